@@ -1,0 +1,31 @@
+// Subcommand registry for the ltmapper CLI. Each apps/cmd_*.cpp file registers its subcommands
+// with a static LTM_COMMAND(...) object, so adding a command touches no shared file.
+// Commands only parse arguments, convert types and call module pipelines.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <string>
+
+namespace ltm::app {
+
+// `setup` adds one subcommand to `parent` (with its options and callback). `order` sorts the
+// help listing.
+struct CommandRegistrar {
+  CommandRegistrar(int order, std::function<void(CLI::App& parent)> setup);
+};
+
+// Shared flags: --threads N (0 = all cores) and --quiet, set up on the subcommand.
+struct CommonOptions {
+  int threads = 0;
+  bool quiet = false;
+};
+void AddCommonOptions(CLI::App& cmd, CommonOptions& opts);
+
+}  // namespace ltm::app
+
+#define LTM_CONCAT_INNER(a, b) a##b
+#define LTM_CONCAT(a, b) LTM_CONCAT_INNER(a, b)
+#define LTM_COMMAND(order, setup) \
+  static const ::ltm::app::CommandRegistrar LTM_CONCAT(ltm_command_, __LINE__)(order, setup)

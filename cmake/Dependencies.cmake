@@ -1,0 +1,25 @@
+# Every dependency comes from Debian 12 packages (scripts/install-deps.sh). Nothing is downloaded.
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+find_package(TBB REQUIRED)
+find_package(nanoflann REQUIRED)
+find_package(yaml-cpp REQUIRED)
+find_package(CLI11 REQUIRED)
+find_package(spdlog REQUIRED)
+find_package(PNG REQUIRED)
+find_package(SQLite3 REQUIRED)
+find_package(Threads REQUIRED)
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
+
+# Heavy libraries: only the .cpp files of the module that owns them include their headers.
+find_package(PCL 1.13 REQUIRED COMPONENTS common io kdtree search filters features registration segmentation)
+find_package(Ceres 2.1 REQUIRED)
+find_package(embree 3 REQUIRED)
+
+# PCL exports plain variables; wrap them in one imported target with SYSTEM includes.
+if(NOT TARGET ltm_pcl)
+  add_library(ltm_pcl INTERFACE)
+  target_include_directories(ltm_pcl SYSTEM INTERFACE ${PCL_INCLUDE_DIRS})
+  target_link_libraries(ltm_pcl INTERFACE ${PCL_LIBRARIES})
+  target_compile_definitions(ltm_pcl INTERFACE ${PCL_DEFINITIONS})
+endif()

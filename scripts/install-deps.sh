@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Installs exactly the Debian 12 packages ltmapper needs (see DESIGN.md "Dependencies").
+# Idempotent: packages already installed are skipped, and apt-get is not called at all when
+# nothing is missing. Works as root without sudo, and through sudo otherwise.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake pkg-config ccache
+  libeigen3-dev          # linear algebra, poses
+  libceres-dev           # pose graph back end
+  libpcl-dev             # PCD I/O, GICP, Euclidean clustering
+  libnanoflann-dev       # kd-tree for hot loops
+  libtbb-dev             # parallel_for / parallel_reduce
+  libembree-dev          # ray casting (simulator)
+  libsqlite3-dev         # map store
+  libzstd-dev            # blob compression
+  libyaml-cpp-dev        # params files
+  libcli11-dev           # command line
+  libspdlog-dev          # logging
+  libpng-dev             # PNG renders
+  libgtest-dev libgmock-dev libbenchmark-dev   # tests and benchmarks
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages already installed"
+  exit 0
+fi
+
+if [ "$(id -u)" -eq 0 ]; then
+  SUDO=()
+elif command -v sudo >/dev/null 2>&1; then
+  SUDO=(sudo)
+else
+  echo "install-deps: need root or sudo to install: ${missing[*]}" >&2
+  exit 1
+fi
+
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+"${SUDO[@]}" apt-get update -q
+"${SUDO[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"

@@ -1,0 +1,266 @@
+#include "ltmapper/core/core.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <mutex>
+#include <sstream>
+
+namespace ltm {
+
+Error::Error(const std::string& file, std::size_t line, const std::string& what)
+    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
+                         what) {}
+
+const char* ToString(PointClass c) {
+  switch (c) {
+    case PointClass::kUnknown: return "unknown";
+    case PointClass::kStatic: return "static";
+    case PointClass::kHD: return "hd";
+    case PointClass::kPDStrong: return "pd_strong";
+    case PointClass::kPDWeak: return "pd_weak";
+    case PointClass::kNDStrong: return "nd_strong";
+    case PointClass::kNDWeak: return "nd_weak";
+  }
+  return "unknown";
+}
+
+// ------------------------------------------------------------------------------- PointCloud
+void PointCloud::clear() {
+  points.clear();
+  cls.clear();
+  session.clear();
+  object.clear();
+}
+
+namespace {
+template <class T>
+void AppendArray(std::vector<T>& dst, const std::vector<T>& src, std::size_t dst_size_before,
+                 std::size_t src_size) {
+  if (src.empty() && dst.empty()) return;
+  // Only keep an optional array when both sides have it (or the destination was empty).
+  if (dst.empty() && dst_size_before == 0) {
+    dst = src;
+    return;
+  }
+  if (src.empty() || dst.size() != dst_size_before) {
+    dst.clear();
+    return;
+  }
+  (void)src_size;
+  dst.insert(dst.end(), src.begin(), src.end());
+}
+
+template <class T, class Pred>
+std::vector<T> Pick(const std::vector<T>& v, std::size_t n, Pred keep) {
+  std::vector<T> out;
+  if (v.empty()) return out;
+  out.reserve(n);
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (keep(i)) out.push_back(v[i]);
+  return out;
+}
+}  // namespace
+
+void PointCloud::append(const PointCloud& other) {
+  const std::size_t before = size();
+  AppendArray(cls, other.cls, before, other.size());
+  AppendArray(session, other.session, before, other.size());
+  AppendArray(object, other.object, before, other.size());
+  points.insert(points.end(), other.points.begin(), other.points.end());
+}
+
+PointCloud PointCloud::select(const std::vector<bool>& mask) const {
+  if (mask.size() != size())
+    throw Error("PointCloud::select: mask has " + std::to_string(mask.size()) +
+                " entries for " + std::to_string(size()) + " points");
+  const std::size_t n = static_cast<std::size_t>(std::count(mask.begin(), mask.end(), true));
+  auto keep = [&](std::size_t i) { return static_cast<bool>(mask[i]); };
+  PointCloud out;
+  out.points = Pick(points, n, keep);
+  out.cls = Pick(cls, n, keep);
+  out.session = Pick(session, n, keep);
+  out.object = Pick(object, n, keep);
+  return out;
+}
+
+PointCloud PointCloud::select(const std::vector<std::uint32_t>& indices) const {
+  PointCloud out;
+  out.points.reserve(indices.size());
+  for (auto i : indices) {
+    if (i >= size()) throw Error("PointCloud::select: index " + std::to_string(i) + " out of range");
+    out.points.push_back(points[i]);
+    if (!cls.empty()) out.cls.push_back(cls[i]);
+    if (!session.empty()) out.session.push_back(session[i]);
+    if (!object.empty()) out.object.push_back(object[i]);
+  }
+  return out;
+}
+
+void PointCloud::CheckConsistent(const std::string& what) const {
+  auto check = [&](std::size_t n, const char* name) {
+    if (n != 0 && n != size())
+      throw Error(what + ": per-point array '" + name + "' has " + std::to_string(n) +
+                  " entries for " + std::to_string(size()) + " points");
+  };
+  check(cls.size(), "class");
+  check(session.size(), "session");
+  check(object.size(), "object");
+}
+
+int Session::Find(int index) const {
+  auto it = std::lower_bound(keyframes.begin(), keyframes.end(), index,
+                             [](const Keyframe& k, int i) { return k.index < i; });
+  if (it == keyframes.end() || it->index != index) return -1;
+  return static_cast<int>(it - keyframes.begin());
+}
+
+// ----------------------------------------------------------------------------------- Config
+void ConfigFields::operator()(const std::string& key, double& v, const std::string& unit,
+                              double lo, double hi) {
+  fields_.push_back({key, ConfigField::Kind::kDouble, &v, unit, lo, hi, {}});
+}
+void ConfigFields::operator()(const std::string& key, int& v, const std::string& unit, int lo,
+                              int hi) {
+  fields_.push_back({key, ConfigField::Kind::kInt, &v, unit, double(lo), double(hi), {}});
+}
+void ConfigFields::operator()(const std::string& key, bool& v) {
+  fields_.push_back({key, ConfigField::Kind::kBool, &v, "", 0, 1, {}});
+}
+void ConfigFields::operator()(const std::string& key, std::string& v,
+                              std::vector<std::string> choices) {
+  fields_.push_back({key, ConfigField::Kind::kString, &v, "", 0, 0, std::move(choices)});
+}
+void ConfigFields::operator()(const std::string& key, std::vector<double>& v,
+                              const std::string& unit, double lo, double hi) {
+  fields_.push_back({key, ConfigField::Kind::kDoubleList, &v, unit, lo, hi, {}});
+}
+
+namespace {
+std::string Num(double v) {
+  std::ostringstream os;
+  os << std::setprecision(10) << v;
+  return os.str();
+}
+void CheckRange(const ConfigField& f, double v, const std::string& where) {
+  if (!std::isfinite(v) || v < f.lo || v > f.hi)
+    throw Error(where + ": key '" + f.key + "' = " + Num(v) + " is out of range [" + Num(f.lo) +
+                ", " + Num(f.hi) + "]" + (f.unit.empty() ? "" : " " + f.unit));
+}
+}  // namespace
+
+void ValidateFields(const ConfigFields& fields, const std::string& where) {
+  for (const auto& f : fields.fields()) {
+    switch (f.kind) {
+      case ConfigField::Kind::kDouble: CheckRange(f, *static_cast<double*>(f.ptr), where); break;
+      case ConfigField::Kind::kInt: CheckRange(f, *static_cast<int*>(f.ptr), where); break;
+      case ConfigField::Kind::kBool: break;
+      case ConfigField::Kind::kString: {
+        const auto& s = *static_cast<std::string*>(f.ptr);
+        if (!f.choices.empty() &&
+            std::find(f.choices.begin(), f.choices.end(), s) == f.choices.end()) {
+          std::string allowed;
+          for (const auto& c : f.choices) allowed += (allowed.empty() ? "" : ", ") + c;
+          throw Error(where + ": key '" + f.key + "' = '" + s + "' is not one of: " + allowed);
+        }
+        break;
+      }
+      case ConfigField::Kind::kDoubleList: {
+        const auto& list = *static_cast<std::vector<double>*>(f.ptr);
+        if (list.empty()) throw Error(where + ": key '" + f.key + "' must not be an empty list");
+        for (double v : list) CheckRange(f, v, where);
+        break;
+      }
+    }
+  }
+}
+
+std::string FieldsToString(const ConfigFields& fields) {
+  std::ostringstream os;
+  for (const auto& f : fields.fields()) {
+    os << "  " << f.key << ": ";
+    switch (f.kind) {
+      case ConfigField::Kind::kDouble: os << Num(*static_cast<double*>(f.ptr)); break;
+      case ConfigField::Kind::kInt: os << *static_cast<int*>(f.ptr); break;
+      case ConfigField::Kind::kBool: os << (*static_cast<bool*>(f.ptr) ? "true" : "false"); break;
+      case ConfigField::Kind::kString: os << *static_cast<std::string*>(f.ptr); break;
+      case ConfigField::Kind::kDoubleList: {
+        os << "[";
+        const auto& list = *static_cast<std::vector<double>*>(f.ptr);
+        for (std::size_t i = 0; i < list.size(); ++i) os << (i ? ", " : "") << Num(list[i]);
+        os << "]";
+        break;
+      }
+    }
+    if (!f.unit.empty()) os << "  # " << f.unit;
+    os << "\n";
+  }
+  return os.str();
+}
+
+// --------------------------------------------------------------------------------- Progress
+struct Progress::Impl {
+  std::string label;
+  std::size_t total = 0;
+  std::atomic<std::size_t> done{0};
+  bool enabled = false;
+  bool finished = false;
+  std::mutex mu;
+  std::chrono::steady_clock::time_point start, last_print;
+};
+
+Progress::Progress(std::string label, std::size_t total, bool force) : impl_(new Impl) {
+  impl_->label = std::move(label);
+  impl_->total = total;
+  impl_->enabled = force || isatty(STDERR_FILENO);
+  impl_->start = impl_->last_print = std::chrono::steady_clock::now();
+}
+
+Progress::~Progress() { Done(); }
+
+void Progress::Tick(std::size_t n) {
+  const std::size_t d = impl_->done.fetch_add(n) + n;
+  if (!impl_->enabled) return;
+  const auto now = std::chrono::steady_clock::now();
+  std::unique_lock<std::mutex> lock(impl_->mu, std::try_to_lock);
+  if (!lock.owns_lock() || now - impl_->last_print < std::chrono::milliseconds(250)) return;
+  impl_->last_print = now;
+  const double s = std::chrono::duration<double>(now - impl_->start).count();
+  const double rate = s > 0 ? d / s : 0.0;
+  const double eta = rate > 0 && impl_->total > d ? (impl_->total - d) / rate : 0.0;
+  std::fprintf(stderr, "\r%s: %zu/%zu (%.1f/s, ETA %.0f s)   ", impl_->label.c_str(), d,
+               impl_->total, rate, eta);
+  std::fflush(stderr);
+}
+
+void Progress::Done() {
+  if (!impl_ || impl_->finished) return;
+  impl_->finished = true;
+  if (!impl_->enabled) return;
+  const double s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - impl_->start).count();
+  std::fprintf(stderr, "\r%s: %zu/%zu in %.1f s                \n", impl_->label.c_str(),
+               impl_->done.load(), impl_->total, s);
+}
+
+std::size_t PeakRssBytes() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      std::istringstream is(line.substr(6));
+      std::size_t kb = 0;
+      is >> kb;
+      return kb * 1024;
+    }
+  }
+  return 0;
+}
+
+}  // namespace ltm

@@ -1,0 +1,93 @@
+// ltmapper geometry: voxel downsampling, kd-tree, transforms, range filtering, range images.
+// Depends on core, Eigen, TBB and nanoflann (nanoflann and TBB only inside the .cpp files).
+// Functions that run in parallel take the thread count as an argument (0 = all cores); nothing
+// sets a process-wide thread limit.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <memory>
+#include <utility>
+#include <vector>
+
+namespace ltm::geometry {
+
+// ------------------------------------------------------------------------------ transforms
+// p' = T * p for every point; optional arrays are kept.
+PointCloud Transform(const PointCloud& cloud, const Pose& T);
+void TransformInPlace(PointCloud& cloud, const Pose& T);
+// Keeps points with min_range <= |p| <= max_range [m] (range measured from the origin).
+PointCloud RangeFilter(const PointCloud& cloud, double min_range_m, double max_range_m);
+// Keeps points inside the axis-aligned box [lo, hi].
+PointCloud CropBox(const PointCloud& cloud, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi);
+// Drops NaN / Inf points; returns how many were dropped.
+std::size_t RemoveNonFinite(PointCloud& cloud);
+
+// -------------------------------------------------------------------------- voxel downsampling
+// One point per occupied voxel of edge `voxel_m`: the centroid of its points (intensity
+// averaged too). Optional arrays take the value of the voxel's first point. Output order is
+// deterministic (sorted by voxel key) whatever the thread count.
+PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads = 0);
+
+// ----------------------------------------------------------------------------------- kd-tree
+// nanoflann kd-tree over a cloud's xyz. Owns a copy of the cloud or shares it.
+class KdTree {
+ public:
+  explicit KdTree(PointCloud cloud);                       // owns
+  explicit KdTree(std::shared_ptr<const PointCloud> cloud);  // shares
+  ~KdTree();
+  KdTree(KdTree&&) noexcept;
+  KdTree& operator=(KdTree&&) noexcept;
+
+  const PointCloud& cloud() const;
+  std::size_t size() const;
+  // k nearest neighbours: (index, squared distance) sorted by distance; fewer when the cloud
+  // has fewer than k points.
+  std::vector<std::pair<std::uint32_t, float>> Knn(const Eigen::Vector3f& q, std::size_t k) const;
+  // Nearest neighbour; returns false when the cloud is empty.
+  bool Nearest(const Eigen::Vector3f& q, std::uint32_t* index, float* sq_dist) const;
+  // All points within `radius` [m]: (index, squared distance) sorted by distance.
+  std::vector<std::pair<std::uint32_t, float>> Radius(const Eigen::Vector3f& q, float radius) const;
+  // Number of points within `radius`, stopping early once `max_count` is reached.
+  std::size_t CountWithin(const Eigen::Vector3f& q, float radius, std::size_t max_count) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// ------------------------------------------------------------------------------ range images
+// Spherical projection of a spinning LiDAR. Rows span the vertical FOV (row 0 = top), columns
+// the full 360 deg (column 0 at azimuth +180 deg, increasing clockwise seen from above, i.e.
+// with decreasing azimuth atan2(y, x)).
+struct RangeImageConfig {
+  double fov_up_deg = 2.0;       // [deg] upper edge of the vertical FOV
+  double fov_down_deg = -24.8;   // [deg] lower edge (negative = below the horizon)
+  int rows = 64;                 // pixels over the vertical FOV
+  int cols = 900;                // pixels over 360 deg
+};
+
+class RangeImage {
+ public:
+  RangeImage() = default;
+  explicit RangeImage(const RangeImageConfig& cfg);
+  const RangeImageConfig& config() const { return cfg_; }
+  int rows() const { return cfg_.rows; }
+  int cols() const { return cfg_.cols; }
+  // Pixel of a point in the sensor frame; false when outside the vertical FOV or at range ~0.
+  bool Project(const Eigen::Vector3f& p, int* row, int* col, float* range) const;
+  // Resets to "no return" (+inf) and projects `cloud` (sensor frame), keeping the minimum range
+  // per pixel. Also records, per pixel, the index of the point that won (-1 = none).
+  void Build(const PointCloud& cloud);
+  float At(int row, int col) const { return range_[std::size_t(row) * cfg_.cols + col]; }
+  int IndexAt(int row, int col) const { return index_[std::size_t(row) * cfg_.cols + col]; }
+  const std::vector<float>& data() const { return range_; }
+
+ private:
+  RangeImageConfig cfg_;
+  double up_rad_ = 0, down_rad_ = 0, fov_rad_ = 0;
+  std::vector<float> range_;
+  std::vector<int> index_;
+};
+
+}  // namespace ltm::geometry

@@ -1,0 +1,142 @@
+// ltmapper io: every file format users already have, read and written.
+//
+// All readers throw ltm::Error naming the file (and line where there is one). All writers write
+// to a temporary name in the same directory and rename, so a crash never leaves a partial file.
+// PCL and yaml-cpp are used only inside the .cpp files.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace ltm::io {
+
+// ------------------------------------------------------------------------ atomic file writes
+// Writes through a temporary file "<path>.tmp-<pid>-<n>" and renames it over `path` when
+// `write` returns. On exception the temporary is removed and the exception is rethrown.
+void WriteFileAtomic(const std::string& path, const std::function<void(std::ostream&)>& write);
+// Same, for writers that need a path (e.g. PCL): `write(tmp_path)` must create tmp_path.
+void WritePathAtomic(const std::string& path, const std::function<void(const std::string&)>& write);
+// Creates a directory and its parents; throws on failure.
+void MakeDirs(const std::string& dir);
+
+// ----------------------------------------------------------------------------------- clouds
+struct CloudReadStats {
+  std::size_t points_in_file = 0;
+  std::size_t non_finite_dropped = 0;  // NaN / Inf points removed (never propagated)
+};
+// PCD (ascii, binary, binary_compressed) through PCL's reader. Needs fields x y z; intensity
+// optional (0 when absent). Truncated files and headers that disagree with the data are errors.
+PointCloud ReadPcd(const std::string& path, CloudReadStats* stats = nullptr);
+enum class PcdFormat { kAscii, kBinary, kBinaryCompressed };
+void WritePcd(const std::string& path, const PointCloud& cloud,
+              PcdFormat format = PcdFormat::kBinary);
+// KITTI velodyne .bin: float32 x y z reflectance, little endian, 16 bytes per point.
+PointCloud ReadKittiBin(const std::string& path, CloudReadStats* stats = nullptr);
+void WriteKittiBin(const std::string& path, const PointCloud& cloud);
+// Reads .pcd or .bin by extension.
+PointCloud ReadCloud(const std::string& path, CloudReadStats* stats = nullptr);
+// Binary little-endian PLY with float x y z intensity and, when present, uchar class,
+// ushort session, int object (CloudCompare shows them as scalar fields).
+void WritePly(const std::string& path, const PointCloud& cloud);
+PointCloud ReadPly(const std::string& path);  // reads what WritePly writes
+
+// -------------------------------------------------------------------------- scan context
+// SCDs/NNNNNN.scd: `rows` lines of `cols` space-separated numbers (20 x 60 by default).
+Eigen::MatrixXd ReadScd(const std::string& path, int rows = 20, int cols = 60);
+void WriteScd(const std::string& path, const Eigen::MatrixXd& desc);
+
+// ------------------------------------------------------------------------------------ poses
+// KITTI: 12 numbers per line, row-major 3x4 [R|t].
+std::vector<Pose> ReadKittiPoses(const std::string& path);
+void WriteKittiPoses(const std::string& path, const std::vector<Pose>& poses);
+// TUM: "timestamp tx ty tz qx qy qz qw" per line.
+struct StampedPose {
+  double stamp = 0.0;
+  Pose pose = Pose::Identity();
+};
+std::vector<StampedPose> ReadTumPoses(const std::string& path);
+void WriteTumPoses(const std::string& path, const std::vector<StampedPose>& poses);
+// A 3x4 (12 numbers, row-major) or 4x4 (16 numbers) rigid transform from text; e.g. KITTI's
+// `Tr` or `relative.txt`. A leading "Tr:" label is allowed.
+Pose ReadTransform(const std::string& path);
+Pose ParseTransform(const std::string& text, const std::string& where);
+
+// -------------------------------------------------------------------------------------- g2o
+struct G2oGraph {
+  std::vector<std::pair<int, Pose>> vertices;  // (id, pose) in file order
+  std::vector<Edge> edges;
+};
+// VERTEX_SE3:QUAT id x y z qx qy qz qw / EDGE_SE3:QUAT a b x y z qx qy qz qw [21 info values].
+// Quaternions are normalised; a quaternion whose norm is far from 1 (|n-1| > 1e-3), an unknown
+// tag, a duplicate vertex id or an edge to a missing vertex is an error naming file and line.
+// FIX lines are accepted and ignored.
+G2oGraph ReadG2o(const std::string& path);
+void WriteG2o(const std::string& path, const G2oGraph& graph);
+
+// ---------------------------------------------------------------------------------- sessions
+struct SessionLoadOptions {
+  bool load_clouds = false;  // read every scan now (else Keyframe::cloud_path only)
+  bool require_g2o = false;
+};
+// Session directory as SC-LIO-SAM / SC-A-LOAM / FAST-LIO savers write it:
+//   Scans/NNNNNN.pcd, optional SCDs/NNNNNN.scd, singlesession_posegraph.g2o and/or
+//   optimized_poses.txt. Poses come from the g2o vertices when present (else the KITTI file),
+//   odometry edges from the g2o (else derived from consecutive poses). Scan files are sorted by
+//   the integer value of their names. Pose count != scan count, duplicate indices, a missing
+//   directory or missing files are errors.
+Session LoadSession(const std::string& dir, const SessionLoadOptions& opt = {});
+// KITTI odometry layout: `dir/velodyne/NNNNNN.bin` + a poses file (12 numbers per line, one per
+// scan index, maybe more lines than scans). When `T_cam_velo` is given (KITTI's `Tr`), the poses
+// are camera poses and the LiDAR pose is T_w_velo = Tr^-1 * P * Tr.
+Session LoadKittiSession(const std::string& dir, const std::string& poses_path,
+                         const Pose* T_cam_velo = nullptr, const SessionLoadOptions& opt = {});
+// Writes a session in SC-LIO-SAM layout: Scans/NNNNNN.pcd (binary), singlesession_posegraph.g2o,
+// optimized_poses.txt and, when `scds` is non-empty, SCDs/NNNNNN.scd. Clouds come from
+// Keyframe::cloud (must be set).
+void WriteSession(const std::string& dir, const Session& session,
+                  const std::vector<Eigen::MatrixXd>& scds = {});
+// Loads the cloud of a keyframe (from memory or its path).
+std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats = nullptr);
+
+// What `ltmapper info` prints: counts, scan sizes, pose span, path length, edges, problems.
+struct SessionInfo {
+  std::string dir;
+  std::size_t keyframes = 0;
+  std::size_t scans_found = 0, scds_found = 0;
+  std::size_t points_min = 0, points_max = 0, points_total = 0;
+  std::size_t non_finite_points = 0;
+  Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero(), bbox_max = Eigen::Vector3d::Zero();
+  double path_length_m = 0.0;
+  std::size_t odometry_edges = 0, loop_edges = 0;
+  std::string pose_source;             // "g2o" or "optimized_poses.txt"
+  std::vector<std::string> problems;   // missing / inconsistent files, one line each
+};
+SessionInfo InspectSession(const std::string& dir, bool read_scans = true);
+std::string FormatSessionInfo(const SessionInfo& info);
+
+// ------------------------------------------------------------------------------------- YAML
+// Reads a YAML params file into any config with a Visit() (see core.hpp). Nested maps are
+// flattened to dotted keys. Unknown keys, wrong types and out-of-range values are errors
+// naming the file and key. Keys absent from the file keep their defaults.
+void LoadConfigFields(const std::string& path, const ConfigFields& fields,
+                      const std::string& section = "");
+template <class Config>
+void LoadConfig(const std::string& path, Config& cfg, const std::string& section = "") {
+  LoadConfigFields(path, FieldsOf(cfg), section);
+  ValidateConfig(cfg, path);
+}
+// Writes the config as YAML (nested maps for dotted keys), e.g. to record the resolved params.
+void SaveConfigFields(const std::string& path, const ConfigFields& fields);
+
+// Numeric index of a scan file name ("000123.pcd" -> 123); throws when not a number.
+int FileIndex(const std::string& filename);
+// Regular files in `dir` with the extension `ext` (".pcd"), sorted by FileIndex.
+std::vector<std::string> ListIndexedFiles(const std::string& dir, const std::string& ext);
+
+}  // namespace ltm::io

@@ -1,0 +1,107 @@
+#include "ltmapper/core/core.hpp"
+
+#include <gtest/gtest.h>
+
+namespace ltm {
+namespace {
+
+struct DemoConfig {
+  double voxel_m = 0.5;
+  int beams = 64;
+  bool flag = true;
+  std::string mode = "cauchy";
+  std::vector<double> list = {1.0, 2.0};
+  template <class V>
+  void Visit(V& v) {
+    v("voxel_m", voxel_m, "m", 0.01, 10.0);
+    v("lidar.beams", beams, "", 1, 128);
+    v("flag", flag);
+    v("mode", mode, {"cauchy", "dcs"});
+    v("list", list, "m", 0.0, 5.0);
+  }
+};
+
+TEST(Config, DefaultsValidate) { EXPECT_NO_THROW(ValidateConfig(DemoConfig{})); }
+
+TEST(Config, OutOfRangeNamesKey) {
+  DemoConfig c;
+  c.beams = 500;
+  try {
+    ValidateConfig(c, "params.yaml");
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("lidar.beams"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("params.yaml"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Config, BadChoiceAndBadListEntry) {
+  DemoConfig c;
+  c.mode = "huber";
+  EXPECT_THROW(ValidateConfig(c), Error);
+  c.mode = "dcs";
+  c.list = {1.0, 9.0};
+  EXPECT_THROW(ValidateConfig(c), Error);
+  c.list.clear();
+  EXPECT_THROW(ValidateConfig(c), Error);
+}
+
+TEST(Config, PrintsEveryKey) {
+  const std::string s = ConfigToString(DemoConfig{});
+  for (const char* k : {"voxel_m: 0.5", "lidar.beams: 64", "flag: true", "mode: cauchy", "list: [1, 2]"})
+    EXPECT_NE(s.find(k), std::string::npos) << k << " in\n" << s;
+}
+
+TEST(PointCloud, SelectKeepsArraysTogether) {
+  PointCloud c;
+  for (int i = 0; i < 5; ++i) {
+    c.push_back(float(i), 0, 0, float(10 * i));
+    c.cls.push_back(i % 2 ? PointClass::kHD : PointClass::kStatic);
+  }
+  const PointCloud s = c.select(std::vector<bool>{true, false, true, false, true});
+  ASSERT_EQ(s.size(), 3u);
+  ASSERT_EQ(s.cls.size(), 3u);
+  EXPECT_FLOAT_EQ(s.points[1].x, 2.f);
+  EXPECT_EQ(s.cls[1], PointClass::kStatic);
+  EXPECT_TRUE(s.session.empty());
+  EXPECT_THROW(c.select(std::vector<bool>{true}), Error);
+  const PointCloud t = c.select(std::vector<std::uint32_t>{4, 1});
+  EXPECT_FLOAT_EQ(t.points[0].intensity, 40.f);
+  EXPECT_EQ(t.cls[1], PointClass::kHD);
+}
+
+TEST(PointCloud, AppendDropsArraysPresentOnOneSideOnly) {
+  PointCloud a, b;
+  a.push_back(0, 0, 0);
+  a.cls.push_back(PointClass::kStatic);
+  b.push_back(1, 1, 1);
+  PointCloud c = a;
+  c.append(b);
+  EXPECT_EQ(c.size(), 2u);
+  EXPECT_TRUE(c.cls.empty());
+  PointCloud d = a;
+  d.append(a);
+  EXPECT_EQ(d.cls.size(), 2u);
+  PointCloud e;
+  e.append(a);
+  EXPECT_EQ(e.cls.size(), 1u);
+  EXPECT_NO_THROW(d.CheckConsistent("d"));
+  d.cls.pop_back();
+  EXPECT_THROW(d.CheckConsistent("d"), Error);
+}
+
+TEST(Session, FindByIndex) {
+  Session s;
+  for (int i : {0, 2, 5}) s.keyframes.push_back(Keyframe{i, Pose::Identity(), "", nullptr});
+  EXPECT_EQ(s.Find(2), 1);
+  EXPECT_EQ(s.Find(3), -1);
+  EXPECT_EQ(s.Find(9), -1);
+}
+
+TEST(Error, NamesFileAndLine) {
+  EXPECT_STREQ(Error("a.g2o", 7, "bad").what(), "a.g2o:7: bad");
+  EXPECT_STREQ(Error("a.g2o", 0, "bad").what(), "a.g2o: bad");
+}
+
+}  // namespace
+}  // namespace ltm
