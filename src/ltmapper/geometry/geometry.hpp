@@ -25,12 +25,17 @@ std::size_t RemoveNonFinite(PointCloud& cloud);
 
 // -------------------------------------------------------------------------- voxel downsampling
 // One point per occupied voxel of edge `voxel_m`: the centroid of its points (intensity
-// averaged too). Optional arrays take the value of the voxel's first point. Output order is
+// averaged too). Optional arrays take the value of the voxel's first point (lowest index).
+// Non-finite points are ignored. Voxel index = floor(coordinate / voxel_m). Sums are in double
+// and in point-index order, so the output is bit-identical for any thread count. Output order is
 // deterministic (sorted by voxel key) whatever the thread count.
 PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads = 0);
 
 // ----------------------------------------------------------------------------------- kd-tree
-// nanoflann kd-tree over a cloud's xyz. Owns a copy of the cloud or shares it.
+// nanoflann kd-tree over a cloud's xyz. Owns a copy of the cloud or shares it. The cloud must be
+// finite (ltm::Error otherwise: see RemoveNonFinite). Distances are computed in double and
+// returned as float; "within radius" means squared distance < radius^2 (strict). Equal
+// distances are ordered by index.
 class KdTree {
  public:
   explicit KdTree(PointCloud cloud);                       // owns
@@ -69,13 +74,17 @@ struct RangeImageConfig {
 
 class RangeImage {
  public:
-  RangeImage() = default;
+  RangeImage() : RangeImage(RangeImageConfig{}) {}
+  // Throws ltm::Error when rows/cols < 1 or fov_up_deg <= fov_down_deg.
   explicit RangeImage(const RangeImageConfig& cfg);
   const RangeImageConfig& config() const { return cfg_; }
   int rows() const { return cfg_.rows; }
   int cols() const { return cfg_.cols; }
   // Pixel of a point in the sensor frame; false when outside the vertical FOV or at range ~0.
   bool Project(const Eigen::Vector3f& p, int* row, int* col, float* range) const;
+  // Pixel rule: row = floor((fov_up - pitch) / fov * rows) (pitch = asin(z/|p|); a point exactly
+  // on the lower edge goes to the last row), col = floor((pi - atan2(y, x)) / (2 pi) * cols)
+  // wrapped into [0, cols). Straight ahead (+x) is column cols/2, straight behind column 0.
   // Resets to "no return" (+inf) and projects `cloud` (sensor frame), keeping the minimum range
   // per pixel. Also records, per pixel, the index of the point that won (-1 = none).
   void Build(const PointCloud& cloud);
@@ -86,6 +95,9 @@ class RangeImage {
  private:
   RangeImageConfig cfg_;
   double up_rad_ = 0, down_rad_ = 0, fov_rad_ = 0;
+  float up_f_ = 0.f, down_f_ = 0.f;    // [rad] FOV edges as floats for the hot loop
+  float row_scale_ = 0.f;              // rows / fov [1/rad]
+  float col_scale_ = 0.f;              // cols / (2 pi) [1/rad]
   std::vector<float> range_;
   std::vector<int> index_;
 };

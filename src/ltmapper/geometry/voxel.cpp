@@ -1,0 +1,211 @@
+// Voxel-grid downsampling by sorting (voxel key, point index) records.
+//
+// Why sorting rather than a hash map: the output must be ordered by voxel key anyway, and with
+// the point index as tie-breaker the order inside a voxel is the input order, so centroid sums
+// are formed in the same order whatever the thread count (bit-identical output).
+// Common case: the occupied voxel indices span < 2^21 per axis and pack into one uint64 relative
+// to the minimum index (16-byte records, fast sort). Otherwise (e.g. 1 cm voxels over +-1e6 m)
+// a 3 x int64 key is used; both orders are lexicographic (x, y, z).
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+
+namespace ltm::geometry {
+
+namespace {
+
+constexpr int kPackBits = 21;                     // bits per axis in the packed key
+constexpr std::int64_t kPackSpan = std::int64_t(1) << kPackBits;
+constexpr double kMaxVoxelIndex = 4.0e18;         // |index| beyond this would overflow int64
+constexpr std::size_t kGrain = 4096;              // points per TBB task
+
+using Index3 = std::array<std::int64_t, 3>;
+
+struct PackedRec {
+  std::uint64_t key;
+  std::uint32_t idx;
+  bool operator<(const PackedRec& o) const { return key != o.key ? key < o.key : idx < o.idx; }
+  bool SameVoxel(const PackedRec& o) const { return key == o.key; }
+};
+
+struct WideRec {
+  Index3 key;
+  std::uint32_t idx;
+  bool operator<(const WideRec& o) const { return key != o.key ? key < o.key : idx < o.idx; }
+  bool SameVoxel(const WideRec& o) const { return key == o.key; }
+};
+
+struct Bounds {
+  Index3 lo{std::numeric_limits<std::int64_t>::max(), std::numeric_limits<std::int64_t>::max(),
+            std::numeric_limits<std::int64_t>::max()};
+  Index3 hi{std::numeric_limits<std::int64_t>::min(), std::numeric_limits<std::int64_t>::min(),
+            std::numeric_limits<std::int64_t>::min()};
+  std::size_t finite = 0;
+  bool overflow = false;
+  void Add(const Index3& k) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], k[a]);
+      hi[a] = std::max(hi[a], k[a]);
+    }
+    ++finite;
+  }
+  void Join(const Bounds& o) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], o.lo[a]);
+      hi[a] = std::max(hi[a], o.hi[a]);
+    }
+    finite += o.finite;
+    overflow = overflow || o.overflow;
+  }
+};
+
+inline bool Finite(const PointXYZI& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
+
+// Voxel index of a finite point; false when an index would not fit in int64.
+inline bool VoxelOf(const PointXYZI& p, double voxel_m, Index3* k) {
+  const double v[3] = {std::floor(double(p.x) / voxel_m), std::floor(double(p.y) / voxel_m),
+                       std::floor(double(p.z) / voxel_m)};
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(v[a]) > kMaxVoxelIndex) return false;
+    (*k)[a] = static_cast<std::int64_t>(v[a]);
+  }
+  return true;
+}
+
+// Sorted records -> one centroid per run of equal keys.
+template <class Rec>
+PointCloud Reduce(const PointCloud& cloud, std::vector<Rec>& recs) {
+  tbb::parallel_sort(recs.begin(), recs.end());
+  std::vector<std::size_t> starts;
+  starts.reserve(recs.size() / 4 + 1);
+  for (std::size_t i = 0; i < recs.size(); ++i)
+    if (i == 0 || !recs[i].SameVoxel(recs[i - 1])) starts.push_back(i);
+  starts.push_back(recs.size());
+  const std::size_t m = starts.size() - 1;
+
+  PointCloud out;
+  out.points.resize(m);
+  if (!cloud.cls.empty()) out.cls.resize(m);
+  if (!cloud.session.empty()) out.session.resize(m);
+  if (!cloud.object.empty()) out.object.resize(m);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain / 4),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+      double sx = 0, sy = 0, sz = 0, si = 0;
+      for (std::size_t j = starts[v]; j < starts[v + 1]; ++j) {
+        const PointXYZI& p = cloud.points[recs[j].idx];
+        sx += p.x;
+        sy += p.y;
+        sz += p.z;
+        si += p.intensity;
+      }
+      const double inv = 1.0 / double(starts[v + 1] - starts[v]);
+      out.points[v] = {float(sx * inv), float(sy * inv), float(sz * inv), float(si * inv)};
+      const std::uint32_t first = recs[starts[v]].idx;
+      if (!cloud.cls.empty()) out.cls[v] = cloud.cls[first];
+      if (!cloud.session.empty()) out.session[v] = cloud.session[first];
+      if (!cloud.object.empty()) out.object[v] = cloud.object[first];
+    }
+  });
+  return out;
+}
+
+PointCloud Downsample(const PointCloud& cloud, double voxel_m) {
+  const std::size_t n = cloud.size();
+  const Bounds b = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, n, kGrain), Bounds{},
+      [&](const tbb::blocked_range<std::size_t>& r, Bounds acc) {
+        Index3 k{0, 0, 0};
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const PointXYZI& p = cloud.points[i];
+          if (!Finite(p)) continue;
+          if (!VoxelOf(p, voxel_m, &k)) {
+            acc.overflow = true;
+            continue;
+          }
+          acc.Add(k);
+        }
+        return acc;
+      },
+      [](Bounds a, const Bounds& o) {
+        a.Join(o);
+        return a;
+      });
+  if (b.overflow)
+    throw Error("VoxelDownsample: voxel index overflows int64 (voxel " + std::to_string(voxel_m) +
+                " m too small for the coordinates)");
+  if (b.finite == 0) return PointCloud{};
+
+  // Compact list of finite point indices, in input order.
+  std::vector<std::uint32_t> finite_idx;
+  const bool all_finite = b.finite == n;
+  if (!all_finite) {
+    finite_idx.reserve(b.finite);
+    for (std::size_t i = 0; i < n; ++i)
+      if (Finite(cloud.points[i])) finite_idx.push_back(std::uint32_t(i));
+  }
+  auto point_index = [&](std::size_t j) {
+    return all_finite ? std::uint32_t(j) : finite_idx[j];
+  };
+  const std::size_t m = b.finite;
+
+  bool packable = true;
+  for (int a = 0; a < 3; ++a) packable = packable && (b.hi[a] - b.lo[a]) < kPackSpan;
+  if (packable) {
+    std::vector<PackedRec> recs(m);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+      Index3 k{0, 0, 0};
+      for (std::size_t j = r.begin(); j != r.end(); ++j) {
+        const std::uint32_t i = point_index(j);
+        VoxelOf(cloud.points[i], voxel_m, &k);
+        const std::uint64_t key = (std::uint64_t(k[0] - b.lo[0]) << (2 * kPackBits)) |
+                                  (std::uint64_t(k[1] - b.lo[1]) << kPackBits) |
+                                  std::uint64_t(k[2] - b.lo[2]);
+        recs[j] = {key, i};
+      }
+    });
+    return Reduce(cloud, recs);
+  }
+  std::vector<WideRec> recs(m);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t j = r.begin(); j != r.end(); ++j) {
+      const std::uint32_t i = point_index(j);
+      recs[j].idx = i;
+      VoxelOf(cloud.points[i], voxel_m, &recs[j].key);
+    }
+  });
+  return Reduce(cloud, recs);
+}
+
+}  // namespace
+
+PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads) {
+  if (!(voxel_m > 0.0) || !std::isfinite(voxel_m))
+    throw Error("VoxelDownsample: voxel size must be a positive finite number, got " +
+                std::to_string(voxel_m));
+  if (threads < 0) throw Error("VoxelDownsample: threads must be >= 0, got " + std::to_string(threads));
+  cloud.CheckConsistent("VoxelDownsample");
+  if (cloud.size() > std::numeric_limits<std::uint32_t>::max())
+    throw Error("VoxelDownsample: more than 2^32 points");
+  if (cloud.empty()) return PointCloud{};
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  PointCloud out;
+  arena.execute([&] { out = Downsample(cloud, voxel_m); });
+  return out;
+}
+
+}  // namespace ltm::geometry

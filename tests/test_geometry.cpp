@@ -1,0 +1,413 @@
+// Oracle tests for the geometry module: kd-tree vs brute force, voxel grid vs a std::map
+// reference, range-image pixel math on hand-placed points, transforms round trip.
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <random>
+
+namespace ltm::geometry {
+namespace {
+
+PointCloud RandomCloud(std::size_t n, float extent, unsigned seed, Eigen::Vector3f offset = {0, 0, 0}) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-extent, extent);
+  PointCloud c;
+  for (std::size_t i = 0; i < n; ++i)
+    c.push_back(offset.x() + u(rng), offset.y() + u(rng), offset.z() + u(rng), float(i % 7));
+  return c;
+}
+
+void AddArrays(PointCloud& c) {
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    c.cls.push_back(PointClass(i % 7));
+    c.session.push_back(std::uint16_t(i % 3));
+    c.object.push_back(std::int32_t(i));
+  }
+}
+
+// ------------------------------------------------------------------------------ transforms
+TEST(Transform, RoundTripAndArraysKept) {
+  PointCloud c = RandomCloud(500, 50.f, 1);
+  AddArrays(c);
+  Pose T = Pose::Identity();
+  T.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(10, -20, 3);
+  const PointCloud t = Transform(c, T);
+  ASSERT_EQ(t.size(), c.size());
+  EXPECT_EQ(t.cls, c.cls);
+  EXPECT_EQ(t.session, c.session);
+  EXPECT_EQ(t.object, c.object);
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Vector3d expect = T * c.points[i].xyz().cast<double>();
+    EXPECT_LT((t.points[i].xyz().cast<double>() - expect).norm(), 1e-4);
+    EXPECT_EQ(t.points[i].intensity, c.points[i].intensity);
+  }
+  PointCloud back = t;
+  TransformInPlace(back, T.inverse());
+  for (std::size_t i = 0; i < c.size(); ++i)
+    EXPECT_LT((back.points[i].xyz() - c.points[i].xyz()).norm(), 1e-4f);
+}
+
+TEST(Filters, RangeCropNonFiniteKeepArraysAligned) {
+  PointCloud c;
+  c.push_back(1, 0, 0);    // r = 1
+  c.push_back(0, 5, 0);    // r = 5
+  c.push_back(0, 0, 10);   // r = 10
+  c.push_back(20, 0, 0);   // r = 20
+  AddArrays(c);
+  PointCloud r = RangeFilter(c, 5.0, 10.0);  // bounds inclusive
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r.object, (std::vector<std::int32_t>{1, 2}));
+  EXPECT_EQ(r.cls.size(), 2u);
+
+  PointCloud b = CropBox(c, Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 5, 5));
+  ASSERT_EQ(b.size(), 2u);
+  EXPECT_EQ(b.object, (std::vector<std::int32_t>{0, 1}));
+  EXPECT_EQ(b.session, (std::vector<std::uint16_t>{0, 1}));
+
+  PointCloud n = c;
+  n.points[1].y = std::numeric_limits<float>::quiet_NaN();
+  n.points[3].z = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(RemoveNonFinite(n), 2u);
+  ASSERT_EQ(n.size(), 2u);
+  EXPECT_EQ(n.object, (std::vector<std::int32_t>{0, 2}));
+  EXPECT_EQ(n.cls.size(), 2u);
+  EXPECT_EQ(n.session.size(), 2u);
+  EXPECT_EQ(RemoveNonFinite(n), 0u);
+}
+
+// -------------------------------------------------------------------------- voxel downsampling
+struct RefVoxel {
+  double sx = 0, sy = 0, sz = 0, si = 0;
+  std::size_t n = 0;
+  std::size_t first = 0;
+};
+
+// Slow reference: std::map keyed by the voxel index triple (lexicographic = documented order).
+std::map<std::array<std::int64_t, 3>, RefVoxel> RefVoxels(const PointCloud& c, double v) {
+  std::map<std::array<std::int64_t, 3>, RefVoxel> m;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const auto& p = c.points[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    std::array<std::int64_t, 3> k{std::int64_t(std::floor(p.x / v)), std::int64_t(std::floor(p.y / v)),
+                                  std::int64_t(std::floor(p.z / v))};
+    auto [it, inserted] = m.try_emplace(k);
+    if (inserted) it->second.first = i;
+    it->second.sx += p.x;
+    it->second.sy += p.y;
+    it->second.sz += p.z;
+    it->second.si += p.intensity;
+    ++it->second.n;
+  }
+  return m;
+}
+
+void ExpectMatchesReference(const PointCloud& c, double v, int threads) {
+  const PointCloud d = VoxelDownsample(c, v, threads);
+  const auto ref = RefVoxels(c, v);
+  ASSERT_EQ(d.size(), ref.size());
+  std::size_t j = 0;
+  for (const auto& [k, r] : ref) {
+    const auto& p = d.points[j];
+    const double tol = 1e-6 * (1.0 + std::abs(r.sx / r.n) + std::abs(r.sy / r.n) + std::abs(r.sz / r.n));
+    EXPECT_NEAR(p.x, r.sx / r.n, tol) << "voxel " << j;
+    EXPECT_NEAR(p.y, r.sy / r.n, tol) << "voxel " << j;
+    EXPECT_NEAR(p.z, r.sz / r.n, tol) << "voxel " << j;
+    EXPECT_NEAR(p.intensity, r.si / r.n, 1e-5);
+    if (!c.object.empty()) {
+      EXPECT_EQ(d.object[j], c.object[r.first]);
+      EXPECT_EQ(d.cls[j], c.cls[r.first]);
+      EXPECT_EQ(d.session[j], c.session[r.first]);
+    }
+    ++j;
+  }
+}
+
+TEST(Voxel, MatchesReferenceRandomNegativeCoords) {
+  PointCloud c = RandomCloud(20000, 10.f, 2);
+  AddArrays(c);
+  ExpectMatchesReference(c, 0.5, 1);
+  ExpectMatchesReference(c, 0.5, 2);
+  ExpectMatchesReference(c, 3.0, 0);
+}
+
+TEST(Voxel, BoundaryPointsGoToUpperVoxel) {
+  PointCloud c;
+  c.push_back(0.f, 0.f, 0.f);    // voxel (0,0,0)
+  c.push_back(0.5f, 0.f, 0.f);   // exactly on the boundary: voxel (1,0,0)
+  c.push_back(-0.5f, 0.f, 0.f);  // voxel (-1,0,0)
+  c.push_back(-0.f, 0.f, 0.f);   // -0 joins voxel 0
+  c.push_back(0.49f, 0.49f, 0.49f);
+  c.push_back(-1e-7f, 0.f, 0.f);  // voxel (-1,0,0)
+  const PointCloud d = VoxelDownsample(c, 0.5, 1);
+  ASSERT_EQ(d.size(), 3u);
+  EXPECT_NEAR(d.points[0].x, (-0.5 - 1e-7) / 2, 1e-7);
+  EXPECT_NEAR(d.points[1].x, 0.49 / 3, 1e-6);
+  EXPECT_NEAR(d.points[1].y, 0.49 / 3, 1e-6);
+  EXPECT_FLOAT_EQ(d.points[2].x, 0.5f);
+  ExpectMatchesReference(c, 0.5, 2);
+}
+
+TEST(Voxel, FarCoordinatesAndWideKeys) {
+  // +-1e6 m: packed keys for 1 m voxels, the 3 x int64 fallback for 1 mm voxels.
+  PointCloud c = RandomCloud(3000, 30.f, 3, {1e6f, -1e6f, 5e5f});
+  PointCloud far2 = RandomCloud(3000, 30.f, 4, {-1e6f, 1e6f, -5e5f});
+  c.append(far2);
+  AddArrays(c);
+  ExpectMatchesReference(c, 1.0, 2);
+  ExpectMatchesReference(c, 0.001, 2);
+  EXPECT_THROW(VoxelDownsample(c, 1e-20, 1), Error);
+}
+
+TEST(Voxel, ThreadCountDoesNotChangeOutput) {
+  PointCloud c = RandomCloud(200000, 40.f, 5);
+  AddArrays(c);
+  const PointCloud a = VoxelDownsample(c, 0.3, 1);
+  const PointCloud b = VoxelDownsample(c, 0.3, 2);
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a.points[i].x, b.points[i].x);
+    ASSERT_EQ(a.points[i].y, b.points[i].y);
+    ASSERT_EQ(a.points[i].z, b.points[i].z);
+    ASSERT_EQ(a.points[i].intensity, b.points[i].intensity);
+  }
+  EXPECT_EQ(a.object, b.object);
+}
+
+TEST(Voxel, EmptyNonFiniteAndBadArgs) {
+  EXPECT_TRUE(VoxelDownsample(PointCloud{}, 1.0).empty());
+  PointCloud c;
+  c.push_back(std::numeric_limits<float>::quiet_NaN(), 0, 0);
+  EXPECT_TRUE(VoxelDownsample(c, 1.0).empty());
+  c.push_back(1.2f, 0, 0);
+  EXPECT_EQ(VoxelDownsample(c, 1.0).size(), 1u);
+  EXPECT_THROW(VoxelDownsample(c, 0.0), Error);
+  EXPECT_THROW(VoxelDownsample(c, -1.0), Error);
+  EXPECT_THROW(VoxelDownsample(c, 1.0, -2), Error);
+}
+
+// ----------------------------------------------------------------------------------- kd-tree
+// Same arithmetic as the tree: float differences, double squares and sum.
+double Sq(const Eigen::Vector3f& q, const PointXYZI& p) {
+  const double dx = q.x() - p.x, dy = q.y() - p.y, dz = q.z() - p.z;
+  return dx * dx + dy * dy + dz * dz;
+}
+
+void CheckTree(const PointCloud& c, const std::vector<Eigen::Vector3f>& queries, float radius) {
+  const KdTree tree(c);
+  ASSERT_EQ(tree.size(), c.size());
+  const double r2 = double(radius) * double(radius);
+  for (const auto& q : queries) {
+    std::vector<std::pair<double, std::uint32_t>> all;
+    for (std::size_t i = 0; i < c.size(); ++i) all.emplace_back(Sq(q, c.points[i]), std::uint32_t(i));
+    std::sort(all.begin(), all.end());
+
+    // Radius: exact index set, sorted by (distance, index).
+    std::vector<std::uint32_t> expect_r;
+    for (const auto& [d, i] : all)
+      if (d < r2) expect_r.push_back(i);
+    const auto got_r = tree.Radius(q, radius);
+    ASSERT_EQ(got_r.size(), expect_r.size());
+    std::vector<std::uint32_t> got_idx;
+    for (std::size_t j = 0; j < got_r.size(); ++j) {
+      got_idx.push_back(got_r[j].first);
+      EXPECT_EQ(got_r[j].second, float(Sq(q, c.points[got_r[j].first])));
+      if (j > 0) {
+        EXPECT_LE(got_r[j - 1].second, got_r[j].second);
+      }
+    }
+    std::vector<std::uint32_t> a = got_idx, b = expect_r;
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    EXPECT_EQ(a, b);
+
+    // CountWithin with early stop.
+    for (std::size_t max_count : {std::size_t(1), std::size_t(3), std::size_t(1000000)})
+      EXPECT_EQ(tree.CountWithin(q, radius, max_count), std::min(max_count, expect_r.size()));
+
+    // Knn: the k smallest distances (ties may pick different indices of equal distance).
+    for (std::size_t k : {std::size_t(1), std::size_t(4), std::size_t(10)}) {
+      const auto got = tree.Knn(q, k);
+      ASSERT_EQ(got.size(), std::min(k, c.size()));
+      for (std::size_t j = 0; j < got.size(); ++j) {
+        EXPECT_EQ(got[j].second, float(all[j].first)) << "k=" << k << " j=" << j;
+        EXPECT_EQ(got[j].second, float(Sq(q, c.points[got[j].first])));
+      }
+    }
+    std::uint32_t ni = 99;
+    float nd = -1.f;
+    if (c.empty()) {
+      EXPECT_FALSE(tree.Nearest(q, &ni, &nd));
+    } else {
+      ASSERT_TRUE(tree.Nearest(q, &ni, &nd));
+      EXPECT_EQ(nd, float(all[0].first));
+      EXPECT_EQ(float(Sq(q, c.points[ni])), nd);
+    }
+  }
+}
+
+std::vector<Eigen::Vector3f> Queries(const PointCloud& c, std::size_t n, float extent, unsigned seed,
+                                     Eigen::Vector3f offset = {0, 0, 0}) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-extent, extent);
+  std::vector<Eigen::Vector3f> q;
+  for (std::size_t i = 0; i < n; ++i) q.emplace_back(offset.x() + u(rng), offset.y() + u(rng), offset.z() + u(rng));
+  for (std::size_t i = 0; i < std::min<std::size_t>(c.size(), 5); ++i) q.push_back(c.points[i].xyz());
+  return q;
+}
+
+TEST(KdTree, EmptyCloud) {
+  PointCloud c;
+  CheckTree(c, Queries(c, 3, 1.f, 1), 1.f);
+  KdTree t(c);
+  EXPECT_TRUE(t.Knn({0, 0, 0}, 3).empty());
+  EXPECT_EQ(t.CountWithin({0, 0, 0}, 10.f, 10), 0u);
+}
+
+TEST(KdTree, OneToFivePoints) {
+  for (std::size_t n = 1; n <= 5; ++n) {
+    const PointCloud c = RandomCloud(n, 2.f, unsigned(10 + n));
+    CheckTree(c, Queries(c, 20, 3.f, unsigned(n)), 1.5f);
+  }
+}
+
+TEST(KdTree, DuplicatesAndTies) {
+  PointCloud c;
+  for (int i = 0; i < 40; ++i) c.push_back(1.f, 2.f, 3.f);  // all identical
+  for (int x = -3; x <= 3; ++x)
+    for (int y = -3; y <= 3; ++y) c.push_back(float(x), float(y), 0.f);  // grid: many equal distances
+  std::vector<Eigen::Vector3f> q = Queries(c, 30, 4.f, 7);
+  q.push_back({0.5f, 0.5f, 0.f});
+  q.push_back({1.f, 2.f, 3.f});
+  q.push_back({0.f, 0.f, 0.f});
+  CheckTree(c, q, 1.0f);   // grid neighbours at exactly 1.0 are excluded (strict)
+  CheckTree(c, q, 2.5f);
+}
+
+TEST(KdTree, RandomAndFarFromOrigin) {
+  const PointCloud c = RandomCloud(3000, 20.f, 21);
+  CheckTree(c, Queries(c, 200, 22.f, 22), 2.0f);
+  const Eigen::Vector3f off(1e6f, -1e6f, 1e6f);
+  const PointCloud f = RandomCloud(2000, 50.f, 23, off);
+  CheckTree(f, Queries(f, 100, 55.f, 24, off), 6.0f);
+}
+
+TEST(KdTree, SharedCloudAndMove) {
+  auto c = std::make_shared<const PointCloud>(RandomCloud(100, 5.f, 30));
+  KdTree a(c);
+  EXPECT_EQ(&a.cloud(), c.get());
+  KdTree b(std::move(a));
+  EXPECT_EQ(b.size(), 100u);
+  std::uint32_t i;
+  float d;
+  ASSERT_TRUE(b.Nearest(c->points[17].xyz(), &i, &d));
+  EXPECT_EQ(i, 17u);
+  EXPECT_EQ(d, 0.f);
+  PointCloud bad;
+  bad.push_back(std::numeric_limits<float>::quiet_NaN(), 0, 0);
+  EXPECT_THROW(KdTree{bad}, Error);
+}
+
+// ------------------------------------------------------------------------------ range images
+Eigen::Vector3f Dir(double az_deg, double el_deg, double r) {
+  const double az = az_deg * M_PI / 180, el = el_deg * M_PI / 180;
+  return (r * Eigen::Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)))
+      .cast<float>();
+}
+
+TEST(RangeImage, PixelOfHandPlacedPoints) {
+  const RangeImage img(RangeImageConfig{});  // 64 x 900, +2 .. -24.8 deg
+  int row, col;
+  float r;
+  // Straight ahead: pitch 0 -> row floor(2 / 26.8 * 64) = 4; azimuth 0 -> column 450.
+  ASSERT_TRUE(img.Project({10.f, 0.f, 0.f}, &row, &col, &r));
+  EXPECT_EQ(row, 4);
+  EXPECT_EQ(col, 450);
+  EXPECT_FLOAT_EQ(r, 10.f);
+  // Behind: azimuth +-180 deg -> column 0 (both signs of zero y).
+  ASSERT_TRUE(img.Project({-10.f, 0.f, 0.f}, &row, &col, &r));
+  EXPECT_EQ(col, 0);
+  ASSERT_TRUE(img.Project({-10.f, -0.f, 0.f}, &row, &col, &r));
+  EXPECT_EQ(col, 0);
+  ASSERT_TRUE(img.Project(Dir(-179.9, 0, 5), &row, &col, &r));
+  EXPECT_EQ(col, 899);
+  ASSERT_TRUE(img.Project(Dir(179.9, 0, 5), &row, &col, &r));
+  EXPECT_EQ(col, 0);
+  // Left (+y, azimuth +90) -> column 225 (clockwise from +180); right -> 675.
+  ASSERT_TRUE(img.Project({0.f, 10.f, 0.f}, &row, &col, &r));
+  EXPECT_EQ(col, 225);
+  ASSERT_TRUE(img.Project({0.f, -10.f, 0.f}, &row, &col, &r));
+  EXPECT_EQ(col, 675);
+  // Vertical FOV edges.
+  ASSERT_TRUE(img.Project(Dir(30, 1.99, 20), &row, &col, &r));
+  EXPECT_EQ(row, 0);
+  ASSERT_TRUE(img.Project(Dir(30, -24.79, 20), &row, &col, &r));
+  EXPECT_EQ(row, 63);
+  EXPECT_FALSE(img.Project(Dir(30, 2.1, 20), &row, &col, &r));
+  EXPECT_FALSE(img.Project(Dir(30, -25.0, 20), &row, &col, &r));
+  EXPECT_FALSE(img.Project({0.f, 0.f, 0.f}, &row, &col, &r));
+  // A row boundary: pitch 2 - 26.8 * 10.5 / 64 deg is in the middle of row 10.
+  ASSERT_TRUE(img.Project(Dir(0, 2.0 - 26.8 * 10.5 / 64, 7), &row, &col, &r));
+  EXPECT_EQ(row, 10);
+}
+
+TEST(RangeImage, BuildKeepsMinimumRangeAndIndex) {
+  RangeImage img(RangeImageConfig{});
+  PointCloud c;
+  c.push_back(20.f, 0.f, 0.f);   // 0: far
+  c.push_back(5.f, 0.f, 0.f);    // 1: near, same pixel -> wins
+  c.push_back(10.f, 0.f, 0.f);   // 2
+  c.push_back(0.f, 0.f, 50.f);   // 3: outside FOV
+  c.push_back(0.f, -3.f, 0.f);   // 4: right
+  img.Build(c);
+  EXPECT_FLOAT_EQ(img.At(4, 450), 5.f);
+  EXPECT_EQ(img.IndexAt(4, 450), 1);
+  EXPECT_FLOAT_EQ(img.At(4, 675), 3.f);
+  EXPECT_EQ(img.IndexAt(4, 675), 4);
+  int filled = 0;
+  for (int r = 0; r < img.rows(); ++r)
+    for (int k = 0; k < img.cols(); ++k) {
+      if (img.IndexAt(r, k) >= 0) {
+        ++filled;
+      } else {
+        EXPECT_TRUE(std::isinf(img.At(r, k)));
+      }
+    }
+  EXPECT_EQ(filled, 2);
+  img.Build(PointCloud{});  // resets
+  EXPECT_EQ(img.IndexAt(4, 450), -1);
+  EXPECT_TRUE(std::isinf(img.At(4, 450)));
+}
+
+TEST(RangeImage, RandomPointsLandWithinOnePixelOfTheirDirection) {
+  RangeImageConfig cfg;
+  cfg.rows = 32;
+  cfg.cols = 360;
+  cfg.fov_up_deg = 15;
+  cfg.fov_down_deg = -15;
+  const RangeImage img(cfg);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> az(-180, 180), el(-14.9, 14.9), rr(0.5, 80);
+  for (int i = 0; i < 2000; ++i) {
+    const double a = az(rng), e = el(rng);
+    int row, col;
+    float r;
+    ASSERT_TRUE(img.Project(Dir(a, e, rr(rng)), &row, &col, &r));
+    const double row_exact = (15.0 - e) / 30.0 * 32;
+    const double col_exact = (180.0 - a) / 360.0 * 360;
+    EXPECT_LE(std::abs(row + 0.5 - row_exact), 0.5 + 1e-3);
+    const double dc = std::abs(col + 0.5 - col_exact);
+    EXPECT_LE(std::min(dc, 360 - dc), 0.5 + 1e-3);
+  }
+  EXPECT_THROW(RangeImage(RangeImageConfig{1.0, 2.0, 64, 900}), Error);
+  EXPECT_THROW(RangeImage(RangeImageConfig{2.0, -2.0, 0, 900}), Error);
+}
+
+}  // namespace
+}  // namespace ltm::geometry
