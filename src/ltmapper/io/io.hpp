@@ -116,14 +116,24 @@ struct SessionInfo {
   std::size_t odometry_edges = 0, loop_edges = 0;
   std::string pose_source;             // "g2o" or "optimized_poses.txt"
   std::vector<std::string> problems;   // missing / inconsistent files, one line each
+  std::size_t scans_read = 0;          // scans read successfully (points_* are over these)
+  std::string load_error;              // why LoadSession fails; empty when the session loads
 };
+// Never throws for problems inside the session (they go to `problems`, and `load_error` when
+// LoadSession would fail or a scan is unreadable); throws ltm::Error when `dir` does not exist or
+// has no Scans/ folder. Empty scans are problems (they load, but have no geometry).
 SessionInfo InspectSession(const std::string& dir, bool read_scans = true);
+// Same for a KITTI layout (velodyne/NNNNNN.bin + poses file, optional Tr as in LoadKittiSession).
+SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses_path,
+                                const Pose* T_cam_velo = nullptr, bool read_scans = true);
 std::string FormatSessionInfo(const SessionInfo& info);
 
 // ------------------------------------------------------------------------------------- YAML
 // Reads a YAML params file into any config with a Visit() (see core.hpp). Nested maps are
 // flattened to dotted keys. Unknown keys, wrong types and out-of-range values are errors
-// naming the file and key. Keys absent from the file keep their defaults.
+// naming the file and key. Keys absent from the file keep their defaults. `section` selects a
+// top-level map (other top-level keys are ignored; an absent section keeps every default). A file
+// with any error changes nothing (values are applied only when the whole file is valid).
 void LoadConfigFields(const std::string& path, const ConfigFields& fields,
                       const std::string& section = "");
 template <class Config>

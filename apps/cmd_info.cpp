@@ -1,0 +1,52 @@
+// `ltmapper info <session-dir>`: what a session holds and what is wrong with it, before any
+// stage runs on it. Exit code 1 when the session cannot be loaded at all.
+#include "command.hpp"
+
+#include "ltmapper/io/io.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <iostream>
+#include <memory>
+
+namespace {
+
+struct InfoArgs {
+  std::string dir;
+  std::string kitti_poses;
+  std::string calib;
+  bool no_scans = false;
+};
+
+void RunInfo(const InfoArgs& a) {
+  ltm::io::SessionInfo info;
+  if (!a.kitti_poses.empty()) {
+    std::unique_ptr<ltm::Pose> Tr;
+    if (!a.calib.empty()) Tr = std::make_unique<ltm::Pose>(ltm::io::ReadTransform(a.calib));
+    info = ltm::io::InspectKittiSession(a.dir, a.kitti_poses, Tr.get(), !a.no_scans);
+  } else {
+    if (!a.calib.empty()) throw ltm::Error("--calib needs --kitti-poses (KITTI layout)");
+    info = ltm::io::InspectSession(a.dir, !a.no_scans);
+  }
+  std::cout << ltm::io::FormatSessionInfo(info) << std::flush;
+  if (!info.load_error.empty()) throw ltm::Error("session cannot be loaded: " + info.load_error);
+  if (!info.problems.empty())
+    spdlog::warn("{}: {} problem(s) listed above", a.dir, info.problems.size());
+}
+
+LTM_COMMAND(10, [](CLI::App& parent) {
+  auto args = std::make_shared<InfoArgs>();
+  auto* cmd = parent.add_subcommand(
+      "info", "What a session holds: keyframes, scan sizes, poses, edges, problems");
+  cmd->add_option("session-dir", args->dir, "Session directory (Scans/, g2o / optimized_poses.txt) "
+                                            "or KITTI sequence directory (velodyne/)")
+      ->required();
+  cmd->add_option("--kitti-poses", args->kitti_poses,
+                  "KITTI layout: poses file (12 numbers per line, one per scan index)");
+  cmd->add_option("--calib", args->calib,
+                  "KITTI layout: calib.txt (its 'Tr:' line) or a 3x4/4x4 file; poses are camera poses");
+  cmd->add_flag("--no-scans", args->no_scans, "Do not read the scans (faster; no point statistics)");
+  cmd->callback([args] { RunInfo(*args); });
+});
+
+}  // namespace

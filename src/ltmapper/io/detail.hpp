@@ -1,0 +1,29 @@
+// Private helpers shared by the io .cpp files (not part of the public API).
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <Eigen/Geometry>
+
+#include <string>
+#include <vector>
+
+namespace ltm::io::detail {
+
+// Tolerance on |q| - 1 and on ||R^T R - I|| for rotations read from text files: larger
+// deviations are not rounding but a wrong file.
+constexpr double kUnitTolerance = 1e-3;
+
+// Rigid pose from a text rotation: checks it is a rotation within kUnitTolerance (error naming
+// file:line otherwise) and projects it onto SO(3) so Isometry3d::inverse() is exact.
+Pose PoseFromRt(const Eigen::Matrix3d& R, const Eigen::Vector3d& t, const std::string& file,
+                std::size_t line);
+// Pose from a translation and a quaternion (x y z w order as in TUM / g2o), normalised.
+Pose PoseFromQuat(const Eigen::Vector3d& t, double qx, double qy, double qz, double qw,
+                  const std::string& file, std::size_t line);
+// Splits a line into numbers; throws naming file:line on a token that is not a number.
+std::vector<double> ParseNumbers(const std::string& text, const std::string& file, std::size_t line);
+// Formats a double so that it reads back to the same value (shortest of %.15g / %.17g).
+std::string FormatDouble(double v);
+
+}  // namespace ltm::io::detail

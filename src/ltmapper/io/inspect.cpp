@@ -1,0 +1,295 @@
+// `ltmapper info`: what a session holds and what is wrong with it. Unlike LoadSession this goes
+// on after a problem, so a user sees every problem at once.
+#include "ltmapper/io/io.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace ltm::io {
+namespace {
+
+struct IndexedFile {
+  int index = 0;
+  std::string path;
+};
+
+std::string IdList(const std::vector<int>& ids, std::size_t max = 10) {
+  std::ostringstream ss;
+  for (std::size_t i = 0; i < ids.size() && i < max; ++i) ss << (i ? ", " : "") << ids[i];
+  if (ids.size() > max) ss << ", ... (" << ids.size() << " in all)";
+  return ss.str();
+}
+
+// Like ListIndexedFiles, but bad names and duplicate indices become problems (and a load error).
+std::vector<IndexedFile> ListLenient(const std::string& dir, const std::string& ext, SessionInfo& info) {
+  std::vector<IndexedFile> files;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    if (!entry.is_regular_file() || entry.path().extension().string() != ext) continue;
+    try {
+      files.push_back({FileIndex(entry.path().string()), entry.path().string()});
+    } catch (const Error& e) {
+      info.problems.push_back(e.what());
+      if (info.load_error.empty()) info.load_error = e.what();
+    }
+  }
+  std::sort(files.begin(), files.end(),
+            [](const IndexedFile& a, const IndexedFile& b) { return a.index != b.index ? a.index < b.index : a.path < b.path; });
+  std::vector<IndexedFile> unique;
+  for (auto& f : files) {
+    if (!unique.empty() && unique.back().index == f.index) {
+      const std::string msg = dir + ": duplicate index " + std::to_string(f.index) + ": " +
+                              fs::path(unique.back().path).filename().string() + " and " +
+                              fs::path(f.path).filename().string();
+      info.problems.push_back(msg);
+      if (info.load_error.empty()) info.load_error = msg;
+      continue;
+    }
+    unique.push_back(std::move(f));
+  }
+  return unique;
+}
+
+void PoseStats(const std::vector<Pose>& poses, SessionInfo& info) {
+  if (poses.empty()) return;
+  info.bbox_min = info.bbox_max = poses.front().translation();
+  info.path_length_m = 0.0;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const Eigen::Vector3d t = poses[i].translation();
+    info.bbox_min = info.bbox_min.cwiseMin(t);
+    info.bbox_max = info.bbox_max.cwiseMax(t);
+    if (i > 0) info.path_length_m += (t - poses[i - 1].translation()).norm();
+  }
+}
+
+// Reads every scan (in parallel): sizes, non-finite counts, empty and unreadable scans.
+void ScanStats(const std::vector<IndexedFile>& scans, SessionInfo& info) {
+  struct Result {
+    std::size_t points = 0, non_finite = 0;
+    std::string error;
+  };
+  std::vector<Result> results(scans.size());
+  tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t i) {
+    try {
+      CloudReadStats st;
+      results[i].points = ReadCloud(scans[i].path, &st).size();
+      results[i].non_finite = st.non_finite_dropped;
+    } catch (const std::exception& e) {
+      results[i].error = e.what();
+    }
+  });
+  info.points_min = std::numeric_limits<std::size_t>::max();
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    const Result& r = results[i];
+    if (!r.error.empty()) {
+      info.problems.push_back("unreadable scan: " + r.error);
+      if (info.load_error.empty()) info.load_error = r.error;
+      continue;
+    }
+    ++info.scans_read;
+    info.points_min = std::min(info.points_min, r.points);
+    info.points_max = std::max(info.points_max, r.points);
+    info.points_total += r.points;
+    info.non_finite_points += r.non_finite;
+    if (r.points == 0)
+      info.problems.push_back("empty scan: " + scans[i].path + " has 0 points" +
+                              (r.non_finite ? " (after dropping " + std::to_string(r.non_finite) + " NaN/Inf points)" : ""));
+  }
+  if (info.scans_read == 0) info.points_min = 0;
+}
+
+}  // namespace
+
+SessionInfo InspectSession(const std::string& dir, bool read_scans) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such session directory");
+  const fs::path root(dir);
+  const std::string scans_dir = (root / "Scans").string();
+  if (!fs::is_directory(scans_dir, ec))
+    throw Error(dir + ": missing Scans/ folder (expected Scans/NNNNNN.pcd keyframe scans)");
+
+  SessionInfo info;
+  info.dir = dir;
+  const auto scans = ListLenient(scans_dir, ".pcd", info);
+  info.scans_found = scans.size();
+  if (scans.empty()) info.problems.push_back(scans_dir + ": no .pcd scans");
+  std::set<int> scan_ids;
+  for (const auto& s : scans) scan_ids.insert(s.index);
+
+  const std::string scd_dir = (root / "SCDs").string();
+  if (fs::is_directory(scd_dir, ec)) {
+    const auto scds = ListLenient(scd_dir, ".scd", info);
+    info.scds_found = scds.size();
+    std::set<int> scd_ids;
+    for (const auto& s : scds) scd_ids.insert(s.index);
+    std::vector<int> no_scd, no_scan;
+    for (int id : scan_ids)
+      if (!scd_ids.count(id)) no_scd.push_back(id);
+    for (int id : scd_ids)
+      if (!scan_ids.count(id)) no_scan.push_back(id);
+    if (!no_scd.empty()) info.problems.push_back("SCDs/: no descriptor for scans " + IdList(no_scd) + " (they will be computed)");
+    if (!no_scan.empty()) info.problems.push_back("SCDs/: descriptors without a scan: " + IdList(no_scan));
+  }
+
+  const std::string g2o_path = (root / "singlesession_posegraph.g2o").string();
+  const std::string kitti_path = (root / "optimized_poses.txt").string();
+  std::vector<Pose> poses;
+  if (fs::exists(g2o_path, ec)) {
+    info.pose_source = "singlesession_posegraph.g2o";
+    try {
+      const G2oGraph g = ReadG2o(g2o_path);
+      std::map<int, Pose> by_id(g.vertices.begin(), g.vertices.end());
+      std::map<int, int> position;
+      for (const auto& [id, T] : by_id) {
+        position[id] = int(poses.size());
+        poses.push_back(T);
+      }
+      info.keyframes = by_id.size();
+      std::vector<int> missing, extra;
+      for (const auto& [id, T] : by_id)
+        if (!scan_ids.count(id)) missing.push_back(id);
+      for (int id : scan_ids)
+        if (!by_id.count(id)) extra.push_back(id);
+      if (!missing.empty())
+        info.problems.push_back("missing scans: g2o vertices without Scans/ file: " + IdList(missing));
+      if (!extra.empty())
+        info.problems.push_back("extra scans without poses (no g2o vertex): " + IdList(extra));
+      if (by_id.size() != scans.size())
+        info.problems.push_back("count mismatch: " + std::to_string(by_id.size()) + " g2o vertices, " +
+                                std::to_string(scans.size()) + " scans");
+      for (const auto& e : g.edges)
+        (std::abs(position[e.from] - position[e.to]) == 1 ? info.odometry_edges : info.loop_edges)++;
+    } catch (const Error& e) {
+      info.problems.push_back(e.what());
+    }
+    if (fs::exists(kitti_path, ec)) {
+      try {
+        const auto kp = ReadKittiPoses(kitti_path);
+        if (kp.size() != info.keyframes)
+          info.problems.push_back("optimized_poses.txt has " + std::to_string(kp.size()) +
+                                  " poses, the g2o " + std::to_string(info.keyframes) +
+                                  " vertices (the g2o is used)");
+      } catch (const Error& e) {
+        info.problems.push_back(std::string(e.what()) + " (not used: the g2o gives the poses)");
+      }
+    }
+  } else if (fs::exists(kitti_path, ec)) {
+    info.pose_source = "optimized_poses.txt";
+    try {
+      poses = ReadKittiPoses(kitti_path);
+      info.keyframes = poses.size();
+      if (poses.size() != scans.size())
+        info.problems.push_back("count mismatch: pose count != scan count: " + std::to_string(poses.size()) +
+                                " poses in optimized_poses.txt, " + std::to_string(scans.size()) +
+                                " scans in Scans/");
+      if (poses.size() > 1) info.odometry_edges = poses.size() - 1;
+    } catch (const Error& e) {
+      info.problems.push_back(e.what());
+    }
+  } else {
+    info.pose_source = "none";
+    info.problems.push_back("no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
+  }
+  PoseStats(poses, info);
+  if (read_scans) ScanStats(scans, info);
+
+  if (info.load_error.empty()) {
+    try {
+      LoadSession(dir);
+    } catch (const Error& e) {
+      info.load_error = e.what();
+    }
+  }
+  return info;
+}
+
+SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses_path,
+                                const Pose* T_cam_velo, bool read_scans) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such KITTI sequence directory");
+  const std::string velo_dir = (fs::path(dir) / "velodyne").string();
+  if (!fs::is_directory(velo_dir, ec))
+    throw Error(dir + ": missing velodyne/ folder (expected velodyne/NNNNNN.bin)");
+  SessionInfo info;
+  info.dir = dir;
+  info.pose_source = poses_path + (T_cam_velo ? " (camera poses, with Tr)" : "");
+  const auto scans = ListLenient(velo_dir, ".bin", info);
+  info.scans_found = scans.size();
+  if (scans.empty()) info.problems.push_back(velo_dir + ": no .bin scans");
+  std::vector<Pose> poses;
+  try {
+    const auto all = ReadKittiPoses(poses_path);
+    const Pose Tr = T_cam_velo ? *T_cam_velo : Pose::Identity();
+    std::vector<int> no_pose;
+    for (const auto& s : scans) {
+      if (s.index >= 0 && std::size_t(s.index) < all.size())
+        poses.push_back(Tr.inverse() * all[std::size_t(s.index)] * Tr);
+      else
+        no_pose.push_back(s.index);
+    }
+    if (!no_pose.empty())
+      info.problems.push_back("extra scans without poses (" + std::to_string(all.size()) +
+                              " lines in the poses file): " + IdList(no_pose));
+  } catch (const Error& e) {
+    info.problems.push_back(e.what());
+  }
+  info.keyframes = poses.size();
+  if (poses.size() > 1) info.odometry_edges = poses.size() - 1;
+  PoseStats(poses, info);
+  if (read_scans) ScanStats(scans, info);
+  if (info.load_error.empty()) {
+    try {
+      LoadKittiSession(dir, poses_path, T_cam_velo);
+    } catch (const Error& e) {
+      info.load_error = e.what();
+    }
+  }
+  return info;
+}
+
+std::string FormatSessionInfo(const SessionInfo& info) {
+  std::ostringstream os;
+  char buf[256];
+  os << "session " << info.dir << "\n";
+  os << "  keyframes:       " << info.keyframes << " (poses from " << info.pose_source << ")\n";
+  os << "  scans:           " << info.scans_found << " found, " << info.scds_found << " SCDs"
+     << (info.scds_found == 0 ? " (Scan Context computed when needed)" : "") << "\n";
+  if (info.scans_read > 0) {
+    std::snprintf(buf, sizeof(buf), "min %zu / mean %.0f / max %zu (%zu points in %zu scans read)",
+                  info.points_min, double(info.points_total) / double(info.scans_read), info.points_max,
+                  info.points_total, info.scans_read);
+    os << "  points per scan: " << buf << "\n";
+    os << "  non-finite:      " << info.non_finite_points << " NaN/Inf points dropped\n";
+  } else {
+    os << "  points per scan: not read\n";
+  }
+  if (info.keyframes > 0) {
+    const Eigen::Vector3d e = info.bbox_max - info.bbox_min;
+    std::snprintf(buf, sizeof(buf), "x [%.2f, %.2f]  y [%.2f, %.2f]  z [%.2f, %.2f] m (extent %.2f x %.2f x %.2f m)",
+                  info.bbox_min.x(), info.bbox_max.x(), info.bbox_min.y(), info.bbox_max.y(),
+                  info.bbox_min.z(), info.bbox_max.z(), e.x(), e.y(), e.z());
+    os << "  pose bbox:       " << buf << "\n";
+    std::snprintf(buf, sizeof(buf), "%.2f m", info.path_length_m);
+    os << "  path length:     " << buf << "\n";
+  }
+  os << "  edges:           " << info.odometry_edges << " odometry, " << info.loop_edges << " loops\n";
+  if (info.problems.empty()) {
+    os << "  problems:        none\n";
+  } else {
+    os << "  PROBLEMS (" << info.problems.size() << "):\n";
+    for (const auto& p : info.problems) os << "    - " << p << "\n";
+  }
+  if (!info.load_error.empty()) os << "  CANNOT LOAD:     " << info.load_error << "\n";
+  return os.str();
+}
+
+}  // namespace ltm::io

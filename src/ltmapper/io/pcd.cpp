@@ -1,0 +1,312 @@
+// PCD through PCL's reader and writer. PCL prints an error and sometimes returns partial data on
+// truncated or inconsistent files, so the header is parsed here first and the data size checked
+// against it (binary: exact byte count; binary_compressed: the two size words; ascii: line and
+// token counts). Non-finite points are dropped and counted, never passed on.
+#include "ltmapper/io/io.hpp"
+
+#include <pcl/PCLPointCloud2.h>
+#include <pcl/io/pcd_io.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace ltm::io {
+namespace {
+
+struct PcdHeader {
+  std::vector<std::string> fields;
+  std::vector<int> sizes, counts;
+  std::vector<char> types;
+  long long width = -1, height = -1, points = -1;
+  std::string data;            // ascii | binary | binary_compressed
+  std::size_t data_offset = 0; // byte offset of the first data byte
+  std::size_t header_lines = 0;
+  std::size_t PointStep() const {
+    std::size_t s = 0;
+    for (std::size_t i = 0; i < sizes.size(); ++i) s += std::size_t(sizes[i]) * std::size_t(counts[i]);
+    return s;
+  }
+  std::size_t Values() const {
+    std::size_t s = 0;
+    for (int c : counts) s += std::size_t(c);
+    return s;
+  }
+};
+
+long long ParseCount(const std::string& path, std::size_t line, const std::string& key,
+                     std::istringstream& ss) {
+  long long v = -1;
+  if (!(ss >> v) || v < 0) throw Error(path, line, "bad " + key + " value in PCD header");
+  return v;
+}
+
+PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
+  PcdHeader h;
+  std::string line;
+  std::size_t lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ss(line);
+    std::string key;
+    if (!(ss >> key) || key[0] == '#') continue;
+    if (key == "VERSION" || key == "VIEWPOINT") continue;
+    if (key == "FIELDS" || key == "COLUMNS") {
+      for (std::string f; ss >> f;) h.fields.push_back(f);
+    } else if (key == "SIZE") {
+      for (int v; ss >> v;) h.sizes.push_back(v);
+    } else if (key == "TYPE") {
+      for (std::string t; ss >> t;) h.types.push_back(t.empty() ? '?' : t[0]);
+    } else if (key == "COUNT") {
+      for (int v; ss >> v;) h.counts.push_back(v);
+    } else if (key == "WIDTH") {
+      h.width = ParseCount(path, lineno, key, ss);
+    } else if (key == "HEIGHT") {
+      h.height = ParseCount(path, lineno, key, ss);
+    } else if (key == "POINTS") {
+      h.points = ParseCount(path, lineno, key, ss);
+    } else if (key == "DATA") {
+      ss >> h.data;
+      const auto pos = in.tellg();
+      h.data_offset = pos < 0 ? 0 : std::size_t(pos);
+      h.header_lines = lineno;
+      if (pos < 0) {  // DATA was the last line without a newline: no data at all
+        in.clear();
+        in.seekg(0, std::ios::end);
+        h.data_offset = std::size_t(in.tellg());
+      }
+      break;
+    } else {
+      throw Error(path, lineno, "unknown PCD header entry '" + key + "'");
+    }
+  }
+  if (h.data.empty()) throw Error(path + ": not a PCD file (no DATA line in the header)");
+  if (h.data != "ascii" && h.data != "binary" && h.data != "binary_compressed")
+    throw Error(path, h.header_lines, "unknown PCD DATA type '" + h.data + "'");
+  if (h.fields.empty()) throw Error(path + ": PCD header has no FIELDS");
+  if (h.counts.empty()) h.counts.assign(h.fields.size(), 1);
+  if (h.sizes.size() != h.fields.size() || h.types.size() != h.fields.size() ||
+      h.counts.size() != h.fields.size())
+    throw Error(path + ": PCD header FIELDS/SIZE/TYPE/COUNT have different lengths");
+  if (h.width < 0) throw Error(path + ": PCD header has no WIDTH");
+  if (h.height < 0) h.height = 1;
+  if (h.points < 0) h.points = h.width * h.height;
+  if (h.points != h.width * h.height)
+    throw Error(path + ": PCD header POINTS " + std::to_string(h.points) + " != WIDTH*HEIGHT " +
+                std::to_string(h.width * h.height));
+  return h;
+}
+
+// Checks that the data section holds exactly what the header announces.
+void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& h) {
+  in.clear();
+  in.seekg(0, std::ios::end);
+  const std::size_t file_size = std::size_t(in.tellg());
+  const std::size_t have = file_size >= h.data_offset ? file_size - h.data_offset : 0;
+  const std::size_t n = std::size_t(h.points);
+  if (h.data == "binary") {
+    const std::size_t want = n * h.PointStep();
+    if (have < want)
+      throw Error(path + ": truncated PCD: header announces " + std::to_string(n) + " points (" +
+                  std::to_string(want) + " bytes) but the file holds " + std::to_string(have) +
+                  " data bytes");
+    if (have > want)
+      throw Error(path + ": PCD header disagrees with data: " + std::to_string(n) + " points need " +
+                  std::to_string(want) + " bytes but the file holds " + std::to_string(have));
+  } else if (h.data == "binary_compressed") {
+    if (n == 0) return;
+    if (have < 8) throw Error(path + ": truncated PCD: compressed data section is missing");
+    std::uint32_t sizes[2] = {0, 0};
+    in.seekg(std::streamoff(h.data_offset));
+    in.read(reinterpret_cast<char*>(sizes), 8);
+    if (std::size_t(sizes[1]) != n * h.PointStep())
+      throw Error(path + ": PCD header disagrees with data: " + std::to_string(n) +
+                  " points need " + std::to_string(n * h.PointStep()) +
+                  " bytes uncompressed, the data says " + std::to_string(sizes[1]));
+    if (have < 8 + std::size_t(sizes[0]))
+      throw Error(path + ": truncated PCD: compressed block of " + std::to_string(sizes[0]) +
+                  " bytes but only " + std::to_string(have - 8) + " present");
+  } else {  // ascii: one line per point, each with the announced number of values
+    in.seekg(std::streamoff(h.data_offset));
+    std::string line;
+    std::size_t lineno = h.header_lines, rows = 0;
+    const std::size_t values = h.Values();
+    while (std::getline(in, line)) {
+      ++lineno;
+      std::istringstream ss(line);
+      std::size_t tokens = 0;
+      bool comment = false;
+      for (std::string t; ss >> t;) {
+        if (tokens == 0 && t[0] == '#') comment = true;
+        ++tokens;
+      }
+      if (tokens == 0 || comment) continue;
+      ++rows;
+      if (tokens != values)
+        throw Error(path, lineno,
+                    "PCD ascii row has " + std::to_string(tokens) + " values, expected " +
+                        std::to_string(values) + (rows == n && tokens < values ? " (truncated file?)" : ""));
+    }
+    if (rows < n)
+      throw Error(path + ": truncated PCD: header announces " + std::to_string(n) +
+                  " points but the file holds " + std::to_string(rows) + " rows");
+    if (rows > n)
+      throw Error(path + ": PCD header disagrees with data: header announces " + std::to_string(n) +
+                  " points but the file holds " + std::to_string(rows) + " rows");
+  }
+}
+
+double ReadValue(const std::uint8_t* p, std::uint8_t datatype) {
+  switch (datatype) {
+    case pcl::PCLPointField::INT8: { std::int8_t v; std::memcpy(&v, p, 1); return v; }
+    case pcl::PCLPointField::UINT8: { std::uint8_t v; std::memcpy(&v, p, 1); return v; }
+    case pcl::PCLPointField::INT16: { std::int16_t v; std::memcpy(&v, p, 2); return v; }
+    case pcl::PCLPointField::UINT16: { std::uint16_t v; std::memcpy(&v, p, 2); return v; }
+    case pcl::PCLPointField::INT32: { std::int32_t v; std::memcpy(&v, p, 4); return v; }
+    case pcl::PCLPointField::UINT32: { std::uint32_t v; std::memcpy(&v, p, 4); return v; }
+    case pcl::PCLPointField::FLOAT32: { float v; std::memcpy(&v, p, 4); return v; }
+    case pcl::PCLPointField::FLOAT64: { double v; std::memcpy(&v, p, 8); return v; }
+    default: return std::nan("");
+  }
+}
+
+std::size_t TypeSize(std::uint8_t datatype) {
+  switch (datatype) {
+    case pcl::PCLPointField::INT8: case pcl::PCLPointField::UINT8: return 1;
+    case pcl::PCLPointField::INT16: case pcl::PCLPointField::UINT16: return 2;
+    case pcl::PCLPointField::INT32: case pcl::PCLPointField::UINT32:
+    case pcl::PCLPointField::FLOAT32: return 4;
+    case pcl::PCLPointField::FLOAT64: return 8;
+    default: return 0;
+  }
+}
+
+}  // namespace
+
+PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(path + ": cannot open");
+    const PcdHeader h = ParseHeader(path, in);
+    CheckDataSize(path, in, h);
+    if (h.points == 0) {  // a valid empty scan; PCL would only print a warning
+      if (stats) *stats = CloudReadStats{};
+      return PointCloud{};
+    }
+  }
+
+  pcl::PCLPointCloud2 blob;
+  Eigen::Vector4f origin;
+  Eigen::Quaternionf orientation;
+  int version = 0;
+  pcl::PCDReader reader;
+  int ret = -1;
+  try {
+    ret = reader.read(path, blob, origin, orientation, version);
+  } catch (const std::exception& e) {
+    throw Error(path + ": PCL cannot read the PCD file: " + e.what());
+  }
+  if (ret < 0) throw Error(path + ": PCL cannot read the PCD file (corrupt or truncated)");
+
+  const std::size_t n = std::size_t(blob.width) * std::size_t(blob.height);
+  if (blob.data.size() < n * blob.point_step)
+    throw Error(path + ": PCD data holds fewer bytes than WIDTH*HEIGHT points need");
+
+  const pcl::PCLPointField* fx = nullptr;
+  const pcl::PCLPointField* fy = nullptr;
+  const pcl::PCLPointField* fz = nullptr;
+  const pcl::PCLPointField* fi = nullptr;
+  for (const auto& f : blob.fields) {
+    if (f.name == "x") fx = &f;
+    if (f.name == "y") fy = &f;
+    if (f.name == "z") fz = &f;
+    if (f.name == "intensity") fi = &f;
+  }
+  if (!fx || !fy || !fz) throw Error(path + ": PCD has no x y z fields");
+  for (const auto* f : {fx, fy, fz, fi}) {
+    if (!f) continue;
+    if (TypeSize(f->datatype) == 0 || f->offset + TypeSize(f->datatype) > blob.point_step)
+      throw Error(path + ": PCD field '" + f->name + "' has an unsupported type or offset");
+  }
+
+  PointCloud cloud;
+  cloud.reserve(n);
+  std::size_t dropped = 0;
+  for (std::size_t r = 0; r < blob.height; ++r) {
+    const std::uint8_t* row = blob.data.data() + r * std::size_t(blob.row_step);
+    for (std::size_t c = 0; c < blob.width; ++c) {
+      const std::uint8_t* p = row + c * std::size_t(blob.point_step);
+      const double x = ReadValue(p + fx->offset, fx->datatype);
+      const double y = ReadValue(p + fy->offset, fy->datatype);
+      const double z = ReadValue(p + fz->offset, fz->datatype);
+      const double in = fi ? ReadValue(p + fi->offset, fi->datatype) : 0.0;
+      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z) || !std::isfinite(in)) {
+        ++dropped;
+        continue;
+      }
+      cloud.push_back(float(x), float(y), float(z), float(in));
+    }
+  }
+  if (stats) {
+    stats->points_in_file = n;
+    stats->non_finite_dropped = dropped;
+  }
+  return cloud;
+}
+
+namespace {
+// An empty cloud is a valid PCD (POINTS 0), but PCL's writers refuse it: write the header here.
+void WriteEmptyPcd(const std::string& tmp, PcdFormat format) {
+  std::ofstream out(tmp, std::ios::binary);
+  out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
+         "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 0\nHEIGHT 1\n"
+         "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA "
+      << (format == PcdFormat::kAscii ? "ascii" : "binary") << "\n";
+  if (!out) throw Error(tmp + ": write failed");
+}
+}  // namespace
+
+void WritePcd(const std::string& path, const PointCloud& cloud, PcdFormat format) {
+  WritePathAtomic(path, [&](const std::string& tmp) {
+    if (cloud.empty()) {
+      WriteEmptyPcd(tmp, format);
+      return;
+    }
+    pcl::PointCloud<pcl::PointXYZI> pc;
+    pc.resize(cloud.size());
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const auto& p = cloud.points[i];
+      pc[i].x = p.x;
+      pc[i].y = p.y;
+      pc[i].z = p.z;
+      pc[i].intensity = p.intensity;
+    }
+    pc.width = std::uint32_t(cloud.size());
+    pc.height = 1;
+    pc.is_dense = true;
+    pcl::PCDWriter writer;
+    int ret = -1;
+    try {
+      switch (format) {
+        case PcdFormat::kAscii: ret = writer.writeASCII(tmp, pc, 9); break;
+        case PcdFormat::kBinary: ret = writer.writeBinary(tmp, pc); break;
+        case PcdFormat::kBinaryCompressed: ret = writer.writeBinaryCompressed(tmp, pc); break;
+      }
+    } catch (const std::exception& e) {
+      throw Error(path + ": PCL cannot write the PCD file: " + e.what());
+    }
+    if (ret != 0) throw Error(path + ": PCL cannot write the PCD file");
+  });
+}
+
+}  // namespace ltm::io

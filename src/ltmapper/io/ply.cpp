@@ -1,0 +1,188 @@
+// PLY, binary little endian, with per-point scalar fields CloudCompare shows: float x y z
+// intensity, and when the cloud has them uchar class, ushort session, int object.
+#include "ltmapper/io/io.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace ltm::io {
+
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "PLY writer assumes a little-endian host"
+#endif
+
+namespace {
+template <class T>
+void Put(std::string& buf, T v) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  buf.append(b, sizeof(T));
+}
+
+struct PlyProperty {
+  std::string name;
+  std::string type;
+  std::size_t size = 0;
+  std::size_t offset = 0;
+};
+
+std::size_t PlyTypeSize(const std::string& t) {
+  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
+  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
+  if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32")
+    return 4;
+  if (t == "double" || t == "float64") return 8;
+  return 0;
+}
+
+double PlyValue(const char* p, const std::string& t) {
+  auto get = [p](auto v) {
+    std::memcpy(&v, p, sizeof(v));
+    return double(v);
+  };
+  if (t == "char" || t == "int8") return get(std::int8_t{});
+  if (t == "uchar" || t == "uint8") return get(std::uint8_t{});
+  if (t == "short" || t == "int16") return get(std::int16_t{});
+  if (t == "ushort" || t == "uint16") return get(std::uint16_t{});
+  if (t == "int" || t == "int32") return get(std::int32_t{});
+  if (t == "uint" || t == "uint32") return get(std::uint32_t{});
+  if (t == "float" || t == "float32") return get(float{});
+  return get(double{});
+}
+}  // namespace
+
+void WritePly(const std::string& path, const PointCloud& cloud) {
+  cloud.CheckConsistent(path);
+  const bool has_cls = !cloud.cls.empty(), has_ses = !cloud.session.empty(),
+             has_obj = !cloud.object.empty();
+  std::ostringstream header;
+  header << "ply\nformat binary_little_endian 1.0\ncomment ltmapper\nelement vertex "
+         << cloud.size()
+         << "\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\n";
+  if (has_cls) header << "property uchar class\n";
+  if (has_ses) header << "property ushort session\n";
+  if (has_obj) header << "property int object\n";
+  header << "end_header\n";
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    out << header.str();
+    std::string buf;
+    const std::size_t chunk = 65536;
+    for (std::size_t begin = 0; begin < cloud.size(); begin += chunk) {
+      buf.clear();
+      const std::size_t end = std::min(cloud.size(), begin + chunk);
+      for (std::size_t i = begin; i < end; ++i) {
+        const auto& p = cloud.points[i];
+        Put(buf, p.x);
+        Put(buf, p.y);
+        Put(buf, p.z);
+        Put(buf, p.intensity);
+        if (has_cls) Put(buf, static_cast<std::uint8_t>(cloud.cls[i]));
+        if (has_ses) Put(buf, cloud.session[i]);
+        if (has_obj) Put(buf, cloud.object[i]);
+      }
+      out.write(buf.data(), std::streamsize(buf.size()));
+    }
+  });
+}
+
+PointCloud ReadPly(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path + ": cannot open (no such file or not readable)");
+  std::string line;
+  std::size_t lineno = 0;
+  std::getline(in, line);
+  ++lineno;
+  if (line != "ply" && line != "ply\r") throw Error(path, 1, "not a PLY file");
+  std::size_t n = 0, step = 0;
+  bool in_vertex = false, seen_vertex = false, format_ok = false;
+  std::vector<PlyProperty> props;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ss(line);
+    std::string key;
+    ss >> key;
+    if (key == "end_header") break;
+    if (key == "comment" || key == "obj_info" || key.empty()) continue;
+    if (key == "format") {
+      std::string fmt;
+      ss >> fmt;
+      if (fmt != "binary_little_endian")
+        throw Error(path, lineno, "PLY format '" + fmt + "' not supported (binary_little_endian only)");
+      format_ok = true;
+    } else if (key == "element") {
+      std::string name;
+      long long count = -1;
+      ss >> name >> count;
+      if (name == "vertex") {
+        if (count < 0) throw Error(path, lineno, "bad vertex count");
+        n = std::size_t(count);
+        in_vertex = seen_vertex = true;
+      } else {
+        if (!seen_vertex) throw Error(path, lineno, "PLY element '" + name + "' before 'vertex' is not supported");
+        in_vertex = false;  // elements after the vertices (faces ...) are ignored
+      }
+    } else if (key == "property") {
+      if (!in_vertex) continue;
+      PlyProperty p;
+      ss >> p.type >> p.name;
+      if (p.type == "list") throw Error(path, lineno, "list properties on vertices are not supported");
+      p.size = PlyTypeSize(p.type);
+      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + p.type + "'");
+      p.offset = step;
+      step += p.size;
+      props.push_back(p);
+    } else {
+      throw Error(path, lineno, "unknown PLY header line '" + line + "'");
+    }
+  }
+  if (!format_ok) throw Error(path + ": PLY header has no format line");
+  if (!seen_vertex) throw Error(path + ": PLY has no vertex element");
+  const PlyProperty *px = nullptr, *py = nullptr, *pz = nullptr, *pi = nullptr, *pc = nullptr,
+                    *ps = nullptr, *po = nullptr;
+  for (const auto& p : props) {
+    if (p.name == "x") px = &p;
+    if (p.name == "y") py = &p;
+    if (p.name == "z") pz = &p;
+    if (p.name == "intensity" || p.name == "scalar_intensity") pi = &p;
+    if (p.name == "class" || p.name == "scalar_class") pc = &p;
+    if (p.name == "session" || p.name == "scalar_session") ps = &p;
+    if (p.name == "object" || p.name == "scalar_object") po = &p;
+  }
+  if (!px || !py || !pz) throw Error(path + ": PLY vertices have no x y z");
+  std::vector<char> data(n * step);
+  in.read(data.data(), std::streamsize(data.size()));
+  if (std::size_t(in.gcount()) != data.size())
+    throw Error(path + ": truncated PLY: " + std::to_string(n) + " vertices need " +
+                std::to_string(data.size()) + " bytes, found " + std::to_string(in.gcount()));
+  PointCloud cloud;
+  cloud.points.resize(n);
+  if (pc) cloud.cls.resize(n);
+  if (ps) cloud.session.resize(n);
+  if (po) cloud.object.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const char* rec = data.data() + i * step;
+    auto& p = cloud.points[i];
+    p.x = float(PlyValue(rec + px->offset, px->type));
+    p.y = float(PlyValue(rec + py->offset, py->type));
+    p.z = float(PlyValue(rec + pz->offset, pz->type));
+    p.intensity = pi ? float(PlyValue(rec + pi->offset, pi->type)) : 0.f;
+    if (pc) {
+      const double c = PlyValue(rec + pc->offset, pc->type);
+      if (c < 0 || c > double(PointClass::kNDWeak))
+        throw Error(path + ": vertex " + std::to_string(i) + " has unknown class " + std::to_string(c));
+      cloud.cls[i] = static_cast<PointClass>(int(c));
+    }
+    if (ps) cloud.session[i] = static_cast<std::uint16_t>(PlyValue(rec + ps->offset, ps->type));
+    if (po) cloud.object[i] = static_cast<std::int32_t>(PlyValue(rec + po->offset, po->type));
+  }
+  return cloud;
+}
+
+}  // namespace ltm::io

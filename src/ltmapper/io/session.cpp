@@ -1,0 +1,217 @@
+// Session directories (SC-LIO-SAM / SC-A-LOAM / FAST-LIO savers) and the KITTI odometry layout.
+//
+// Rule for matching poses to scans:
+//  * g2o: a vertex id IS a scan index: VERTEX id k is the pose of Scans/k.pcd (any zero padding).
+//    The set of vertex ids must equal the set of scan indices (SC-LIO-SAM numbers both 0..n-1).
+//    An edge joining keyframes adjacent in index order is odometry, any other edge a loop (for
+//    contiguous indices this is the usual |to - from| == 1).
+//  * optimized_poses.txt: line i is the pose of the i-th scan in index order; counts must agree.
+//    Odometry edges are derived from consecutive poses (has_information = false).
+//  * KITTI: line i of the poses file is the pose of velodyne/i.bin (the file may be longer).
+#include "ltmapper/io/io.hpp"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace ltm::io {
+namespace {
+
+std::string BaseName(const std::string& dir) {
+  fs::path p(dir);
+  if (p.filename().empty()) p = p.parent_path();  // "a/b/" -> "b"
+  return p.filename().string();
+}
+
+std::string IndexList(const std::vector<int>& ids, std::size_t max = 8) {
+  std::ostringstream ss;
+  for (std::size_t i = 0; i < ids.size() && i < max; ++i) ss << (i ? ", " : "") << ids[i];
+  if (ids.size() > max) ss << ", ... (" << ids.size() << " in all)";
+  return ss.str();
+}
+
+void DeriveOdometry(Session& s) {
+  s.odometry.clear();
+  for (std::size_t i = 1; i < s.keyframes.size(); ++i) {
+    Edge e;
+    e.from = s.keyframes[i - 1].index;
+    e.to = s.keyframes[i].index;
+    e.T_from_to = s.keyframes[i - 1].T_session_sensor.inverse() * s.keyframes[i].T_session_sensor;
+    e.has_information = false;
+    s.odometry.push_back(e);
+  }
+}
+
+void LoadClouds(Session& s) {
+  std::atomic<std::size_t> non_finite{0};
+  tbb::parallel_for(std::size_t(0), s.keyframes.size(), [&](std::size_t i) {
+    auto& kf = s.keyframes[i];
+    CloudReadStats st;
+    kf.cloud = std::make_shared<const PointCloud>(ReadCloud(kf.cloud_path, &st));
+    non_finite += st.non_finite_dropped;
+  });
+  for (const auto& kf : s.keyframes)
+    if (kf.cloud->empty()) spdlog::warn("{}: empty scan (0 points); keyframe {} has no geometry", kf.cloud_path, kf.index);
+  if (non_finite > 0)
+    spdlog::warn("{}: dropped {} NaN/Inf points while reading the scans", s.dir, non_finite.load());
+}
+
+}  // namespace
+
+Session LoadSession(const std::string& dir, const SessionLoadOptions& opt) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such session directory");
+  const std::string scans_dir = (fs::path(dir) / "Scans").string();
+  if (!fs::is_directory(scans_dir, ec))
+    throw Error(dir + ": missing Scans/ folder (expected Scans/NNNNNN.pcd keyframe scans)");
+  const std::vector<std::string> scans = ListIndexedFiles(scans_dir, ".pcd");
+  if (scans.empty()) throw Error(scans_dir + ": no .pcd scans");
+
+  Session s;
+  s.dir = dir;
+  s.name = BaseName(dir);
+  s.keyframes.resize(scans.size());
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    s.keyframes[i].index = FileIndex(scans[i]);
+    s.keyframes[i].cloud_path = scans[i];
+  }
+
+  const std::string g2o_path = (fs::path(dir) / "singlesession_posegraph.g2o").string();
+  const std::string kitti_path = (fs::path(dir) / "optimized_poses.txt").string();
+  if (fs::exists(g2o_path, ec)) {
+    const G2oGraph g = ReadG2o(g2o_path);
+    std::map<int, Pose> by_id;
+    for (const auto& [id, T] : g.vertices) by_id[id] = T;
+    std::vector<int> no_vertex, no_scan;
+    std::set<int> scan_ids;
+    for (const auto& kf : s.keyframes) {
+      scan_ids.insert(kf.index);
+      if (!by_id.count(kf.index)) no_vertex.push_back(kf.index);
+    }
+    for (const auto& [id, T] : by_id)
+      if (!scan_ids.count(id)) no_scan.push_back(id);
+    if (!no_vertex.empty() || !no_scan.empty()) {
+      std::string msg = g2o_path + ": g2o vertex ids do not match the scan indices (" +
+                        std::to_string(by_id.size()) + " vertices, " + std::to_string(scans.size()) +
+                        " scans in Scans/)";
+      if (!no_vertex.empty()) msg += "; scans without a vertex: " + IndexList(no_vertex);
+      if (!no_scan.empty()) msg += "; vertices without a scan: " + IndexList(no_scan);
+      throw Error(msg);
+    }
+    for (auto& kf : s.keyframes) kf.T_session_sensor = by_id[kf.index];
+    for (const auto& e : g.edges) {
+      const int a = s.Find(e.from), b = s.Find(e.to);
+      (std::abs(a - b) == 1 ? s.odometry : s.loops).push_back(e);
+    }
+  } else if (opt.require_g2o) {
+    throw Error(dir + ": missing singlesession_posegraph.g2o (required)");
+  } else if (fs::exists(kitti_path, ec)) {
+    const std::vector<Pose> poses = ReadKittiPoses(kitti_path);
+    if (poses.size() != scans.size())
+      throw Error(kitti_path + ": " + std::to_string(poses.size()) + " poses but Scans/ holds " +
+                  std::to_string(scans.size()) + " scans (pose count != scan count)");
+    for (std::size_t i = 0; i < poses.size(); ++i) s.keyframes[i].T_session_sensor = poses[i];
+    DeriveOdometry(s);
+  } else {
+    throw Error(dir + ": no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
+  }
+  if (opt.load_clouds) LoadClouds(s);
+  return s;
+}
+
+Session LoadKittiSession(const std::string& dir, const std::string& poses_path,
+                         const Pose* T_cam_velo, const SessionLoadOptions& opt) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such KITTI sequence directory");
+  const std::string velo_dir = (fs::path(dir) / "velodyne").string();
+  if (!fs::is_directory(velo_dir, ec))
+    throw Error(dir + ": missing velodyne/ folder (expected velodyne/NNNNNN.bin)");
+  const std::vector<std::string> scans = ListIndexedFiles(velo_dir, ".bin");
+  if (scans.empty()) throw Error(velo_dir + ": no .bin scans");
+  const std::vector<Pose> poses = ReadKittiPoses(poses_path);
+  Session s;
+  s.dir = dir;
+  s.name = BaseName(dir);
+  const Pose Tr = T_cam_velo ? *T_cam_velo : Pose::Identity();
+  const Pose Tr_inv = Tr.inverse();
+  for (const auto& path : scans) {
+    Keyframe kf;
+    kf.index = FileIndex(path);
+    if (kf.index < 0 || std::size_t(kf.index) >= poses.size())
+      throw Error(poses_path + ": " + std::to_string(poses.size()) + " poses, but scan " + path +
+                  " needs pose line " + std::to_string(kf.index + 1));
+    // Camera poses P: T_w_velo = Tr^-1 * P * Tr, where Tr = T_cam_velo and the world is the
+    // LiDAR frame of scan 0 (rotated like the camera's first frame).
+    kf.T_session_sensor = Tr_inv * poses[std::size_t(kf.index)] * Tr;
+    kf.cloud_path = path;
+    s.keyframes.push_back(std::move(kf));
+  }
+  DeriveOdometry(s);
+  if (opt.load_clouds) LoadClouds(s);
+  return s;
+}
+
+void WriteSession(const std::string& dir, const Session& session,
+                  const std::vector<Eigen::MatrixXd>& scds) {
+  if (!scds.empty() && scds.size() != session.keyframes.size())
+    throw Error(dir + ": " + std::to_string(scds.size()) + " Scan Context descriptors for " +
+                std::to_string(session.keyframes.size()) + " keyframes");
+  std::set<int> indices;
+  for (const auto& kf : session.keyframes) {
+    if (!kf.cloud) throw Error(dir + ": keyframe " + std::to_string(kf.index) + " has no cloud in memory");
+    if (kf.index < 0) throw Error(dir + ": negative keyframe index " + std::to_string(kf.index));
+    if (!indices.insert(kf.index).second)
+      throw Error(dir + ": duplicate keyframe index " + std::to_string(kf.index));
+  }
+  auto name = [](int index, const char* ext) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%06d%s", index, ext);
+    return std::string(buf);
+  };
+  const fs::path root(dir);
+  MakeDirs((root / "Scans").string());
+  // Refuse to mix with scans of another session left in the folder: loading would mismatch.
+  for (const auto& path : ListIndexedFiles((root / "Scans").string(), ".pcd"))
+    if (!indices.count(FileIndex(path)))
+      throw Error(path + ": a scan not in the session being written is already in " + dir +
+                  "/Scans (write into an empty directory)");
+  tbb::parallel_for(std::size_t(0), session.keyframes.size(), [&](std::size_t i) {
+    const auto& kf = session.keyframes[i];
+    WritePcd((root / "Scans" / name(kf.index, ".pcd")).string(), *kf.cloud, PcdFormat::kBinary);
+  });
+  if (!scds.empty()) {
+    MakeDirs((root / "SCDs").string());
+    for (std::size_t i = 0; i < scds.size(); ++i)
+      WriteScd((root / "SCDs" / name(session.keyframes[i].index, ".scd")).string(), scds[i]);
+  }
+  G2oGraph g;
+  std::vector<Pose> poses;
+  for (const auto& kf : session.keyframes) {
+    g.vertices.emplace_back(kf.index, kf.T_session_sensor);
+    poses.push_back(kf.T_session_sensor);
+  }
+  g.edges = session.odometry;
+  g.edges.insert(g.edges.end(), session.loops.begin(), session.loops.end());
+  WriteG2o((root / "singlesession_posegraph.g2o").string(), g);
+  WriteKittiPoses((root / "optimized_poses.txt").string(), poses);
+}
+
+std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats) {
+  if (kf.cloud) {
+    if (stats) *stats = CloudReadStats{kf.cloud->size(), 0};
+    return kf.cloud;
+  }
+  if (kf.cloud_path.empty())
+    throw Error("keyframe " + std::to_string(kf.index) + ": neither a cloud nor a cloud path");
+  return std::make_shared<const PointCloud>(ReadCloud(kf.cloud_path, stats));
+}
+
+}  // namespace ltm::io

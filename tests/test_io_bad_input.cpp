@@ -1,0 +1,215 @@
+// Bad input: every reader names the file (and line) and never returns partial data.
+#include "ltmapper/io/io.hpp"
+#include "test_util.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+namespace fs = std::filesystem;
+
+namespace ltm {
+namespace {
+
+// Runs `f`, expects ltm::Error whose message contains every string in `parts`.
+template <class F>
+void ExpectError(F&& f, std::initializer_list<std::string> parts) {
+  try {
+    f();
+    ADD_FAILURE() << "expected ltm::Error";
+  } catch (const Error& e) {
+    for (const auto& p : parts) EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << "'" << p << "' not in: " << e.what();
+  }
+}
+
+PointCloud Line(std::size_t n) {
+  PointCloud c;
+  for (std::size_t k = 0; k < n; ++k) c.push_back(float(k), 1.f, 2.f, 3.f);
+  return c;
+}
+
+TEST(BadInput, MissingFiles) {
+  test::TempDir tmp;
+  const std::string missing = tmp / "nope.pcd";
+  ExpectError([&] { io::ReadPcd(missing); }, {missing});
+  ExpectError([&] { io::ReadKittiBin(tmp / "nope.bin"); }, {"nope.bin"});
+  ExpectError([&] { io::ReadKittiPoses(tmp / "poses.txt"); }, {"poses.txt"});
+  ExpectError([&] { io::ReadG2o(tmp / "g.g2o"); }, {"g.g2o"});
+  ExpectError([&] { io::ReadScd(tmp / "1.scd"); }, {"1.scd"});
+  ExpectError([&] { io::LoadSession(tmp / "no_session"); }, {"no_session", "no such"});
+}
+
+TEST(BadInput, TruncatedBinaryPcd) {
+  for (auto fmt : {io::PcdFormat::kBinary, io::PcdFormat::kBinaryCompressed}) {
+    test::TempDir tmp;
+    io::WritePcd(tmp / "c.pcd", Line(1000), fmt);
+    fs::resize_file(tmp / "c.pcd", fs::file_size(tmp / "c.pcd") - 100);
+    ExpectError([&] { io::ReadPcd(tmp / "c.pcd"); }, {tmp / "c.pcd", "truncated"});
+  }
+}
+
+TEST(BadInput, TruncatedAsciiPcd) {
+  test::TempDir tmp;
+  io::WritePcd(tmp / "a.pcd", Line(100), io::PcdFormat::kAscii);
+  std::string text = test::ReadText(tmp / "a.pcd");
+  text.resize(text.size() - 40);  // cuts the last rows (and one in the middle of its values)
+  test::WriteText(tmp / "a.pcd", text);
+  ExpectError([&] { io::ReadPcd(tmp / "a.pcd"); }, {"a.pcd"});
+  // Whole rows missing.
+  test::WriteText(tmp / "b.pcd",
+                  "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+                  "WIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n1 2 3 4\n5 6 7 8\n");
+  ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "truncated", "3 points"});
+}
+
+TEST(BadInput, PcdHeaderDisagreesWithData) {
+  test::TempDir tmp;
+  // POINTS says 5, WIDTH*HEIGHT says 3.
+  test::WriteText(tmp / "p.pcd",
+                  "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+                  "WIDTH 3\nHEIGHT 1\nPOINTS 5\nDATA ascii\n1 2 3\n4 5 6\n7 8 9\n");
+  ExpectError([&] { io::ReadPcd(tmp / "p.pcd"); }, {"p.pcd", "POINTS"});
+  // Binary data holding more points than the header announces.
+  io::WritePcd(tmp / "b.pcd", Line(10), io::PcdFormat::kBinary);
+  std::string text = test::ReadText(tmp / "b.pcd");
+  for (const char* key : {"WIDTH 10", "POINTS 10"}) {
+    const auto p = text.find(key);
+    ASSERT_NE(p, std::string::npos);
+    text.replace(p, std::string(key).size(), std::string(key).substr(0, std::string(key).size() - 2) + "8");
+  }
+  test::WriteText(tmp / "b.pcd", text);
+  ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "disagrees"});
+  // More ascii rows than POINTS.
+  test::WriteText(tmp / "c.pcd",
+                  "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+                  "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n4 5 6\n");
+  ExpectError([&] { io::ReadPcd(tmp / "c.pcd"); }, {"c.pcd", "disagrees"});
+  // No x y z.
+  test::WriteText(tmp / "d.pcd",
+                  "VERSION 0.7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\n"
+                  "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2\n");
+  ExpectError([&] { io::ReadPcd(tmp / "d.pcd"); }, {"d.pcd", "x y z"});
+  // Not a PCD at all.
+  test::WriteText(tmp / "e.pcd", "hello\n");
+  ExpectError([&] { io::ReadPcd(tmp / "e.pcd"); }, {"e.pcd"});
+}
+
+TEST(BadInput, NonFinitePointsDroppedAndCounted) {
+  test::TempDir tmp;
+  PointCloud c = Line(10);
+  c.points[2].x = std::numeric_limits<float>::quiet_NaN();
+  c.points[5].z = std::numeric_limits<float>::infinity();
+  c.points[7].intensity = -std::numeric_limits<float>::infinity();
+  for (auto fmt : {io::PcdFormat::kAscii, io::PcdFormat::kBinary, io::PcdFormat::kBinaryCompressed}) {
+    io::WritePcd(tmp / "n.pcd", c, fmt);
+    io::CloudReadStats st;
+    const PointCloud r = io::ReadPcd(tmp / "n.pcd", &st);
+    EXPECT_EQ(st.points_in_file, 10u);
+    EXPECT_EQ(st.non_finite_dropped, 3u);
+    ASSERT_EQ(r.size(), 7u);
+    for (const auto& p : r.points)
+      EXPECT_TRUE(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::isfinite(p.intensity));
+  }
+  io::WriteKittiBin(tmp / "n.bin", c);
+  io::CloudReadStats st;
+  EXPECT_EQ(io::ReadKittiBin(tmp / "n.bin", &st).size(), 7u);
+  EXPECT_EQ(st.non_finite_dropped, 3u);
+}
+
+TEST(BadInput, TruncatedKittiBin) {
+  test::TempDir tmp;
+  io::WriteKittiBin(tmp / "t.bin", Line(10));
+  fs::resize_file(tmp / "t.bin", 16 * 10 - 3);
+  ExpectError([&] { io::ReadKittiBin(tmp / "t.bin"); }, {"t.bin", "multiple of 16"});
+}
+
+TEST(BadInput, G2oUnknownTagAndBadQuaternion) {
+  test::TempDir tmp;
+  const std::string v0 = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\n";
+  test::WriteText(tmp / "tag.g2o", v0 + "VERTEX_XYZ 1 0 0 0\n");
+  ExpectError([&] { io::ReadG2o(tmp / "tag.g2o"); }, {"tag.g2o:2", "VERTEX_XYZ"});
+  test::WriteText(tmp / "q.g2o", v0 + v0 + "VERTEX_SE3:QUAT 1 0 0 0 0 0 0.5 1\n");
+  ExpectError([&] { io::ReadG2o(tmp / "q.g2o"); }, {"q.g2o:2", "duplicate vertex id 0"});
+  test::WriteText(tmp / "q2.g2o", v0 + "VERTEX_SE3:QUAT 1 0 0 0 0 0 0.5 1\n");
+  ExpectError([&] { io::ReadG2o(tmp / "q2.g2o"); }, {"q2.g2o:2", "quaternion"});
+  test::WriteText(tmp / "e.g2o", v0 + "EDGE_SE3:QUAT 0 3 1 0 0 0 0 0 1\n");
+  ExpectError([&] { io::ReadG2o(tmp / "e.g2o"); }, {"e.g2o:2", "missing vertex 3"});
+  test::WriteText(tmp / "n.g2o", v0 + "EDGE_SE3:QUAT 0 0 1 0 0 0 0 0 1 5\n");
+  ExpectError([&] { io::ReadG2o(tmp / "n.g2o"); }, {"n.g2o:2", "21 information"});
+  test::WriteText(tmp / "x.g2o", "VERTEX_SE3:QUAT 0 0 zero 0 0 0 0 1\n");
+  ExpectError([&] { io::ReadG2o(tmp / "x.g2o"); }, {"x.g2o:1", "'zero'"});
+}
+
+TEST(BadInput, PoseFiles) {
+  test::TempDir tmp;
+  test::WriteText(tmp / "k.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n");
+  ExpectError([&] { io::ReadKittiPoses(tmp / "k.txt"); }, {"k.txt:2", "12"});
+  test::WriteText(tmp / "t.txt", "0 1 2 3 0 0 0 2\n");
+  ExpectError([&] { io::ReadTumPoses(tmp / "t.txt"); }, {"t.txt:1", "quaternion"});
+}
+
+struct SmallConfig {
+  double radius_m = 1.0;
+  int k = 3;
+  std::string mode = "a";
+  std::vector<double> list = {1.0};
+  template <class V>
+  void Visit(V& v) {
+    v("search.radius_m", radius_m, "m", 0.1, 10.0);
+    v("search.k", k, "", 1, 50);
+    v("mode", mode, {"a", "b"});
+    v("list", list, "m", 0.0, 5.0);
+  }
+};
+
+TEST(BadInput, Yaml) {
+  test::TempDir tmp;
+  SmallConfig c;
+  ExpectError([&] { io::LoadConfig(tmp / "none.yaml", c); }, {"none.yaml"});
+  test::WriteText(tmp / "bad.yaml", "search:\n  radius_m: [1, 2\nmode: a\n");
+  ExpectError([&] { io::LoadConfig(tmp / "bad.yaml", c); }, {"bad.yaml:"});
+  test::WriteText(tmp / "unknown.yaml", "search:\n  radius_m: 2\n  kk: 4\n");
+  ExpectError([&] { io::LoadConfig(tmp / "unknown.yaml", c); },
+              {"unknown.yaml:3", "unknown key 'search.kk'", "search.k"});
+  test::WriteText(tmp / "type.yaml", "search:\n  radius_m: far\n");
+  ExpectError([&] { io::LoadConfig(tmp / "type.yaml", c); }, {"type.yaml:2", "search.radius_m", "number"});
+  test::WriteText(tmp / "list.yaml", "search:\n  radius_m: [1, 2]\n");
+  ExpectError([&] { io::LoadConfig(tmp / "list.yaml", c); }, {"list.yaml:2", "search.radius_m", "list"});
+  test::WriteText(tmp / "int.yaml", "search:\n  k: 2.5\n");
+  ExpectError([&] { io::LoadConfig(tmp / "int.yaml", c); }, {"int.yaml:2", "search.k", "integer"});
+  test::WriteText(tmp / "range.yaml", "search:\n  radius_m: 50\n");
+  ExpectError([&] { io::LoadConfig(tmp / "range.yaml", c); }, {"range.yaml:2", "search.radius_m", "range"});
+  test::WriteText(tmp / "choice.yaml", "mode: c\n");
+  ExpectError([&] { io::LoadConfig(tmp / "choice.yaml", c); }, {"choice.yaml:1", "mode"});
+  test::WriteText(tmp / "seq.yaml", "list: 3\n");
+  ExpectError([&] { io::LoadConfig(tmp / "seq.yaml", c); }, {"seq.yaml:1", "list"});
+  test::WriteText(tmp / "map.yaml", "search: 3\n");
+  ExpectError([&] { io::LoadConfig(tmp / "map.yaml", c); }, {"map.yaml:1", "unknown key 'search'"});
+  EXPECT_EQ(c.radius_m, 1.0);  // unknown.yaml set radius_m before its bad key: nothing applied
+}
+
+TEST(BadInput, AtomicWriteLeavesNoPartialFile) {
+  test::TempDir tmp;
+  const std::string path = tmp / "out.txt";
+  EXPECT_THROW(io::WriteFileAtomic(path, [](std::ostream& os) {
+                 os << "half of the data";
+                 throw Error("writer failed");
+               }),
+               Error);
+  EXPECT_FALSE(fs::exists(path));
+  EXPECT_TRUE(fs::is_empty(tmp.str()));  // temporary removed too
+  // An existing file survives a failed rewrite unchanged.
+  io::WriteFileAtomic(path, [](std::ostream& os) { os << "old"; });
+  EXPECT_THROW(io::WritePathAtomic(path, [](const std::string& tmp_path) {
+                 test::WriteText(tmp_path, "partial");
+                 throw Error("writer failed");
+               }),
+               Error);
+  EXPECT_EQ(test::ReadText(path), "old");
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp.str()), fs::directory_iterator{}), 1);
+}
+
+}  // namespace
+}  // namespace ltm

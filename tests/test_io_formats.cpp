@@ -1,0 +1,304 @@
+// Round trips for every file format io reads and writes.
+#include "ltmapper/io/io.hpp"
+#include "test_util.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+namespace fs = std::filesystem;
+
+namespace ltm {
+namespace {
+
+PointCloud RandomCloud(std::size_t n, unsigned seed = 1) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-50.f, 50.f), i(0.f, 255.f);
+  PointCloud c;
+  for (std::size_t k = 0; k < n; ++k) c.push_back(u(rng), u(rng), u(rng) * 0.1f, i(rng));
+  return c;
+}
+
+Pose RandomPose(std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Pose T = Pose::Identity();
+  T.linear() = Eigen::Quaterniond(Eigen::Vector4d(u(rng), u(rng), u(rng), u(rng)).normalized()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(u(rng), u(rng), u(rng)) * 100.0;
+  return T;
+}
+
+void ExpectSameCloud(const PointCloud& a, const PointCloud& b, float tol = 0.f) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    EXPECT_NEAR(a.points[k].x, b.points[k].x, tol);
+    EXPECT_NEAR(a.points[k].y, b.points[k].y, tol);
+    EXPECT_NEAR(a.points[k].z, b.points[k].z, tol);
+    EXPECT_NEAR(a.points[k].intensity, b.points[k].intensity, tol);
+  }
+}
+
+void ExpectSamePose(const Pose& a, const Pose& b, double tol = 1e-9) {
+  EXPECT_LT((a.matrix() - b.matrix()).cwiseAbs().maxCoeff(), tol) << a.matrix() << "\nvs\n" << b.matrix();
+}
+
+class PcdFormats : public ::testing::TestWithParam<io::PcdFormat> {};
+
+TEST_P(PcdFormats, RoundTripIsExact) {
+  test::TempDir tmp;
+  const PointCloud c = RandomCloud(1000);
+  const std::string path = tmp / "cloud.pcd";
+  io::WritePcd(path, c, GetParam());
+  io::CloudReadStats st;
+  const PointCloud r = io::ReadPcd(path, &st);
+  EXPECT_EQ(st.points_in_file, 1000u);
+  EXPECT_EQ(st.non_finite_dropped, 0u);
+  ExpectSameCloud(c, r);  // ascii is written with 9 significant digits: floats survive exactly
+  // Nothing but the file itself is left in the folder (no temporaries).
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp.str()), fs::directory_iterator{}), 1);
+}
+
+TEST_P(PcdFormats, EmptyCloudRoundTrips) {
+  test::TempDir tmp;
+  io::WritePcd(tmp / "empty.pcd", PointCloud{}, GetParam());
+  io::CloudReadStats st;
+  EXPECT_TRUE(io::ReadPcd(tmp / "empty.pcd", &st).empty());
+  EXPECT_EQ(st.points_in_file, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(All, PcdFormats,
+                         ::testing::Values(io::PcdFormat::kAscii, io::PcdFormat::kBinary,
+                                           io::PcdFormat::kBinaryCompressed));
+
+TEST(Pcd, XyzOnlyAndDoubleFieldsRead) {
+  test::TempDir tmp;
+  test::WriteText(tmp / "xyz.pcd",
+                  "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\n"
+                  "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1.5 2 3\n-4 5 6.25\n");
+  const PointCloud c = io::ReadPcd(tmp / "xyz.pcd");
+  ASSERT_EQ(c.size(), 2u);
+  EXPECT_FLOAT_EQ(c.points[1].x, -4.f);
+  EXPECT_FLOAT_EQ(c.points[1].z, 6.25f);
+  EXPECT_FLOAT_EQ(c.points[0].intensity, 0.f);
+}
+
+TEST(KittiBin, RoundTripAndReadCloudDispatch) {
+  test::TempDir tmp;
+  const PointCloud c = RandomCloud(500, 2);
+  io::WriteKittiBin(tmp / "000007.bin", c);
+  EXPECT_EQ(fs::file_size(tmp / "000007.bin"), 500u * 16u);
+  ExpectSameCloud(c, io::ReadKittiBin(tmp / "000007.bin"));
+  ExpectSameCloud(c, io::ReadCloud(tmp / "000007.bin"));
+  EXPECT_THROW(io::ReadCloud(tmp / "cloud.xyz"), Error);
+}
+
+TEST(Ply, RoundTripWithScalarFields) {
+  test::TempDir tmp;
+  PointCloud c = RandomCloud(300, 3);
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    c.cls.push_back(static_cast<PointClass>(k % 7));
+    c.session.push_back(static_cast<std::uint16_t>(k % 5));
+    c.object.push_back(int(k % 11) - 1);
+  }
+  io::WritePly(tmp / "c.ply", c);
+  const std::string head = test::ReadText(tmp / "c.ply").substr(0, 300);
+  EXPECT_NE(head.find("format binary_little_endian 1.0"), std::string::npos);
+  EXPECT_NE(head.find("property uchar class"), std::string::npos);
+  EXPECT_NE(head.find("property ushort session"), std::string::npos);
+  EXPECT_NE(head.find("property int object"), std::string::npos);
+  const PointCloud r = io::ReadPly(tmp / "c.ply");
+  ExpectSameCloud(c, r);
+  EXPECT_EQ(r.cls, c.cls);
+  EXPECT_EQ(r.session, c.session);
+  EXPECT_EQ(r.object, c.object);
+
+  // Without optional arrays only x y z intensity are written.
+  const PointCloud plain = RandomCloud(10, 4);
+  io::WritePly(tmp / "p.ply", plain);
+  EXPECT_EQ(test::ReadText(tmp / "p.ply").find("class"), std::string::npos);
+  const PointCloud rp = io::ReadPly(tmp / "p.ply");
+  ExpectSameCloud(plain, rp);
+  EXPECT_TRUE(rp.cls.empty() && rp.session.empty() && rp.object.empty());
+}
+
+TEST(Scd, RoundTripAndShapeErrors) {
+  test::TempDir tmp;
+  const Eigen::MatrixXd d = Eigen::MatrixXd::Random(20, 60).cwiseAbs() * 10.0;
+  io::WriteScd(tmp / "000001.scd", d);
+  const Eigen::MatrixXd r = io::ReadScd(tmp / "000001.scd");
+  EXPECT_EQ((r - d).cwiseAbs().maxCoeff(), 0.0);
+  // Wrong shape: a row with 59 values, named with file:line.
+  std::string text = test::ReadText(tmp / "000001.scd");
+  const auto eol = text.find('\n', text.find('\n') + 1);  // end of line 2
+  const auto last_space = text.rfind(' ', eol);
+  text.erase(last_space, eol - last_space);
+  test::WriteText(tmp / "bad.scd", text);
+  try {
+    io::ReadScd(tmp / "bad.scd");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.scd:2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(io::ReadScd(tmp / "000001.scd", 21, 60), Error);
+}
+
+TEST(Poses, KittiAndTumRoundTrip) {
+  test::TempDir tmp;
+  std::mt19937 rng(5);
+  std::vector<Pose> poses;
+  std::vector<io::StampedPose> stamped;
+  for (int k = 0; k < 20; ++k) {
+    poses.push_back(RandomPose(rng));
+    stamped.push_back({0.1 * k + 1e9, poses.back()});
+  }
+  io::WriteKittiPoses(tmp / "poses.txt", poses);
+  const auto rk = io::ReadKittiPoses(tmp / "poses.txt");
+  ASSERT_EQ(rk.size(), poses.size());
+  for (std::size_t k = 0; k < poses.size(); ++k) ExpectSamePose(rk[k], poses[k]);
+
+  io::WriteTumPoses(tmp / "tum.txt", stamped);
+  const auto rt = io::ReadTumPoses(tmp / "tum.txt");
+  ASSERT_EQ(rt.size(), stamped.size());
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    EXPECT_DOUBLE_EQ(rt[k].stamp, stamped[k].stamp);
+    ExpectSamePose(rt[k].pose, poses[k]);
+  }
+}
+
+TEST(Poses, TransformFormats) {
+  std::mt19937 rng(6);
+  const Pose T = RandomPose(rng);
+  const Eigen::Matrix4d M = T.matrix();
+  std::ostringstream m34, m44, calib;
+  m34.precision(17);
+  m44.precision(17);
+  calib.precision(17);
+  calib << "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr:";
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      if (r < 3) m34 << M(r, c) << " ";
+      if (r < 3) calib << " " << M(r, c);
+      m44 << M(r, c) << (c < 3 ? " " : "\n");
+    }
+    if (r < 3) m34 << "\n";
+  }
+  calib << "\n";
+  ExpectSamePose(io::ParseTransform(m34.str(), "m34"), T);
+  ExpectSamePose(io::ParseTransform(m44.str(), "m44"), T);
+  ExpectSamePose(io::ParseTransform(calib.str(), "calib.txt"), T);
+  test::TempDir tmp;
+  test::WriteText(tmp / "rel.txt", m44.str());
+  ExpectSamePose(io::ReadTransform(tmp / "rel.txt"), T);
+  EXPECT_THROW(io::ParseTransform("1 2 3", "short"), Error);
+  EXPECT_THROW(io::ParseTransform("2 0 0 0 0 1 0 0 0 0 1 0", "scaled"), Error);  // not a rotation
+}
+
+TEST(G2o, RoundTripWithAndWithoutInformation) {
+  test::TempDir tmp;
+  std::mt19937 rng(7);
+  io::G2oGraph g;
+  for (int k = 0; k < 5; ++k) g.vertices.emplace_back(k, RandomPose(rng));
+  for (int k = 0; k < 4; ++k) {
+    Edge e;
+    e.from = k;
+    e.to = k + 1;
+    e.T_from_to = RandomPose(rng);
+    if (k % 2) {
+      e.has_information = true;
+      Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Random();
+      e.information = A * A.transpose() + Matrix6d::Identity();
+    }
+    g.edges.push_back(e);
+  }
+  io::WriteG2o(tmp / "g.g2o", g);
+  const auto r = io::ReadG2o(tmp / "g.g2o");
+  ASSERT_EQ(r.vertices.size(), 5u);
+  ASSERT_EQ(r.edges.size(), 4u);
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_EQ(r.vertices[k].first, k);
+    ExpectSamePose(r.vertices[k].second, g.vertices[k].second, 1e-12);
+  }
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_EQ(r.edges[k].from, k);
+    EXPECT_EQ(r.edges[k].to, k + 1);
+    EXPECT_EQ(r.edges[k].has_information, g.edges[k].has_information);
+    ExpectSamePose(r.edges[k].T_from_to, g.edges[k].T_from_to, 1e-12);
+    EXPECT_LT((r.edges[k].information - g.edges[k].information).cwiseAbs().maxCoeff(), 1e-12);
+  }
+}
+
+TEST(G2o, ScLioSamStyleSixDecimalsAndFix) {
+  test::TempDir tmp;
+  // As SC-LIO-SAM writes it: 6 decimals (quaternion norm off by ~1e-6), no information, FIX.
+  test::WriteText(tmp / "s.g2o",
+                  "VERTEX_SE3:QUAT 0 0.000000 0.000000 0.000000 0.000000 0.000000 0.000000 1.000000\n"
+                  "VERTEX_SE3:QUAT 1 1.000000 0.100000 0.000000 0.000000 0.000000 0.382683 0.923880\n"
+                  "FIX 0\n"
+                  "EDGE_SE3:QUAT 0 1 1.000000 0.100000 0.000000 0.000000 0.000000 0.382683 0.923880\n");
+  const auto g = io::ReadG2o(tmp / "s.g2o");
+  ASSERT_EQ(g.vertices.size(), 2u);
+  ASSERT_EQ(g.edges.size(), 1u);
+  EXPECT_FALSE(g.edges[0].has_information);
+  const Eigen::Matrix3d R = g.vertices[1].second.rotation();
+  EXPECT_LT((R.transpose() * R - Eigen::Matrix3d::Identity()).norm(), 1e-12);  // normalised
+  EXPECT_NEAR(Eigen::AngleAxisd(R).angle(), M_PI / 4, 1e-5);
+}
+
+// A config struct as modules write them, for the YAML round trip.
+struct IoDemoConfig {
+  double voxel_m = 0.5;
+  int beams = 64;
+  double max_range_m = 80.0;
+  bool flag = true;
+  std::string loss = "cauchy";
+  std::vector<double> resolutions = {1.0, 2.0};
+  template <class V>
+  void Visit(V& v) {
+    v("voxel_m", voxel_m, "m", 0.01, 10.0);
+    v("lidar.beams", beams, "", 1, 128);
+    v("lidar.max_range_m", max_range_m, "m", 1.0, 500.0);
+    v("flag", flag);
+    v("loss", loss, {"cauchy", "dcs"});
+    v("resolutions", resolutions, "deg", 0.1, 5.0);
+  }
+};
+
+TEST(Yaml, SaveLoadRoundTripNested) {
+  test::TempDir tmp;
+  IoDemoConfig c;
+  c.voxel_m = 0.1;  // not exactly representable: must survive the text
+  c.beams = 32;
+  c.max_range_m = 120.25;
+  c.flag = false;
+  c.loss = "dcs";
+  c.resolutions = {0.5, 1.5, 3.0};
+  io::SaveConfigFields(tmp / "p.yaml", FieldsOf(c));
+  const std::string text = test::ReadText(tmp / "p.yaml");
+  EXPECT_NE(text.find("lidar:"), std::string::npos) << text;  // nested map for dotted keys
+  IoDemoConfig r;
+  io::LoadConfig(tmp / "p.yaml", r);
+  EXPECT_EQ(r.voxel_m, c.voxel_m);
+  EXPECT_EQ(r.beams, 32);
+  EXPECT_EQ(r.max_range_m, 120.25);
+  EXPECT_FALSE(r.flag);
+  EXPECT_EQ(r.loss, "dcs");
+  EXPECT_EQ(r.resolutions, c.resolutions);
+}
+
+TEST(Yaml, SectionPartialKeysAndFlatDottedKeys) {
+  test::TempDir tmp;
+  test::WriteText(tmp / "all.yaml",
+                  "other:\n  anything: 1\nmine:\n  voxel_m: 0.25\n  lidar.beams: 16\n");
+  IoDemoConfig c;
+  io::LoadConfig(tmp / "all.yaml", c, "mine");
+  EXPECT_EQ(c.voxel_m, 0.25);
+  EXPECT_EQ(c.beams, 16);
+  EXPECT_EQ(c.max_range_m, 80.0);  // absent: default kept
+  IoDemoConfig d;
+  io::LoadConfig(tmp / "all.yaml", d, "absent_section");
+  EXPECT_EQ(d.voxel_m, 0.5);
+}
+
+}  // namespace
+}  // namespace ltm

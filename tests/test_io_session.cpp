@@ -1,0 +1,247 @@
+// Session directories: write + load round trip, the pose/scan matching rules, bad sessions,
+// InspectSession and the `ltmapper info` command.
+#include "ltmapper/io/io.hpp"
+#include "test_util.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <random>
+
+namespace fs = std::filesystem;
+
+namespace ltm {
+namespace {
+
+template <class F>
+void ExpectError(F&& f, std::initializer_list<std::string> parts) {
+  try {
+    f();
+    ADD_FAILURE() << "expected ltm::Error";
+  } catch (const Error& e) {
+    for (const auto& p : parts)
+      EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << "'" << p << "' not in: " << e.what();
+  }
+}
+
+Pose Planar(double x, double y, double yaw) {
+  Pose T = Pose::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(x, y, 0.0);
+  return T;
+}
+
+// n keyframes on a line 1 m apart, each scan with 50 + k points, one loop 0 -> n-1.
+Session MakeSession(int n) {
+  Session s;
+  s.name = "demo";
+  for (int k = 0; k < n; ++k) {
+    Keyframe kf;
+    kf.index = k;
+    kf.T_session_sensor = Planar(double(k), 0.1 * k, 0.05 * k);
+    auto cloud = std::make_shared<PointCloud>();
+    for (int p = 0; p < 50 + k; ++p) cloud->push_back(float(p), float(k), 0.5f, float(p % 7));
+    kf.cloud = cloud;
+    s.keyframes.push_back(kf);
+  }
+  for (int k = 0; k + 1 < n; ++k) {
+    Edge e;
+    e.from = k;
+    e.to = k + 1;
+    e.T_from_to = s.keyframes[k].T_session_sensor.inverse() * s.keyframes[k + 1].T_session_sensor;
+    s.odometry.push_back(e);
+  }
+  Edge loop;
+  loop.from = 0;
+  loop.to = n - 1;
+  loop.T_from_to = s.keyframes[0].T_session_sensor.inverse() * s.keyframes[n - 1].T_session_sensor;
+  loop.has_information = true;
+  loop.information = Matrix6d::Identity() * 100.0;
+  s.loops.push_back(loop);
+  return s;
+}
+
+void ExpectSamePose(const Pose& a, const Pose& b, double tol = 1e-9) {
+  EXPECT_LT((a.matrix() - b.matrix()).cwiseAbs().maxCoeff(), tol);
+}
+
+TEST(Session, WriteLoadRoundTrip) {
+  test::TempDir tmp;
+  const Session s = MakeSession(12);
+  std::vector<Eigen::MatrixXd> scds(12, Eigen::MatrixXd::Constant(20, 60, 1.5));
+  io::WriteSession(tmp / "sess", s, scds);
+  EXPECT_TRUE(fs::exists(tmp / "sess/Scans/000011.pcd"));
+  EXPECT_TRUE(fs::exists(tmp / "sess/SCDs/000003.scd"));
+  io::SessionLoadOptions opt;
+  opt.load_clouds = true;
+  const Session r = io::LoadSession(tmp / "sess", opt);
+  EXPECT_EQ(r.name, "sess");
+  ASSERT_EQ(r.keyframes.size(), 12u);
+  for (std::size_t k = 0; k < 12; ++k) {
+    EXPECT_EQ(r.keyframes[k].index, int(k));
+    ExpectSamePose(r.keyframes[k].T_session_sensor, s.keyframes[k].T_session_sensor);
+    ASSERT_TRUE(r.keyframes[k].cloud);
+    EXPECT_EQ(r.keyframes[k].cloud->size(), 50 + k);
+  }
+  EXPECT_EQ(r.odometry.size(), 11u);
+  ASSERT_EQ(r.loops.size(), 1u);
+  EXPECT_EQ(r.loops[0].to, 11);
+  EXPECT_TRUE(r.loops[0].has_information);
+  EXPECT_DOUBLE_EQ(r.loops[0].information(0, 0), 100.0);
+  // Lazy loading: path only; KeyframeCloud reads it.
+  const Session lazy = io::LoadSession(tmp / "sess");
+  EXPECT_FALSE(lazy.keyframes[3].cloud);
+  EXPECT_EQ(io::KeyframeCloud(lazy.keyframes[3])->size(), 53u);
+  // Writing twice into the same directory is fine (same indices).
+  EXPECT_NO_THROW(io::WriteSession(tmp / "sess", s));
+}
+
+TEST(Session, NumericSortAndPosesFileWithoutG2o) {
+  test::TempDir tmp;
+  const std::string dir = tmp / "fastlio";
+  std::vector<Pose> poses;
+  // Unpadded names, as some savers write: 2.pcd must come before 10.pcd.
+  for (int k : {0, 1, 2, 10}) {
+    PointCloud c;
+    c.push_back(float(k), 0, 0);
+    io::WritePcd(dir + "/Scans/" + std::to_string(k) + ".pcd", c);
+    poses.push_back(Planar(k, 0, 0));
+  }
+  io::WriteKittiPoses(dir + "/optimized_poses.txt", poses);
+  const Session s = io::LoadSession(dir);
+  ASSERT_EQ(s.keyframes.size(), 4u);
+  EXPECT_EQ(s.keyframes[2].index, 2);
+  EXPECT_EQ(s.keyframes[3].index, 10);
+  EXPECT_DOUBLE_EQ(s.keyframes[3].T_session_sensor.translation().x(), 10.0);
+  EXPECT_EQ(io::KeyframeCloud(s.keyframes[3])->points[0].x, 10.f);
+  ASSERT_EQ(s.odometry.size(), 3u);  // derived from consecutive poses
+  EXPECT_FALSE(s.odometry[2].has_information);
+  EXPECT_EQ(s.odometry[2].from, 2);
+  EXPECT_EQ(s.odometry[2].to, 10);
+  EXPECT_NEAR(s.odometry[2].T_from_to.translation().x(), 8.0, 1e-12);
+  EXPECT_TRUE(s.loops.empty());
+  ExpectError([&] { io::SessionLoadOptions o; o.require_g2o = true; io::LoadSession(dir, o); }, {"g2o"});
+}
+
+TEST(Session, BadSessions) {
+  test::TempDir tmp;
+  const Session s = MakeSession(5);
+  ExpectError([&] { io::LoadSession(tmp / "absent"); }, {tmp / "absent", "no such"});
+  fs::create_directories(tmp / "noscans");
+  ExpectError([&] { io::LoadSession(tmp / "noscans"); }, {"noscans", "Scans/"});
+
+  // Pose count != scan count (optimized_poses.txt only).
+  io::WriteSession(tmp / "count", s);
+  fs::remove(tmp / "count/singlesession_posegraph.g2o");
+  fs::remove(tmp / "count/Scans/000004.pcd");
+  ExpectError([&] { io::LoadSession(tmp / "count"); }, {"optimized_poses.txt", "5 poses", "4 scans"});
+
+  // g2o vertex without a scan and scan without a vertex.
+  io::WriteSession(tmp / "ids", s);
+  fs::rename(tmp / "ids/Scans/000004.pcd", tmp / "ids/Scans/000007.pcd");
+  ExpectError([&] { io::LoadSession(tmp / "ids"); }, {"singlesession_posegraph.g2o", "scans without a vertex: 7", "vertices without a scan: 4"});
+
+  // Duplicate indices.
+  io::WriteSession(tmp / "dup", s);
+  fs::copy_file(tmp / "dup/Scans/000001.pcd", tmp / "dup/Scans/1.pcd");
+  ExpectError([&] { io::LoadSession(tmp / "dup"); }, {"duplicate index 1", "000001.pcd", "1.pcd"});
+
+  // No poses at all.
+  io::WriteSession(tmp / "nop", s);
+  fs::remove(tmp / "nop/singlesession_posegraph.g2o");
+  fs::remove(tmp / "nop/optimized_poses.txt");
+  ExpectError([&] { io::LoadSession(tmp / "nop"); }, {"no poses"});
+
+  // Bad g2o inside a session: the g2o's file:line is in the message.
+  io::WriteSession(tmp / "badg2o", s);
+  test::WriteText(tmp / "badg2o/singlesession_posegraph.g2o", "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nHELLO 1\n");
+  ExpectError([&] { io::LoadSession(tmp / "badg2o"); }, {"singlesession_posegraph.g2o:2", "HELLO"});
+}
+
+TEST(Session, InspectReportsProblems) {
+  test::TempDir tmp;
+  Session s = MakeSession(6);
+  s.keyframes[2].cloud = std::make_shared<PointCloud>();  // empty scan: loads, but is a problem
+  io::WriteSession(tmp / "s", s);
+  io::SessionInfo info = io::InspectSession(tmp / "s");
+  EXPECT_EQ(info.keyframes, 6u);
+  EXPECT_EQ(info.scans_found, 6u);
+  EXPECT_EQ(info.scans_read, 6u);
+  EXPECT_EQ(info.points_min, 0u);
+  EXPECT_EQ(info.points_max, 55u);
+  EXPECT_EQ(info.odometry_edges, 5u);
+  EXPECT_EQ(info.loop_edges, 1u);
+  EXPECT_EQ(info.pose_source, "singlesession_posegraph.g2o");
+  EXPECT_NEAR(info.path_length_m, 5 * std::hypot(1.0, 0.1), 1e-9);
+  EXPECT_NEAR(info.bbox_max.x(), 5.0, 1e-9);
+  EXPECT_TRUE(info.load_error.empty()) << info.load_error;
+  ASSERT_EQ(info.problems.size(), 1u);
+  EXPECT_NE(info.problems[0].find("empty scan"), std::string::npos);
+  EXPECT_NE(info.problems[0].find("000002.pcd"), std::string::npos);
+  EXPECT_NE(io::FormatSessionInfo(info).find("PROBLEMS (1)"), std::string::npos);
+
+  // Missing scan, extra scan, count mismatch all listed at once.
+  fs::rename(tmp / "s/Scans/000005.pcd", tmp / "s/Scans/000009.pcd");
+  info = io::InspectSession(tmp / "s", false);
+  const std::string text = io::FormatSessionInfo(info);
+  EXPECT_NE(text.find("missing scans"), std::string::npos) << text;
+  EXPECT_NE(text.find("extra scans without poses"), std::string::npos) << text;
+  EXPECT_FALSE(info.load_error.empty());
+  EXPECT_NE(text.find("CANNOT LOAD"), std::string::npos) << text;
+
+  EXPECT_THROW(io::InspectSession(tmp / "absent"), Error);
+}
+
+TEST(Session, KittiLayoutWithExtrinsic) {
+  test::TempDir tmp;
+  const std::string dir = tmp / "seq";
+  PointCloud c;
+  c.push_back(1, 2, 3, 4);
+  for (int k = 0; k < 3; ++k) io::WriteKittiBin(dir + "/velodyne/00000" + std::to_string(k) + ".bin", c);
+  const Pose Tr = Planar(0.3, -0.1, 0.7);
+  std::vector<Pose> cam;
+  for (int k = 0; k < 5; ++k) cam.push_back(Planar(0, 0, 0.1 * k) * Planar(2.0 * k, 0, 0));
+  io::WriteKittiPoses(tmp / "poses.txt", cam);
+  const Session s = io::LoadKittiSession(dir, tmp / "poses.txt", &Tr);
+  ASSERT_EQ(s.keyframes.size(), 3u);
+  for (int k = 0; k < 3; ++k)
+    ExpectSamePose(s.keyframes[k].T_session_sensor, Tr.inverse() * cam[k] * Tr, 1e-12);
+  EXPECT_EQ(s.odometry.size(), 2u);
+  const Session plain = io::LoadKittiSession(dir, tmp / "poses.txt");
+  ExpectSamePose(plain.keyframes[2].T_session_sensor, cam[2], 1e-12);
+  // Fewer poses than scans.
+  io::WriteKittiPoses(tmp / "short.txt", {cam[0], cam[1]});
+  ExpectError([&] { io::LoadKittiSession(dir, tmp / "short.txt"); }, {"short.txt", "000002.bin"});
+}
+
+TEST(Cli, InfoMissingDirFailsWithPath) {
+  test::TempDir tmp;
+  std::string out;
+  const std::string missing = tmp / "no_such_session";
+  EXPECT_NE(test::RunCli("info " + missing, &out), 0);
+  EXPECT_NE(out.find(missing), std::string::npos) << out;
+}
+
+TEST(Cli, InfoGoodSessionPrintsCounts) {
+  test::TempDir tmp;
+  io::WriteSession(tmp / "good", MakeSession(4));
+  std::string out;
+  EXPECT_EQ(test::RunCli("info " + (tmp / "good"), &out), 0) << out;
+  EXPECT_NE(out.find("keyframes:       4"), std::string::npos) << out;
+  EXPECT_NE(out.find("min 50 / mean 52 / max 53"), std::string::npos) << out;
+  EXPECT_NE(out.find("3 odometry, 1 loops"), std::string::npos) << out;
+  EXPECT_NE(out.find("problems:        none"), std::string::npos) << out;
+}
+
+TEST(Cli, InfoBrokenSessionExitsNonZero) {
+  test::TempDir tmp;
+  io::WriteSession(tmp / "bad", MakeSession(4));
+  fs::remove(tmp / "bad/singlesession_posegraph.g2o");
+  fs::remove(tmp / "bad/Scans/000003.pcd");
+  std::string out;
+  EXPECT_NE(test::RunCli("info " + (tmp / "bad"), &out), 0) << out;
+  EXPECT_NE(out.find("pose count != scan count"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace ltm
