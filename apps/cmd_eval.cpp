@@ -1,0 +1,360 @@
+// `ltmapper eval traj|hd|ld|restore|storage`: score a stage's output against ground truth.
+// Each subcommand takes explicit files, or the simulator dir plus a stage output dir and finds
+// the files by the layouts of docs/FORMATS.md. Prints the Markdown report; --json / --md write
+// it to files (atomically).
+#include "command.hpp"
+
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace ltm::app {
+namespace {
+
+struct EvalOptions {
+  CommonOptions common;
+  std::string config;
+  std::vector<std::string> set;  // key=value overrides
+  std::string json, md;
+};
+
+void AddEvalOptions(CLI::App& cmd, EvalOptions& o) {
+  AddCommonOptions(cmd, o.common);
+  cmd.add_option("--config", o.config, "params_eval.yaml (every key optional)");
+  cmd.add_option("--set", o.set, "Override a config key, e.g. --set hd.match_dist_m=0.2 (repeatable)");
+  cmd.add_option("--json", o.json, "Write the report as JSON to this file");
+  cmd.add_option("--md", o.md, "Write the report as Markdown to this file");
+}
+
+// Applies "key=value" to the config field with that key (numbers, bools, strings, lists as
+// comma-separated numbers); unknown keys and bad values are errors.
+void ApplyOverride(eval::EvalConfig& cfg, const std::string& kv) {
+  const auto eq = kv.find('=');
+  if (eq == std::string::npos) throw Error("--set " + kv + ": expected key=value");
+  const std::string key = kv.substr(0, eq), value = kv.substr(eq + 1);
+  auto fields = FieldsOf(cfg);
+  for (const auto& f : fields.fields()) {
+    if (f.key != key) continue;
+    try {
+      switch (f.kind) {
+        case ConfigField::Kind::kDouble: {
+          std::size_t used = 0;
+          *static_cast<double*>(f.ptr) = std::stod(value, &used);
+          if (used != value.size()) throw std::invalid_argument(value);
+          break;
+        }
+        case ConfigField::Kind::kInt: {
+          std::size_t used = 0;
+          *static_cast<int*>(f.ptr) = std::stoi(value, &used);
+          if (used != value.size()) throw std::invalid_argument(value);
+          break;
+        }
+        case ConfigField::Kind::kBool:
+          if (value != "true" && value != "false") throw std::invalid_argument(value);
+          *static_cast<bool*>(f.ptr) = value == "true";
+          break;
+        case ConfigField::Kind::kString: *static_cast<std::string*>(f.ptr) = value; break;
+        case ConfigField::Kind::kDoubleList: {
+          std::vector<double> list;
+          std::stringstream ss(value);
+          std::string item;
+          while (std::getline(ss, item, ',')) list.push_back(std::stod(item));
+          *static_cast<std::vector<double>*>(f.ptr) = list;
+          break;
+        }
+      }
+    } catch (const std::logic_error&) {
+      throw Error("--set " + kv + ": bad value for " + key);
+    }
+    return;
+  }
+  throw Error("--set " + kv + ": unknown key '" + key + "'");
+}
+
+eval::EvalConfig LoadEvalConfig(const EvalOptions& o) {
+  if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
+  eval::EvalConfig cfg;
+  if (!o.config.empty()) io::LoadConfig(o.config, cfg);
+  for (const auto& kv : o.set) ApplyOverride(cfg, kv);
+  ValidateConfig(cfg, o.config.empty() ? "eval config" : o.config);
+  spdlog::info("eval config{}:\n{}", o.config.empty() ? " (defaults)" : " " + o.config, ConfigToString(cfg));
+  return cfg;
+}
+
+void Finish(const eval::Report& report, const EvalOptions& o) {
+  eval::WriteReport(report, o.json, o.md);
+  std::cout << eval::ToMarkdown(report) << std::flush;
+  if (!o.json.empty()) spdlog::info("wrote {}", o.json);
+  if (!o.md.empty()) spdlog::info("wrote {}", o.md);
+}
+
+std::string Join(const std::string& a, const std::string& b) { return (fs::path(a) / b).string(); }
+
+void Usage(const std::string& what) { throw CLI::ValidationError(what); }
+
+// ------------------------------------------------------------------------------------ traj
+void SetupTraj(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::vector<std::string> truth, est, names;
+    std::string sim, aligned;
+    bool drifted = false;
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand("traj", "ATE / RPE / inter-session consistency of world poses");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--truth-poses", o->truth, "True pose files (KITTI or TUM), one per session, central first");
+  cmd->add_option("--est-poses", o->est, "Estimated pose files, same order and keyframes");
+  cmd->add_option("--names", o->names, "Session names for the explicit files (default: parent folder names)");
+  cmd->add_option("--sim", o->sim, "Simulator output dir (truth/<session>/poses_world.txt)");
+  cmd->add_option("--aligned", o->aligned, "LT-SLAM output dir (<session>/poses_world.txt)");
+  cmd->add_flag("--drifted", o->drifted, "With --sim: score the drifted input odometry (sessions/*/optimized_poses.txt)");
+  cmd->callback([o] {
+    const bool sim_form = !o->sim.empty();
+    if (sim_form == (!o->truth.empty() || !o->est.empty()))
+      Usage("eval traj: give --sim DIR with --aligned DIR or --drifted, or --truth-poses F... --est-poses F...");
+    if (sim_form && (o->aligned.empty() == !o->drifted))
+      Usage("eval traj: with --sim give exactly one of --aligned DIR and --drifted");
+    if (!sim_form && o->truth.size() != o->est.size())
+      Usage("eval traj: --truth-poses and --est-poses need the same number of files");
+    if (!o->names.empty() && o->names.size() != o->truth.size())
+      Usage("eval traj: --names needs one name per pose file");
+    const auto cfg = LoadEvalConfig(*o);
+    eval::Report report;
+    std::vector<eval::SessionTrajectory> sessions;
+    std::vector<std::string> missing;
+    if (sim_form) {
+      report.inputs = {{"sim", o->sim}, {"estimate", o->drifted ? "drifted session odometry" : o->aligned}};
+      sessions = eval::LoadSimTrajectories(o->sim, o->drifted ? std::string() : o->aligned, &missing);
+      for (const auto& m : missing) spdlog::warn("session {}: no estimated poses, not scored", m);
+    } else {
+      for (std::size_t i = 0; i < o->truth.size(); ++i) {
+        eval::SessionTrajectory s;
+        s.name = !o->names.empty() ? o->names[i] : fs::path(o->est[i]).parent_path().filename().string();
+        if (s.name.empty()) s.name = "session_" + std::to_string(i);
+        s.truth = eval::ReadPoses(o->truth[i]);
+        s.est = eval::ReadPoses(o->est[i]);
+        report.inputs.push_back({s.name + " truth", o->truth[i]});
+        report.inputs.push_back({s.name + " estimate", o->est[i]});
+        sessions.push_back(std::move(s));
+      }
+    }
+    report.traj = eval::EvaluateTrajectories(sessions, cfg);
+    report.traj->missing = missing;
+    Finish(report, *o);
+  });
+}
+
+// -------------------------------------------------------------------------------------- hd
+void SetupHd(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::string truth_map, output, objects, sim, changes, session, aligned, poses;
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand("hd", "HD removal: point-wise SA / DA / AA (KTH DynamicMap rule)");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--truth-map", o->truth_map, "Labelled raw map (PLY with 'class', 'object'), frame of the output");
+  cmd->add_option("--output", o->output, "The method's HD-free map (PCD/PLY); default with --changes: <changes>/<session>/static_map.pcd");
+  cmd->add_option("--objects", o->objects, "objects.csv for per-class rows (default with --sim: truth/objects.csv)");
+  cmd->add_option("--sim", o->sim, "Simulator output dir: the raw map is built from truth/<session>/labels");
+  cmd->add_option("--changes", o->changes, "LT-removert output dir");
+  cmd->add_option("--session", o->session, "Session name (e.g. session_01)");
+  cmd->add_option("--aligned", o->aligned, "Place the labelled scans with <aligned>/<session>/poses_world.txt (the poses the method used)");
+  cmd->add_option("--poses", o->poses, "Place the labelled scans with this pose file (KITTI/TUM) instead");
+  cmd->callback([o] {
+    const bool sim_form = !o->sim.empty();
+    if (sim_form == !o->truth_map.empty())
+      Usage("eval hd: give --truth-map F --output F, or --sim DIR --session NAME with --changes DIR or --output F");
+    if (!sim_form && o->output.empty()) Usage("eval hd: --output is required");
+    if (sim_form && o->session.empty()) Usage("eval hd: --session is required with --sim");
+    if (sim_form && o->output.empty() && o->changes.empty()) Usage("eval hd: give --changes DIR or --output F");
+    if (!o->aligned.empty() && !o->poses.empty()) Usage("eval hd: give at most one of --aligned and --poses");
+    const auto cfg = LoadEvalConfig(*o);
+    const std::string output = !o->output.empty() ? o->output : Join(Join(o->changes, o->session), "static_map.pcd");
+    const std::string objects = !o->objects.empty() ? o->objects : sim_form ? Join(Join(o->sim, "truth"), "objects.csv") : "";
+    if (!o->objects.empty() && !fs::exists(o->objects)) throw Error(o->objects, 0, "no such file");
+    eval::Report report;
+    report.inputs.push_back({"output", output});
+    PointCloud out = io::ReadCloud(output);
+    spdlog::info("output map: {} points", out.size());
+    eval::HdEvaluator ev(std::move(out), cfg, objects.empty() ? std::map<int, std::string>{} : eval::ReadObjectClasses(objects),
+                         o->common.threads);
+    if (!sim_form) {
+      report.inputs.push_back({"truth map", o->truth_map});
+      ev.Add(io::ReadPly(o->truth_map));
+    } else {
+      std::vector<Pose> poses;
+      if (!o->aligned.empty() || !o->poses.empty()) {
+        const std::string f = !o->poses.empty() ? o->poses : Join(Join(o->aligned, o->session), "poses_world.txt");
+        poses = eval::ReadPoses(f);
+        report.inputs.push_back({"scan poses", f});
+      } else {
+        // True poses in the estimated world frame (= the central session's true frame).
+        const Pose T = eval::TruthToEstimateFrame(o->sim, "");
+        for (const auto& p : eval::ReadPoses(Join(Join(Join(o->sim, "truth"), o->session), "poses_world.txt")))
+          poses.push_back(T * p);
+        report.inputs.push_back({"scan poses", "true poses in the central session's frame"});
+      }
+      report.inputs.push_back({"truth", Join(Join(Join(o->sim, "truth"), o->session), "labels")});
+      const std::size_t used = eval::AddSimSessionTruth(ev, o->sim, o->session, poses, cfg);
+      spdlog::info("scored {} labelled scans", used);
+    }
+    report.hd = ev.Result();
+    Finish(report, *o);
+  });
+}
+
+// -------------------------------------------------------------------------------------- ld
+void SetupLd(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::string truth_dir, pred_dir, kept_map, central_static, truth_transform;
+    std::string sim, changes, pair, aligned;
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand("ld", "LD changes: precision / recall / F1 of PD and ND, strong and weak");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--truth-dir", o->truth_dir, "Folder with truth {pd_strong,pd_weak,nd_strong,nd_weak}.pcd");
+  cmd->add_option("--pred-dir", o->pred_dir, "Folder with predicted {pd_strong,pd_weak,nd_strong,nd_weak}.pcd");
+  cmd->add_option("--truth-transform", o->truth_transform, "3x4/4x4 transform applied to the truth clouds");
+  cmd->add_option("--kept-map", o->kept_map, "Map kept after the update (static / live map) for the weak-ND check");
+  cmd->add_option("--central-static", o->central_static,
+                  "Central HD-free map; kept map = it minus predicted strong ND (when no --kept-map)");
+  cmd->add_option("--sim", o->sim, "Simulator output dir (truth/pair_00_XX)");
+  cmd->add_option("--changes", o->changes, "LT-removert output dir (pair folder, <central>/static_map.pcd)");
+  cmd->add_option("--pair", o->pair, "Session pair, e.g. 00_01");
+  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world by the joint ATE alignment");
+  cmd->callback([o] {
+    const bool sim_form = !o->sim.empty();
+    if (sim_form && (o->changes.empty() || o->pair.empty()))
+      Usage("eval ld: with --sim give --changes DIR and --pair 00_XX");
+    if (!sim_form && (o->truth_dir.empty() || o->pred_dir.empty()))
+      Usage("eval ld: give --truth-dir D --pred-dir D, or --sim DIR --changes DIR --pair 00_XX");
+    const auto cfg = LoadEvalConfig(*o);
+    eval::Report report;
+    eval::ChangeClouds truth, pred;
+    std::string central_static = o->central_static;
+    if (sim_form) {
+      const std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
+      const std::string pdir = eval::FindPairDir(o->changes, o->pair);
+      report.inputs = {{"truth", tdir}, {"prediction", pdir}};
+      const Pose T = eval::TruthToEstimateFrame(o->sim, o->aligned);
+      truth = eval::TransformChanges(eval::ReadChangeClouds(tdir), T);
+      pred = eval::ReadChangeClouds(pdir);
+      if (central_static.empty() && o->kept_map.empty()) {
+        // The central session is the pair's first number, indexing the sim's sessions.
+        const auto names = eval::SimSessionNames(o->sim);
+        const std::size_t c = std::size_t(std::stoul(o->pair.substr(0, o->pair.find('_'))));
+        if (c < names.size()) {
+          const std::string f = Join(Join(o->changes, names[c]), "static_map.pcd");
+          if (fs::exists(f)) central_static = f;
+          else spdlog::warn("{} not found: weak-ND preservation not scored", f);
+        }
+      }
+    } else {
+      report.inputs = {{"truth", o->truth_dir}, {"prediction", o->pred_dir}};
+      truth = eval::ReadChangeClouds(o->truth_dir);
+      if (!o->truth_transform.empty()) truth = eval::TransformChanges(truth, io::ReadTransform(o->truth_transform));
+      pred = eval::ReadChangeClouds(o->pred_dir);
+    }
+    std::optional<PointCloud> kept;
+    if (!o->kept_map.empty()) {
+      kept = io::ReadCloud(o->kept_map);
+      report.inputs.push_back({"kept map", o->kept_map});
+    } else if (!central_static.empty()) {
+      kept = eval::KeptMapFromChanges(io::ReadCloud(central_static), pred.nd_strong, cfg, o->common.threads);
+      report.inputs.push_back({"kept map", central_static + " minus predicted strong ND"});
+    }
+    report.ld = eval::EvaluateLd(truth, pred, kept ? &*kept : nullptr, cfg, o->common.threads);
+    Finish(report, *o);
+  });
+}
+
+// --------------------------------------------------------------------------------- restore
+void SetupRestore(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::string map_a, map_b, sim, session, aligned;
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand("restore", "Chamfer distance over cubic patches between two aligned maps (paper table)");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--map-a", o->map_a, "First map (e.g. the restored session), PCD/PLY")->required();
+  cmd->add_option("--map-b", o->map_b, "Second map (e.g. the real session), same frame");
+  cmd->add_option("--sim", o->sim, "Instead of --map-b: the simulator's truth/<session>/static_world.pcd");
+  cmd->add_option("--session", o->session, "Session name for --sim");
+  cmd->add_option("--aligned", o->aligned, "With --sim: map the truth into the estimated world by the joint ATE alignment");
+  cmd->callback([o] {
+    if (o->map_b.empty() == o->sim.empty()) Usage("eval restore: give --map-b F, or --sim DIR --session NAME");
+    if (!o->sim.empty() && o->session.empty()) Usage("eval restore: --session is required with --sim");
+    const auto cfg = LoadEvalConfig(*o);
+    eval::Report report;
+    const PointCloud a = io::ReadCloud(o->map_a);
+    PointCloud b;
+    if (!o->map_b.empty()) {
+      b = io::ReadCloud(o->map_b);
+      report.inputs = {{"map A", o->map_a}, {"map B", o->map_b}};
+    } else {
+      const std::string f = Join(Join(Join(o->sim, "truth"), o->session), "static_world.pcd");
+      b = geometry::Transform(io::ReadCloud(f), eval::TruthToEstimateFrame(o->sim, o->aligned));
+      report.inputs = {{"map A", o->map_a}, {"map B", f}};
+    }
+    report.restore = eval::EvaluateRestore(a, b, cfg, o->common.threads);
+    Finish(report, *o);
+  });
+}
+
+// --------------------------------------------------------------------------------- storage
+void SetupStorage(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::vector<std::string> paths, reports;
+    double wall_s = -1.0, peak_mb = -1.0;
+    std::string label = "given";
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand("storage", "Bytes on disk (ratios to the first path), wall time and peak memory");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--path", o->paths, "Files or directories to measure (the first is the ratio reference)");
+  cmd->add_option("--report", o->reports, "Stage report.json files to read wall time / peak memory from");
+  cmd->add_option("--wall-s", o->wall_s, "Wall time of a run [s], reported under --label")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--peak-mb", o->peak_mb, "Peak memory of a run [MiB], reported under --label")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--label", o->label, "Label for --wall-s / --peak-mb");
+  cmd->callback([o] {
+    if (o->paths.empty() && o->reports.empty() && o->wall_s < 0 && o->peak_mb < 0)
+      Usage("eval storage: give --path P..., --report F... or --wall-s / --peak-mb");
+    const auto cfg = LoadEvalConfig(*o);
+    (void)cfg;
+    eval::Report report;
+    eval::StorageResult s = eval::EvaluateStorage(o->paths);
+    for (const auto& r : o->reports) s.costs.push_back(eval::ReadCostReport(r));
+    if (o->wall_s >= 0 || o->peak_mb >= 0) {
+      eval::CostItem c;
+      c.label = o->label;
+      if (o->wall_s >= 0) c.wall_s = o->wall_s;
+      if (o->peak_mb >= 0) c.peak_bytes = o->peak_mb * 1048576.0;
+      s.costs.push_back(c);
+    }
+    report.storage = std::move(s);
+    Finish(report, *o);
+  });
+}
+
+}  // namespace
+
+LTM_COMMAND(80, [](CLI::App& app) {
+  auto* eval = app.add_subcommand("eval", "Score a stage against ground truth: traj, hd, ld, restore, storage");
+  eval->require_subcommand(1);
+  SetupTraj(*eval);
+  SetupHd(*eval);
+  SetupLd(*eval);
+  SetupRestore(*eval);
+  SetupStorage(*eval);
+});
+
+}  // namespace ltm::app

@@ -1,0 +1,375 @@
+// Point-wise cloud metrics: HD removal (SA/DA/AA), LD changes (P/R/F1), restoration (Chamfer).
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+namespace ltm::eval {
+namespace {
+
+tbb::task_arena MakeArena(int threads) {
+  return threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
+}
+
+double Ratio(std::size_t num, std::size_t den) {
+  return den == 0 ? kNaN : double(num) / double(den);
+}
+
+// Number of points of `queries` with a point of `tree` within `dist` (0 when the tree is empty).
+std::size_t CountMatched(const PointCloud& queries, const geometry::KdTree& tree, double dist,
+                         tbb::task_arena& arena) {
+  if (queries.empty() || tree.size() == 0) return 0;
+  const float d2 = float(dist * dist);
+  return arena.execute([&] {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, queries.size(), 1024), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::size_t acc) {
+          std::uint32_t idx = 0;
+          float sq = 0.f;
+          for (std::size_t i = r.begin(); i != r.end(); ++i)
+            if (tree.Nearest(queries.points[i].xyz(), &idx, &sq) && sq <= d2) ++acc;
+          return acc;
+        },
+        [](std::size_t a, std::size_t b) { return a + b; });
+  });
+}
+
+PrfStats Prf(const PointCloud& truth, const PointCloud& pred, const geometry::KdTree& truth_tree,
+             const geometry::KdTree& pred_tree, double dist, tbb::task_arena& arena) {
+  PrfStats s;
+  s.predicted = pred.size();
+  s.truth = truth.size();
+  s.predicted_matched = CountMatched(pred, truth_tree, dist, arena);
+  s.truth_matched = CountMatched(truth, pred_tree, dist, arena);
+  s.precision = Ratio(s.predicted_matched, s.predicted);
+  s.recall = Ratio(s.truth_matched, s.truth);
+  if (!std::isnan(s.precision) && !std::isnan(s.recall))
+    s.f1 = s.precision + s.recall > 0.0 ? 2.0 * s.precision * s.recall / (s.precision + s.recall) : 0.0;
+  return s;
+}
+
+PointCloud Concat(const PointCloud& a, const PointCloud& b) {
+  PointCloud c;
+  c.points.reserve(a.size() + b.size());
+  c.points.insert(c.points.end(), a.points.begin(), a.points.end());
+  c.points.insert(c.points.end(), b.points.begin(), b.points.end());
+  return c;
+}
+
+// Among predicted points (strong then weak) within `dist` of the truth union (strong then
+// weak), how many have the nearest truth point's strength.
+void Strength(const PointCloud& pred_strong, const PointCloud& pred_weak,
+              const geometry::KdTree& truth_union, std::size_t truth_strong_count, double dist,
+              tbb::task_arena& arena, std::size_t* matched, std::size_t* correct) {
+  *matched = 0;
+  *correct = 0;
+  if (truth_union.size() == 0) return;
+  const float d2 = float(dist * dist);
+  using Acc = std::pair<std::size_t, std::size_t>;
+  for (int pass = 0; pass < 2; ++pass) {
+    const PointCloud& pred = pass == 0 ? pred_strong : pred_weak;
+    const bool strong = pass == 0;
+    const Acc acc = arena.execute([&] {
+      return tbb::parallel_reduce(
+          tbb::blocked_range<std::size_t>(0, pred.size(), 1024), Acc{0, 0},
+          [&](const tbb::blocked_range<std::size_t>& r, Acc a) {
+            std::uint32_t idx = 0;
+            float sq = 0.f;
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+              if (!truth_union.Nearest(pred.points[i].xyz(), &idx, &sq) || sq > d2) continue;
+              ++a.first;
+              if ((idx < truth_strong_count) == strong) ++a.second;
+            }
+            return a;
+          },
+          [](Acc a, Acc b) { return Acc{a.first + b.first, a.second + b.second}; });
+    });
+    *matched += acc.first;
+    *correct += acc.second;
+  }
+}
+
+// Patch grid cell of a point.
+struct Cell {
+  std::int64_t x, y, z;
+  bool operator==(const Cell& o) const { return x == o.x && y == o.y && z == o.z; }
+  bool operator<(const Cell& o) const {
+    return x != o.x ? x < o.x : (y != o.y ? y < o.y : z < o.z);
+  }
+};
+struct CellHash {
+  std::size_t operator()(const Cell& c) const {
+    return std::size_t(c.x * 73856093) ^ std::size_t(c.y * 19349663) ^ std::size_t(c.z * 83492791);
+  }
+};
+using CellMap = std::unordered_map<Cell, std::vector<std::uint32_t>, CellHash>;
+
+CellMap Bucket(const PointCloud& cloud, double edge) {
+  CellMap m;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const auto& p = cloud.points[i];
+    const Cell c{std::int64_t(std::floor(double(p.x) / edge)),
+                 std::int64_t(std::floor(double(p.y) / edge)),
+                 std::int64_t(std::floor(double(p.z) / edge))};
+    m[c].push_back(std::uint32_t(i));
+  }
+  return m;
+}
+
+// Mean over `from` of the (squared, when `squared`) distance to the nearest point of `to`.
+double DirectedMean(const PointCloud& from, const geometry::KdTree& to, bool squared) {
+  double sum = 0.0;
+  std::uint32_t idx = 0;
+  float sq = 0.f;
+  for (const auto& p : from.points) {
+    to.Nearest(p.xyz(), &idx, &sq);
+    sum += squared ? double(sq) : std::sqrt(double(sq));
+  }
+  return sum / double(from.size());
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------- HD
+struct HdEvaluator::Impl {
+  geometry::KdTree tree;
+  EvalConfig cfg;
+  std::map<int, std::string> object_classes;
+  int threads = 0;
+  // (class code, object id) -> (total, preserved)
+  std::map<std::pair<int, std::int32_t>, std::pair<std::size_t, std::size_t>> tally;
+  std::size_t out_of_range = 0;
+  Impl(PointCloud out, const EvalConfig& c, std::map<int, std::string> oc, int t)
+      : tree(std::move(out)), cfg(c), object_classes(std::move(oc)), threads(t) {}
+};
+
+HdEvaluator::HdEvaluator(PointCloud output, const EvalConfig& cfg,
+                         std::map<int, std::string> object_classes, int threads) {
+  ValidateConfig(cfg, "eval config");
+  impl_ = std::make_unique<Impl>(std::move(output), cfg, std::move(object_classes), threads);
+}
+HdEvaluator::~HdEvaluator() = default;
+
+void HdEvaluator::Add(const PointCloud& truth, const Eigen::Vector3d& sensor) {
+  if (truth.empty()) return;
+  if (truth.cls.size() != truth.size())
+    throw Error("HD truth cloud has no per-point class (need a labelled PLY with field 'class')");
+  truth.CheckConsistent("HD truth cloud");
+  const float d2 = float(impl_->cfg.hd_match_dist_m * impl_->cfg.hd_match_dist_m);
+  const double max_range = impl_->cfg.hd_truth_max_range_m;
+  const Eigen::Vector3f s = sensor.cast<float>();
+  // 0 = matched, 1 = unmatched, 2 = out of range.
+  std::vector<std::uint8_t> state(truth.size(), 1);
+  auto arena = MakeArena(impl_->threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, truth.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::uint32_t idx = 0;
+                        float sq = 0.f;
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const Eigen::Vector3f p = truth.points[i].xyz();
+                          if (max_range > 0.0 && (p - s).norm() > max_range) {
+                            state[i] = 2;
+                            continue;
+                          }
+                          if (impl_->tree.Nearest(p, &idx, &sq) && sq <= d2) state[i] = 0;
+                        }
+                      });
+  });
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    if (state[i] == 2) {
+      ++impl_->out_of_range;
+      continue;
+    }
+    const int cls = int(truth.cls[i]);
+    // Object ids only separate LD objects among static points (HD actors are pooled as "hd").
+    const std::int32_t obj =
+        truth.cls[i] == PointClass::kStatic && !truth.object.empty() ? std::max(truth.object[i], -1) : -1;
+    auto& t = impl_->tally[{cls, obj}];
+    ++t.first;
+    if (state[i] == 0) ++t.second;
+  }
+}
+
+HdResult HdEvaluator::Result() const {
+  HdResult r;
+  r.match_dist_m = impl_->cfg.hd_match_dist_m;
+  r.output_points = impl_->tree.size();
+  r.ignored = impl_->out_of_range;
+  std::map<std::string, ClassCount> rows;
+  for (const auto& [key, tp] : impl_->tally) {
+    const auto cls = PointClass(key.first);
+    std::string name;
+    if (cls == PointClass::kStatic) {
+      r.static_total += tp.first;
+      r.static_preserved += tp.second;
+      if (key.second < 0) {
+        name = "static";
+      } else {
+        const auto it = impl_->object_classes.find(key.second);
+        name = "ld:" + (it != impl_->object_classes.end() ? it->second : std::string("object"));
+      }
+    } else if (cls == PointClass::kHD) {
+      r.dynamic_total += tp.first;
+      r.dynamic_removed += tp.first - tp.second;
+      name = "hd";
+    } else {
+      r.ignored += tp.first;
+      name = "unknown";
+    }
+    auto& row = rows[name];
+    row.name = name;
+    row.total += tp.first;
+    row.preserved += tp.second;
+  }
+  r.sa = Ratio(r.static_preserved, r.static_total);
+  r.da = Ratio(r.dynamic_removed, r.dynamic_total);
+  if (!std::isnan(r.sa) && !std::isnan(r.da)) r.aa = std::sqrt(r.sa * r.da);
+  auto rank = [](const std::string& n) {
+    return n == "static" ? 0 : n.rfind("ld:", 0) == 0 ? 1 : n == "hd" ? 2 : 3;
+  };
+  for (auto& [name, row] : rows) r.classes.push_back(row);
+  std::stable_sort(r.classes.begin(), r.classes.end(),
+                   [&](const ClassCount& a, const ClassCount& b) { return rank(a.name) < rank(b.name); });
+  return r;
+}
+
+HdResult EvaluateHd(const PointCloud& truth, const PointCloud& output, const EvalConfig& cfg,
+                    const std::map<int, std::string>& object_classes, int threads) {
+  HdEvaluator ev(output, cfg, object_classes, threads);
+  ev.Add(truth);
+  return ev.Result();
+}
+
+// ------------------------------------------------------------------------------------- LD
+LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const PointCloud* kept_map,
+                    const EvalConfig& cfg, int threads) {
+  ValidateConfig(cfg, "eval config");
+  auto arena = MakeArena(threads);
+  const double d = cfg.ld_match_dist_m;
+  LdResult r;
+  r.match_dist_m = d;
+
+  const PointCloud truth_pd = Concat(truth.pd_strong, truth.pd_weak);
+  const PointCloud truth_nd = Concat(truth.nd_strong, truth.nd_weak);
+  const PointCloud pred_pd = Concat(pred.pd_strong, pred.pd_weak);
+  const PointCloud pred_nd = Concat(pred.nd_strong, pred.nd_weak);
+  auto tree = [](const PointCloud& c) { return geometry::KdTree(std::make_shared<const PointCloud>(c)); };
+  const auto t_pds = tree(truth.pd_strong), t_pdw = tree(truth.pd_weak), t_nds = tree(truth.nd_strong),
+             t_ndw = tree(truth.nd_weak), t_pd = tree(truth_pd), t_nd = tree(truth_nd);
+  const auto p_pds = tree(pred.pd_strong), p_pdw = tree(pred.pd_weak), p_nds = tree(pred.nd_strong),
+             p_ndw = tree(pred.nd_weak), p_pd = tree(pred_pd), p_nd = tree(pred_nd);
+
+  r.pd_strong = Prf(truth.pd_strong, pred.pd_strong, t_pds, p_pds, d, arena);
+  r.pd_weak = Prf(truth.pd_weak, pred.pd_weak, t_pdw, p_pdw, d, arena);
+  r.pd = Prf(truth_pd, pred_pd, t_pd, p_pd, d, arena);
+  r.nd_strong = Prf(truth.nd_strong, pred.nd_strong, t_nds, p_nds, d, arena);
+  r.nd_weak = Prf(truth.nd_weak, pred.nd_weak, t_ndw, p_ndw, d, arena);
+  r.nd = Prf(truth_nd, pred_nd, t_nd, p_nd, d, arena);
+
+  Strength(pred.pd_strong, pred.pd_weak, t_pd, truth.pd_strong.size(), d, arena, &r.pd_matched,
+           &r.pd_strength_correct);
+  r.pd_strength_accuracy = Ratio(r.pd_strength_correct, r.pd_matched);
+  Strength(pred.nd_strong, pred.nd_weak, t_nd, truth.nd_strong.size(), d, arena, &r.nd_matched,
+           &r.nd_strength_correct);
+  r.nd_strength_accuracy = Ratio(r.nd_strength_correct, r.nd_matched);
+
+  r.weak_nd_truth = truth.nd_weak.size();
+  if (kept_map) {
+    r.kept_map_given = true;
+    const geometry::KdTree kept(std::make_shared<const PointCloud>(*kept_map));
+    r.weak_nd_kept = CountMatched(truth.nd_weak, kept, d, arena);
+    r.weak_nd_preserved = Ratio(r.weak_nd_kept, r.weak_nd_truth);
+  }
+  return r;
+}
+
+PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
+                              const EvalConfig& cfg, int threads) {
+  ValidateConfig(cfg, "eval config");
+  if (nd_strong.empty()) return central_static;
+  const geometry::KdTree tree(std::make_shared<const PointCloud>(nd_strong));
+  const float eps2 = float(cfg.ld_same_point_m * cfg.ld_same_point_m);
+  std::vector<std::uint8_t> keep(central_static.size(), 1);
+  auto arena = MakeArena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, central_static.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::uint32_t idx = 0;
+                        float sq = 0.f;
+                        for (std::size_t i = r.begin(); i != r.end(); ++i)
+                          if (tree.Nearest(central_static.points[i].xyz(), &idx, &sq) && sq <= eps2)
+                            keep[i] = 0;
+                      });
+  });
+  return central_static.select(std::vector<bool>(keep.begin(), keep.end()));
+}
+
+// -------------------------------------------------------------------------------- restore
+RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
+                              int threads) {
+  ValidateConfig(cfg, "eval config");
+  RestoreResult r;
+  r.patch_m = cfg.patch_m;
+  r.min_points = cfg.patch_min_points;
+  r.chamfer = cfg.chamfer;
+  r.thresholds = cfg.chamfer_thresholds;
+  r.np_above.assign(r.thresholds.size(), 0);
+  r.points_a = a.size();
+  r.points_b = b.size();
+
+  const CellMap ca = Bucket(a, cfg.patch_m), cb = Bucket(b, cfg.patch_m);
+  r.patches_a = ca.size();
+  r.patches_b = cb.size();
+  const std::size_t min_pts = std::size_t(cfg.patch_min_points);
+  std::vector<Cell> valid;
+  for (const auto& [cell, idx_a] : ca) {
+    const auto it = cb.find(cell);
+    if (it == cb.end()) continue;
+    ++r.patches_both;
+    if (idx_a.size() >= min_pts && it->second.size() >= min_pts) valid.push_back(cell);
+  }
+  std::sort(valid.begin(), valid.end());  // deterministic order
+  r.np_valid = valid.size();
+  if (valid.empty()) return r;
+
+  const bool squared = cfg.chamfer == "fan_squared";
+  std::vector<double> cd(valid.size(), 0.0);
+  auto arena = MakeArena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), valid.size(), [&](std::size_t k) {
+      PointCloud pa = a.select(ca.at(valid[k]));
+      PointCloud pb = b.select(cb.at(valid[k]));
+      pa.cls.clear(), pa.session.clear(), pa.object.clear();
+      pb.cls.clear(), pb.session.clear(), pb.object.clear();
+      const auto sa = std::make_shared<const PointCloud>(std::move(pa));
+      const auto sb = std::make_shared<const PointCloud>(std::move(pb));
+      const geometry::KdTree ta(sa), tb(sb);
+      const double ab = DirectedMean(*sa, tb, squared);
+      const double ba = DirectedMean(*sb, ta, squared);
+      cd[k] = squared ? ab + ba : 0.5 * (ab + ba);
+    });
+  });
+  double sum = 0.0, mx = 0.0;
+  for (double v : cd) {
+    sum += v;
+    mx = std::max(mx, v);
+    for (std::size_t t = 0; t < r.thresholds.size(); ++t)
+      if (v > r.thresholds[t]) ++r.np_above[t];
+  }
+  r.mean = sum / double(cd.size());
+  double var = 0.0;
+  for (double v : cd) var += (v - r.mean) * (v - r.mean);
+  r.variance = var / double(cd.size());
+  r.max = mx;
+  return r;
+}
+
+}  // namespace ltm::eval

@@ -1,0 +1,295 @@
+// ltmapper eval: scores every stage against ground truth (usually the simulator's truth/).
+//
+//   trajectories  ATE (after one rigid alignment), RPE, inter-session consistency
+//   hd            point-wise SA / DA / AA of HD removal (KTH DynamicMap benchmark rule)
+//   ld            precision / recall / F1 of PD and ND points, strong and weak
+//   restore       the LT-mapper paper's Chamfer table over cubic patches
+//   storage       bytes on disk, wall time and peak memory of a stage
+//
+// Every metric is a plain function returning a result struct; a Report gathers them and is
+// written as JSON (machines) and Markdown (people). Undefined ratios (0/0) are NaN in the
+// structs, `null` in JSON and "n/a" in Markdown. Depends on core; io, geometry and TBB are used
+// only inside the .cpp files.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ltm::eval {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// ------------------------------------------------------------------------------------ config
+struct EvalConfig {
+  // Trajectories.
+  std::string traj_align = "joint";        // joint: one SE(3) over all sessions; per_session; none
+  std::string rpe_unit = "m";              // m: pairs `rpe_delta` metres of true path apart; frames
+  double rpe_delta = 10.0;                 // [m or keyframes] RPE pair separation
+  double consistency_max_dist_m = 10.0;    // [m] query keyframes farther than this from every
+                                           // central keyframe (true positions) are skipped
+  // HD removal.
+  double hd_match_dist_m = 0.1;            // [m] truth point preserved if an output point is this close
+  double hd_truth_max_range_m = 0.0;       // [m] drop truth points farther from their sensor (0 = keep all)
+  int hd_keyframe_stride = 1;              // use every n-th labelled scan of a session (sim form)
+  // LD changes.
+  double ld_match_dist_m = 0.2;            // [m] predicted/truth change points closer than this match
+  double ld_same_point_m = 0.001;          // [m] "same point" when removing predicted strong ND from
+                                           // the central static map to derive the kept map
+  // Restoration (paper table).
+  double patch_m = 5.0;                    // [m] edge of the cubic patches
+  int patch_min_points = 25;               // a patch is valid when BOTH maps have >= this many points
+  std::string chamfer = "mean";            // mean: (d(A->B) + d(B->A)) / 2 of mean NN distances [m];
+                                           // fan_squared: sum of the two mean squared NN distances [m^2]
+  std::vector<double> chamfer_thresholds = {1.0, 2.0, 3.0};  // count patches with CD > each
+
+  template <class V>
+  void Visit(V& v) {
+    v("traj.align", traj_align, {"joint", "per_session", "none"});
+    v("traj.rpe_unit", rpe_unit, {"m", "frames"});
+    v("traj.rpe_delta", rpe_delta, "m|frames", 1e-3, 1e6);
+    v("traj.consistency_max_dist_m", consistency_max_dist_m, "m", 0.0, 1e6);
+    v("hd.match_dist_m", hd_match_dist_m, "m", 1e-4, 10.0);
+    v("hd.truth_max_range_m", hd_truth_max_range_m, "m", 0.0, 1e4);
+    v("hd.keyframe_stride", hd_keyframe_stride, "", 1, 1000000);
+    v("ld.match_dist_m", ld_match_dist_m, "m", 1e-4, 10.0);
+    v("ld.same_point_m", ld_same_point_m, "m", 0.0, 1.0);
+    v("restore.patch_m", patch_m, "m", 0.01, 1e4);
+    v("restore.min_points", patch_min_points, "", 1, 100000000);
+    v("restore.chamfer", chamfer, {"mean", "fan_squared"});
+    v("restore.thresholds", chamfer_thresholds, "m|m^2", 0.0, 1e6);
+  }
+};
+
+// ----------------------------------------------------------------------------- trajectories
+struct ErrorStats {
+  std::size_t n = 0;
+  double rmse = kNaN, mean = kNaN, median = kNaN, max = kNaN;
+};
+ErrorStats Stats(std::vector<double> values);
+
+struct PoseErrors {
+  ErrorStats trans_m;   // [m]
+  ErrorStats rot_deg;   // [deg]
+};
+
+// One session's keyframe poses T_world_sensor: truth (sim world) and estimate (any frame; the
+// ATE alignment removes the frame difference), same keyframes in the same order. Session 0 is
+// the central session.
+struct SessionTrajectory {
+  std::string name;
+  std::vector<Pose> truth;
+  std::vector<Pose> est;
+};
+
+struct TrajSessionResult {
+  std::string name;
+  std::size_t poses = 0;
+  PoseErrors ate, rpe;
+  Pose T_truth_est = Pose::Identity();  // alignment applied to this session's estimate
+};
+struct ConsistencySessionResult {
+  std::string name;                     // query session
+  std::size_t pairs = 0, skipped = 0;   // skipped: no central keyframe within the max distance
+  PoseErrors error;
+};
+struct TrajResult {
+  std::string align;
+  std::string rpe_unit;
+  double rpe_delta = 0.0;
+  PoseErrors ate, rpe;                  // over all sessions' poses / pairs
+  std::vector<TrajSessionResult> sessions;
+  PoseErrors consistency;               // over all query sessions
+  std::vector<ConsistencySessionResult> consistency_sessions;
+  std::vector<std::string> missing;     // sessions without an estimate (filled by loaders)
+};
+
+// Rigid transform T (no scale) minimising sum |T * src_i - dst_i|^2 (Horn / Umeyama: SVD of the
+// cross-covariance, reflection fixed). Needs >= 1 point; with < 3 non-collinear points the
+// rotation is the least-squares one SVD gives (identity for a single point).
+Pose AlignRigid(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst);
+
+// ATE: per pose |t_truth - t_aligned| and the angle of R_truth^T R_aligned.
+// RPE: for each i, j = first later keyframe whose true path distance from i is >= rpe_delta
+// (or i + rpe_delta frames); error of (T_i^-1 T_j)_est against (T_i^-1 T_j)_truth.
+// Consistency: for each query keyframe q, its nearest central keyframe c by true position
+// (within consistency_max_dist_m); error of (T_c^-1 T_q)_est against the truth. Independent of
+// the world frame, so it measures how well sessions agree with each other.
+TrajResult EvaluateTrajectories(const std::vector<SessionTrajectory>& sessions,
+                                const EvalConfig& cfg);
+
+// ---------------------------------------------------------------------------------- HD removal
+struct ClassCount {
+  std::string name;         // "static", "hd", "ld:<object class>", "unknown"
+  std::size_t total = 0;
+  std::size_t preserved = 0;
+};
+struct HdResult {
+  double match_dist_m = 0.0;
+  std::size_t output_points = 0;
+  std::size_t static_total = 0, static_preserved = 0;
+  std::size_t dynamic_total = 0, dynamic_removed = 0;
+  std::size_t ignored = 0;  // truth points of class unknown or beyond hd_truth_max_range_m
+  double sa = kNaN, da = kNaN, aa = kNaN;  // SA = preserved static / static, DA = removed HD / HD
+  std::vector<ClassCount> classes;         // sorted: static, ld:*, hd, unknown
+};
+
+// KTH DynamicMap benchmark rule: every truth point (PointCloud::cls: kStatic or kHD, world frame
+// of the output) is matched to the nearest output point; within hd_match_dist_m it is preserved,
+// else removed. The output map is usually voxel-downsampled: with voxel v a truth point of an
+// occupied voxel lies within v*sqrt(3) of the voxel's centroid and typically within ~v/2, so
+// choose hd_match_dist_m around v (a larger distance lets HD points next to kept static points
+// count as preserved, lowering DA). Feeding truth in pieces (Add) gives the same counts as one
+// big cloud, so the raw map of a long session never has to be held in memory.
+class HdEvaluator {
+ public:
+  // object_classes: LD object id -> class name, for the per-class rows (optional).
+  HdEvaluator(PointCloud output, const EvalConfig& cfg,
+              std::map<int, std::string> object_classes = {}, int threads = 0);
+  ~HdEvaluator();
+  HdEvaluator(const HdEvaluator&) = delete;
+  HdEvaluator& operator=(const HdEvaluator&) = delete;
+  // Truth points with labels (cls required; object optional: -1 / absent = permanent static).
+  // `sensor` is where the points were observed from (for hd_truth_max_range_m).
+  void Add(const PointCloud& truth, const Eigen::Vector3d& sensor = Eigen::Vector3d::Zero());
+  HdResult Result() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+HdResult EvaluateHd(const PointCloud& truth, const PointCloud& output, const EvalConfig& cfg,
+                    const std::map<int, std::string>& object_classes = {}, int threads = 0);
+
+// ---------------------------------------------------------------------------------------- LD
+struct ChangeClouds {
+  PointCloud pd_strong, pd_weak, nd_strong, nd_weak;
+};
+struct PrfStats {
+  std::size_t predicted = 0, predicted_matched = 0;  // predicted points within d of truth
+  std::size_t truth = 0, truth_matched = 0;          // truth points within d of a prediction
+  double precision = kNaN, recall = kNaN, f1 = kNaN;
+};
+struct LdResult {
+  double match_dist_m = 0.0;
+  PrfStats pd_strong, pd_weak, pd, nd_strong, nd_weak, nd;  // pd / nd: strong and weak pooled
+  // Weak ND (static in central, never seen through by the query) must stay in the map.
+  bool kept_map_given = false;
+  std::size_t weak_nd_truth = 0, weak_nd_kept = 0;
+  double weak_nd_preserved = kNaN;
+  // Strength correctness: among predicted PD (ND) points within d of a truth PD (ND) point of
+  // either strength, the fraction whose nearest such truth point has the predicted strength.
+  std::size_t pd_matched = 0, pd_strength_correct = 0;
+  double pd_strength_accuracy = kNaN;
+  std::size_t nd_matched = 0, nd_strength_correct = 0;
+  double nd_strength_accuracy = kNaN;
+};
+// Truth and prediction in the same frame. `kept_map` (may be null) is the map the method keeps
+// after the update (static / live map): weak-ND truth points within d of it count as kept.
+LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& predicted,
+                    const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0);
+// Kept map derived from a removert output: the central static map minus the points that have a
+// predicted strong-ND point within ld_same_point_m (strong ND is removed, weak ND kept).
+PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
+                              const EvalConfig& cfg, int threads = 0);
+
+// ------------------------------------------------------------------------------ restoration
+struct RestoreResult {
+  double patch_m = 0.0;
+  int min_points = 0;
+  std::string chamfer;
+  std::size_t points_a = 0, points_b = 0;
+  std::size_t patches_a = 0, patches_b = 0, patches_both = 0;  // occupied patches
+  std::size_t np_valid = 0;                // patches where both maps have >= min_points
+  double max = kNaN, mean = kNaN, variance = kNaN;  // over valid patches (population variance)
+  std::vector<double> thresholds;
+  std::vector<std::size_t> np_above;       // valid patches with CD > thresholds[k]
+};
+// Both maps in the same frame. Patches are the cells floor(p / patch_m) of one grid anchored at
+// the origin. In a valid patch, d(A->B) is the mean over A's points of the distance to the
+// nearest B point OF THE SAME PATCH, and CD = (d(A->B) + d(B->A)) / 2 [m] ("mean"), or the sum
+// of the two directed means of squared distances [m^2] ("fan_squared", Fan et al. 2017).
+RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
+                              int threads = 0);
+
+// ----------------------------------------------------------------------------------- storage
+struct StorageItem {
+  std::string path;
+  std::uint64_t bytes = 0;      // apparent size: sum of regular files' sizes (recursively)
+  std::size_t files = 0;
+  double ratio_to_first = kNaN; // bytes / bytes of the first item
+};
+struct CostItem {
+  std::string label;            // e.g. the report's path
+  double wall_s = kNaN;         // [s]
+  double peak_bytes = kNaN;     // [bytes]
+};
+struct StorageResult {
+  std::vector<StorageItem> items;
+  std::vector<CostItem> costs;
+};
+// Throws when `path` does not exist. Symlinks are not followed.
+StorageItem MeasureStorage(const std::string& path);
+StorageResult EvaluateStorage(const std::vector<std::string>& paths);
+// Wall time and peak memory from a stage's report.json: the first numeric field (document
+// order, any depth) named wall_time_s / wall_s / elapsed_s / time_s / seconds, and
+// peak_rss_bytes / peak_memory_bytes / peak_bytes (bytes) or peak_rss_mb / peak_memory_mb /
+// peak_mb (MiB). Absent fields stay NaN; malformed JSON is an error.
+CostItem ReadCostReport(const std::string& report_json_path);
+
+// ------------------------------------------------------------------------------------ report
+struct Report {
+  std::vector<std::pair<std::string, std::string>> inputs;  // what was scored (name, path)
+  std::optional<TrajResult> traj;
+  std::optional<HdResult> hd;
+  std::optional<LdResult> ld;
+  std::optional<RestoreResult> restore;
+  std::optional<StorageResult> storage;
+};
+std::string ToJson(const Report& report);
+std::string ToMarkdown(const Report& report);
+// Writes either or both (empty path = skip), atomically.
+void WriteReport(const Report& report, const std::string& json_path, const std::string& md_path);
+// The number at a dotted path ("hd.sa", "traj.sessions.0.ate.trans_m.rmse") of a JSON text;
+// nullopt when absent or not a number (null). Malformed JSON throws ltm::Error.
+std::optional<double> JsonNumber(const std::string& json_text, const std::string& dotted_path);
+
+// ---------------------------------------------------------------------- stage file layouts
+// (docs/FORMATS.md) Helpers the CLI uses to find inputs in a sim dir and stage outputs.
+
+// KITTI (12 numbers per line) or TUM (8) pose file, detected from the first data line.
+std::vector<Pose> ReadPoses(const std::string& path);
+// Session names under DIR/truth (session_XX folders), sorted.
+std::vector<std::string> SimSessionNames(const std::string& sim_dir);
+// Truth poses DIR/truth/<s>/poses_world.txt with estimates from `est_dir/<s>/poses_world.txt`
+// (an aligned/ dir) or, when est_dir is empty, the drifted session poses
+// DIR/sessions/<s>/optimized_poses.txt. Sessions without an estimate are listed in *missing.
+std::vector<SessionTrajectory> LoadSimTrajectories(const std::string& sim_dir,
+                                                   const std::string& est_dir,
+                                                   std::vector<std::string>* missing);
+// DIR/truth/objects.csv -> id -> class (empty map when the file is absent).
+std::map<int, std::string> ReadObjectClasses(const std::string& objects_csv);
+// Feeds a session's labelled scans (truth/<session>/labels/*.ply) placed with
+// T_frame_sensor[k] (one per keyframe, keyframe order) into `ev`; returns scans used.
+std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir,
+                               const std::string& session, const std::vector<Pose>& T_frame_sensor,
+                               const EvalConfig& cfg);
+// Transform taking the sim's true world frame into the estimated world frame: the inverse of
+// the joint ATE alignment when `aligned_dir` is given, else the inverse of the central
+// session's true origin (world = central session frame, as LT-SLAM defines it).
+Pose TruthToEstimateFrame(const std::string& sim_dir, const std::string& aligned_dir);
+// The four change clouds {pd_strong,pd_weak,nd_strong,nd_weak}.pcd of a pair folder.
+ChangeClouds ReadChangeClouds(const std::string& dir);
+ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T);
+// `root/pair_<pair>`; pair "00_01" also finds pair_session_00_session_01 and any pair_*
+// folder whose two trailing numbers are 00 and 01. Throws listing what exists when none.
+std::string FindPairDir(const std::string& root, const std::string& pair);
+
+}  // namespace ltm::eval

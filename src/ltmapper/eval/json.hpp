@@ -1,0 +1,55 @@
+// Internal to ltm::eval (not a public header): a small JSON value, parser and writer, enough for
+// our reports and for reading other stages' report.json. No third-party JSON library is a
+// project dependency.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ltm::eval::json {
+
+struct Value {
+  enum class Type { kNull, kBool, kNumber, kString, kArray, kObject };
+  Type type = Type::kNull;
+  bool b = false;
+  double num = 0.0;
+  std::string str;
+  std::vector<Value> arr;
+  std::vector<std::pair<std::string, Value>> obj;  // document order
+
+  const Value* Find(const std::string& key) const;
+};
+
+// Throws ltm::Error("<where>: JSON error at offset N: ...") on malformed input.
+Value Parse(const std::string& text, const std::string& where);
+
+// Pretty writer (2-space indent). Non-finite numbers are written as null.
+class Writer {
+ public:
+  Writer& BeginObject(const std::string& key = {});
+  Writer& EndObject();
+  Writer& BeginArray(const std::string& key = {});
+  Writer& EndArray();
+  Writer& Number(const std::string& key, double v);
+  Writer& Int(const std::string& key, long long v);
+  Writer& String(const std::string& key, const std::string& v);
+  Writer& Bool(const std::string& key, bool v);
+  // Array elements (no key).
+  Writer& Number(double v) { return Number({}, v); }
+  std::string str() const { return out_ + "\n"; }
+
+ private:
+  void Prefix(const std::string& key);
+  std::string out_;
+  std::vector<bool> first_;  // per open container: no element written yet
+  std::vector<bool> is_object_;
+};
+
+std::string Quote(const std::string& s);
+
+}  // namespace ltm::eval::json

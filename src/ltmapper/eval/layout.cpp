@@ -1,0 +1,227 @@
+// Finding eval inputs in the documented layouts (docs/FORMATS.md): the simulator's truth/,
+// LT-SLAM's aligned/ and LT-removert's changes/.
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace ltm::eval {
+namespace {
+
+std::string Join(const std::string& a, const std::string& b) { return (fs::path(a) / b).string(); }
+
+std::vector<std::string> SplitCsv(const std::string& line) {
+  std::vector<std::string> out;
+  std::string cur;
+  bool quoted = false;
+  for (const char c : line) {
+    if (c == '"') {
+      quoted = !quoted;
+    } else if (c == ',' && !quoted) {
+      out.push_back(cur);
+      cur.clear();
+    } else if (c != '\r') {
+      cur += c;
+    }
+  }
+  out.push_back(cur);
+  for (auto& s : out) {
+    const auto b = s.find_first_not_of(" \t");
+    const auto e = s.find_last_not_of(" \t");
+    s = b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+  }
+  return out;
+}
+
+// Integers appearing in a name, in order ("pair_session_00_session_01" -> 0, 1).
+std::vector<long> Numbers(const std::string& s) {
+  std::vector<long> out;
+  for (std::size_t i = 0; i < s.size();) {
+    if (std::isdigit(static_cast<unsigned char>(s[i]))) {
+      std::size_t j = i;
+      while (j < s.size() && std::isdigit(static_cast<unsigned char>(s[j]))) ++j;
+      out.push_back(std::stol(s.substr(i, j - i)));
+      i = j;
+    } else {
+      ++i;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<Pose> ReadPoses(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error(path, 0, "cannot open pose file");
+  std::string line;
+  std::size_t line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[line.find_first_not_of(" \t")] == '#')
+      continue;
+    std::istringstream ss(line);
+    std::size_t n = 0;
+    std::string tok;
+    while (ss >> tok) ++n;
+    if (n == 12) return io::ReadKittiPoses(path);
+    if (n == 8) {
+      std::vector<Pose> poses;
+      for (const auto& sp : io::ReadTumPoses(path)) poses.push_back(sp.pose);
+      return poses;
+    }
+    throw Error(path, line_no, "expected 12 numbers (KITTI) or 8 (TUM) per line, found " + std::to_string(n));
+  }
+  throw Error(path, 0, "pose file is empty");
+}
+
+std::vector<std::string> SimSessionNames(const std::string& sim_dir) {
+  const std::string truth = Join(sim_dir, "truth");
+  if (!fs::is_directory(truth)) throw Error(truth, 0, "not a simulator truth directory");
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(truth))
+    if (e.is_directory() && e.path().filename().string().rfind("session_", 0) == 0)
+      names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  if (names.empty()) throw Error(truth, 0, "no session_XX folders");
+  return names;
+}
+
+std::vector<SessionTrajectory> LoadSimTrajectories(const std::string& sim_dir, const std::string& est_dir,
+                                                   std::vector<std::string>* missing) {
+  std::vector<SessionTrajectory> out;
+  for (const auto& name : SimSessionNames(sim_dir)) {
+    SessionTrajectory s;
+    s.name = name;
+    s.truth = ReadPoses(Join(Join(Join(sim_dir, "truth"), name), "poses_world.txt"));
+    const std::string est = est_dir.empty()
+                                ? Join(Join(Join(sim_dir, "sessions"), name), "optimized_poses.txt")
+                                : Join(Join(est_dir, name), "poses_world.txt");
+    if (!fs::exists(est)) {
+      if (missing) missing->push_back(name);
+      continue;
+    }
+    s.est = ReadPoses(est);
+    if (s.est.size() != s.truth.size())
+      throw Error(est, 0, std::to_string(s.est.size()) + " poses but the truth has " +
+                              std::to_string(s.truth.size()) + " keyframes");
+    out.push_back(std::move(s));
+  }
+  if (out.empty())
+    throw Error(est_dir.empty() ? sim_dir : est_dir, 0, "no session has estimated poses");
+  return out;
+}
+
+std::map<int, std::string> ReadObjectClasses(const std::string& path) {
+  std::map<int, std::string> out;
+  std::ifstream in(path);
+  if (!in) return out;
+  std::string line;
+  std::size_t line_no = 0, id_col = 0, class_col = 1;
+  bool first = true;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
+    const auto f = SplitCsv(line);
+    if (first) {
+      first = false;
+      if (!f.empty() && !f[0].empty() && !std::isdigit(static_cast<unsigned char>(f[0][0])) && f[0][0] != '-') {
+        const auto id = std::find(f.begin(), f.end(), "id");
+        const auto cls = std::find(f.begin(), f.end(), "class");
+        if (id == f.end() || cls == f.end()) throw Error(path, line_no, "header needs columns 'id' and 'class'");
+        id_col = std::size_t(id - f.begin());
+        class_col = std::size_t(cls - f.begin());
+        continue;
+      }
+    }
+    if (f.size() <= std::max(id_col, class_col)) throw Error(path, line_no, "too few columns");
+    try {
+      out[std::stoi(f[id_col])] = f[class_col];
+    } catch (const std::exception&) {
+      throw Error(path, line_no, "object id '" + f[id_col] + "' is not an integer");
+    }
+  }
+  return out;
+}
+
+std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir, const std::string& session,
+                               const std::vector<Pose>& T_frame_sensor, const EvalConfig& cfg) {
+  const std::string dir = Join(Join(Join(sim_dir, "truth"), session), "labels");
+  if (!fs::is_directory(dir)) throw Error(dir, 0, "no labelled scans");
+  const auto files = io::ListIndexedFiles(dir, ".ply");
+  if (files.size() != T_frame_sensor.size())
+    throw Error(dir, 0, std::to_string(files.size()) + " labelled scans but " +
+                            std::to_string(T_frame_sensor.size()) + " poses");
+  Progress progress("eval hd: labelled scans", (files.size() + cfg.hd_keyframe_stride - 1) / cfg.hd_keyframe_stride);
+  std::size_t used = 0;
+  for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.hd_keyframe_stride)) {
+    const std::string path = files[k].find('/') == std::string::npos ? Join(dir, files[k]) : files[k];
+    PointCloud scan = io::ReadPly(path);
+    if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+    geometry::TransformInPlace(scan, T_frame_sensor[k]);
+    ev.Add(scan, T_frame_sensor[k].translation());
+    ++used;
+    progress.Tick();
+  }
+  progress.Done();
+  return used;
+}
+
+Pose TruthToEstimateFrame(const std::string& sim_dir, const std::string& aligned_dir) {
+  if (!aligned_dir.empty()) {
+    const auto sessions = LoadSimTrajectories(sim_dir, aligned_dir, nullptr);
+    std::vector<Eigen::Vector3d> est, truth;
+    for (const auto& s : sessions)
+      for (std::size_t i = 0; i < s.truth.size(); ++i) {
+        est.push_back(s.est[i].translation());
+        truth.push_back(s.truth[i].translation());
+      }
+    return AlignRigid(est, truth).inverse();  // AlignRigid gives T_truth_est
+  }
+  const auto names = SimSessionNames(sim_dir);
+  return io::ReadTransform(Join(Join(Join(sim_dir, "truth"), names.front()), "origin.txt")).inverse();
+}
+
+ChangeClouds ReadChangeClouds(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw Error(dir, 0, "no such change directory");
+  ChangeClouds c;
+  c.pd_strong = io::ReadPcd(Join(dir, "pd_strong.pcd"));
+  c.pd_weak = io::ReadPcd(Join(dir, "pd_weak.pcd"));
+  c.nd_strong = io::ReadPcd(Join(dir, "nd_strong.pcd"));
+  c.nd_weak = io::ReadPcd(Join(dir, "nd_weak.pcd"));
+  return c;
+}
+
+ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T) {
+  return {geometry::Transform(c.pd_strong, T), geometry::Transform(c.pd_weak, T),
+          geometry::Transform(c.nd_strong, T), geometry::Transform(c.nd_weak, T)};
+}
+
+std::string FindPairDir(const std::string& root, const std::string& pair) {
+  if (!fs::is_directory(root)) throw Error(root, 0, "no such directory");
+  const std::string direct = Join(root, "pair_" + pair);
+  if (fs::is_directory(direct)) return direct;
+  const auto want = Numbers(pair);
+  std::vector<std::string> seen;
+  if (want.size() == 2) {
+    for (const auto& e : fs::directory_iterator(root)) {
+      const std::string name = e.path().filename().string();
+      if (!e.is_directory() || name.rfind("pair_", 0) != 0) continue;
+      seen.push_back(name);
+      const auto got = Numbers(name);
+      if (got.size() >= 2 && got[got.size() - 2] == want[0] && got.back() == want[1]) return e.path().string();
+    }
+  }
+  std::string list;
+  for (const auto& s : seen) list += " " + s;
+  throw Error(root, 0, "no pair folder for '" + pair + "' (found:" + (list.empty() ? " none" : list) + ")");
+}
+
+}  // namespace ltm::eval

@@ -1,0 +1,352 @@
+// Report writers: JSON for machines, Markdown for people.
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/json.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+namespace ltm::eval {
+namespace {
+
+// ------------------------------------------------------------------------------------ JSON
+void WriteStats(json::Writer& w, const std::string& key, const ErrorStats& s) {
+  w.BeginObject(key)
+      .Int("n", (long long)s.n)
+      .Number("rmse", s.rmse)
+      .Number("mean", s.mean)
+      .Number("median", s.median)
+      .Number("max", s.max)
+      .EndObject();
+}
+
+void WritePoseErrors(json::Writer& w, const std::string& key, const PoseErrors& e) {
+  w.BeginObject(key);
+  WriteStats(w, "trans_m", e.trans_m);
+  WriteStats(w, "rot_deg", e.rot_deg);
+  w.EndObject();
+}
+
+void WritePrf(json::Writer& w, const std::string& key, const PrfStats& s) {
+  w.BeginObject(key)
+      .Int("predicted", (long long)s.predicted)
+      .Int("predicted_matched", (long long)s.predicted_matched)
+      .Int("truth", (long long)s.truth)
+      .Int("truth_matched", (long long)s.truth_matched)
+      .Number("precision", s.precision)
+      .Number("recall", s.recall)
+      .Number("f1", s.f1)
+      .EndObject();
+}
+
+void WriteTraj(json::Writer& w, const TrajResult& t) {
+  w.BeginObject("traj").String("align", t.align).String("rpe_unit", t.rpe_unit).Number("rpe_delta", t.rpe_delta);
+  WritePoseErrors(w, "ate", t.ate);
+  WritePoseErrors(w, "rpe", t.rpe);
+  WritePoseErrors(w, "consistency", t.consistency);
+  w.BeginArray("sessions");
+  for (const auto& s : t.sessions) {
+    w.BeginObject().String("name", s.name).Int("poses", (long long)s.poses);
+    WritePoseErrors(w, "ate", s.ate);
+    WritePoseErrors(w, "rpe", s.rpe);
+    w.BeginArray("T_truth_est");  // row-major 3x4
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) w.Number(s.T_truth_est.matrix()(r, c));
+    w.EndArray().EndObject();
+  }
+  w.EndArray();
+  w.BeginArray("consistency_sessions");
+  for (const auto& c : t.consistency_sessions) {
+    w.BeginObject().String("name", c.name).Int("pairs", (long long)c.pairs).Int("skipped", (long long)c.skipped);
+    WritePoseErrors(w, "error", c.error);
+    w.EndObject();
+  }
+  w.EndArray();
+  w.BeginArray("missing");
+  for (const auto& m : t.missing) w.String({}, m);
+  w.EndArray().EndObject();
+}
+
+void WriteHd(json::Writer& w, const HdResult& h) {
+  w.BeginObject("hd")
+      .Number("match_dist_m", h.match_dist_m)
+      .Int("output_points", (long long)h.output_points)
+      .Int("static_total", (long long)h.static_total)
+      .Int("static_preserved", (long long)h.static_preserved)
+      .Int("dynamic_total", (long long)h.dynamic_total)
+      .Int("dynamic_removed", (long long)h.dynamic_removed)
+      .Int("ignored", (long long)h.ignored)
+      .Number("sa", h.sa)
+      .Number("da", h.da)
+      .Number("aa", h.aa);
+  w.BeginArray("classes");
+  for (const auto& c : h.classes)
+    w.BeginObject()
+        .String("name", c.name)
+        .Int("total", (long long)c.total)
+        .Int("preserved", (long long)c.preserved)
+        .Int("removed", (long long)(c.total - c.preserved))
+        .EndObject();
+  w.EndArray().EndObject();
+}
+
+void WriteLd(json::Writer& w, const LdResult& l) {
+  w.BeginObject("ld").Number("match_dist_m", l.match_dist_m);
+  WritePrf(w, "pd_strong", l.pd_strong);
+  WritePrf(w, "pd_weak", l.pd_weak);
+  WritePrf(w, "pd", l.pd);
+  WritePrf(w, "nd_strong", l.nd_strong);
+  WritePrf(w, "nd_weak", l.nd_weak);
+  WritePrf(w, "nd", l.nd);
+  w.BeginObject("weak_nd_kept")
+      .Bool("kept_map_given", l.kept_map_given)
+      .Int("truth", (long long)l.weak_nd_truth)
+      .Int("kept", (long long)l.weak_nd_kept)
+      .Number("fraction", l.weak_nd_preserved)
+      .EndObject();
+  w.BeginObject("pd_strength")
+      .Int("matched", (long long)l.pd_matched)
+      .Int("correct", (long long)l.pd_strength_correct)
+      .Number("accuracy", l.pd_strength_accuracy)
+      .EndObject();
+  w.BeginObject("nd_strength")
+      .Int("matched", (long long)l.nd_matched)
+      .Int("correct", (long long)l.nd_strength_correct)
+      .Number("accuracy", l.nd_strength_accuracy)
+      .EndObject();
+  w.EndObject();
+}
+
+void WriteRestore(json::Writer& w, const RestoreResult& r) {
+  w.BeginObject("restore")
+      .Number("patch_m", r.patch_m)
+      .Int("min_points", r.min_points)
+      .String("chamfer", r.chamfer)
+      .Int("points_a", (long long)r.points_a)
+      .Int("points_b", (long long)r.points_b)
+      .Int("patches_a", (long long)r.patches_a)
+      .Int("patches_b", (long long)r.patches_b)
+      .Int("patches_both", (long long)r.patches_both)
+      .Int("np_valid", (long long)r.np_valid)
+      .Number("max", r.max)
+      .Number("mean", r.mean)
+      .Number("variance", r.variance);
+  w.BeginArray("np_above");
+  for (std::size_t k = 0; k < r.thresholds.size(); ++k)
+    w.BeginObject().Number("threshold", r.thresholds[k]).Int("patches", (long long)r.np_above[k]).EndObject();
+  w.EndArray().EndObject();
+}
+
+void WriteStorage(json::Writer& w, const StorageResult& s) {
+  w.BeginObject("storage").BeginArray("items");
+  for (const auto& it : s.items)
+    w.BeginObject()
+        .String("path", it.path)
+        .Int("bytes", (long long)it.bytes)
+        .Int("files", (long long)it.files)
+        .Number("ratio_to_first", it.ratio_to_first)
+        .EndObject();
+  w.EndArray().BeginArray("costs");
+  for (const auto& c : s.costs)
+    w.BeginObject().String("label", c.label).Number("wall_s", c.wall_s).Number("peak_bytes", c.peak_bytes).EndObject();
+  w.EndArray().EndObject();
+}
+
+// -------------------------------------------------------------------------------- Markdown
+std::string Fmt(double v, int digits = 3) {
+  if (!std::isfinite(v)) return "n/a";
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "%.*f", digits, v);
+  return buf;
+}
+
+std::string Bytes(double b) {
+  if (!std::isfinite(b)) return "n/a";
+  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  int u = 0;
+  while (b >= 1024.0 && u < 4) {
+    b /= 1024.0;
+    ++u;
+  }
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), u == 0 ? "%.0f %s" : "%.2f %s", b, units[u]);
+  return buf;
+}
+
+std::string Row(const std::vector<std::string>& cells) {
+  std::string s = "|";
+  for (const auto& c : cells) s += " " + c + " |";
+  return s + "\n";
+}
+
+std::string Header(const std::vector<std::string>& cells) {
+  std::string s = Row(cells) + "|";
+  for (std::size_t i = 0; i < cells.size(); ++i) s += i == 0 ? "---|" : "---:|";
+  return s + "\n";
+}
+
+std::vector<std::string> ErrCells(const std::string& label, const PoseErrors& e) {
+  return {label, std::to_string(e.trans_m.n), Fmt(e.trans_m.rmse), Fmt(e.trans_m.mean), Fmt(e.trans_m.max),
+          Fmt(e.rot_deg.rmse), Fmt(e.rot_deg.mean), Fmt(e.rot_deg.max)};
+}
+const std::vector<std::string> kErrHeader = {"", "n", "trans RMSE [m]", "trans mean [m]", "trans max [m]",
+                                             "rot RMSE [deg]", "rot mean [deg]", "rot max [deg]"};
+
+void MdTraj(std::ostringstream& md, const TrajResult& t) {
+  md << "## Trajectories\n\nAlignment: " << t.align << "; RPE over " << Fmt(t.rpe_delta, 2) << " "
+     << t.rpe_unit << ".\n\n";
+  md << Header(kErrHeader) << Row(ErrCells("ATE (all)", t.ate)) << Row(ErrCells("RPE (all)", t.rpe));
+  for (const auto& s : t.sessions) {
+    md << Row(ErrCells("ATE " + s.name, s.ate)) << Row(ErrCells("RPE " + s.name, s.rpe));
+  }
+  if (!t.consistency_sessions.empty()) {
+    md << "\nInter-session consistency (query keyframe vs nearest central keyframe, relative pose "
+          "error):\n\n"
+       << Header(kErrHeader) << Row(ErrCells("all queries", t.consistency));
+    for (const auto& c : t.consistency_sessions)
+      md << Row(ErrCells(c.name + " (" + std::to_string(c.skipped) + " far kf skipped)", c.error));
+  }
+  if (!t.missing.empty()) {
+    md << "\nSessions without an estimate (not scored):";
+    for (const auto& m : t.missing) md << " " << m;
+    md << "\n";
+  }
+  md << "\n";
+}
+
+void MdHd(std::ostringstream& md, const HdResult& h) {
+  md << "## HD removal\n\nKTH DynamicMap rule, match distance " << Fmt(h.match_dist_m, 3) << " m, "
+     << h.output_points << " output points.\n\n"
+     << Header({"SA", "DA", "AA", "static kept / total", "HD removed / total", "ignored"})
+     << Row({Fmt(h.sa, 4), Fmt(h.da, 4), Fmt(h.aa, 4),
+             std::to_string(h.static_preserved) + " / " + std::to_string(h.static_total),
+             std::to_string(h.dynamic_removed) + " / " + std::to_string(h.dynamic_total),
+             std::to_string(h.ignored)})
+     << "\n"
+     << Header({"class", "points", "preserved", "removed", "preserved %"});
+  for (const auto& c : h.classes)
+    md << Row({c.name, std::to_string(c.total), std::to_string(c.preserved), std::to_string(c.total - c.preserved),
+               Fmt(c.total ? 100.0 * double(c.preserved) / double(c.total) : kNaN, 2)});
+  md << "\n";
+}
+
+void MdLd(std::ostringstream& md, const LdResult& l) {
+  md << "## LD changes\n\nMatch distance " << Fmt(l.match_dist_m, 3) << " m.\n\n"
+     << Header({"class", "predicted", "truth", "precision", "recall", "F1"});
+  const std::pair<const char*, const PrfStats*> rows[] = {{"PD strong", &l.pd_strong}, {"PD weak", &l.pd_weak},
+                                                          {"PD (all)", &l.pd},          {"ND strong", &l.nd_strong},
+                                                          {"ND weak", &l.nd_weak},      {"ND (all)", &l.nd}};
+  for (const auto& [name, s] : rows)
+    md << Row({name, std::to_string(s->predicted), std::to_string(s->truth), Fmt(s->precision, 4),
+               Fmt(s->recall, 4), Fmt(s->f1, 4)});
+  md << "\n- Weak ND kept in the map: "
+     << (l.kept_map_given ? std::to_string(l.weak_nd_kept) + " / " + std::to_string(l.weak_nd_truth) + " = " +
+                                Fmt(l.weak_nd_preserved, 4)
+                          : std::string("n/a (no kept map)"))
+     << "\n- PD strength correct: " << l.pd_strength_correct << " / " << l.pd_matched << " = "
+     << Fmt(l.pd_strength_accuracy, 4) << "\n- ND strength correct: " << l.nd_strength_correct << " / "
+     << l.nd_matched << " = " << Fmt(l.nd_strength_accuracy, 4) << "\n\n";
+}
+
+void MdRestore(std::ostringstream& md, const RestoreResult& r) {
+  const std::string unit = r.chamfer == "fan_squared" ? "m^2" : "m";
+  md << "## Restoration (Chamfer distance per " << Fmt(r.patch_m, 2) << " m patch, >= " << r.min_points
+     << " points in both maps, CD = " << (r.chamfer == "fan_squared" ? "sum of mean squared NN distances"
+                                                                     : "mean of the two mean NN distances")
+     << ")\n\n";
+  std::vector<std::string> head = {"max [" + unit + "]", "mean [" + unit + "]", "var"};
+  std::vector<std::string> cells = {Fmt(r.max), Fmt(r.mean), Fmt(r.variance)};
+  for (std::size_t k = 0; k < r.thresholds.size(); ++k) {
+    head.push_back("NP CD>" + Fmt(r.thresholds[k], 1));
+    cells.push_back(std::to_string(r.np_above[k]));
+  }
+  head.push_back("NP valid");
+  cells.push_back(std::to_string(r.np_valid));
+  md << Header(head) << Row(cells) << "\nPoints A/B: " << r.points_a << " / " << r.points_b
+     << "; occupied patches A/B/both: " << r.patches_a << " / " << r.patches_b << " / " << r.patches_both
+     << ".\n\n";
+}
+
+void MdStorage(std::ostringstream& md, const StorageResult& s) {
+  md << "## Storage and cost\n\n";
+  if (!s.items.empty()) {
+    md << Header({"path", "bytes", "size", "files", "ratio to first"});
+    for (const auto& it : s.items)
+      md << Row({"`" + it.path + "`", std::to_string(it.bytes), Bytes(double(it.bytes)), std::to_string(it.files),
+                 Fmt(it.ratio_to_first, 3)});
+    md << "\n";
+  }
+  if (!s.costs.empty()) {
+    md << Header({"stage", "wall time [s]", "peak memory"});
+    for (const auto& c : s.costs) md << Row({c.label, Fmt(c.wall_s, 2), Bytes(c.peak_bytes)});
+    md << "\n";
+  }
+}
+
+}  // namespace
+
+std::string ToJson(const Report& report) {
+  json::Writer w;
+  w.BeginObject();
+  w.BeginObject("inputs");
+  for (const auto& [k, v] : report.inputs) w.String(k, v);
+  w.EndObject();
+  if (report.traj) WriteTraj(w, *report.traj);
+  if (report.hd) WriteHd(w, *report.hd);
+  if (report.ld) WriteLd(w, *report.ld);
+  if (report.restore) WriteRestore(w, *report.restore);
+  if (report.storage) WriteStorage(w, *report.storage);
+  w.EndObject();
+  return w.str();
+}
+
+std::string ToMarkdown(const Report& report) {
+  std::ostringstream md;
+  md << "# ltmapper eval\n\n";
+  if (!report.inputs.empty()) {
+    for (const auto& [k, v] : report.inputs) md << "- " << k << ": `" << v << "`\n";
+    md << "\n";
+  }
+  if (report.traj) MdTraj(md, *report.traj);
+  if (report.hd) MdHd(md, *report.hd);
+  if (report.ld) MdLd(md, *report.ld);
+  if (report.restore) MdRestore(md, *report.restore);
+  if (report.storage) MdStorage(md, *report.storage);
+  return md.str();
+}
+
+void WriteReport(const Report& report, const std::string& json_path, const std::string& md_path) {
+  if (!json_path.empty()) {
+    const std::string text = ToJson(report);
+    io::WriteFileAtomic(json_path, [&](std::ostream& os) { os << text; });
+  }
+  if (!md_path.empty()) {
+    const std::string text = ToMarkdown(report);
+    io::WriteFileAtomic(md_path, [&](std::ostream& os) { os << text; });
+  }
+}
+
+std::optional<double> JsonNumber(const std::string& json_text, const std::string& dotted_path) {
+  const json::Value doc = json::Parse(json_text, "json");
+  const json::Value* v = &doc;
+  std::size_t start = 0;
+  while (v && start <= dotted_path.size()) {
+    const std::size_t dot = dotted_path.find('.', start);
+    const std::string seg = dotted_path.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    if (v->type == json::Value::Type::kArray) {
+      char* end = nullptr;
+      const unsigned long idx = std::strtoul(seg.c_str(), &end, 10);
+      v = (!seg.empty() && *end == '\0' && idx < v->arr.size()) ? &v->arr[idx] : nullptr;
+    } else {
+      v = v->Find(seg);
+    }
+    if (dot == std::string::npos) break;
+    start = dot + 1;
+  }
+  if (!v || v->type != json::Value::Type::kNumber) return std::nullopt;
+  return v->num;
+}
+
+}  // namespace ltm::eval
