@@ -1,0 +1,130 @@
+// HD removal by remove-then-revert on multi-resolution range images (Removert, Kim & Kim 2020).
+//
+// Remove: at each removal resolution (fine to coarse) a map point is a candidate when at least
+//   remove_min_votes keyframes see through it and those are at least remove_min_ratio of the
+//   keyframes with evidence about it (see-through + hit). Fine pixels catch small and thin
+//   movers; coarse pixels (min range over a larger solid angle) catch what fine pixels miss
+//   between beams. The candidates are the union over resolutions.
+// Revert: false removals come from pixel quantisation (grazing ground, silhouette edges, thin
+//   poles, pose error): a fine pixel's min range belongs to a different surface than the point.
+//   At a coarser revert resolution the pixel's min range includes the nearer neighbours, so a
+//   static point is observed as a surface (hit) by many keyframes while a moving object's trace
+//   is hit only by the few keyframes that saw the object there. A candidate is reverted when,
+//   at some revert resolution, hits >= revert_min_hits and hits >= revert_hit_ratio * S, S being
+//   its largest see-through count over the removal resolutions.
+#include "ltmapper/removert/detail.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <mutex>
+
+namespace ltm::removert {
+
+void RemovertConfig::Validate(const std::string& where) const {
+  ValidateConfig(*this, where);
+  auto fail = [&](const std::string& what) { throw Error(where + ": " + what); };
+  if (!(fov_up_deg > fov_down_deg)) fail("sensor.fov_up_deg must be above sensor.fov_down_deg");
+  if (!(max_range_m > min_range_m)) fail("sensor.max_range_m must exceed sensor.min_range_m");
+  if (remove_resolutions_deg.empty()) fail("hd.remove_resolutions_deg must not be empty");
+  if (revert && revert_resolutions_deg.empty())
+    fail("hd.revert_resolutions_deg must not be empty when hd.revert is true");
+  if (ld_resolutions_deg.empty()) fail("ld.resolutions_deg must not be empty");
+}
+
+PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                           int threads) {
+  // Batches of keyframes: each scan is range filtered, moved to the world frame and the batch
+  // voxelised; the accumulated map is re-voxelised whenever it doubles, so memory stays at
+  // about two maps plus one batch of scans.
+  const std::size_t batch = std::size_t(std::max(8, 4 * (threads > 0 ? threads : 2)));
+  PointCloud acc;
+  std::size_t last_size = 0;
+  for (std::size_t b = 0; b < keyframes.size(); b += batch) {
+    const std::size_t e = std::min(keyframes.size(), b + batch);
+    std::vector<PointCloud> parts(e - b);
+    detail::ParallelFor(e - b, threads, [&](std::size_t k) {
+      const WorldKeyframe& kf = keyframes[b + k];
+      const auto scan = detail::LoadScan(kf);
+      PointCloud local = geometry::RangeFilter(*scan, cfg.min_range_m, cfg.max_range_m);
+      local.cls.clear();
+      local.session.clear();
+      local.object.clear();
+      geometry::TransformInPlace(local, kf.T_world_sensor);
+      parts[k] = geometry::VoxelDownsample(local, cfg.map_voxel_m, 1);
+    });
+    PointCloud merged;
+    for (auto& p : parts) merged.append(p);
+    acc.append(geometry::VoxelDownsample(merged, cfg.map_voxel_m, threads));
+    if (acc.size() > 2 * std::max<std::size_t>(last_size, 1 << 16)) {
+      acc = geometry::VoxelDownsample(acc, cfg.map_voxel_m, threads);
+      last_size = acc.size();
+    }
+  }
+  return geometry::VoxelDownsample(acc, cfg.map_voxel_m, threads);
+}
+
+HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& cfg, int threads) {
+  cfg.Validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<double> levels = cfg.remove_resolutions_deg;
+  const int n_remove = int(levels.size());
+  if (cfg.revert)
+    levels.insert(levels.end(), cfg.revert_resolutions_deg.begin(), cfg.revert_resolutions_deg.end());
+  const VisibilityVotes votes = CountVisibility(map, keyframes, levels, cfg, threads);
+
+  HdResult res;
+  HdStats& st = res.stats;
+  st.map_points = map.size();
+  st.removed_per_resolution.assign(std::size_t(n_remove), 0);
+  std::vector<bool> dynamic(map.size(), false);
+  for (std::size_t i = 0; i < map.size(); ++i) {
+    bool cand = false;
+    for (int l = 0; l < n_remove; ++l) {
+      const double s = votes.See(l, i), h = votes.Hit(l, i);
+      if (s >= cfg.remove_min_votes && s >= cfg.remove_min_ratio * (s + h)) {
+        cand = true;
+        ++st.removed_per_resolution[std::size_t(l)];
+      }
+    }
+    if (!cand) continue;
+    ++st.candidates;
+    // Strongest removal evidence over the removal resolutions.
+    double s_max = 0;
+    for (int l = 0; l < n_remove; ++l) s_max = std::max<double>(s_max, votes.See(l, i));
+    bool revert = false;
+    if (cfg.revert) {
+      for (int l = n_remove; l < votes.levels && !revert; ++l) {
+        const double h = votes.Hit(l, i);
+        revert = h >= cfg.revert_min_hits && h >= cfg.revert_hit_ratio * s_max;
+      }
+    }
+    if (revert) {
+      ++st.reverted;
+    } else {
+      dynamic[i] = true;
+      ++st.removed;
+    }
+  }
+  std::vector<bool> keep(dynamic.size());
+  for (std::size_t i = 0; i < dynamic.size(); ++i) keep[i] = !dynamic[i];
+  res.static_map = map.select(keep);
+  res.hd_map = map.select(dynamic);
+  st.seconds_votes = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
+HdResult RemoveHd(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                  int threads) {
+  cfg.Validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  const PointCloud map = BuildSessionMap(keyframes, cfg, threads);
+  const double t_map = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  HdResult res = RemoveHdFromMap(map, keyframes, cfg, threads);
+  res.stats.seconds_map = t_map;
+  return res;
+}
+
+}  // namespace ltm::removert

@@ -1,0 +1,73 @@
+// LD change detection between two HD-free maps (paper: "Low Dynamic (LD) Change Detection"):
+// a point with fewer than k neighbours within r in the other session's map is a change; ND from
+// the central map, PD from the query map. Occlusion then splits each into strong and weak
+// (occlusion.cpp).
+#include "ltmapper/removert/detail.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <chrono>
+
+namespace ltm::removert {
+
+namespace {
+// mask[i] = points[i] has fewer than k neighbours within r in `other`.
+std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, const RemovertConfig& cfg,
+                          int threads) {
+  std::vector<bool> mask(points.size(), true);
+  if (other.empty() || points.empty()) return mask;
+  const geometry::KdTree tree(other);
+  const std::size_t k = std::size_t(cfg.ld_min_neighbors);
+  const float r = float(cfg.ld_radius_m);
+  std::vector<std::uint8_t> m(points.size(), 1);
+  const std::size_t chunk = 4096;
+  detail::ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
+    const std::size_t b = c * chunk, e = std::min(points.size(), b + chunk);
+    for (std::size_t i = b; i < e; ++i)
+      m[i] = tree.CountWithin(points.points[i].xyz(), r, k) < k ? 1 : 0;
+  });
+  for (std::size_t i = 0; i < m.size(); ++i) mask[i] = m[i] != 0;
+  return mask;
+}
+}  // namespace
+
+LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
+                  const std::vector<WorldKeyframe>& central_keyframes,
+                  const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg,
+                  int threads) {
+  cfg.Validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  LdResult res;
+  res.stats.central_points = central_map.size();
+  res.stats.query_points = query_map.size();
+
+  const PointCloud nd = central_map.select(Missing(central_map, query_map, cfg, threads));
+  const PointCloud pd = query_map.select(Missing(query_map, central_map, cfg, threads));
+
+  // Weak ND preservation: ND the query never saw through stays in the map.
+  if (cfg.weak_nd) {
+    const std::vector<bool> strong = detail::SeenThroughBy(nd, query_keyframes, cfg, threads);
+    std::vector<bool> weak(strong.size());
+    for (std::size_t i = 0; i < strong.size(); ++i) weak[i] = !strong[i];
+    res.nd_strong = nd.select(strong);
+    res.nd_weak = nd.select(weak);
+  } else {
+    res.nd_strong = nd;
+  }
+  // PD in space the central session observed as free is weak; behind / beyond it, strong.
+  {
+    const std::vector<bool> weak = detail::SeenThroughBy(pd, central_keyframes, cfg, threads);
+    std::vector<bool> strong(weak.size());
+    for (std::size_t i = 0; i < weak.size(); ++i) strong[i] = !weak[i];
+    res.pd_weak = pd.select(weak);
+    res.pd_strong = pd.select(strong);
+  }
+  res.stats.nd_strong = res.nd_strong.size();
+  res.stats.nd_weak = res.nd_weak.size();
+  res.stats.pd_strong = res.pd_strong.size();
+  res.stats.pd_weak = res.pd_weak.size();
+  res.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
+}  // namespace ltm::removert

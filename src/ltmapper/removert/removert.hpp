@@ -1,0 +1,189 @@
+// ltmapper removert: LT-removert (LT-mapper paper, section "LT-removert").
+//
+//   HD removal   per session, remove-then-revert on multi-resolution range images (Removert,
+//                Kim & Kim, IROS 2020): a map point that a keyframe scan *sees through* (the
+//                scan's range at the point's pixel exceeds the point's range by a tolerance)
+//                gets a vote; points with enough votes at any removal resolution (fine to
+//                coarse) are removed; removed points that enough keyframes observe as a surface
+//                at a coarser revert resolution are reverted (false removals at grazing angles,
+//                edges and thin structures).
+//   LD detection between the HD-free central and query maps (kd-tree: fewer than k neighbours
+//                within r in the other session = change): ND from central, PD from query.
+//   Occlusion    ND the query never saw through = weak ND (kept in the map); PD in space some
+//                central scan saw through (observed free) = weak PD; otherwise strong.
+//
+// All work is per keyframe and parallel (TBB, threads passed in); scans are streamed from disk
+// (at most one per worker in memory) and each keyframe only touches the map points within
+// `submap_radius_m` of it (tile index), so memory is the session maps plus O(threads) scans.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace ltm::removert {
+
+struct RemovertConfig {
+  // --- sensor and range images
+  double fov_up_deg = 3.0;        // [deg] upper edge of the range images' vertical FOV
+  double fov_down_deg = -25.0;    // [deg] lower edge
+  double min_range_m = 2.0;       // [m] scan returns closer than this are ignored (ego vehicle)
+  double max_range_m = 100.0;     // [m] scan returns farther than this are ignored
+  double submap_radius_m = 60.0;  // [m] a keyframe tests only map points this close to it
+  double tile_m = 10.0;           // [m] edge of the 2D tiles indexing map points for submaps
+  // --- session map
+  double map_voxel_m = 0.1;       // [m] voxel of the session map (union of keyframe scans)
+  // --- see-through test: scan range > point range + tol_abs_m + tol_rel * point range
+  double tol_abs_m = 0.15;        // [m]
+  double tol_rel = 0.02;          // [-]
+  int window_px = 1;              // [pixels] see-through needs the window's nearest return beyond
+  // --- HD removal (remove then revert)
+  std::vector<double> remove_resolutions_deg = {0.4, 0.6, 0.8};  // [deg/pixel] fine to coarse
+  std::vector<double> revert_resolutions_deg = {1.2, 1.6};       // [deg/pixel] coarser
+  bool revert = true;             // false: removal only (ablation)
+  int remove_min_votes = 1;       // [keyframes] see-through votes to become a removal candidate
+  double remove_min_ratio = 0.2;  // [-] and see-through votes / (see-through + hit votes)
+  int revert_min_hits = 3;        // [keyframes] hits at a revert resolution to revert ...
+  double revert_hit_ratio = 1.0;  // [-] ... and hits >= ratio * see-through votes there
+  // --- LD detection
+  double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
+  int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
+  std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
+  int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
+  double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
+  bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
+  std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
+  // --- outputs
+  double assign_radius_m = 60.0;       // [m] changes farther from every central keyframe ...
+  double new_keyframe_dist_m = 20.0;   // [m] ... go to query keyframes this far from all central ones
+  double keyframe_voxel_m = 0.0;       // [m] extra voxel for per-keyframe clouds (0 = map voxel)
+  bool write_keyframes = true;         // per keyframe local clouds
+  bool write_ply = true;               // PLY twins with a class field
+
+  template <class V>
+  void Visit(V& v) {
+    v("sensor.fov_up_deg", fov_up_deg, "deg", -90.0, 90.0);
+    v("sensor.fov_down_deg", fov_down_deg, "deg", -90.0, 90.0);
+    v("sensor.min_range_m", min_range_m, "m", 0.0, 1000.0);
+    v("sensor.max_range_m", max_range_m, "m", 0.1, 10000.0);
+    v("submap_radius_m", submap_radius_m, "m", 1.0, 10000.0);
+    v("tile_m", tile_m, "m", 0.5, 1000.0);
+    v("map_voxel_m", map_voxel_m, "m", 0.01, 10.0);
+    v("tol_abs_m", tol_abs_m, "m", 0.0, 10.0);
+    v("tol_rel", tol_rel, "", 0.0, 1.0);
+    v("window_px", window_px, "pixels", 0, 10);
+    v("hd.remove_resolutions_deg", remove_resolutions_deg, "deg", 0.01, 10.0);
+    v("hd.revert_resolutions_deg", revert_resolutions_deg, "deg", 0.01, 10.0);
+    v("hd.revert", revert);
+    v("hd.remove_min_votes", remove_min_votes, "keyframes", 1, 65535);
+    v("hd.remove_min_ratio", remove_min_ratio, "", 0.0, 1.0);
+    v("hd.revert_min_hits", revert_min_hits, "keyframes", 1, 65535);
+    v("hd.revert_hit_ratio", revert_hit_ratio, "", 0.0, 1000.0);
+    v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
+    v("ld.min_neighbors", ld_min_neighbors, "points", 1, 1000);
+    v("ld.resolutions_deg", ld_resolutions_deg, "deg", 0.01, 10.0);
+    v("ld.min_votes", ld_min_votes, "keyframes", 1, 65535);
+    v("ld.min_ratio", ld_min_ratio, "", 0.0, 1.0);
+    v("ld.weak_nd", weak_nd);
+    v("ld.pairs", pairs, {"central", "consecutive"});
+    v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);
+    v("out.new_keyframe_dist_m", new_keyframe_dist_m, "m", 0.0, 1e6);
+    v("out.keyframe_voxel_m", keyframe_voxel_m, "m", 0.0, 10.0);
+    v("out.write_keyframes", write_keyframes);
+    v("out.write_ply", write_ply);
+  }
+  // Range checks plus the cross-field rules (FOV order, non-empty resolution lists, ...).
+  void Validate(const std::string& where = "removert config") const;
+};
+
+// A keyframe placed in the world: its scan (sensor frame) is either in memory (`cloud`) or read
+// on demand from `cloud_path` (.pcd / .bin).
+struct WorldKeyframe {
+  int index = 0;
+  Pose T_world_sensor = Pose::Identity();
+  std::shared_ptr<const PointCloud> cloud;
+  std::string cloud_path;
+};
+
+// ------------------------------------------------------------------------------ HD removal
+struct HdStats {
+  std::size_t map_points = 0;
+  std::vector<std::size_t> removed_per_resolution;  // candidates found at each removal resolution
+  std::size_t candidates = 0;   // union over the removal resolutions
+  std::size_t reverted = 0;
+  std::size_t removed = 0;      // candidates - reverted
+  double seconds_map = 0, seconds_votes = 0;
+};
+struct HdResult {
+  PointCloud static_map;  // world frame, HD-free
+  PointCloud hd_map;      // world frame, removed points
+  HdStats stats;
+};
+// The session map: union of the keyframe scans in the world frame (range-filtered), voxel
+// downsampled; built in batches so only a few scans are in memory at once.
+PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                           int threads = 0);
+// HD removal of one session (builds its map first).
+HdResult RemoveHd(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                  int threads = 0);
+// HD removal of a given map (world frame) against the keyframes.
+HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& cfg, int threads = 0);
+
+// ------------------------------------------------------------------------------ LD detection
+struct LdStats {
+  std::size_t central_points = 0, query_points = 0;
+  std::size_t nd_strong = 0, nd_weak = 0, pd_strong = 0, pd_weak = 0;
+  double seconds = 0;
+};
+struct LdResult {
+  PointCloud nd_strong, nd_weak;  // central map points, world frame
+  PointCloud pd_strong, pd_weak;  // query map points, world frame
+  LdStats stats;
+};
+// LD changes between the HD-free central and query maps (world frame). The keyframes (scans +
+// world poses) decide occlusion: ND seen through by a query scan is strong (else weak), PD seen
+// through by a central scan is weak (else strong).
+LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
+                  const std::vector<WorldKeyframe>& central_keyframes,
+                  const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg,
+                  int threads = 0);
+
+// ------------------------------------------------------------------------- visibility votes
+// For each point (world frame) and each resolution, how many keyframes see through it (scan
+// range > point range + tolerance) and how many hit it (|scan range - point range| <=
+// tolerance), counting keyframes within submap_radius_m of the point. The building block of HD
+// removal and of the weak/strong decisions; exposed for tests and ablations.
+struct VisibilityVotes {
+  std::size_t points = 0;
+  int levels = 0;
+  std::vector<std::uint16_t> see;  // [level * points + i]
+  std::vector<std::uint16_t> hit;
+  std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
+  std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
+};
+VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
+                                const std::vector<double>& resolutions_deg,
+                                const RemovertConfig& cfg, int threads = 0);
+
+// ------------------------------------------------------------------------------------ stage
+struct StageReport {
+  std::vector<std::string> sessions;
+  std::vector<HdStats> hd;
+  std::vector<std::pair<int, int>> pairs;
+  std::vector<LdStats> ld;
+  std::vector<std::vector<int>> new_keyframes;  // per pair: query keyframe indices reported new
+  double seconds = 0;
+  std::size_t peak_rss_bytes = 0;
+};
+// The whole stage from files: session directories (io::LoadSession), one world pose file per
+// session (KITTI, keyframe order: LT-SLAM's aligned/<session>/poses_world.txt or sim truth), and
+// the output directory (layout in docs/FORMATS.md, "LT-removert output"). Session 0 is central.
+StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
+                             const std::vector<std::string>& poses_files, const std::string& out_dir,
+                             int threads = 0);
+
+}  // namespace ltm::removert

@@ -1,0 +1,352 @@
+// The LT-removert stage from files: sessions + world poses -> changes/ (docs/FORMATS.md).
+//
+// Keyframe assignment (what LT-map consumes). Every output point belongs to exactly one keyframe:
+//  - central static, HD and ND points: the nearest central keyframe (3D distance to its position);
+//    so the per-keyframe static clouds partition the central static map (no duplicates) and each
+//    ND point lies in the static cloud of the keyframe it is assigned to;
+//  - PD points: the nearest keyframe among the central keyframes and the "new" query keyframes
+//    (query keyframes farther than out.new_keyframe_dist_m from every central keyframe). A PD
+//    point whose nearest candidate is a central keyframe farther than out.assign_radius_m goes to
+//    its nearest query keyframe, which becomes new too. New keyframes are written under
+//    pair_*/new_keyframes/ in their own local frame, listed in keyframes.csv and report.json;
+//    LT-map creates map keyframes for them.
+#include "ltmapper/removert/detail.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iomanip>
+#include <set>
+#include <sstream>
+
+namespace ltm::removert {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string Index6(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%06d", index);
+  return buf;
+}
+
+std::string PairName(const std::vector<std::string>& names, int c, int q) {
+  (void)names;
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "pair_%02d_%02d", c, q);
+  return buf;
+}
+
+PointCloud Labelled(const PointCloud& cloud, PointClass cls, int session) {
+  PointCloud out;
+  out.points = cloud.points;
+  out.cls.assign(cloud.size(), cls);
+  out.session.assign(cloud.size(), std::uint16_t(session));
+  out.object.assign(cloud.size(), -1);
+  return out;
+}
+
+PointCloud Positions(const std::vector<WorldKeyframe>& kfs) {
+  PointCloud c;
+  for (const auto& kf : kfs) {
+    const Eigen::Vector3d t = kf.T_world_sensor.translation();
+    c.push_back(float(t.x()), float(t.y()), float(t.z()));
+  }
+  return c;
+}
+
+// Nearest keyframe (position index) of every point.
+std::vector<std::uint32_t> Nearest(const PointCloud& pts, const geometry::KdTree& tree, int threads,
+                                   std::vector<float>* sq_dist = nullptr) {
+  std::vector<std::uint32_t> out(pts.size(), 0);
+  if (sq_dist) sq_dist->assign(pts.size(), 0.f);
+  const std::size_t chunk = 8192;
+  detail::ParallelFor((pts.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
+    const std::size_t b = c * chunk, e = std::min(pts.size(), b + chunk);
+    for (std::size_t i = b; i < e; ++i) {
+      std::uint32_t k = 0;
+      float d2 = 0.f;
+      tree.Nearest(pts.points[i].xyz(), &k, &d2);
+      out[i] = k;
+      if (sq_dist) (*sq_dist)[i] = d2;
+    }
+  });
+  return out;
+}
+
+// Member indices per bucket.
+std::vector<std::vector<std::uint32_t>> Buckets(const std::vector<std::uint32_t>& owner, std::size_t n) {
+  std::vector<std::vector<std::uint32_t>> b(n);
+  for (std::size_t i = 0; i < owner.size(); ++i)
+    if (owner[i] < n) b[owner[i]].push_back(std::uint32_t(i));
+  return b;
+}
+
+PointCloud Voxel(const PointCloud& c, double voxel_m) {
+  return voxel_m > 0.0 ? geometry::VoxelDownsample(c, voxel_m, 1) : c;
+}
+
+void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor,
+                      const std::vector<std::pair<std::string, PointCloud>>& parts,
+                      const std::vector<PointClass>& classes, int session_of_part0,
+                      const std::vector<int>& sessions, const RemovertConfig& cfg) {
+  io::MakeDirs(dir);
+  PointCloud all;
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    const PointCloud local = Voxel(detail::ToLocal(parts[p].second, T_world_sensor), cfg.keyframe_voxel_m);
+    io::WritePcd(dir + "/" + parts[p].first + ".pcd", local);
+    if (cfg.write_ply) all.append(Labelled(local, classes[p], sessions[p]));
+  }
+  (void)session_of_part0;
+  if (cfg.write_ply) io::WritePly(dir + "/classes.ply", all);
+}
+
+std::string JsonStr(const std::string& s) {
+  std::string o = "\"";
+  for (char ch : s) {
+    if (ch == '"' || ch == '\\') o += '\\';
+    o += ch;
+  }
+  return o + "\"";
+}
+
+}  // namespace
+
+StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
+                             const std::vector<std::string>& poses_files, const std::string& out_dir,
+                             int threads) {
+  cfg.Validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  if (session_dirs.empty()) throw Error("removert: no sessions given");
+  if (poses_files.size() != session_dirs.size())
+    throw Error("removert: " + std::to_string(session_dirs.size()) + " sessions but " +
+                std::to_string(poses_files.size()) + " pose files");
+  StageReport rep;
+  const std::size_t ns = session_dirs.size();
+  std::vector<std::vector<WorldKeyframe>> kfs(ns);
+  for (std::size_t s = 0; s < ns; ++s) {
+    const Session sess = io::LoadSession(session_dirs[s]);
+    const std::vector<Pose> poses = io::ReadKittiPoses(poses_files[s]);
+    if (poses.size() != sess.keyframes.size())
+      throw Error(poses_files[s], 0,
+                  std::to_string(poses.size()) + " poses but session " + session_dirs[s] + " has " +
+                      std::to_string(sess.keyframes.size()) + " keyframes (one pose per keyframe, in order)");
+    rep.sessions.push_back(sess.name.empty() ? fs::path(session_dirs[s]).filename().string() : sess.name);
+    for (std::size_t k = 0; k < poses.size(); ++k) {
+      WorldKeyframe w;
+      w.index = sess.keyframes[k].index;
+      w.T_world_sensor = poses[k];
+      w.cloud = sess.keyframes[k].cloud;
+      w.cloud_path = sess.keyframes[k].cloud_path;
+      kfs[s].push_back(std::move(w));
+    }
+  }
+  io::MakeDirs(out_dir);
+
+  // ---- HD removal per session.
+  std::vector<PointCloud> static_maps(ns), hd_maps(ns);
+  for (std::size_t s = 0; s < ns; ++s) {
+    spdlog::info("removert: HD removal of {} ({} keyframes)", rep.sessions[s], kfs[s].size());
+    HdResult hd = RemoveHd(kfs[s], cfg, threads);
+    const HdStats& st = hd.stats;
+    spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} ({:.2f} %), "
+                 "{:.1f} s map + {:.1f} s votes",
+                 rep.sessions[s], st.map_points, st.candidates, st.reverted, st.removed,
+                 st.map_points ? 100.0 * double(st.removed) / double(st.map_points) : 0.0,
+                 st.seconds_map, st.seconds_votes);
+    const std::string dir = out_dir + "/" + rep.sessions[s];
+    io::MakeDirs(dir);
+    io::WritePcd(dir + "/static_map.pcd", hd.static_map);
+    io::WritePcd(dir + "/hd_map.pcd", hd.hd_map);
+    if (cfg.write_ply) {
+      PointCloud all = Labelled(hd.static_map, PointClass::kStatic, int(s));
+      all.append(Labelled(hd.hd_map, PointClass::kHD, int(s)));
+      io::WritePly(dir + "/map.ply", all);
+    }
+    rep.hd.push_back(st);
+    static_maps[s] = std::move(hd.static_map);
+    hd_maps[s] = std::move(hd.hd_map);
+  }
+
+  // ---- LD per pair.
+  for (std::size_t q = 1; q < ns; ++q) {
+    const int c = cfg.pairs == "consecutive" ? int(q) - 1 : 0;
+    rep.pairs.emplace_back(c, int(q));
+  }
+  for (const auto& [c, q] : rep.pairs) {
+    const std::string pname = PairName(rep.sessions, c, q);
+    spdlog::info("removert: LD {} vs {}", rep.sessions[std::size_t(c)], rep.sessions[std::size_t(q)]);
+    const LdResult ld = DetectLd(static_maps[std::size_t(c)], static_maps[std::size_t(q)],
+                                 kfs[std::size_t(c)], kfs[std::size_t(q)], cfg, threads);
+    spdlog::info("removert: {}: ND strong {} weak {}, PD strong {} weak {} ({:.1f} s)", pname,
+                 ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.pd_strong, ld.stats.pd_weak,
+                 ld.stats.seconds);
+    rep.ld.push_back(ld.stats);
+    const std::string dir = out_dir + "/" + pname;
+    io::MakeDirs(dir);
+    io::WritePcd(dir + "/pd_strong.pcd", ld.pd_strong);
+    io::WritePcd(dir + "/pd_weak.pcd", ld.pd_weak);
+    io::WritePcd(dir + "/nd_strong.pcd", ld.nd_strong);
+    io::WritePcd(dir + "/nd_weak.pcd", ld.nd_weak);
+
+    // Central static minus ND (ND points are exactly central static points).
+    const PointCloud& cmap = static_maps[std::size_t(c)];
+    PointCloud nd_all = ld.nd_strong;
+    nd_all.append(ld.nd_weak);
+    if (cfg.write_ply) {
+      const geometry::KdTree nd_tree(nd_all);
+      std::vector<bool> keep(cmap.size(), true);
+      if (!nd_all.empty())
+        for (std::size_t i = 0; i < cmap.size(); ++i) {
+          std::uint32_t k;
+          float d2;
+          keep[i] = !(nd_tree.Nearest(cmap.points[i].xyz(), &k, &d2) && d2 == 0.f);
+        }
+      PointCloud all = Labelled(cmap.select(keep), PointClass::kStatic, c);
+      all.append(Labelled(ld.nd_strong, PointClass::kNDStrong, c));
+      all.append(Labelled(ld.nd_weak, PointClass::kNDWeak, c));
+      all.append(Labelled(ld.pd_strong, PointClass::kPDStrong, q));
+      all.append(Labelled(ld.pd_weak, PointClass::kPDWeak, q));
+      io::WritePly(dir + "/changes.ply", all);
+    }
+
+    // ---- Keyframe assignment (rule at the top of this file).
+    const auto& ckf = kfs[std::size_t(c)];
+    const auto& qkf = kfs[std::size_t(q)];
+    const std::size_t nc = ckf.size();
+    const geometry::KdTree ctree(Positions(ckf));
+    const geometry::KdTree qtree(Positions(qkf));
+    std::vector<float> qd2;
+    Nearest(Positions(qkf), ctree, threads, &qd2);
+    std::vector<std::uint32_t> new_q;  // query keyframe positions that become new keyframes
+    const float nk2 = float(cfg.new_keyframe_dist_m * cfg.new_keyframe_dist_m);
+    for (std::size_t j = 0; j < qkf.size(); ++j)
+      if (qd2[j] > nk2) new_q.push_back(std::uint32_t(j));
+    PointCloud cand = Positions(ckf);
+    for (auto j : new_q) cand.push_back(float(qkf[j].T_world_sensor.translation().x()),
+                                         float(qkf[j].T_world_sensor.translation().y()),
+                                         float(qkf[j].T_world_sensor.translation().z()));
+    const geometry::KdTree cand_tree(cand);
+    // PD owner: [0, nc) central keyframe, nc + j query keyframe j.
+    auto pd_owner = [&](const PointCloud& pd, std::vector<std::uint32_t>* owner) {
+      std::vector<float> d2;
+      *owner = Nearest(pd, cand_tree, threads, &d2);
+      const float ar2 = float(cfg.assign_radius_m * cfg.assign_radius_m);
+      for (std::size_t i = 0; i < pd.size(); ++i) {
+        std::uint32_t& o = (*owner)[i];
+        if (o >= nc) {
+          o = std::uint32_t(nc) + new_q[o - nc];
+        } else if (d2[i] > ar2) {
+          std::uint32_t j = 0;
+          float dq = 0.f;
+          qtree.Nearest(pd.points[i].xyz(), &j, &dq);
+          o = std::uint32_t(nc) + j;
+        }
+      }
+    };
+    std::vector<std::uint32_t> own_pds, own_pdw;
+    pd_owner(ld.pd_strong, &own_pds);
+    pd_owner(ld.pd_weak, &own_pdw);
+    const std::size_t nk = nc + qkf.size();
+    const auto b_static = Buckets(Nearest(cmap, ctree, threads), nk);
+    const auto b_hd = Buckets(Nearest(hd_maps[std::size_t(c)], ctree, threads), nk);
+    const auto b_nds = Buckets(Nearest(ld.nd_strong, ctree, threads), nk);
+    const auto b_ndw = Buckets(Nearest(ld.nd_weak, ctree, threads), nk);
+    const auto b_pds = Buckets(own_pds, nk);
+    const auto b_pdw = Buckets(own_pdw, nk);
+    std::vector<int> is_new(qkf.size(), 0);
+    for (std::size_t j = 0; j < qkf.size(); ++j)
+      if (!b_pds[nc + j].empty() || !b_pdw[nc + j].empty()) is_new[j] = 1;
+    for (auto j : new_q) is_new[j] = 1;
+    std::vector<int> new_list;
+    for (std::size_t j = 0; j < qkf.size(); ++j)
+      if (is_new[j]) new_list.push_back(int(j));
+
+    auto pick = [](const PointCloud& cl, const std::vector<std::uint32_t>& idx) { return cl.select(idx); };
+    if (cfg.write_keyframes) {
+      detail::ParallelFor(nc, threads, [&](std::size_t k) {
+        WriteKeyframeDir(dir + "/keyframes/" + Index6(ckf[k].index), ckf[k].T_world_sensor,
+                         {{"static", pick(cmap, b_static[k])},
+                          {"hd", pick(hd_maps[std::size_t(c)], b_hd[k])},
+                          {"pd_strong", pick(ld.pd_strong, b_pds[k])},
+                          {"pd_weak", pick(ld.pd_weak, b_pdw[k])},
+                          {"nd_strong", pick(ld.nd_strong, b_nds[k])},
+                          {"nd_weak", pick(ld.nd_weak, b_ndw[k])}},
+                         {PointClass::kStatic, PointClass::kHD, PointClass::kPDStrong,
+                          PointClass::kPDWeak, PointClass::kNDStrong, PointClass::kNDWeak},
+                         c, {c, c, q, q, c, c}, cfg);
+      });
+      detail::ParallelFor(new_list.size(), threads, [&](std::size_t t) {
+        const std::size_t j = std::size_t(new_list[t]);
+        WriteKeyframeDir(dir + "/new_keyframes/" + Index6(qkf[j].index), qkf[j].T_world_sensor,
+                         {{"pd_strong", pick(ld.pd_strong, b_pds[nc + j])},
+                          {"pd_weak", pick(ld.pd_weak, b_pdw[nc + j])}},
+                         {PointClass::kPDStrong, PointClass::kPDWeak}, q, {q, q}, cfg);
+      });
+    }
+    // Keyframe list: kind, session, index, point counts, world pose (KITTI 12 numbers).
+    io::WriteFileAtomic(dir + "/keyframes.csv", [&](std::ostream& os) {
+      os << "kind,session,index,static,hd,pd_strong,pd_weak,nd_strong,nd_weak,"
+            "r00,r01,r02,tx,r10,r11,r12,ty,r20,r21,r22,tz\n";
+      os << std::setprecision(9);
+      auto row = [&](const char* kind, int ses, const WorldKeyframe& kf, std::size_t a, std::size_t b,
+                     std::size_t c2, std::size_t d, std::size_t e, std::size_t f) {
+        os << kind << ',' << ses << ',' << kf.index << ',' << a << ',' << b << ',' << c2 << ',' << d
+           << ',' << e << ',' << f;
+        const Eigen::Matrix4d M = kf.T_world_sensor.matrix();
+        for (int r = 0; r < 3; ++r)
+          for (int cc = 0; cc < 4; ++cc) os << ',' << M(r, cc);
+        os << '\n';
+      };
+      for (std::size_t k = 0; k < nc; ++k)
+        row("central", c, ckf[k], b_static[k].size(), b_hd[k].size(), b_pds[k].size(),
+            b_pdw[k].size(), b_nds[k].size(), b_ndw[k].size());
+      for (int j : new_list)
+        row("new", q, qkf[std::size_t(j)], 0, 0, b_pds[nc + std::size_t(j)].size(),
+            b_pdw[nc + std::size_t(j)].size(), 0, 0);
+    });
+    std::vector<int> new_idx;
+    for (int j : new_list) new_idx.push_back(qkf[std::size_t(j)].index);
+    rep.new_keyframes.push_back(new_idx);
+  }
+
+  rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  rep.peak_rss_bytes = PeakRssBytes();
+
+  io::WriteFileAtomic(out_dir + "/report.json", [&](std::ostream& os) {
+    os << std::setprecision(9) << "{\n  \"stage\": \"removert\",\n  \"sessions\": [\n";
+    for (std::size_t s = 0; s < ns; ++s) {
+      const HdStats& h = rep.hd[s];
+      os << "    {\"name\": " << JsonStr(rep.sessions[s]) << ", \"keyframes\": " << kfs[s].size()
+         << ", \"map_points\": " << h.map_points << ", \"candidates\": " << h.candidates
+         << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed
+         << ", \"removed_per_resolution\": [";
+      for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
+        os << (l ? ", " : "") << h.removed_per_resolution[l];
+      os << "], \"seconds_map\": " << h.seconds_map << ", \"seconds_votes\": " << h.seconds_votes
+         << "}" << (s + 1 < ns ? "," : "") << "\n";
+    }
+    os << "  ],\n  \"pairs\": [\n";
+    for (std::size_t p = 0; p < rep.pairs.size(); ++p) {
+      const LdStats& l = rep.ld[p];
+      os << "    {\"central\": " << rep.pairs[p].first << ", \"query\": " << rep.pairs[p].second
+         << ", \"dir\": " << JsonStr(PairName(rep.sessions, rep.pairs[p].first, rep.pairs[p].second))
+         << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak
+         << ", \"pd_strong\": " << l.pd_strong << ", \"pd_weak\": " << l.pd_weak
+         << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
+      for (std::size_t j = 0; j < rep.new_keyframes[p].size(); ++j)
+        os << (j ? ", " : "") << rep.new_keyframes[p][j];
+      os << "]}" << (p + 1 < rep.pairs.size() ? "," : "") << "\n";
+    }
+    os << "  ],\n  \"seconds\": " << rep.seconds << ",\n  \"peak_rss_bytes\": " << rep.peak_rss_bytes
+       << ",\n  \"threads\": " << threads << "\n}\n";
+  });
+  return rep;
+}
+
+}  // namespace ltm::removert

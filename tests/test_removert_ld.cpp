@@ -1,0 +1,143 @@
+// LT-removert LD detection and occlusion handling on a synthetic street seen by two sessions:
+//  - car only in central (open view)            -> strong ND
+//  - car only in query, in space central saw free -> weak PD
+//  - box behind a wall that only the query has  -> weak ND (occluded in the query), kept
+//  - wall only in central                         -> strong ND; box behind it (revealed) -> strong PD
+#include "test_removert_scene.hpp"
+#include "test_util.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/removert/removert.hpp"
+
+#include <gtest/gtest.h>
+
+namespace ltm {
+namespace {
+
+using removert::RemovertConfig;
+using removert::WorldKeyframe;
+
+enum : int {
+  kCarCentral = 10,   // ND strong
+  kCarQuery = 11,     // PD weak
+  kHiddenBox = 12,    // in both; occluded in the query by kWallQuery -> weak ND
+  kWallQuery = 13,    // PD (central saw through) -> weak PD
+  kWallCentral = 14,  // ND strong
+  kRevealedBox = 15,  // in both; behind kWallCentral -> strong PD
+};
+
+std::vector<test::Box> Common() {
+  return {test::MakeBox(-40, 12, 0, 40, 12.3, 4, 1), test::MakeBox(-40, -16.3, 0, 40, -16, 4, 2),
+          test::MakeBox(13, -9, 0, 17, -7, 2.0, kHiddenBox),
+          test::MakeBox(-17, -9, 0, -13, -7, 2.0, kRevealedBox)};
+}
+
+std::vector<WorldKeyframe> Drive(const std::vector<test::Box>& boxes, double y, PointCloud* truth) {
+  std::vector<WorldKeyframe> kfs;
+  for (int k = 0; k <= 20; ++k) {
+    WorldKeyframe kf;
+    kf.index = k;
+    kf.T_world_sensor = test::At(-20.0 + 2.0 * k, y, 1.8, 0.0);
+    auto scan = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
+    if (truth) truth->append(test::ToWorld(*scan, kf.T_world_sensor));
+    kf.cloud = scan;
+    kfs.push_back(kf);
+  }
+  return kfs;
+}
+
+struct Scene {
+  std::vector<WorldKeyframe> central, query;
+  PointCloud cmap, qmap;
+};
+
+Scene MakeScene() {
+  Scene s;
+  auto cb = Common();
+  cb.push_back(test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral));
+  cb.push_back(test::MakeBox(-20, -5.3, 0, -10, -5, 3.5, kWallCentral));
+  auto qb = Common();
+  qb.push_back(test::MakeBox(-7, -6, 0.3, -3, -4, 1.8, kCarQuery));
+  qb.push_back(test::MakeBox(10, -5.3, 0, 20, -5, 3.5, kWallQuery));
+  s.central = Drive(cb, 0.0, nullptr);
+  s.query = Drive(qb, 0.7, nullptr);
+  RemovertConfig cfg;
+  s.cmap = removert::BuildSessionMap(s.central, cfg, 2);
+  s.qmap = removert::BuildSessionMap(s.query, cfg, 2);
+  return s;
+}
+
+// Fraction of `pts` inside the box grown by `m`.
+std::size_t CountIn(const PointCloud& pts, const test::Box& b, double m = 0.05) {
+  std::size_t n = 0;
+  for (const auto& p : pts.points)
+    if (p.x >= b.lo.x() - m && p.x <= b.hi.x() + m && p.y >= b.lo.y() - m && p.y <= b.hi.y() + m &&
+        p.z >= b.lo.z() - m && p.z <= b.hi.z() + m)
+      ++n;
+  return n;
+}
+
+TEST(RemovertLd, NdPdStrongWeak) {
+  const Scene s = MakeScene();
+  RemovertConfig cfg;
+  const auto ld = removert::DetectLd(s.cmap, s.qmap, s.central, s.query, cfg, 2);
+  const test::Box car_c = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, 0);
+  const test::Box car_q = test::MakeBox(-7, -6, 0.3, -3, -4, 1.8, 0);
+  const test::Box hidden = test::MakeBox(13, -9, 0.0, 17, -7, 2.0, 0);
+  const test::Box wall_q = test::MakeBox(10, -5.3, 0, 20, -5, 3.5, 0);
+  const test::Box wall_c = test::MakeBox(-20, -5.3, 0, -10, -5, 3.5, 0);
+  const test::Box revealed = test::MakeBox(-17, -9, 0.0, -13, -7, 2.0, 0);
+
+  // Car only in central: ND, strong (the query sees the ground behind its place).
+  const std::size_t car_c_map = CountIn(s.cmap, car_c);
+  const std::size_t car_c_nds = CountIn(ld.nd_strong, car_c), car_c_ndw = CountIn(ld.nd_weak, car_c);
+  std::printf("central car: map %zu, ND strong %zu weak %zu\n", car_c_map, car_c_nds, car_c_ndw);
+  EXPECT_GE(double(car_c_nds + car_c_ndw), 0.95 * double(car_c_map));
+  EXPECT_GE(double(car_c_nds), 0.9 * double(car_c_nds + car_c_ndw));
+
+  // Car only in query, in the open: PD, weak (central saw through that space).
+  const std::size_t car_q_map = CountIn(s.qmap, car_q);
+  const std::size_t car_q_pdw = CountIn(ld.pd_weak, car_q), car_q_pds = CountIn(ld.pd_strong, car_q);
+  std::printf("query car: map %zu, PD weak %zu strong %zu\n", car_q_map, car_q_pdw, car_q_pds);
+  EXPECT_GE(double(car_q_pdw + car_q_pds), 0.95 * double(car_q_map));
+  EXPECT_GE(double(car_q_pdw), 0.9 * double(car_q_pdw + car_q_pds));
+
+  // Box occluded in the query by the query's new wall: ND, weak (kept).
+  const std::size_t hid_nds = CountIn(ld.nd_strong, hidden), hid_ndw = CountIn(ld.nd_weak, hidden);
+  std::printf("hidden box: ND strong %zu weak %zu\n", hid_nds, hid_ndw);
+  EXPECT_GT(hid_ndw, 50u);
+  EXPECT_GE(double(hid_ndw), 0.95 * double(hid_nds + hid_ndw));
+
+  // The query's new wall stands where central saw free space: weak PD.
+  const std::size_t wq_pdw = CountIn(ld.pd_weak, wall_q), wq_pds = CountIn(ld.pd_strong, wall_q);
+  std::printf("query wall: PD weak %zu strong %zu\n", wq_pdw, wq_pds);
+  EXPECT_GE(double(wq_pdw), 0.9 * double(wq_pdw + wq_pds));
+
+  // The central's wall is gone in the query: strong ND; the box it hid is strong PD.
+  const std::size_t wc_nds = CountIn(ld.nd_strong, wall_c), wc_ndw = CountIn(ld.nd_weak, wall_c);
+  const std::size_t rv_pds = CountIn(ld.pd_strong, revealed), rv_pdw = CountIn(ld.pd_weak, revealed);
+  std::printf("central wall: ND strong %zu weak %zu; revealed box: PD strong %zu weak %zu\n", wc_nds,
+              wc_ndw, rv_pds, rv_pdw);
+  EXPECT_GE(double(wc_nds), 0.9 * double(wc_nds + wc_ndw));
+  EXPECT_GT(rv_pds, 50u);
+  EXPECT_GE(double(rv_pds), 0.9 * double(rv_pds + rv_pdw));
+
+  // Without weak-ND preservation the hidden box is removed as strong ND (ablation switch).
+  RemovertConfig no_weak = cfg;
+  no_weak.weak_nd = false;
+  const auto ld2 = removert::DetectLd(s.cmap, s.qmap, s.central, s.query, no_weak, 2);
+  EXPECT_TRUE(ld2.nd_weak.empty());
+  EXPECT_GE(CountIn(ld2.nd_strong, hidden), hid_ndw);
+}
+
+TEST(RemovertLd, IdenticalSessionsHaveNoChanges) {
+  auto boxes = Common();
+  const auto a = Drive(boxes, 0.0, nullptr);
+  RemovertConfig cfg;
+  const PointCloud m = removert::BuildSessionMap(a, cfg, 2);
+  const auto ld = removert::DetectLd(m, m, a, a, cfg, 2);
+  EXPECT_EQ(ld.nd_strong.size() + ld.nd_weak.size() + ld.pd_strong.size() + ld.pd_weak.size(), 0u);
+}
+
+}  // namespace
+}  // namespace ltm

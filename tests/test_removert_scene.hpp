@@ -1,0 +1,99 @@
+// Tiny analytic scenes for the removert tests: ground plane + axis-aligned boxes, ray cast by a
+// spinning LiDAR model, every return labelled with the box (or ground) it hit.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+#include "ltmapper/removert/removert.hpp"
+
+#include <Eigen/Geometry>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <vector>
+
+namespace ltm::test {
+
+struct Box {
+  Eigen::Vector3d lo, hi;
+  int id = 0;  // label written into PointCloud::object of hits
+};
+
+struct Lidar {
+  int beams = 64;
+  double fov_up_deg = 2.0, fov_down_deg = -24.8;
+  int cols = 900;  // 0.4 deg
+  double max_range = 80.0;
+};
+
+// Ray / box slab test: entry distance t > 0 or +inf.
+inline double HitBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Box& b) {
+  double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (std::fabs(d[a]) < 1e-12) {
+      if (o[a] < b.lo[a] || o[a] > b.hi[a]) return std::numeric_limits<double>::infinity();
+      continue;
+    }
+    double ta = (b.lo[a] - o[a]) / d[a], tb = (b.hi[a] - o[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return std::numeric_limits<double>::infinity();
+  }
+  return t0 > 1e-9 ? t0 : std::numeric_limits<double>::infinity();
+}
+
+// Scan in the sensor frame (sensor at T_world_sensor, axes aligned with world up). Ground z = 0
+// has object id -1; boxes their id. `object` holds the label.
+inline PointCloud CastScan(const Pose& T_world_sensor, const std::vector<Box>& boxes, const Lidar& L) {
+  PointCloud scan;
+  const Eigen::Vector3d o = T_world_sensor.translation();
+  const Eigen::Matrix3d R = T_world_sensor.linear();
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  for (int b = 0; b < L.beams; ++b) {
+    const double el = (L.fov_up_deg - (b + 0.5) * (L.fov_up_deg - L.fov_down_deg) / L.beams) * kDeg;
+    for (int c = 0; c < L.cols; ++c) {
+      const double az = (c + 0.5) * 2.0 * 3.14159265358979323846 / L.cols;
+      const Eigen::Vector3d ds(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+      const Eigen::Vector3d dw = R * ds;
+      double best = L.max_range;
+      int label = -2;
+      if (dw.z() < -1e-9) {
+        const double tg = -o.z() / dw.z();
+        if (tg < best) best = tg, label = -1;
+      }
+      for (const Box& bx : boxes) {
+        const double t = HitBox(o, dw, bx);
+        if (t < best) best = t, label = bx.id;
+      }
+      if (label == -2) continue;
+      const Eigen::Vector3d p = ds * best;
+      scan.push_back(float(p.x()), float(p.y()), float(p.z()));
+      scan.object.push_back(label);
+    }
+  }
+  return scan;
+}
+
+inline Pose At(double x, double y, double z = 1.8, double yaw = 0.0) {
+  Pose T = Pose::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(x, y, z);
+  return T;
+}
+
+inline Box MakeBox(double x0, double y0, double z0, double x1, double y1, double z1, int id) {
+  return Box{Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1), id};
+}
+
+// World points of a scan with their labels.
+inline PointCloud ToWorld(const PointCloud& scan, const Pose& T) {
+  PointCloud out = scan;
+  for (auto& p : out.points) {
+    const Eigen::Vector3d w = T * Eigen::Vector3d(p.x, p.y, p.z);
+    p.x = float(w.x()), p.y = float(w.y()), p.z = float(w.z());
+  }
+  return out;
+}
+
+}  // namespace ltm::test
