@@ -1,0 +1,127 @@
+// `ltmapper removert`: LT-removert from files. Sessions + world poses (LT-SLAM's aligned/ dir or
+// one KITTI pose file per session) -> changes/ (docs/FORMATS.md, "LT-removert output").
+#include "command.hpp"
+
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/removert/removert.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <memory>
+#include <sstream>
+
+namespace ltm::app {
+namespace {
+
+struct RemovertArgs {
+  CommonOptions common;
+  std::string config;
+  std::vector<std::string> sessions;
+  std::string aligned;
+  std::vector<std::string> poses;
+  std::string out;
+  std::vector<std::string> set;
+};
+
+// "key=value" onto a config field (numbers, bools, strings, comma-separated lists).
+void ApplySet(removert::RemovertConfig& cfg, const std::string& kv) {
+  const auto eq = kv.find('=');
+  if (eq == std::string::npos) throw Error("--set " + kv + ": expected key=value");
+  const std::string key = kv.substr(0, eq), value = kv.substr(eq + 1);
+  auto fields = FieldsOf(cfg);
+  for (const auto& f : fields.fields()) {
+    if (f.key != key) continue;
+    auto num = [&](const std::string& t) {
+      std::size_t used = 0;
+      const double d = std::stod(t, &used);
+      if (used != t.size()) throw Error("--set " + kv + ": not a number: " + t);
+      return d;
+    };
+    try {
+      switch (f.kind) {
+        case ConfigField::Kind::kDouble: *static_cast<double*>(f.ptr) = num(value); break;
+        case ConfigField::Kind::kInt: *static_cast<int*>(f.ptr) = int(num(value)); break;
+        case ConfigField::Kind::kBool:
+          if (value != "true" && value != "false") throw Error("--set " + kv + ": expected true|false");
+          *static_cast<bool*>(f.ptr) = value == "true";
+          break;
+        case ConfigField::Kind::kString: *static_cast<std::string*>(f.ptr) = value; break;
+        case ConfigField::Kind::kDoubleList: {
+          std::vector<double> list;
+          std::stringstream ss(value);
+          for (std::string t; std::getline(ss, t, ',');) list.push_back(num(t));
+          *static_cast<std::vector<double>*>(f.ptr) = list;
+          break;
+        }
+      }
+    } catch (const std::invalid_argument&) {
+      throw Error("--set " + kv + ": bad value");
+    }
+    return;
+  }
+  throw Error("--set " + kv + ": unknown key '" + key + "'");
+}
+
+void RunRemovert(const RemovertArgs& a) {
+  if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
+  removert::RemovertConfig cfg;
+  if (!a.config.empty()) io::LoadConfig(a.config, cfg);
+  for (const auto& kv : a.set) ApplySet(cfg, kv);
+  cfg.Validate(a.config.empty() ? "removert config" : a.config);
+  spdlog::info("removert config:\n{}", ConfigToString(cfg));
+
+  std::vector<std::string> poses = a.poses;
+  if (!a.aligned.empty()) {
+    for (const auto& s : a.sessions) {
+      const std::string name = std::filesystem::path(s).lexically_normal().filename().string();
+      poses.push_back(a.aligned + "/" + (name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name) +
+                      "/poses_world.txt");
+    }
+  }
+  if (poses.size() != a.sessions.size())
+    throw Error("need one pose file per session: " + std::to_string(a.sessions.size()) +
+                " sessions, " + std::to_string(poses.size()) + " pose files");
+  const auto rep = removert::RunRemovertStage(cfg, a.sessions, poses, a.out, a.common.threads);
+  for (std::size_t s = 0; s < rep.sessions.size(); ++s) {
+    const auto& h = rep.hd[s];
+    spdlog::info("{}: {} map points, {} removed as HD ({:.2f} %), {} reverted", rep.sessions[s],
+                 h.map_points, h.removed,
+                 h.map_points ? 100.0 * double(h.removed) / double(h.map_points) : 0.0, h.reverted);
+  }
+  for (std::size_t p = 0; p < rep.pairs.size(); ++p) {
+    const auto& l = rep.ld[p];
+    spdlog::info("pair {}-{}: ND strong {} weak {}, PD strong {} weak {}, {} new keyframes",
+                 rep.pairs[p].first, rep.pairs[p].second, l.nd_strong, l.nd_weak, l.pd_strong,
+                 l.pd_weak, rep.new_keyframes[p].size());
+  }
+  spdlog::info("removert: {:.1f} s, peak memory {:.0f} MB, output {}", rep.seconds,
+               double(rep.peak_rss_bytes) / 1e6, a.out);
+}
+
+LTM_COMMAND(40, [](CLI::App& parent) {
+  auto a = std::make_shared<RemovertArgs>();
+  auto* cmd = parent.add_subcommand(
+      "removert", "LT-removert: HD removal (remove-then-revert) and LD changes (PD/ND, strong/weak)");
+  AddCommonOptions(*cmd, a->common);
+  cmd->add_option("--config", a->config, "params_ltremovert.yaml (every key optional)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--sessions", a->sessions, "Session directories; the first is the central session")
+      ->required();
+  auto* al = cmd->add_option("--aligned", a->aligned,
+                             "LT-SLAM output dir: world poses from <dir>/<session>/poses_world.txt")
+                 ->check(CLI::ExistingDirectory);
+  auto* po = cmd->add_option("--poses", a->poses,
+                             "One KITTI world-pose file per session (e.g. sim truth/session_XX/poses_world.txt)");
+  al->excludes(po);
+  po->excludes(al);
+  cmd->add_option("--out", a->out, "Output directory (changes/)")->required();
+  cmd->add_option("--set", a->set, "Override a config key, e.g. --set ld.weak_nd=false (repeatable)");
+  cmd->callback([a] {
+    if (a->aligned.empty() && a->poses.empty()) throw Error("removert: give --aligned DIR or --poses FILE...");
+    RunRemovert(*a);
+  });
+});
+
+}  // namespace
+}  // namespace ltm::app

@@ -1,0 +1,147 @@
+// LT-removert stage from files: sessions written in SC-LIO-SAM layout, world poses as KITTI
+// files, outputs as in docs/FORMATS.md; the per-keyframe clouds partition the maps; query
+// keyframes far from the central session become new keyframes; the config file parses.
+#include "test_removert_scene.hpp"
+#include "test_util.hpp"
+
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/removert/removert.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+namespace ltm {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A session driving along y = 0 from x0 for n keyframes, 2 m apart; returns world poses.
+std::vector<Pose> WriteStreetSession(const std::string& dir, double x0, int n, bool parked_car) {
+  std::vector<test::Box> boxes = {test::MakeBox(-60, 8, 0, 120, 8.3, 4, 1),
+                                  test::MakeBox(-60, -8.3, 0, 120, -8, 4, 2)};
+  if (parked_car) boxes.push_back(test::MakeBox(-2, -6, 0.3, 2, -4, 1.8, 7));
+  Session s;
+  s.name = fs::path(dir).filename().string();
+  std::vector<Pose> world;
+  const Pose origin = test::At(x0, 0.0, 0.0, 0.0);  // session frame = first keyframe's ground point
+  for (int k = 0; k < n; ++k) {
+    const Pose T = test::At(x0 + 2.0 * k, 0.0, 1.8);
+    Keyframe kf;
+    kf.index = k;
+    kf.T_session_sensor = origin.inverse() * T;
+    auto scan = test::CastScan(T, boxes, test::Lidar{});
+    scan.object.clear();
+    kf.cloud = std::make_shared<PointCloud>(std::move(scan));
+    s.keyframes.push_back(kf);
+    if (k > 0) {
+      Edge e;
+      e.from = k - 1;
+      e.to = k;
+      e.T_from_to = s.keyframes[std::size_t(k - 1)].T_session_sensor.inverse() * kf.T_session_sensor;
+      s.odometry.push_back(e);
+    }
+    world.push_back(T);
+  }
+  io::WriteSession(dir, s);
+  return world;
+}
+
+TEST(RemovertStage, WritesFormatsAndPartitions) {
+  test::TempDir tmp;
+  const std::string s0 = tmp / "session_00", s1 = tmp / "session_01";
+  const auto w0 = WriteStreetSession(s0, -10.0, 8, true);
+  const auto w1 = WriteStreetSession(s1, -10.0, 30, false);  // drives 44 m past the central's end
+  io::WriteKittiPoses(tmp / "p0.txt", w0);
+  io::WriteKittiPoses(tmp / "p1.txt", w1);
+
+  removert::RemovertConfig cfg;
+  cfg.new_keyframe_dist_m = 20.0;
+  const std::string out = tmp / "changes";
+  const auto rep = removert::RunRemovertStage(cfg, {s0, s1}, {tmp / "p0.txt", tmp / "p1.txt"}, out, 2);
+  ASSERT_EQ(rep.sessions.size(), 2u);
+  ASSERT_EQ(rep.pairs.size(), 1u);
+  for (const char* f : {"session_00/static_map.pcd", "session_00/hd_map.pcd", "session_01/static_map.pcd",
+                        "pair_00_01/pd_strong.pcd", "pair_00_01/pd_weak.pcd", "pair_00_01/nd_strong.pcd",
+                        "pair_00_01/nd_weak.pcd", "pair_00_01/changes.ply", "pair_00_01/keyframes.csv",
+                        "report.json"})
+    EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
+
+  // The parked car is ND strong (the query drove by without it).
+  const PointCloud nds = io::ReadPcd(out + "/pair_00_01/nd_strong.pcd");
+  EXPECT_GT(nds.size(), 200u);
+
+  // Per-keyframe static clouds partition the central static map.
+  const PointCloud cmap = io::ReadPcd(out + "/session_00/static_map.pcd");
+  std::size_t sum = 0, nd_sum = 0;
+  for (int k = 0; k < 8; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d", k);
+    const std::string kdir = out + "/pair_00_01/keyframes/" + name;
+    for (const char* f : {"static", "hd", "pd_strong", "pd_weak", "nd_strong", "nd_weak"})
+      EXPECT_TRUE(fs::exists(kdir + "/" + f + ".pcd")) << kdir << " " << f;
+    EXPECT_TRUE(fs::exists(kdir + "/classes.ply"));
+    const PointCloud st = io::ReadPcd(kdir + "/static.pcd");
+    sum += st.size();
+    nd_sum += io::ReadPcd(kdir + "/nd_strong.pcd").size();
+    // Local frame: points lie within the sensor's range of the keyframe origin.
+    for (const auto& p : st.points) ASSERT_LT(p.xyz().norm(), float(cfg.max_range_m) + 1.f);
+  }
+  EXPECT_EQ(sum, cmap.size());
+  EXPECT_EQ(nd_sum, nds.size());
+
+  // The query's keyframes beyond 20 m from the central's last keyframe are new keyframes.
+  ASSERT_EQ(rep.new_keyframes.size(), 1u);
+  EXPECT_FALSE(rep.new_keyframes[0].empty());
+  for (int idx : rep.new_keyframes[0]) {
+    const double x = -10.0 + 2.0 * idx;
+    EXPECT_GT(x, 4.0 + 20.0 - 2.0) << idx;  // central ends at x = 4
+  }
+  EXPECT_TRUE(fs::exists(out + "/pair_00_01/new_keyframes"));
+  const std::string json = test::ReadText(out + "/report.json");
+  EXPECT_NE(json.find("\"new_keyframes\""), std::string::npos);
+  EXPECT_NE(json.find("\"peak_rss_bytes\""), std::string::npos);
+}
+
+TEST(RemovertStage, BadInputsAreErrors) {
+  test::TempDir tmp;
+  const std::string s0 = tmp / "s0";
+  const auto w0 = WriteStreetSession(s0, 0.0, 3, false);
+  io::WriteKittiPoses(tmp / "short.txt", {w0[0], w0[1]});
+  removert::RemovertConfig cfg;
+  EXPECT_THROW(removert::RunRemovertStage(cfg, {s0}, {tmp / "short.txt"}, tmp / "out", 1), Error);
+  EXPECT_THROW(removert::RunRemovertStage(cfg, {s0}, {}, tmp / "out", 1), Error);
+  EXPECT_THROW(removert::RunRemovertStage(cfg, {tmp / "missing"}, {tmp / "short.txt"}, tmp / "out", 1),
+               Error);
+}
+
+TEST(RemovertStage, ConfigFileParsesToDefaults) {
+  removert::RemovertConfig cfg;
+  io::LoadConfig(std::string(LTM_SOURCE_DIR) + "/config/params_ltremovert.yaml", cfg);
+  EXPECT_EQ(ConfigToString(cfg), ConfigToString(removert::RemovertConfig{}));
+  test::TempDir tmp;
+  test::WriteText(tmp / "bad.yaml", "hd:\n  no_such_key: 1\n");
+  removert::RemovertConfig c2;
+  EXPECT_THROW(io::LoadConfig(tmp / "bad.yaml", c2), Error);
+}
+
+TEST(RemovertStage, CliUsageErrors) {
+  if (!fs::exists(LTM_EXE)) GTEST_SKIP() << "ltmapper executable not built";
+  std::string out;
+  EXPECT_NE(test::RunCli("removert --sessions /nonexistent --out /tmp/x", &out), 0);
+  EXPECT_NE(test::RunCli("removert --sessions a --poses p --aligned /tmp --out x", &out), 0);
+  test::TempDir tmp;
+  const std::string s0 = tmp / "s0";
+  const auto w0 = WriteStreetSession(s0, 0.0, 3, false);
+  io::WriteKittiPoses(tmp / "p.txt", w0);
+  EXPECT_EQ(test::RunCli("removert --quiet --threads 2 --config " + std::string(LTM_SOURCE_DIR) +
+                             "/config/params_ltremovert.yaml --sessions " + s0 + " --poses " +
+                             tmp / "p.txt" + " --out " + tmp / "out",
+                         &out),
+            0)
+      << out;
+  EXPECT_TRUE(fs::exists(tmp / "out/s0/static_map.pcd")) << out;
+}
+
+}  // namespace
+}  // namespace ltm
