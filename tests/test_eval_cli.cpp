@@ -84,6 +84,12 @@ TEST(Storage, BytesFilesRatiosAndCostReport) {
   const CostItem c = ReadCostReport(dir / "report.json");
   EXPECT_DOUBLE_EQ(c.wall_s, 12.5);
   EXPECT_DOUBLE_EQ(c.peak_bytes, 2.0 * 1048576.0);
+  // As LT-removert writes it: per-pair "seconds" nested before the stage's total.
+  test::WriteText(dir / "removert.json",
+                  R"({"stage": "removert", "pairs": [{"seconds": 1.5}], "seconds": 7.25, "peak_rss_bytes": 4096})");
+  const CostItem r2 = ReadCostReport(dir / "removert.json");
+  EXPECT_DOUBLE_EQ(r2.wall_s, 7.25);
+  EXPECT_DOUBLE_EQ(r2.peak_bytes, 4096.0);
   test::WriteText(dir / "bad.json", "{\"wall_s\": }");
   EXPECT_THROW(ReadCostReport(dir / "bad.json"), Error);
 }

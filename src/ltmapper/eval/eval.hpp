@@ -238,8 +238,8 @@ struct StorageResult {
 // Throws when `path` does not exist. Symlinks are not followed.
 StorageItem MeasureStorage(const std::string& path);
 StorageResult EvaluateStorage(const std::vector<std::string>& paths);
-// Wall time and peak memory from a stage's report.json: the first numeric field (document
-// order, any depth) named wall_time_s / wall_s / elapsed_s / time_s / seconds, and
+// Wall time and peak memory from a stage's report.json: the shallowest numeric field (then
+// document order) named wall_time_s / wall_s / seconds_total / elapsed_s / time_s / seconds, and
 // peak_rss_bytes / peak_memory_bytes / peak_bytes (bytes) or peak_rss_mb / peak_memory_mb /
 // peak_mb (MiB). Absent fields stay NaN; malformed JSON is an error.
 CostItem ReadCostReport(const std::string& report_json_path);

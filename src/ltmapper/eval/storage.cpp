@@ -44,23 +44,29 @@ StorageResult EvaluateStorage(const std::vector<std::string>& paths) {
 
 namespace {
 
-// First numeric field (document order, depth first) whose key is one of `names`.
-const json::Value* FindNumber(const json::Value& v, const std::vector<std::string>& names,
+// The shallowest numeric field whose key is one of `names` (breadth first, then document
+// order), so a stage's total time wins over per-item times nested below it.
+const json::Value* FindNumber(const json::Value& root, const std::vector<std::string>& names,
                               std::size_t* which) {
-  if (v.type == json::Value::Type::kObject) {
-    for (const auto& [k, child] : v.obj) {
-      if (child.type == json::Value::Type::kNumber) {
-        for (std::size_t i = 0; i < names.size(); ++i)
-          if (k == names[i]) {
-            *which = i;
-            return &child;
-          }
+  std::vector<const json::Value*> level = {&root};
+  while (!level.empty()) {
+    std::vector<const json::Value*> next;
+    for (const json::Value* v : level) {
+      if (v->type == json::Value::Type::kObject) {
+        for (const auto& [k, child] : v->obj) {
+          if (child.type == json::Value::Type::kNumber)
+            for (std::size_t i = 0; i < names.size(); ++i)
+              if (k == names[i]) {
+                *which = i;
+                return &child;
+              }
+          next.push_back(&child);
+        }
+      } else if (v->type == json::Value::Type::kArray) {
+        for (const auto& child : v->arr) next.push_back(&child);
       }
-      if (const auto* f = FindNumber(child, names, which)) return f;
     }
-  } else if (v.type == json::Value::Type::kArray) {
-    for (const auto& child : v.arr)
-      if (const auto* f = FindNumber(child, names, which)) return f;
+    level = std::move(next);
   }
   return nullptr;
 }
@@ -76,7 +82,7 @@ CostItem ReadCostReport(const std::string& path) {
   CostItem c;
   c.label = path;
   std::size_t which = 0;
-  if (const auto* t = FindNumber(doc, {"wall_time_s", "wall_s", "elapsed_s", "time_s", "seconds"}, &which))
+  if (const auto* t = FindNumber(doc, {"wall_time_s", "wall_s", "seconds_total", "elapsed_s", "time_s", "seconds"}, &which))
     c.wall_s = t->num;
   const std::vector<std::string> mem = {"peak_rss_bytes", "peak_memory_bytes", "peak_bytes",
                                         "peak_rss_mb", "peak_memory_mb", "peak_mb"};
