@@ -81,6 +81,10 @@ TEST(BadInput, PcdHeaderDisagreesWithData) {
   }
   test::WriteText(tmp / "b.pcd", text);
   ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "disagrees"});
+  // A trailing newline after binary data (some writers add one) is not a disagreement.
+  io::WritePcd(tmp / "nl.pcd", Line(10), io::PcdFormat::kBinary);
+  test::WriteText(tmp / "nl.pcd", test::ReadText(tmp / "nl.pcd") + "\n");
+  EXPECT_EQ(io::ReadPcd(tmp / "nl.pcd").size(), 10u);
   // More ascii rows than POINTS.
   test::WriteText(tmp / "c.pcd",
                   "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"

@@ -243,5 +243,22 @@ TEST(Cli, InfoBrokenSessionExitsNonZero) {
   EXPECT_NE(out.find("pose count != scan count"), std::string::npos) << out;
 }
 
+TEST(Cli, InfoKittiLayout) {
+  test::TempDir tmp;
+  PointCloud c;
+  c.push_back(1, 2, 3, 4);
+  c.push_back(5, 6, 7, 8);
+  for (int k = 0; k < 3; ++k) io::WriteKittiBin(tmp / ("seq/velodyne/00000" + std::to_string(k) + ".bin"), c);
+  io::WriteKittiPoses(tmp / "poses.txt", {Planar(0, 0, 0), Planar(1, 0, 0), Planar(3, 0, 0), Planar(6, 0, 0)});
+  test::WriteText(tmp / "calib.txt", "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+  std::string out;
+  EXPECT_EQ(test::RunCli("info " + (tmp / "seq") + " --kitti-poses " + (tmp / "poses.txt") +
+                         " --calib " + (tmp / "calib.txt"), &out), 0) << out;
+  EXPECT_NE(out.find("keyframes:       3"), std::string::npos) << out;
+  EXPECT_NE(out.find("path length:     3.00 m"), std::string::npos) << out;
+  EXPECT_NE(test::RunCli("info " + (tmp / "seq") + " --kitti-poses " + (tmp / "missing.txt"), &out), 0);
+  EXPECT_NE(out.find("missing.txt"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace ltm

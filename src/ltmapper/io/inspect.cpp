@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
@@ -274,9 +275,11 @@ std::string FormatSessionInfo(const SessionInfo& info) {
   }
   if (info.keyframes > 0) {
     const Eigen::Vector3d e = info.bbox_max - info.bbox_min;
+    // Round tiny values to 0 so the box does not print "-0.00".
+    auto c = [](double v) { return std::abs(v) < 0.005 ? 0.0 : v; };
     std::snprintf(buf, sizeof(buf), "x [%.2f, %.2f]  y [%.2f, %.2f]  z [%.2f, %.2f] m (extent %.2f x %.2f x %.2f m)",
-                  info.bbox_min.x(), info.bbox_max.x(), info.bbox_min.y(), info.bbox_max.y(),
-                  info.bbox_min.z(), info.bbox_max.z(), e.x(), e.y(), e.z());
+                  c(info.bbox_min.x()), c(info.bbox_max.x()), c(info.bbox_min.y()), c(info.bbox_max.y()),
+                  c(info.bbox_min.z()), c(info.bbox_max.z()), e.x(), e.y(), e.z());
     os << "  pose bbox:       " << buf << "\n";
     std::snprintf(buf, sizeof(buf), "%.2f m", info.path_length_m);
     os << "  path length:     " << buf << "\n";

@@ -118,7 +118,9 @@ void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& 
       throw Error(path + ": truncated PCD: header announces " + std::to_string(n) + " points (" +
                   std::to_string(want) + " bytes) but the file holds " + std::to_string(have) +
                   " data bytes");
-    if (have > want)
+    // A few trailing bytes (a newline some writers add) are tolerated; whole extra points mean
+    // the header's count is wrong.
+    if (have > want && have - want >= h.PointStep())
       throw Error(path + ": PCD header disagrees with data: " + std::to_string(n) + " points need " +
                   std::to_string(want) + " bytes but the file holds " + std::to_string(have));
   } else if (h.data == "binary_compressed") {
