@@ -25,5 +25,10 @@ test: build
 bench: build
 	bash bench/run_all.sh $(BUILD_DIR)
 
+# Installs, builds, simulates the default scenario, runs the whole pipeline, evaluates it and
+# writes out/demo/report.html.
+demo: build
+	bash scripts/demo.sh out/demo $(BUILD_DIR)
+
 clean:
 	rm -rf $(BUILD_DIR)

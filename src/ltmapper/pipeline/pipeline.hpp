@@ -1,0 +1,72 @@
+// ltmapper pipeline: `ltmapper run` chains LT-SLAM -> LT-removert -> LT-map through the files of
+// docs/FORMATS.md (the paper's file-based protocol), so every stage's output can be inspected,
+// and a run that stops half-way resumes at the first stage without a finished output.
+// `WriteReport` gathers a demo directory's evaluation JSON/Markdown and PNG renders into
+// report.md and report.html.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <string>
+#include <vector>
+
+namespace ltm::pipeline {
+
+struct RunConfig {
+  std::string slam_config;      // LT-SLAM params file ("" = built-in defaults)
+  std::string removert_config;  // LT-removert params file ("" = built-in defaults)
+  std::string map_config;       // LT-map params file ("" = built-in defaults)
+  std::string store_name = "map.ltmap";                          // store file inside the out dir
+  std::string from_stage = "auto";  // auto: resume after the last finished stage; else rerun from it
+  bool export_maps = true;          // write live.pcd, meta.pcd and objects/ next to the store
+
+  template <class V>
+  void Visit(V& v) {
+    v("slam_config", slam_config);
+    v("removert_config", removert_config);
+    v("map_config", map_config);
+    v("store_name", store_name);
+    v("from_stage", from_stage, {"auto", "slam", "removert", "map"});
+    v("export_maps", export_maps);
+  }
+};
+
+struct StageTiming {
+  std::string stage;
+  bool skipped = false;  // finished output found (resume)
+  double seconds = 0.0;
+};
+
+struct RunReport {
+  std::vector<std::string> sessions;      // names, central first
+  std::vector<std::string> aligned;       // sessions LT-SLAM aligned (central included)
+  std::vector<std::string> not_aligned;   // with the reason
+  std::vector<StageTiming> stages;
+  std::size_t map_points_live = 0, map_points_meta = 0, objects = 0;
+  std::uint64_t store_bytes = 0;
+  double seconds = 0.0;
+  std::size_t peak_rss_bytes = 0;
+};
+
+// Runs the three stages on `session_dirs` (first = central) into `out_dir`:
+//   out_dir/aligned/  out_dir/changes/  out_dir/<store_name>  [live.pcd meta.pcd objects/]
+//   out_dir/run_report.json, run_report.md
+// A query session LT-SLAM cannot align is reported and left out of the later stages.
+RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
+                      const std::string& out_dir, int threads = 0);
+std::string FormatRunReport(const RunReport& report);
+
+// A report is a list of items in order: Markdown files (their text is included) and PNG
+// pictures (linked, with a caption). Writes `out_base`.md and a self-contained-looking
+// `out_base`.html (tables and lists converted, pictures referenced relative to the report).
+struct ReportItem {
+  std::string path;     // .md or .png
+  std::string caption;  // for pictures; defaults to the file name
+};
+void WriteReport(const std::string& out_base, const std::string& title,
+                 const std::vector<ReportItem>& items);
+// The small Markdown subset the reports use (#-headings, | tables |, - lists, paragraphs,
+// `code`) as HTML; everything else is escaped text.
+std::string MarkdownToHtml(const std::string& markdown);
+
+}  // namespace ltm::pipeline
