@@ -1,0 +1,237 @@
+// `ltmapper map <sub>`: the LT-map store (init, integrate, live, meta, restore, export, log, fsck,
+// objects). Commands parse arguments, load the config and call ltm::map; outputs are atomic.
+#include "command.hpp"
+
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/map/map.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+namespace ltm::app {
+namespace {
+
+struct MapOptions {
+  CommonOptions common;
+  std::string store, config, out;
+  map::PipelineDirs dirs;
+  std::string central, session;
+  std::vector<std::string> sessions;
+  std::vector<double> box_min, box_max;
+  double voxel = -1.0;
+  bool meta = false, changes = false;
+};
+
+map::MapConfig LoadMapConfig(const MapOptions& o) {
+  if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
+  map::MapConfig cfg;
+  if (!o.config.empty()) io::LoadConfig(o.config, cfg);
+  if (o.voxel >= 0) cfg.output_voxel_m = o.voxel;
+  ValidateConfig(cfg, o.config.empty() ? "map config" : o.config);
+  if (!o.common.quiet) spdlog::info("map config:\n{}", ConfigToString(cfg));
+  return cfg;
+}
+
+map::Region RegionOf(const MapOptions& o, const map::MapConfig& cfg) {
+  map::Region r;
+  r.voxel_m = cfg.output_voxel_m;
+  if (o.box_min.empty() != o.box_max.empty()) throw Error("--min and --max go together");
+  if (!o.box_min.empty()) {
+    r.use_box = true;
+    r.lo = Eigen::Vector3d(o.box_min[0], o.box_min[1], o.box_min[2]);
+    r.hi = Eigen::Vector3d(o.box_max[0], o.box_max[1], o.box_max[2]);
+    if ((r.lo.array() > r.hi.array()).any()) throw Error("--min must not exceed --max");
+  }
+  return r;
+}
+
+map::Store OpenStore(const MapOptions& o, const map::MapConfig& cfg) {
+  map::Store s = map::Store::Open(o.store, cfg);
+  s.set_threads(o.common.threads);
+  return s;
+}
+
+// "NAME" or an order number.
+int ResolveSession(const map::Store& s, const std::string& name) {
+  for (const auto& r : s.Sessions())
+    if (r.name == name) return r.order;
+  try {
+    std::size_t used = 0;
+    const int k = std::stoi(name, &used);
+    if (used == name.size() && k >= 0 && k <= s.LatestSession()) return k;
+  } catch (const std::exception&) {
+  }
+  throw Error(s.path() + ": no session '" + name + "'");
+}
+
+void Report(const map::IntegrationResult& r, const std::string& name) {
+  spdlog::info(
+      "map: session {} '{}' integrated in {:.2f} s: {} new keyframes, {} changed, PD strong {} weak {}, ND strong {} "
+      "weak {}, superseded {}, restored {}; {} map points, {} bytes written",
+      r.session, name, r.seconds, r.keyframes_new, r.keyframes_changed, r.pd_strong, r.pd_weak, r.nd_strong,
+      r.nd_weak, r.superseded, r.restored, r.points, r.bytes);
+}
+
+void WriteCloud(const std::string& out, const PointCloud& cloud, const std::string& what) {
+  map::WriteLabelledCloud(out, cloud);
+  spdlog::info("map: wrote {} ({} points) to {}", what, cloud.size(), out);
+}
+
+void Setup(CLI::App& parent) {
+  auto* map_cmd = parent.add_subcommand("map", "LT-map: delta-map store, live / meta maps, restore, objects");
+  map_cmd->require_subcommand(1);
+  auto opts = std::make_shared<MapOptions>();
+  MapOptions& o = *opts;
+  auto common = [&o](CLI::App* c) {
+    AddCommonOptions(*c, o.common);
+    c->add_option("--store", o.store, "Map store file (NAME.ltmap)")->required();
+    c->add_option("--config", o.config, "params_ltmap.yaml (every key optional)");
+  };
+  auto dirs = [&o](CLI::App* c) {
+    c->add_option("--aligned", o.dirs.aligned, "LT-SLAM output dir (aligned/)")->required();
+    c->add_option("--changes", o.dirs.changes, "LT-removert output dir (changes/)")->required();
+    c->add_option("--sessions", o.dirs.sessions, "Input session dirs root (optional: keyframe numbering)");
+    c->add_option("--central", o.central, "Central session name (default: first in aligned/)");
+  };
+  auto region = [&o](CLI::App* c) {
+    c->add_option("--min", o.box_min, "Box lower corner x y z [m] (world)")->expected(3);
+    c->add_option("--max", o.box_max, "Box upper corner x y z [m] (world)")->expected(3);
+    c->add_option("--voxel", o.voxel, "Output voxel size [m] (overrides output_voxel_m; 0 = all points)");
+  };
+
+  auto* init = map_cmd->add_subcommand("init", "Create the store with the central session as base");
+  common(init);
+  dirs(init);
+  init->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    const auto r = map::InitFromDirs(o.store, cfg, o.dirs, o.central, o.common.threads);
+    Report(r, "central");
+  });
+
+  auto* integ = map_cmd->add_subcommand(
+      "integrate", "Integrate query sessions (one transaction each); creates the store when missing");
+  common(integ);
+  dirs(integ);
+  integ->add_option("--session", o.sessions, "Query session(s) to integrate (default: all not yet integrated)");
+  integ->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    if (!std::filesystem::exists(o.store)) Report(map::InitFromDirs(o.store, cfg, o.dirs, o.central, o.common.threads), "central");
+    map::Store store = OpenStore(o, cfg);
+    std::vector<std::string> todo = o.sessions;
+    if (todo.empty()) {
+      const auto names = map::AlignedSessions(o.dirs, store.Sessions().at(0).name);
+      std::vector<std::string> done;
+      for (const auto& s : store.Sessions()) done.push_back(s.name);
+      for (const auto& n : names)
+        if (std::find(done.begin(), done.end(), n) == done.end()) todo.push_back(n);
+    }
+    for (const auto& name : todo) Report(map::IntegrateFromDirs(store, o.dirs, name), name);
+    if (todo.empty()) spdlog::info("map: nothing to integrate");
+  });
+
+  auto* live = map_cmd->add_subcommand("live", "Write the live map (latest state, all PD)");
+  common(live);
+  region(live);
+  live->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  live->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    const map::Store s = OpenStore(o, cfg);
+    WriteCloud(o.out, s.Live(RegionOf(o, cfg)), "live map");
+  });
+
+  auto* meta = map_cmd->add_subcommand("meta", "Write the meta map (strong PD only, seen-through space carved)");
+  common(meta);
+  region(meta);
+  meta->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  meta->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    const map::Store s = OpenStore(o, cfg);
+    WriteCloud(o.out, s.Meta(RegionOf(o, cfg)), "meta map");
+  });
+
+  auto* restore = map_cmd->add_subcommand("restore", "Write the map as it was at a session (chained inverse deltas)");
+  common(restore);
+  region(restore);
+  restore->add_option("--session", o.session, "Session name or order")->required();
+  restore->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  restore->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    const map::Store s = OpenStore(o, cfg);
+    const int k = ResolveSession(s, o.session);
+    WriteCloud(o.out, s.MapAt(k, RegionOf(o, cfg)), "map as of session " + std::to_string(k));
+  });
+
+  auto* exp = map_cmd->add_subcommand("export", "Export the live map (or --session / --meta / --changes) with class and session fields");
+  common(exp);
+  region(exp);
+  exp->add_option("--session", o.session, "State as of this session (with --changes: that step's changes)");
+  exp->add_flag("--meta", o.meta, "Export the meta map");
+  exp->add_flag("--changes", o.changes, "Export one step's PD / ND points (needs --session)");
+  exp->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  exp->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    const map::Store s = OpenStore(o, cfg);
+    const map::Region r = RegionOf(o, cfg);
+    if (o.meta + o.changes > 1) throw Error("export: --meta and --changes exclude each other");
+    if (o.changes) {
+      if (o.session.empty()) throw Error("export --changes needs --session");
+      WriteCloud(o.out, s.StepChanges(ResolveSession(s, o.session), r), "changes");
+    } else if (o.meta) {
+      WriteCloud(o.out, s.Meta(r), "meta map");
+    } else {
+      const int k = o.session.empty() ? s.LatestSession() : ResolveSession(s, o.session);
+      WriteCloud(o.out, s.MapAt(k, r), "map as of session " + std::to_string(k));
+    }
+  });
+
+  auto* log = map_cmd->add_subcommand("log", "Sessions, keyframes, points, bytes and changes per step");
+  common(log);
+  log->callback([opts] {
+    const MapOptions& o = *opts;
+    map::MapConfig cfg;
+    if (!o.config.empty()) io::LoadConfig(o.config, cfg);
+    const map::Store s = OpenStore(o, cfg);
+    std::cout << map::FormatLog(s) << std::flush;
+  });
+
+  auto* fsck = map_cmd->add_subcommand("fsck", "Verify schema, integrity, every blob's checksum and references");
+  common(fsck);
+  fsck->callback([opts] {
+    const MapOptions& o = *opts;
+    map::MapConfig cfg;
+    const map::Store s = OpenStore(o, cfg);
+    const map::FsckReport r = s.Fsck();
+    for (const auto& p : r.problems) std::cout << "problem: " << p << '\n';
+    std::cout << "fsck " << o.store << ": " << (r.ok ? "ok" : "FAILED") << " (" << r.sessions << " sessions, "
+              << r.keyframes << " keyframes, " << r.blobs << " blobs, " << r.points << " points, " << r.bytes
+              << " blob bytes)" << std::endl;
+    if (!r.ok) throw Error(o.store + ": fsck found " + std::to_string(r.problems.size()) + " problem(s)");
+  });
+
+  auto* objects = map_cmd->add_subcommand("objects", "Cluster strong ND / PD per step into objects (clouds + CSV/JSON)");
+  common(objects);
+  objects->add_option("--out", o.out, "Output directory")->required();
+  objects->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    const map::Store s = OpenStore(o, cfg);
+    const auto objs = s.Objects();
+    map::WriteObjects(o.out, objs);
+    spdlog::info("map: {} objects written to {}", objs.size(), o.out);
+  });
+}
+
+LTM_COMMAND(60, Setup);
+
+}  // namespace
+}  // namespace ltm::app

@@ -1,0 +1,171 @@
+// Change composition (paper eq. 4): P ⊙ LD = P − ND + PD, its inverse, and the delta between two
+// states of a keyframe. On the store's grid the set difference is exact: a stored ND point is a
+// copy of the point it removes, so "the same point" is "the same quantised key".
+#include "ltmapper/map/detail.hpp"
+
+#include <cmath>
+#include <unordered_map>
+
+namespace ltm::map {
+namespace detail {
+namespace {
+
+// Points of cloud within `radius` of any query point; get(k) returns a point as Vector3d.
+template <class GetC, class GetQ>
+std::vector<bool> WithinRadiusImpl(std::size_t nc, GetC getc, std::size_t nq, GetQ getq, double radius) {
+  std::vector<bool> mask(nc, false);
+  if (nc == 0 || nq == 0) return mask;
+  const double cell = radius > 0 ? radius : 1e-9;
+  const double r2 = radius * radius;
+  auto cell_of = [&](const Eigen::Vector3d& p) {
+    return Eigen::Vector3i(int(std::floor(p.x() / cell)), int(std::floor(p.y() / cell)), int(std::floor(p.z() / cell)));
+  };
+  auto pack = [](int x, int y, int z) {
+    constexpr std::uint64_t m = (1ull << 21) - 1;
+    return ((std::uint64_t(std::uint32_t(x)) & m) << 42) | ((std::uint64_t(std::uint32_t(y)) & m) << 21) |
+           (std::uint64_t(std::uint32_t(z)) & m);
+  };
+  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid;
+  grid.reserve(nq);
+  for (std::size_t k = 0; k < nq; ++k) {
+    const Eigen::Vector3i c = cell_of(getq(k));
+    grid[pack(c.x(), c.y(), c.z())].push_back(std::uint32_t(k));
+  }
+  for (std::size_t k = 0; k < nc; ++k) {
+    const Eigen::Vector3d p = getc(k);
+    const Eigen::Vector3i c = cell_of(p);
+    bool hit = false;
+    for (int dx = -1; dx <= 1 && !hit; ++dx)
+      for (int dy = -1; dy <= 1 && !hit; ++dy)
+        for (int dz = -1; dz <= 1 && !hit; ++dz) {
+          auto it = grid.find(pack(c.x() + dx, c.y() + dy, c.z() + dz));
+          if (it == grid.end()) continue;
+          for (std::uint32_t j : it->second)
+            if ((getq(j) - p).squaredNorm() <= r2) {
+              hit = true;
+              break;
+            }
+        }
+    mask[k] = hit;
+  }
+  return mask;
+}
+
+bool IsRemoved(std::uint8_t role) { return role == kRemovedChange || role == kRemovedSuperseded; }
+
+}  // namespace
+
+QCloud ApplyForward(const QCloud& state, const QCloud& delta) {
+  KeySet removed(delta.size());
+  std::size_t added = 0;
+  for (const QPoint& p : delta) {
+    if (IsRemoved(p.role)) removed.Insert(Key(p));
+    if (p.role == kAdded) ++added;
+  }
+  QCloud out;
+  out.reserve(state.size() + added);
+  if (removed.size() == 0) {
+    out = state;
+  } else {
+    for (const QPoint& p : state)
+      if (!removed.Contains(Key(p))) out.push_back(p);
+  }
+  for (const QPoint& p : delta)
+    if (p.role == kAdded) out.push_back(p);
+  return out;
+}
+
+QCloud ApplyInverse(const QCloud& state, const QCloud& delta) {
+  KeySet added(delta.size());
+  std::size_t removed = 0;
+  for (const QPoint& p : delta) {
+    if (p.role == kAdded) added.Insert(Key(p));
+    if (IsRemoved(p.role)) ++removed;
+  }
+  QCloud out;
+  out.reserve(state.size() + removed);
+  if (added.size() == 0) {
+    out = state;
+  } else {
+    for (const QPoint& p : state)
+      if (!added.Contains(Key(p))) out.push_back(p);
+  }
+  for (const QPoint& p : delta)
+    if (IsRemoved(p.role)) {
+      out.push_back(p);
+      out.back().role = kAdded;
+    }
+  return out;
+}
+
+QCloud MakeDelta(const QCloud& latest, const QCloud& target, const KeySet& change_keys, const QCloud& info) {
+  KeySet latest_keys(latest.size()), target_keys(target.size());
+  for (const QPoint& p : latest) latest_keys.Insert(Key(p));
+  for (const QPoint& p : target) target_keys.Insert(Key(p));
+  QCloud delta;
+  for (const QPoint& p : latest) {
+    const std::uint64_t k = Key(p);
+    if (target_keys.Contains(k)) continue;
+    delta.push_back(p);
+    delta.back().role = change_keys.Contains(k) ? kRemovedChange : kRemovedSuperseded;
+  }
+  for (const QPoint& p : target) {
+    if (latest_keys.Contains(Key(p))) continue;
+    delta.push_back(p);
+    delta.back().role = kAdded;
+  }
+  for (const QPoint& p : info) {
+    delta.push_back(p);
+    delta.back().role = kInfoNDWeak;
+  }
+  return delta;
+}
+
+std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double radius_units) {
+  auto get = [](const QCloud& c) {
+    return [&c](std::size_t k) { return Eigen::Vector3d(c[k].x, c[k].y, c[k].z); };
+  };
+  return WithinRadiusImpl(cloud.size(), get(cloud), query.size(), get(query), radius_units);
+}
+
+}  // namespace detail
+
+std::vector<bool> WithinRadius(const PointCloud& cloud, const PointCloud& query, double radius_m) {
+  auto get = [](const PointCloud& c) {
+    return [&c](std::size_t k) { return c.points[k].xyz().cast<double>().eval(); };
+  };
+  return detail::WithinRadiusImpl(cloud.size(), get(cloud), query.size(), get(query), radius_m);
+}
+
+PointCloud Compose(const PointCloud& cloud, const PointCloud& nd, const PointCloud& pd, double tolerance_m) {
+  std::vector<bool> keep = WithinRadius(cloud, nd, tolerance_m);
+  keep.flip();
+  PointCloud out = cloud.select(keep);
+  out.append(pd);
+  return out;
+}
+
+std::vector<int> FarKeyframes(const std::vector<Pose>& map_poses, const std::vector<Pose>& query_poses,
+                              double radius_m) {
+  std::vector<Eigen::Vector3d> taken;
+  taken.reserve(map_poses.size());
+  for (const Pose& p : map_poses) taken.push_back(p.translation());
+  std::vector<int> out;
+  const double r2 = radius_m * radius_m;
+  for (std::size_t k = 0; k < query_poses.size(); ++k) {
+    const Eigen::Vector3d t = query_poses[k].translation();
+    bool near = false;
+    for (const Eigen::Vector3d& m : taken)
+      if ((m - t).squaredNorm() <= r2) {
+        near = true;
+        break;
+      }
+    if (!near) {
+      out.push_back(int(k));
+      taken.push_back(t);
+    }
+  }
+  return out;
+}
+
+}  // namespace ltm::map

@@ -1,0 +1,79 @@
+// Private to src/ltmapper/map: quantised clouds, blob codec and the integer-key composition.
+#pragma once
+
+#include "ltmapper/map/map.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace ltm::map::detail {
+
+// Role of a point inside a stored delta (a state point always has kAdded).
+enum Role : std::uint8_t {
+  kAdded = 0,               // appended by the step (PD, or a point the reference state had)
+  kRemovedChange = 1,       // removed: matched a strong ND (seen through)
+  kRemovedSuperseded = 2,   // removed: not in the step's target state (resampled / reverted)
+  kInfoNDWeak = 3,          // weak ND: kept in the map, recorded for objects / export
+};
+
+// A point on the store's grid: coordinates in units of resolution_m in the keyframe frame,
+// intensity in units of intensity_step. cls / session travel with the point through compositions.
+struct QPoint {
+  std::int32_t x = 0, y = 0, z = 0, i = 0;
+  std::uint16_t session = 0;
+  std::uint8_t cls = 0;
+  std::uint8_t role = kAdded;
+};
+using QCloud = std::vector<QPoint>;
+
+// Coordinates are packed into 21-bit signed fields for the composition key: |q| < 2^20.
+constexpr std::int32_t kMaxCoord = (1 << 20) - 1;
+
+inline std::uint64_t Key(const QPoint& p) {
+  constexpr std::uint64_t m = (1ull << 21) - 1;
+  return ((std::uint64_t(std::uint32_t(p.x)) & m) << 42) | ((std::uint64_t(std::uint32_t(p.y)) & m) << 21) |
+         (std::uint64_t(std::uint32_t(p.z)) & m);
+}
+
+// Open-addressing set of 64-bit keys (linear probing); fast membership for composition.
+class KeySet {
+ public:
+  explicit KeySet(std::size_t expected = 0);
+  void Insert(std::uint64_t key);
+  bool Contains(std::uint64_t key) const;
+  std::size_t size() const { return count_; }
+
+ private:
+  void Grow();
+  std::vector<std::uint64_t> slots_;  // 0 = empty; keys are stored +1 shifted (see .cpp)
+  std::size_t mask_ = 0, count_ = 0;
+  bool has_zero_ = false;
+};
+
+// Throws ltm::Error (naming `what` and the point) for non-finite or out-of-range points.
+QCloud Quantize(const PointCloud& cloud, double resolution_m, double intensity_step,
+                PointClass default_cls, std::uint16_t default_session, const std::string& what);
+PointCloud Dequantize(const QCloud& q, double resolution_m, double intensity_step);
+
+std::string EncodeQ(const QCloud& q, double resolution_m, double intensity_step, int zstd_level);
+// Verifies the checksum and the sizes; returns the points and the blob's resolution / step.
+QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, double* resolution_m = nullptr,
+               double* intensity_step = nullptr);
+std::uint64_t Fnv1a64(const void* data, std::size_t size, std::uint64_t h = 1469598103934665603ull);
+
+// ---- composition on the grid (exact: stored ND are copies of the points they remove)
+// Forward: drop every state point whose key is a removed key of `delta`, append kAdded points.
+QCloud ApplyForward(const QCloud& state, const QCloud& delta);
+// Inverse (PD and ND swapped): drop every state point whose key an added point has, re-append
+// the removed points.
+QCloud ApplyInverse(const QCloud& state, const QCloud& delta);
+// Delta taking `latest` to `target`: keys of latest absent from target are removed (role
+// kRemovedChange when in `change_keys`, else kRemovedSuperseded), keys of target absent from
+// latest are added; `info` points are appended with kInfoNDWeak. Shared keys keep latest's points.
+QCloud MakeDelta(const QCloud& latest, const QCloud& target, const KeySet& change_keys,
+                 const QCloud& info);
+// Mask of `cloud` points within `radius_units` (grid units) of any `query` point.
+std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double radius_units);
+
+}  // namespace ltm::map::detail

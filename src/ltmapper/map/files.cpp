@@ -1,0 +1,240 @@
+// File layer: LT-SLAM and LT-removert outputs (docs/FORMATS.md) -> Store integration.
+#include "ltmapper/map/map.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <unistd.h>
+
+namespace ltm::map {
+namespace {
+
+namespace fs = std::filesystem;
+
+template <class F>
+void ParallelFor(int threads, std::size_t n, F f) {
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), n, [&](std::size_t k) { f(k); });
+  });
+}
+
+PointCloud ReadIfExists(const std::string& path) {
+  return fs::exists(path) ? io::ReadPcd(path) : PointCloud{};
+}
+
+PointCloud WithClass(PointCloud c, PointClass cls) {
+  c.cls.assign(c.size(), cls);
+  c.session.clear();
+  c.object.clear();
+  return c;
+}
+
+// keyframes.csv of a pair: kind,session,index,<6 counts>,<12 pose numbers>. Returns
+// (kind, index) -> T_world_sensor.
+std::map<std::pair<std::string, int>, Pose> ReadKeyframesCsv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error(path + ": cannot open (LT-removert keyframe list)");
+  std::map<std::pair<std::string, int>, Pose> out;
+  std::string line;
+  std::size_t no = 0;
+  while (std::getline(in, line)) {
+    ++no;
+    if (no == 1 || line.empty()) continue;
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string t; std::getline(ss, t, ',');) f.push_back(t);
+    if (f.size() != 21) throw Error(path, no, "expected 21 comma-separated fields, got " + std::to_string(f.size()));
+    Pose T = Pose::Identity();
+    try {
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 4; ++c) T.matrix()(r, c) = std::stod(f[std::size_t(9 + 4 * r + c)]);
+      out[{f[0], std::stoi(f[2])}] = T;
+    } catch (const std::exception&) {
+      throw Error(path, no, "bad number");
+    }
+  }
+  return out;
+}
+
+std::vector<std::string> SubdirsSorted(const std::string& dir) {
+  std::vector<std::string> out;
+  if (!fs::is_directory(dir)) return out;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_directory()) out.push_back(e.path().filename().string());
+  std::sort(out.begin(), out.end(), [](const std::string& a, const std::string& b) {
+    return io::FileIndex(a) < io::FileIndex(b);
+  });
+  return out;
+}
+
+std::string PairDir(const PipelineDirs& dirs, const std::vector<std::string>& names, int c, int q) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "pair_%02d_%02d", c, q);
+  const std::string a = dirs.changes + "/" + buf;
+  if (fs::is_directory(a)) return a;
+  const std::string b = dirs.changes + "/pair_" + names[std::size_t(c)] + "_" + names[std::size_t(q)];
+  if (fs::is_directory(b)) return b;
+  return "";
+}
+
+Pose ReadAnchor(const PipelineDirs& dirs, const std::string& name) {
+  const std::string p = dirs.aligned + "/" + name + "/anchor.txt";
+  return fs::exists(p) ? io::ReadTransform(p) : Pose::Identity();
+}
+
+// Keyframe indices of a session in pose-file order: from the input session dir when given, else
+// 0..n-1 (the simulator's and savers' numbering).
+std::vector<int> KeyframeIndices(const PipelineDirs& dirs, const std::string& name, std::size_t n) {
+  std::vector<int> idx(n);
+  if (!dirs.sessions.empty() && fs::is_directory(dirs.sessions + "/" + name)) {
+    const Session s = io::LoadSession(dirs.sessions + "/" + name);
+    if (s.keyframes.size() != n)
+      throw Error(dirs.aligned + "/" + name + "/poses_world.txt: " + std::to_string(n) + " poses but the session has " +
+                  std::to_string(s.keyframes.size()) + " keyframes");
+    for (std::size_t k = 0; k < n; ++k) idx[k] = s.keyframes[k].index;
+  } else {
+    for (std::size_t k = 0; k < n; ++k) idx[k] = int(k);
+  }
+  return idx;
+}
+
+}  // namespace
+
+std::vector<std::string> AlignedSessions(const PipelineDirs& dirs, const std::string& central) {
+  if (!fs::is_directory(dirs.aligned)) throw Error(dirs.aligned + ": LT-SLAM output directory not found");
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dirs.aligned))
+    if (e.is_directory() && fs::exists(e.path() / "poses_world.txt")) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  if (names.empty()) throw Error(dirs.aligned + ": no <session>/poses_world.txt (LT-SLAM output)");
+  if (!central.empty()) {
+    auto it = std::find(names.begin(), names.end(), central);
+    if (it == names.end()) throw Error(dirs.aligned + ": no session named '" + central + "'");
+    names.erase(it);
+    names.insert(names.begin(), central);
+  }
+  return names;
+}
+
+IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& cfg, const PipelineDirs& dirs,
+                               const std::string& central, int threads) {
+  const auto names = AlignedSessions(dirs, central);
+  const std::string& cname = names[0];
+  if (fs::exists(store_path)) throw Error(store_path + ": map store already exists");
+  // Central keyframes: poses and static clouds from the first pair directory; else the central
+  // static map split by nearest keyframe.
+  std::vector<KeyframeInput> kfs;
+  std::string pair;
+  for (std::size_t q = 1; q < names.size() && pair.empty(); ++q) pair = PairDir(dirs, names, 0, int(q));
+  if (!pair.empty()) {
+    const auto poses = ReadKeyframesCsv(pair + "/keyframes.csv");
+    for (const auto& [key, T] : poses)
+      if (key.first == "central") kfs.push_back({key.second, T, {}});
+    std::sort(kfs.begin(), kfs.end(), [](const auto& a, const auto& b) { return a.index < b.index; });
+    ParallelFor(threads, kfs.size(), [&](std::size_t k) {
+      char b2[32];
+      std::snprintf(b2, sizeof(b2), "%06d", kfs[k].index);
+      kfs[k].cloud = ReadIfExists(pair + "/keyframes/" + b2 + "/static.pcd");
+    });
+    spdlog::info("map init: {} central keyframes from {}", kfs.size(), pair);
+  } else {
+    const std::string smap = dirs.changes + "/" + cname + "/static_map.pcd";
+    const auto poses = io::ReadKittiPoses(dirs.aligned + "/" + cname + "/poses_world.txt");
+    const auto idx = KeyframeIndices(dirs, cname, poses.size());
+    const PointCloud world = io::ReadPcd(smap);
+    PointCloud positions;
+    for (const auto& T : poses) positions.push_back(float(T.translation().x()), float(T.translation().y()), float(T.translation().z()));
+    const geometry::KdTree tree(positions);
+    std::vector<std::vector<std::uint32_t>> own(poses.size());
+    for (std::size_t i = 0; i < world.size(); ++i) {
+      std::uint32_t k;
+      float d2;
+      if (tree.Nearest(world.points[i].xyz(), &k, &d2)) own[k].push_back(std::uint32_t(i));
+    }
+    for (std::size_t k = 0; k < poses.size(); ++k)
+      kfs.push_back({idx[k], poses[k], geometry::Transform(world.select(own[k]), poses[k].inverse())});
+    spdlog::info("map init: no pair directory; {} keyframes from {}", kfs.size(), smap);
+  }
+  const std::string tmp = store_path + ".tmp-" + std::to_string(::getpid());
+  std::error_code ec;
+  fs::remove(tmp, ec);
+  fs::remove(tmp + "-wal", ec);
+  fs::remove(tmp + "-shm", ec);
+  IntegrationResult r;
+  try {
+    Store store = Store::Create(tmp, cfg);
+    store.set_threads(threads);
+    r = store.IntegrateBase({cname, ReadAnchor(dirs, cname), ConfigToString(cfg)}, kfs);
+  } catch (...) {
+    fs::remove(tmp, ec);
+    fs::remove(tmp + "-wal", ec);
+    fs::remove(tmp + "-shm", ec);
+    throw;
+  }
+  // The store is closed (WAL checkpointed into the main file): publish it with one rename.
+  fs::rename(tmp, store_path);
+  return r;
+}
+
+IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, const std::string& query) {
+  const auto sessions = store.Sessions();
+  if (sessions.empty()) throw Error(store.path() + ": empty map store (run map init)");
+  const auto names = AlignedSessions(dirs, sessions[0].name);
+  const auto it = std::find(names.begin(), names.end(), query);
+  if (it == names.end()) throw Error(dirs.aligned + ": no session named '" + query + "'");
+  const int qi = int(it - names.begin());
+  if (qi == 0) throw Error("session '" + query + "' is the central session");
+  // Changes against the central session (LT-removert's default pairing), else against the
+  // previous session (consecutive pairing; its keyframes must be map keyframes).
+  int ci = 0;
+  std::string pair = PairDir(dirs, names, 0, qi);
+  if (pair.empty()) {
+    ci = qi - 1;
+    pair = PairDir(dirs, names, ci, qi);
+  }
+  if (pair.empty())
+    throw Error(dirs.changes + ": no LT-removert pair directory for '" + names[0] + "' -> '" + query + "'");
+  const auto poses = ReadKeyframesCsv(pair + "/keyframes.csv");
+  const std::vector<std::string> kdirs = SubdirsSorted(pair + "/keyframes");
+  const std::vector<std::string> ndirs = SubdirsSorted(pair + "/new_keyframes");
+  std::vector<KeyframeDelta> deltas(kdirs.size());
+  std::vector<KeyframeInput> fresh(ndirs.size());
+  ParallelFor(0, kdirs.size() + ndirs.size(), [&](std::size_t k) {
+    if (k < kdirs.size()) {
+      const std::string d = pair + "/keyframes/" + kdirs[k] + "/";
+      KeyframeDelta& kd = deltas[k];
+      kd.keyframe = io::FileIndex(kdirs[k]);
+      kd.pd_strong = ReadIfExists(d + "pd_strong.pcd");
+      kd.pd_weak = ReadIfExists(d + "pd_weak.pcd");
+      kd.nd_strong = ReadIfExists(d + "nd_strong.pcd");
+      kd.nd_weak = ReadIfExists(d + "nd_weak.pcd");
+    } else {
+      const std::string& name = ndirs[k - kdirs.size()];
+      const std::string d = pair + "/new_keyframes/" + name + "/";
+      KeyframeInput& in = fresh[k - kdirs.size()];
+      in.index = io::FileIndex(name);
+      auto pit = poses.find({"new", in.index});
+      if (pit == poses.end()) throw Error(pair + "/keyframes.csv: no 'new' row for keyframe " + name);
+      in.T_world_sensor = pit->second;
+      in.cloud = WithClass(ReadIfExists(d + "pd_strong.pcd"), PointClass::kPDStrong);
+      in.cloud.append(WithClass(ReadIfExists(d + "pd_weak.pcd"), PointClass::kPDWeak));
+    }
+  });
+  spdlog::info("map integrate: {} from {} ({} reference keyframes, {} new-territory keyframes)", query, pair,
+               deltas.size(), fresh.size());
+  return store.IntegrateSession({query, ReadAnchor(dirs, query), ConfigToString(store.config())}, names[std::size_t(ci)],
+                                deltas, fresh);
+}
+
+}  // namespace ltm::map

@@ -1,0 +1,138 @@
+// Outputs: labelled PCD / PLY clouds, object tables, the `log` text.
+#include "ltmapper/map/map.hpp"
+
+#include "ltmapper/io/io.hpp"
+
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <iomanip>
+#include <ostream>
+#include <sstream>
+
+namespace ltm::map {
+namespace {
+
+bool EndsWith(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// Binary PCD with x y z intensity (float), class (uchar), session (ushort), object (int).
+void WriteLabelledPcd(const std::string& path, const PointCloud& cloud) {
+  io::WriteFileAtomic(path, [&](std::ostream& os) {
+    const std::size_t n = cloud.size();
+    os << "# .PCD v0.7 - Point Cloud Data file format (ltmapper map)\nVERSION 0.7\n"
+       << "FIELDS x y z intensity class session object\nSIZE 4 4 4 4 1 2 4\nTYPE F F F F U U I\n"
+       << "COUNT 1 1 1 1 1 1 1\nWIDTH " << n << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << n
+       << "\nDATA binary\n";
+    constexpr std::size_t kStride = 23;
+    std::string buf;
+    constexpr std::size_t kBatch = 1 << 16;
+    for (std::size_t b = 0; b < n; b += kBatch) {
+      const std::size_t m = std::min(kBatch, n - b);
+      buf.assign(m * kStride, '\0');
+      for (std::size_t k = 0; k < m; ++k) {
+        const std::size_t i = b + k;
+        char* p = &buf[k * kStride];
+        std::memcpy(p, &cloud.points[i], 16);
+        const std::uint8_t c = cloud.cls.empty() ? 0 : std::uint8_t(cloud.cls[i]);
+        const std::uint16_t s = cloud.session.empty() ? 0 : cloud.session[i];
+        const std::int32_t o = cloud.object.empty() ? -1 : cloud.object[i];
+        std::memcpy(p + 16, &c, 1);
+        std::memcpy(p + 17, &s, 2);
+        std::memcpy(p + 19, &o, 4);
+      }
+      os.write(buf.data(), std::streamsize(buf.size()));
+    }
+  });
+}
+
+std::string JsonEscape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '"' || c == '\\') o += '\\';
+    o += c;
+  }
+  return o;
+}
+
+std::string Bytes(std::size_t b) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.2f MB", double(b) / 1e6);
+  return buf;
+}
+
+}  // namespace
+
+void WriteLabelledCloud(const std::string& path, const PointCloud& cloud) {
+  cloud.CheckConsistent(path);
+  if (EndsWith(path, ".pcd")) {
+    WriteLabelledPcd(path, cloud);
+  } else if (EndsWith(path, ".ply")) {
+    io::WritePly(path, cloud);
+  } else {
+    throw Error(path + ": output must end in .pcd or .ply");
+  }
+}
+
+void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects) {
+  io::MakeDirs(dir + "/clouds");
+  PointCloud all;
+  for (const auto& o : objects) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/clouds/object_%04d.pcd", o.id);
+    WriteLabelledCloud(dir + name, o.cloud);
+    all.append(o.cloud);
+  }
+  WriteLabelledCloud(dir + "/objects.ply", all);
+  io::WriteFileAtomic(dir + "/objects.csv", [&](std::ostream& os) {
+    os << "id,session,reference,class,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n" << std::fixed
+       << std::setprecision(3);
+    for (const auto& o : objects)
+      os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.points << ','
+         << o.centroid.x() << ',' << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y()
+         << ',' << o.lo.z() << ',' << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << '\n';
+  });
+  io::WriteFileAtomic(dir + "/objects.json", [&](std::ostream& os) {
+    os << std::fixed << std::setprecision(3) << "{\"objects\": [";
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+      const auto& o = objects[k];
+      os << (k ? ",\n  " : "\n  ") << "{\"id\": " << o.id << ", \"session\": " << o.session
+         << ", \"reference\": " << o.reference << ", \"class\": \"" << JsonEscape(ToString(o.cls))
+         << "\", \"points\": " << o.points << ", \"centroid\": [" << o.centroid.x() << ", " << o.centroid.y()
+         << ", " << o.centroid.z() << "], \"min\": [" << o.lo.x() << ", " << o.lo.y() << ", " << o.lo.z()
+         << "], \"max\": [" << o.hi.x() << ", " << o.hi.y() << ", " << o.hi.z() << "]}";
+    }
+    os << "\n]}\n";
+  });
+}
+
+std::string FormatLog(const Store& store) {
+  std::ostringstream os;
+  const auto sessions = store.Sessions();
+  const auto kfs = store.Keyframes();
+  const StoreTotals t = store.Totals();
+  os << "map store " << store.path() << ": " << sessions.size() << " sessions, " << kfs.size()
+     << " keyframes, resolution " << store.config().resolution_m << " m\n";
+  os << std::left << std::setw(5) << "step" << std::setw(22) << "session" << std::setw(5) << "ref" << std::right
+     << std::setw(8) << "kf_new" << std::setw(8) << "kf_chg" << std::setw(11) << "pd_strong" << std::setw(10)
+     << "pd_weak" << std::setw(11) << "nd_strong" << std::setw(10) << "nd_weak" << std::setw(11) << "superseded"
+     << std::setw(10) << "restored" << std::setw(12) << "points" << std::setw(12) << "bytes" << '\n';
+  std::size_t snapshot = 0;
+  for (const auto& s : sessions) {
+    os << std::left << std::setw(5) << s.order << std::setw(22) << s.name << std::setw(5)
+       << (s.reference < 0 ? std::string("-") : std::to_string(s.reference)) << std::right << std::setw(8)
+       << s.keyframes_new << std::setw(8) << s.keyframes_changed << std::setw(11) << s.pd_strong << std::setw(10)
+       << s.pd_weak << std::setw(11) << s.nd_strong << std::setw(10) << s.nd_weak << std::setw(11) << s.superseded
+       << std::setw(10) << s.restored << std::setw(12) << s.points << std::setw(12) << s.bytes << '\n';
+    snapshot += s.points * 16;  // binary PCD XYZI
+  }
+  os << "store file: " << Bytes(t.file_bytes) << " (bases " << Bytes(t.base_bytes) << " for " << t.base_points
+     << " points, deltas " << Bytes(t.delta_bytes) << " for " << t.delta_points << " points)\n";
+  os << "full PCD snapshot of every session: " << Bytes(snapshot);
+  if (snapshot) os << "; store / snapshots = " << std::fixed << std::setprecision(1) << 100.0 * double(t.file_bytes) / double(snapshot) << " %";
+  os << '\n';
+  return os.str();
+}
+
+}  // namespace ltm::map

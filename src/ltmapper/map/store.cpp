@@ -1,0 +1,926 @@
+// The map store: one SQLite file (WAL, foreign keys, schema version), integration transactions,
+// restore / live / meta by composition, fsck and digest. Schema in README.md.
+#include "ltmapper/map/detail.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <sqlite3.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <limits>
+#include <filesystem>
+#include <map>
+#include <sstream>
+
+namespace ltm::map {
+
+using detail::QCloud;
+using detail::QPoint;
+
+namespace {
+
+constexpr int kSchemaVersion = 1;
+constexpr int kApplicationId = 0x4C544D50;  // "LTMP"
+
+const char* kSchema = R"sql(
+CREATE TABLE schema_info(
+  key   TEXT PRIMARY KEY,
+  value TEXT NOT NULL);
+CREATE TABLE sessions(
+  id             INTEGER PRIMARY KEY,            -- order: 0 = central
+  name           TEXT NOT NULL UNIQUE,
+  reference      INTEGER REFERENCES sessions(id),-- NULL for the central session
+  anchor         TEXT NOT NULL,                  -- 3x4 row-major, 12 numbers
+  params         TEXT NOT NULL,
+  integrated_utc TEXT NOT NULL,
+  keyframes_new INTEGER NOT NULL DEFAULT 0, keyframes_changed INTEGER NOT NULL DEFAULT 0,
+  pd_strong INTEGER NOT NULL DEFAULT 0, pd_weak INTEGER NOT NULL DEFAULT 0,
+  nd_strong INTEGER NOT NULL DEFAULT 0, nd_weak INTEGER NOT NULL DEFAULT 0,
+  superseded INTEGER NOT NULL DEFAULT 0, restored INTEGER NOT NULL DEFAULT 0,
+  points INTEGER NOT NULL DEFAULT 0, bytes INTEGER NOT NULL DEFAULT 0);
+CREATE TABLE keyframes(
+  id           INTEGER PRIMARY KEY,
+  session      INTEGER NOT NULL REFERENCES sessions(id),
+  source_index INTEGER NOT NULL,
+  pose         TEXT NOT NULL,                    -- T_world_sensor 3x4 row-major
+  UNIQUE(session, source_index));
+CREATE TABLE base_clouds(
+  keyframe INTEGER PRIMARY KEY REFERENCES keyframes(id),
+  as_of    INTEGER NOT NULL REFERENCES sessions(id),
+  points   INTEGER NOT NULL,
+  data     BLOB NOT NULL);
+CREATE TABLE deltas(
+  keyframe INTEGER NOT NULL REFERENCES keyframes(id),
+  session  INTEGER NOT NULL REFERENCES sessions(id),
+  added    INTEGER NOT NULL,
+  removed  INTEGER NOT NULL,
+  info     INTEGER NOT NULL,
+  data     BLOB NOT NULL,
+  PRIMARY KEY(keyframe, session));
+CREATE INDEX deltas_by_session ON deltas(session);
+)sql";
+
+std::string PoseToText(const Pose& T) {
+  std::string s;
+  char buf[32];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) {
+      std::snprintf(buf, sizeof(buf), "%.17g", T.matrix()(r, c));
+      if (!s.empty()) s += ' ';
+      s += buf;
+    }
+  return s;
+}
+
+Pose PoseFromText(const std::string& text, const std::string& where) {
+  std::istringstream is(text);
+  Pose T = Pose::Identity();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c)
+      if (!(is >> T.matrix()(r, c))) throw Error(where + ": pose needs 12 numbers, got '" + text + "'");
+  return T;
+}
+
+std::string UtcNow() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+// ------------------------------------------------------------------------------ sqlite helpers
+class Stmt {
+ public:
+  Stmt(sqlite3* db, const std::string& sql, const std::string& path) : db_(db), path_(path) {
+    if (sqlite3_prepare_v2(db, sql.c_str(), -1, &st_, nullptr) != SQLITE_OK)
+      throw Error(path + ": SQL prepare failed (" + sqlite3_errmsg(db) + "): " + sql);
+  }
+  ~Stmt() { sqlite3_finalize(st_); }
+  Stmt(const Stmt&) = delete;
+  Stmt& operator=(const Stmt&) = delete;
+  Stmt& Bind(int i, long long v) { return Check(sqlite3_bind_int64(st_, i, v)); }
+  Stmt& Bind(int i, const std::string& v) {
+    return Check(sqlite3_bind_text(st_, i, v.data(), int(v.size()), SQLITE_TRANSIENT));
+  }
+  Stmt& BindBlob(int i, const std::string& v) {
+    return Check(sqlite3_bind_blob(st_, i, v.data(), int(v.size()), SQLITE_TRANSIENT));
+  }
+  Stmt& BindNull(int i) { return Check(sqlite3_bind_null(st_, i)); }
+  // true while rows come; false when done.
+  bool Step() {
+    const int rc = sqlite3_step(st_);
+    if (rc == SQLITE_ROW) return true;
+    if (rc == SQLITE_DONE) return false;
+    throw Error(path_ + ": SQL step failed: " + sqlite3_errmsg(db_));
+  }
+  void Run() {
+    while (Step()) {
+    }
+    sqlite3_reset(st_);
+    sqlite3_clear_bindings(st_);
+  }
+  void Reset() {
+    sqlite3_reset(st_);
+    sqlite3_clear_bindings(st_);
+  }
+  long long Int(int c) const { return sqlite3_column_int64(st_, c); }
+  int Columns() const { return sqlite3_column_count(st_); }
+  bool Null(int c) const { return sqlite3_column_type(st_, c) == SQLITE_NULL; }
+  std::string Text(int c) const {
+    const auto* p = sqlite3_column_text(st_, c);
+    return p ? std::string(reinterpret_cast<const char*>(p), std::size_t(sqlite3_column_bytes(st_, c))) : std::string();
+  }
+  std::string Blob(int c) const {
+    const void* p = sqlite3_column_blob(st_, c);
+    const int n = sqlite3_column_bytes(st_, c);
+    return p ? std::string(static_cast<const char*>(p), std::size_t(n)) : std::string();
+  }
+
+ private:
+  Stmt& Check(int rc) {
+    if (rc != SQLITE_OK) throw Error(path_ + ": SQL bind failed: " + sqlite3_errmsg(db_));
+    return *this;
+  }
+  sqlite3* db_;
+  std::string path_;
+  sqlite3_stmt* st_ = nullptr;
+};
+
+template <class F>
+void ParallelFor(int threads, std::size_t n, F f) {
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t k = r.begin(); k != r.end(); ++k) f(k);
+    });
+  });
+}
+
+PointCloud ToWorld(const QCloud& q, const Pose& T, double res, double istep, const Region& region) {
+  PointCloud c = detail::Dequantize(q, res, istep);
+  geometry::TransformInPlace(c, T);
+  if (region.use_box) c = geometry::CropBox(c, region.lo, region.hi);
+  return c;
+}
+
+PointCloud Concat(std::vector<PointCloud>& parts, const Region& region, int threads) {
+  std::size_t n = 0;
+  for (const auto& p : parts) n += p.size();
+  PointCloud out;
+  out.points.reserve(n);
+  out.cls.reserve(n);
+  out.session.reserve(n);
+  for (auto& p : parts) {
+    if (p.empty()) continue;
+    out.points.insert(out.points.end(), p.points.begin(), p.points.end());
+    out.cls.insert(out.cls.end(), p.cls.begin(), p.cls.end());
+    out.session.insert(out.session.end(), p.session.begin(), p.session.end());
+    PointCloud().points.swap(p.points);
+  }
+  if (region.voxel_m > 0 && !out.empty()) out = geometry::VoxelDownsample(out, region.voxel_m, threads);
+  return out;
+}
+
+}  // namespace
+
+// ====================================================================================== Impl
+struct Store::Impl {
+  sqlite3* db = nullptr;
+  std::string path;
+  MapConfig cfg;
+  int threads = 0;
+
+  ~Impl() {
+    if (db) sqlite3_close_v2(db);
+  }
+  void Exec(const std::string& sql) const {
+    char* err = nullptr;
+    if (sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err) != SQLITE_OK) {
+      const std::string msg = err ? err : "unknown";
+      sqlite3_free(err);
+      throw Error(path + ": SQL failed (" + msg + "): " + sql.substr(0, 80));
+    }
+  }
+  std::string Pragma(const std::string& name) const {
+    Stmt st(db, "PRAGMA " + name, path);
+    return st.Step() ? st.Text(0) : std::string();
+  }
+  void OpenDb(int flags) {
+    if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
+      const std::string msg = db ? sqlite3_errmsg(db) : "out of memory";
+      throw Error(path + ": cannot open map store: " + msg);
+    }
+    sqlite3_extended_result_codes(db, 1);
+    sqlite3_busy_timeout(db, 10000);
+    Exec("PRAGMA foreign_keys = ON");
+    const std::string mode = Pragma("journal_mode = WAL");
+    if (mode != "wal") throw Error(path + ": cannot switch the map store to WAL (journal_mode = " + mode + ")");
+    // FULL: a committed integration survives power loss, not only a killed process.
+    Exec("PRAGMA synchronous = FULL");
+  }
+  std::string Info(const std::string& key) const {
+    Stmt st(db, "SELECT value FROM schema_info WHERE key = ?", path);
+    st.Bind(1, key);
+    if (!st.Step()) throw Error(path + ": map store has no '" + key + "' in schema_info");
+    return st.Text(0);
+  }
+  std::vector<KeyframeRecord> Keyframes() const {
+    std::vector<KeyframeRecord> out;
+    Stmt st(db,
+            "SELECT k.id, k.session, k.source_index, k.pose, b.points, length(b.data), "
+            "(SELECT count(*) FROM deltas d WHERE d.keyframe = k.id), "
+            "(SELECT coalesce(sum(length(d.data)), 0) FROM deltas d WHERE d.keyframe = k.id) "
+            "FROM keyframes k LEFT JOIN base_clouds b ON b.keyframe = k.id ORDER BY k.id",
+            path);
+    while (st.Step()) {
+      KeyframeRecord r;
+      r.id = int(st.Int(0));
+      r.session = int(st.Int(1));
+      r.source_index = int(st.Int(2));
+      r.T_world_sensor = PoseFromText(st.Text(3), path + ": keyframe " + std::to_string(r.id));
+      r.base_points = std::size_t(st.Int(4));
+      r.base_bytes = std::size_t(st.Int(5));
+      r.delta_count = std::size_t(st.Int(6));
+      r.delta_bytes = std::size_t(st.Int(7));
+      out.push_back(r);
+    }
+    return out;
+  }
+  int Latest() const {
+    Stmt st(db, "SELECT max(id) FROM sessions", path);
+    st.Step();
+    return st.Null(0) ? -1 : int(st.Int(0));
+  }
+  QCloud Decode(const std::string& blob, const std::string& what) const {
+    return detail::DecodeQ(blob.data(), blob.size(), path + ": " + what);
+  }
+  std::string Encode(const QCloud& q) const { return detail::EncodeQ(q, cfg.resolution_m, cfg.intensity_step, cfg.zstd_level); }
+
+  // Base blob and the deltas with session > min_session, newest first.
+  struct KfBlobs {
+    KeyframeRecord rec;
+    std::string base;
+    std::vector<std::pair<int, std::string>> deltas;  // (session, blob), newest first
+  };
+  std::vector<KfBlobs> LoadBlobs(int max_created_session, int min_delta_session, int only_delta_session = -1) const {
+    std::vector<KfBlobs> out;
+    std::map<int, std::size_t> pos;
+    for (const KeyframeRecord& r : Keyframes()) {
+      if (r.session > max_created_session) continue;
+      pos[r.id] = out.size();
+      out.push_back({r, {}, {}});
+    }
+    if (only_delta_session < 0) {
+      Stmt st(db, "SELECT keyframe, data FROM base_clouds", path);
+      while (st.Step()) {
+        auto it = pos.find(int(st.Int(0)));
+        if (it != pos.end()) out[it->second].base = st.Blob(1);
+      }
+    }
+    Stmt sd(db,
+            only_delta_session >= 0 ? "SELECT keyframe, session, data FROM deltas WHERE session = ?"
+                                    : "SELECT keyframe, session, data FROM deltas WHERE session > ? ORDER BY session DESC",
+            path);
+    sd.Bind(1, only_delta_session >= 0 ? only_delta_session : min_delta_session);
+    while (sd.Step()) {
+      auto it = pos.find(int(sd.Int(0)));
+      if (it != pos.end()) out[it->second].deltas.emplace_back(int(sd.Int(1)), sd.Blob(2));
+    }
+    return out;
+  }
+  // State as of the oldest session above which deltas were loaded (inverse chain from the base).
+  QCloud Rollback(const KfBlobs& b) const {
+    const std::string what = "keyframe " + std::to_string(b.rec.id);
+    QCloud s = Decode(b.base, what + " base");
+    for (const auto& [session, blob] : b.deltas)
+      s = detail::ApplyInverse(s, Decode(blob, what + " delta " + std::to_string(session)));
+    return s;
+  }
+};
+
+// ===================================================================================== Store
+Store::Store(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Store::Store(Store&&) noexcept = default;
+Store& Store::operator=(Store&&) noexcept = default;
+Store::~Store() = default;
+
+const std::string& Store::path() const { return impl_->path; }
+const MapConfig& Store::config() const { return impl_->cfg; }
+void Store::set_threads(int threads) { impl_->threads = threads; }
+
+Store Store::Create(const std::string& path, const MapConfig& cfg) {
+  ValidateConfig(cfg, "map config");
+  if (std::filesystem::exists(path)) throw Error(path + ": map store already exists");
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  impl->cfg = cfg;
+  impl->OpenDb(SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+  impl->Exec("BEGIN IMMEDIATE");
+  try {
+    impl->Exec("PRAGMA application_id = " + std::to_string(kApplicationId));
+    impl->Exec(kSchema);
+    Stmt ins(impl->db, "INSERT INTO schema_info(key, value) VALUES(?, ?)", path);
+    char buf[64];
+    const std::pair<std::string, std::string> rows[] = {
+        {"schema_version", std::to_string(kSchemaVersion)},
+        {"resolution_m", (std::snprintf(buf, sizeof(buf), "%.17g", cfg.resolution_m), std::string(buf))},
+        {"intensity_step", (std::snprintf(buf, sizeof(buf), "%.17g", cfg.intensity_step), std::string(buf))},
+        {"created_utc", UtcNow()},
+        {"generator", "ltmapper 0.1.0"}};
+    for (const auto& [k, v] : rows) ins.Bind(1, k).Bind(2, v).Run();
+    impl->Exec("COMMIT");
+  } catch (...) {
+    sqlite3_exec(impl->db, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
+  return Store(std::move(impl));
+}
+
+Store Store::Open(const std::string& path, const MapConfig& cfg) {
+  ValidateConfig(cfg, "map config");
+  if (!std::filesystem::is_regular_file(path)) throw Error(path + ": map store not found");
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  impl->cfg = cfg;
+  impl->OpenDb(SQLITE_OPEN_READWRITE);
+  std::string version;
+  try {
+    version = impl->Info("schema_version");
+  } catch (const Error&) {
+    throw Error(path + ": not an ltmapper map store (no schema_info table)");
+  }
+  if (version != std::to_string(kSchemaVersion))
+    throw Error(path + ": map store schema version " + version + ", this ltmapper reads version " +
+                std::to_string(kSchemaVersion));
+  impl->cfg.resolution_m = std::stod(impl->Info("resolution_m"));
+  impl->cfg.intensity_step = std::stod(impl->Info("intensity_step"));
+  return Store(std::move(impl));
+}
+
+namespace {
+// Commits explicitly; rolls back when destroyed without Commit() (exceptions).
+class Transaction {
+ public:
+  explicit Transaction(Store::Impl& s) : s_(s) { s_.Exec("BEGIN IMMEDIATE"); }
+  void Commit() {
+    s_.Exec("COMMIT");
+    done_ = true;
+  }
+  ~Transaction() {
+    if (!done_) sqlite3_exec(s_.db, "ROLLBACK", nullptr, nullptr, nullptr);
+  }
+
+ private:
+  Store::Impl& s_;
+  bool done_ = false;
+};
+
+void InsertSession(Store::Impl& s, int order, const SessionMeta& meta, int reference) {
+  Stmt st(s.db, "INSERT INTO sessions(id, name, reference, anchor, params, integrated_utc) VALUES(?,?,?,?,?,?)", s.path);
+  st.Bind(1, order).Bind(2, meta.name);
+  if (reference < 0)
+    st.BindNull(3);
+  else
+    st.Bind(3, reference);
+  st.Bind(4, PoseToText(meta.anchor)).Bind(5, meta.params).Bind(6, UtcNow()).Run();
+}
+
+void FinishSession(Store::Impl& s, IntegrationResult& r) {
+  {
+    Stmt st(s.db, "SELECT coalesce(sum(points), 0) FROM base_clouds", s.path);
+    st.Step();
+    r.points = std::size_t(st.Int(0));
+  }
+  Stmt st(s.db,
+          "UPDATE sessions SET keyframes_new=?, keyframes_changed=?, pd_strong=?, pd_weak=?, nd_strong=?, "
+          "nd_weak=?, superseded=?, restored=?, points=?, bytes=? WHERE id=?",
+          s.path);
+  st.Bind(1, (long long)r.keyframes_new).Bind(2, (long long)r.keyframes_changed);
+  st.Bind(3, (long long)r.pd_strong).Bind(4, (long long)r.pd_weak).Bind(5, (long long)r.nd_strong);
+  st.Bind(6, (long long)r.nd_weak).Bind(7, (long long)r.superseded).Bind(8, (long long)r.restored);
+  st.Bind(9, (long long)r.points).Bind(10, (long long)r.bytes).Bind(11, r.session).Run();
+}
+
+void CheckName(const std::string& name) {
+  if (name.empty()) throw Error("map store: session name is empty");
+}
+}  // namespace
+
+// Adds keyframes (their clouds become bases owned by `session`), encoding in parallel chunks.
+static void InsertKeyframes(Store::Impl& s, Store& store, int session, const std::vector<const KeyframeInput*>& kfs,
+                            IntegrationResult& r, std::size_t& written) {
+  Stmt ik(s.db, "INSERT INTO keyframes(session, source_index, pose) VALUES(?,?,?)", s.path);
+  Stmt ib(s.db, "INSERT INTO base_clouds(keyframe, as_of, points, data) VALUES(?,?,?,?)", s.path);
+  constexpr std::size_t kChunk = 64;
+  for (std::size_t c0 = 0; c0 < kfs.size(); c0 += kChunk) {
+    const std::size_t n = std::min(kChunk, kfs.size() - c0);
+    std::vector<std::string> blobs(n);
+    std::vector<std::size_t> points(n);
+    ParallelFor(s.threads, n, [&](std::size_t k) {
+      const KeyframeInput& kf = *kfs[c0 + k];
+      const QCloud q = detail::Quantize(kf.cloud, s.cfg.resolution_m, s.cfg.intensity_step, PointClass::kStatic,
+                                        std::uint16_t(session), "session " + std::to_string(session) +
+                                                                    " keyframe " + std::to_string(kf.index));
+      points[k] = q.size();
+      blobs[k] = s.Encode(q);
+    });
+    for (std::size_t k = 0; k < n; ++k) {
+      const KeyframeInput& kf = *kfs[c0 + k];
+      ik.Bind(1, session).Bind(2, kf.index).Bind(3, PoseToText(kf.T_world_sensor)).Run();
+      const long long id = sqlite3_last_insert_rowid(s.db);
+      ib.Bind(1, id).Bind(2, session).Bind(3, (long long)points[k]).BindBlob(4, blobs[k]).Run();
+      r.bytes += blobs[k].size();
+      ++r.keyframes_new;
+      ++written;
+      if (store.on_keyframe_written) store.on_keyframe_written(written);
+    }
+  }
+}
+
+IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes) {
+  const auto t0 = std::chrono::steady_clock::now();
+  CheckName(session.name);
+  Impl& s = *impl_;
+  Transaction tx(s);
+  if (s.Latest() >= 0) throw Error(s.path + ": the store already has a base session");
+  IntegrationResult r;
+  r.session = 0;
+  InsertSession(s, 0, session, -1);
+  std::vector<const KeyframeInput*> kfs;
+  for (const auto& kf : keyframes) kfs.push_back(&kf);
+  std::size_t written = 0;
+  InsertKeyframes(s, *this, 0, kfs, r, written);
+  FinishSession(s, r);
+  tx.Commit();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return r;
+}
+
+IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std::string& reference,
+                                          const std::vector<KeyframeDelta>& deltas,
+                                          const std::vector<KeyframeInput>& query_keyframes) {
+  const auto t0 = std::chrono::steady_clock::now();
+  CheckName(session.name);
+  Impl& s = *impl_;
+  Transaction tx(s);
+  const int latest = s.Latest();
+  if (latest < 0) throw Error(s.path + ": integrate the central session first (map init)");
+  {
+    Stmt st(s.db, "SELECT id FROM sessions WHERE name = ?", s.path);
+    st.Bind(1, session.name);
+    if (st.Step()) throw Error(s.path + ": session '" + session.name + "' is already integrated");
+  }
+  const int ref = SessionOrder(reference);
+  const int S = latest + 1;
+  if (S > 65535) throw Error(s.path + ": too many sessions");
+  IntegrationResult r;
+  r.session = S;
+  InsertSession(s, S, session, ref);
+
+  // Work per map keyframe: the removert delta (keyframes owned by the reference session) and/or
+  // query points re-expressed in its frame (query keyframes near it); far query keyframes become
+  // new map keyframes.
+  const std::vector<KeyframeRecord> kfs = s.Keyframes();
+  std::map<int, std::size_t> owned;  // reference keyframe index -> position in kfs
+  for (std::size_t k = 0; k < kfs.size(); ++k)
+    if (kfs[k].session == ref) owned[kfs[k].source_index] = k;
+  struct Work {
+    const KeyframeDelta* delta = nullptr;
+    std::vector<std::pair<const KeyframeInput*, Pose>> extra;  // query cloud, T_map_query
+  };
+  std::map<std::size_t, Work> work;  // by position in kfs
+  for (const auto& d : deltas) {
+    auto it = owned.find(d.keyframe);
+    if (it == owned.end())
+      throw Error(s.path + ": delta for keyframe " + std::to_string(d.keyframe) + " of session '" + reference +
+                  "', which is not a map keyframe");
+    if (work[it->second].delta) throw Error(s.path + ": two deltas for keyframe " + std::to_string(d.keyframe));
+    work[it->second].delta = &d;
+  }
+  std::vector<Pose> map_poses;
+  for (const auto& k : kfs) map_poses.push_back(k.T_world_sensor);
+  std::vector<const KeyframeInput*> fresh;
+  {
+    const double r2 = s.cfg.new_keyframe_radius_m * s.cfg.new_keyframe_radius_m;
+    std::vector<Eigen::Vector3d> fresh_t;
+    for (const auto& q : query_keyframes) {
+      const Eigen::Vector3d t = q.T_world_sensor.translation();
+      double best = std::numeric_limits<double>::infinity();
+      std::size_t m = 0;
+      for (std::size_t k = 0; k < kfs.size(); ++k) {
+        const double d2 = (map_poses[k].translation() - t).squaredNorm();
+        if (d2 < best) best = d2, m = k;
+      }
+      bool near_fresh = false;
+      for (const auto& f : fresh_t) near_fresh |= (f - t).squaredNorm() <= r2;
+      if (best > r2) {
+        if (!near_fresh || !q.cloud.empty()) {  // keep every point: a cloud near a fresh one is its own
+          fresh.push_back(&q);
+          fresh_t.push_back(t);
+        }
+      } else if (!q.cloud.empty()) {
+        work[m].extra.emplace_back(&q, map_poses[m].inverse() * q.T_world_sensor);
+      }
+    }
+  }
+
+  std::size_t written = 0;
+  const double radius_units = s.cfg.nd_match_radius_m / s.cfg.resolution_m;
+  Stmt get_base(s.db, "SELECT data FROM base_clouds WHERE keyframe = ?", s.path);
+  Stmt get_deltas(s.db, "SELECT session, data FROM deltas WHERE keyframe = ? AND session > ? ORDER BY session DESC",
+                  s.path);
+  Stmt put_delta(s.db, "INSERT INTO deltas(keyframe, session, added, removed, info, data) VALUES(?,?,?,?,?,?)", s.path);
+  Stmt put_base(s.db, "UPDATE base_clouds SET as_of = ?, points = ?, data = ? WHERE keyframe = ?", s.path);
+  constexpr std::size_t kChunk = 64;
+  struct Out {
+    std::string delta_blob, base_blob;
+    std::size_t added = 0, removed = 0, info = 0, base_points = 0;
+    std::size_t pd_strong = 0, pd_weak = 0, nd_strong = 0, superseded = 0, restored = 0;
+  };
+  std::vector<std::pair<std::size_t, const Work*>> items;
+  for (const auto& [k, w] : work) items.emplace_back(k, &w);
+  for (std::size_t c0 = 0; c0 < items.size(); c0 += kChunk) {
+    const std::size_t n = std::min(kChunk, items.size() - c0);
+    std::vector<Impl::KfBlobs> in(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      in[k].rec = kfs[items[c0 + k].first];
+      get_base.Bind(1, in[k].rec.id);
+      if (!get_base.Step()) throw Error(s.path + ": keyframe " + std::to_string(in[k].rec.id) + " has no base cloud");
+      in[k].base = get_base.Blob(0);
+      get_base.Reset();
+      get_deltas.Bind(1, in[k].rec.id).Bind(2, ref);
+      while (get_deltas.Step()) in[k].deltas.emplace_back(int(get_deltas.Int(0)), get_deltas.Blob(1));
+      get_deltas.Reset();
+    }
+    std::vector<Out> out(n);
+    ParallelFor(s.threads, n, [&](std::size_t k) {
+      const Work& w = *items[c0 + k].second;
+      const KeyframeRecord& rec = in[k].rec;
+      const std::string what = "session '" + session.name + "' map keyframe " + std::to_string(rec.id);
+      const QCloud latest_q = s.Decode(in[k].base, what + " base");
+      auto quant = [&](const PointCloud& c, PointClass cls, const std::string& name) {
+        return detail::Quantize(c, s.cfg.resolution_m, s.cfg.intensity_step, cls, std::uint16_t(S), what + " " + name);
+      };
+      detail::KeySet change_keys;
+      QCloud target, nd_weak;
+      if (rec.session == ref) {
+        // Target state = reference − ND(strong, matched within the radius) + PD (paper eq. 4).
+        const QCloud ref_q = in[k].deltas.empty() ? latest_q : s.Rollback(in[k]);
+        QCloud nd_strong;
+        if (w.delta) {
+          nd_strong = quant(w.delta->nd_strong, PointClass::kNDStrong, "nd_strong");
+          nd_weak = quant(w.delta->nd_weak, PointClass::kNDWeak, "nd_weak");
+        }
+        const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, radius_units);
+        target.reserve(ref_q.size());
+        for (std::size_t i = 0; i < ref_q.size(); ++i) {
+          if (matched[i])
+            change_keys.Insert(detail::Key(ref_q[i]));
+          else
+            target.push_back(ref_q[i]);
+        }
+        if (w.delta) {
+          for (const QPoint& p : quant(w.delta->pd_strong, PointClass::kPDStrong, "pd_strong")) target.push_back(p);
+          for (const QPoint& p : quant(w.delta->pd_weak, PointClass::kPDWeak, "pd_weak")) target.push_back(p);
+        }
+      }
+      // Query points near this keyframe (new territory seen again, or PD beyond the assignment
+      // radius): a keyframe the reference never had is replaced by what this session saw.
+      for (const auto& [q, T] : w.extra) {
+        PointCloud local = geometry::Transform(q->cloud, T);
+        for (const QPoint& p : quant(local, PointClass::kPDStrong, "query keyframe " + std::to_string(q->index)))
+          target.push_back(p);
+      }
+      const QCloud delta = detail::MakeDelta(latest_q, target, change_keys, nd_weak);
+      Out& o = out[k];
+      for (const QPoint& p : delta) {
+        switch (p.role) {
+          case detail::kAdded:
+            ++o.added;
+            if (p.session == S && p.cls == std::uint8_t(PointClass::kPDStrong)) ++o.pd_strong;
+            else if (p.session == S && p.cls == std::uint8_t(PointClass::kPDWeak)) ++o.pd_weak;
+            else ++o.restored;
+            break;
+          case detail::kRemovedChange: ++o.removed, ++o.nd_strong; break;
+          case detail::kRemovedSuperseded: ++o.removed, ++o.superseded; break;
+          default: ++o.info;
+        }
+      }
+      if (delta.empty()) return;
+      o.delta_blob = s.Encode(delta);
+      if (o.added + o.removed > 0) {
+        const QCloud next = detail::ApplyForward(latest_q, delta);
+        o.base_points = next.size();
+        o.base_blob = s.Encode(next);
+      }
+    });
+    for (std::size_t k = 0; k < n; ++k) {
+      const Out& o = out[k];
+      if (o.delta_blob.empty()) continue;
+      const int id = in[k].rec.id;
+      put_delta.Bind(1, id).Bind(2, S).Bind(3, (long long)o.added).Bind(4, (long long)o.removed);
+      put_delta.Bind(5, (long long)o.info).BindBlob(6, o.delta_blob).Run();
+      r.bytes += o.delta_blob.size();
+      if (!o.base_blob.empty()) {
+        put_base.Bind(1, S).Bind(2, (long long)o.base_points).BindBlob(3, o.base_blob).Bind(4, id).Run();
+        r.bytes += o.base_blob.size();
+        ++r.keyframes_changed;
+      }
+      r.pd_strong += o.pd_strong;
+      r.pd_weak += o.pd_weak;
+      r.nd_strong += o.nd_strong;
+      r.nd_weak += o.info;
+      r.superseded += o.superseded;
+      r.restored += o.restored;
+      ++written;
+      if (on_keyframe_written) on_keyframe_written(written);
+    }
+  }
+  InsertKeyframes(s, *this, S, fresh, r, written);
+
+  FinishSession(s, r);
+  tx.Commit();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return r;
+}
+
+// ================================================================================== queries
+std::vector<SessionRecord> Store::Sessions() const {
+  const Impl& s = *impl_;
+  std::vector<SessionRecord> out;
+  Stmt st(s.db,
+          "SELECT id, name, reference, anchor, params, integrated_utc, keyframes_new, keyframes_changed, pd_strong, "
+          "pd_weak, nd_strong, nd_weak, superseded, restored, points, bytes FROM sessions ORDER BY id",
+          s.path);
+  while (st.Step()) {
+    SessionRecord r;
+    r.order = int(st.Int(0));
+    r.name = st.Text(1);
+    r.reference = st.Null(2) ? -1 : int(st.Int(2));
+    r.anchor = PoseFromText(st.Text(3), s.path + ": session " + r.name + " anchor");
+    r.params = st.Text(4);
+    r.integrated_utc = st.Text(5);
+    std::size_t* f[] = {&r.keyframes_new, &r.keyframes_changed, &r.pd_strong, &r.pd_weak, &r.nd_strong,
+                        &r.nd_weak,       &r.superseded,        &r.restored,  &r.points,  &r.bytes};
+    for (int k = 0; k < 10; ++k) *f[k] = std::size_t(st.Int(6 + k));
+    out.push_back(r);
+  }
+  return out;
+}
+
+std::vector<KeyframeRecord> Store::Keyframes() const { return impl_->Keyframes(); }
+int Store::LatestSession() const { return impl_->Latest(); }
+
+int Store::SessionOrder(const std::string& name) const {
+  Stmt st(impl_->db, "SELECT id FROM sessions WHERE name = ?", impl_->path);
+  st.Bind(1, name);
+  if (!st.Step()) throw Error(impl_->path + ": no session named '" + name + "' in the map store");
+  return int(st.Int(0));
+}
+
+StoreTotals Store::Totals() const {
+  const Impl& s = *impl_;
+  StoreTotals t;
+  for (const char* suffix : {"", "-wal"}) {
+    std::error_code ec;
+    const auto n = std::filesystem::file_size(s.path + suffix, ec);
+    if (!ec) t.file_bytes += std::size_t(n);
+  }
+  Stmt b(s.db, "SELECT coalesce(sum(length(data)), 0), coalesce(sum(points), 0) FROM base_clouds", s.path);
+  b.Step();
+  t.base_bytes = std::size_t(b.Int(0));
+  t.base_points = std::size_t(b.Int(1));
+  Stmt d(s.db, "SELECT coalesce(sum(length(data)), 0), coalesce(sum(added + removed + info), 0) FROM deltas", s.path);
+  d.Step();
+  t.delta_bytes = std::size_t(d.Int(0));
+  t.delta_points = std::size_t(d.Int(1));
+  return t;
+}
+
+PointCloud Store::KeyframeCloud(int keyframe_id, int session) const {
+  const Impl& s = *impl_;
+  for (auto& b : s.LoadBlobs(session, session)) {
+    if (b.rec.id != keyframe_id) continue;
+    return detail::Dequantize(s.Rollback(b), s.cfg.resolution_m, s.cfg.intensity_step);
+  }
+  return {};
+}
+
+PointCloud Store::MapAt(int session, const Region& region) const {
+  const Impl& s = *impl_;
+  if (session < 0 || session > s.Latest())
+    throw Error(s.path + ": no session " + std::to_string(session) + " in the map store");
+  const auto blobs = s.LoadBlobs(session, session);
+  std::vector<PointCloud> parts(blobs.size());
+  ParallelFor(s.threads, blobs.size(), [&](std::size_t k) {
+    parts[k] = ToWorld(s.Rollback(blobs[k]), blobs[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step,
+                       region);
+  });
+  return Concat(parts, region, s.threads);
+}
+
+PointCloud Store::Live(const Region& region) const {
+  const int latest = LatestSession();
+  if (latest < 0) throw Error(impl_->path + ": the map store is empty");
+  return MapAt(latest, region);
+}
+
+PointCloud Store::Meta(const Region& region) const {
+  const Impl& s = *impl_;
+  const int latest = s.Latest();
+  if (latest < 0) throw Error(s.path + ": the map store is empty");
+  const auto blobs = s.LoadBlobs(latest, -1);  // every delta, newest first
+  const double carve_units = s.cfg.meta_carve_radius_m / s.cfg.resolution_m;
+  std::vector<PointCloud> parts(blobs.size());
+  ParallelFor(s.threads, blobs.size(), [&](std::size_t k) {
+    const auto& b = blobs[k];
+    const std::string what = "keyframe " + std::to_string(b.rec.id);
+    std::vector<QCloud> deltas;
+    for (const auto& [session, blob] : b.deltas) deltas.push_back(s.Decode(blob, what + " delta"));
+    QCloud state = s.Decode(b.base, what + " base");
+    for (const QCloud& d : deltas) state = detail::ApplyInverse(state, d);  // first state of the keyframe
+    // Weak PD (a new keyframe's parked cars) never enters the meta map.
+    state.erase(std::remove_if(state.begin(), state.end(),
+                               [](const QPoint& p) { return p.cls == std::uint8_t(PointClass::kPDWeak); }),
+                state.end());
+    QCloud carve;
+    for (auto it = deltas.rbegin(); it != deltas.rend(); ++it) {  // oldest step first
+      const int step = b.deltas[std::size_t(deltas.rend() - it - 1)].first;
+      for (const QPoint& p : *it) {
+        if (p.role == detail::kAdded && p.session == step && p.cls == std::uint8_t(PointClass::kPDStrong))
+          state.push_back(p);
+        if (p.role == detail::kRemovedChange) carve.push_back(p);
+      }
+    }
+    if (!carve.empty()) {
+      const std::vector<bool> cut = detail::WithinRadiusQ(state, carve, carve_units);
+      QCloud kept;
+      kept.reserve(state.size());
+      for (std::size_t i = 0; i < state.size(); ++i)
+        if (!cut[i]) kept.push_back(state[i]);
+      state.swap(kept);
+    }
+    parts[k] = ToWorld(state, b.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+  });
+  return Concat(parts, region, s.threads);
+}
+
+PointCloud Store::StepChanges(int session, const Region& region) const {
+  const Impl& s = *impl_;
+  if (session < 1 || session > s.Latest())
+    throw Error(s.path + ": no session step " + std::to_string(session) + " in the map store");
+  const auto blobs = s.LoadBlobs(session, -1, session);
+  std::vector<PointCloud> parts(blobs.size());
+  ParallelFor(s.threads, blobs.size(), [&](std::size_t k) {
+    QCloud changes;
+    for (const auto& [step, blob] : blobs[k].deltas) {
+      for (QPoint p : s.Decode(blob, "keyframe " + std::to_string(blobs[k].rec.id) + " delta")) {
+        if (p.role == detail::kAdded && p.session == step &&
+            (p.cls == std::uint8_t(PointClass::kPDStrong) || p.cls == std::uint8_t(PointClass::kPDWeak))) {
+        } else if (p.role == detail::kRemovedChange) {
+          p.cls = std::uint8_t(PointClass::kNDStrong);
+        } else if (p.role == detail::kInfoNDWeak) {
+          p.cls = std::uint8_t(PointClass::kNDWeak);
+        } else {
+          continue;
+        }
+        p.session = std::uint16_t(step);
+        changes.push_back(p);
+      }
+    }
+    parts[k] = ToWorld(changes, blobs[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+  });
+  Region no_voxel = region;
+  no_voxel.voxel_m = 0;
+  return Concat(parts, no_voxel, s.threads);
+}
+
+// ===================================================================================== fsck
+FsckReport Store::Fsck() const {
+  const Impl& s = *impl_;
+  FsckReport r;
+  auto problem = [&](const std::string& p) {
+    r.ok = false;
+    if (r.problems.size() < 200) r.problems.push_back(p);
+  };
+  try {
+    const std::string v = s.Info("schema_version");
+    if (v != std::to_string(kSchemaVersion)) problem("schema version " + v);
+  } catch (const Error& e) {
+    problem(e.what());
+  }
+  {
+    Stmt st(s.db, "PRAGMA integrity_check", s.path);
+    while (st.Step())
+      if (st.Text(0) != "ok") problem("integrity_check: " + st.Text(0));
+  }
+  {
+    Stmt st(s.db, "PRAGMA foreign_key_check", s.path);
+    while (st.Step()) problem("foreign key violation in table " + st.Text(0) + " row " + std::to_string(st.Int(1)));
+  }
+  const auto sessions = Sessions();
+  r.sessions = sessions.size();
+  for (std::size_t k = 0; k < sessions.size(); ++k) {
+    const auto& ss = sessions[k];
+    if (ss.order != int(k)) problem("session orders are not 0..N-1 (found " + std::to_string(ss.order) + ")");
+    if (k == 0 && ss.reference != -1) problem("central session has a reference");
+    if (k > 0 && (ss.reference < 0 || ss.reference >= ss.order))
+      problem("session " + ss.name + " references session " + std::to_string(ss.reference));
+  }
+  const int latest = int(sessions.size()) - 1;
+  std::map<int, KeyframeRecord> kfs;
+  try {
+    for (const auto& k : s.Keyframes()) kfs[k.id] = k;
+  } catch (const Error& e) {
+    problem(e.what());
+  }
+  r.keyframes = kfs.size();
+  std::map<int, int> last_change;  // keyframe -> newest session whose delta changed points
+  {
+    Stmt st(s.db, "SELECT keyframe, session, added, removed, info, data FROM deltas", s.path);
+    while (st.Step()) {
+      const int kf = int(st.Int(0)), ses = int(st.Int(1));
+      const std::string where = "delta (keyframe " + std::to_string(kf) + ", session " + std::to_string(ses) + ")";
+      const std::string blob = st.Blob(5);
+      ++r.blobs;
+      r.bytes += blob.size();
+      auto it = kfs.find(kf);
+      if (it == kfs.end()) problem(where + ": no such keyframe");
+      else if (ses <= it->second.session) problem(where + ": not after the keyframe's creation");
+      if (ses < 1 || ses > latest) problem(where + ": no such session step");
+      try {
+        const QCloud q = s.Decode(blob, where);
+        std::size_t a = 0, rm = 0, inf = 0;
+        for (const QPoint& p : q) (p.role == detail::kAdded ? a : p.role == detail::kInfoNDWeak ? inf : rm)++;
+        if (a != std::size_t(st.Int(2)) || rm != std::size_t(st.Int(3)) || inf != std::size_t(st.Int(4)))
+          problem(where + ": point counts differ from the row");
+        r.points += q.size();
+      } catch (const Error& e) {
+        problem(e.what());
+      }
+      if (st.Int(2) + st.Int(3) > 0) last_change[kf] = std::max(last_change[kf], ses);
+    }
+  }
+  std::map<int, bool> has_base;
+  {
+    Stmt st(s.db, "SELECT keyframe, as_of, points, data FROM base_clouds", s.path);
+    while (st.Step()) {
+      const int kf = int(st.Int(0)), as_of = int(st.Int(1));
+      const std::string where = "base cloud of keyframe " + std::to_string(kf);
+      const std::string blob = st.Blob(3);
+      has_base[kf] = true;
+      ++r.blobs;
+      r.bytes += blob.size();
+      auto it = kfs.find(kf);
+      if (it == kfs.end()) problem(where + ": no such keyframe");
+      else if (as_of < it->second.session || as_of > latest) problem(where + ": as_of out of range");
+      if (last_change.count(kf) && last_change[kf] != as_of) problem(where + ": not as of its newest delta");
+      try {
+        const QCloud q = s.Decode(blob, where);
+        if (q.size() != std::size_t(st.Int(2))) problem(where + ": point count differs from the row");
+        r.points += q.size();
+      } catch (const Error& e) {
+        problem(e.what());
+      }
+    }
+  }
+  for (const auto& [id, k] : kfs) {
+    if (!has_base.count(id)) problem("keyframe " + std::to_string(id) + " has no base cloud");
+    if (k.session < 0 || k.session > latest) problem("keyframe " + std::to_string(id) + " owned by no session");
+  }
+  return r;
+}
+
+std::uint64_t Store::Digest() const {
+  const Impl& s = *impl_;
+  std::uint64_t h = detail::Fnv1a64("ltmap", 5);
+  auto add = [&](const std::string& v) {
+    const std::uint64_t n = v.size();
+    h = detail::Fnv1a64(&n, sizeof(n), h);
+    h = detail::Fnv1a64(v.data(), v.size(), h);
+  };
+  const char* queries[] = {
+      "SELECT id, name, coalesce(reference, -1), anchor, params, keyframes_new, keyframes_changed, pd_strong, pd_weak, "
+      "nd_strong, nd_weak, superseded, restored, points, bytes FROM sessions ORDER BY id",
+      "SELECT id, session, source_index, pose FROM keyframes ORDER BY id",
+      "SELECT keyframe, as_of, points, data FROM base_clouds ORDER BY keyframe",
+      "SELECT keyframe, session, added, removed, info, data FROM deltas ORDER BY keyframe, session"};
+  for (const char* q : queries) {
+    Stmt st(s.db, q, s.path);
+    while (st.Step()) {
+      for (int c = 0; c < st.Columns(); ++c) add(st.Blob(c));
+      add("|");
+    }
+    add("#");
+  }
+  return h;
+}
+
+}  // namespace ltm::map

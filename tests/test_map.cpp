@@ -1,0 +1,373 @@
+// LT-map: blob codec, composition / rollback, live vs meta, new keyframes, transactions, fsck.
+#include "ltmapper/map/map.hpp"
+
+#include "test_util.hpp"
+
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <tuple>
+
+namespace ltm::map {
+namespace {
+
+constexpr double kRes = 0.001;
+
+PointCloud Grid(float x0, float y0, float z, int nx, int ny, float step, float intensity = 0.5f) {
+  PointCloud c;
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j) c.push_back(x0 + i * step, y0 + j * step, z, intensity);
+  return c;
+}
+
+// A box-shaped "car": points on a grid inside [x0, x0+w] x [y0, y0+d] x [0, h].
+PointCloud Car(float x0, float y0, float w = 2.f, float d = 4.f, float h = 1.5f, float step = 0.25f) {
+  PointCloud c;
+  for (float x = x0; x <= x0 + w; x += step)
+    for (float y = y0; y <= y0 + d; y += step)
+      for (float z = 0.25f; z <= h; z += step) c.push_back(x, y, z, 0.8f);
+  return c;
+}
+
+PointCloud Cat(PointCloud a, const PointCloud& b) {
+  a.append(b);
+  return a;
+}
+
+// Sorted quantised coordinates: set comparison independent of point order.
+std::vector<std::tuple<long, long, long>> Keys(const PointCloud& c, double res = kRes) {
+  std::vector<std::tuple<long, long, long>> k;
+  for (const auto& p : c.points)
+    k.emplace_back(std::lround(p.x / res), std::lround(p.y / res), std::lround(p.z / res));
+  std::sort(k.begin(), k.end());
+  return k;
+}
+
+Pose At(double x, double y, double yaw = 0) {
+  Pose T = Pose::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(x, y, 0);
+  return T;
+}
+
+// ------------------------------------------------------------------------------------- blobs
+TEST(MapBlob, RoundTripWithinHalfResolution) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-300.f, 300.f), ui(0.f, 255.f);
+  PointCloud c;
+  for (int k = 0; k < 20000; ++k) {
+    c.push_back(u(rng), u(rng), u(rng) * 0.1f, ui(rng));
+    c.cls.push_back(PointClass(k % 7));
+    c.session.push_back(std::uint16_t(k % 5));
+  }
+  for (double res : {0.001, 0.005}) {
+    const std::string blob = EncodeBlob(c, res, 0.01);
+    const PointCloud d = DecodeBlob(blob);
+    ASSERT_EQ(d.size(), c.size());
+    double worst = 0;
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      const Eigen::Vector3f e = d.points[k].xyz() - c.points[k].xyz();
+      // res/2 from the quantisation plus float rounding of a ~300 m coordinate (3e-5 m).
+      worst = std::max(worst, double(e.cwiseAbs().maxCoeff()));
+      ASSERT_LE(std::fabs(d.points[k].intensity - c.points[k].intensity), 0.005 + 1e-4);
+      ASSERT_EQ(d.cls[k], c.cls[k]);
+      ASSERT_EQ(d.session[k], c.session[k]);
+    }
+    EXPECT_LE(worst, res / 2 + 4e-5) << "res " << res;
+    RecordProperty("bytes_per_point_res" + std::to_string(res), std::to_string(double(blob.size()) / c.size()));
+  }
+}
+
+TEST(MapBlob, ChecksumDetectsEveryFlippedByte) {
+  const PointCloud c = Cat(Grid(-5, -5, 0, 40, 40, 0.25f), Car(1, 1));
+  const std::string blob = EncodeBlob(c, kRes, 0.01);
+  std::mt19937 rng(5);
+  for (int t = 0; t < 300; ++t) {
+    std::string bad = blob;
+    const std::size_t pos = t < 64 ? std::size_t(t) : rng() % bad.size();  // every header byte, then random
+    bad[pos] = char(bad[pos] ^ (1 << (rng() % 8)));
+    EXPECT_THROW(DecodeBlob(bad, "test blob"), Error) << "flipped byte " << pos;
+  }
+  EXPECT_THROW(DecodeBlob(blob.substr(0, blob.size() - 1)), Error);
+  EXPECT_THROW(DecodeBlob(std::string()), Error);
+  EXPECT_NO_THROW(DecodeBlob(blob));
+}
+
+TEST(MapBlob, RejectsPointsOutsideTheGrid) {
+  PointCloud c;
+  c.push_back(2000.f, 0, 0);  // 2^20 mm = 1048 m is the limit at 1 mm
+  EXPECT_THROW(EncodeBlob(c, 0.001, 0.01), Error);
+  EXPECT_NO_THROW(EncodeBlob(c, 0.01, 0.01));
+  c.points[0].x = std::nanf("");
+  EXPECT_THROW(EncodeBlob(c, 0.01, 0.01), Error);
+  EXPECT_NO_THROW(EncodeBlob(PointCloud{}, 0.01, 0.01));
+}
+
+TEST(MapCompose, SetDifferenceByNearestNeighbourAndUnion) {
+  const PointCloud ground = Grid(0, 0, 0, 20, 20, 0.5f);
+  const PointCloud car = Car(3, 3);
+  PointCloud nd = car;  // removert's ND: the car, slightly displaced
+  for (auto& p : nd.points) p.x += 0.03f;
+  const PointCloud wall = Grid(0, 12, 1, 20, 1, 0.5f);
+  const PointCloud out = Compose(Cat(ground, car), nd, wall, 0.1);
+  EXPECT_EQ(Keys(out), Keys(Cat(ground, wall)));
+  // Chaining with the inverse (ND and PD swapped) rolls back.
+  EXPECT_EQ(Keys(Compose(out, wall, car, 1e-3)), Keys(Cat(ground, car)));
+}
+
+TEST(MapCompose, FarKeyframes) {
+  const std::vector<Pose> map = {At(0, 0), At(10, 0)};
+  const std::vector<Pose> q = {At(1, 1), At(30, 0), At(32, 0), At(45, 0), At(10, 4)};
+  EXPECT_EQ(FarKeyframes(map, q, 5.0), (std::vector<int>{1, 3}));
+}
+
+// ------------------------------------------------------------------------------------- store
+struct Scene {
+  // Central: 3 keyframes, each ground + one parked car in its own frame.
+  std::vector<KeyframeInput> base;
+  Scene() {
+    for (int k = 0; k < 3; ++k)
+      base.push_back({k, At(20.0 * k, 0, 0.3 * k), Cat(Grid(-6, -6, 0, 48, 48, 0.25f), Car(2, 2))});
+  }
+};
+
+MapConfig Cfg() {
+  MapConfig c;
+  c.output_voxel_m = 0;
+  return c;
+}
+
+// Session 1: keyframe 0's car gone (strong ND), a wall appears (strong PD) and a new parked car
+// (weak PD); keyframe 1: ND weak only (occluded); keyframe 2: untouched.
+std::vector<KeyframeDelta> Step1() {
+  KeyframeDelta d0;
+  d0.keyframe = 0;
+  d0.nd_strong = Car(2, 2);
+  for (auto& p : d0.nd_strong.points) p.z += 0.02f;  // not the same samples: matched within radius
+  d0.pd_strong = Grid(-6, 6.5f, 1.1f, 48, 1, 0.25f);  // clear of the removed car (carve radius)
+  d0.pd_weak = Car(-4, -4);
+  KeyframeDelta d1;
+  d1.keyframe = 1;
+  d1.nd_weak = Grid(-6, -6, 0, 4, 4, 0.25f);
+  return {d0, d1};
+}
+
+TEST(MapStore, RestoreEverySessionFromLatest) {
+  test::TempDir tmp;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  const auto r1 = s.IntegrateSession({"s1"}, "s0", Step1(), {});
+  EXPECT_EQ(r1.keyframes_changed, 1u);
+  EXPECT_EQ(r1.nd_strong, Car(2, 2).size());
+  EXPECT_EQ(r1.pd_weak, Car(-4, -4).size());
+  EXPECT_EQ(r1.nd_weak, 16u);
+  // Session 2 against the central session (LT-removert's default pairing): keyframe 0 has the
+  // original car back, no wall, and keyframe 2 loses its car.
+  KeyframeDelta a, b;
+  a.keyframe = 0;
+  b.keyframe = 2;
+  b.nd_strong = Car(2, 2);
+  const auto r2 = s.IntegrateSession({"s2"}, "s0", {a, b}, {});
+  EXPECT_GT(r2.superseded, 0u);  // session 1's wall and parked car
+  EXPECT_GT(r2.restored, 0u);    // the central car, back
+
+  // Expected keyframe states by float composition.
+  const PointCloud k0_s0 = sc.base[0].cloud;
+  const auto st1 = Step1();
+  const PointCloud k0_s1 = Compose(k0_s0, st1[0].nd_strong, Cat(st1[0].pd_strong, st1[0].pd_weak), 0.1);
+  const auto kfs = s.Keyframes();
+  ASSERT_EQ(kfs.size(), 3u);
+  EXPECT_EQ(Keys(s.KeyframeCloud(kfs[0].id, 0)), Keys(k0_s0));
+  EXPECT_EQ(Keys(s.KeyframeCloud(kfs[0].id, 1)), Keys(k0_s1));
+  EXPECT_EQ(Keys(s.KeyframeCloud(kfs[0].id, 2)), Keys(k0_s0));
+  EXPECT_EQ(Keys(s.KeyframeCloud(kfs[2].id, 1)), Keys(sc.base[2].cloud));
+  EXPECT_EQ(Keys(s.KeyframeCloud(kfs[2].id, 2)), Keys(Grid(-6, -6, 0, 48, 48, 0.25f)));
+  // Restore S0 from the latest, whole map in the world frame, equals the base within quantisation.
+  PointCloud world0;
+  for (const auto& kf : sc.base) {
+    PointCloud c = kf.cloud;
+    for (auto& p : c.points) {
+      const Eigen::Vector3f w = (kf.T_world_sensor * p.xyz().cast<double>()).cast<float>();
+      p.x = w.x(), p.y = w.y(), p.z = w.z();
+    }
+    world0.append(c);
+  }
+  const PointCloud restored = s.MapAt(0);
+  ASSERT_EQ(restored.size(), world0.size());
+  const auto ab = WithinRadius(restored, world0, kRes), ba = WithinRadius(world0, restored, kRes);
+  EXPECT_EQ(std::count(ab.begin(), ab.end(), true), long(ab.size()));
+  EXPECT_EQ(std::count(ba.begin(), ba.end(), true), long(ba.size()));
+  // Session classes travel with the points.
+  const PointCloud at1 = s.KeyframeCloud(kfs[0].id, 1);
+  EXPECT_EQ(std::count(at1.cls.begin(), at1.cls.end(), PointClass::kPDWeak), long(Car(-4, -4).size()));
+  EXPECT_TRUE(s.Fsck().ok);
+}
+
+TEST(MapStore, LiveHasWeakPdMetaDoesNot) {
+  test::TempDir tmp;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  s.IntegrateSession({"s1"}, "s0", Step1(), {});
+  auto count = [](const PointCloud& c, PointClass k) { return std::count(c.cls.begin(), c.cls.end(), k); };
+  const PointCloud live = s.Live(), meta = s.Meta();
+  const long weak = long(Car(-4, -4).size()), strong = 48;
+  EXPECT_EQ(count(live, PointClass::kPDWeak), weak);
+  EXPECT_EQ(count(meta, PointClass::kPDWeak), 0);
+  EXPECT_EQ(count(live, PointClass::kPDStrong), strong);
+  EXPECT_EQ(count(meta, PointClass::kPDStrong), strong);
+  // Strong ND carved in both: keyframe 0's car is gone; the other cars stay.
+  const long base_total = long(sc.base[0].cloud.size() * 3);
+  const long car = long(Car(2, 2).size());
+  EXPECT_EQ(long(live.size()), base_total - car + strong + weak);
+  EXPECT_LE(long(meta.size()), base_total - car + strong);
+  EXPECT_GE(long(meta.size()), base_total - car + strong - 40);  // ground under the car within the carve radius
+  // Changes of step 1 in the world frame.
+  const PointCloud ch = s.StepChanges(1);
+  EXPECT_EQ(count(ch, PointClass::kNDStrong), car);
+  EXPECT_EQ(count(ch, PointClass::kNDWeak), 16);
+  // Objects: the parked car (weak PD), the wall (strong PD), the removed car (strong ND).
+  const auto objs = s.Objects();
+  ASSERT_EQ(objs.size(), 3u);
+  int pdw = 0, pds = 0, nds = 0;
+  for (const auto& o : objs) {
+    pdw += o.cls == PointClass::kPDWeak && o.points == std::size_t(weak);
+    pds += o.cls == PointClass::kPDStrong && o.points == std::size_t(strong);
+    nds += o.cls == PointClass::kNDStrong && o.points == std::size_t(car);
+    EXPECT_EQ(o.session, 1);
+  }
+  EXPECT_EQ(pdw + pds + nds, 3);
+  // Box export.
+  Region box;
+  box.use_box = true;
+  box.lo = Eigen::Vector3d(-7, -7, -1);
+  box.hi = Eigen::Vector3d(7, 7, 5);
+  const PointCloud part = s.Live(box);
+  EXPECT_GT(part.size(), 0u);
+  EXPECT_LT(part.size(), live.size());
+  for (const auto& p : part.points) EXPECT_LE(std::fabs(p.x), 7.001f);
+}
+
+TEST(MapStore, FarQueryKeyframesBecomeMapKeyframes) {
+  test::TempDir tmp;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  // Query keyframes: one near keyframe 1 (its points join keyframe 1), two far away (100 m).
+  std::vector<KeyframeInput> q = {{5, At(21, 1), Car(0, 0)},
+                                  {6, At(100, 0), Grid(-3, -3, 0, 20, 20, 0.3f)},
+                                  {7, At(140, 0), Grid(-3, -3, 0, 10, 10, 0.3f)}};
+  const auto r = s.IntegrateSession({"s1"}, "s0", {}, q);
+  EXPECT_EQ(r.keyframes_new, 2u);
+  EXPECT_EQ(r.keyframes_changed, 1u);
+  const auto kfs = s.Keyframes();
+  ASSERT_EQ(kfs.size(), 5u);
+  EXPECT_EQ(kfs[3].session, 1);
+  EXPECT_EQ(kfs[3].source_index, 6);
+  EXPECT_EQ(kfs[3].base_points, 400u);
+  EXPECT_EQ(s.MapAt(0).size(), 3 * sc.base[0].cloud.size());  // not in the map before session 1
+  EXPECT_EQ(s.MapAt(1).size(), 3 * sc.base[0].cloud.size() + Car(0, 0).size() + 400 + 100);
+  // Session 2 sees the new territory again: the keyframe is replaced by what session 2 saw.
+  std::vector<KeyframeInput> q2 = {{9, At(101, 0), Grid(-3, -3, 0, 5, 5, 0.3f)}};
+  const auto r2 = s.IntegrateSession({"s2"}, "s0", {}, q2);
+  EXPECT_EQ(r2.keyframes_new, 0u);
+  EXPECT_EQ(s.KeyframeCloud(kfs[3].id, 2).size(), 25u);
+  EXPECT_EQ(s.KeyframeCloud(kfs[3].id, 1).size(), 400u);
+  EXPECT_TRUE(s.Fsck().ok);
+}
+
+TEST(MapStore, ExceptionMidIntegrationLeavesPreviousState) {
+  test::TempDir tmp;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  const std::uint64_t before = s.Digest();
+  s.on_keyframe_written = [](std::size_t n) {
+    if (n == 1) throw Error("injected failure");
+  };
+  std::vector<KeyframeInput> far = {{6, At(100, 0), Grid(0, 0, 0, 5, 5, 0.3f)}};
+  EXPECT_THROW(s.IntegrateSession({"s1"}, "s0", Step1(), far), Error);
+  EXPECT_EQ(s.Digest(), before);
+  EXPECT_EQ(s.Sessions().size(), 1u);
+  EXPECT_EQ(s.Keyframes().size(), 3u);
+  s.on_keyframe_written = nullptr;
+  EXPECT_NO_THROW(s.IntegrateSession({"s1"}, "s0", Step1(), far));
+  EXPECT_NE(s.Digest(), before);
+  // Errors in the input are raised before anything is written, naming the problem.
+  KeyframeDelta bad;
+  bad.keyframe = 42;
+  EXPECT_THROW(s.IntegrateSession({"s2"}, "s0", {bad}, {}), Error);
+  EXPECT_THROW(s.IntegrateSession({"s1"}, "s0", {}, {}), Error);  // already integrated
+  EXPECT_THROW(s.IntegrateSession({"s3"}, "nope", {}, {}), Error);
+  EXPECT_EQ(s.Sessions().size(), 2u);
+  EXPECT_TRUE(s.Fsck().ok);
+}
+
+TEST(MapStore, ReopenAndDigestStable) {
+  test::TempDir tmp;
+  Scene sc;
+  std::uint64_t d = 0;
+  {
+    Store s = Store::Create(tmp / "m.ltmap", Cfg());
+    s.IntegrateBase({"s0"}, sc.base);
+    s.IntegrateSession({"s1"}, "s0", Step1(), {});
+    d = s.Digest();
+  }
+  Store s = Store::Open(tmp / "m.ltmap");
+  EXPECT_EQ(s.Digest(), d);
+  EXPECT_EQ(s.LatestSession(), 1);
+  EXPECT_EQ(s.SessionOrder("s1"), 1);
+  EXPECT_THROW(Store::Create(tmp / "m.ltmap", Cfg()), Error);
+  test::WriteText(tmp / "junk.ltmap", "not a database at all, definitely not sqlite");
+  EXPECT_THROW(Store::Open(tmp / "junk.ltmap"), Error);
+  EXPECT_THROW(Store::Open(tmp / "missing.ltmap"), Error);
+  const std::string log = FormatLog(s);
+  EXPECT_NE(log.find("s1"), std::string::npos) << log;
+}
+
+// Flips one byte inside a stored blob through SQLite: fsck must name it.
+TEST(MapStore, FsckDetectsCorruptedBlob) {
+  test::TempDir tmp;
+  Scene sc;
+  const std::string path = tmp / "m.ltmap";
+  {
+    Store s = Store::Create(path, Cfg());
+    s.IntegrateBase({"s0"}, sc.base);
+    s.IntegrateSession({"s1"}, "s0", Step1(), {});
+    EXPECT_TRUE(s.Fsck().ok);
+  }
+  for (const char* table : {"base_clouds", "deltas"}) {
+    test::TempDir t2;
+    const std::string copy = t2 / "c.ltmap";
+    std::filesystem::copy_file(path, copy);
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(copy.c_str(), &db), SQLITE_OK);
+    const std::string sql = std::string("SELECT keyframe, data FROM ") + table + " LIMIT 1";
+    sqlite3_stmt* st = nullptr;
+    ASSERT_EQ(sqlite3_prepare_v2(db, sql.c_str(), -1, &st, nullptr), SQLITE_OK);
+    ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+    const long long kf = sqlite3_column_int64(st, 0);
+    std::string blob(static_cast<const char*>(sqlite3_column_blob(st, 1)), std::size_t(sqlite3_column_bytes(st, 1)));
+    sqlite3_finalize(st);
+    blob[blob.size() / 2] = char(blob[blob.size() / 2] ^ 0x10);
+    const std::string upd = std::string("UPDATE ") + table + " SET data = ? WHERE keyframe = ?";
+    ASSERT_EQ(sqlite3_prepare_v2(db, upd.c_str(), -1, &st, nullptr), SQLITE_OK);
+    sqlite3_bind_blob(st, 1, blob.data(), int(blob.size()), SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 2, kf);
+    ASSERT_EQ(sqlite3_step(st), SQLITE_DONE);
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+    const Store s = Store::Open(copy);
+    const FsckReport r = s.Fsck();
+    EXPECT_FALSE(r.ok) << table;
+    ASSERT_FALSE(r.problems.empty());
+    EXPECT_NE(r.problems[0].find("checksum"), std::string::npos) << r.problems[0];
+    EXPECT_THROW(s.MapAt(0), Error);
+  }
+}
+
+}  // namespace
+}  // namespace ltm::map
