@@ -1,0 +1,203 @@
+// ltmapper slam: LT-SLAM, the multi-session SLAM engine of the LT-mapper paper (section "LT-SLAM").
+//
+// Every session keeps its own odometry frame; one anchor pose per session, A_s = T_world_session,
+// places it in the shared world frame (world = the central session's frame, A_0 = identity):
+//   T_world_sensor = A_s * T_session_sensor                                     (paper eq. 3)
+// Inter-session loops come from Scan Context retrieval, are verified by GICP between keyframe
+// submaps and enter a Ceres pose graph through the anchors with a robust loss:
+//   r = Log( z^-1 * (A_a * x_a)^-1 * (A_b * x_b) )                               (paper eq. 2)
+// PCL and Ceres are used only inside the .cpp files.
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace ltm::slam {
+
+struct SlamConfig {
+  // --- Scan Context (Kim & Kim 2018; defaults of the original code)
+  int sc_rings = 20;                  // radial bins
+  int sc_sectors = 60;                // azimuth bins
+  double sc_max_range_m = 80.0;       // points farther than this (in xy) are ignored
+  double sc_lidar_height_m = 2.0;     // bin value = max(z + height): height above the ground
+  int sc_candidates = 10;             // top-k ring-key neighbours compared per query keyframe
+  double sc_search_ratio = 0.1;       // fine shift search window, fraction of the sectors
+  double sc_dist_threshold = 0.3;     // candidate when 1 - mean cosine < this (GICP verifies)
+  bool sc_read_files = true;          // use <session>/SCDs/NNNNNN.scd when present
+  int sc_max_loops_per_pair = 60;     // registrations per session pair from Scan Context
+  int sc_min_gap_keyframes = 3;       // min query-keyframe gap between selected SC candidates
+
+  // --- registration (PCL GICP between keyframe submaps)
+  double reg_min_range_m = 1.0;       // scan points closer than this are dropped (the vehicle)
+  double reg_max_range_m = 80.0;      // scan points farther than this are dropped
+  double reg_voxel_m = 0.4;           // voxel of keyframe clouds and submaps
+  int reg_submap_neighbours = 3;      // keyframes on each side merged into a submap
+  double reg_max_correspondence_m = 2.0;  // GICP correspondence distance
+  int reg_max_iterations = 40;        // GICP outer iterations
+  int reg_covariance_neighbours = 20; // k for GICP point covariances
+  double reg_fitness_range_m = 1.0;   // fitness = mean squared NN distance of points within this
+  double reg_fitness_threshold = 0.1; // accept when fitness < this [m^2]
+  double reg_min_overlap = 0.3;       // and this fraction of source points has a NN within range
+  double reg_max_correction_deg = 45.0;  // reject when GICP rotates this far from the initial guess
+  double reg_max_translation_m = 15.0;   // reject when GICP moves this far from the initial guess
+  double loop_sigma_t_m = 0.1;        // loop std-dev at fitness <= reg_fitness_floor
+  double loop_sigma_r_deg = 0.5;
+  double reg_fitness_floor = 0.02;    // [m^2]; sigma grows with sqrt(fitness / floor) above it
+
+  // --- pose graph (Ceres)
+  double odom_sigma_t_m = 0.05;       // odometry std-dev when the g2o carries no information
+  double odom_sigma_r_deg = 0.2;
+  bool use_g2o_information = true;    // use the g2o edge information when present
+  std::string robust_loss = "cauchy"; // cauchy | dcs | none, on every inter-session loop
+  double robust_scale = 1.0;          // Cauchy scale / DCS Phi, in whitened units
+  int solver_max_iterations = 100;
+  int min_loops = 3;                  // consistent loops needed to call a query aligned
+  bool gate_inconsistent_loops = true;  // drop loops whose implied anchor disagrees with consensus
+  double consensus_t_m = 4.0;         // implied anchors agree within this ...
+  double consensus_r_deg = 5.0;
+  double consensus_drift_ratio = 0.03;  // ... plus this fraction of the path between the loops
+  double outlier_t_m = 1.0;           // after optimisation, loops with larger residual are rejected
+  double outlier_r_deg = 3.0;
+
+  // --- radius-search refinement (paper: "radius search loop detection" after the SC loops)
+  int refine_rounds = 2;
+  double refine_radius_m = 8.0;       // world-frame search radius around a query keyframe
+  int refine_stride = 2;              // try every n-th query keyframe without a loop
+  int refine_max_loops_per_pair = 150;
+
+  template <class V>
+  void Visit(V& v) {
+    v("sc.rings", sc_rings, "bins", 1, 1000);
+    v("sc.sectors", sc_sectors, "bins", 4, 3600);
+    v("sc.max_range_m", sc_max_range_m, "m", 1.0, 1000.0);
+    v("sc.lidar_height_m", sc_lidar_height_m, "m", -10.0, 10.0);
+    v("sc.candidates", sc_candidates, "keyframes", 1, 1000);
+    v("sc.search_ratio", sc_search_ratio, "fraction", 0.0, 1.0);
+    v("sc.dist_threshold", sc_dist_threshold, "1-cos", 0.0, 1.0);
+    v("sc.read_files", sc_read_files);
+    v("sc.max_loops_per_pair", sc_max_loops_per_pair, "loops", 0, 1000000);
+    v("sc.min_gap_keyframes", sc_min_gap_keyframes, "keyframes", 0, 1000000);
+    v("registration.min_range_m", reg_min_range_m, "m", 0.0, 100.0);
+    v("registration.max_range_m", reg_max_range_m, "m", 1.0, 1000.0);
+    v("registration.voxel_m", reg_voxel_m, "m", 0.01, 10.0);
+    v("registration.submap_neighbours", reg_submap_neighbours, "keyframes", 0, 100);
+    v("registration.max_correspondence_m", reg_max_correspondence_m, "m", 0.01, 100.0);
+    v("registration.max_iterations", reg_max_iterations, "iterations", 1, 1000);
+    v("registration.covariance_neighbours", reg_covariance_neighbours, "points", 5, 100);
+    v("registration.fitness_range_m", reg_fitness_range_m, "m", 0.01, 100.0);
+    v("registration.fitness_threshold", reg_fitness_threshold, "m^2", 0.0, 100.0);
+    v("registration.min_overlap", reg_min_overlap, "fraction", 0.0, 1.0);
+    v("registration.max_correction_deg", reg_max_correction_deg, "deg", 0.0, 180.0);
+    v("registration.max_translation_m", reg_max_translation_m, "m", 0.0, 1000.0);
+    v("registration.loop_sigma_t_m", loop_sigma_t_m, "m", 1e-4, 100.0);
+    v("registration.loop_sigma_r_deg", loop_sigma_r_deg, "deg", 1e-4, 180.0);
+    v("registration.fitness_floor", reg_fitness_floor, "m^2", 1e-6, 100.0);
+    v("graph.odom_sigma_t_m", odom_sigma_t_m, "m", 1e-5, 100.0);
+    v("graph.odom_sigma_r_deg", odom_sigma_r_deg, "deg", 1e-5, 180.0);
+    v("graph.use_g2o_information", use_g2o_information);
+    v("graph.robust_loss", robust_loss, {"cauchy", "dcs", "none"});
+    v("graph.robust_scale", robust_scale, "whitened", 1e-3, 1e3);
+    v("graph.solver_max_iterations", solver_max_iterations, "iterations", 1, 10000);
+    v("graph.min_loops", min_loops, "loops", 1, 100000);
+    v("graph.gate_inconsistent_loops", gate_inconsistent_loops);
+    v("graph.consensus_t_m", consensus_t_m, "m", 0.0, 1e4);
+    v("graph.consensus_r_deg", consensus_r_deg, "deg", 0.0, 180.0);
+    v("graph.consensus_drift_ratio", consensus_drift_ratio, "m/m", 0.0, 1.0);
+    v("graph.outlier_t_m", outlier_t_m, "m", 0.0, 1e6);
+    v("graph.outlier_r_deg", outlier_r_deg, "deg", 0.0, 360.0);
+    v("refine.rounds", refine_rounds, "rounds", 0, 100);
+    v("refine.radius_m", refine_radius_m, "m", 0.0, 1000.0);
+    v("refine.stride", refine_stride, "keyframes", 1, 100000);
+    v("refine.max_loops_per_pair", refine_max_loops_per_pair, "loops", 0, 1000000);
+  }
+};
+
+// ------------------------------------------------------------------------------ Scan Context
+struct ScanContext {
+  Eigen::MatrixXf desc;        // rings x sectors; 0 = empty bin
+  Eigen::VectorXf ring_key;    // row means (rotation invariant), retrieval key
+  Eigen::VectorXf sector_key;  // column means, for the coarse shift
+};
+// Descriptor of a scan in its sensor frame. Sector s covers azimuth [s, s+1) * 2pi/sectors
+// counter-clockwise from +x; ring r covers xy range [r, r+1) * max_range/rings.
+ScanContext MakeScanContext(const PointCloud& scan, const SlamConfig& cfg);
+// From a rings x sectors matrix (e.g. an SCDs/*.scd file).
+ScanContext ScanContextFromMatrix(const Eigen::MatrixXd& desc);
+struct ScMatch {
+  double distance = 1.0;  // 1 - mean cosine of the columns non-empty in both, at the best shift
+  int shift = 0;          // columns: b's column c matches a's column c + shift
+  double yaw_rad = 0.0;   // rotation of the yaw part of T_a_b (p_a = Rz(yaw) p_b)
+};
+ScMatch CompareScanContexts(const ScanContext& a, const ScanContext& b, const SlamConfig& cfg);
+
+// ------------------------------------------------------------------------------ registration
+struct RegistrationResult {
+  Pose T_target_source = Pose::Identity();
+  double fitness = 1e9;   // mean squared NN distance [m^2] of source points within fitness range
+  double overlap = 0.0;   // fraction of source points with a target NN within fitness range
+  bool converged = false;
+  bool accepted = false;  // converged and fitness / overlap / correction within the thresholds
+  std::string reason;     // why not accepted
+};
+// GICP of `source` onto `target` (both already downsampled), from `T_target_source_init`.
+RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
+                                const Pose& T_target_source_init, const SlamConfig& cfg);
+
+// ------------------------------------------------------------------------------ loops + graph
+struct LoopRecord {
+  NodeKey a, b;                   // a.session < b.session; keyframe = position in the session
+  std::string source = "sc";      // sc | radius | given
+  double sc_distance = -1.0;      // -1 when not from Scan Context
+  double yaw_deg = 0.0;           // Scan Context yaw (initial guess)
+  Pose T_a_b = Pose::Identity();  // measurement z: p_a = T_a_b * p_b
+  double fitness = -1.0;          // GICP fitness [m^2], -1 when not registered
+  bool verified = false;          // passed registration
+  bool accepted = false;          // used in the final graph
+  std::string status;             // accepted / why rejected
+  double residual_t_m = -1.0, residual_r_deg = -1.0;  // final unweighted residual
+  Matrix6d information = Matrix6d::Identity();        // order x y z rx ry rz
+};
+
+struct SessionAlignment {
+  std::string name;
+  bool aligned = false;            // central: always true
+  std::string reason;              // why not aligned
+  Pose anchor = Pose::Identity();  // A = T_world_session (meaningful when aligned)
+  std::vector<Pose> T_session_sensor;  // optimised, in the session's own frame
+  std::vector<Pose> T_world_sensor;    // A * T_session_sensor; empty when not aligned
+  int sc_candidates = 0, loops_verified = 0, loops_accepted = 0, radius_loops = 0;
+};
+
+struct SlamResult {
+  std::vector<SessionAlignment> sessions;
+  std::vector<LoopRecord> loops;
+  double time_descriptors_s = 0, time_retrieval_s = 0, time_registration_s = 0,
+         time_optimisation_s = 0, time_total_s = 0;
+  int registrations = 0;
+  bool solution_usable = true;
+  double initial_cost = 0, final_cost = 0;
+  int solver_iterations = 0;
+};
+
+// Back end alone: anchor initialisation from `loops` (verified ones), consistency gating,
+// Ceres optimisation with the robust loss, outlier pruning, aligned / not-aligned decision.
+// Sessions need keyframe poses and edges only (no clouds). `loops` outcomes are filled in.
+SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops,
+                            const SlamConfig& cfg, int threads = 0);
+
+// Whole LT-SLAM in memory: descriptors, retrieval, registration, graph, radius refinement.
+// Session 0 is the central session. Throws ltm::Error on broken input (empty scans, edges to
+// missing keyframes, no keyframes); sessions that cannot be aligned are reported, not thrown.
+SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg,
+                         int threads = 0);
+
+// The stage from files: loads the session directories (first = central), aligns them and writes
+// out_dir as described in docs/FORMATS.md ("LT-SLAM output").
+SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
+                        const std::string& out_dir, int threads = 0);
+
+}  // namespace ltm::slam
