@@ -269,24 +269,39 @@ struct Store::Impl {
     std::string base;
     std::vector<std::pair<int, std::string>> deltas;  // (session, blob), newest first
   };
-  std::vector<KfBlobs> LoadBlobs(int max_created_session, int min_delta_session, int only_delta_session = -1) const {
+  // `only_keyframe` >= 0 restricts to one keyframe (indexed lookups, no scan of the map).
+  std::vector<KfBlobs> LoadBlobs(int max_created_session, int min_delta_session, int only_delta_session = -1,
+                                 int only_keyframe = -1) const {
     std::vector<KfBlobs> out;
     std::map<int, std::size_t> pos;
-    for (const KeyframeRecord& r : Keyframes()) {
-      if (r.session > max_created_session) continue;
-      pos[r.id] = out.size();
-      out.push_back({r, {}, {}});
+    const std::string kf_filter = only_keyframe >= 0 ? " AND keyframe = " + std::to_string(only_keyframe) : "";
+    {
+      Stmt st(db,
+              "SELECT id, session, source_index, pose FROM keyframes WHERE session <= ?" +
+                  (only_keyframe >= 0 ? " AND id = " + std::to_string(only_keyframe) : std::string()) + " ORDER BY id",
+              path);
+      st.Bind(1, max_created_session);
+      while (st.Step()) {
+        KfBlobs b;
+        b.rec.id = int(st.Int(0));
+        b.rec.session = int(st.Int(1));
+        b.rec.source_index = int(st.Int(2));
+        b.rec.T_world_sensor = PoseFromText(st.Text(3), path + ": keyframe " + std::to_string(b.rec.id));
+        pos[b.rec.id] = out.size();
+        out.push_back(std::move(b));
+      }
     }
     if (only_delta_session < 0) {
-      Stmt st(db, "SELECT keyframe, data FROM base_clouds", path);
+      Stmt st(db, "SELECT keyframe, data FROM base_clouds WHERE 1" + kf_filter, path);
       while (st.Step()) {
         auto it = pos.find(int(st.Int(0)));
         if (it != pos.end()) out[it->second].base = st.Blob(1);
       }
     }
     Stmt sd(db,
-            only_delta_session >= 0 ? "SELECT keyframe, session, data FROM deltas WHERE session = ?"
-                                    : "SELECT keyframe, session, data FROM deltas WHERE session > ? ORDER BY session DESC",
+            only_delta_session >= 0 ? "SELECT keyframe, session, data FROM deltas WHERE session = ?" + kf_filter
+                                    : "SELECT keyframe, session, data FROM deltas WHERE session > ?" + kf_filter +
+                                          " ORDER BY session DESC",
             path);
     sd.Bind(1, only_delta_session >= 0 ? only_delta_session : min_delta_session);
     while (sd.Step()) {
@@ -706,11 +721,9 @@ StoreTotals Store::Totals() const {
 
 PointCloud Store::KeyframeCloud(int keyframe_id, int session) const {
   const Impl& s = *impl_;
-  for (auto& b : s.LoadBlobs(session, session)) {
-    if (b.rec.id != keyframe_id) continue;
-    return detail::Dequantize(s.Rollback(b), s.cfg.resolution_m, s.cfg.intensity_step);
-  }
-  return {};
+  const auto blobs = s.LoadBlobs(session, session, -1, keyframe_id);
+  if (blobs.empty()) return {};
+  return detail::Dequantize(s.Rollback(blobs[0]), s.cfg.resolution_m, s.cfg.intensity_step);
 }
 
 PointCloud Store::MapAt(int session, const Region& region) const {
