@@ -81,7 +81,10 @@ void WriteG2o(const std::string& path, const G2oGraph& graph);
 
 // ---------------------------------------------------------------------------------- sessions
 struct SessionLoadOptions {
-  bool load_clouds = false;  // read every scan now (else Keyframe::cloud_path only)
+  // Read every scan now (else Keyframe::cloud_path only). Scans are read with tbb::parallel_for
+  // in the caller's task arena (wrap the call in a tbb::task_arena to bound the threads). Empty
+  // scans load as empty clouds with a warning; NaN/Inf points are dropped with a warning.
+  bool load_clouds = false;
   bool require_g2o = false;
 };
 // Session directory as SC-LIO-SAM / SC-A-LOAM / FAST-LIO savers write it:
