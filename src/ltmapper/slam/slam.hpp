@@ -36,7 +36,9 @@ struct SlamConfig {
   double reg_max_range_m = 80.0;      // scan points farther than this are dropped
   double reg_voxel_m = 0.4;           // voxel of keyframe clouds and submaps
   int reg_submap_neighbours = 3;      // keyframes on each side merged into a submap
-  double reg_max_correspondence_m = 2.0;  // GICP correspondence distance
+  double reg_coarse_voxel_m = 1.0;    // coarse stage (Scan Context gives no translation) ...
+  double reg_coarse_correspondence_m = 8.0;  // ... with this correspondence distance; 0 = off
+  double reg_max_correspondence_m = 1.0;  // fine GICP correspondence distance
   int reg_max_iterations = 40;        // GICP outer iterations
   int reg_covariance_neighbours = 20; // k for GICP point covariances
   double reg_fitness_range_m = 1.0;   // fitness = mean squared NN distance of points within this
@@ -85,6 +87,8 @@ struct SlamConfig {
     v("registration.max_range_m", reg_max_range_m, "m", 1.0, 1000.0);
     v("registration.voxel_m", reg_voxel_m, "m", 0.01, 10.0);
     v("registration.submap_neighbours", reg_submap_neighbours, "keyframes", 0, 100);
+    v("registration.coarse_voxel_m", reg_coarse_voxel_m, "m", 0.01, 20.0);
+    v("registration.coarse_correspondence_m", reg_coarse_correspondence_m, "m", 0.0, 200.0);
     v("registration.max_correspondence_m", reg_max_correspondence_m, "m", 0.01, 100.0);
     v("registration.max_iterations", reg_max_iterations, "iterations", 1, 1000);
     v("registration.covariance_neighbours", reg_covariance_neighbours, "points", 5, 100);
@@ -143,7 +147,9 @@ struct RegistrationResult {
   bool accepted = false;  // converged and fitness / overlap / correction within the thresholds
   std::string reason;     // why not accepted
 };
-// GICP of `source` onto `target` (both already downsampled), from `T_target_source_init`.
+// GICP of `source` onto `target` (both already downsampled to reg_voxel_m), from
+// `T_target_source_init`: a coarse stage on reg_coarse_voxel_m clouds with a wide correspondence
+// distance (the initial translation may be metres off), then the fine stage.
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
                                 const Pose& T_target_source_init, const SlamConfig& cfg);
 

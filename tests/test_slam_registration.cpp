@@ -1,0 +1,114 @@
+// Loop verification by GICP: synthetic known offsets, rejection of wrong places, and real data
+// (fast_gicp sample pair against its reference; KITTI scans 0 and 5 from a Scan Context yaw).
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/slam/slam.hpp"
+#include "test_slam_synth.hpp"
+#include "test_util.hpp"
+
+#include <cmath>
+
+using namespace ltm;
+using namespace ltm::slam;
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+double AngleDeg(const Pose& T) { return Eigen::AngleAxisd(T.linear()).angle() / kDeg; }
+}  // namespace
+
+TEST(SlamRegistration, RecoversSyntheticOffset) {
+  SlamConfig cfg;
+  const PointCloud world = test::SynthWorld(21);
+  const Pose Ta = test::MakePose(0, 0, 1.8, 0.1), Tb = test::MakePose(2.5, 0.4, 1.8, 0.5);
+  const PointCloud a = geometry::VoxelDownsample(*test::SynthScan(world, Ta, 40, 1), cfg.reg_voxel_m);
+  const PointCloud b = geometry::VoxelDownsample(*test::SynthScan(world, Tb, 40, 2), cfg.reg_voxel_m);
+  const Pose truth = Ta.inverse() * Tb;
+  // Initial guess: the yaw only (as Scan Context gives it), translation unknown.
+  const Pose init(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()));
+  const RegistrationResult r = RegisterGicp(a, b, init, cfg);
+  ASSERT_TRUE(r.accepted) << r.reason;
+  const Pose err = truth.inverse() * r.T_target_source;
+  EXPECT_LT(err.translation().norm(), 0.05);
+  EXPECT_LT(AngleDeg(err), 0.2);
+  EXPECT_LT(r.fitness, 0.02);
+  EXPECT_GT(r.overlap, 0.8);
+}
+
+TEST(SlamRegistration, RejectsDifferentPlaces) {
+  SlamConfig cfg;
+  const PointCloud w1 = test::SynthWorld(31), w2 = test::SynthWorld(32);
+  const PointCloud a = geometry::VoxelDownsample(
+      *test::SynthScan(w1, test::MakePose(0, 0, 1.8, 0), 40, 1), cfg.reg_voxel_m);
+  const PointCloud b = geometry::VoxelDownsample(
+      *test::SynthScan(w2, test::MakePose(0, 0, 1.8, 0), 40, 2), cfg.reg_voxel_m);
+  const RegistrationResult r = RegisterGicp(a, b, Pose::Identity(), cfg);
+  EXPECT_FALSE(r.accepted) << "fitness " << r.fitness << " overlap " << r.overlap;
+  EXPECT_FALSE(r.reason.empty());
+  // Too few points: not accepted, no crash.
+  PointCloud tiny;
+  tiny.push_back(0, 0, 0);
+  EXPECT_FALSE(RegisterGicp(a, tiny, Pose::Identity(), cfg).accepted);
+}
+
+TEST(SlamRegistrationReal, GicpPairMatchesReference) {
+  LTM_REQUIRE_REAL_DATA(data);
+  const std::string dir = data + "/gicp_pair";
+  SlamConfig cfg;
+  cfg.reg_voxel_m = 0.2;
+  cfg.reg_max_iterations = 64;
+  const PointCloud target = geometry::VoxelDownsample(io::ReadPcd(dir + "/251370668.pcd"), 0.2);
+  const PointCloud source = geometry::VoxelDownsample(io::ReadPcd(dir + "/251371071.pcd"), 0.2);
+  // relative.txt: source 251371071 -> target 251370668, i.e. T_target_source.
+  const Pose ref = io::ReadTransform(dir + "/relative.txt");
+  const RegistrationResult r = RegisterGicp(target, source, Pose::Identity(), cfg);
+  const Pose err = ref.inverse() * r.T_target_source;
+  std::printf("gicp_pair: |dt| = %.4f m, dR = %.4f deg, fitness %.4f, overlap %.3f\n",
+              err.translation().norm(), AngleDeg(err), r.fitness, r.overlap);
+  EXPECT_TRUE(r.accepted) << r.reason;
+  EXPECT_LT(err.translation().norm(), 0.05);
+  // The reference is "good to a few cm" (data README); PCL GICP lands 0.2-0.5 deg from its
+  // rotation depending on the correspondence distance, so the rotation bound is looser here.
+  EXPECT_LT(AngleDeg(err), 0.6);
+}
+
+TEST(SlamRegistrationReal, KittiScans0And5FromScanContextYaw) {
+  LTM_REQUIRE_REAL_DATA(data);
+  const std::string dir = data + "/kitti00_head";
+  SlamConfig cfg;
+  const Pose Tr = io::ParseTransform(
+      "4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-02 "
+      "-7.210626507497e-03 8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 "
+      "9.999738645903e-01 4.859485810390e-04 -7.206933692422e-03 -2.921968648686e-01",
+      "KITTI Tr (data README)");
+  const std::vector<Pose> P = io::ReadKittiPoses(dir + "/poses_00.txt");
+  ASSERT_GT(P.size(), 5u);
+  // LiDAR poses: T_w_velo = Tr^-1 P Tr; relative pose of scan 5 in scan 0's frame.
+  const Pose truth = (Tr.inverse() * P[0] * Tr).inverse() * (Tr.inverse() * P[5] * Tr);
+  const PointCloud s0 = io::ReadKittiBin(dir + "/velodyne/000000.bin");
+  const PointCloud s5 = io::ReadKittiBin(dir + "/velodyne/000005.bin");
+  const ScMatch m = CompareScanContexts(MakeScanContext(s0, cfg), MakeScanContext(s5, cfg), cfg);
+  ASSERT_LT(m.distance, cfg.sc_dist_threshold);
+  const auto prep = [&](const PointCloud& c) {
+    return geometry::VoxelDownsample(
+        geometry::RangeFilter(c, cfg.reg_min_range_m, cfg.reg_max_range_m), cfg.reg_voxel_m);
+  };
+  const Pose init(Eigen::AngleAxisd(m.yaw_rad, Eigen::Vector3d::UnitZ()));
+  const PointCloud a = prep(s0), b = prep(s5);
+  const RegistrationResult r = RegisterGicp(a, b, init, cfg);
+  // The same registration started at the KITTI relative pose: the SC-yaw start (4.3 m of
+  // translation unknown) must reach the same optimum.
+  const RegistrationResult at_truth = RegisterGicp(a, b, truth, cfg);
+  const Pose err = truth.inverse() * r.T_target_source;
+  const Pose basin = at_truth.T_target_source.inverse() * r.T_target_source;
+  std::printf("KITTI 0<-5: truth |t| = %.3f m; SC dist %.3f yaw %.2f deg; GICP from SC yaw vs "
+              "GICP from truth: %.4f m %.4f deg; vs KITTI poses: %.4f m %.4f deg\n",
+              truth.translation().norm(), m.distance, m.yaw_rad / kDeg,
+              basin.translation().norm(), AngleDeg(basin), err.translation().norm(), AngleDeg(err));
+  EXPECT_TRUE(r.accepted) << r.reason;
+  EXPECT_LT(basin.translation().norm(), 0.05);
+  EXPECT_LT(AngleDeg(basin), 0.2);
+  // Measured: PCL GICP on these raw (not de-skewed) scans settles ~0.7 m short of the KITTI
+  // pose whether started from the SC yaw or from the pose itself (also ~0.18 m for scans 0-1),
+  // so the comparison with the KITTI poses is bounded loosely and reported.
+  EXPECT_LT(err.translation().norm(), 1.0);
+}
