@@ -1,0 +1,399 @@
+// Embree 3 scenes and the spinning LiDAR. One instanced scene per part: the permanent world,
+// each LD object, and two actor prototypes; each session has a top-level scene instancing the
+// permanent world, its LD objects and its moving actors (re-committed per keyframe, which only
+// rebuilds the small instance BVH).
+#include "ltmapper/sim/internal.hpp"
+
+#include <embree3/rtcore.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+
+namespace ltm::sim {
+
+namespace {
+
+struct InstanceKind {
+  enum Type { kPermanent, kLd, kActor } type = kPermanent;
+  int index = 0;  // LD object index or actor index in the session plan
+};
+
+struct SessionScene {
+  RTCScene top = nullptr;
+  std::vector<InstanceKind> inst;      // by instance geometry id in `top`
+  std::vector<RTCGeometry> actor_geom; // by actor index
+  std::vector<bool> actor_on;
+  std::vector<Eigen::Matrix3f> actor_rot;
+  int keyframe = -2;
+};
+
+void ErrorCallback(void* user, RTCError code, const char* str) {
+  auto* msg = static_cast<std::string*>(user);
+  static std::mutex m;
+  std::lock_guard<std::mutex> lock(m);
+  if (msg->empty()) *msg = "Embree error " + std::to_string(int(code)) + ": " + (str ? str : "");
+}
+
+}  // namespace
+
+struct Simulator::Impl {
+  detail::Scenario sc;
+  int threads = 0;
+  tbb::task_arena arena;
+  std::string embree_error;
+  RTCDevice device = nullptr;
+  RTCScene permanent = nullptr, car = nullptr, pedestrian = nullptr;
+  std::vector<RTCScene> ld;
+  std::vector<SessionScene> sessions;
+  std::vector<Eigen::Vector3f> dirs;  // sensor-frame ray directions, beam-major
+  std::size_t triangles = 0;
+  std::vector<LdObjectInfo> ld_info;
+
+  Impl(const SimConfig& cfg, int n_threads)
+      : sc(detail::BuildScenario(cfg)),
+        threads(n_threads),
+        arena(n_threads > 0 ? n_threads : tbb::task_arena::automatic) {
+    const std::string config = n_threads > 0 ? "threads=" + std::to_string(n_threads) : "";
+    device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
+    if (!device) throw Error("sim: cannot create the Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
+    rtcSetDeviceErrorFunction(device, ErrorCallback, &embree_error);
+    for (const auto& o : sc.ld) ld_info.push_back(o.info);
+    arena.execute([&] { Build(); });
+    Check("building the scenes");
+    const int B = cfg.beams, C = cfg.columns;
+    dirs.resize(std::size_t(B) * C);
+    for (int b = 0; b < B; ++b) {
+      const double el = (B == 1 ? cfg.fov_up_deg
+                                : cfg.fov_up_deg - b * (cfg.fov_up_deg - cfg.fov_down_deg) / (B - 1)) * M_PI / 180.0;
+      for (int c = 0; c < C; ++c) {
+        // Column 0 at azimuth +180 deg, azimuth decreasing with the column (geometry::RangeImage).
+        const double az = M_PI - 2.0 * M_PI * c / C;
+        dirs[std::size_t(b) * C + c] = Eigen::Vector3f(float(std::cos(el) * std::cos(az)),
+                                                       float(std::cos(el) * std::sin(az)), float(std::sin(el)));
+      }
+    }
+  }
+
+  ~Impl() {
+    for (auto& s : sessions) {
+      if (s.top) rtcReleaseScene(s.top);
+    }
+    for (auto* s : ld) rtcReleaseScene(s);
+    if (permanent) rtcReleaseScene(permanent);
+    if (car) rtcReleaseScene(car);
+    if (pedestrian) rtcReleaseScene(pedestrian);
+    if (device) rtcReleaseDevice(device);
+  }
+
+  void Check(const std::string& what) {
+    if (!embree_error.empty()) throw Error("sim: " + what + ": " + embree_error);
+  }
+
+  RTCScene MeshScene(const detail::Mesh& m, RTCBuildQuality quality) {
+    RTCScene scene = rtcNewScene(device);
+    rtcSetSceneBuildQuality(scene, quality);
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                          3 * sizeof(float), m.v.size()));
+    auto* f = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                             3 * sizeof(unsigned), m.f.size()));
+    if (!v || !f) throw Error("sim: Embree could not allocate a geometry buffer");
+    for (std::size_t i = 0; i < m.v.size(); ++i) {
+      v[3 * i] = m.v[i].x();
+      v[3 * i + 1] = m.v[i].y();
+      v[3 * i + 2] = m.v[i].z();
+    }
+    for (std::size_t i = 0; i < m.f.size(); ++i) {
+      for (int k = 0; k < 3; ++k) f[3 * i + k] = m.f[i][k];
+    }
+    rtcCommitGeometry(g);
+    rtcAttachGeometry(scene, g);
+    rtcReleaseGeometry(g);
+    rtcCommitScene(scene);
+    triangles += m.f.size();
+    return scene;
+  }
+
+  static void SetTransform(RTCGeometry inst, const Pose& T) {
+    float m[12];  // column-major 3x4
+    for (int c = 0; c < 4; ++c) {
+      for (int r = 0; r < 3; ++r) m[c * 3 + r] = float(T.matrix()(r, c));
+    }
+    rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, m);
+  }
+
+  unsigned Instance(RTCScene top, RTCScene child, const Pose& T, RTCGeometry* out = nullptr) {
+    RTCGeometry inst = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(inst, child);
+    SetTransform(inst, T);
+    rtcCommitGeometry(inst);
+    const unsigned id = rtcAttachGeometry(top, inst);
+    if (out) *out = inst;
+    rtcReleaseGeometry(inst);
+    return id;
+  }
+
+  void Build() {
+    permanent = MeshScene(sc.static_mesh, RTC_BUILD_QUALITY_HIGH);
+    for (const auto& o : sc.ld) ld.push_back(MeshScene(o.mesh, RTC_BUILD_QUALITY_HIGH));
+    car = MeshScene(sc.car_mesh, RTC_BUILD_QUALITY_HIGH);
+    pedestrian = MeshScene(sc.pedestrian_mesh, RTC_BUILD_QUALITY_HIGH);
+    triangles -= sc.car_mesh.f.size() + sc.pedestrian_mesh.f.size();
+    sessions.resize(sc.sessions.size());
+    for (std::size_t s = 0; s < sc.sessions.size(); ++s) {
+      SessionScene& ss = sessions[s];
+      ss.top = rtcNewScene(device);
+      rtcSetSceneFlags(ss.top, RTC_SCENE_FLAG_DYNAMIC);
+      rtcSetSceneBuildQuality(ss.top, RTC_BUILD_QUALITY_LOW);
+      auto put = [&](unsigned id, InstanceKind k) {
+        if (ss.inst.size() <= id) ss.inst.resize(id + 1);
+        ss.inst[id] = k;
+      };
+      put(Instance(ss.top, permanent, Pose::Identity()), {InstanceKind::kPermanent, -1});
+      for (std::size_t i = 0; i < sc.ld.size(); ++i) {
+        if (IsPresent(int(i), int(s))) put(Instance(ss.top, ld[i], Pose::Identity()), {InstanceKind::kLd, int(i)});
+      }
+      const auto& actors = sc.sessions[s].actors;
+      ss.actor_geom.resize(actors.size());
+      ss.actor_on.assign(actors.size(), true);
+      ss.actor_rot.assign(actors.size(), Eigen::Matrix3f::Identity());
+      for (std::size_t a = 0; a < actors.size(); ++a) {
+        put(Instance(ss.top, actors[a].pedestrian ? pedestrian : car, Pose::Identity(), &ss.actor_geom[a]),
+            {InstanceKind::kActor, int(a)});
+      }
+    }
+  }
+
+  bool IsPresent(int object, int session) const {
+    const auto& p = sc.ld[std::size_t(object)].info.present_in;
+    return std::find(p.begin(), p.end(), session) != p.end();
+  }
+
+  void CheckIndex(int session, int keyframe) const {
+    if (session < 0 || session >= int(sc.sessions.size())) throw Error("sim: no session " + std::to_string(session));
+    if (keyframe < 0 || keyframe >= int(sc.sessions[std::size_t(session)].T_world_sensor.size())) {
+      throw Error("sim: session " + std::to_string(session) + " has no keyframe " + std::to_string(keyframe));
+    }
+  }
+
+  // Puts the session's actors where they are at the keyframe's time; actors off their paths or
+  // beyond the LiDAR's reach are disabled.
+  void SetKeyframe(int session, int keyframe) {
+    CheckIndex(session, keyframe);
+    SessionScene& ss = sessions[std::size_t(session)];
+    if (ss.keyframe == keyframe) return;
+    const auto& plan = sc.sessions[std::size_t(session)];
+    const double t = keyframe * plan.seconds_per_keyframe;
+    const Eigen::Vector3d sensor = plan.T_world_sensor[std::size_t(keyframe)].translation();
+    for (std::size_t a = 0; a < plan.actors.size(); ++a) {
+      Pose T;
+      bool on = plan.actors[a].PoseAt(t, sc.grid, sc.terrain, &T) &&
+                (T.translation() - sensor).norm() < sc.cfg.max_range_m + 10.0;
+      RTCGeometry g = ss.actor_geom[a];
+      if (on) {
+        SetTransform(g, T);
+        ss.actor_rot[a] = T.linear().cast<float>();
+        rtcCommitGeometry(g);
+      }
+      if (on != ss.actor_on[a]) {
+        if (on) rtcEnableGeometry(g);
+        else rtcDisableGeometry(g);
+        ss.actor_on[a] = on;
+      }
+    }
+    arena.execute([&] { rtcCommitScene(ss.top); });
+    Check("committing session " + std::to_string(session));
+    ss.keyframe = keyframe;
+  }
+
+  // Label and intensity of a hit.
+  void Resolve(int session, unsigned inst, unsigned prim, const Eigen::Vector3f& ng, const Eigen::Vector3f& dir,
+               PointClass* cls, int* object, float* intensity) const {
+    const SessionScene& ss = sessions[std::size_t(session)];
+    const InstanceKind k = ss.inst[inst];
+    const detail::Mesh* mesh = &sc.static_mesh;
+    Eigen::Vector3f n = ng;
+    *cls = PointClass::kStatic;
+    *object = -1;
+    if (k.type == InstanceKind::kLd) {
+      mesh = &sc.ld[std::size_t(k.index)].mesh;
+      *object = sc.ld[std::size_t(k.index)].info.id;
+    } else if (k.type == InstanceKind::kActor) {
+      const auto& actor = sc.sessions[std::size_t(session)].actors[std::size_t(k.index)];
+      mesh = actor.pedestrian ? &sc.pedestrian_mesh : &sc.car_mesh;
+      n = ss.actor_rot[std::size_t(k.index)] * ng;  // Ng is in the instance's object space
+      *cls = PointClass::kHD;
+      *object = actor.id;
+    }
+    const float nn = n.norm();
+    const float cosine = nn > 0 ? std::abs(n.dot(dir)) / nn : 1.0f;
+    *intensity = 100.0f * detail::Reflectivity(mesh->mat[prim]) * cosine;
+  }
+};
+
+Simulator::Simulator(const SimConfig& cfg, int threads) {
+  CheckConfig(cfg);
+  impl_ = std::make_unique<Impl>(cfg, threads);
+}
+Simulator::~Simulator() = default;
+
+const SimConfig& Simulator::config() const { return impl_->sc.cfg; }
+int Simulator::sessions() const { return int(impl_->sc.sessions.size()); }
+int Simulator::keyframes(int s) const {
+  impl_->CheckIndex(s, 0);
+  return int(impl_->sc.sessions[std::size_t(s)].T_world_sensor.size());
+}
+std::size_t Simulator::triangles() const { return impl_->triangles; }
+std::size_t Simulator::hd_actors() const {
+  std::size_t n = 0;
+  for (const auto& s : impl_->sc.sessions) n += s.actors.size();
+  return n;
+}
+const std::vector<LdObjectInfo>& Simulator::ld_objects() const { return impl_->ld_info; }
+bool Simulator::IsPresent(int o, int s) const { return impl_->IsPresent(o, s); }
+Pose Simulator::T_world_session(int s) const {
+  impl_->CheckIndex(s, 0);
+  return impl_->sc.sessions[std::size_t(s)].T_world_session;
+}
+const std::vector<Pose>& Simulator::T_world_sensor(int s) const {
+  impl_->CheckIndex(s, 0);
+  return impl_->sc.sessions[std::size_t(s)].T_world_sensor;
+}
+std::vector<Pose> Simulator::T_session_sensor_true(int s) const {
+  const Pose inv = T_world_session(s).inverse();
+  std::vector<Pose> out;
+  for (const auto& T : T_world_sensor(s)) out.push_back(inv * T);
+  return out;
+}
+const std::vector<Pose>& Simulator::T_session_sensor_drifted(int s) const {
+  impl_->CheckIndex(s, 0);
+  return impl_->sc.sessions[std::size_t(s)].T_session_sensor_drifted;
+}
+
+PointCloud Simulator::CastScan(int session, int keyframe) {
+  Impl& I = *impl_;
+  I.SetKeyframe(session, keyframe);
+  const SimConfig& cfg = I.sc.cfg;
+  const Pose& T = I.sc.sessions[std::size_t(session)].T_world_sensor[std::size_t(keyframe)];
+  const Eigen::Matrix3f R = T.linear().cast<float>();
+  const Eigen::Vector3f o = T.translation().cast<float>();
+  const int B = cfg.beams, C = cfg.columns;
+  const std::size_t n = std::size_t(B) * C;
+  std::vector<float> range(n, -1.f), intensity(n, 0.f);
+  std::vector<PointClass> cls(n, PointClass::kUnknown);
+  std::vector<std::int32_t> object(n, -1);
+  RTCScene top = I.sessions[std::size_t(session)].top;
+  const float tnear = float(cfg.min_range_m), tfar = float(cfg.max_range_m);
+
+  I.arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, C, 8), [&](const tbb::blocked_range<int>& r) {
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+      alignas(64) int valid[16];
+      RTCRayHit16 rh;
+      for (int c = r.begin(); c < r.end(); ++c) {
+        for (int b0 = 0; b0 < B; b0 += 16) {
+          for (int l = 0; l < 16; ++l) {
+            const int b = b0 + l;
+            valid[l] = b < B ? -1 : 0;
+            const Eigen::Vector3f d = b < B ? Eigen::Vector3f(R * I.dirs[std::size_t(b) * C + c]) : Eigen::Vector3f::UnitX();
+            rh.ray.org_x[l] = o.x();
+            rh.ray.org_y[l] = o.y();
+            rh.ray.org_z[l] = o.z();
+            rh.ray.dir_x[l] = d.x();
+            rh.ray.dir_y[l] = d.y();
+            rh.ray.dir_z[l] = d.z();
+            rh.ray.tnear[l] = tnear;
+            rh.ray.tfar[l] = tfar;
+            rh.ray.time[l] = 0.f;
+            rh.ray.mask[l] = 0xFFFFFFFFu;
+            rh.ray.id[l] = unsigned(l);
+            rh.ray.flags[l] = 0;
+            rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+            rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
+          }
+          rtcIntersect16(valid, top, &ctx, &rh);
+          for (int l = 0; l < 16 && b0 + l < B; ++l) {
+            if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
+            const std::size_t i = std::size_t(b0 + l) * C + c;
+            range[i] = rh.ray.tfar[l];
+            const Eigen::Vector3f d(rh.ray.dir_x[l], rh.ray.dir_y[l], rh.ray.dir_z[l]);
+            I.Resolve(session, rh.hit.instID[0][l], rh.hit.primID[l],
+                      {rh.hit.Ng_x[l], rh.hit.Ng_y[l], rh.hit.Ng_z[l]}, d, &cls[i], &object[i], &intensity[i]);
+          }
+        }
+      }
+    });
+  });
+  I.Check("casting a scan");
+
+  // Noise and dropout per ray from a hash of (seed, session, keyframe, ray): thread-independent.
+  PointCloud cloud;
+  cloud.reserve(n);
+  const auto seed = std::uint64_t(cfg.seed);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (range[i] < 0) continue;
+    const std::uint64_t h = detail::Hash(seed, std::uint64_t(session) + 1000, std::uint64_t(keyframe), i);
+    if (detail::ToUnit(h) < cfg.dropout) continue;
+    const double u1 = 1.0 - detail::ToUnit(detail::Mix(h ^ 0x5bd1e995ull)), u2 = detail::ToUnit(detail::Mix(h + 17));
+    const double g = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+    const float rr = float(range[i] + cfg.range_noise_m * g);
+    if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
+    const Eigen::Vector3f p = I.dirs[i] * rr;
+    cloud.push_back(p.x(), p.y(), p.z(), intensity[i]);
+    cloud.cls.push_back(cls[i]);
+    cloud.object.push_back(object[i]);
+  }
+  cloud.session.assign(cloud.size(), std::uint16_t(session));
+  return cloud;
+}
+
+std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const Eigen::Vector3d& origin,
+                                        const std::vector<Eigen::Vector3f>& dirs) {
+  Impl& I = *impl_;
+  I.SetKeyframe(session, keyframe);
+  std::vector<RayHit> out(dirs.size());
+  RTCScene top = I.sessions[std::size_t(session)].top;
+  const float tfar = float(I.sc.cfg.max_range_m);
+  I.arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, dirs.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+        RTCRayHit rh;
+        rh.ray.org_x = float(origin.x());
+        rh.ray.org_y = float(origin.y());
+        rh.ray.org_z = float(origin.z());
+        rh.ray.dir_x = dirs[i].x();
+        rh.ray.dir_y = dirs[i].y();
+        rh.ray.dir_z = dirs[i].z();
+        rh.ray.tnear = 0.f;
+        rh.ray.tfar = tfar;
+        rh.ray.time = 0.f;
+        rh.ray.mask = 0xFFFFFFFFu;
+        rh.ray.id = 0;
+        rh.ray.flags = 0;
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(top, &ctx, &rh);
+        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+        RayHit& h = out[i];
+        h.hit = true;
+        h.range = rh.ray.tfar;
+        float intensity;
+        I.Resolve(session, rh.hit.instID[0], rh.hit.primID, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, dirs[i],
+                  &h.cls, &h.object, &intensity);
+      }
+    });
+  });
+  I.Check("casting rays");
+  return out;
+}
+
+}  // namespace ltm::sim

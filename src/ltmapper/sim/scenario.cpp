@@ -1,0 +1,50 @@
+// Config checks and the tiny test scenario.
+#include "ltmapper/sim/sim.hpp"
+
+#include <cmath>
+
+namespace ltm::sim {
+
+void CheckConfig(const SimConfig& c, const std::string& where) {
+  ValidateConfig(c, where);
+  auto fail = [&](const std::string& what) { throw Error(where + ": " + what); };
+  if (c.fov_up_deg <= c.fov_down_deg && c.beams > 1) fail("lidar.fov_up_deg must be above lidar.fov_down_deg");
+  if (c.min_range_m >= c.max_range_m) fail("lidar.min_range_m must be below lidar.max_range_m");
+  if (c.building_max_height_m < c.building_min_height_m) {
+    fail("world.building_max_height_m must be >= world.building_min_height_m");
+  }
+  if (std::floor(c.extent_m / c.block_m + 1e-9) < 2) {
+    fail("world.extent_m must hold at least two streets (extent >= 2 * world.block_m)");
+  }
+  if (c.road_half_width_m + c.sidewalk_m + 2.0 > 0.5 * c.block_m) {
+    fail("world.road_half_width_m + world.sidewalk_m leave no room for blocks (must be < block_m / 2 - 2)");
+  }
+  if (c.lane_offset_m >= c.road_half_width_m) fail("route.lane_offset_m must lie inside the road");
+}
+
+SimConfig TinyConfig() {
+  SimConfig c;
+  c.seed = 7;
+  c.extent_m = 100.0;
+  c.block_m = 50.0;
+  c.ground_cell_m = 2.0;
+  c.beams = 16;
+  c.columns = 360;
+  c.max_range_m = 60.0;
+  c.sessions = 2;
+  c.keyframes = 15;
+  c.keyframe_spacing_m = 2.0;
+  c.hd_cars = 3;
+  c.hd_pedestrians = 3;
+  c.ld_parked_cars = 2;
+  c.ld_trees_cut = 1;
+  c.ld_fences = 1;
+  c.ld_containers = 1;
+  c.ld_structures = 1;
+  c.ld_wall_reveals = 1;
+  c.ld_occluded = 1;
+  c.open_lot_fraction = 0.5;
+  return c;
+}
+
+}  // namespace ltm::sim

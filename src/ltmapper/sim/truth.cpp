@@ -1,0 +1,238 @@
+// Simulate(): casts every keyframe of every session, writes the sessions (SC-LIO-SAM layout) and
+// the truth folder: true poses and origins, labelled scans, static worlds, LD objects and the
+// point-wise change truth per (central, query) pair with occlusion-aware strong / weak split.
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/sim/sim.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iomanip>
+#include <ostream>
+
+namespace ltm::sim {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+std::string Num(int i, int width) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%0*d", width, i);
+  return buf;
+}
+std::string SessionName(int s) { return "session_" + Num(s, 2); }
+
+void WriteObjectsCsv(const std::string& path, const std::vector<LdObjectInfo>& objects) {
+  io::WriteFileAtomic(path, [&](std::ostream& os) {
+    os << "id,class,present_in,placement,centroid_x,centroid_y,centroid_z,min_x,min_y,min_z,max_x,max_y,max_z\n";
+    os << std::fixed << std::setprecision(3);
+    for (const auto& o : objects) {
+      os << o.id << ',' << o.cls << ',';
+      for (std::size_t i = 0; i < o.present_in.size(); ++i) os << (i ? ";" : "") << o.present_in[i];
+      os << ',' << o.placement;
+      for (const auto* v : {&o.centroid, &o.box_min, &o.box_max}) os << ',' << v->x() << ',' << v->y() << ',' << v->z();
+      os << '\n';
+    }
+  });
+}
+
+// For each world point: does some keyframe ray of `session` pass through it? The ray from the
+// keyframe's sensor towards the point is cast in that session's world (with its HD actors at
+// that time); it passes through when its first hit lies beyond the point's range plus the
+// tolerance, or nothing is hit within max range. Only keyframes that could have measured the
+// point are tried: range within [min_range, max_range - tol] and elevation inside the vertical
+// FOV. With visibility_max_rays > 0, at most that many rays per point (the first keyframes).
+std::vector<char> SeenThrough(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg) {
+  const std::size_t n = pts.size();
+  std::vector<char> seen(n, 0);
+  std::vector<int> tested(n, 0);
+  const double tol = cfg.visibility_tolerance_m;
+  const double el_lo = cfg.fov_down_deg * M_PI / 180.0 - 1e-6, el_hi = cfg.fov_up_deg * M_PI / 180.0 + 1e-6;
+  const auto& poses = sim.T_world_sensor(session);
+  std::vector<std::size_t> idx;
+  std::vector<Eigen::Vector3f> dirs;
+  std::vector<float> ranges;
+  for (std::size_t j = 0; j < poses.size(); ++j) {
+    const Eigen::Vector3d o = poses[j].translation();
+    const Eigen::Matrix3d Rt = poses[j].linear().transpose();
+    idx.clear();
+    dirs.clear();
+    ranges.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (seen[i] || (cfg.visibility_max_rays > 0 && tested[i] >= cfg.visibility_max_rays)) continue;
+      const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - o;
+      const double r = d.norm();
+      if (r < cfg.min_range_m || r + tol > cfg.max_range_m) continue;
+      const Eigen::Vector3d ds = Rt * d;
+      const double el = std::atan2(ds.z(), std::hypot(ds.x(), ds.y()));
+      if (el < el_lo || el > el_hi) continue;
+      idx.push_back(i);
+      dirs.push_back((d / r).cast<float>());
+      ranges.push_back(float(r));
+    }
+    if (idx.empty()) continue;
+    const auto hits = sim.CastRays(session, int(j), o, dirs);
+    for (std::size_t m = 0; m < idx.size(); ++m) {
+      ++tested[idx[m]];
+      if (!hits[m].hit || hits[m].range > ranges[m] + tol) seen[idx[m]] = 1;
+    }
+  }
+  return seen;
+}
+
+// PointCloud::append drops the optional arrays when `src` has none, which an empty cloud never
+// has: skip empty ones so the labels survive.
+void Append(PointCloud& dst, const PointCloud& src) {
+  if (!src.empty()) dst.append(src);
+}
+
+std::size_t DirBytes(const std::string& dir) {
+  std::size_t total = 0;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    if (e.is_regular_file()) total += std::size_t(e.file_size());
+  }
+  return total;
+}
+
+}  // namespace
+
+SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads) {
+  const auto t_total = Clock::now();
+  SimReport rep;
+  auto t = Clock::now();
+  Simulator sim(cfg, threads);
+  rep.seconds_build = Since(t);
+  const int N = sim.sessions();
+  rep.sessions = N;
+  rep.triangles = sim.triangles();
+  rep.ld_objects = sim.ld_objects().size();
+  rep.hd_actors = sim.hd_actors();
+
+  const std::string truth = out_dir + "/truth";
+  io::MakeDirs(out_dir + "/sessions");
+  io::MakeDirs(truth);
+  SimConfig resolved = cfg;
+  io::SaveConfigFields(truth + "/scenario.yaml", FieldsOf(resolved));
+  WriteObjectsCsv(truth + "/objects.csv", sim.ld_objects());
+
+  const double voxel = cfg.truth_voxel_m;
+  std::vector<PointCloud> ld_world(static_cast<std::size_t>(N));
+  for (int s = 0; s < N; ++s) {
+    const std::string name = SessionName(s);
+    const std::string sdir = out_dir + "/sessions/" + name, tdir = truth + "/" + name;
+    io::MakeDirs(tdir + "/labels");
+    const auto& drifted = sim.T_session_sensor_drifted(s);
+    const auto& world_poses = sim.T_world_sensor(s);
+    Session session;
+    session.name = name;
+    session.dir = sdir;
+    PointCloud static_acc, ld_acc;
+    Progress progress("sim " + name, std::size_t(sim.keyframes(s)));
+    for (int k = 0; k < sim.keyframes(s); ++k) {
+      t = Clock::now();
+      auto cloud = std::make_shared<PointCloud>(sim.CastScan(s, k));
+      rep.seconds_cast += Since(t);
+      rep.rays += std::size_t(cfg.beams) * std::size_t(cfg.columns);
+      rep.points += cloud->size();
+
+      t = Clock::now();
+      io::WritePly(tdir + "/labels/" + Num(k, 6) + ".ply", *cloud);
+      rep.seconds_write += Since(t);
+
+      t = Clock::now();
+      const PointCloud world = geometry::Transform(*cloud, world_poses[std::size_t(k)]);
+      std::vector<bool> is_static(world.size()), is_ld(world.size());
+      for (std::size_t i = 0; i < world.size(); ++i) {
+        is_static[i] = world.cls[i] != PointClass::kHD;
+        is_ld[i] = is_static[i] && world.object[i] >= 0;
+        rep.hd_points += !is_static[i];
+        rep.ld_points += is_ld[i];
+      }
+      Append(static_acc, geometry::VoxelDownsample(world.select(is_static), voxel, threads));
+      Append(ld_acc, geometry::VoxelDownsample(world.select(is_ld), voxel, threads));
+      rep.seconds_truth += Since(t);
+
+      Keyframe kf;
+      kf.index = k;
+      kf.T_session_sensor = drifted[std::size_t(k)];
+      kf.cloud = std::move(cloud);
+      session.keyframes.push_back(std::move(kf));
+      if (k > 0) {
+        Edge e;
+        e.from = k - 1;
+        e.to = k;
+        e.T_from_to = drifted[std::size_t(k - 1)].inverse() * drifted[std::size_t(k)];
+        session.odometry.push_back(e);
+      }
+      progress.Tick();
+    }
+    progress.Done();
+    t = Clock::now();
+    io::WriteSession(sdir, session);
+    io::WriteKittiPoses(tdir + "/poses_world.txt", world_poses);
+    io::WriteKittiPoses(tdir + "/origin.txt", {sim.T_world_session(s)});
+    rep.seconds_write += Since(t);
+    t = Clock::now();
+    const PointCloud static_world = geometry::VoxelDownsample(static_acc, voxel, threads);
+    io::WritePcd(tdir + "/static_world.pcd", static_world);
+    io::WritePly(tdir + "/static_world.ply", static_world);
+    ld_world[std::size_t(s)] = geometry::VoxelDownsample(ld_acc, voxel, threads);
+    rep.seconds_truth += Since(t);
+    rep.keyframes += std::size_t(sim.keyframes(s));
+  }
+
+  // Change truth per pair (central 0, query k).
+  t = Clock::now();
+  for (int q = 1; q < N; ++q) {
+    PairTruthCounts counts;
+    counts.query = q;
+    auto changed = [&](const PointCloud& c, int in, int out) {
+      std::vector<bool> keep(c.size());
+      for (std::size_t i = 0; i < c.size(); ++i) {
+        keep[i] = sim.IsPresent(c.object[i], in) && !sim.IsPresent(c.object[i], out);
+      }
+      return c.select(keep);
+    };
+    PointCloud nd = changed(ld_world[0], 0, q), pd = changed(ld_world[std::size_t(q)], q, 0);
+    const auto nd_seen = SeenThrough(sim, q, nd, cfg);  // query saw through: strong ND
+    const auto pd_seen = SeenThrough(sim, 0, pd, cfg);  // central saw the space free: weak PD
+    std::vector<bool> nd_strong(nd.size()), nd_weak(nd.size()), pd_strong(pd.size()), pd_weak(pd.size());
+    for (std::size_t i = 0; i < nd.size(); ++i) {
+      nd_strong[i] = nd_seen[i];
+      nd_weak[i] = !nd_seen[i];
+      nd.cls[i] = nd_seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak;
+    }
+    for (std::size_t i = 0; i < pd.size(); ++i) {
+      pd_weak[i] = pd_seen[i];
+      pd_strong[i] = !pd_seen[i];
+      pd.cls[i] = pd_seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong;
+    }
+    const std::string pdir = truth + "/pair_00_" + Num(q, 2);
+    io::MakeDirs(pdir);
+    const PointCloud pds = pd.select(pd_strong), pdw = pd.select(pd_weak);
+    const PointCloud nds = nd.select(nd_strong), ndw = nd.select(nd_weak);
+    io::WritePcd(pdir + "/pd_strong.pcd", pds);
+    io::WritePcd(pdir + "/pd_weak.pcd", pdw);
+    io::WritePcd(pdir + "/nd_strong.pcd", nds);
+    io::WritePcd(pdir + "/nd_weak.pcd", ndw);
+    PointCloud all = nd;
+    Append(all, pd);
+    io::WritePly(pdir + "/changes.ply", all);
+    counts.pd_strong = pds.size();
+    counts.pd_weak = pdw.size();
+    counts.nd_strong = nds.size();
+    counts.nd_weak = ndw.size();
+    rep.pairs.push_back(counts);
+  }
+  rep.seconds_truth += Since(t);
+  rep.rays_per_s = rep.seconds_cast > 0 ? double(rep.rays) / rep.seconds_cast : 0.0;
+  rep.bytes_written = DirBytes(out_dir);
+  rep.seconds_total = Since(t_total);
+  return rep;
+}
+
+}  // namespace ltm::sim
