@@ -101,6 +101,19 @@ std::string Join(const std::string& a, const std::string& b) { return (fs::path(
 
 void Usage(const std::string& what) { throw CLI::ValidationError(what); }
 
+// Where the stage output lives relative to the sim's true world: "central" (LT-SLAM's world =
+// the central session's frame; with --aligned, by the joint ATE alignment) or "world" (the stage
+// was run on the sim's true world poses, e.g. `removert --poses truth/*/poses_world.txt`).
+void AddTruthFrame(CLI::App& cmd, std::string& frame) {
+  cmd.add_option("--truth-frame", frame,
+                 "Frame of the stage output: central (LT-SLAM world, default) or world (run on true world poses)")
+      ->check(CLI::IsMember({"central", "world"}));
+}
+Pose TruthFrame(const std::string& sim, const std::string& aligned, const std::string& frame) {
+  if (!aligned.empty()) return eval::TruthToEstimateFrame(sim, aligned);
+  return frame == "world" ? Pose::Identity() : eval::TruthToEstimateFrame(sim, "");
+}
+
 // ------------------------------------------------------------------------------------ traj
 void SetupTraj(CLI::App& parent) {
   struct Opt : EvalOptions {
@@ -157,6 +170,7 @@ void SetupTraj(CLI::App& parent) {
 void SetupHd(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string truth_map, output, objects, sim, changes, session, aligned, poses;
+    std::string truth_frame = "central";
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("hd", "HD removal: point-wise SA / DA / AA (KTH DynamicMap rule)");
@@ -169,6 +183,7 @@ void SetupHd(CLI::App& parent) {
   cmd->add_option("--session", o->session, "Session name (e.g. session_01)");
   cmd->add_option("--aligned", o->aligned, "Place the labelled scans with <aligned>/<session>/poses_world.txt (the poses the method used)");
   cmd->add_option("--poses", o->poses, "Place the labelled scans with this pose file (KITTI/TUM) instead");
+  AddTruthFrame(*cmd, o->truth_frame);
   cmd->callback([o] {
     const bool sim_form = !o->sim.empty();
     if (sim_form == !o->truth_map.empty())
@@ -197,11 +212,11 @@ void SetupHd(CLI::App& parent) {
         poses = eval::ReadPoses(f);
         report.inputs.push_back({"scan poses", f});
       } else {
-        // True poses in the estimated world frame (= the central session's true frame).
-        const Pose T = eval::TruthToEstimateFrame(o->sim, "");
+        // True poses in the output's frame.
+        const Pose T = TruthFrame(o->sim, "", o->truth_frame);
         for (const auto& p : eval::ReadPoses(Join(Join(Join(o->sim, "truth"), o->session), "poses_world.txt")))
           poses.push_back(T * p);
-        report.inputs.push_back({"scan poses", "true poses in the central session's frame"});
+        report.inputs.push_back({"scan poses", "true poses, " + o->truth_frame + " frame"});
       }
       report.inputs.push_back({"truth", Join(Join(Join(o->sim, "truth"), o->session), "labels")});
       const std::size_t used = eval::AddSimSessionTruth(ev, o->sim, o->session, poses, cfg);
@@ -217,6 +232,7 @@ void SetupLd(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string truth_dir, pred_dir, kept_map, central_static, truth_transform;
     std::string sim, changes, pair, aligned;
+    std::string truth_frame = "central";
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("ld", "LD changes: precision / recall / F1 of PD and ND, strong and weak");
@@ -231,6 +247,7 @@ void SetupLd(CLI::App& parent) {
   cmd->add_option("--changes", o->changes, "LT-removert output dir (pair folder, <central>/static_map.pcd)");
   cmd->add_option("--pair", o->pair, "Session pair, e.g. 00_01");
   cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world by the joint ATE alignment");
+  AddTruthFrame(*cmd, o->truth_frame);
   cmd->callback([o] {
     const bool sim_form = !o->sim.empty();
     if (sim_form && (o->changes.empty() || o->pair.empty()))
@@ -245,7 +262,7 @@ void SetupLd(CLI::App& parent) {
       const std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
       const std::string pdir = eval::FindPairDir(o->changes, o->pair);
       report.inputs = {{"truth", tdir}, {"prediction", pdir}};
-      const Pose T = eval::TruthToEstimateFrame(o->sim, o->aligned);
+      const Pose T = TruthFrame(o->sim, o->aligned, o->truth_frame);
       truth = eval::TransformChanges(eval::ReadChangeClouds(tdir), T);
       pred = eval::ReadChangeClouds(pdir);
       if (central_static.empty() && o->kept_map.empty()) {
@@ -281,6 +298,7 @@ void SetupLd(CLI::App& parent) {
 void SetupRestore(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string map_a, map_b, sim, session, aligned;
+    std::string truth_frame = "central";
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("restore", "Chamfer distance over cubic patches between two aligned maps (paper table)");
@@ -290,6 +308,7 @@ void SetupRestore(CLI::App& parent) {
   cmd->add_option("--sim", o->sim, "Instead of --map-b: the simulator's truth/<session>/static_world.pcd");
   cmd->add_option("--session", o->session, "Session name for --sim");
   cmd->add_option("--aligned", o->aligned, "With --sim: map the truth into the estimated world by the joint ATE alignment");
+  AddTruthFrame(*cmd, o->truth_frame);
   cmd->callback([o] {
     if (o->map_b.empty() == o->sim.empty()) Usage("eval restore: give --map-b F, or --sim DIR --session NAME");
     if (!o->sim.empty() && o->session.empty()) Usage("eval restore: --session is required with --sim");
@@ -302,7 +321,7 @@ void SetupRestore(CLI::App& parent) {
       report.inputs = {{"map A", o->map_a}, {"map B", o->map_b}};
     } else {
       const std::string f = Join(Join(Join(o->sim, "truth"), o->session), "static_world.pcd");
-      b = geometry::Transform(io::ReadCloud(f), eval::TruthToEstimateFrame(o->sim, o->aligned));
+      b = geometry::Transform(io::ReadCloud(f), TruthFrame(o->sim, o->aligned, o->truth_frame));
       report.inputs = {{"map A", o->map_a}, {"map B", f}};
     }
     report.restore = eval::EvaluateRestore(a, b, cfg, o->common.threads);

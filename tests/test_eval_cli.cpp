@@ -253,6 +253,13 @@ TEST(Cli, TruthAsOutputIsPerfectThroughEveryCommand) {
     EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".precision"), 1.0) << k;
     EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".recall"), 1.0) << k;
   }
+  // The prediction is in the central frame: claiming it is in the sim world misses everything.
+  ASSERT_EQ(RunCli("eval ld --sim " + f.sim + " --changes " + f.changes + " --pair 00_01 --truth-frame world --json " +
+                       (dir / "lw.json"),
+                   &out),
+            0)
+      << out;
+  EXPECT_DOUBLE_EQ(*JsonNumber(test::ReadText(dir / "lw.json"), "ld.pd.precision"), 0.0);
 
   ASSERT_EQ(RunCli("eval restore --map-a " + f.changes + "/session_01/static_map.pcd --sim " + f.sim +
                        " --session session_01 --set restore.min_points=5 --json " + (dir / "r.json"),
