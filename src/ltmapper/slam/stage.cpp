@@ -1,0 +1,222 @@
+// The LT-SLAM stage from files: load session directories, align, write aligned/ (see
+// docs/FORMATS.md, "LT-SLAM output").
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/slam/internal.hpp"
+#include "ltmapper/slam/slam.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <map>
+#include <ostream>
+#include <set>
+#include <sstream>
+
+namespace ltm::slam {
+
+namespace {
+namespace fs = std::filesystem;
+
+std::string JsonString(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    switch (c) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\t': out += "\\t"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          char buf[8];
+          std::snprintf(buf, sizeof(buf), "\\u%04x", c);
+          out += buf;
+        } else {
+          out += c;
+        }
+    }
+  }
+  return out + "\"";
+}
+
+std::string PoseJson(const Pose& T) {
+  std::ostringstream os;
+  os << std::setprecision(9) << "[";
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) os << (r + c ? ", " : "") << T.matrix()(r, c);
+  }
+  os << "]";
+  return os.str();
+}
+
+double YawDeg(const Pose& T) {
+  return std::atan2(T.linear()(1, 0), T.linear()(0, 0)) * 180.0 / M_PI;
+}
+
+void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
+                  const SlamConfig& cfg, const std::string& out_dir) {
+  io::MakeDirs(out_dir);
+  const std::size_t n = sessions.size();
+  // ---- per session
+  for (std::size_t s = 0; s < n; ++s) {
+    const SessionAlignment& a = res.sessions[s];
+    const std::string dir = (fs::path(out_dir) / a.name).string();
+    io::MakeDirs(dir);
+    const std::string kitti = dir + "/poses_world.txt", tum = dir + "/poses_world_tum.txt",
+                      anchor = dir + "/anchor.txt", na = dir + "/NOT_ALIGNED.txt";
+    if (a.aligned) {
+      io::WriteKittiPoses(kitti, a.T_world_sensor);
+      std::vector<io::StampedPose> st;
+      for (std::size_t k = 0; k < a.T_world_sensor.size(); ++k) {
+        st.push_back({double(k), a.T_world_sensor[k]});
+      }
+      io::WriteTumPoses(tum, st);
+      io::WriteKittiPoses(anchor, {a.anchor});
+      fs::remove(na);
+    } else {
+      // Never leave world poses of an earlier run next to a session that is not aligned now.
+      for (const auto& p : {kitti, tum, anchor}) fs::remove(p);
+      io::WriteFileAtomic(na, [&](std::ostream& os) {
+        os << "session " << a.name << " is NOT aligned to the world frame: " << a.reason << "\n";
+      });
+    }
+  }
+
+  // ---- joint graph: keyframes of aligned sessions in world coordinates. Vertex id = number of
+  // keyframes of all earlier aligned sessions + position in the session (no digit tricks).
+  io::G2oGraph graph;
+  std::vector<int> offset(n, -1);
+  int next = 0;
+  for (std::size_t s = 0; s < n; ++s) {
+    if (!res.sessions[s].aligned) continue;
+    offset[s] = next;
+    for (const Pose& T : res.sessions[s].T_world_sensor) graph.vertices.push_back({next++, T});
+  }
+  for (std::size_t s = 0; s < n; ++s) {
+    if (offset[s] < 0) continue;
+    for (const auto* edges : {&sessions[s].odometry, &sessions[s].loops}) {
+      for (Edge e : *edges) {
+        e.from = offset[s] + sessions[s].Find(e.from);
+        e.to = offset[s] + sessions[s].Find(e.to);
+        graph.edges.push_back(e);
+      }
+    }
+  }
+  for (const LoopRecord& l : res.loops) {
+    if (!l.accepted) continue;
+    Edge e;
+    e.from = offset[l.a.session] + l.a.keyframe;
+    e.to = offset[l.b.session] + l.b.keyframe;
+    e.T_from_to = l.T_a_b;
+    e.information = l.information;
+    e.has_information = true;
+    graph.edges.push_back(e);
+  }
+  io::WriteG2o((fs::path(out_dir) / "joint.g2o").string(), graph);
+
+  // ---- loops table
+  io::WriteFileAtomic((fs::path(out_dir) / "loops.csv").string(), [&](std::ostream& os) {
+    os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,accepted,residual_t_m,residual_r_deg,"
+          "status\n";
+    os << std::setprecision(6);
+    for (const LoopRecord& l : res.loops) {
+      const Session& A = sessions[l.a.session];
+      const Session& B = sessions[l.b.session];
+      os << A.name << "-" << B.name << "," << A.keyframes[l.a.keyframe].index << ","
+         << B.keyframes[l.b.keyframe].index << "," << l.source << "," << l.sc_distance << ","
+         << l.yaw_deg << "," << l.fitness << "," << (l.accepted ? 1 : 0) << "," << l.residual_t_m
+         << "," << l.residual_r_deg << ",\"" << l.status << "\"\n";
+    }
+  });
+
+  // ---- report
+  io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) {
+    os << std::setprecision(6) << "{\n  \"central\": " << JsonString(res.sessions[0].name)
+       << ",\n  \"all_aligned\": ";
+    bool all = true;
+    for (const auto& a : res.sessions) all = all && a.aligned;
+    os << (all ? "true" : "false") << ",\n  \"sessions\": [\n";
+    for (std::size_t s = 0; s < n; ++s) {
+      const auto& a = res.sessions[s];
+      os << "    {\"name\": " << JsonString(a.name) << ", \"dir\": " << JsonString(sessions[s].dir)
+         << ", \"keyframes\": " << sessions[s].keyframes.size()
+         << ", \"aligned\": " << (a.aligned ? "true" : "false")
+         << ", \"reason\": " << JsonString(a.reason) << ", \"sc_candidates\": " << a.sc_candidates
+         << ", \"loops_verified\": " << a.loops_verified
+         << ", \"loops_accepted\": " << a.loops_accepted
+         << ", \"radius_loops_accepted\": " << a.radius_loops
+         << ", \"anchor\": " << (a.aligned ? PoseJson(a.anchor) : "null") << "}"
+         << (s + 1 < n ? "," : "") << "\n";
+    }
+    os << "  ],\n  \"registrations\": " << res.registrations
+       << ",\n  \"solver\": {\"usable\": " << (res.solution_usable ? "true" : "false")
+       << ", \"initial_cost\": " << res.initial_cost << ", \"final_cost\": " << res.final_cost
+       << ", \"iterations\": " << res.solver_iterations << "},\n"
+       << "  \"time_s\": {\"descriptors\": " << res.time_descriptors_s
+       << ", \"retrieval\": " << res.time_retrieval_s
+       << ", \"registration\": " << res.time_registration_s
+       << ", \"optimisation\": " << res.time_optimisation_s << ", \"total\": " << res.time_total_s
+       << "},\n  \"robust_loss\": " << JsonString(cfg.robust_loss)
+       << ",\n  \"peak_rss_bytes\": " << PeakRssBytes() << "\n}\n";
+  });
+  io::WriteFileAtomic((fs::path(out_dir) / "report.md").string(), [&](std::ostream& os) {
+    os << std::fixed << std::setprecision(2) << "# LT-SLAM report\n\nCentral session: `"
+       << res.sessions[0].name << "` (world frame).\n\n"
+       << "| session | keyframes | aligned | SC candidates | verified | accepted | radius | "
+          "anchor x y z [m] | anchor yaw [deg] |\n|---|---|---|---|---|---|---|---|---|\n";
+    for (std::size_t s = 0; s < n; ++s) {
+      const auto& a = res.sessions[s];
+      os << "| " << a.name << " | " << sessions[s].keyframes.size() << " | "
+         << (a.aligned ? "yes" : "**NOT ALIGNED**") << " | " << a.sc_candidates << " | "
+         << a.loops_verified << " | " << a.loops_accepted << " | " << a.radius_loops << " | ";
+      if (a.aligned) {
+        os << a.anchor.translation().x() << " " << a.anchor.translation().y() << " "
+           << a.anchor.translation().z() << " | " << YawDeg(a.anchor) << " |\n";
+      } else {
+        os << "- | - |\n";
+      }
+    }
+    for (const auto& a : res.sessions) {
+      if (!a.aligned) os << "\n**" << a.name << " is not aligned**: " << a.reason << "\n";
+    }
+    os << "\nTime: descriptors " << res.time_descriptors_s << " s, retrieval "
+       << res.time_retrieval_s << " s, registration " << res.time_registration_s << " s ("
+       << res.registrations << " GICP), optimisation " << res.time_optimisation_s << " s, total "
+       << res.time_total_s << " s.\n";
+  });
+}
+}  // namespace
+
+SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
+                        const std::string& out_dir, int threads) {
+  if (session_dirs.empty()) throw Error("slam: no session directories given");
+  std::vector<Session> sessions;
+  std::set<std::string> names;
+  for (const auto& dir : session_dirs) {
+    sessions.push_back(io::LoadSession(dir));
+    Session& s = sessions.back();
+    if (s.name.empty()) s.name = fs::path(dir).filename().string();
+    if (!names.insert(s.name).second) {
+      throw Error(dir + ": two sessions share the name '" + s.name +
+                  "' (output folders are named after sessions)");
+    }
+    spdlog::info("slam: session {} ({}): {} keyframes, {} odometry + {} loop edges", s.name, dir,
+                 s.keyframes.size(), s.odometry.size(), s.loops.size());
+  }
+  SlamResult res = AlignSessions(sessions, cfg, threads);
+  WriteOutputs(sessions, res, cfg, out_dir);
+  for (const auto& a : res.sessions) {
+    if (a.aligned) {
+      spdlog::info("slam: {} aligned: {} loops accepted ({} radius), anchor t = [{:.2f} {:.2f} "
+                   "{:.2f}] m, yaw {:.2f} deg",
+                   a.name, a.loops_accepted, a.radius_loops, a.anchor.translation().x(),
+                   a.anchor.translation().y(), a.anchor.translation().z(), YawDeg(a.anchor));
+    } else {
+      spdlog::warn("slam: {} is NOT aligned: {}", a.name, a.reason);
+    }
+  }
+  return res;
+}
+
+}  // namespace ltm::slam
