@@ -38,7 +38,7 @@ void BM_CastScan(benchmark::State& state) {
   }
   const double rays = double(beams) * sim.config().columns;
   state.counters["rays/s"] = benchmark::Counter(rays * double(state.iterations()), benchmark::Counter::kIsRate);
-  state.counters["ms/keyframe"] = benchmark::Counter(1e3 * double(state.iterations()),
+  state.counters["s/keyframe"] = benchmark::Counter(double(state.iterations()),
                                                      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
   state.counters["points"] = double(points) / double(state.iterations());
   state.counters["threads"] = threads == 0 ? double(std::thread::hardware_concurrency()) : double(threads);

@@ -60,7 +60,7 @@ TEST_F(SimTruth, WritesEveryDocumentedFile) {
   EXPECT_GT(report_->ld_objects, 5u);
   EXPECT_GT(report_->hd_points, 0u);
   EXPECT_GT(report_->ld_points, 0u);
-  for (const char* f : {"truth/scenario.yaml", "truth/objects.csv", "truth/pair_00_01/pd_strong.pcd",
+  for (const char* f : {"truth/scenario.yaml", "truth/objects.csv", "truth/hd_actors.csv", "truth/pair_00_01/pd_strong.pcd",
                         "truth/pair_00_01/pd_weak.pcd", "truth/pair_00_01/nd_strong.pcd",
                         "truth/pair_00_01/nd_weak.pcd", "truth/pair_00_01/changes.ply"}) {
     EXPECT_TRUE(fs::exists(Out() + "/" + f)) << f;

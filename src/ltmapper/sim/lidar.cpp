@@ -170,6 +170,7 @@ struct Simulator::Impl {
   }
 
   bool IsPresent(int object, int session) const {
+    if (object < 0 || object >= int(sc.ld.size())) return false;
     const auto& p = sc.ld[std::size_t(object)].info.present_in;
     return std::find(p.begin(), p.end(), session) != p.end();
   }
@@ -255,6 +256,15 @@ std::size_t Simulator::hd_actors() const {
   return n;
 }
 const std::vector<LdObjectInfo>& Simulator::ld_objects() const { return impl_->ld_info; }
+std::vector<HdActorInfo> Simulator::hd_actor_info() const {
+  std::vector<HdActorInfo> out;
+  for (std::size_t s = 0; s < impl_->sc.sessions.size(); ++s) {
+    for (const auto& a : impl_->sc.sessions[s].actors) {
+      out.push_back({a.id, int(s), a.pedestrian ? "pedestrian" : "car", a.speed});
+    }
+  }
+  return out;
+}
 bool Simulator::IsPresent(int o, int s) const { return impl_->IsPresent(o, s); }
 Pose Simulator::T_world_session(int s) const {
   impl_->CheckIndex(s, 0);

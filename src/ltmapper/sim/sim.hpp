@@ -161,6 +161,14 @@ struct LdObjectInfo {
   Eigen::Vector3d box_min = Eigen::Vector3d::Zero(), box_max = Eigen::Vector3d::Zero();
 };
 
+// An HD actor: moves along its session's route during that session only.
+struct HdActorInfo {
+  int id = 0;          // unique over all sessions, after the LD object ids
+  int session = 0;
+  std::string cls;     // car | pedestrian
+  double speed_mps = 0.0;
+};
+
 // Counts of the point-wise change truth of one pair (central 0, query k), in points after
 // voxel downsampling (truth.voxel_m).
 struct PairTruthCounts {
@@ -212,6 +220,7 @@ class Simulator {
   std::size_t triangles() const;
   std::size_t hd_actors() const;
   const std::vector<LdObjectInfo>& ld_objects() const;
+  std::vector<HdActorInfo> hd_actor_info() const;
   // HD actor ids are unique over all sessions and never collide with LD object ids.
   bool IsPresent(int ld_object, int session) const;
 

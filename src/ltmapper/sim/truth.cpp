@@ -6,6 +6,12 @@
 #include "ltmapper/sim/sim.hpp"
 
 #include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <functional>
+#include <mutex>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -37,6 +43,13 @@ void WriteObjectsCsv(const std::string& path, const std::vector<LdObjectInfo>& o
       for (const auto* v : {&o.centroid, &o.box_min, &o.box_max}) os << ',' << v->x() << ',' << v->y() << ',' << v->z();
       os << '\n';
     }
+  });
+}
+
+void WriteActorsCsv(const std::string& path, const std::vector<HdActorInfo>& actors) {
+  io::WriteFileAtomic(path, [&](std::ostream& os) {
+    os << "id,class,session,speed_mps\n" << std::fixed << std::setprecision(3);
+    for (const auto& a : actors) os << a.id << ',' << a.cls << ',' << a.session << ',' << a.speed_mps << '\n';
   });
 }
 
@@ -84,6 +97,79 @@ std::vector<char> SeenThrough(Simulator& sim, int session, const PointCloud& pts
   return seen;
 }
 
+// Runs jobs in submission order on one background thread (or inline when not threaded), with a
+// bounded queue: keyframe k's files and truth are processed while keyframe k+1 is cast.
+class OrderedWorker {
+ public:
+  explicit OrderedWorker(bool threaded, std::size_t max_queue = 4) : max_queue_(max_queue) {
+    if (threaded) thread_ = std::thread([this] { Loop(); });
+  }
+  ~OrderedWorker() {
+    try {
+      Finish();
+    } catch (...) {
+    }
+  }
+  void Push(std::function<void()> job) {
+    if (!thread_.joinable()) {
+      job();
+      return;
+    }
+    std::unique_lock<std::mutex> lock(m_);
+    cv_.wait(lock, [&] { return queue_.size() < max_queue_ || error_; });
+    if (error_) return;
+    queue_.push_back(std::move(job));
+    cv_.notify_all();
+  }
+  // Waits for every job; rethrows the first error.
+  void Finish() {
+    if (thread_.joinable()) {
+      {
+        std::lock_guard<std::mutex> lock(m_);
+        done_ = true;
+        cv_.notify_all();
+      }
+      thread_.join();
+    }
+    if (error_) {
+      auto e = error_;
+      error_ = nullptr;
+      std::rethrow_exception(e);
+    }
+  }
+
+ private:
+  void Loop() {
+    for (;;) {
+      std::function<void()> job;
+      {
+        std::unique_lock<std::mutex> lock(m_);
+        cv_.wait(lock, [&] { return !queue_.empty() || done_; });
+        if (queue_.empty()) return;
+        job = std::move(queue_.front());
+        queue_.pop_front();
+        cv_.notify_all();
+      }
+      try {
+        job();
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(m_);
+        if (!error_) error_ = std::current_exception();
+        queue_.clear();
+        cv_.notify_all();
+        return;
+      }
+    }
+  }
+  std::size_t max_queue_;
+  std::thread thread_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::deque<std::function<void()>> queue_;
+  bool done_ = false;
+  std::exception_ptr error_;
+};
+
 // PointCloud::append drops the optional arrays when `src` has none, which an empty cloud never
 // has: skip empty ones so the labels survive.
 void Append(PointCloud& dst, const PointCloud& src) {
@@ -118,6 +204,7 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
   SimConfig resolved = cfg;
   io::SaveConfigFields(truth + "/scenario.yaml", FieldsOf(resolved));
   WriteObjectsCsv(truth + "/objects.csv", sim.ld_objects());
+  WriteActorsCsv(truth + "/hd_actors.csv", sim.hd_actor_info());
 
   const double voxel = cfg.truth_voxel_m;
   std::vector<PointCloud> ld_world(static_cast<std::size_t>(N));
@@ -132,30 +219,31 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
     session.dir = sdir;
     PointCloud static_acc, ld_acc;
     Progress progress("sim " + name, std::size_t(sim.keyframes(s)));
+    OrderedWorker worker(threads != 1);
     for (int k = 0; k < sim.keyframes(s); ++k) {
       t = Clock::now();
-      auto cloud = std::make_shared<PointCloud>(sim.CastScan(s, k));
+      auto cloud = std::make_shared<const PointCloud>(sim.CastScan(s, k));
       rep.seconds_cast += Since(t);
       rep.rays += std::size_t(cfg.beams) * std::size_t(cfg.columns);
       rep.points += cloud->size();
-
-      t = Clock::now();
-      io::WritePly(tdir + "/labels/" + Num(k, 6) + ".ply", *cloud);
-      rep.seconds_write += Since(t);
-
-      t = Clock::now();
-      const PointCloud world = geometry::Transform(*cloud, world_poses[std::size_t(k)]);
-      std::vector<bool> is_static(world.size()), is_ld(world.size());
-      for (std::size_t i = 0; i < world.size(); ++i) {
-        is_static[i] = world.cls[i] != PointClass::kHD;
-        is_ld[i] = is_static[i] && world.object[i] >= 0;
-        rep.hd_points += !is_static[i];
-        rep.ld_points += is_ld[i];
-      }
-      Append(static_acc, geometry::VoxelDownsample(world.select(is_static), voxel, threads));
-      Append(ld_acc, geometry::VoxelDownsample(world.select(is_ld), voxel, threads));
-      rep.seconds_truth += Since(t);
-
+      worker.Push([&, cloud, k] {
+        auto t0 = Clock::now();
+        io::WritePly(tdir + "/labels/" + Num(k, 6) + ".ply", *cloud);
+        rep.seconds_write += Since(t0);
+        t0 = Clock::now();
+        const PointCloud world = geometry::Transform(*cloud, world_poses[std::size_t(k)]);
+        std::vector<bool> is_static(world.size()), is_ld(world.size());
+        for (std::size_t i = 0; i < world.size(); ++i) {
+          is_static[i] = world.cls[i] != PointClass::kHD;
+          is_ld[i] = is_static[i] && world.object[i] >= 0;
+          rep.hd_points += !is_static[i];
+          rep.ld_points += is_ld[i];
+        }
+        Append(static_acc, geometry::VoxelDownsample(world.select(is_static), voxel, threads));
+        Append(ld_acc, geometry::VoxelDownsample(world.select(is_ld), voxel, threads));
+        rep.seconds_truth += Since(t0);
+        progress.Tick();
+      });
       Keyframe kf;
       kf.index = k;
       kf.T_session_sensor = drifted[std::size_t(k)];
@@ -168,8 +256,8 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
         e.T_from_to = drifted[std::size_t(k - 1)].inverse() * drifted[std::size_t(k)];
         session.odometry.push_back(e);
       }
-      progress.Tick();
     }
+    worker.Finish();
     progress.Done();
     t = Clock::now();
     io::WriteSession(sdir, session);
