@@ -115,8 +115,11 @@ void ParallelFor(tbb::task_arena& arena, std::size_t n, F&& f) {
   });
 }
 
-void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg,
-              tbb::task_arena& arena, const std::string& label) {
+void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg_in,
+              tbb::task_arena& arena, const std::string& label, bool coarse) {
+  SlamConfig cfg = cfg_in;
+  // Radius candidates start from the current estimate: the coarse stage is not needed.
+  if (!coarse) cfg.reg_coarse_correspondence_m = 0.0;
   Progress progress(label, cand.size());
   ParallelFor(arena, cand.size(), [&](std::size_t i) {
     LoopRecord& l = cand[i];
@@ -236,7 +239,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
 
   // ---- registration of the Scan Context candidates
   sw = Stopwatch();
-  Register(loops, store, cfg, arena, "GICP scan context loops");
+  Register(loops, store, cfg, arena, "GICP scan context loops", true);
   int registrations = static_cast<int>(loops.size());
   double t_reg = sw.Seconds();
 
@@ -292,7 +295,8 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
     }
     if (cand.empty()) break;
     sw = Stopwatch();
-    Register(cand, store, cfg, arena, "GICP radius loops, round " + std::to_string(round + 1));
+    Register(cand, store, cfg, arena, "GICP radius loops, round " + std::to_string(round + 1),
+             false);
     registrations += static_cast<int>(cand.size());
     t_reg += sw.Seconds();
     std::size_t ok = 0;

@@ -26,16 +26,16 @@ struct SlamConfig {
   double sc_lidar_height_m = 2.0;     // bin value = max(z + height): height above the ground
   int sc_candidates = 10;             // top-k ring-key neighbours compared per query keyframe
   double sc_search_ratio = 0.1;       // fine shift search window, fraction of the sectors
-  double sc_dist_threshold = 0.3;     // candidate when 1 - mean cosine < this (GICP verifies)
+  double sc_dist_threshold = 0.4;     // candidate when 1 - mean cosine < this (GICP verifies)
   bool sc_read_files = true;          // use <session>/SCDs/NNNNNN.scd when present
   int sc_max_loops_per_pair = 60;     // registrations per session pair from Scan Context
-  int sc_min_gap_keyframes = 3;       // min query-keyframe gap between selected SC candidates
+  int sc_min_gap_keyframes = 1;       // min query-keyframe gap between selected SC candidates
 
   // --- registration (PCL GICP between keyframe submaps)
   double reg_min_range_m = 1.0;       // scan points closer than this are dropped (the vehicle)
-  double reg_max_range_m = 80.0;      // scan points farther than this are dropped
-  double reg_voxel_m = 0.4;           // voxel of keyframe clouds and submaps
-  int reg_submap_neighbours = 3;      // keyframes on each side merged into a submap
+  double reg_max_range_m = 60.0;      // scan points farther than this are dropped
+  double reg_voxel_m = 0.5;           // voxel of keyframe clouds and submaps
+  int reg_submap_neighbours = 2;      // keyframes on each side merged into a submap
   double reg_coarse_voxel_m = 1.0;    // coarse stage (Scan Context gives no translation) ...
   double reg_coarse_correspondence_m = 8.0;  // ... with this correspondence distance; 0 = off
   double reg_max_correspondence_m = 1.0;  // fine GICP correspondence distance
