@@ -46,6 +46,29 @@ void WriteObjectsCsv(const std::string& path, const std::vector<LdObjectInfo>& o
   });
 }
 
+// The pose graph as the SC-LIO-SAM saver writes it: 6 decimals, no information matrix (so the
+// quaternions are only normalised to ~1e-6 and readers must renormalise).
+void WriteScLioSamG2o(const std::string& path, const Session& session) {
+  auto put = [](std::ostream& os, const Pose& T) {
+    const Eigen::Quaterniond q(T.linear());
+    const Eigen::Vector3d t = T.translation();
+    os << ' ' << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << q.w();
+  };
+  io::WriteFileAtomic(path, [&](std::ostream& os) {
+    os << std::fixed << std::setprecision(6);
+    for (const auto& kf : session.keyframes) {
+      os << "VERTEX_SE3:QUAT " << kf.index;
+      put(os, kf.T_session_sensor);
+      os << '\n';
+    }
+    for (const auto& e : session.odometry) {
+      os << "EDGE_SE3:QUAT " << e.from << ' ' << e.to;
+      put(os, e.T_from_to);
+      os << '\n';
+    }
+  });
+}
+
 void WriteActorsCsv(const std::string& path, const std::vector<HdActorInfo>& actors) {
   io::WriteFileAtomic(path, [&](std::ostream& os) {
     os << "id,class,session,speed_mps\n" << std::fixed << std::setprecision(3);
@@ -261,6 +284,7 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
     progress.Done();
     t = Clock::now();
     io::WriteSession(sdir, session);
+    WriteScLioSamG2o(sdir + "/singlesession_posegraph.g2o", session);  // replaces io's full-precision file
     io::WriteKittiPoses(tdir + "/poses_world.txt", world_poses);
     io::WriteKittiPoses(tdir + "/origin.txt", {sim.T_world_session(s)});
     rep.seconds_write += Since(t);
