@@ -174,14 +174,19 @@ TEST(RemovertHd, RemovesMoversKeepsStaticStreet) {
 TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {
   const Street s = MakeStreet(0.05);  // 5 cm, 0.06 deg pose noise
   RemovertConfig ours;
-  // The public LT-mapper code: one resolution, plain pixel test, no revert.
+  // The public LT-mapper code: one resolution, plain pixel test, any see-through removes, no revert.
   RemovertConfig single;
   single.remove_resolutions_deg = {ours.remove_resolutions_deg.front()};
   single.revert = false;
   single.window_px = 0;
-  // Multi-resolution remove-then-revert without the window: the revert alone earns its place.
+  single.remove_min_ratio = 0.0;
+  // Multi-resolution remove-then-revert with the plain pixel test and the public code's voting:
+  // the revert alone earns its place.
   RemovertConfig no_window = ours;
   no_window.window_px = 0;
+  no_window.remove_min_ratio = 0.0;
+  no_window.revert_hit_ratio = 1.0;
+  no_window.revert_min_hits = 3;
   const auto a = removert::RemoveHd(s.kfs, ours, 2);
   const auto b = removert::RemoveHd(s.kfs, single, 2);
   const auto c = removert::RemoveHd(s.kfs, no_window, 2);

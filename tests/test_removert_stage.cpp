@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 
 namespace ltm {
@@ -141,6 +142,48 @@ TEST(RemovertStage, CliUsageErrors) {
             0)
       << out;
   EXPECT_TRUE(fs::exists(tmp / "out/s0/static_map.pcd")) << out;
+}
+
+}  // namespace
+}  // namespace ltm
+
+namespace ltm {
+namespace {
+
+// Real data: the first six KITTI 00 scans as one session (LiDAR poses = Tr^-1 P Tr). HD removal
+// runs and removes a small fraction; set LTM_REMOVERT_KITTI_OUT=DIR to keep the clouds for a render.
+TEST(RemovertReal, KittiHeadHdRemoval) {
+  LTM_REQUIRE_REAL_DATA(data);
+  const std::string dir = data + "/kitti00_head";
+  const Pose Tr = io::ParseTransform(
+      "4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-02 "
+      "-7.210626507497e-03 8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 "
+      "9.999738645903e-01 4.859485810390e-04 -7.206933692422e-03 -2.921968648686e-01",
+      "KITTI 00-02 Tr");
+  const Session s = io::LoadKittiSession(dir, dir + "/poses_00.txt", &Tr);
+  ASSERT_EQ(s.keyframes.size(), 6u);
+  std::vector<removert::WorldKeyframe> kfs;
+  for (const auto& kf : s.keyframes) {
+    removert::WorldKeyframe w;
+    w.index = kf.index;
+    w.T_world_sensor = kf.T_session_sensor;
+    w.cloud_path = kf.cloud_path;
+    w.cloud = kf.cloud;
+    kfs.push_back(w);
+  }
+  removert::RemovertConfig cfg;
+  const auto res = removert::RemoveHd(kfs, cfg, 2);
+  const double frac = double(res.stats.removed) / double(res.stats.map_points);
+  std::printf("KITTI 00 head: map %zu points, candidates %zu, reverted %zu, removed %zu (%.3f %%)\n",
+              res.stats.map_points, res.stats.candidates, res.stats.reverted, res.stats.removed,
+              100.0 * frac);
+  EXPECT_GT(res.stats.map_points, 100000u);
+  EXPECT_LT(frac, 0.05);  // walls and ground stay (3.2 % removed: foliage, fence lines, a few blobs)
+  if (const char* out = std::getenv("LTM_REMOVERT_KITTI_OUT"); out && *out) {
+    io::MakeDirs(out);
+    io::WritePcd(std::string(out) + "/static_map.pcd", res.static_map);
+    io::WritePcd(std::string(out) + "/hd_map.pcd", res.hd_map);
+  }
 }
 
 }  // namespace

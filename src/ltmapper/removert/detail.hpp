@@ -114,9 +114,13 @@ std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf);
 // parallel_for over [0, n) inside a task_arena of `threads` (0 = default), grain 1.
 void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f);
 
-// mask[i] = keyframes see through points[i] at any LD resolution (occlusion.cpp).
-std::vector<bool> SeenThroughBy(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
-                                const RemovertConfig& cfg, int threads);
+// Per point: keyframes see through it at any LD resolution (seen), and whether any keyframe had
+// a return in the window at its pixel at all (observed) (occlusion.cpp).
+struct Visibility {
+  std::vector<bool> seen, observed;
+};
+Visibility SeenThroughBy(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& cfg, int threads);
 
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);

@@ -45,27 +45,39 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   const PointCloud pd = query_map.select(Missing(query_map, central_map, cfg, threads));
 
   // Weak ND preservation: ND the query never saw through stays in the map.
-  if (cfg.weak_nd) {
-    const std::vector<bool> strong = detail::SeenThroughBy(nd, query_keyframes, cfg, threads);
-    std::vector<bool> weak(strong.size());
-    for (std::size_t i = 0; i < strong.size(); ++i) weak[i] = !strong[i];
+  {
+    const detail::Visibility vis = detail::SeenThroughBy(nd, query_keyframes, cfg, threads);
+    std::vector<bool> strong(nd.size()), weak(nd.size()), unobs(nd.size());
+    for (std::size_t i = 0; i < nd.size(); ++i) {
+      const bool covered = !cfg.covisible_only || vis.observed[i];
+      strong[i] = covered && (vis.seen[i] || !cfg.weak_nd);
+      weak[i] = covered && !strong[i];
+      unobs[i] = !covered;
+    }
     res.nd_strong = nd.select(strong);
     res.nd_weak = nd.select(weak);
-  } else {
-    res.nd_strong = nd;
+    res.nd_unobserved = nd.select(unobs);
   }
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
   {
-    const std::vector<bool> weak = detail::SeenThroughBy(pd, central_keyframes, cfg, threads);
-    std::vector<bool> strong(weak.size());
-    for (std::size_t i = 0; i < weak.size(); ++i) strong[i] = !weak[i];
+    const detail::Visibility vis = detail::SeenThroughBy(pd, central_keyframes, cfg, threads);
+    std::vector<bool> strong(pd.size()), weak(pd.size()), unobs(pd.size());
+    for (std::size_t i = 0; i < pd.size(); ++i) {
+      const bool covered = !cfg.covisible_only || vis.observed[i];
+      weak[i] = covered && vis.seen[i];
+      strong[i] = covered && !vis.seen[i];
+      unobs[i] = !covered;
+    }
     res.pd_weak = pd.select(weak);
     res.pd_strong = pd.select(strong);
+    res.pd_unobserved = pd.select(unobs);
   }
   res.stats.nd_strong = res.nd_strong.size();
   res.stats.nd_weak = res.nd_weak.size();
   res.stats.pd_strong = res.pd_strong.size();
   res.stats.pd_weak = res.pd_weak.size();
+  res.stats.pd_unobserved = res.pd_unobserved.size();
+  res.stats.nd_unobserved = res.nd_unobserved.size();
   res.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
 }

@@ -8,20 +8,31 @@
 // FOV, occluded (scan range shorter) and no-return pixels give no see-through vote.
 //   ND seen through by the query  -> strong ND (removed);  else weak ND (kept).
 //   PD seen through by the central -> weak PD (was free);  else strong PD.
+// With ld.covisible_only, a raw change the other session never had in view at all (no return
+// in the window at its pixel from any keyframe in range: out of range, out of FOV) is
+// "unobserved": a coverage difference, not a change. Unobserved ND stays static; unobserved PD
+// is new territory (written apart, and added to the keyframe clouds as strong PD).
 #include "ltmapper/removert/detail.hpp"
 
 namespace ltm::removert::detail {
 
-std::vector<bool> SeenThroughBy(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
-                                const RemovertConfig& cfg, int threads) {
-  std::vector<bool> out(points.size(), false);
+Visibility SeenThroughBy(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& cfg, int threads) {
+  Visibility out;
+  out.seen.assign(points.size(), false);
+  out.observed.assign(points.size(), false);
   if (points.empty() || keyframes.empty()) return out;
-  const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, cfg, threads);
+  const VisibilityVotes v =
+      CountVisibility(points, keyframes, cfg.ld_resolutions_deg, cfg, threads, true);
   for (std::size_t i = 0; i < points.size(); ++i) {
-    for (int l = 0; l < v.levels && !out[i]; ++l) {
+    bool seen = false, observed = false;
+    for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
-      out[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
+      seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
+      observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
     }
+    out.seen[i] = seen;
+    out.observed[i] = observed;
   }
   return out;
 }

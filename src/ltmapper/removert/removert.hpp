@@ -28,8 +28,8 @@ namespace ltm::removert {
 
 struct RemovertConfig {
   // --- sensor and range images
-  double fov_up_deg = 3.0;        // [deg] upper edge of the range images' vertical FOV
-  double fov_down_deg = -25.0;    // [deg] lower edge
+  double fov_up_deg = 16.0;       // [deg] upper edge of the range images' vertical FOV
+  double fov_down_deg = -26.0;    // [deg] lower edge
   double min_range_m = 2.0;       // [m] scan returns closer than this are ignored (ego vehicle)
   double max_range_m = 100.0;     // [m] scan returns farther than this are ignored
   double submap_radius_m = 60.0;  // [m] a keyframe tests only map points this close to it
@@ -45,9 +45,9 @@ struct RemovertConfig {
   std::vector<double> revert_resolutions_deg = {1.2, 1.6};       // [deg/pixel] coarser
   bool revert = true;             // false: removal only (ablation)
   int remove_min_votes = 1;       // [keyframes] see-through votes to become a removal candidate
-  double remove_min_ratio = 0.2;  // [-] and see-through votes / (see-through + hit votes)
-  int revert_min_hits = 3;        // [keyframes] hits at a revert resolution to revert ...
-  double revert_hit_ratio = 1.0;  // [-] ... and hits >= ratio * see-through votes there
+  double remove_min_ratio = 0.5;  // [-] and see-through votes / (see-through + hit votes)
+  int revert_min_hits = 5;        // [keyframes] hits at a revert resolution to revert ...
+  double revert_hit_ratio = 3.0;  // [-] ... and hits >= ratio * see-through votes there
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
@@ -55,6 +55,8 @@ struct RemovertConfig {
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
   bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
+  bool covisible_only = true;     // a raw change counts only where the other session had its line
+                                  // of sight at all (a return in the window); else unobserved
   std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
   // --- outputs
   double assign_radius_m = 60.0;       // [m] changes farther from every central keyframe ...
@@ -88,6 +90,7 @@ struct RemovertConfig {
     v("ld.min_votes", ld_min_votes, "keyframes", 1, 65535);
     v("ld.min_ratio", ld_min_ratio, "", 0.0, 1.0);
     v("ld.weak_nd", weak_nd);
+    v("ld.covisible_only", covisible_only);
     v("ld.pairs", pairs, {"central", "consecutive"});
     v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);
     v("out.new_keyframe_dist_m", new_keyframe_dist_m, "m", 0.0, 1e6);
@@ -137,11 +140,14 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
 struct LdStats {
   std::size_t central_points = 0, query_points = 0;
   std::size_t nd_strong = 0, nd_weak = 0, pd_strong = 0, pd_weak = 0;
+  std::size_t pd_unobserved = 0, nd_unobserved = 0;
   double seconds = 0;
 };
 struct LdResult {
   PointCloud nd_strong, nd_weak;  // central map points, world frame
   PointCloud pd_strong, pd_weak;  // query map points, world frame
+  PointCloud pd_unobserved;       // query points the central never had in view (new territory)
+  PointCloud nd_unobserved;       // central points the query never had in view (kept, no change)
   LdStats stats;
 };
 // LD changes between the HD-free central and query maps (world frame). The keyframes (scans +
@@ -162,12 +168,14 @@ struct VisibilityVotes {
   int levels = 0;
   std::vector<std::uint16_t> see;  // [level * points + i]
   std::vector<std::uint16_t> hit;
+  std::vector<std::uint16_t> occ;  // occluded (nearer return); only when count_occluded
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
-                                const RemovertConfig& cfg, int threads = 0);
+                                const RemovertConfig& cfg, int threads = 0,
+                                bool count_occluded = false);
 
 // ------------------------------------------------------------------------------------ stage
 struct StageReport {

@@ -183,9 +183,10 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     spdlog::info("removert: LD {} vs {}", rep.sessions[std::size_t(c)], rep.sessions[std::size_t(q)]);
     const LdResult ld = DetectLd(static_maps[std::size_t(c)], static_maps[std::size_t(q)],
                                  kfs[std::size_t(c)], kfs[std::size_t(q)], cfg, threads);
-    spdlog::info("removert: {}: ND strong {} weak {}, PD strong {} weak {} ({:.1f} s)", pname,
-                 ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.pd_strong, ld.stats.pd_weak,
-                 ld.stats.seconds);
+    spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} "
+                 "(unobserved {}) ({:.1f} s)",
+                 pname, ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
+                 ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.seconds);
     rep.ld.push_back(ld.stats);
     const std::string dir = out_dir + "/" + pname;
     io::MakeDirs(dir);
@@ -193,6 +194,11 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     io::WritePcd(dir + "/pd_weak.pcd", ld.pd_weak);
     io::WritePcd(dir + "/nd_strong.pcd", ld.nd_strong);
     io::WritePcd(dir + "/nd_weak.pcd", ld.nd_weak);
+    io::WritePcd(dir + "/pd_unobserved.pcd", ld.pd_unobserved);
+    // Keyframe clouds: new territory (query points the central never had in view) is added to
+    // the map like strong PD, so LT-map's composition brings it in.
+    PointCloud pd_strong_kf = ld.pd_strong;
+    pd_strong_kf.append(ld.pd_unobserved);
 
     // Central static minus ND (ND points are exactly central static points).
     const PointCloud& cmap = static_maps[std::size_t(c)];
@@ -212,6 +218,9 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
       all.append(Labelled(ld.nd_weak, PointClass::kNDWeak, c));
       all.append(Labelled(ld.pd_strong, PointClass::kPDStrong, q));
       all.append(Labelled(ld.pd_weak, PointClass::kPDWeak, q));
+      PointCloud unobs = Labelled(ld.pd_unobserved, PointClass::kPDStrong, q);
+      std::fill(unobs.object.begin(), unobs.object.end(), 1);  // object 1 = new territory
+      all.append(unobs);
       io::WritePly(dir + "/changes.ply", all);
     }
 
@@ -250,7 +259,7 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
       }
     };
     std::vector<std::uint32_t> own_pds, own_pdw;
-    pd_owner(ld.pd_strong, &own_pds);
+    pd_owner(pd_strong_kf, &own_pds);
     pd_owner(ld.pd_weak, &own_pdw);
     const std::size_t nk = nc + qkf.size();
     const auto b_static = Buckets(Nearest(cmap, ctree, threads), nk);
@@ -273,7 +282,7 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
         WriteKeyframeDir(dir + "/keyframes/" + Index6(ckf[k].index), ckf[k].T_world_sensor,
                          {{"static", pick(cmap, b_static[k])},
                           {"hd", pick(hd_maps[std::size_t(c)], b_hd[k])},
-                          {"pd_strong", pick(ld.pd_strong, b_pds[k])},
+                          {"pd_strong", pick(pd_strong_kf, b_pds[k])},
                           {"pd_weak", pick(ld.pd_weak, b_pdw[k])},
                           {"nd_strong", pick(ld.nd_strong, b_nds[k])},
                           {"nd_weak", pick(ld.nd_weak, b_ndw[k])}},
@@ -284,7 +293,7 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
       detail::ParallelFor(new_list.size(), threads, [&](std::size_t t) {
         const std::size_t j = std::size_t(new_list[t]);
         WriteKeyframeDir(dir + "/new_keyframes/" + Index6(qkf[j].index), qkf[j].T_world_sensor,
-                         {{"pd_strong", pick(ld.pd_strong, b_pds[nc + j])},
+                         {{"pd_strong", pick(pd_strong_kf, b_pds[nc + j])},
                           {"pd_weak", pick(ld.pd_weak, b_pdw[nc + j])}},
                          {PointClass::kPDStrong, PointClass::kPDWeak}, q, {q, q}, cfg);
       });
@@ -338,6 +347,7 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
          << ", \"dir\": " << JsonStr(PairName(rep.sessions, rep.pairs[p].first, rep.pairs[p].second))
          << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak
          << ", \"pd_strong\": " << l.pd_strong << ", \"pd_weak\": " << l.pd_weak
+         << ", \"pd_unobserved\": " << l.pd_unobserved << ", \"nd_unobserved\": " << l.nd_unobserved
          << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
       for (std::size_t j = 0; j < rep.new_keyframes[p].size(); ++j)
         os << (j ? ", " : "") << rep.new_keyframes[p][j];

@@ -166,7 +166,7 @@ PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
 
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
-                                const RemovertConfig& cfg, int threads) {
+                                const RemovertConfig& cfg, int threads, bool count_occluded) {
   if (keyframes.size() >= 65535)
     throw Error("removert: " + std::to_string(keyframes.size()) +
                 " keyframes in one session; vote counters hold at most 65534");
@@ -177,6 +177,7 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   const std::size_t L = resolutions_deg.size();
   out.see.assign(n * L, 0);
   out.hit.assign(n * L, 0);
+  if (count_occluded) out.occ.assign(n * L, 0);
   if (n == 0 || L == 0 || keyframes.empty()) return out;
 
   const detail::TileIndex index(points, cfg.tile_m);
@@ -185,6 +186,8 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   // fewer than 65535 keyframes never overflows.
   std::unique_ptr<std::atomic<std::uint16_t>[]> see(new std::atomic<std::uint16_t>[n * L]());
   std::unique_ptr<std::atomic<std::uint16_t>[]> hit(new std::atomic<std::uint16_t>[n * L]());
+  std::unique_ptr<std::atomic<std::uint16_t>[]> occ(
+      count_occluded ? new std::atomic<std::uint16_t>[n * L]() : nullptr);
   const float radius = float(cfg.submap_radius_m);
   const float r2 = radius * radius;
   const float tol_abs = float(cfg.tol_abs_m), tol_rel = float(cfg.tol_rel);
@@ -218,6 +221,8 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
             see[slot].fetch_add(1, std::memory_order_relaxed);
           } else if (std::fabs(s - r) <= tol || std::fabs(img.At(l, pix) - r) <= tol) {
             hit[slot].fetch_add(1, std::memory_order_relaxed);
+          } else if (count_occluded) {
+            occ[slot].fetch_add(1, std::memory_order_relaxed);
           }
         }
       }
@@ -230,6 +235,7 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
       const std::size_t orig = std::size_t(order[i]);
       out.see[l * n + orig] = see[l * n + i].load(std::memory_order_relaxed);
       out.hit[l * n + orig] = hit[l * n + i].load(std::memory_order_relaxed);
+      if (count_occluded) out.occ[l * n + orig] = occ[l * n + i].load(std::memory_order_relaxed);
     }
   }
   return out;
