@@ -206,6 +206,25 @@ TEST(MapStore, RestoreEverySessionFromLatest) {
   EXPECT_TRUE(s.Fsck().ok);
 }
 
+TEST(MapStore, WeakNdStoredOnlyOnRequest) {
+  test::TempDir tmp;
+  Scene sc;
+  MapConfig cfg = Cfg();
+  cfg.store_weak_nd = true;
+  Store s = Store::Create(tmp / "m.ltmap", cfg);
+  s.IntegrateBase({"s0"}, sc.base);
+  const auto with = s.IntegrateSession({"s1"}, "s0", Step1(), {});
+  const PointCloud ch = s.StepChanges(1);
+  EXPECT_EQ(std::count(ch.cls.begin(), ch.cls.end(), PointClass::kNDWeak), 16);
+  EXPECT_TRUE(s.Fsck().ok);
+  Store t = Store::Create(tmp / "n.ltmap", Cfg());
+  t.IntegrateBase({"s0"}, sc.base);
+  const auto without = t.IntegrateSession({"s1"}, "s0", Step1(), {});
+  EXPECT_EQ(with.nd_weak, without.nd_weak);  // counted either way
+  EXPECT_LT(without.bytes, with.bytes);
+  EXPECT_EQ(s.Live().size(), t.Live().size());
+}
+
 TEST(MapStore, LiveHasWeakPdMetaDoesNot) {
   test::TempDir tmp;
   Scene sc;
@@ -228,7 +247,7 @@ TEST(MapStore, LiveHasWeakPdMetaDoesNot) {
   // Changes of step 1 in the world frame.
   const PointCloud ch = s.StepChanges(1);
   EXPECT_EQ(count(ch, PointClass::kNDStrong), car);
-  EXPECT_EQ(count(ch, PointClass::kNDWeak), 16);
+  EXPECT_EQ(count(ch, PointClass::kNDWeak), 0);  // not stored by default (changes nothing)
   // Objects: the parked car (weak PD), the wall (strong PD), the removed car (strong ND).
   const auto objs = s.Objects();
   ASSERT_EQ(objs.size(), 3u);

@@ -30,6 +30,7 @@ struct MapConfig {
   // Integration.
   double nd_match_radius_m = 0.1;        // a keyframe point within this of an ND point is removed
   double new_keyframe_radius_m = 10.0;   // query keyframe with no map keyframe within -> new one
+  bool store_weak_nd = false;            // keep weak ND points in deltas (they change nothing)
   // Outputs.
   double meta_carve_radius_m = 0.2;      // meta map: points this close to any strong ND are carved
   double output_voxel_m = 0.1;           // voxel size of written maps (0 = every point)
@@ -45,6 +46,7 @@ struct MapConfig {
     v("zstd_level", zstd_level, "", 1, 19);
     v("nd_match_radius_m", nd_match_radius_m, "m", 1e-4, 5.0);
     v("new_keyframe_radius_m", new_keyframe_radius_m, "m", 0.1, 1000.0);
+    v("store_weak_nd", store_weak_nd);
     v("meta_carve_radius_m", meta_carve_radius_m, "m", 0.0, 5.0);
     v("output_voxel_m", output_voxel_m, "m", 0.0, 10.0);
     v("object_tolerance_m", object_tolerance_m, "m", 0.01, 10.0);

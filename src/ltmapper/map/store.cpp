@@ -557,6 +557,7 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
   struct Out {
     std::string delta_blob, base_blob;
     std::size_t added = 0, removed = 0, info = 0, base_points = 0;
+    std::size_t nd_weak_in = 0;  // weak ND points LT-removert reported (stored or not)
     std::size_t pd_strong = 0, pd_weak = 0, nd_strong = 0, superseded = 0, restored = 0;
   };
   std::vector<std::pair<std::size_t, const Work*>> items;
@@ -591,7 +592,8 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
         QCloud nd_strong;
         if (w.delta) {
           nd_strong = quant(w.delta->nd_strong, PointClass::kNDStrong, "nd_strong");
-          nd_weak = quant(w.delta->nd_weak, PointClass::kNDWeak, "nd_weak");
+          // Weak ND changes nothing in the map (occluded, kept); it is stored only on request.
+          if (s.cfg.store_weak_nd) nd_weak = quant(w.delta->nd_weak, PointClass::kNDWeak, "nd_weak");
         }
         const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, radius_units);
         target.reserve(ref_q.size());
@@ -615,6 +617,7 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
       }
       const QCloud delta = detail::MakeDelta(latest_q, target, change_keys, nd_weak);
       Out& o = out[k];
+      o.nd_weak_in = w.delta ? w.delta->nd_weak.size() : 0;
       for (const QPoint& p : delta) {
         switch (p.role) {
           case detail::kAdded:
@@ -638,6 +641,7 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
     });
     for (std::size_t k = 0; k < n; ++k) {
       const Out& o = out[k];
+      r.nd_weak += o.nd_weak_in;
       if (o.delta_blob.empty()) continue;
       const int id = in[k].rec.id;
       put_delta.Bind(1, id).Bind(2, S).Bind(3, (long long)o.added).Bind(4, (long long)o.removed);
@@ -651,7 +655,6 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
       r.pd_strong += o.pd_strong;
       r.pd_weak += o.pd_weak;
       r.nd_strong += o.nd_strong;
-      r.nd_weak += o.info;
       r.superseded += o.superseded;
       r.restored += o.restored;
       ++written;
