@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -60,8 +62,11 @@ inline std::string ReadText(const std::string& path) {
 
 // Runs the ltmapper executable with `args`; returns the exit code, stdout+stderr in *output.
 inline int RunCli(const std::string& args, std::string* output = nullptr) {
-  const std::string out_file =
-      (std::filesystem::temp_directory_path() / ("ltm_cli_" + std::to_string(std::rand()))).string();
+  // Unique per process and call: ctest runs test executables in parallel.
+  static int calls = 0;
+  const std::string out_file = (std::filesystem::temp_directory_path() /
+                                ("ltm_cli_" + std::to_string(::getpid()) + "_" + std::to_string(++calls)))
+                                   .string();
   const std::string cmd = std::string(LTM_EXE) + " " + args + " > " + out_file + " 2>&1";
   const int status = std::system(cmd.c_str());
   if (output) *output = ReadText(out_file);
