@@ -1,4 +1,4 @@
-// `ltmapper eval traj|hd|ld|restore|storage`: score a stage's output against ground truth.
+// `ltmapper eval traj|hd|ld|restore|storage|objects`: score a stage's output against ground truth.
 // Each subcommand takes explicit files, or the simulator dir plus a stage output dir and finds
 // the files by the layouts of docs/FORMATS.md. Prints the Markdown report; --json / --md write
 // it to files (atomically).
@@ -10,6 +10,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -364,16 +365,60 @@ void SetupStorage(CLI::App& parent) {
   });
 }
 
+// --------------------------------------------------------------------------------- objects
+void SetupObjects(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::string sim, objects, aligned;
+    std::vector<std::string> pairs;
+    std::string truth_frame = "central";
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand("objects", "Changed objects: LT-map clusters vs the simulator's LD objects (point IoU)");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--sim", o->sim, "Simulator output dir (truth/objects.csv, truth/<session>/labels)")->required();
+  cmd->add_option("--objects", o->objects, "Output of `ltmapper map objects` (objects.csv, objects.ply)")->required();
+  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world by the joint ATE alignment");
+  cmd->add_option("--pair", o->pairs, "Session pair(s), e.g. 00_01 (default: 00 with every other session)");
+  AddTruthFrame(*cmd, o->truth_frame);
+  cmd->callback([o] {
+    const auto cfg = LoadEvalConfig(*o);
+    std::vector<std::string> pairs = o->pairs;
+    if (pairs.empty()) {
+      const auto names = eval::SimSessionNames(o->sim);
+      for (std::size_t q = 1; q < names.size(); ++q) {
+        char buf[32];
+        std::snprintf(buf, sizeof(buf), "00_%02zu", q);
+        pairs.push_back(buf);
+      }
+    }
+    const Pose T = TruthFrame(o->sim, o->aligned, o->truth_frame);
+    std::vector<eval::ObjectTruth> truth;
+    for (const auto& p : pairs) {
+      auto t = eval::LoadSimObjectTruth(o->sim, p, T, cfg, o->common.threads);
+      spdlog::info("pair {}: {} changed truth objects", p, t.size());
+      for (auto& x : t) truth.push_back(std::move(x));
+    }
+    const auto clusters = eval::ReadObjectClusters(o->objects);
+    spdlog::info("{} clusters read from {}", clusters.size(), o->objects);
+    eval::Report report;
+    report.inputs = {{"sim", o->sim}, {"objects", o->objects}};
+    if (!o->aligned.empty()) report.inputs.push_back({"aligned", o->aligned});
+    report.objects = eval::EvaluateObjects(truth, clusters, cfg, o->common.threads);
+    Finish(report, *o);
+  });
+}
+
 }  // namespace
 
 LTM_COMMAND(80, [](CLI::App& app) {
-  auto* eval = app.add_subcommand("eval", "Score a stage against ground truth: traj, hd, ld, restore, storage");
+  auto* eval = app.add_subcommand("eval", "Score a stage against ground truth: traj, hd, ld, restore, storage, objects");
   eval->require_subcommand(1);
   SetupTraj(*eval);
   SetupHd(*eval);
   SetupLd(*eval);
   SetupRestore(*eval);
   SetupStorage(*eval);
+  SetupObjects(*eval);
 });
 
 }  // namespace ltm::app

@@ -49,6 +49,12 @@ struct EvalConfig {
   std::string chamfer = "mean";            // mean: (d(A->B) + d(B->A)) / 2 of mean NN distances [m];
                                            // fan_squared: sum of the two mean squared NN distances [m^2]
   std::vector<double> chamfer_thresholds = {1.0, 2.0, 3.0};  // count patches with CD > each
+  // Changed objects (clusters of LT-map vs the simulator's LD objects).
+  double obj_match_dist_m = 0.2;           // [m] a point matches when the other set has a point this close
+  double obj_voxel_m = 0.1;                // [m] truth and cluster points voxel-downsampled to this
+  double obj_min_iou = 0.5;                // an object is found when a cluster reaches this point IoU
+  int obj_min_truth_points = 10;           // truth objects with fewer (voxelised) points: not scored
+  int obj_keyframe_stride = 1;             // use every n-th labelled scan for the truth points
 
   template <class V>
   void Visit(V& v) {
@@ -65,6 +71,11 @@ struct EvalConfig {
     v("restore.min_points", patch_min_points, "", 1, 100000000);
     v("restore.chamfer", chamfer, {"mean", "fan_squared"});
     v("restore.thresholds", chamfer_thresholds, "m|m^2", 0.0, 1e6);
+    v("objects.match_dist_m", obj_match_dist_m, "m", 1e-4, 10.0);
+    v("objects.voxel_m", obj_voxel_m, "m", 0.0, 10.0);
+    v("objects.min_iou", obj_min_iou, "", 0.0, 1.0);
+    v("objects.min_truth_points", obj_min_truth_points, "", 0, 100000000);
+    v("objects.keyframe_stride", obj_keyframe_stride, "", 1, 1000000);
   }
 };
 
@@ -219,6 +230,67 @@ struct RestoreResult {
 RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
                               int threads = 0);
 
+// ----------------------------------------------------------------------------------- objects
+// Changed objects of a session pair: truth = LD objects present in exactly one of the two
+// sessions (points in the estimate frame), prediction = LT-map's clusters of that step.
+struct ObjectTruth {
+  std::string pair;       // "00_01"
+  int id = -1;            // LD object id (truth/objects.csv)
+  std::string cls, placement;
+  int session = 0;        // sim session index where the object exists (its points come from there)
+  PointCloud cloud;
+};
+struct ObjectCluster {
+  std::string pair;       // step's "<reference>_<session>", 2 digits each
+  int id = -1;            // cluster id (objects.csv of `ltmapper map objects`)
+  PointCloud cloud;
+};
+struct ObjectScore {
+  std::string pair;
+  int id = -1;
+  std::string cls, placement;
+  int session = 0;
+  std::size_t points = 0;          // truth points after voxelisation
+  int best_cluster = -1;           // cluster with the highest IoU (-1: none overlaps)
+  std::size_t cluster_points = 0;  // its points after voxelisation
+  double best_iou = 0.0;
+  bool scored = true;              // false: fewer than obj_min_truth_points (never scanned)
+  bool found = false;              // scored and best_iou >= obj_min_iou
+};
+struct ObjectsResult {
+  double match_dist_m = 0.0, voxel_m = 0.0, min_iou = 0.0;
+  std::size_t clusters = 0;        // clusters of the scored pairs
+  std::size_t truth_objects = 0;   // scored truth objects
+  std::size_t found = 0;
+  double found_fraction = kNaN;
+  std::vector<ObjectScore> objects;
+};
+// Point IoU of two point sets after voxel-downsampling both to obj_voxel_m (same density, so
+// counts are comparable): a point of A matches when B has a point within obj_match_dist_m and
+// vice versa; inter = (matched A + matched B) / 2, IoU = inter / (|A| + |B| - inter). Equals the
+// set IoU when the matched points pair up one to one. 0 when either set is empty.
+double PointIoU(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg);
+// Every truth object against the clusters of its pair (boxes grown by the match distance must
+// overlap); one cluster per object: the one with the highest IoU.
+ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
+                              const EvalConfig& cfg, int threads = 0);
+// truth/objects.csv rows (id, class, present_in, placement; sessions as sim indices).
+struct SimObject {
+  int id = -1;
+  std::string cls, placement;
+  std::vector<int> present_in;
+};
+std::vector<SimObject> ReadSimObjects(const std::string& objects_csv);
+// Truth changed objects of pair "CC_QQ" (sim session indices): labelled scan points (class
+// static, object = id) of the session where each object exists, placed with the true poses,
+// mapped by T_est_truth (TruthToEstimateFrame) and voxel-downsampled to obj_voxel_m.
+std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair,
+                                            const Pose& T_est_truth, const EvalConfig& cfg, int threads = 0);
+// The clusters written by `ltmapper map objects` (objects.csv + objects.ply with object ids);
+// pair = reference and session columns (store session orders, = sim indices when the sessions
+// were integrated in sim order).
+std::vector<ObjectCluster> ReadObjectClusters(const std::string& objects_dir);
+
 // ----------------------------------------------------------------------------------- storage
 struct StorageItem {
   std::string path;
@@ -252,6 +324,7 @@ struct Report {
   std::optional<LdResult> ld;
   std::optional<RestoreResult> restore;
   std::optional<StorageResult> storage;
+  std::optional<ObjectsResult> objects;
 };
 std::string ToJson(const Report& report);
 std::string ToMarkdown(const Report& report);

@@ -154,6 +154,33 @@ void WriteStorage(json::Writer& w, const StorageResult& s) {
   w.EndArray().EndObject();
 }
 
+void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
+  w.BeginObject("objects")
+      .Number("match_dist_m", r.match_dist_m)
+      .Number("voxel_m", r.voxel_m)
+      .Number("min_iou", r.min_iou)
+      .Int("clusters", (long long)r.clusters)
+      .Int("truth_objects", (long long)r.truth_objects)
+      .Int("found", (long long)r.found)
+      .Number("found_fraction", r.found_fraction)
+      .BeginArray("objects");
+  for (const auto& o : r.objects)
+    w.BeginObject()
+        .String("pair", o.pair)
+        .Int("id", o.id)
+        .String("class", o.cls)
+        .String("placement", o.placement)
+        .Int("session", o.session)
+        .Int("points", (long long)o.points)
+        .Int("best_cluster", o.best_cluster)
+        .Int("cluster_points", (long long)o.cluster_points)
+        .Number("best_iou", o.best_iou)
+        .Bool("scored", o.scored)
+        .Bool("found", o.found)
+        .EndObject();
+  w.EndArray().EndObject();
+}
+
 // -------------------------------------------------------------------------------- Markdown
 std::string Fmt(double v, int digits = 3) {
   if (!std::isfinite(v)) return "n/a";
@@ -285,6 +312,24 @@ void MdStorage(std::ostringstream& md, const StorageResult& s) {
   }
 }
 
+void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
+  md << "## Changed objects\n\nTruth: LD objects present in exactly one session of the pair; point IoU "
+        "after a " << Fmt(r.voxel_m, 2) << " m voxel filter, match distance " << Fmt(r.match_dist_m, 2)
+     << " m; found when IoU >= " << Fmt(r.min_iou, 2) << ".\n\n"
+     << Header({"truth objects", "found", "found fraction", "clusters"})
+     << Row({std::to_string(r.truth_objects), std::to_string(r.found), Fmt(r.found_fraction, 3),
+             std::to_string(r.clusters)})
+     << "\n"
+     << Header({"pair", "id", "class", "placement", "in session", "points", "best cluster", "cluster points",
+                "IoU", "found"});
+  for (const auto& o : r.objects)
+    md << Row({o.pair, std::to_string(o.id), o.cls, o.placement, std::to_string(o.session), std::to_string(o.points),
+               o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
+               std::to_string(o.cluster_points), Fmt(o.best_iou, 3),
+               !o.scored ? std::string("not scored") : o.found ? std::string("yes") : std::string("no")});
+  md << "\n";
+}
+
 }  // namespace
 
 std::string ToJson(const Report& report) {
@@ -298,6 +343,7 @@ std::string ToJson(const Report& report) {
   if (report.ld) WriteLd(w, *report.ld);
   if (report.restore) WriteRestore(w, *report.restore);
   if (report.storage) WriteStorage(w, *report.storage);
+  if (report.objects) WriteObjectsResult(w, *report.objects);
   w.EndObject();
   return w.str();
 }
@@ -314,6 +360,7 @@ std::string ToMarkdown(const Report& report) {
   if (report.ld) MdLd(md, *report.ld);
   if (report.restore) MdRestore(md, *report.restore);
   if (report.storage) MdStorage(md, *report.storage);
+  if (report.objects) MdObjects(md, *report.objects);
   return md.str();
 }
 

@@ -1,0 +1,302 @@
+// Changed-object evaluation: LT-map's clusters against the simulator's LD objects by point IoU.
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+namespace fs = std::filesystem;
+
+namespace ltm::eval {
+namespace {
+
+std::string Join(const std::string& a, const std::string& b) { return (fs::path(a) / b).string(); }
+
+std::vector<std::string> SplitCsv(const std::string& line) {
+  std::vector<std::string> out(1);
+  for (const char c : line) {
+    if (c == ',') out.emplace_back();
+    else if (c != '\r' && c != '"') out.back() += c;
+  }
+  for (auto& s : out) {
+    const auto b = s.find_first_not_of(" \t");
+    const auto e = s.find_last_not_of(" \t");
+    s = b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+  }
+  return out;
+}
+
+// Reads a CSV with a header line; calls row(fields, column index lookup, line number).
+template <class F>
+void ReadCsv(const std::string& path, const std::vector<std::string>& required, F row) {
+  std::ifstream in(path);
+  if (!in) throw Error(path, 0, "cannot open");
+  std::string line;
+  std::size_t line_no = 0;
+  std::vector<std::string> header;
+  std::vector<std::size_t> cols;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
+    auto f = SplitCsv(line);
+    if (header.empty()) {
+      header = f;
+      for (const auto& r : required) {
+        const auto it = std::find(header.begin(), header.end(), r);
+        if (it == header.end()) throw Error(path, line_no, "header has no column '" + r + "'");
+        cols.push_back(std::size_t(it - header.begin()));
+      }
+      continue;
+    }
+    if (f.size() < header.size()) throw Error(path, line_no, "too few columns");
+    std::vector<std::string> v;
+    for (auto c : cols) v.push_back(f[c]);
+    row(v, line_no);
+  }
+  if (header.empty()) throw Error(path, 0, "empty CSV");
+}
+
+int ToInt(const std::string& s, const std::string& path, std::size_t line) {
+  try {
+    std::size_t used = 0;
+    const int v = std::stoi(s, &used);
+    if (used != s.size()) throw std::invalid_argument(s);
+    return v;
+  } catch (const std::logic_error&) {
+    throw Error(path, line, "'" + s + "' is not an integer");
+  }
+}
+
+std::string PairName(int a, int b) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%02d_%02d", a, b);
+  return buf;
+}
+
+PointCloud Downsample(const PointCloud& c, double voxel_m) {
+  return voxel_m > 0.0 ? geometry::VoxelDownsample(c, voxel_m, 1) : c;
+}
+
+std::size_t Matched(const PointCloud& q, const geometry::KdTree& tree, double d) {
+  if (tree.size() == 0) return 0;
+  const float d2 = float(d * d);
+  std::size_t n = 0;
+  std::uint32_t idx = 0;
+  float sq = 0.f;
+  for (const auto& p : q.points)
+    if (tree.Nearest(p.xyz(), &idx, &sq) && sq <= d2) ++n;
+  return n;
+}
+
+double Iou(const PointCloud& a, const geometry::KdTree& ta, const PointCloud& b, const geometry::KdTree& tb,
+           double d) {
+  if (a.empty() || b.empty()) return 0.0;
+  const double inter = 0.5 * double(Matched(a, tb, d) + Matched(b, ta, d));
+  return inter / (double(a.size()) + double(b.size()) - inter);
+}
+
+struct Box {
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(1e30f), hi = Eigen::Vector3f::Constant(-1e30f);
+  explicit Box(const PointCloud& c) {
+    for (const auto& p : c.points) {
+      lo = lo.cwiseMin(p.xyz());
+      hi = hi.cwiseMax(p.xyz());
+    }
+  }
+  bool Overlaps(const Box& o, float margin) const {
+    return (lo.array() <= o.hi.array() + margin).all() && (o.lo.array() <= hi.array() + margin).all();
+  }
+};
+
+}  // namespace
+
+double PointIoU(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg) {
+  const PointCloud va = Downsample(a, cfg.obj_voxel_m), vb = Downsample(b, cfg.obj_voxel_m);
+  if (va.empty() || vb.empty()) return 0.0;
+  const geometry::KdTree ta(va), tb(vb);
+  return Iou(va, ta, vb, tb, cfg.obj_match_dist_m);
+}
+
+ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
+                              const EvalConfig& cfg, int threads) {
+  ObjectsResult r;
+  r.match_dist_m = cfg.obj_match_dist_m;
+  r.voxel_m = cfg.obj_voxel_m;
+  r.min_iou = cfg.obj_min_iou;
+  std::set<std::string> pairs;
+  for (const auto& t : truth) pairs.insert(t.pair);
+  // Voxelised clusters of the scored pairs, with boxes and trees.
+  std::vector<std::size_t> used;
+  for (std::size_t k = 0; k < clusters.size(); ++k)
+    if (pairs.count(clusters[k].pair)) used.push_back(k);
+  r.clusters = used.size();
+  std::vector<PointCloud> cc(clusters.size());
+  std::vector<std::unique_ptr<geometry::KdTree>> ct(clusters.size());
+  std::vector<Box> cb(clusters.size(), Box(PointCloud{}));
+  std::vector<PointCloud> tc(truth.size());
+  std::vector<std::unique_ptr<geometry::KdTree>> tt(truth.size());
+  tbb::task_arena arena = threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), used.size(), [&](std::size_t u) {
+      const std::size_t k = used[u];
+      cc[k] = Downsample(clusters[k].cloud, cfg.obj_voxel_m);
+      cb[k] = Box(cc[k]);
+      ct[k] = std::make_unique<geometry::KdTree>(cc[k]);
+    });
+    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) {
+      tc[i] = Downsample(truth[i].cloud, cfg.obj_voxel_m);
+      tt[i] = std::make_unique<geometry::KdTree>(tc[i]);
+    });
+  });
+  r.objects.resize(truth.size());
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) {
+      const ObjectTruth& t = truth[i];
+      ObjectScore& s = r.objects[i];
+      s.pair = t.pair;
+      s.id = t.id;
+      s.cls = t.cls;
+      s.placement = t.placement;
+      s.session = t.session;
+      s.points = tc[i].size();
+      s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1));
+      if (tc[i].empty()) return;
+      const Box tb(tc[i]);
+      for (const std::size_t k : used) {
+        if (clusters[k].pair != t.pair || cc[k].empty() || !tb.Overlaps(cb[k], float(cfg.obj_match_dist_m)))
+          continue;
+        const double iou = Iou(tc[i], *tt[i], cc[k], *ct[k], cfg.obj_match_dist_m);
+        if (iou > s.best_iou) {
+          s.best_iou = iou;
+          s.best_cluster = clusters[k].id;
+          s.cluster_points = cc[k].size();
+        }
+      }
+      s.found = s.scored && s.best_iou >= cfg.obj_min_iou;
+    });
+  });
+  for (const auto& s : r.objects) {
+    if (!s.scored) continue;
+    ++r.truth_objects;
+    if (s.found) ++r.found;
+  }
+  r.found_fraction = r.truth_objects ? double(r.found) / double(r.truth_objects) : kNaN;
+  return r;
+}
+
+std::vector<SimObject> ReadSimObjects(const std::string& path) {
+  std::vector<SimObject> out;
+  ReadCsv(path, {"id", "class", "present_in", "placement"}, [&](const std::vector<std::string>& f, std::size_t line) {
+    SimObject o;
+    o.id = ToInt(f[0], path, line);
+    o.cls = f[1];
+    o.placement = f[3];
+    std::string cur;
+    for (const char c : f[2] + ";") {
+      if (c == ';') {
+        if (!cur.empty()) o.present_in.push_back(ToInt(cur, path, line));
+        cur.clear();
+      } else if (c != ' ') {
+        cur += c;
+      }
+    }
+    out.push_back(std::move(o));
+  });
+  return out;
+}
+
+std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair, const Pose& T_est_truth,
+                                            const EvalConfig& cfg, int threads) {
+  int a = -1, b = -1;
+  if (std::sscanf(pair.c_str(), "%d_%d", &a, &b) != 2 || a < 0 || b < 0)
+    throw Error("eval objects: pair '" + pair + "' is not CC_QQ");
+  const auto names = SimSessionNames(sim_dir);
+  if (std::size_t(std::max(a, b)) >= names.size())
+    throw Error(sim_dir, 0, "pair " + pair + ": the simulator has " + std::to_string(names.size()) + " sessions");
+  const std::string truth_dir = Join(sim_dir, "truth");
+  std::vector<ObjectTruth> out;
+  for (const auto& o : ReadSimObjects(Join(truth_dir, "objects.csv"))) {
+    const bool in_a = std::count(o.present_in.begin(), o.present_in.end(), a) > 0;
+    const bool in_b = std::count(o.present_in.begin(), o.present_in.end(), b) > 0;
+    if (in_a == in_b) continue;
+    ObjectTruth t;
+    t.pair = PairName(a, b);
+    t.id = o.id;
+    t.cls = o.cls;
+    t.placement = o.placement;
+    t.session = in_a ? a : b;
+    out.push_back(std::move(t));
+  }
+  for (const int s : {a, b}) {
+    std::map<int, std::size_t> slot;  // object id -> position in out
+    for (std::size_t i = 0; i < out.size(); ++i)
+      if (out[i].session == s) slot[out[i].id] = i;
+    if (slot.empty()) continue;
+    const std::string sdir = Join(truth_dir, names[std::size_t(s)]);
+    const auto poses = ReadPoses(Join(sdir, "poses_world.txt"));
+    const std::string ldir = Join(sdir, "labels");
+    const auto files = io::ListIndexedFiles(ldir, ".ply");
+    if (files.size() != poses.size())
+      throw Error(ldir, 0, std::to_string(files.size()) + " labelled scans but " + std::to_string(poses.size()) + " poses");
+    std::vector<std::size_t> scans;
+    for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.obj_keyframe_stride)) scans.push_back(k);
+    // Per scan: points of each wanted object in the estimate frame; merged in scan order.
+    std::vector<std::map<int, PointCloud>> parts(scans.size());
+    tbb::task_arena arena = threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
+    arena.execute([&] {
+      tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t j) {
+        const std::size_t k = scans[j];
+        const std::string path = files[k].find('/') == std::string::npos ? Join(ldir, files[k]) : files[k];
+        const PointCloud scan = io::ReadPly(path);
+        if (scan.cls.size() != scan.size() || scan.object.size() != scan.size())
+          throw Error(path, 0, "labelled scan needs 'class' and 'object' fields");
+        const Pose T = T_est_truth * poses[k];
+        for (std::size_t i = 0; i < scan.size(); ++i) {
+          if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
+          const Eigen::Vector3f p = (T * scan.points[i].xyz().cast<double>()).cast<float>();
+          parts[j][scan.object[i]].push_back(p.x(), p.y(), p.z(), scan.points[i].intensity);
+        }
+      });
+    });
+    for (auto& m : parts)
+      for (auto& [id, c] : m) out[slot[id]].cloud.append(c);
+  }
+  for (auto& t : out) t.cloud = Downsample(t.cloud, cfg.obj_voxel_m);
+  return out;
+}
+
+std::vector<ObjectCluster> ReadObjectClusters(const std::string& dir) {
+  const std::string csv = Join(dir, "objects.csv"), ply = Join(dir, "objects.ply");
+  std::map<int, std::size_t> slot;
+  std::vector<ObjectCluster> out;
+  ReadCsv(csv, {"id", "session", "reference"}, [&](const std::vector<std::string>& f, std::size_t line) {
+    ObjectCluster c;
+    c.id = ToInt(f[0], csv, line);
+    c.pair = PairName(ToInt(f[2], csv, line), ToInt(f[1], csv, line));
+    if (slot.count(c.id)) throw Error(csv, line, "duplicate object id " + f[0]);
+    slot[c.id] = out.size();
+    out.push_back(std::move(c));
+  });
+  if (out.empty()) return out;
+  const PointCloud all = io::ReadPly(ply);
+  if (all.object.size() != all.size()) throw Error(ply, 0, "no 'object' field");
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    const auto it = slot.find(all.object[i]);
+    if (it == slot.end()) throw Error(ply, 0, "point " + std::to_string(i) + ": object " + std::to_string(all.object[i]) + " not in objects.csv");
+    const auto& p = all.points[i];
+    out[it->second].cloud.push_back(p.x, p.y, p.z, p.intensity);
+  }
+  return out;
+}
+
+}  // namespace ltm::eval

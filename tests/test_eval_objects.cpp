@@ -1,0 +1,154 @@
+// Changed-object evaluation on hand-built cases with known point IoU, and the sim / map-objects
+// file readers on a tiny fake layout.
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include "test_util.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace ltm::eval {
+namespace {
+
+// nx x ny grid at z = 0 with 0.1 m spacing at voxel centres (one point per 0.1 m voxel).
+PointCloud Grid(int nx, int ny, float x0 = 0.f, float y0 = 0.f) {
+  PointCloud c;
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j) c.push_back(x0 + 0.05f + 0.1f * float(i), y0 + 0.05f + 0.1f * float(j), 0.05f);
+  return c;
+}
+
+EvalConfig Cfg() {
+  EvalConfig cfg;
+  cfg.obj_voxel_m = 0.1;
+  cfg.obj_match_dist_m = 0.05;  // below the spacing: only the same grid node matches
+  cfg.obj_min_iou = 0.5;
+  cfg.obj_min_truth_points = 10;
+  return cfg;
+}
+
+TEST(Objects, PointIoUHandComputed) {
+  const auto cfg = Cfg();
+  const PointCloud t = Grid(10, 10);           // 100 points
+  EXPECT_DOUBLE_EQ(PointIoU(t, t, cfg), 1.0);
+  // Half of the object plus 50 points elsewhere: inter 50, union 100 + 100 - 50 -> 1/3.
+  PointCloud c = Grid(5, 10);
+  c.append(Grid(5, 10, 20.f, 0.f));
+  EXPECT_NEAR(PointIoU(t, c, cfg), 1.0 / 3.0, 1e-12);
+  // Half of the object only: inter 50, union 100 -> 0.5.
+  EXPECT_NEAR(PointIoU(t, Grid(5, 10), cfg), 0.5, 1e-12);
+  // Denser cluster (4 points per voxel) is voxelised first: same IoU as the grid itself.
+  PointCloud dense;
+  for (const auto& p : t.points)
+    for (float d : {-0.02f, 0.02f})
+      for (float e : {-0.02f, 0.02f}) dense.push_back(p.x + d, p.y + e, p.z);
+  EXPECT_NEAR(PointIoU(t, dense, cfg), 1.0, 1e-12);
+  EXPECT_DOUBLE_EQ(PointIoU(t, PointCloud{}, cfg), 0.0);
+}
+
+TEST(Objects, EvaluateObjectsFoundFraction) {
+  const auto cfg = Cfg();
+  std::vector<ObjectTruth> truth(4);
+  truth[0] = {"00_01", 7, "car", "open", 0, Grid(10, 10)};               // one whole cluster: found
+  truth[1] = {"00_01", 8, "tree", "open", 1, Grid(10, 10, 5.f, 0.f)};    // glued into a huge cluster: not found
+  truth[2] = {"00_02", 9, "car", "open", 2, Grid(10, 10, 10.f, 0.f)};    // cluster only in the other pair
+  truth[3] = {"00_01", 10, "car", "occluded", 0, Grid(2, 2, 30.f, 0.f)}; // 4 points: not scored
+  std::vector<ObjectCluster> clusters(3);
+  clusters[0] = {"00_01", 0, Grid(10, 10)};
+  clusters[1] = {"00_01", 1, Grid(40, 10, 5.f, 0.f)};  // 400 points, 100 of them the tree: IoU 0.25
+  clusters[2] = {"00_01", 2, Grid(10, 10, 10.f, 0.f)}; // where object 9 is, but wrong pair
+  const auto r = EvaluateObjects(truth, clusters, cfg, 2);
+  ASSERT_EQ(r.objects.size(), 4u);
+  EXPECT_TRUE(r.objects[0].found);
+  EXPECT_EQ(r.objects[0].best_cluster, 0);
+  EXPECT_NEAR(r.objects[0].best_iou, 1.0, 1e-12);
+  EXPECT_FALSE(r.objects[1].found);
+  EXPECT_EQ(r.objects[1].best_cluster, 1);
+  EXPECT_NEAR(r.objects[1].best_iou, 0.25, 1e-12);
+  EXPECT_FALSE(r.objects[2].found);
+  EXPECT_EQ(r.objects[2].best_cluster, -1);
+  EXPECT_FALSE(r.objects[3].scored);
+  EXPECT_EQ(r.truth_objects, 3u);
+  EXPECT_EQ(r.found, 1u);
+  EXPECT_NEAR(r.found_fraction, 1.0 / 3.0, 1e-12);
+  EXPECT_EQ(r.clusters, 3u);
+  Report rep;
+  rep.objects = r;
+  EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.found_fraction"), 1.0 / 3.0, 1e-9);
+  EXPECT_NE(ToMarkdown(rep).find("Changed objects"), std::string::npos);
+}
+
+void WriteText(const std::string& path, const std::string& text) {
+  fs::create_directories(fs::path(path).parent_path());
+  std::ofstream(path) << text;
+}
+
+TEST(Objects, SimTruthAndClusterFiles) {
+  const fs::path dir = fs::temp_directory_path() / ("ltm_eval_objects_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string t = (dir / "sim" / "truth").string();
+  WriteText(t + "/objects.csv",
+            "id,class,present_in,placement,centroid_x\n"
+            "3,car,0,open,0\n"       // only in 00: changed for 00_01
+            "4,fence,0;1,open,0\n"   // in both: not changed
+            "5,car,1,open,0\n");     // only in 01: changed
+  // One scan per session; session 01's true pose is shifted by +100 m in x.
+  for (int s = 0; s < 2; ++s) {
+    const std::string sd = t + "/session_0" + std::to_string(s);
+    WriteText(sd + "/poses_world.txt", s == 0 ? "1 0 0 0 0 1 0 0 0 0 1 0\n" : "1 0 0 100 0 1 0 0 0 0 1 0\n");
+    WriteText(sd + "/origin.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n");
+    PointCloud scan = Grid(10, 10);
+    scan.append(Grid(10, 10, 5.f, 0.f));
+    scan.append(Grid(3, 3, 9.f, 0.f));  // HD actor sharing the id of a changed object
+    scan.cls.assign(scan.size(), PointClass::kStatic);
+    scan.object.assign(scan.size(), -1);
+    scan.session.assign(scan.size(), std::uint16_t(s));
+    for (std::size_t i = 0; i < 100; ++i) scan.object[i] = s == 0 ? 3 : 5;
+    for (std::size_t i = 100; i < 200; ++i) scan.object[i] = 4;
+    for (std::size_t i = 200; i < scan.size(); ++i) scan.cls[i] = PointClass::kHD, scan.object[i] = s == 0 ? 3 : 5;
+    fs::create_directories(sd + "/labels");
+    io::WritePly(sd + "/labels/000000.ply", scan);
+  }
+  const auto truth = LoadSimObjectTruth((dir / "sim").string(), "00_01", Pose::Identity(), Cfg());
+  ASSERT_EQ(truth.size(), 2u);
+  EXPECT_EQ(truth[0].id, 3);
+  EXPECT_EQ(truth[0].session, 0);
+  EXPECT_EQ(truth[0].pair, "00_01");
+  EXPECT_EQ(truth[0].cloud.size(), 100u);  // HD points with the same id excluded
+  EXPECT_EQ(truth[1].id, 5);
+  EXPECT_EQ(truth[1].session, 1);
+  ASSERT_EQ(truth[1].cloud.size(), 100u);
+  EXPECT_NEAR(truth[1].cloud.points[0].x, 100.05f, 1e-3f);  // placed with the true pose
+
+  // Clusters as `ltmapper map objects` writes them: object 0 = truth 3, object 1 = half of truth 5.
+  const std::string od = (dir / "objects").string();
+  WriteText(od + "/objects.csv",
+            "id,session,reference,class,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n"
+            "0,1,0,nd_strong,100,0,0,0,0,0,0,0,0,0\n"
+            "1,1,0,pd_strong,50,0,0,0,0,0,0,0,0,0\n");
+  PointCloud all = Grid(10, 10);
+  all.append(Grid(5, 10, 100.f, 0.f));
+  all.object.assign(all.size(), 0);
+  for (std::size_t i = 100; i < all.size(); ++i) all.object[i] = 1;
+  io::WritePly(od + "/objects.ply", all);
+  const auto clusters = ReadObjectClusters(od);
+  ASSERT_EQ(clusters.size(), 2u);
+  EXPECT_EQ(clusters[0].pair, "00_01");
+  EXPECT_EQ(clusters[1].cloud.size(), 50u);
+  const auto r = EvaluateObjects(truth, clusters, Cfg());
+  EXPECT_TRUE(r.objects[0].found);
+  EXPECT_TRUE(r.objects[1].found);  // IoU exactly 0.5
+  EXPECT_NEAR(r.objects[1].best_iou, 0.5, 1e-12);
+  EXPECT_THROW(LoadSimObjectTruth((dir / "sim").string(), "00_05", Pose::Identity(), Cfg()), Error);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace ltm::eval
