@@ -34,8 +34,10 @@ void RunSim(const SimArgs& a) {
                r.seconds_cast, r.rays_per_s / 1e6, r.keyframes ? 1e3 * r.seconds_cast / double(r.keyframes) : 0.0,
                r.seconds_build, r.seconds_write, r.seconds_truth, r.seconds_total, double(r.bytes_written) / 1e6);
   for (const auto& p : r.pairs) {
-    spdlog::info("pair 00-{:02d}: PD strong {} weak {}, ND strong {} weak {} (points, {} m voxels)", p.query,
-                 p.pd_strong, p.pd_weak, p.nd_strong, p.nd_weak, cfg.truth_voxel_m);
+    spdlog::info("pair 00-{:02d}: PD strong {} weak {}, ND strong {} weak {} (points, {} m voxels); LD objects "
+                 "only: PD strong {} weak {}, ND strong {} weak {}; {} visibility rays", p.query, p.pd_strong,
+                 p.pd_weak, p.nd_strong, p.nd_weak, cfg.truth_voxel_m, p.objects_pd_strong, p.objects_pd_weak,
+                 p.objects_nd_strong, p.objects_nd_weak, p.rays);
   }
   spdlog::info("wrote {}/sessions and {}/truth", a.out, a.out);
 }

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <filesystem>
 #include <map>
 #include <set>
@@ -62,7 +63,10 @@ TEST_F(SimTruth, WritesEveryDocumentedFile) {
   EXPECT_GT(report_->ld_points, 0u);
   for (const char* f : {"truth/scenario.yaml", "truth/objects.csv", "truth/hd_actors.csv", "truth/pair_00_01/pd_strong.pcd",
                         "truth/pair_00_01/pd_weak.pcd", "truth/pair_00_01/nd_strong.pcd",
-                        "truth/pair_00_01/nd_weak.pcd", "truth/pair_00_01/changes.ply"}) {
+                        "truth/pair_00_01/nd_weak.pcd", "truth/pair_00_01/changes.ply",
+                        "truth/pair_00_01/objects_pd_strong.pcd", "truth/pair_00_01/objects_pd_weak.pcd",
+                        "truth/pair_00_01/objects_nd_strong.pcd", "truth/pair_00_01/objects_nd_weak.pcd",
+                        "truth/pair_00_01/objects_changes.ply"}) {
     EXPECT_TRUE(fs::exists(Out() + "/" + f)) << f;
   }
   for (int s = 0; s < cfg.sessions; ++s) {
@@ -190,8 +194,8 @@ TEST_F(SimTruth, LdObjectsSeenExactlyWhereTheyExist) {
     }
   }
   EXPECT_GE(seen_present, objects.size() / 2);
-  // Change truth: PD on objects new in the query, ND on objects gone from it.
-  const PointCloud ch = io::ReadPly(Out() + "/truth/pair_00_01/changes.ply");
+  // Object change truth: PD on objects new in the query, ND on objects gone from it.
+  const PointCloud ch = io::ReadPly(Out() + "/truth/pair_00_01/objects_changes.ply");
   ASSERT_GT(ch.size(), 0u);
   std::set<PointClass> classes;
   for (std::size_t i = 0; i < ch.size(); ++i) {
@@ -208,8 +212,83 @@ TEST_F(SimTruth, LdObjectsSeenExactlyWhereTheyExist) {
   EXPECT_TRUE(classes.count(PointClass::kNDStrong));
   EXPECT_TRUE(classes.count(PointClass::kNDWeak)) << "the object behind the hoarding gives weak ND";
   std::size_t total = 0;
-  for (const auto& p : report_->pairs) total += p.pd_strong + p.pd_weak + p.nd_strong + p.nd_weak;
+  for (const auto& p : report_->pairs) {
+    total += p.objects_pd_strong + p.objects_pd_weak + p.objects_nd_strong + p.objects_nd_weak;
+  }
   EXPECT_EQ(total, ch.size());
+}
+
+// Exact point lookup (the change clouds are subsets of the static worlds, same coordinates).
+std::set<std::array<float, 3>> PointSet(const PointCloud& c) {
+  std::set<std::array<float, 3>> s;
+  for (const auto& p : c.points) s.insert({p.x, p.y, p.z});
+  return s;
+}
+
+TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
+  const SimConfig cfg = TinyConfig();
+  Simulator sim(cfg, 2);
+  const std::string pair = Out() + "/truth/pair_00_01/";
+  const auto pds = PointSet(io::ReadPcd(pair + "pd_strong.pcd"));
+  std::set<std::array<float, 3>> any;
+  for (const char* f : {"pd_strong", "pd_weak", "nd_strong", "nd_weak"}) {
+    const auto s = PointSet(io::ReadPcd(pair + f + ".pcd"));
+    any.insert(s.begin(), s.end());
+    // The object-only truth is part of the full truth.
+    for (const auto& p : PointSet(io::ReadPcd(pair + "objects_" + f + ".pcd"))) EXPECT_TRUE(s.count(p)) << f;
+  }
+  // Permanent structure is only ever strong PD (query side) or weak ND (central side).
+  const PointCloud ch = io::ReadPly(pair + "changes.ply");
+  std::size_t permanent = 0;
+  for (std::size_t i = 0; i < ch.size(); ++i) {
+    if (ch.object[i] >= 0) continue;
+    ++permanent;
+    EXPECT_TRUE(ch.cls[i] == PointClass::kPDStrong || ch.cls[i] == PointClass::kNDWeak) << int(ch.cls[i]);
+  }
+  EXPECT_GT(permanent, 0u);
+  auto min_distance = [&](const Eigen::Vector3f& p, int s) {
+    double best = 1e30;
+    for (const auto& T : sim.T_world_sensor(s)) best = std::min(best, (T.translation() - p.cast<double>()).norm());
+    return best;
+  };
+  // Query static points beyond the max range of every central keyframe: strong PD.
+  const PointCloud query = io::ReadPly(Out() + "/truth/session_01/static_world.ply");
+  std::size_t far = 0;
+  for (std::size_t i = 0; i < query.size(); i += 7) {
+    if (query.object[i] >= 0 || min_distance(query.points[i].xyz(), 0) <= cfg.max_range_m + 1.0) continue;
+    ++far;
+    const auto& p = query.points[i];
+    ASSERT_TRUE(pds.count({p.x, p.y, p.z})) << p.x << " " << p.y << " " << p.z;
+  }
+  EXPECT_GT(far, 10u);
+  // Central static points a query ray hits head-on (within 5 cm): in no change file.
+  const PointCloud central = io::ReadPly(Out() + "/truth/session_00/static_world.ply");
+  std::size_t observed = 0;
+  for (int k : {2, 9}) {
+    const Pose T = sim.T_world_sensor(1)[std::size_t(k)];
+    std::vector<Eigen::Vector3f> dirs;
+    std::vector<std::size_t> idx;
+    for (std::size_t i = 0; i < central.size(); i += 11) {
+      const Eigen::Vector3d d = central.points[i].xyz().cast<double>() - T.translation();
+      if (central.object[i] >= 0 || d.norm() > cfg.max_range_m - 1.0 || d.norm() < cfg.min_range_m) continue;
+      const Eigen::Vector3d ds = T.linear().transpose() * d;
+      const double el = std::atan2(ds.z(), std::hypot(ds.x(), ds.y())) * 180.0 / M_PI;
+      if (el < cfg.fov_down_deg || el > cfg.fov_up_deg) continue;
+      dirs.push_back(d.normalized().cast<float>());
+      idx.push_back(i);
+    }
+    const auto hits = sim.CastRays(1, k, T.translation(), dirs);
+    for (std::size_t m = 0; m < idx.size(); ++m) {
+      const auto& p = central.points[idx[m]];
+      const double r = (p.xyz().cast<double>() - T.translation()).norm();
+      if (hits[m].hit && hits[m].object < 0 && hits[m].cos_incidence > 0.5 && std::abs(hits[m].range - r) < 0.05) {
+        ++observed;
+        ASSERT_FALSE(any.count({p.x, p.y, p.z})) << "observed by query keyframe " << k << ": " << p.x << " " << p.y;
+      }
+    }
+  }
+  EXPECT_GT(observed, 100u);
+  EXPECT_GT(report_->pairs[0].nd_weak, report_->pairs[0].objects_nd_weak);
 }
 
 TEST(Sim, SameSeedSameBytesAnyThreadsOtherSeedDiffers) {

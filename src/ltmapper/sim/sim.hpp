@@ -84,7 +84,9 @@ struct SimConfig {
   double ld_route_distance_m = 20.0;    // [m] slots this close to a route count as near it
   // --- truth ---
   double truth_voxel_m = 0.2;           // [m] static worlds and change clouds
-  double visibility_tolerance_m = 0.3;  // [m] a ray "passes through" when it hits beyond range+tol
+  double visibility_tolerance_m = 0.3;  // [m] a ray observes a point when its first hit lies within
+                                        // tol / cos(incidence) of it, passes through beyond that
+  double visibility_grazing_max_m = 2.0;  // [m] cap of that along-ray tolerance at grazing incidence
   int visibility_max_rays = 0;          // per point and pair, 0 = every keyframe in range
 
   template <class V>
@@ -142,6 +144,7 @@ struct SimConfig {
     v("ld.route_distance_m", ld_route_distance_m, "m", 1.0, 1000.0);
     v("truth.voxel_m", truth_voxel_m, "m", 0.01, 10.0);
     v("truth.visibility_tolerance_m", visibility_tolerance_m, "m", 0.0, 10.0);
+    v("truth.visibility_grazing_max_m", visibility_grazing_max_m, "m", 0.0, 100.0);
     v("truth.visibility_max_rays", visibility_max_rays, "", 0, 1000000);
   }
 };
@@ -170,10 +173,12 @@ struct HdActorInfo {
 };
 
 // Counts of the point-wise change truth of one pair (central 0, query k), in points after
-// voxel downsampling (truth.voxel_m).
+// voxel downsampling (truth.voxel_m): every changed surface, and the LD-object-only part.
 struct PairTruthCounts {
   int query = 0;
   std::size_t pd_strong = 0, pd_weak = 0, nd_strong = 0, nd_weak = 0;
+  std::size_t objects_pd_strong = 0, objects_pd_weak = 0, objects_nd_strong = 0, objects_nd_weak = 0;
+  std::size_t rays = 0;  // visibility rays cast for this pair
 };
 
 struct SimReport {
@@ -202,6 +207,7 @@ struct RayHit {
   float range = 0.f;                         // [m] noise-free distance to the first hit
   PointClass cls = PointClass::kUnknown;     // kStatic (also LD objects) or kHD
   int object = -1;                           // LD object id, HD actor id, -1 permanent static
+  float cos_incidence = 1.f;                 // |cos| of the angle between ray and surface normal
 };
 
 // The scenario and its Embree scenes in memory (for tests and benchmarks; Simulate uses it).

@@ -5,6 +5,11 @@
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/sim/sim.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
@@ -120,6 +125,112 @@ std::vector<char> SeenThrough(Simulator& sim, int session, const PointCloud& pts
   return seen;
 }
 
+// Along-ray tolerance for a first hit whose surface makes |cos| `cosine` with the ray: a point
+// within truth.visibility_tolerance_m of that surface (normal distance) is on it, so the range
+// window grows as 1/cos at grazing incidence (far ground), capped by visibility_grazing_max_m.
+double RayTolerance(const SimConfig& cfg, float cosine) {
+  const double tol = cfg.visibility_tolerance_m;
+  const double c = std::max(double(cosine), 1e-6);
+  return std::max(tol, std::min(tol / c, cfg.visibility_grazing_max_m));
+}
+
+// Keyframes coarse to fine (every 16th first, then the ones in between): a surface seen by a
+// stretch of keyframes is found by the first pass, the order never changes the outcome.
+std::vector<std::size_t> CoarseToFine(std::size_t n) {
+  auto rev4 = [](std::size_t x) {
+    return ((x & 1) << 3) | ((x & 2) << 1) | ((x & 4) >> 1) | ((x & 8) >> 3);
+  };
+  std::vector<std::size_t> order(n);
+  for (std::size_t j = 0; j < n; ++j) order[j] = j;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return rev4(a % 16) < rev4(b % 16); });
+  return order;
+}
+
+// Did session `session` observe the surface of each point (a point of session `owner`'s
+// HD-free world, world frame)? A point is observed when some keyframe ray of `session` towards
+// it (range within [lidar.min_range_m, lidar.max_range_m], elevation inside the vertical FOV,
+// cast in the world of `session` with its HD actors at that keyframe) first hits permanent
+// structure or an LD object present in both sessions within the along-ray tolerance of the
+// point (RayTolerance). Points already marked observed are skipped; a point stops being tested
+// once observed. Returns the number of rays cast.
+std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pts, const SimConfig& cfg,
+                    std::vector<char>* observed) {
+  const std::size_t n = pts.size();
+  std::vector<int> tested(n, 0);
+  std::size_t rays = 0;
+  const double el_lo = cfg.fov_down_deg * M_PI / 180.0 - 1e-6, el_hi = cfg.fov_up_deg * M_PI / 180.0 + 1e-6;
+  const auto& poses = sim.T_world_sensor(session);
+  std::vector<std::size_t> todo, idx;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(*observed)[i]) todo.push_back(i);
+  }
+  std::vector<Eigen::Vector3f> dirs;
+  std::vector<float> ranges;
+  for (const std::size_t j : CoarseToFine(poses.size())) {
+    const Eigen::Vector3d o = poses[j].translation();
+    const Eigen::Matrix3d Rt = poses[j].linear().transpose();
+    idx.clear();
+    dirs.clear();
+    ranges.clear();
+    std::size_t kept = 0;
+    for (const std::size_t i : todo) {
+      if ((*observed)[i]) continue;
+      todo[kept++] = i;
+      if (cfg.visibility_max_rays > 0 && tested[i] >= cfg.visibility_max_rays) continue;
+      const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - o;
+      if (std::abs(d.x()) > cfg.max_range_m || std::abs(d.y()) > cfg.max_range_m) continue;
+      const double r = d.norm();
+      if (r < cfg.min_range_m || r > cfg.max_range_m) continue;
+      const Eigen::Vector3d ds = Rt * d;
+      const double el = std::atan2(ds.z(), std::hypot(ds.x(), ds.y()));
+      if (el < el_lo || el > el_hi) continue;
+      idx.push_back(i);
+      dirs.push_back((d / r).cast<float>());
+      ranges.push_back(float(r));
+    }
+    todo.resize(kept);
+    if (idx.empty()) continue;
+    const auto hits = sim.CastRays(session, int(j), o, dirs);
+    rays += idx.size();
+    for (std::size_t m = 0; m < idx.size(); ++m) {
+      const std::size_t i = idx[m];
+      ++tested[i];
+      const RayHit& h = hits[m];
+      const bool same = h.hit && h.cls != PointClass::kHD && (h.object < 0 || sim.IsPresent(h.object, owner));
+      if (same && std::abs(double(h.range) - ranges[m]) <= RayTolerance(cfg, h.cos_incidence)) (*observed)[i] = 1;
+    }
+  }
+  return rays;
+}
+
+// The surfaces of `own` (session `s`'s HD-free world: permanent structure and LD objects
+// present in both sessions) that session `o` did not observe. A point is observed when `o`'s
+// HD-free world has a point of the same kind within truth.visibility_tolerance_m (a cheap
+// first test: `o` scanned that surface), else by casting rays from `o`'s keyframes (Observe).
+// These surfaces exist in both worlds, so no ray of `o` can pass through them (rays that seem
+// to are tangent to an edge): not observed means occluded, out of range or out of the FOV.
+PointCloud Unobserved(Simulator& sim, int s, int o, const PointCloud& own, const PointCloud& other, const SimConfig& cfg,
+                      int threads, std::size_t* rays) {
+  auto shared = [&](int obj) { return obj < 0 || (sim.IsPresent(obj, s) && sim.IsPresent(obj, o)); };
+  std::vector<bool> keep_own(own.size()), keep_other(other.size());
+  for (std::size_t i = 0; i < own.size(); ++i) keep_own[i] = shared(own.object[i]);
+  for (std::size_t i = 0; i < other.size(); ++i) keep_other[i] = shared(other.object[i]);
+  const PointCloud pts = own.select(keep_own);
+  const geometry::KdTree tree(other.select(keep_other));
+  std::vector<char> observed(pts.size(), 0);
+  const float radius = float(cfg.visibility_tolerance_m);
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pts.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i < r.end(); ++i) observed[i] = tree.CountWithin(pts.points[i].xyz(), radius, 1) > 0;
+    });
+  });
+  *rays += Observe(sim, o, s, pts, cfg, &observed);
+  std::vector<bool> un(pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i) un[i] = !observed[i];
+  return pts.select(un);
+}
+
 // Runs jobs in submission order on one background thread (or inline when not threaded), with a
 // bounded queue: keyframe k's files and truth are processed while keyframe k+1 is cast.
 class OrderedWorker {
@@ -230,7 +341,7 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
   WriteActorsCsv(truth + "/hd_actors.csv", sim.hd_actor_info());
 
   const double voxel = cfg.truth_voxel_m;
-  std::vector<PointCloud> ld_world(static_cast<std::size_t>(N));
+  std::vector<PointCloud> ld_world(static_cast<std::size_t>(N)), static_worlds(static_cast<std::size_t>(N));
   for (int s = 0; s < N; ++s) {
     const std::string name = SessionName(s);
     const std::string sdir = out_dir + "/sessions/" + name, tdir = truth + "/" + name;
@@ -293,11 +404,13 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
     io::WritePcd(tdir + "/static_world.pcd", static_world);
     io::WritePly(tdir + "/static_world.ply", static_world);
     ld_world[std::size_t(s)] = geometry::VoxelDownsample(ld_acc, voxel, threads);
+    static_worlds[std::size_t(s)] = static_world;
     rep.seconds_truth += Since(t);
     rep.keyframes += std::size_t(sim.keyframes(s));
   }
 
-  // Change truth per pair (central 0, query k).
+  // Change truth per pair (central 0, query k): the LD objects that changed (objects_*), plus
+  // every other surface one session has and the other never observed (FORMATS.md).
   t = Clock::now();
   for (int q = 1; q < N; ++q) {
     PairTruthCounts counts;
@@ -309,35 +422,46 @@ SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads
       }
       return c.select(keep);
     };
+    // LD objects: present in one session only.
     PointCloud nd = changed(ld_world[0], 0, q), pd = changed(ld_world[std::size_t(q)], q, 0);
     const auto nd_seen = SeenThrough(sim, q, nd, cfg);  // query saw through: strong ND
     const auto pd_seen = SeenThrough(sim, 0, pd, cfg);  // central saw the space free: weak PD
-    std::vector<bool> nd_strong(nd.size()), nd_weak(nd.size()), pd_strong(pd.size()), pd_weak(pd.size());
-    for (std::size_t i = 0; i < nd.size(); ++i) {
-      nd_strong[i] = nd_seen[i];
-      nd_weak[i] = !nd_seen[i];
-      nd.cls[i] = nd_seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak;
-    }
-    for (std::size_t i = 0; i < pd.size(); ++i) {
-      pd_weak[i] = pd_seen[i];
-      pd_strong[i] = !pd_seen[i];
-      pd.cls[i] = pd_seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong;
-    }
+    for (std::size_t i = 0; i < nd.size(); ++i) nd.cls[i] = nd_seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak;
+    for (std::size_t i = 0; i < pd.size(); ++i) pd.cls[i] = pd_seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong;
+    // Surfaces both sessions have (permanent, LD objects present in both) that the other
+    // session never observed: weak ND (central side, kept in the map) and strong PD (query side).
+    PointCloud snd = Unobserved(sim, 0, q, static_worlds[0], static_worlds[std::size_t(q)], cfg, threads, &counts.rays);
+    PointCloud spd = Unobserved(sim, q, 0, static_worlds[std::size_t(q)], static_worlds[0], cfg, threads, &counts.rays);
+    snd.cls.assign(snd.size(), PointClass::kNDWeak);
+    spd.cls.assign(spd.size(), PointClass::kPDStrong);
+
+    auto of = [](const PointCloud& c, PointClass k) {
+      std::vector<bool> keep(c.size());
+      for (std::size_t i = 0; i < c.size(); ++i) keep[i] = c.cls[i] == k;
+      return c.select(keep);
+    };
     const std::string pdir = truth + "/pair_00_" + Num(q, 2);
     io::MakeDirs(pdir);
-    const PointCloud pds = pd.select(pd_strong), pdw = pd.select(pd_weak);
-    const PointCloud nds = nd.select(nd_strong), ndw = nd.select(nd_weak);
-    io::WritePcd(pdir + "/pd_strong.pcd", pds);
-    io::WritePcd(pdir + "/pd_weak.pcd", pdw);
-    io::WritePcd(pdir + "/nd_strong.pcd", nds);
-    io::WritePcd(pdir + "/nd_weak.pcd", ndw);
-    PointCloud all = nd;
-    Append(all, pd);
+    const PointClass kinds[4] = {PointClass::kPDStrong, PointClass::kPDWeak, PointClass::kNDStrong, PointClass::kNDWeak};
+    const char* names[4] = {"pd_strong", "pd_weak", "nd_strong", "nd_weak"};
+    std::size_t* obj_counts[4] = {&counts.objects_pd_strong, &counts.objects_pd_weak, &counts.objects_nd_strong,
+                                  &counts.objects_nd_weak};
+    std::size_t* all_counts[4] = {&counts.pd_strong, &counts.pd_weak, &counts.nd_strong, &counts.nd_weak};
+    PointCloud objects = nd, all;
+    Append(objects, pd);
+    for (int c = 0; c < 4; ++c) {
+      const bool is_pd = c < 2;
+      const PointCloud o = of(is_pd ? pd : nd, kinds[c]);
+      PointCloud a = o;
+      Append(a, of(is_pd ? spd : snd, kinds[c]));
+      io::WritePcd(pdir + "/objects_" + names[c] + ".pcd", o);
+      io::WritePcd(pdir + "/" + names[c] + ".pcd", a);
+      *obj_counts[c] = o.size();
+      *all_counts[c] = a.size();
+      Append(all, a);
+    }
+    io::WritePly(pdir + "/objects_changes.ply", objects);
     io::WritePly(pdir + "/changes.ply", all);
-    counts.pd_strong = pds.size();
-    counts.pd_weak = pdw.size();
-    counts.nd_strong = nds.size();
-    counts.nd_weak = ndw.size();
     rep.pairs.push_back(counts);
   }
   rep.seconds_truth += Since(t);
