@@ -55,17 +55,20 @@ TEST(Objects, PointIoUHandComputed) {
 
 TEST(Objects, EvaluateObjectsFoundFraction) {
   const auto cfg = Cfg();
-  std::vector<ObjectTruth> truth(4);
-  truth[0] = {"00_01", 7, "car", "open", 0, Grid(10, 10)};               // one whole cluster: found
-  truth[1] = {"00_01", 8, "tree", "open", 1, Grid(10, 10, 5.f, 0.f)};    // glued into a huge cluster: not found
-  truth[2] = {"00_02", 9, "car", "open", 2, Grid(10, 10, 10.f, 0.f)};    // cluster only in the other pair
-  truth[3] = {"00_01", 10, "car", "occluded", 0, Grid(2, 2, 30.f, 0.f)}; // 4 points: not scored
+  std::vector<ObjectTruth> truth(6);
+  truth[0] = {"00_01", 7, "car", "open", 0, Grid(10, 10), {}};               // one whole cluster: found
+  truth[1] = {"00_01", 8, "tree", "open", 1, Grid(10, 10, 5.f, 0.f), {}};    // glued into a huge cluster: not found
+  truth[2] = {"00_02", 9, "car", "open", 2, Grid(10, 10, 10.f, 0.f), {}};    // cluster only in the other pair
+  truth[3] = {"00_01", 10, "car", "occluded", 0, Grid(2, 2, 30.f, 0.f), {}}; // 4 points: not scored
+  // Removed at an earlier step: clusters of 00_01 are eligible too.
+  truth[4] = {"00_02", 11, "car", "open", 0, Grid(10, 10, 10.f, 0.f), {"00_02", "00_01"}};
+  truth[5] = {"00_01", 12, "car", "occluded", 0, Grid(10, 10), {}, 5};   // 5 change points: not scored
   std::vector<ObjectCluster> clusters(3);
   clusters[0] = {"00_01", 0, Grid(10, 10)};
   clusters[1] = {"00_01", 1, Grid(40, 10, 5.f, 0.f)};  // 400 points, 100 of them the tree: IoU 0.25
   clusters[2] = {"00_01", 2, Grid(10, 10, 10.f, 0.f)}; // where object 9 is, but wrong pair
   const auto r = EvaluateObjects(truth, clusters, cfg, 2);
-  ASSERT_EQ(r.objects.size(), 4u);
+  ASSERT_EQ(r.objects.size(), 6u);
   EXPECT_TRUE(r.objects[0].found);
   EXPECT_EQ(r.objects[0].best_cluster, 0);
   EXPECT_NEAR(r.objects[0].best_iou, 1.0, 1e-12);
@@ -75,13 +78,17 @@ TEST(Objects, EvaluateObjectsFoundFraction) {
   EXPECT_FALSE(r.objects[2].found);
   EXPECT_EQ(r.objects[2].best_cluster, -1);
   EXPECT_FALSE(r.objects[3].scored);
-  EXPECT_EQ(r.truth_objects, 3u);
-  EXPECT_EQ(r.found, 1u);
-  EXPECT_NEAR(r.found_fraction, 1.0 / 3.0, 1e-12);
+  EXPECT_TRUE(r.objects[4].found);
+  EXPECT_EQ(r.objects[4].best_cluster, 2);
+  EXPECT_FALSE(r.objects[5].scored);
+  EXPECT_FALSE(r.objects[5].found);
+  EXPECT_EQ(r.truth_objects, 4u);
+  EXPECT_EQ(r.found, 2u);
+  EXPECT_NEAR(r.found_fraction, 0.5, 1e-12);
   EXPECT_EQ(r.clusters, 3u);
   Report rep;
   rep.objects = r;
-  EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.found_fraction"), 1.0 / 3.0, 1e-9);
+  EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.found_fraction"), 0.5, 1e-9);
   EXPECT_NE(ToMarkdown(rep).find("Changed objects"), std::string::npos);
 }
 

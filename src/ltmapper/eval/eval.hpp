@@ -55,6 +55,8 @@ struct EvalConfig {
   double obj_min_iou = 0.5;                // an object is found when a cluster reaches this point IoU
   int obj_min_truth_points = 10;           // truth objects with fewer (voxelised) points: not scored
   int obj_keyframe_stride = 1;             // use every n-th labelled scan for the truth points
+  int obj_min_change_points = 20;          // truth objects with fewer detectable change points
+                                           // (pair changes.ply: PD, strong ND) are not scored
 
   template <class V>
   void Visit(V& v) {
@@ -76,6 +78,7 @@ struct EvalConfig {
     v("objects.min_iou", obj_min_iou, "", 0.0, 1.0);
     v("objects.min_truth_points", obj_min_truth_points, "", 0, 100000000);
     v("objects.keyframe_stride", obj_keyframe_stride, "", 1, 1000000);
+    v("objects.min_change_points", obj_min_change_points, "", 0, 100000000);
   }
 };
 
@@ -239,6 +242,15 @@ struct ObjectTruth {
   std::string cls, placement;
   int session = 0;        // sim session index where the object exists (its points come from there)
   PointCloud cloud;
+  // Pairs whose clusters may hold the object (empty = {pair}). LT-map's step k stores the change
+  // of the map state, so an object the central session had and session j < k already lacked is
+  // removed at step j: its clusters are those of pairs (00, j..k).
+  std::vector<std::string> match_pairs;
+  // Truth change points of the object in truth/pair_*/changes.ply that the clustering can see
+  // (PD strong / weak, ND strong); -1 when the file is absent. Objects with fewer than
+  // obj_min_change_points (e.g. occluded: weak ND only, or never seen by the other session)
+  // are not scored.
+  long change_points = -1;
 };
 struct ObjectCluster {
   std::string pair;       // step's "<reference>_<session>", 2 digits each
@@ -254,7 +266,8 @@ struct ObjectScore {
   int best_cluster = -1;           // cluster with the highest IoU (-1: none overlaps)
   std::size_t cluster_points = 0;  // its points after voxelisation
   double best_iou = 0.0;
-  bool scored = true;              // false: fewer than obj_min_truth_points (never scanned)
+  long change_points = -1;         // see ObjectTruth
+  bool scored = true;              // false: too few truth points or change points
   bool found = false;              // scored and best_iou >= obj_min_iou
 };
 struct ObjectsResult {

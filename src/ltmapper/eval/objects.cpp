@@ -134,7 +134,10 @@ ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::
   r.voxel_m = cfg.obj_voxel_m;
   r.min_iou = cfg.obj_min_iou;
   std::set<std::string> pairs;
-  for (const auto& t : truth) pairs.insert(t.pair);
+  for (const auto& t : truth) {
+    pairs.insert(t.pair);
+    pairs.insert(t.match_pairs.begin(), t.match_pairs.end());
+  }
   // Voxelised clusters of the scored pairs, with boxes and trees.
   std::vector<std::size_t> used;
   for (std::size_t k = 0; k < clusters.size(); ++k)
@@ -169,11 +172,16 @@ ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::
       s.placement = t.placement;
       s.session = t.session;
       s.points = tc[i].size();
-      s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1));
+      s.change_points = t.change_points;
+      s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1)) &&
+                 (t.change_points < 0 || t.change_points >= long(cfg.obj_min_change_points));
       if (tc[i].empty()) return;
       const Box tb(tc[i]);
       for (const std::size_t k : used) {
-        if (clusters[k].pair != t.pair || cc[k].empty() || !tb.Overlaps(cb[k], float(cfg.obj_match_dist_m)))
+        const bool eligible = t.match_pairs.empty()
+                                  ? clusters[k].pair == t.pair
+                                  : std::count(t.match_pairs.begin(), t.match_pairs.end(), clusters[k].pair) > 0;
+        if (!eligible || cc[k].empty() || !tb.Overlaps(cb[k], float(cfg.obj_match_dist_m)))
           continue;
         const double iou = Iou(tc[i], *tt[i], cc[k], *ct[k], cfg.obj_match_dist_m);
         if (iou > s.best_iou) {
@@ -235,6 +243,10 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
     t.cls = o.cls;
     t.placement = o.placement;
     t.session = in_a ? a : b;
+    t.match_pairs.push_back(t.pair);
+    if (in_a)  // removed: at the first step between a and b whose session lacks it
+      for (int j = std::min(a, b) + 1; j < std::max(a, b); ++j)
+        if (std::count(o.present_in.begin(), o.present_in.end(), j) == 0) t.match_pairs.push_back(PairName(a, j));
     out.push_back(std::move(t));
   }
   for (const int s : {a, b}) {
@@ -272,6 +284,21 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
       for (auto& [id, c] : m) out[slot[id]].cloud.append(c);
   }
   for (auto& t : out) t.cloud = Downsample(t.cloud, cfg.obj_voxel_m);
+  // Detectable change points per object from the pair's truth changes.ply (when present).
+  std::string ply;
+  try {
+    ply = Join(FindPairDir(truth_dir, PairName(a, b)), "changes.ply");
+  } catch (const Error&) {
+  }
+  if (!ply.empty() && fs::exists(ply)) {
+    const PointCloud ch = io::ReadPly(ply);
+    if (ch.cls.size() != ch.size() || ch.object.size() != ch.size()) throw Error(ply, 0, "needs 'class' and 'object' fields");
+    std::map<int, long> count;
+    for (std::size_t i = 0; i < ch.size(); ++i)
+      if (ch.cls[i] == PointClass::kPDStrong || ch.cls[i] == PointClass::kPDWeak || ch.cls[i] == PointClass::kNDStrong)
+        ++count[ch.object[i]];
+    for (auto& t : out) t.change_points = count.count(t.id) ? count[t.id] : 0;
+  }
   return out;
 }
 

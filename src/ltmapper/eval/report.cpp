@@ -175,6 +175,7 @@ void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
         .Int("best_cluster", o.best_cluster)
         .Int("cluster_points", (long long)o.cluster_points)
         .Number("best_iou", o.best_iou)
+        .Int("change_points", o.change_points)
         .Bool("scored", o.scored)
         .Bool("found", o.found)
         .EndObject();
@@ -315,15 +316,17 @@ void MdStorage(std::ostringstream& md, const StorageResult& s) {
 void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   md << "## Changed objects\n\nTruth: LD objects present in exactly one session of the pair; point IoU "
         "after a " << Fmt(r.voxel_m, 2) << " m voxel filter, match distance " << Fmt(r.match_dist_m, 2)
-     << " m; found when IoU >= " << Fmt(r.min_iou, 2) << ".\n\n"
+     << " m; found when IoU >= " << Fmt(r.min_iou, 2)
+     << "; not scored: too few scanned points or too few detectable change points (truth PD, strong ND).\n\n"
      << Header({"truth objects", "found", "found fraction", "clusters"})
      << Row({std::to_string(r.truth_objects), std::to_string(r.found), Fmt(r.found_fraction, 3),
              std::to_string(r.clusters)})
      << "\n"
-     << Header({"pair", "id", "class", "placement", "in session", "points", "best cluster", "cluster points",
+     << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "best cluster", "cluster points",
                 "IoU", "found"});
   for (const auto& o : r.objects)
     md << Row({o.pair, std::to_string(o.id), o.cls, o.placement, std::to_string(o.session), std::to_string(o.points),
+               o.change_points < 0 ? std::string("n/a") : std::to_string(o.change_points),
                o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
                std::to_string(o.cluster_points), Fmt(o.best_iou, 3),
                !o.scored ? std::string("not scored") : o.found ? std::string("yes") : std::string("no")});
