@@ -60,7 +60,33 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
     const PointCloud tc = geometry::VoxelDownsample(target, cfg.reg_coarse_voxel_m, 1);
     const PointCloud sc = geometry::VoxelDownsample(source, cfg.reg_coarse_voxel_m, 1);
     if (tc.size() >= min_points && sc.size() >= min_points) {
-      run(ToPcl(tc), ToPcl(sc), cfg.reg_coarse_correspondence_m);
+      auto tcp = ToPcl(tc);
+      run(tcp, ToPcl(sc), cfg.reg_coarse_correspondence_m);
+      // Early rejection (saves the fine stage for wrong places): after the coarse stage a true
+      // match overlaps well at the coarse resolution; require half the final overlap ratio.
+      pcl::KdTreeFLANN<pcl::PointXYZ> coarse_tree;
+      coarse_tree.setInputCloud(tcp);
+      const double r2 = std::pow(std::max(cfg.reg_fitness_range_m, cfg.reg_coarse_voxel_m), 2);
+      const Eigen::Matrix4f G = guess;
+      std::vector<int> ci(1);
+      std::vector<float> cd(1);
+      std::size_t near = 0;
+      for (const auto& p : sc.points) {
+        const Eigen::Vector4f q = G * Eigen::Vector4f(p.x, p.y, p.z, 1.f);
+        if (coarse_tree.nearestKSearch(pcl::PointXYZ(q.x(), q.y(), q.z()), 1, ci, cd) > 0 &&
+            cd[0] <= r2) {
+          ++near;
+        }
+      }
+      const double coarse_overlap = double(near) / double(sc.size());
+      if (coarse_overlap < 0.5 * cfg.reg_min_overlap) {
+        std::ostringstream why;
+        why.precision(3);
+        why << "coarse stage overlap " << coarse_overlap << " < " << 0.5 * cfg.reg_min_overlap;
+        r.reason = why.str();
+        r.overlap = coarse_overlap;
+        return r;
+      }
     }
   }
   r.converged = run(tgt, src, cfg.reg_max_correspondence_m);

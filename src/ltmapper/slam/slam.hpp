@@ -28,18 +28,18 @@ struct SlamConfig {
   double sc_search_ratio = 0.1;       // fine shift search window, fraction of the sectors
   double sc_dist_threshold = 0.4;     // candidate when 1 - mean cosine < this (GICP verifies)
   bool sc_read_files = true;          // use <session>/SCDs/NNNNNN.scd when present
-  int sc_max_loops_per_pair = 60;     // registrations per session pair from Scan Context
+  int sc_max_loops_per_pair = 30;     // registrations per session pair from Scan Context
   int sc_min_gap_keyframes = 1;       // min query-keyframe gap between selected SC candidates
 
   // --- registration (PCL GICP between keyframe submaps)
   double reg_min_range_m = 1.0;       // scan points closer than this are dropped (the vehicle)
   double reg_max_range_m = 60.0;      // scan points farther than this are dropped
   double reg_voxel_m = 0.5;           // voxel of keyframe clouds and submaps
-  int reg_submap_neighbours = 2;      // keyframes on each side merged into a submap
+  int reg_submap_neighbours = 1;      // keyframes on each side merged into a submap
   double reg_coarse_voxel_m = 1.0;    // coarse stage (Scan Context gives no translation) ...
   double reg_coarse_correspondence_m = 8.0;  // ... with this correspondence distance; 0 = off
   double reg_max_correspondence_m = 1.0;  // fine GICP correspondence distance
-  int reg_max_iterations = 40;        // GICP outer iterations
+  int reg_max_iterations = 30;        // GICP outer iterations
   int reg_covariance_neighbours = 20; // k for GICP point covariances
   double reg_fitness_range_m = 1.0;   // fitness = mean squared NN distance of points within this
   double reg_fitness_threshold = 0.1; // accept when fitness < this [m^2]
@@ -67,9 +67,9 @@ struct SlamConfig {
 
   // --- radius-search refinement (paper: "radius search loop detection" after the SC loops)
   int refine_rounds = 2;
-  double refine_radius_m = 8.0;       // world-frame search radius around a query keyframe
-  int refine_stride = 2;              // try every n-th query keyframe without a loop
-  int refine_max_loops_per_pair = 150;
+  double refine_radius_m = 5.0;       // world-frame search radius around a query keyframe
+  int refine_stride = 3;              // try every n-th query keyframe without a loop
+  int refine_max_loops_per_pair = 100;
 
   template <class V>
   void Visit(V& v) {
