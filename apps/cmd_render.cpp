@@ -6,6 +6,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -38,6 +39,18 @@ std::string TrajectoryName(const std::string& path) {
   return stem;
 }
 
+// Legend name of a cloud: its file stem, or "folder/stem" when several clouds share a stem
+// (e.g. every session's static_map.pcd).
+std::string LayerName(const std::string& path, const std::vector<std::string>& all) {
+  const std::filesystem::path p(path);
+  const std::string stem = p.stem().string();
+  const auto same = std::count_if(all.begin(), all.end(), [&](const std::string& other) {
+    return std::filesystem::path(other).stem().string() == stem;
+  });
+  const std::string parent = p.parent_path().filename().string();
+  return same > 1 && !parent.empty() ? parent + "/" + stem : stem;
+}
+
 void RunRender(const RenderOptions& o) {
   if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
   viz::RenderConfig cfg;
@@ -57,7 +70,7 @@ void RunRender(const RenderOptions& o) {
     const std::string ext = Lower(std::filesystem::path(path).extension().string());
     clouds.push_back(ext == ".ply" ? io::ReadPly(path) : io::ReadCloud(path));
     viz::Layer l;
-    l.name = std::filesystem::path(path).stem().string();
+    l.name = LayerName(path, o.clouds);
     l.default_class = viz::ClassFromFileName(path);
     l.default_session = int(i);
     spdlog::info("cloud {}: {} points{}{}", path, clouds.back().size(),
