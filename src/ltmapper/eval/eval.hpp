@@ -243,8 +243,8 @@ struct ObjectTruth {
   int session = 0;        // sim session index where the object exists (its points come from there)
   PointCloud cloud;
   // Pairs whose clusters may hold the object (empty = {pair}). LT-map's step k stores the change
-  // of the map state, so an object the central session had and session j < k already lacked is
-  // removed at step j: its clusters are those of pairs (00, j..k).
+  // of the map state, so an object that session j (00 < j < k) already lacked (removal) or had
+  // (addition) was applied at step j: clusters of those pairs (00, j) are eligible too.
   std::vector<std::string> match_pairs;
   // Truth change points of the object in truth/pair_*/changes.ply that the clustering can see
   // (PD strong / weak, ND strong); -1 when the file is absent. Objects with fewer than

@@ -244,9 +244,10 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
     t.placement = o.placement;
     t.session = in_a ? a : b;
     t.match_pairs.push_back(t.pair);
-    if (in_a)  // removed: at the first step between a and b whose session lacks it
-      for (int j = std::min(a, b) + 1; j < std::max(a, b); ++j)
-        if (std::count(o.present_in.begin(), o.present_in.end(), j) == 0) t.match_pairs.push_back(PairName(a, j));
+    // The map may have applied the change at an earlier step j (a < j < b) whose session
+    // already agrees with b about the object (removed / added there).
+    for (int j = std::min(a, b) + 1; j < std::max(a, b); ++j)
+      if ((std::count(o.present_in.begin(), o.present_in.end(), j) > 0) == in_b) t.match_pairs.push_back(PairName(a, j));
     out.push_back(std::move(t));
   }
   for (const int s : {a, b}) {

@@ -38,6 +38,10 @@ struct MapConfig {
   double object_tolerance_m = 0.5;
   int object_min_points = 20;
   int object_max_points = 1000000;
+  double object_ground_cell_m = 0.0;     // xy cell for the local ground height (0 = keep ground)
+  double object_ground_height_m = 0.25;  // change points this close above the lowest map point
+                                         // of their cell are ground, not clustered
+  double object_max_extent_m = 0.0;      // clusters with a larger xy box edge are not objects (0 = off)
 
   template <class V>
   void Visit(V& v) {
@@ -52,6 +56,9 @@ struct MapConfig {
     v("object_tolerance_m", object_tolerance_m, "m", 0.01, 10.0);
     v("object_min_points", object_min_points, "", 1, 100000000);
     v("object_max_points", object_max_points, "", 1, 100000000);
+    v("object_ground_cell_m", object_ground_cell_m, "m", 0.0, 100.0);
+    v("object_ground_height_m", object_ground_height_m, "m", 0.0, 10.0);
+    v("object_max_extent_m", object_max_extent_m, "m", 0.0, 10000.0);
   }
 };
 
