@@ -36,56 +36,11 @@ void AddEvalOptions(CLI::App& cmd, EvalOptions& o) {
   cmd.add_option("--md", o.md, "Write the report as Markdown to this file");
 }
 
-// Applies "key=value" to the config field with that key (numbers, bools, strings, lists as
-// comma-separated numbers); unknown keys and bad values are errors.
-void ApplyOverride(eval::EvalConfig& cfg, const std::string& kv) {
-  const auto eq = kv.find('=');
-  if (eq == std::string::npos) throw Error("--set " + kv + ": expected key=value");
-  const std::string key = kv.substr(0, eq), value = kv.substr(eq + 1);
-  auto fields = FieldsOf(cfg);
-  for (const auto& f : fields.fields()) {
-    if (f.key != key) continue;
-    try {
-      switch (f.kind) {
-        case ConfigField::Kind::kDouble: {
-          std::size_t used = 0;
-          *static_cast<double*>(f.ptr) = std::stod(value, &used);
-          if (used != value.size()) throw std::invalid_argument(value);
-          break;
-        }
-        case ConfigField::Kind::kInt: {
-          std::size_t used = 0;
-          *static_cast<int*>(f.ptr) = std::stoi(value, &used);
-          if (used != value.size()) throw std::invalid_argument(value);
-          break;
-        }
-        case ConfigField::Kind::kBool:
-          if (value != "true" && value != "false") throw std::invalid_argument(value);
-          *static_cast<bool*>(f.ptr) = value == "true";
-          break;
-        case ConfigField::Kind::kString: *static_cast<std::string*>(f.ptr) = value; break;
-        case ConfigField::Kind::kDoubleList: {
-          std::vector<double> list;
-          std::stringstream ss(value);
-          std::string item;
-          while (std::getline(ss, item, ',')) list.push_back(std::stod(item));
-          *static_cast<std::vector<double>*>(f.ptr) = list;
-          break;
-        }
-      }
-    } catch (const std::logic_error&) {
-      throw Error("--set " + kv + ": bad value for " + key);
-    }
-    return;
-  }
-  throw Error("--set " + kv + ": unknown key '" + key + "'");
-}
-
 eval::EvalConfig LoadEvalConfig(const EvalOptions& o) {
   if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
   eval::EvalConfig cfg;
   if (!o.config.empty()) io::LoadConfig(o.config, cfg);
-  for (const auto& kv : o.set) ApplyOverride(cfg, kv);
+  for (const auto& kv : o.set) SetField(FieldsOf(cfg), kv);
   ValidateConfig(cfg, o.config.empty() ? "eval config" : o.config);
   spdlog::info("eval config{}:\n{}", o.config.empty() ? " (defaults)" : " " + o.config, ConfigToString(cfg));
   return cfg;

@@ -24,50 +24,11 @@ struct RemovertArgs {
   std::vector<std::string> set;
 };
 
-// "key=value" onto a config field (numbers, bools, strings, comma-separated lists).
-void ApplySet(removert::RemovertConfig& cfg, const std::string& kv) {
-  const auto eq = kv.find('=');
-  if (eq == std::string::npos) throw Error("--set " + kv + ": expected key=value");
-  const std::string key = kv.substr(0, eq), value = kv.substr(eq + 1);
-  auto fields = FieldsOf(cfg);
-  for (const auto& f : fields.fields()) {
-    if (f.key != key) continue;
-    auto num = [&](const std::string& t) {
-      std::size_t used = 0;
-      const double d = std::stod(t, &used);
-      if (used != t.size()) throw Error("--set " + kv + ": not a number: " + t);
-      return d;
-    };
-    try {
-      switch (f.kind) {
-        case ConfigField::Kind::kDouble: *static_cast<double*>(f.ptr) = num(value); break;
-        case ConfigField::Kind::kInt: *static_cast<int*>(f.ptr) = int(num(value)); break;
-        case ConfigField::Kind::kBool:
-          if (value != "true" && value != "false") throw Error("--set " + kv + ": expected true|false");
-          *static_cast<bool*>(f.ptr) = value == "true";
-          break;
-        case ConfigField::Kind::kString: *static_cast<std::string*>(f.ptr) = value; break;
-        case ConfigField::Kind::kDoubleList: {
-          std::vector<double> list;
-          std::stringstream ss(value);
-          for (std::string t; std::getline(ss, t, ',');) list.push_back(num(t));
-          *static_cast<std::vector<double>*>(f.ptr) = list;
-          break;
-        }
-      }
-    } catch (const std::invalid_argument&) {
-      throw Error("--set " + kv + ": bad value");
-    }
-    return;
-  }
-  throw Error("--set " + kv + ": unknown key '" + key + "'");
-}
-
 void RunRemovert(const RemovertArgs& a) {
   if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
   removert::RemovertConfig cfg;
   if (!a.config.empty()) io::LoadConfig(a.config, cfg);
-  for (const auto& kv : a.set) ApplySet(cfg, kv);
+  for (const auto& kv : a.set) SetField(FieldsOf(cfg), kv);
   cfg.Validate(a.config.empty() ? "removert config" : a.config);
   spdlog::info("removert config:\n{}", ConfigToString(cfg));
 

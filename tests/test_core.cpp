@@ -105,3 +105,28 @@ TEST(Error, NamesFileAndLine) {
 
 }  // namespace
 }  // namespace ltm
+
+namespace ltm {
+namespace {
+TEST(Config, SetFieldOverridesByKey) {
+  DemoConfig c;
+  const auto f = FieldsOf(c);
+  SetField(f, "voxel_m=0.25");
+  SetField(f, "lidar.beams=32");
+  SetField(f, "flag=false");
+  SetField(f, "mode=dcs");
+  SetField(f, "list=0.5,1.5");
+  EXPECT_DOUBLE_EQ(c.voxel_m, 0.25);
+  EXPECT_EQ(c.beams, 32);
+  EXPECT_FALSE(c.flag);
+  EXPECT_EQ(c.mode, "dcs");
+  EXPECT_EQ(c.list, (std::vector<double>{0.5, 1.5}));
+  EXPECT_THROW(SetField(f, "nokey=1"), Error);
+  EXPECT_THROW(SetField(f, "voxel_m=abc"), Error);
+  EXPECT_THROW(SetField(f, "voxel_m=1x"), Error);
+  EXPECT_THROW(SetField(f, "lidar.beams=1.5"), Error);
+  EXPECT_THROW(SetField(f, "flag=yes"), Error);
+  EXPECT_THROW(SetField(f, "voxel_m"), Error);
+}
+}  // namespace
+}  // namespace ltm

@@ -181,6 +181,52 @@ void ValidateFields(const ConfigFields& fields, const std::string& where) {
   }
 }
 
+void SetField(const ConfigFields& fields, const std::string& kv) {
+  const auto eq = kv.find('=');
+  if (eq == std::string::npos) throw Error("--set " + kv + ": expected key=value");
+  const std::string key = kv.substr(0, eq), value = kv.substr(eq + 1);
+  auto number = [&](const std::string& t) {
+    std::size_t used = 0;
+    double d = 0.0;
+    try {
+      d = std::stod(t, &used);
+    } catch (const std::logic_error&) {
+      used = 0;
+    }
+    if (used == 0 || used != t.size()) throw Error("--set " + kv + ": '" + t + "' is not a number for key '" + key + "'");
+    return d;
+  };
+  for (const auto& f : fields.fields()) {
+    if (f.key != key) continue;
+    switch (f.kind) {
+      case ConfigField::Kind::kDouble: *static_cast<double*>(f.ptr) = number(value); break;
+      case ConfigField::Kind::kInt: {
+        const double d = number(value);
+        if (d != std::floor(d)) throw Error("--set " + kv + ": key '" + key + "' needs an integer");
+        *static_cast<int*>(f.ptr) = static_cast<int>(d);
+        break;
+      }
+      case ConfigField::Kind::kBool:
+        if (value != "true" && value != "false") throw Error("--set " + kv + ": key '" + key + "' needs true|false");
+        *static_cast<bool*>(f.ptr) = value == "true";
+        break;
+      case ConfigField::Kind::kString: *static_cast<std::string*>(f.ptr) = value; break;
+      case ConfigField::Kind::kDoubleList: {
+        std::vector<double> list;
+        std::stringstream ss(value);
+        std::string item;
+        while (std::getline(ss, item, ',')) list.push_back(number(item));
+        *static_cast<std::vector<double>*>(f.ptr) = list;
+        break;
+      }
+    }
+    return;
+  }
+  std::string known;
+  for (const auto& f : fields.fields()) known += (known.empty() ? "" : ", ") + f.key;
+  throw Error("--set " + kv + ": unknown key '" + key + "' (keys: " + known + ")");
+}
+
 std::string FieldsToString(const ConfigFields& fields) {
   std::ostringstream os;
   for (const auto& f : fields.fields()) {

@@ -144,6 +144,10 @@ ConfigFields FieldsOf(Config& c) {
 void ValidateFields(const ConfigFields& fields, const std::string& where);
 // "key: value [unit]" lines, one per field.
 std::string FieldsToString(const ConfigFields& fields);
+// Applies one "key=value" override (command lines' --set): numbers, true|false, strings, and
+// comma-separated lists. Unknown keys and unparsable values are errors naming the key; ranges
+// are checked afterwards by ValidateConfig.
+void SetField(const ConfigFields& fields, const std::string& key_value);
 
 template <class Config>
 void ValidateConfig(const Config& c, const std::string& where = "config") {
