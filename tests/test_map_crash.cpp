@@ -6,6 +6,7 @@
 
 #include "test_util.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -158,11 +159,16 @@ TEST(MapCrash, SigkillDuringIntegrationLeavesPreviousOrNextState) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
 
-  // The fully integrated state and the time a full run takes.
+  // The fully integrated state and the time a full run takes: the faster of two runs, so a
+  // slow first start (cold page cache, a loaded machine) does not push the kills past the end.
   const std::string full = tmp / "full.ltmap";
-  fs::copy_file(pristine, full);
   bool killed = false;
-  const double t_full = run(full, -1, &killed);
+  double t_full = 1e9;
+  for (int i = 0; i < 2; ++i) {
+    for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(full + suffix);
+    fs::copy_file(pristine, full);
+    t_full = std::min(t_full, run(full, -1, &killed));
+  }
   const std::uint64_t after = DigestOf(full, &ok);
   ASSERT_TRUE(ok);
   ASSERT_NE(before, after);
@@ -171,8 +177,10 @@ TEST(MapCrash, SigkillDuringIntegrationLeavesPreviousOrNextState) {
   // Most of a run is process start-up and reading the PCDs; bias the kills towards the end.
   std::uniform_real_distribution<double> delay(0.25 * t_full, 1.1 * t_full);
   int n_prev = 0, n_next = 0, n_killed = 0, n_wal = 0;
-  const int trials = 24;
-  for (int t = 0; t < trials; ++t) {
+  // Keep going until 24 runs were really killed (some finish before their kill time).
+  const int wanted_kills = 24, max_trials = 80;
+  int trials = 0;
+  for (int t = 0; t < max_trials && n_killed < wanted_kills; ++t, ++trials) {
     const std::string store = tmp / ("trial_" + std::to_string(t) + ".ltmap");
     fs::copy_file(pristine, store);
     run(store, delay(rng), &killed);
@@ -194,7 +202,7 @@ TEST(MapCrash, SigkillDuringIntegrationLeavesPreviousOrNextState) {
   }
   std::printf("crash test: full integrate %.3f s; %d trials, %d killed (%d with a WAL left behind), %d previous "
               "state, %d integrated state\n", t_full, trials, n_killed, n_wal, n_prev, n_next);
-  EXPECT_GE(n_killed, trials / 2);
+  EXPECT_GE(n_killed, 20);  // issue 6: at least 20 kills at different points
 }
 
 }  // namespace

@@ -55,7 +55,7 @@ struct RemovertConfig {
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
   bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
-  bool covisible_only = true;     // a raw change counts only where the other session had its line
+  bool covisible_only = false;    // true: a raw change counts only where the other session had its line
                                   // of sight at all (a return in the window); else unobserved
   std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
   // --- outputs
