@@ -13,17 +13,6 @@ namespace fs = std::filesystem;
 namespace ltm {
 namespace {
 
-// Runs `f`, expects ltm::Error whose message contains every string in `parts`.
-template <class F>
-void ExpectError(F&& f, std::initializer_list<std::string> parts) {
-  try {
-    f();
-    ADD_FAILURE() << "expected ltm::Error";
-  } catch (const Error& e) {
-    for (const auto& p : parts) EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << "'" << p << "' not in: " << e.what();
-  }
-}
-
 PointCloud Line(std::size_t n) {
   PointCloud c;
   for (std::size_t k = 0; k < n; ++k) c.push_back(float(k), 1.f, 2.f, 3.f);
@@ -33,12 +22,12 @@ PointCloud Line(std::size_t n) {
 TEST(BadInput, MissingFiles) {
   test::TempDir tmp;
   const std::string missing = tmp / "nope.pcd";
-  ExpectError([&] { io::ReadPcd(missing); }, {missing});
-  ExpectError([&] { io::ReadKittiBin(tmp / "nope.bin"); }, {"nope.bin"});
-  ExpectError([&] { io::ReadKittiPoses(tmp / "poses.txt"); }, {"poses.txt"});
-  ExpectError([&] { io::ReadG2o(tmp / "g.g2o"); }, {"g.g2o"});
-  ExpectError([&] { io::ReadScd(tmp / "1.scd"); }, {"1.scd"});
-  ExpectError([&] { io::LoadSession(tmp / "no_session"); }, {"no_session", "no such"});
+  test::ExpectError([&] { io::ReadPcd(missing); }, {missing});
+  test::ExpectError([&] { io::ReadKittiBin(tmp / "nope.bin"); }, {"nope.bin"});
+  test::ExpectError([&] { io::ReadKittiPoses(tmp / "poses.txt"); }, {"poses.txt"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "g.g2o"); }, {"g.g2o"});
+  test::ExpectError([&] { io::ReadScd(tmp / "1.scd"); }, {"1.scd"});
+  test::ExpectError([&] { io::LoadSession(tmp / "no_session"); }, {"no_session", "no such"});
 }
 
 TEST(BadInput, TruncatedBinaryPcd) {
@@ -46,7 +35,7 @@ TEST(BadInput, TruncatedBinaryPcd) {
     test::TempDir tmp;
     io::WritePcd(tmp / "c.pcd", Line(1000), fmt);
     fs::resize_file(tmp / "c.pcd", fs::file_size(tmp / "c.pcd") - 100);
-    ExpectError([&] { io::ReadPcd(tmp / "c.pcd"); }, {tmp / "c.pcd", "truncated"});
+    test::ExpectError([&] { io::ReadPcd(tmp / "c.pcd"); }, {tmp / "c.pcd", "truncated"});
   }
 }
 
@@ -56,12 +45,12 @@ TEST(BadInput, TruncatedAsciiPcd) {
   std::string text = test::ReadText(tmp / "a.pcd");
   text.resize(text.size() - 40);  // cuts the last rows (and one in the middle of its values)
   test::WriteText(tmp / "a.pcd", text);
-  ExpectError([&] { io::ReadPcd(tmp / "a.pcd"); }, {"a.pcd"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "a.pcd"); }, {"a.pcd"});
   // Whole rows missing.
   test::WriteText(tmp / "b.pcd",
                   "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
                   "WIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n1 2 3 4\n5 6 7 8\n");
-  ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "truncated", "3 points"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "truncated", "3 points"});
 }
 
 TEST(BadInput, PcdHeaderDisagreesWithData) {
@@ -70,7 +59,7 @@ TEST(BadInput, PcdHeaderDisagreesWithData) {
   test::WriteText(tmp / "p.pcd",
                   "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
                   "WIDTH 3\nHEIGHT 1\nPOINTS 5\nDATA ascii\n1 2 3\n4 5 6\n7 8 9\n");
-  ExpectError([&] { io::ReadPcd(tmp / "p.pcd"); }, {"p.pcd", "POINTS"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "p.pcd"); }, {"p.pcd", "POINTS"});
   // Binary data holding more points than the header announces.
   io::WritePcd(tmp / "b.pcd", Line(10), io::PcdFormat::kBinary);
   std::string text = test::ReadText(tmp / "b.pcd");
@@ -80,7 +69,7 @@ TEST(BadInput, PcdHeaderDisagreesWithData) {
     text.replace(p, std::string(key).size(), std::string(key).substr(0, std::string(key).size() - 2) + "8");
   }
   test::WriteText(tmp / "b.pcd", text);
-  ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "disagrees"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "b.pcd"); }, {"b.pcd", "disagrees"});
   // A trailing newline after binary data (some writers add one) is not a disagreement.
   io::WritePcd(tmp / "nl.pcd", Line(10), io::PcdFormat::kBinary);
   test::WriteText(tmp / "nl.pcd", test::ReadText(tmp / "nl.pcd") + "\n");
@@ -89,15 +78,15 @@ TEST(BadInput, PcdHeaderDisagreesWithData) {
   test::WriteText(tmp / "c.pcd",
                   "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
                   "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n4 5 6\n");
-  ExpectError([&] { io::ReadPcd(tmp / "c.pcd"); }, {"c.pcd", "disagrees"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "c.pcd"); }, {"c.pcd", "disagrees"});
   // No x y z.
   test::WriteText(tmp / "d.pcd",
                   "VERSION 0.7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\n"
                   "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2\n");
-  ExpectError([&] { io::ReadPcd(tmp / "d.pcd"); }, {"d.pcd", "x y z"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "d.pcd"); }, {"d.pcd", "x y z"});
   // Not a PCD at all.
   test::WriteText(tmp / "e.pcd", "hello\n");
-  ExpectError([&] { io::ReadPcd(tmp / "e.pcd"); }, {"e.pcd"});
+  test::ExpectError([&] { io::ReadPcd(tmp / "e.pcd"); }, {"e.pcd"});
 }
 
 TEST(BadInput, NonFinitePointsDroppedAndCounted) {
@@ -126,32 +115,32 @@ TEST(BadInput, TruncatedKittiBin) {
   test::TempDir tmp;
   io::WriteKittiBin(tmp / "t.bin", Line(10));
   fs::resize_file(tmp / "t.bin", 16 * 10 - 3);
-  ExpectError([&] { io::ReadKittiBin(tmp / "t.bin"); }, {"t.bin", "multiple of 16"});
+  test::ExpectError([&] { io::ReadKittiBin(tmp / "t.bin"); }, {"t.bin", "multiple of 16"});
 }
 
 TEST(BadInput, G2oUnknownTagAndBadQuaternion) {
   test::TempDir tmp;
   const std::string v0 = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\n";
   test::WriteText(tmp / "tag.g2o", v0 + "VERTEX_XYZ 1 0 0 0\n");
-  ExpectError([&] { io::ReadG2o(tmp / "tag.g2o"); }, {"tag.g2o:2", "VERTEX_XYZ"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "tag.g2o"); }, {"tag.g2o:2", "VERTEX_XYZ"});
   test::WriteText(tmp / "q.g2o", v0 + v0 + "VERTEX_SE3:QUAT 1 0 0 0 0 0 0.5 1\n");
-  ExpectError([&] { io::ReadG2o(tmp / "q.g2o"); }, {"q.g2o:2", "duplicate vertex id 0"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "q.g2o"); }, {"q.g2o:2", "duplicate vertex id 0"});
   test::WriteText(tmp / "q2.g2o", v0 + "VERTEX_SE3:QUAT 1 0 0 0 0 0 0.5 1\n");
-  ExpectError([&] { io::ReadG2o(tmp / "q2.g2o"); }, {"q2.g2o:2", "quaternion"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "q2.g2o"); }, {"q2.g2o:2", "quaternion"});
   test::WriteText(tmp / "e.g2o", v0 + "EDGE_SE3:QUAT 0 3 1 0 0 0 0 0 1\n");
-  ExpectError([&] { io::ReadG2o(tmp / "e.g2o"); }, {"e.g2o:2", "missing vertex 3"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "e.g2o"); }, {"e.g2o:2", "missing vertex 3"});
   test::WriteText(tmp / "n.g2o", v0 + "EDGE_SE3:QUAT 0 0 1 0 0 0 0 0 1 5\n");
-  ExpectError([&] { io::ReadG2o(tmp / "n.g2o"); }, {"n.g2o:2", "21 information"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "n.g2o"); }, {"n.g2o:2", "21 information"});
   test::WriteText(tmp / "x.g2o", "VERTEX_SE3:QUAT 0 0 zero 0 0 0 0 1\n");
-  ExpectError([&] { io::ReadG2o(tmp / "x.g2o"); }, {"x.g2o:1", "'zero'"});
+  test::ExpectError([&] { io::ReadG2o(tmp / "x.g2o"); }, {"x.g2o:1", "'zero'"});
 }
 
 TEST(BadInput, PoseFiles) {
   test::TempDir tmp;
   test::WriteText(tmp / "k.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n");
-  ExpectError([&] { io::ReadKittiPoses(tmp / "k.txt"); }, {"k.txt:2", "12"});
+  test::ExpectError([&] { io::ReadKittiPoses(tmp / "k.txt"); }, {"k.txt:2", "12"});
   test::WriteText(tmp / "t.txt", "0 1 2 3 0 0 0 2\n");
-  ExpectError([&] { io::ReadTumPoses(tmp / "t.txt"); }, {"t.txt:1", "quaternion"});
+  test::ExpectError([&] { io::ReadTumPoses(tmp / "t.txt"); }, {"t.txt:1", "quaternion"});
 }
 
 struct SmallConfig {
@@ -171,26 +160,26 @@ struct SmallConfig {
 TEST(BadInput, Yaml) {
   test::TempDir tmp;
   SmallConfig c;
-  ExpectError([&] { io::LoadConfig(tmp / "none.yaml", c); }, {"none.yaml"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "none.yaml", c); }, {"none.yaml"});
   test::WriteText(tmp / "bad.yaml", "search:\n  radius_m: [1, 2\nmode: a\n");
-  ExpectError([&] { io::LoadConfig(tmp / "bad.yaml", c); }, {"bad.yaml:"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "bad.yaml", c); }, {"bad.yaml:"});
   test::WriteText(tmp / "unknown.yaml", "search:\n  radius_m: 2\n  kk: 4\n");
-  ExpectError([&] { io::LoadConfig(tmp / "unknown.yaml", c); },
+  test::ExpectError([&] { io::LoadConfig(tmp / "unknown.yaml", c); },
               {"unknown.yaml:3", "unknown key 'search.kk'", "search.k"});
   test::WriteText(tmp / "type.yaml", "search:\n  radius_m: far\n");
-  ExpectError([&] { io::LoadConfig(tmp / "type.yaml", c); }, {"type.yaml:2", "search.radius_m", "number"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "type.yaml", c); }, {"type.yaml:2", "search.radius_m", "number"});
   test::WriteText(tmp / "list.yaml", "search:\n  radius_m: [1, 2]\n");
-  ExpectError([&] { io::LoadConfig(tmp / "list.yaml", c); }, {"list.yaml:2", "search.radius_m", "list"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "list.yaml", c); }, {"list.yaml:2", "search.radius_m", "list"});
   test::WriteText(tmp / "int.yaml", "search:\n  k: 2.5\n");
-  ExpectError([&] { io::LoadConfig(tmp / "int.yaml", c); }, {"int.yaml:2", "search.k", "integer"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "int.yaml", c); }, {"int.yaml:2", "search.k", "integer"});
   test::WriteText(tmp / "range.yaml", "search:\n  radius_m: 50\n");
-  ExpectError([&] { io::LoadConfig(tmp / "range.yaml", c); }, {"range.yaml:2", "search.radius_m", "range"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "range.yaml", c); }, {"range.yaml:2", "search.radius_m", "range"});
   test::WriteText(tmp / "choice.yaml", "mode: c\n");
-  ExpectError([&] { io::LoadConfig(tmp / "choice.yaml", c); }, {"choice.yaml:1", "mode"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "choice.yaml", c); }, {"choice.yaml:1", "mode"});
   test::WriteText(tmp / "seq.yaml", "list: 3\n");
-  ExpectError([&] { io::LoadConfig(tmp / "seq.yaml", c); }, {"seq.yaml:1", "list"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "seq.yaml", c); }, {"seq.yaml:1", "list"});
   test::WriteText(tmp / "map.yaml", "search: 3\n");
-  ExpectError([&] { io::LoadConfig(tmp / "map.yaml", c); }, {"map.yaml:1", "unknown key 'search'"});
+  test::ExpectError([&] { io::LoadConfig(tmp / "map.yaml", c); }, {"map.yaml:1", "unknown key 'search'"});
   EXPECT_EQ(c.radius_m, 1.0);  // unknown.yaml set radius_m before its bad key: nothing applied
 }
 

@@ -13,17 +13,6 @@ namespace fs = std::filesystem;
 namespace ltm {
 namespace {
 
-template <class F>
-void ExpectError(F&& f, std::initializer_list<std::string> parts) {
-  try {
-    f();
-    ADD_FAILURE() << "expected ltm::Error";
-  } catch (const Error& e) {
-    for (const auto& p : parts)
-      EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << "'" << p << "' not in: " << e.what();
-  }
-}
-
 Pose Planar(double x, double y, double yaw) {
   Pose T = Pose::Identity();
   T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
@@ -120,42 +109,42 @@ TEST(Session, NumericSortAndPosesFileWithoutG2o) {
   EXPECT_EQ(s.odometry[2].to, 10);
   EXPECT_NEAR(s.odometry[2].T_from_to.translation().x(), 8.0, 1e-12);
   EXPECT_TRUE(s.loops.empty());
-  ExpectError([&] { io::SessionLoadOptions o; o.require_g2o = true; io::LoadSession(dir, o); }, {"g2o"});
+  test::ExpectError([&] { io::SessionLoadOptions o; o.require_g2o = true; io::LoadSession(dir, o); }, {"g2o"});
 }
 
 TEST(Session, BadSessions) {
   test::TempDir tmp;
   const Session s = MakeSession(5);
-  ExpectError([&] { io::LoadSession(tmp / "absent"); }, {tmp / "absent", "no such"});
+  test::ExpectError([&] { io::LoadSession(tmp / "absent"); }, {tmp / "absent", "no such"});
   fs::create_directories(tmp / "noscans");
-  ExpectError([&] { io::LoadSession(tmp / "noscans"); }, {"noscans", "Scans/"});
+  test::ExpectError([&] { io::LoadSession(tmp / "noscans"); }, {"noscans", "Scans/"});
 
   // Pose count != scan count (optimized_poses.txt only).
   io::WriteSession(tmp / "count", s);
   fs::remove(tmp / "count/singlesession_posegraph.g2o");
   fs::remove(tmp / "count/Scans/000004.pcd");
-  ExpectError([&] { io::LoadSession(tmp / "count"); }, {"optimized_poses.txt", "5 poses", "4 scans"});
+  test::ExpectError([&] { io::LoadSession(tmp / "count"); }, {"optimized_poses.txt", "5 poses", "4 scans"});
 
   // g2o vertex without a scan and scan without a vertex.
   io::WriteSession(tmp / "ids", s);
   fs::rename(tmp / "ids/Scans/000004.pcd", tmp / "ids/Scans/000007.pcd");
-  ExpectError([&] { io::LoadSession(tmp / "ids"); }, {"singlesession_posegraph.g2o", "scans without a vertex: 7", "vertices without a scan: 4"});
+  test::ExpectError([&] { io::LoadSession(tmp / "ids"); }, {"singlesession_posegraph.g2o", "scans without a vertex: 7", "vertices without a scan: 4"});
 
   // Duplicate indices.
   io::WriteSession(tmp / "dup", s);
   fs::copy_file(tmp / "dup/Scans/000001.pcd", tmp / "dup/Scans/1.pcd");
-  ExpectError([&] { io::LoadSession(tmp / "dup"); }, {"duplicate index 1", "000001.pcd", "1.pcd"});
+  test::ExpectError([&] { io::LoadSession(tmp / "dup"); }, {"duplicate index 1", "000001.pcd", "1.pcd"});
 
   // No poses at all.
   io::WriteSession(tmp / "nop", s);
   fs::remove(tmp / "nop/singlesession_posegraph.g2o");
   fs::remove(tmp / "nop/optimized_poses.txt");
-  ExpectError([&] { io::LoadSession(tmp / "nop"); }, {"no poses"});
+  test::ExpectError([&] { io::LoadSession(tmp / "nop"); }, {"no poses"});
 
   // Bad g2o inside a session: the g2o's file:line is in the message.
   io::WriteSession(tmp / "badg2o", s);
   test::WriteText(tmp / "badg2o/singlesession_posegraph.g2o", "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nHELLO 1\n");
-  ExpectError([&] { io::LoadSession(tmp / "badg2o"); }, {"singlesession_posegraph.g2o:2", "HELLO"});
+  test::ExpectError([&] { io::LoadSession(tmp / "badg2o"); }, {"singlesession_posegraph.g2o:2", "HELLO"});
 }
 
 TEST(Session, InspectReportsProblems) {
@@ -211,7 +200,7 @@ TEST(Session, KittiLayoutWithExtrinsic) {
   ExpectSamePose(plain.keyframes[2].T_session_sensor, cam[2], 1e-12);
   // Fewer poses than scans.
   io::WriteKittiPoses(tmp / "short.txt", {cam[0], cam[1]});
-  ExpectError([&] { io::LoadKittiSession(dir, tmp / "short.txt"); }, {"short.txt", "000002.bin"});
+  test::ExpectError([&] { io::LoadKittiSession(dir, tmp / "short.txt"); }, {"short.txt", "000002.bin"});
 }
 
 TEST(Cli, InfoMissingDirFailsWithPath) {

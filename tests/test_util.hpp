@@ -1,6 +1,8 @@
 // Helpers shared by the test executables (header-only, tests only).
 #pragma once
 
+#include "ltmapper/core/core.hpp"
+
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -8,6 +10,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <random>
 #include <sstream>
 #include <string>
@@ -27,6 +30,19 @@ inline std::string RealDataDir() {
 #define LTM_REQUIRE_REAL_DATA(dir_var)                                                  \
   const std::string dir_var = ::ltm::test::RealDataDir();                              \
   if (dir_var.empty()) GTEST_SKIP() << "real data not found: set LTM_REAL_DATA=../shared/data"
+
+// Runs `f` and expects an ltm::Error whose message contains every string in `parts` (a file
+// name, a line number, the key ...).
+template <class F>
+void ExpectError(F&& f, std::initializer_list<std::string> parts) {
+  try {
+    f();
+    ADD_FAILURE() << "expected ltm::Error";
+  } catch (const ltm::Error& e) {
+    for (const auto& p : parts)
+      EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << "'" << p << "' not in: " << e.what();
+  }
+}
 
 // A fresh temporary directory removed at the end of the test.
 class TempDir {

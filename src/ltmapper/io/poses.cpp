@@ -94,20 +94,30 @@ void WriteRowMajor(std::ostream& out, const Pose& T) {
 }
 }  // namespace
 
-std::vector<Pose> ReadKittiPoses(const std::string& path) {
+// Calls `row(numbers, line)` for every non-blank, non-comment line of a pose text file, after
+// checking it holds exactly `count` numbers (`layout` names them in the error).
+template <class Row>
+void ForEachPoseLine(const std::string& path, std::size_t count, const char* what, const char* layout,
+                     Row&& row) {
   auto in = OpenText(path);
-  std::vector<Pose> poses;
   std::string line;
   std::size_t lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
     if (IsBlankOrComment(line)) continue;
     const auto v = detail::ParseNumbers(line, path, lineno);
-    if (v.size() != 12)
-      throw Error(path, lineno, "KITTI pose line has " + std::to_string(v.size()) +
-                                    " numbers, expected 12 (row-major 3x4)");
-    poses.push_back(PoseFromRowMajor(v, path, lineno));
+    if (v.size() != count)
+      throw Error(path, lineno, std::string(what) + " line has " + std::to_string(v.size()) +
+                                    " numbers, expected " + std::to_string(count) + " (" + layout + ")");
+    row(v, lineno);
   }
+}
+
+std::vector<Pose> ReadKittiPoses(const std::string& path) {
+  std::vector<Pose> poses;
+  ForEachPoseLine(path, 12, "KITTI pose", "row-major 3x4", [&](const std::vector<double>& v, std::size_t lineno) {
+    poses.push_back(PoseFromRowMajor(v, path, lineno));
+  });
   return poses;
 }
 
@@ -118,22 +128,13 @@ void WriteKittiPoses(const std::string& path, const std::vector<Pose>& poses) {
 }
 
 std::vector<StampedPose> ReadTumPoses(const std::string& path) {
-  auto in = OpenText(path);
   std::vector<StampedPose> poses;
-  std::string line;
-  std::size_t lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (IsBlankOrComment(line)) continue;
-    const auto v = detail::ParseNumbers(line, path, lineno);
-    if (v.size() != 8)
-      throw Error(path, lineno, "TUM line has " + std::to_string(v.size()) +
-                                    " numbers, expected 8 (stamp tx ty tz qx qy qz qw)");
+  ForEachPoseLine(path, 8, "TUM", "stamp tx ty tz qx qy qz qw", [&](const std::vector<double>& v, std::size_t lineno) {
     StampedPose sp;
     sp.stamp = v[0];
     sp.pose = detail::PoseFromQuat({v[1], v[2], v[3]}, v[4], v[5], v[6], v[7], path, lineno);
     poses.push_back(sp);
-  }
+  });
   return poses;
 }
 
