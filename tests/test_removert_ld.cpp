@@ -139,5 +139,30 @@ TEST(RemovertLd, IdenticalSessionsHaveNoChanges) {
   EXPECT_EQ(ld.nd_strong.size() + ld.nd_weak.size() + ld.pd_strong.size() + ld.pd_weak.size(), 0u);
 }
 
+// Same world, second drive 0.7 m to the side: the far ground rings fall elsewhere, so the kd-tree
+// set difference alone reports ground everywhere between the other drive's rings. The
+// same-surface test (hits on the point's plane) drops those; they are no change.
+TEST(RemovertLd, SparseFarGroundIsNotAChange) {
+  const auto boxes = Common();
+  const auto a = Drive(boxes, 0.0, nullptr);
+  const auto b = Drive(boxes, 0.7, nullptr);
+  RemovertConfig cfg;
+  const PointCloud ma = removert::BuildSessionMap(a, cfg, 2), mb = removert::BuildSessionMap(b, cfg, 2);
+  auto total = [](const removert::LdResult& r) {
+    return r.nd_strong.size() + r.nd_weak.size() + r.pd_strong.size() + r.pd_weak.size();
+  };
+  const auto with = removert::DetectLd(ma, mb, a, b, cfg, 2);
+  RemovertConfig raw = cfg;
+  raw.ld_same_min_hits = 0;
+  const auto without = removert::DetectLd(ma, mb, a, b, raw, 2);
+  std::printf("changes in an unchanged world: %zu with the same-surface test, %zu without (maps %zu + %zu); "
+              "dropped ND %zu PD %zu\n",
+              total(with), total(without), ma.size(), mb.size(), with.stats.nd_same, with.stats.pd_same);
+  EXPECT_GT(total(without), 1000u);
+  EXPECT_LE(double(total(with)), 0.25 * double(total(without)));
+  // Nothing in this world was seen through: no strong ND, no weak PD either way.
+  EXPECT_LE(with.nd_strong.size() + with.pd_weak.size(), total(with) / 20 + 10);
+}
+
 }  // namespace
 }  // namespace ltm

@@ -116,11 +116,21 @@ void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_
 
 // Per point: keyframes see through it at any LD resolution (seen), and whether any keyframe had
 // a return in the window at its pixel at all (observed) (occlusion.cpp).
+// same: not seen through, and at least ld_same_min_hits keyframes hit it on its surface plane
+// (the other session has this surface; its map is only sparser there). `own_map` (the map the
+// points come from) gives their normals.
 struct Visibility {
-  std::vector<bool> seen, observed;
+  std::vector<bool> seen, observed, same;
 };
-Visibility SeenThroughBy(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
-                         const RemovertConfig& cfg, int threads);
+Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
+                         const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                         int threads);
+
+// Unit normals of `points` from their neighbourhood in `map` (at most 16 nearest within
+// radius_m): the PCA normal of a planar neighbourhood; for a line-like one (a far ground ring,
+// a pole) the direction perpendicular to the line closest to vertical; +z with < 2 neighbours.
+std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
+                                             double radius_m, int threads);
 
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);

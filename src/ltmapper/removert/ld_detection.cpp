@@ -46,9 +46,13 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
 
   // Weak ND preservation: ND the query never saw through stays in the map.
   {
-    const detail::Visibility vis = detail::SeenThroughBy(nd, query_keyframes, cfg, threads);
+    const detail::Visibility vis = detail::SeenThroughBy(nd, central_map, query_keyframes, cfg, threads);
     std::vector<bool> strong(nd.size()), weak(nd.size()), unobs(nd.size());
     for (std::size_t i = 0; i < nd.size(); ++i) {
+      if (vis.same[i]) {
+        ++res.stats.nd_same;
+        continue;
+      }
       const bool covered = !cfg.covisible_only || vis.observed[i];
       strong[i] = covered && (vis.seen[i] || !cfg.weak_nd);
       weak[i] = covered && !strong[i];
@@ -60,9 +64,13 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   }
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
   {
-    const detail::Visibility vis = detail::SeenThroughBy(pd, central_keyframes, cfg, threads);
+    const detail::Visibility vis = detail::SeenThroughBy(pd, query_map, central_keyframes, cfg, threads);
     std::vector<bool> strong(pd.size()), weak(pd.size()), unobs(pd.size());
     for (std::size_t i = 0; i < pd.size(); ++i) {
+      if (vis.same[i]) {
+        ++res.stats.pd_same;
+        continue;
+      }
       const bool covered = !cfg.covisible_only || vis.observed[i];
       weak[i] = covered && vis.seen[i];
       strong[i] = covered && !vis.seen[i];

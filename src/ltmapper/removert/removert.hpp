@@ -8,7 +8,10 @@
 //                at a coarser revert resolution are reverted (false removals at grazing angles,
 //                edges and thin structures).
 //   LD detection between the HD-free central and query maps (kd-tree: fewer than k neighbours
-//                within r in the other session = change): ND from central, PD from query.
+//                within r in the other session = change): ND from central, PD from query. A
+//                raw change the other session's scans hit on its surface plane (and did not see
+//                through) is the same surface sampled more sparsely (far ground between rings):
+//                no change (ld.same_min_hits).
 //   Occlusion    ND the query never saw through = weak ND (kept in the map); PD in space some
 //                central scan saw through (observed free) = weak PD; otherwise strong.
 //
@@ -55,6 +58,17 @@ struct RemovertConfig {
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
   bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
+  int ld_window_px = 1;           // [pixels] window half-size of the LD see-through test (0 = the pixel alone)
+  double ld_submap_radius_m = 100.0;  // [m] keyframes this close to a raw change vote on it (far ground
+                                      // is sampled sparsely: use the sensor's max range)
+  double ld_normal_radius_m = 1.0;   // [m] neighbourhood (own map, at most 16 points) for the normals of
+                                      // raw changes; a line-like neighbourhood (far ground rings) takes
+                                      // the normal perpendicular to the line closest to vertical
+  double ld_surface_max_m = 10.0;     // [m] cap of the same-surface range allowance (grazing far ground)
+  int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through that this many of the other
+                                  // session's keyframes hit on its surface plane (surface hits, see
+                                  // VisibilityOptions) is the same surface, sampled more sparsely:
+                                  // no change (0 = off)
   bool covisible_only = false;    // true: a raw change counts only where the other session had its line
                                   // of sight at all (a return in the window); else unobserved
   std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
@@ -90,6 +104,11 @@ struct RemovertConfig {
     v("ld.min_votes", ld_min_votes, "keyframes", 1, 65535);
     v("ld.min_ratio", ld_min_ratio, "", 0.0, 1.0);
     v("ld.weak_nd", weak_nd);
+    v("ld.window_px", ld_window_px, "pixels", 0, 10);
+    v("ld.submap_radius_m", ld_submap_radius_m, "m", 1.0, 10000.0);
+    v("ld.normal_radius_m", ld_normal_radius_m, "m", 0.05, 10.0);
+    v("ld.surface_max_m", ld_surface_max_m, "m", 0.0, 100.0);
+    v("ld.same_min_hits", ld_same_min_hits, "keyframes", 0, 65535);
     v("ld.covisible_only", covisible_only);
     v("ld.pairs", pairs, {"central", "consecutive"});
     v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);
@@ -141,6 +160,7 @@ struct LdStats {
   std::size_t central_points = 0, query_points = 0;
   std::size_t nd_strong = 0, nd_weak = 0, pd_strong = 0, pd_weak = 0;
   std::size_t pd_unobserved = 0, nd_unobserved = 0;
+  std::size_t pd_same = 0, nd_same = 0;  // raw changes the other session observed as the same surface
   double seconds = 0;
 };
 struct LdResult {
@@ -172,10 +192,20 @@ struct VisibilityVotes {
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
 };
+// Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit
+// when the nearest return of its own pixel lies within the range that one pixel spans on the
+// point's surface plane, r * pixel * tan(incidence), clamped to [tolerance, surface_max_m]: a
+// surface seen at a grazing angle (far ground) is sampled metres apart in range, so the plain
+// tolerance test misses it (LD "same surface" test).
+struct VisibilityOptions {
+  bool count_occluded = false;
+  const std::vector<Eigen::Vector3f>* normals = nullptr;
+  double surface_max_m = 0.0;  // [m]
+};
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
                                 const RemovertConfig& cfg, int threads = 0,
-                                bool count_occluded = false);
+                                const VisibilityOptions& options = {});
 
 // ------------------------------------------------------------------------------------ stage
 struct StageReport {

@@ -166,7 +166,12 @@ PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
 
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
-                                const RemovertConfig& cfg, int threads, bool count_occluded) {
+                                const RemovertConfig& cfg, int threads,
+                                const VisibilityOptions& options) {
+  const bool count_occluded = options.count_occluded;
+  if (options.normals && options.normals->size() != points.size())
+    throw Error("removert: " + std::to_string(options.normals->size()) + " normals for " +
+                std::to_string(points.size()) + " points");
   if (keyframes.size() >= 65535)
     throw Error("removert: " + std::to_string(keyframes.size()) +
                 " keyframes in one session; vote counters hold at most 65534");
@@ -191,6 +196,11 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   const float radius = float(cfg.submap_radius_m);
   const float r2 = radius * radius;
   const float tol_abs = float(cfg.tol_abs_m), tol_rel = float(cfg.tol_rel);
+  // Surface hits: range one pixel spans on the point's plane per unit range and tan(incidence).
+  const float surface_max = float(options.surface_max_m);
+  const bool surface = options.normals != nullptr && surface_max > 0.f;
+  std::vector<float> pixel_rad(L);
+  for (std::size_t l = 0; l < L; ++l) pixel_rad[l] = float(resolutions_deg[l] * 3.14159265358979323846 / 180.0);
   const int nl = int(L);
 
   detail::ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
@@ -208,6 +218,12 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
         float r, pitch, yaw;
         if (!img.Angles(ps, &r, &pitch, &yaw)) continue;
         const float tol = tol_abs + tol_rel * r;
+        // tan(incidence) of the ray on the point's surface (capped at grazing incidence).
+        float tan_inc = 0.f;
+        if (surface) {
+          const float c = std::fabs((*options.normals)[index.order()[i]].dot(d)) / r;
+          tan_inc = std::sqrt(std::max(0.f, 1.f - c * c)) / std::max(c, 1e-3f);
+        }
         for (int l = 0; l < nl; ++l) {
           // See-through: even the nearest return in the window around the point's pixel lies
           // beyond it (so grazing surfaces and silhouette edges, whose neighbouring pixels
@@ -219,7 +235,9 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
           const std::size_t slot = std::size_t(l) * n + i;
           if (s > r + tol) {
             see[slot].fetch_add(1, std::memory_order_relaxed);
-          } else if (std::fabs(s - r) <= tol || std::fabs(img.At(l, pix) - r) <= tol) {
+          } else if (std::fabs(s - r) <= tol || std::fabs(img.At(l, pix) - r) <= tol ||
+                     (surface && std::fabs(img.At(l, pix) - r) <=
+                                     std::min(surface_max, std::max(tol, r * pixel_rad[std::size_t(l)] * tan_inc)))) {
             hit[slot].fetch_add(1, std::memory_order_relaxed);
           } else if (count_occluded) {
             occ[slot].fetch_add(1, std::memory_order_relaxed);
