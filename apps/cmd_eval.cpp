@@ -1,4 +1,4 @@
-// `ltmapper eval traj|hd|ld|restore|storage|objects`: score a stage's output against ground truth.
+// `ltmapper eval traj|hd|ld|restore|storage|objects|livemeta`: score a stage's output against ground truth.
 // Each subcommand takes explicit files, or the simulator dir plus a stage output dir and finds
 // the files by the layouts of docs/FORMATS.md. Prints the Markdown report; --json / --md write
 // it to files (atomically).
@@ -10,6 +10,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -68,6 +69,32 @@ void AddTruthFrame(CLI::App& cmd, std::string& frame) {
 Pose TruthFrame(const std::string& sim, const std::string& aligned, const std::string& frame) {
   if (!aligned.empty()) return eval::TruthToEstimateFrame(sim, aligned);
   return frame == "world" ? Pose::Identity() : eval::TruthToEstimateFrame(sim, "");
+}
+
+// With --aligned, how the truth is placed in the estimated world: per keyframe (default) or by
+// one rigid transform (joint ATE alignment).
+void AddTruthMapping(CLI::App& cmd, std::string& mapping) {
+  cmd.add_option("--truth-mapping", mapping,
+                 "With --aligned: keyframe (default; each truth point moves by the pose correction of the nearest true "
+                 "keyframe of the session that observed it) or global (one rigid transform, the joint ATE alignment)")
+      ->check(CLI::IsMember({"keyframe", "global"}));
+}
+eval::TruthMapping MakeMapping(const std::string& sim, const std::string& aligned, const std::string& frame,
+                               const std::string& mapping) {
+  eval::TruthMapping m;
+  if (!aligned.empty() && mapping == "keyframe") m = eval::KeyframeTruthMapping(sim, aligned);
+  else if (!aligned.empty()) m = eval::GlobalTruthMapping(eval::TruthToEstimateFrame(sim, aligned), "global: joint ATE alignment (" + aligned + ")");
+  else if (frame == "world") m = eval::GlobalTruthMapping(Pose::Identity(), "none: the output is in the sim's true world frame");
+  else m = eval::GlobalTruthMapping(eval::TruthToEstimateFrame(sim, ""), "global: inverse of the central session's true origin");
+  spdlog::info("truth mapping: {}", m.description);
+  return m;
+}
+// Sim session index of a name ("session_02" -> its position among truth/session_XX).
+std::size_t SessionIndex(const std::string& sim, const std::string& name) {
+  const auto names = eval::SimSessionNames(sim);
+  const auto it = std::find(names.begin(), names.end(), name);
+  if (it == names.end()) throw Error(Join(sim, "truth"), 0, "no session '" + name + "'");
+  return std::size_t(it - names.begin());
 }
 
 // ------------------------------------------------------------------------------------ traj
@@ -188,7 +215,7 @@ void SetupLd(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string truth_dir, pred_dir, kept_map, central_static, truth_transform;
     std::string sim, changes, pair, aligned;
-    std::string truth_frame = "central";
+    std::string truth_frame = "central", truth_mapping = "keyframe";
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("ld", "LD changes: precision / recall / F1 of PD and ND, strong and weak");
@@ -202,8 +229,9 @@ void SetupLd(CLI::App& parent) {
   cmd->add_option("--sim", o->sim, "Simulator output dir (truth/pair_00_XX)");
   cmd->add_option("--changes", o->changes, "LT-removert output dir (pair folder, <central>/static_map.pcd)");
   cmd->add_option("--pair", o->pair, "Session pair, e.g. 00_01");
-  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world by the joint ATE alignment");
+  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world (see --truth-mapping)");
   AddTruthFrame(*cmd, o->truth_frame);
+  AddTruthMapping(*cmd, o->truth_mapping);
   cmd->callback([o] {
     const bool sim_form = !o->sim.empty();
     if (sim_form && (o->changes.empty() || o->pair.empty()))
@@ -218,8 +246,16 @@ void SetupLd(CLI::App& parent) {
       const std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
       const std::string pdir = eval::FindPairDir(o->changes, o->pair);
       report.inputs = {{"truth", tdir}, {"prediction", pdir}};
-      const Pose T = TruthFrame(o->sim, o->aligned, o->truth_frame);
-      truth = eval::TransformChanges(eval::ReadChangeClouds(tdir), T);
+      int c = -1, q = -1;
+      if (std::sscanf(o->pair.c_str(), "%d_%d", &c, &q) != 2 || c < 0 || q < 0)
+        Usage("eval ld: --pair must be CC_QQ (sim session indices), got '" + o->pair + "'");
+      const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+      report.inputs.push_back({"truth mapping", m.description});
+      // PD points are query static_world points, ND points central ones (docs/FORMATS.md).
+      const eval::ChangeClouds w = eval::ReadChangeClouds(tdir);
+      const int th = o->common.threads;
+      truth = {m.Map(w.pd_strong, std::size_t(q), th), m.Map(w.pd_weak, std::size_t(q), th),
+               m.Map(w.nd_strong, std::size_t(c), th), m.Map(w.nd_weak, std::size_t(c), th)};
       pred = eval::ReadChangeClouds(pdir);
       if (central_static.empty() && o->kept_map.empty()) {
         // The central session is the pair's first number, indexing the sim's sessions.
@@ -254,7 +290,7 @@ void SetupLd(CLI::App& parent) {
 void SetupRestore(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string map_a, map_b, sim, session, aligned;
-    std::string truth_frame = "central";
+    std::string truth_frame = "central", truth_mapping = "keyframe";
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("restore", "Chamfer distance over cubic patches between two aligned maps (paper table)");
@@ -263,8 +299,9 @@ void SetupRestore(CLI::App& parent) {
   cmd->add_option("--map-b", o->map_b, "Second map (e.g. the real session), same frame");
   cmd->add_option("--sim", o->sim, "Instead of --map-b: the simulator's truth/<session>/static_world.pcd");
   cmd->add_option("--session", o->session, "Session name for --sim");
-  cmd->add_option("--aligned", o->aligned, "With --sim: map the truth into the estimated world by the joint ATE alignment");
+  cmd->add_option("--aligned", o->aligned, "With --sim: map the truth into the estimated world (see --truth-mapping)");
   AddTruthFrame(*cmd, o->truth_frame);
+  AddTruthMapping(*cmd, o->truth_mapping);
   cmd->callback([o] {
     if (o->map_b.empty() == o->sim.empty()) Usage("eval restore: give --map-b F, or --sim DIR --session NAME");
     if (!o->sim.empty() && o->session.empty()) Usage("eval restore: --session is required with --sim");
@@ -277,8 +314,9 @@ void SetupRestore(CLI::App& parent) {
       report.inputs = {{"map A", o->map_a}, {"map B", o->map_b}};
     } else {
       const std::string f = Join(Join(Join(o->sim, "truth"), o->session), "static_world.pcd");
-      b = geometry::Transform(io::ReadCloud(f), TruthFrame(o->sim, o->aligned, o->truth_frame));
-      report.inputs = {{"map A", o->map_a}, {"map B", f}};
+      const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+      b = m.Map(io::ReadCloud(f), SessionIndex(o->sim, o->session), o->common.threads);
+      report.inputs = {{"map A", o->map_a}, {"map B", f}, {"truth mapping", m.description}};
     }
     report.restore = eval::EvaluateRestore(a, b, cfg, o->common.threads);
     Finish(report, *o);
@@ -325,16 +363,17 @@ void SetupObjects(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string sim, objects, aligned;
     std::vector<std::string> pairs;
-    std::string truth_frame = "central";
+    std::string truth_frame = "central", truth_mapping = "keyframe";
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("objects", "Changed objects: LT-map clusters vs the simulator's LD objects (point IoU)");
   AddEvalOptions(*cmd, *o);
   cmd->add_option("--sim", o->sim, "Simulator output dir (truth/objects.csv, truth/<session>/labels)")->required();
   cmd->add_option("--objects", o->objects, "Output of `ltmapper map objects` (objects.csv, objects.ply)")->required();
-  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world by the joint ATE alignment");
+  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world (see --truth-mapping)");
   cmd->add_option("--pair", o->pairs, "Session pair(s), e.g. 00_01 (default: 00 with every other session)");
   AddTruthFrame(*cmd, o->truth_frame);
+  AddTruthMapping(*cmd, o->truth_mapping);
   cmd->callback([o] {
     const auto cfg = LoadEvalConfig(*o);
     std::vector<std::string> pairs = o->pairs;
@@ -346,10 +385,10 @@ void SetupObjects(CLI::App& parent) {
         pairs.push_back(buf);
       }
     }
-    const Pose T = TruthFrame(o->sim, o->aligned, o->truth_frame);
+    const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
     std::vector<eval::ObjectTruth> truth;
     for (const auto& p : pairs) {
-      auto t = eval::LoadSimObjectTruth(o->sim, p, T, cfg, o->common.threads);
+      auto t = eval::LoadSimObjectTruth(o->sim, p, m, cfg, o->common.threads);
       spdlog::info("pair {}: {} changed truth objects", p, t.size());
       for (auto& x : t) truth.push_back(std::move(x));
     }
@@ -358,7 +397,44 @@ void SetupObjects(CLI::App& parent) {
     eval::Report report;
     report.inputs = {{"sim", o->sim}, {"objects", o->objects}};
     if (!o->aligned.empty()) report.inputs.push_back({"aligned", o->aligned});
+    report.inputs.push_back({"truth mapping", m.description});
     report.objects = eval::EvaluateObjects(truth, clusters, cfg, o->common.threads);
+    Finish(report, *o);
+  });
+}
+
+// -------------------------------------------------------------------------------- livemeta
+void SetupLiveMeta(CLI::App& parent) {
+  struct Opt : EvalOptions {
+    std::string sim, aligned, live, meta;
+    std::vector<std::string> classes = {"car"};
+    std::string truth_frame = "central", truth_mapping = "keyframe";
+  };
+  auto o = std::make_shared<Opt>();
+  auto* cmd = parent.add_subcommand(
+      "livemeta", "Live map has the objects new since session 0 and the meta map not; removed objects in neither");
+  AddEvalOptions(*cmd, *o);
+  cmd->add_option("--sim", o->sim, "Simulator output dir (truth/objects.csv, truth/<session>/static_world.ply)")->required();
+  cmd->add_option("--live", o->live, "Live map (PCD/PLY), estimated world")->required();
+  cmd->add_option("--meta", o->meta, "Meta map (PCD/PLY), estimated world")->required();
+  cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world (see --truth-mapping)");
+  cmd->add_option("--class", o->classes, "Object classes scored (truth/objects.csv 'class'; repeatable; 'all' = every class)");
+  AddTruthFrame(*cmd, o->truth_frame);
+  AddTruthMapping(*cmd, o->truth_mapping);
+  cmd->callback([o] {
+    const auto cfg = LoadEvalConfig(*o);
+    const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+    std::vector<std::string> classes = o->classes;
+    std::string class_list;
+    for (const auto& c : classes) class_list += (class_list.empty() ? "" : ", ") + c;
+    if (std::find(classes.begin(), classes.end(), "all") != classes.end()) classes.clear(), class_list = "all";
+    const auto truth = eval::LoadSimLiveMetaTruth(o->sim, classes, m, o->common.threads);
+    spdlog::info("{} objects ({}) changed between session 0 and the last session", truth.size(), class_list);
+    const PointCloud live = io::ReadCloud(o->live), meta = io::ReadCloud(o->meta);
+    eval::Report report;
+    report.inputs = {{"sim", o->sim}, {"live map", o->live}, {"meta map", o->meta}, {"classes", class_list},
+                     {"truth mapping", m.description}};
+    report.livemeta = eval::EvaluateLiveMeta(truth, live, meta, cfg, o->common.threads);
     Finish(report, *o);
   });
 }
@@ -366,7 +442,7 @@ void SetupObjects(CLI::App& parent) {
 }  // namespace
 
 LTM_COMMAND(80, [](CLI::App& app) {
-  auto* eval = app.add_subcommand("eval", "Score a stage against ground truth: traj, hd, ld, restore, storage, objects");
+  auto* eval = app.add_subcommand("eval", "Score a stage against ground truth: traj, hd, ld, restore, storage, objects, livemeta");
   eval->require_subcommand(1);
   SetupTraj(*eval);
   SetupHd(*eval);
@@ -374,6 +450,7 @@ LTM_COMMAND(80, [](CLI::App& app) {
   SetupRestore(*eval);
   SetupStorage(*eval);
   SetupObjects(*eval);
+  SetupLiveMeta(*eval);
 });
 
 }  // namespace ltm::app

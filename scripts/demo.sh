@@ -54,6 +54,12 @@ step "5/6 LT-map: rollback to the first session, storage"
   --md "$OUT/eval/40_restore_positive.md" --json "$OUT/eval/40_restore_positive.json" >/dev/null
 "$LTM" eval restore --map-a "$RUN/live.pcd" --map-b "$RUN/changes/${NAMES[0]}/static_map.pcd" \
   --md "$OUT/eval/41_restore_negative.md" --json "$OUT/eval/41_restore_negative.json" >/dev/null
+# Live map has the cars parked since session 0, the meta map not; removed cars in neither (then
+# the same for every LD object class).
+"$LTM" eval livemeta --sim "$OUT/sim" --aligned "$RUN/aligned" --live "$RUN/live.pcd" --meta "$RUN/meta.pcd" \
+  --md "$OUT/eval/42_livemeta.md" --json "$OUT/eval/42_livemeta.json" >/dev/null
+"$LTM" eval livemeta --sim "$OUT/sim" --aligned "$RUN/aligned" --live "$RUN/live.pcd" --meta "$RUN/meta.pcd" --class all \
+  --md "$OUT/eval/43_livemeta_all.md" --json "$OUT/eval/43_livemeta_all.json" >/dev/null
 rm -rf "$OUT/snapshots" && mkdir -p "$OUT/snapshots"
 for s in "${NAMES[@]}"; do
   [ -f "$RUN/changes/$s/static_map.pcd" ] && ln -f "$RUN/changes/$s/static_map.pcd" "$OUT/snapshots/$s.pcd"

@@ -123,7 +123,7 @@ TEST(Objects, SimTruthAndClusterFiles) {
     fs::create_directories(sd + "/labels");
     io::WritePly(sd + "/labels/000000.ply", scan);
   }
-  const auto truth = LoadSimObjectTruth((dir / "sim").string(), "00_01", Pose::Identity(), Cfg());
+  const auto truth = LoadSimObjectTruth((dir / "sim").string(), "00_01", GlobalTruthMapping(Pose::Identity(), "identity"), Cfg());
   ASSERT_EQ(truth.size(), 2u);
   EXPECT_EQ(truth[0].id, 3);
   EXPECT_EQ(truth[0].session, 0);
@@ -153,7 +153,7 @@ TEST(Objects, SimTruthAndClusterFiles) {
   EXPECT_TRUE(r.objects[0].found);
   EXPECT_TRUE(r.objects[1].found);  // IoU exactly 0.5
   EXPECT_NEAR(r.objects[1].best_iou, 0.5, 1e-12);
-  EXPECT_THROW(LoadSimObjectTruth((dir / "sim").string(), "00_05", Pose::Identity(), Cfg()), Error);
+  EXPECT_THROW(LoadSimObjectTruth((dir / "sim").string(), "00_05", GlobalTruthMapping(Pose::Identity(), "identity"), Cfg()), Error);
   fs::remove_all(dir);
 }
 

@@ -57,6 +57,9 @@ struct EvalConfig {
   int obj_keyframe_stride = 1;             // use every n-th labelled scan for the truth points
   int obj_min_change_points = 20;          // truth objects with fewer detectable change points
                                            // (pair changes.ply: PD, strong ND) are not scored
+  // Live / meta map content (new and removed cars); points match at ld_match_dist_m.
+  double livemeta_min_fraction = 0.5;      // an object is "in" a map when at least this fraction of
+                                           // its truth points has a map point within ld_match_dist_m
 
   template <class V>
   void Visit(V& v) {
@@ -79,6 +82,7 @@ struct EvalConfig {
     v("objects.min_truth_points", obj_min_truth_points, "", 0, 100000000);
     v("objects.keyframe_stride", obj_keyframe_stride, "", 1, 1000000);
     v("objects.min_change_points", obj_min_change_points, "", 0, 100000000);
+    v("livemeta.min_fraction", livemeta_min_fraction, "", 0.0, 1.0);
   }
 };
 
@@ -233,6 +237,73 @@ struct RestoreResult {
 RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
                               int threads = 0);
 
+// ---------------------------------------------------------------------------- truth mapping
+// Places the simulator's truth (true world frame) into the method's estimated world.
+//
+// Per keyframe: each truth point p of a session moves by the pose correction of the nearest (3D
+// position) TRUE keyframe k of that session: p_est = T_est_k * T_true_k^-1 * p. The method's maps
+// are built from scans placed with the estimated poses, so this puts every truth point where the
+// method's map of that session puts the same surface, up to the relative drift between
+// neighbouring keyframes. One rigid transform for everything (the joint ATE alignment) instead
+// leaves the pose error (ATE ~0.25 m) in every point-wise score. true_poses / est_poses: the
+// session's T_world_sensor per keyframe, same order; different counts or none: ltm::Error. The
+// optional point arrays (cls, session, object) are kept.
+PointCloud MapTruthByKeyframes(const PointCloud& truth_world, const std::vector<Pose>& true_poses,
+                               const std::vector<Pose>& est_poses, int threads = 0);
+
+struct TruthMapping {
+  std::string mode = "global";          // global: T_est_truth for every point; keyframe: per keyframe
+  std::string description;              // what was used, for the report inputs
+  Pose T_est_truth = Pose::Identity();  // global mode
+  std::vector<SessionTrajectory> sessions;  // keyframe mode, by sim session index; est empty when
+                                            // the session was not aligned (mapping it is an error)
+  // A truth cloud of sim session `session` (world frame) in the estimate frame.
+  PointCloud Map(const PointCloud& truth_world, std::size_t session, int threads = 0) const;
+  // Pose placing the sensor-frame scan of keyframe k of `session` (true pose T_world_sensor) in
+  // the estimate frame: its estimated pose (keyframe mode: the exact per-keyframe correction of
+  // every point the keyframe observed), or T_est_truth * T_world_sensor.
+  Pose ScanPose(std::size_t session, std::size_t k, const Pose& T_world_sensor) const;
+};
+TruthMapping GlobalTruthMapping(const Pose& T_est_truth, const std::string& description);
+// True poses DIR/truth/<s>/poses_world.txt and estimates aligned_dir/<s>/poses_world.txt of every
+// sim session (counts must agree).
+TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string& aligned_dir);
+
+// ----------------------------------------------------------------------------- live / meta map
+// The criterion "the live map contains new parked cars; the meta map does not": truth objects of
+// some classes (cars) that are new since session 0 (present in the last session, absent from 0; their
+// points from the last session's static_world) or removed since (present in 0, absent from the
+// last; points from session 0). An object is in a map when >= livemeta_min_fraction of its truth
+// points have a map point within ld_match_dist_m. Wanted: new objects in live and not in meta,
+// removed objects in neither. Objects with fewer than obj_min_truth_points points: not scored.
+struct LiveMetaObject {
+  int id = -1;
+  std::string cls, placement;
+  bool added = true;   // true: new since session 0; false: removed since session 0
+  PointCloud cloud;    // truth points, estimate frame
+};
+struct LiveMetaScore {
+  int id = -1;
+  std::string cls, placement;
+  bool added = true;
+  std::size_t points = 0;
+  double live_fraction = kNaN, meta_fraction = kNaN;
+  bool scored = false, in_live = false, in_meta = false;
+};
+struct LiveMetaResult {
+  double match_dist_m = 0.0, min_fraction = 0.0;
+  std::size_t live_points = 0, meta_points = 0;
+  std::size_t added = 0, added_in_live = 0, added_in_meta = 0;        // scored objects only
+  std::size_t removed = 0, removed_in_live = 0, removed_in_meta = 0;
+  std::vector<LiveMetaScore> objects;
+};
+LiveMetaResult EvaluateLiveMeta(const std::vector<LiveMetaObject>& truth, const PointCloud& live,
+                                const PointCloud& meta, const EvalConfig& cfg, int threads = 0);
+// Objects of the given classes (empty = every class) from DIR/truth/objects.csv, points from the
+// `object` field of truth/<session>/static_world.ply, mapped into the estimate frame by `mapping`.
+std::vector<LiveMetaObject> LoadSimLiveMetaTruth(const std::string& sim_dir, const std::vector<std::string>& classes,
+                                                 const TruthMapping& mapping, int threads = 0);
+
 // ----------------------------------------------------------------------------------- objects
 // Changed objects of a session pair: truth = LD objects present in exactly one of the two
 // sessions (points in the estimate frame), prediction = LT-map's clusters of that step.
@@ -295,10 +366,10 @@ struct SimObject {
 };
 std::vector<SimObject> ReadSimObjects(const std::string& objects_csv);
 // Truth changed objects of pair "CC_QQ" (sim session indices): labelled scan points (class
-// static, object = id) of the session where each object exists, placed with the true poses,
-// mapped by T_est_truth (TruthToEstimateFrame) and voxel-downsampled to obj_voxel_m.
+// static, object = id) of the session where each object exists (removed objects: central, added:
+// query), each scan placed by mapping.ScanPose, voxel-downsampled to obj_voxel_m.
 std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair,
-                                            const Pose& T_est_truth, const EvalConfig& cfg, int threads = 0);
+                                            const TruthMapping& mapping, const EvalConfig& cfg, int threads = 0);
 // The clusters written by `ltmapper map objects` (objects.csv + objects.ply with object ids);
 // pair = reference and session columns (store session orders, = sim indices when the sessions
 // were integrated in sim order).
@@ -338,6 +409,7 @@ struct Report {
   std::optional<RestoreResult> restore;
   std::optional<StorageResult> storage;
   std::optional<ObjectsResult> objects;
+  std::optional<LiveMetaResult> livemeta;
 };
 std::string ToJson(const Report& report);
 std::string ToMarkdown(const Report& report);

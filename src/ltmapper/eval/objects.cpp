@@ -223,8 +223,8 @@ std::vector<SimObject> ReadSimObjects(const std::string& path) {
   return out;
 }
 
-std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair, const Pose& T_est_truth,
-                                            const EvalConfig& cfg, int threads) {
+std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair,
+                                            const TruthMapping& mapping, const EvalConfig& cfg, int threads) {
   int a = -1, b = -1;
   if (std::sscanf(pair.c_str(), "%d_%d", &a, &b) != 2 || a < 0 || b < 0)
     throw Error("eval objects: pair '" + pair + "' is not CC_QQ");
@@ -273,7 +273,7 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
         const PointCloud scan = io::ReadPly(path);
         if (scan.cls.size() != scan.size() || scan.object.size() != scan.size())
           throw Error(path, 0, "labelled scan needs 'class' and 'object' fields");
-        const Pose T = T_est_truth * poses[k];
+        const Pose T = mapping.ScanPose(std::size_t(s), k, poses[k]);
         for (std::size_t i = 0; i < scan.size(); ++i) {
           if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
           const Eigen::Vector3f p = (T * scan.points[i].xyz().cast<double>()).cast<float>();

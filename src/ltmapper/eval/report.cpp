@@ -182,6 +182,35 @@ void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
   w.EndArray().EndObject();
 }
 
+void WriteLiveMeta(json::Writer& w, const LiveMetaResult& r) {
+  w.BeginObject("livemeta")
+      .Number("match_dist_m", r.match_dist_m)
+      .Number("min_fraction", r.min_fraction)
+      .Int("live_points", (long long)r.live_points)
+      .Int("meta_points", (long long)r.meta_points)
+      .Int("added", (long long)r.added)
+      .Int("added_in_live", (long long)r.added_in_live)
+      .Int("added_in_meta", (long long)r.added_in_meta)
+      .Int("removed", (long long)r.removed)
+      .Int("removed_in_live", (long long)r.removed_in_live)
+      .Int("removed_in_meta", (long long)r.removed_in_meta)
+      .BeginArray("objects");
+  for (const auto& o : r.objects)
+    w.BeginObject()
+        .Int("id", o.id)
+        .String("class", o.cls)
+        .String("placement", o.placement)
+        .String("change", o.added ? "added" : "removed")
+        .Int("points", (long long)o.points)
+        .Number("live_fraction", o.live_fraction)
+        .Number("meta_fraction", o.meta_fraction)
+        .Bool("scored", o.scored)
+        .Bool("in_live", o.in_live)
+        .Bool("in_meta", o.in_meta)
+        .EndObject();
+  w.EndArray().EndObject();
+}
+
 // -------------------------------------------------------------------------------- Markdown
 std::string Fmt(double v, int digits = 3) {
   if (!std::isfinite(v)) return "n/a";
@@ -333,6 +362,26 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   md << "\n";
 }
 
+void MdLiveMeta(std::ostringstream& md, const LiveMetaResult& r) {
+  auto frac = [](std::size_t a, std::size_t b) { return std::to_string(a) + " / " + std::to_string(b); };
+  md << "## Live and meta map: new and removed objects since session 0\n\nAn object is in a map when >= "
+     << Fmt(r.min_fraction, 2) << " of its truth points have a map point within " << Fmt(r.match_dist_m, 3)
+     << " m. Wanted: new objects in the live map and not in the meta map; removed objects in neither. "
+     << "Live / meta map points: " << r.live_points << " / " << r.meta_points << ".\n\n"
+     << Header({"objects", "total", "in live", "in meta"})
+     << Row({"new since session 0", std::to_string(r.added), frac(r.added_in_live, r.added),
+             frac(r.added_in_meta, r.added)})
+     << Row({"removed since session 0", std::to_string(r.removed), frac(r.removed_in_live, r.removed),
+             frac(r.removed_in_meta, r.removed)})
+     << "\n"
+     << Header({"id", "class", "placement", "change", "points", "live fraction", "meta fraction", "in live", "in meta"});
+  auto yn = [](bool scored, bool v) { return !scored ? std::string("not scored") : v ? std::string("yes") : std::string("no"); };
+  for (const auto& o : r.objects)
+    md << Row({std::to_string(o.id), o.cls, o.placement, o.added ? "new" : "removed", std::to_string(o.points),
+               Fmt(o.live_fraction, 3), Fmt(o.meta_fraction, 3), yn(o.scored, o.in_live), yn(o.scored, o.in_meta)});
+  md << "\n";
+}
+
 }  // namespace
 
 std::string ToJson(const Report& report) {
@@ -347,6 +396,7 @@ std::string ToJson(const Report& report) {
   if (report.restore) WriteRestore(w, *report.restore);
   if (report.storage) WriteStorage(w, *report.storage);
   if (report.objects) WriteObjectsResult(w, *report.objects);
+  if (report.livemeta) WriteLiveMeta(w, *report.livemeta);
   w.EndObject();
   return w.str();
 }
@@ -364,6 +414,7 @@ std::string ToMarkdown(const Report& report) {
   if (report.restore) MdRestore(md, *report.restore);
   if (report.storage) MdStorage(md, *report.storage);
   if (report.objects) MdObjects(md, *report.objects);
+  if (report.livemeta) MdLiveMeta(md, *report.livemeta);
   return md.str();
 }
 

@@ -1,0 +1,203 @@
+// Truth placement in the estimated world (global rigid or per keyframe) and the live / meta map
+// content check (new and removed objects).
+#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <filesystem>
+
+namespace fs = std::filesystem;
+
+namespace ltm::eval {
+namespace {
+
+std::string Join(const std::string& a, const std::string& b) { return (fs::path(a) / b).string(); }
+
+tbb::task_arena MakeArena(int threads) { return threads > 0 ? tbb::task_arena(threads) : tbb::task_arena(); }
+
+// Points of `q` with a point of `tree` within `dist`.
+std::size_t CountWithin(const PointCloud& q, const geometry::KdTree& tree, double dist, tbb::task_arena& arena) {
+  if (q.empty() || tree.size() == 0) return 0;
+  const float d2 = float(dist * dist);
+  return arena.execute([&] {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, q.size(), 1024), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::size_t acc) {
+          std::uint32_t idx = 0;
+          float sq = 0.f;
+          for (std::size_t i = r.begin(); i != r.end(); ++i)
+            if (tree.Nearest(q.points[i].xyz(), &idx, &sq) && sq <= d2) ++acc;
+          return acc;
+        },
+        [](std::size_t a, std::size_t b) { return a + b; });
+  });
+}
+
+}  // namespace
+
+PointCloud MapTruthByKeyframes(const PointCloud& truth_world, const std::vector<Pose>& true_poses,
+                               const std::vector<Pose>& est_poses, int threads) {
+  if (true_poses.size() != est_poses.size())
+    throw Error("truth mapping: " + std::to_string(true_poses.size()) + " true keyframe poses but " +
+                std::to_string(est_poses.size()) + " estimated ones");
+  if (true_poses.empty()) throw Error("truth mapping: no keyframe poses");
+  PointCloud keyframes;
+  keyframes.reserve(true_poses.size());
+  std::vector<Pose> correction(true_poses.size());
+  for (std::size_t k = 0; k < true_poses.size(); ++k) {
+    const Eigen::Vector3d t = true_poses[k].translation();
+    keyframes.push_back(float(t.x()), float(t.y()), float(t.z()));
+    correction[k] = est_poses[k] * true_poses[k].inverse();
+  }
+  const geometry::KdTree tree(std::move(keyframes));
+  PointCloud out = truth_world;
+  tbb::task_arena arena = MakeArena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+      std::uint32_t k = 0;
+      float sq = 0.f;
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        auto& p = out.points[i];
+        tree.Nearest(p.xyz(), &k, &sq);
+        const Eigen::Vector3d q = correction[k] * Eigen::Vector3d(p.x, p.y, p.z);
+        p.x = float(q.x());
+        p.y = float(q.y());
+        p.z = float(q.z());
+      }
+    });
+  });
+  return out;
+}
+
+PointCloud TruthMapping::Map(const PointCloud& truth_world, std::size_t session, int threads) const {
+  if (mode == "global") return geometry::Transform(truth_world, T_est_truth);
+  if (session >= sessions.size())
+    throw Error("truth mapping: no sim session " + std::to_string(session) + " (" + std::to_string(sessions.size()) +
+                " sessions)");
+  const SessionTrajectory& s = sessions[session];
+  if (s.est.empty())
+    throw Error("truth mapping: session " + s.name + " has no estimated poses (not aligned); use --truth-mapping global");
+  return MapTruthByKeyframes(truth_world, s.truth, s.est, threads);
+}
+
+Pose TruthMapping::ScanPose(std::size_t session, std::size_t k, const Pose& T_world_sensor) const {
+  if (mode == "global") return T_est_truth * T_world_sensor;
+  if (session >= sessions.size() || sessions[session].est.empty())
+    throw Error("truth mapping: sim session " + std::to_string(session) +
+                " has no estimated poses (not aligned); use --truth-mapping global");
+  const auto& est = sessions[session].est;
+  if (k >= est.size())
+    throw Error("truth mapping: session " + sessions[session].name + " has " + std::to_string(est.size()) +
+                " estimated poses, keyframe " + std::to_string(k) + " asked");
+  return est[k];
+}
+
+TruthMapping GlobalTruthMapping(const Pose& T_est_truth, const std::string& description) {
+  TruthMapping m;
+  m.mode = "global";
+  m.T_est_truth = T_est_truth;
+  m.description = description;
+  return m;
+}
+
+TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string& aligned_dir) {
+  if (aligned_dir.empty()) throw Error("truth mapping: per-keyframe mapping needs the LT-SLAM output (--aligned)");
+  TruthMapping m;
+  m.mode = "keyframe";
+  m.description = "keyframe: p_est = T_est_k T_true_k^-1 p, k = nearest true keyframe of the observing session (" +
+                  aligned_dir + ")";
+  for (const auto& name : SimSessionNames(sim_dir)) {
+    SessionTrajectory s;
+    s.name = name;
+    s.truth = ReadPoses(Join(Join(Join(sim_dir, "truth"), name), "poses_world.txt"));
+    const std::string est = Join(Join(aligned_dir, name), "poses_world.txt");
+    if (fs::exists(est)) {
+      s.est = ReadPoses(est);
+      if (s.est.size() != s.truth.size())
+        throw Error(est, 0, std::to_string(s.est.size()) + " poses but the truth has " + std::to_string(s.truth.size()) +
+                                " keyframes");
+    }
+    m.sessions.push_back(std::move(s));
+  }
+  return m;
+}
+
+// ------------------------------------------------------------------------------ live / meta
+LiveMetaResult EvaluateLiveMeta(const std::vector<LiveMetaObject>& truth, const PointCloud& live,
+                                const PointCloud& meta, const EvalConfig& cfg, int threads) {
+  LiveMetaResult r;
+  r.match_dist_m = cfg.ld_match_dist_m;
+  r.min_fraction = cfg.livemeta_min_fraction;
+  r.live_points = live.size();
+  r.meta_points = meta.size();
+  const geometry::KdTree live_tree(live), meta_tree(meta);
+  tbb::task_arena arena = MakeArena(threads);
+  for (const auto& t : truth) {
+    LiveMetaScore s;
+    s.id = t.id;
+    s.cls = t.cls;
+    s.placement = t.placement;
+    s.added = t.added;
+    s.points = t.cloud.size();
+    s.scored = s.points > 0 && s.points >= std::size_t(cfg.obj_min_truth_points);
+    if (s.points > 0) {
+      s.live_fraction = double(CountWithin(t.cloud, live_tree, cfg.ld_match_dist_m, arena)) / double(s.points);
+      s.meta_fraction = double(CountWithin(t.cloud, meta_tree, cfg.ld_match_dist_m, arena)) / double(s.points);
+      s.in_live = s.live_fraction >= cfg.livemeta_min_fraction;
+      s.in_meta = s.meta_fraction >= cfg.livemeta_min_fraction;
+    }
+    if (s.scored) {
+      (s.added ? r.added : r.removed) += 1;
+      if (s.in_live) (s.added ? r.added_in_live : r.removed_in_live) += 1;
+      if (s.in_meta) (s.added ? r.added_in_meta : r.removed_in_meta) += 1;
+    }
+    r.objects.push_back(std::move(s));
+  }
+  return r;
+}
+
+std::vector<LiveMetaObject> LoadSimLiveMetaTruth(const std::string& sim_dir, const std::vector<std::string>& classes,
+                                                 const TruthMapping& mapping, int threads) {
+  const auto names = SimSessionNames(sim_dir);
+  const std::size_t last = names.size() - 1;
+  const std::string truth_dir = Join(sim_dir, "truth");
+  std::vector<LiveMetaObject> out;
+  for (const auto& o : ReadSimObjects(Join(truth_dir, "objects.csv"))) {
+    if (!classes.empty() && std::find(classes.begin(), classes.end(), o.cls) == classes.end()) continue;
+    const bool in0 = std::count(o.present_in.begin(), o.present_in.end(), 0) > 0;
+    const bool in_last = std::count(o.present_in.begin(), o.present_in.end(), int(last)) > 0;
+    if (in0 == in_last) continue;
+    LiveMetaObject t;
+    t.id = o.id;
+    t.cls = o.cls;
+    t.placement = o.placement;
+    t.added = in_last;
+    out.push_back(std::move(t));
+  }
+  for (const std::size_t s : {std::size_t(0), last}) {
+    const bool added = s == last;
+    std::map<int, std::size_t> slot;  // object id -> position in out
+    for (std::size_t i = 0; i < out.size(); ++i)
+      if (out[i].added == added) slot[out[i].id] = i;
+    if (slot.empty()) continue;
+    const std::string ply = Join(Join(truth_dir, names[s]), "static_world.ply");
+    const PointCloud world = io::ReadPly(ply);
+    if (world.object.size() != world.size()) throw Error(ply, 0, "no 'object' field");
+    std::vector<bool> keep(world.size());
+    for (std::size_t i = 0; i < world.size(); ++i) keep[i] = slot.count(world.object[i]) > 0;
+    const PointCloud mapped = mapping.Map(world.select(keep), s, threads);
+    for (std::size_t i = 0; i < mapped.size(); ++i) {
+      const auto& p = mapped.points[i];
+      out[slot[mapped.object[i]]].cloud.push_back(p.x, p.y, p.z, p.intensity);
+    }
+  }
+  return out;
+}
+
+}  // namespace ltm::eval
