@@ -123,11 +123,13 @@ std::vector<Eigen::Vector3d> CarLocal(const Eigen::Vector3d& c) {
 //   3 car  "0;1;2"  permanent                                                  near keyframe 0
 //   4 car  "1"      came and went (not scored)                                 near keyframe 3
 //   5 tree "2"      other class (not scored)                                   near keyframe 3
+//   6 car  "1;2"    new since session 0, the live map holds session 1's copy   near keyframe 2
 // The estimates drift per keyframe (different for every keyframe and session).
 struct LiveMetaSim {
   std::string sim, aligned;
-  // Car points in the estimated world, as the method's maps would hold them: id -> cloud.
-  std::map<int, PointCloud> est_cars;
+  // Car points in the estimated world as the method's map of each session holds them:
+  // (id, session) -> cloud.
+  std::map<std::pair<int, int>, PointCloud> est_cars;
 };
 
 LiveMetaSim MakeLiveMetaSim(const TempDir& dir) {
@@ -138,8 +140,10 @@ LiveMetaSim MakeLiveMetaSim(const TempDir& dir) {
     int id;
     std::vector<int> sessions;
     std::size_t kf;
+    double side;  // [m] lateral offset from the keyframe
   };
-  const Car cars[] = {{1, {2}, 1}, {2, {0}, 2}, {3, {0, 1, 2}, 0}, {4, {1}, 3}, {5, {2}, 3}};
+  const Car cars[] = {{1, {2}, 1, 6.0}, {2, {0}, 2, 6.0}, {3, {0, 1, 2}, 0, 6.0},
+                      {4, {1}, 3, 6.0}, {5, {2}, 3, 6.0}, {6, {1, 2}, 2, -6.0}};
   const Pose frame = MakePose(-5.0, 7.0, 0.0, 25.0);
   for (int s = 0; s < 3; ++s) {
     const std::string name = "session_0" + std::to_string(s);
@@ -151,14 +155,13 @@ LiveMetaSim MakeLiveMetaSim(const TempDir& dir) {
     PointCloud world;
     for (const auto& car : cars) {
       if (std::count(car.sessions.begin(), car.sessions.end(), s) == 0) continue;
-      for (const auto& p : CarLocal(Eigen::Vector3d(0.0, 6.0, 0.0))) {
+      for (const auto& p : CarLocal(Eigen::Vector3d(0.0, car.side, 0.0))) {
         const Eigen::Vector3d w = truth[car.kf] * p, e = est[car.kf] * p;
         world.push_back(float(w.x()), float(w.y()), float(w.z()));
         world.cls.push_back(PointClass::kStatic);
         world.session.push_back(std::uint16_t(s));
         world.object.push_back(car.id);
-        // The method's map of the latest session (cars 1, 3, 5) and of session 0 (car 2).
-        if ((s == 2 && car.id != 2) || (s == 0 && car.id == 2)) f.est_cars[car.id].push_back(float(e.x()), float(e.y()), float(e.z()));
+        f.est_cars[{car.id, s}].push_back(float(e.x()), float(e.y()), float(e.z()));
       }
     }
     fs::create_directories(fs::path(f.sim) / "truth" / name);
@@ -169,7 +172,7 @@ LiveMetaSim MakeLiveMetaSim(const TempDir& dir) {
   }
   test::WriteText(f.sim + "/truth/objects.csv",
                   "id,class,present_in,placement,centroid_x\n1,car,2,open,0\n2,car,0,open,0\n3,car,\"0;1;2\",open,0\n"
-                  "4,car,1,open,0\n5,tree,2,open,0\n");
+                  "4,car,1,open,0\n5,tree,2,open,0\n6,car,\"1;2\",open,0\n");
   return f;
 }
 
@@ -178,34 +181,44 @@ TEST(LiveMeta, NewCarsInLiveNotInMetaRemovedInNeither) {
   const LiveMetaSim f = MakeLiveMetaSim(dir);
   const TruthMapping m = KeyframeTruthMapping(f.sim, f.aligned);
   const auto truth = LoadSimLiveMetaTruth(f.sim, {"car"}, m);
-  ASSERT_EQ(truth.size(), 2u);
+  ASSERT_EQ(truth.size(), 3u);
   EXPECT_EQ(truth[0].id, 1);
   EXPECT_TRUE(truth[0].added);
   EXPECT_EQ(truth[1].id, 2);
   EXPECT_FALSE(truth[1].added);
-  EXPECT_EQ(truth[0].cloud.size(), f.est_cars.at(1).size());
-  EXPECT_EQ(LoadSimLiveMetaTruth(f.sim, {}, m).size(), 3u);  // + the new tree
+  EXPECT_EQ(truth[2].id, 6);
+  ASSERT_EQ(truth[0].views.size(), 1u);
+  EXPECT_EQ(truth[0].views[0].size(), f.est_cars.at({1, 2}).size());
+  ASSERT_EQ(truth[2].views.size(), 2u);  // sessions 1 and 2
+  EXPECT_EQ(LoadSimLiveMetaTruth(f.sim, {}, m).size(), 4u);  // + the new tree
 
-  // Live: the latest state (new car 1, permanent car 3); meta: car 3 and 30 % of car 1 (below
-  // the 0.5 fraction). A second live map wrongly keeps the removed car 2.
+  // Live: the latest state (new car 1 and permanent car 3 as session 2 saw them, new car 6 as
+  // session 1 added it); meta: car 3 and 30 % of car 1 (below the 0.5 fraction). A second live
+  // map wrongly keeps the removed car 2.
   PointCloud live, meta, live_bad;
-  live.append(f.est_cars.at(1));
-  live.append(f.est_cars.at(3));
-  meta.append(f.est_cars.at(3));
-  const PointCloud& c1 = f.est_cars.at(1);
+  live.append(f.est_cars.at({1, 2}));
+  live.append(f.est_cars.at({3, 2}));
+  live.append(f.est_cars.at({6, 1}));
+  meta.append(f.est_cars.at({3, 2}));
+  const PointCloud& c1 = f.est_cars.at({1, 2});
   for (std::size_t i = 0; i < c1.size() * 3 / 10; ++i) meta.push_back(c1.points[i].x, c1.points[i].y, c1.points[i].z);
   live_bad = live;
-  live_bad.append(f.est_cars.at(2));
+  live_bad.append(f.est_cars.at({2, 0}));
   EvalConfig cfg;
   LiveMetaResult r = EvaluateLiveMeta(truth, live, meta, cfg);
-  EXPECT_EQ(r.added, 1u);
-  EXPECT_EQ(r.added_in_live, 1u);
+  EXPECT_EQ(r.added, 2u);
+  EXPECT_EQ(r.added_in_live, 2u);
   EXPECT_EQ(r.added_in_meta, 0u);
   EXPECT_EQ(r.removed, 1u);
   EXPECT_EQ(r.removed_in_live, 0u);
   EXPECT_EQ(r.removed_in_meta, 0u);
-  ASSERT_EQ(r.objects.size(), 2u);
+  ASSERT_EQ(r.objects.size(), 3u);
   EXPECT_DOUBLE_EQ(r.objects[0].live_fraction, 1.0);
+  EXPECT_DOUBLE_EQ(r.objects[2].live_fraction, 1.0);
+  // Session 2's view of car 6 alone is decimetres off the copy session 1 put in the map.
+  auto last_view_only = truth;
+  last_view_only[2].views.erase(last_view_only[2].views.begin());
+  EXPECT_LT(EvaluateLiveMeta(last_view_only, live, meta, cfg).objects[2].live_fraction, 0.5);
   EXPECT_GE(r.objects[0].meta_fraction, 0.3);  // + neighbours of the subset within 0.2 m
   EXPECT_LT(r.objects[0].meta_fraction, 0.4);
   r = EvaluateLiveMeta(truth, live_bad, meta, cfg);
@@ -228,12 +241,12 @@ TEST(LiveMeta, NewCarsInLiveNotInMetaRemovedInNeither) {
             0)
       << out;
   std::string js = test::ReadText(dir / "k.json");
-  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added"), 1.0);
-  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added_in_live"), 1.0);
+  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added"), 2.0);
+  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added_in_live"), 2.0);
   EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added_in_meta"), 0.0);
   EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.removed_in_live"), 0.0);
   EXPECT_NE(js.find("\"truth mapping\": \"keyframe"), std::string::npos) << js;
-  EXPECT_NE(test::ReadText(dir / "k.md").find("new since session 0 | 1 | 1 / 1 | 0 / 1"), std::string::npos)
+  EXPECT_NE(test::ReadText(dir / "k.md").find("new since session 0 | 2 | 2 / 2 | 0 / 2"), std::string::npos)
       << test::ReadText(dir / "k.md");
   ASSERT_EQ(RunCli("eval livemeta --sim " + f.sim + " --aligned " + f.aligned + " --live " + (dir / "live.pcd") +
                        " --meta " + (dir / "meta.pcd") + " --truth-mapping global --json " + (dir / "g.json"),
@@ -250,8 +263,8 @@ TEST(LiveMeta, NewCarsInLiveNotInMetaRemovedInNeither) {
             0)
       << out;
   js = test::ReadText(dir / "a.json");
-  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added"), 2.0);
-  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added_in_live"), 1.0);
+  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added"), 3.0);
+  EXPECT_DOUBLE_EQ(*JsonNumber(js, "livemeta.added_in_live"), 2.0);
   // A session without estimated poses cannot be mapped per keyframe.
   fs::remove_all(fs::path(f.aligned) / "session_02");
   EXPECT_EQ(RunCli("eval livemeta --sim " + f.sim + " --aligned " + f.aligned + " --live " + (dir / "live.pcd") +

@@ -271,23 +271,25 @@ TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string&
 
 // ----------------------------------------------------------------------------- live / meta map
 // The criterion "the live map contains new parked cars; the meta map does not": truth objects of
-// some classes (cars) that are new since session 0 (present in the last session, absent from 0; their
-// points from the last session's static_world) or removed since (present in 0, absent from the
-// last; points from session 0). An object is in a map when >= livemeta_min_fraction of its truth
-// points have a map point within ld_match_dist_m. Wanted: new objects in live and not in meta,
-// removed objects in neither. Objects with fewer than obj_min_truth_points points: not scored.
+// some classes (cars) that are new since session 0 (present in the last session, absent from 0)
+// or removed since (present in 0, absent from the last). Each session where the object exists
+// gives a view: its points in that session's static_world, mapped with that session's keyframes
+// (the map may hold the object as any of those sessions placed it, e.g. added at an earlier
+// step). An object is in a map when, in its best view, >= livemeta_min_fraction of the points
+// have a map point within ld_match_dist_m. Wanted: new objects in live and not in meta, removed
+// objects in neither. Objects whose largest view has < obj_min_truth_points points: not scored.
 struct LiveMetaObject {
   int id = -1;
   std::string cls, placement;
-  bool added = true;   // true: new since session 0; false: removed since session 0
-  PointCloud cloud;    // truth points, estimate frame
+  bool added = true;              // true: new since session 0; false: removed since session 0
+  std::vector<PointCloud> views;  // truth points per session where it exists, estimate frame
 };
 struct LiveMetaScore {
   int id = -1;
   std::string cls, placement;
   bool added = true;
-  std::size_t points = 0;
-  double live_fraction = kNaN, meta_fraction = kNaN;
+  std::size_t points = 0;          // largest view
+  double live_fraction = kNaN, meta_fraction = kNaN;  // best view for each map
   bool scored = false, in_live = false, in_meta = false;
 };
 struct LiveMetaResult {

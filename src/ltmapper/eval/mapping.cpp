@@ -10,6 +10,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 namespace fs = std::filesystem;
@@ -144,14 +145,17 @@ LiveMetaResult EvaluateLiveMeta(const std::vector<LiveMetaObject>& truth, const 
     s.cls = t.cls;
     s.placement = t.placement;
     s.added = t.added;
-    s.points = t.cloud.size();
-    s.scored = s.points > 0 && s.points >= std::size_t(cfg.obj_min_truth_points);
-    if (s.points > 0) {
-      s.live_fraction = double(CountWithin(t.cloud, live_tree, cfg.ld_match_dist_m, arena)) / double(s.points);
-      s.meta_fraction = double(CountWithin(t.cloud, meta_tree, cfg.ld_match_dist_m, arena)) / double(s.points);
-      s.in_live = s.live_fraction >= cfg.livemeta_min_fraction;
-      s.in_meta = s.meta_fraction >= cfg.livemeta_min_fraction;
+    for (const auto& v : t.views) {
+      s.points = std::max(s.points, v.size());
+      if (v.empty()) continue;
+      const double live_f = double(CountWithin(v, live_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
+      const double meta_f = double(CountWithin(v, meta_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
+      s.live_fraction = std::isnan(s.live_fraction) ? live_f : std::max(s.live_fraction, live_f);
+      s.meta_fraction = std::isnan(s.meta_fraction) ? meta_f : std::max(s.meta_fraction, meta_f);
     }
+    s.scored = s.points > 0 && s.points >= std::size_t(cfg.obj_min_truth_points);
+    s.in_live = s.live_fraction >= cfg.livemeta_min_fraction;  // false for NaN
+    s.in_meta = s.meta_fraction >= cfg.livemeta_min_fraction;
     if (s.scored) {
       (s.added ? r.added : r.removed) += 1;
       if (s.in_live) (s.added ? r.added_in_live : r.removed_in_live) += 1;
@@ -168,6 +172,7 @@ std::vector<LiveMetaObject> LoadSimLiveMetaTruth(const std::string& sim_dir, con
   const std::size_t last = names.size() - 1;
   const std::string truth_dir = Join(sim_dir, "truth");
   std::vector<LiveMetaObject> out;
+  std::vector<std::vector<int>> present;  // per object in out: sessions where it exists
   for (const auto& o : ReadSimObjects(Join(truth_dir, "objects.csv"))) {
     if (!classes.empty() && std::find(classes.begin(), classes.end(), o.cls) == classes.end()) continue;
     const bool in0 = std::count(o.present_in.begin(), o.present_in.end(), 0) > 0;
@@ -179,12 +184,12 @@ std::vector<LiveMetaObject> LoadSimLiveMetaTruth(const std::string& sim_dir, con
     t.placement = o.placement;
     t.added = in_last;
     out.push_back(std::move(t));
+    present.push_back(o.present_in);
   }
-  for (const std::size_t s : {std::size_t(0), last}) {
-    const bool added = s == last;
+  for (std::size_t s = 0; s < names.size(); ++s) {
     std::map<int, std::size_t> slot;  // object id -> position in out
     for (std::size_t i = 0; i < out.size(); ++i)
-      if (out[i].added == added) slot[out[i].id] = i;
+      if (std::count(present[i].begin(), present[i].end(), int(s))) slot[out[i].id] = i;
     if (slot.empty()) continue;
     const std::string ply = Join(Join(truth_dir, names[s]), "static_world.ply");
     const PointCloud world = io::ReadPly(ply);
@@ -192,10 +197,12 @@ std::vector<LiveMetaObject> LoadSimLiveMetaTruth(const std::string& sim_dir, con
     std::vector<bool> keep(world.size());
     for (std::size_t i = 0; i < world.size(); ++i) keep[i] = slot.count(world.object[i]) > 0;
     const PointCloud mapped = mapping.Map(world.select(keep), s, threads);
+    std::map<int, PointCloud> view;
     for (std::size_t i = 0; i < mapped.size(); ++i) {
       const auto& p = mapped.points[i];
-      out[slot[mapped.object[i]]].cloud.push_back(p.x, p.y, p.z, p.intensity);
+      view[mapped.object[i]].push_back(p.x, p.y, p.z, p.intensity);
     }
+    for (auto& [id, c] : view) out[slot[id]].views.push_back(std::move(c));
   }
   return out;
 }

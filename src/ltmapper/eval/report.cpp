@@ -366,7 +366,10 @@ void MdLiveMeta(std::ostringstream& md, const LiveMetaResult& r) {
   auto frac = [](std::size_t a, std::size_t b) { return std::to_string(a) + " / " + std::to_string(b); };
   md << "## Live and meta map: new and removed objects since session 0\n\nAn object is in a map when >= "
      << Fmt(r.min_fraction, 2) << " of its truth points have a map point within " << Fmt(r.match_dist_m, 3)
-     << " m. Wanted: new objects in the live map and not in the meta map; removed objects in neither. "
+     << " m (best view over the sessions where the object exists). Wanted: new objects in the live map "
+        "and not in the meta map; removed objects in neither. Exceptions by design: a removed object "
+        "placed `occluded` was never seen through (weak ND, kept in both maps); a new object placed "
+        "`revealed` is strong PD (in the meta map too). "
      << "Live / meta map points: " << r.live_points << " / " << r.meta_points << ".\n\n"
      << Header({"objects", "total", "in live", "in meta"})
      << Row({"new since session 0", std::to_string(r.added), frac(r.added_in_live, r.added),
