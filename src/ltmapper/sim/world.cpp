@@ -450,6 +450,12 @@ std::vector<LdObject> PlaceLd(const SimConfig& cfg, const Grid& grid, const Terr
   };
   auto gz = [&](const Eigen::Vector2d& p) { return grid.GroundZ(terrain, p.x(), p.y()); };
 
+  // Parked cars come and go at random, except that (with 2+ sessions) the first car whose slot
+  // lies near both the central and the last route is new in the last session (a parked car the
+  // live map must show and the meta map must not) and the next such car left after session 0.
+  std::vector<int> forced_new = {N - 1}, forced_gone = {0};
+  std::vector<std::vector<int>*> forced = {&forced_new, &forced_gone};
+  std::size_t forced_i = 0;
   for (int i = 0; i < cfg.ld_parked_cars && park_i < park_order.size(); ++i) {
     const Slot& s = slots.park[park_order[park_i++]];
     std::vector<int> present;
@@ -459,6 +465,9 @@ std::vector<LdObject> PlaceLd(const SimConfig& cfg, const Grid& grid, const Terr
         if (rng.Bernoulli(0.5)) present.push_back(k);
       }
     } while (present.empty() || int(present.size()) == N);
+    if (N >= 2 && forced_i < forced.size() && routes[0].Distance(s.c) <= cfg.ld_route_distance_m &&
+        routes[std::size_t(N - 1)].Distance(s.c) <= cfg.ld_route_distance_m)
+      present = *forced[forced_i++];
     AddCar(add("car", present, "open"), s.c, terrain.Height(s.c.x(), s.c.y()), s.yaw,
            rng.Uniform(4.0, 4.8), rng.Uniform(1.7, 1.9), kPaint);
   }
