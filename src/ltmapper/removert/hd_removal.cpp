@@ -11,7 +11,9 @@
 //   static point is observed as a surface (hit) by many keyframes while a moving object's trace
 //   is hit only by the few keyframes that saw the object there. A candidate is reverted when,
 //   at some revert resolution, hits >= revert_min_hits and hits >= revert_hit_ratio * S, S being
-//   its largest see-through count over the removal resolutions.
+//   its largest see-through count over the removal resolutions. Only candidates are projected
+//   at the revert resolutions, and their hits include returns on their surface plane
+//   (hd.revert_surface_max_m): ground seen at a grazing angle is sampled metres apart in range.
 #include "ltmapper/removert/detail.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
@@ -69,42 +71,56 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
                          const RemovertConfig& cfg, int threads) {
   cfg.Validate();
   const auto t0 = std::chrono::steady_clock::now();
-  std::vector<double> levels = cfg.remove_resolutions_deg;
-  const int n_remove = int(levels.size());
-  if (cfg.revert)
-    levels.insert(levels.end(), cfg.revert_resolutions_deg.begin(), cfg.revert_resolutions_deg.end());
-  const VisibilityVotes votes = CountVisibility(map, keyframes, levels, cfg, threads);
+  const int n_remove = int(cfg.remove_resolutions_deg.size());
+  const VisibilityVotes votes = CountVisibility(map, keyframes, cfg.remove_resolutions_deg, cfg, threads);
 
   HdResult res;
   HdStats& st = res.stats;
   st.map_points = map.size();
   st.removed_per_resolution.assign(std::size_t(n_remove), 0);
-  std::vector<bool> dynamic(map.size(), false);
+  std::vector<std::uint32_t> cand;  // candidate map indices
+  std::vector<double> s_max;        // their strongest removal evidence over the removal resolutions
   for (std::size_t i = 0; i < map.size(); ++i) {
-    bool cand = false;
+    bool is_cand = false;
+    double sm = 0;
     for (int l = 0; l < n_remove; ++l) {
       const double s = votes.See(l, i), h = votes.Hit(l, i);
+      sm = std::max(sm, s);
       if (s >= cfg.remove_min_votes && s >= cfg.remove_min_ratio * (s + h)) {
-        cand = true;
+        is_cand = true;
         ++st.removed_per_resolution[std::size_t(l)];
       }
     }
-    if (!cand) continue;
-    ++st.candidates;
-    // Strongest removal evidence over the removal resolutions.
-    double s_max = 0;
-    for (int l = 0; l < n_remove; ++l) s_max = std::max<double>(s_max, votes.See(l, i));
-    bool revert = false;
-    if (cfg.revert) {
-      for (int l = n_remove; l < votes.levels && !revert; ++l) {
-        const double h = votes.Hit(l, i);
-        revert = h >= cfg.revert_min_hits && h >= cfg.revert_hit_ratio * s_max;
-      }
+    if (!is_cand) continue;
+    cand.push_back(std::uint32_t(i));
+    s_max.push_back(sm);
+  }
+  st.candidates = cand.size();
+  // Revert: only the candidates are projected again, at the coarser resolutions, counting hits
+  // on their surface plane (normals from the map), so grazing ground is observed as a surface.
+  std::vector<bool> dynamic(map.size(), false);
+  std::vector<bool> reverted(cand.size(), false);
+  if (cfg.revert && !cand.empty()) {
+    const PointCloud cpts = map.select(cand);
+    VisibilityOptions opt;
+    std::vector<Eigen::Vector3f> normals;
+    if (cfg.revert_surface_max_m > 0.0) {
+      normals = detail::EstimateNormals(cpts, map, cfg.ld_normal_radius_m, threads);
+      opt.normals = &normals;
+      opt.surface_max_m = cfg.revert_surface_max_m;
     }
-    if (revert) {
+    const VisibilityVotes rv = CountVisibility(cpts, keyframes, cfg.revert_resolutions_deg, cfg, threads, opt);
+    for (std::size_t j = 0; j < cand.size(); ++j)
+      for (int l = 0; l < rv.levels && !reverted[j]; ++l) {
+        const double h = rv.Hit(l, j);
+        reverted[j] = h >= cfg.revert_min_hits && h >= cfg.revert_hit_ratio * s_max[j];
+      }
+  }
+  for (std::size_t j = 0; j < cand.size(); ++j) {
+    if (reverted[j]) {
       ++st.reverted;
     } else {
-      dynamic[i] = true;
+      dynamic[cand[j]] = true;
       ++st.removed;
     }
   }

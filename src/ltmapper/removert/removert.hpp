@@ -40,17 +40,20 @@ struct RemovertConfig {
   // --- session map
   double map_voxel_m = 0.1;       // [m] voxel of the session map (union of keyframe scans)
   // --- see-through test: scan range > point range + tol_abs_m + tol_rel * point range
-  double tol_abs_m = 0.15;        // [m]
-  double tol_rel = 0.02;          // [-]
+  double tol_abs_m = 0.10;        // [m]
+  double tol_rel = 0.01;          // [-]
   int window_px = 1;              // [pixels] see-through needs the window's nearest return beyond
   // --- HD removal (remove then revert)
   std::vector<double> remove_resolutions_deg = {0.4, 0.6, 0.8};  // [deg/pixel] fine to coarse
   std::vector<double> revert_resolutions_deg = {1.2, 1.6};       // [deg/pixel] coarser
   bool revert = true;             // false: removal only (ablation)
   int remove_min_votes = 1;       // [keyframes] see-through votes to become a removal candidate
-  double remove_min_ratio = 0.5;  // [-] and see-through votes / (see-through + hit votes)
+  double remove_min_ratio = 0.3;  // [-] and see-through votes / (see-through + hit votes)
   int revert_min_hits = 5;        // [keyframes] hits at a revert resolution to revert ...
-  double revert_hit_ratio = 3.0;  // [-] ... and hits >= ratio * see-through votes there
+  double revert_hit_ratio = 4.0;  // [-] ... and hits >= ratio * see-through votes there
+  double revert_surface_max_m = 10.0;  // [m] revert hits include hits on the candidate's surface plane
+                                       // (VisibilityOptions; normals over ld.normal_radius_m) up to this
+                                       // far in range: grazing ground; 0 = plain range hits
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
@@ -98,6 +101,7 @@ struct RemovertConfig {
     v("hd.remove_min_ratio", remove_min_ratio, "", 0.0, 1.0);
     v("hd.revert_min_hits", revert_min_hits, "keyframes", 1, 65535);
     v("hd.revert_hit_ratio", revert_hit_ratio, "", 0.0, 1000.0);
+    v("hd.revert_surface_max_m", revert_surface_max_m, "m", 0.0, 100.0);
     v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
     v("ld.min_neighbors", ld_min_neighbors, "points", 1, 1000);
     v("ld.resolutions_deg", ld_resolutions_deg, "deg", 0.01, 10.0);
