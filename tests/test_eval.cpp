@@ -231,6 +231,32 @@ TEST(Hd, MaxRangeIgnoresFarPoints) {
   EXPECT_NEAR(r.sa, 0.4, 1e-12);
 }
 
+TEST(Hd, NearStaticSplit) {
+  // 4 static points on x = 0..3 (y = 0); HD points: two 0.05 m above static points 0 and 1 (a
+  // foot on the ground), two far away (y = 5). Output keeps every static point only.
+  PointCloud truth = Labelled(4, 0);
+  const float hd_xy[4][2] = {{0.f, 0.f}, {1.f, 0.f}, {0.f, 5.f}, {1.f, 5.f}};
+  for (const auto& p : hd_xy) {
+    truth.push_back(p[0], p[1], p[1] == 0.f ? 0.05f : 0.f);
+    truth.cls.push_back(PointClass::kHD);
+    truth.object.push_back(100);
+  }
+  EvalConfig cfg;  // match 0.1 m, near static 0.1 m
+  HdEvaluator ev(Unlabelled(truth, {0, 1, 2, 3}), cfg);
+  ev.SetStaticReference(Unlabelled(truth, {0, 1, 2, 3}));
+  ev.Add(truth);
+  const auto r = ev.Result();
+  EXPECT_EQ(r.dynamic_total, 4u);
+  EXPECT_EQ(r.dynamic_removed, 2u);  // the near-static pair is "preserved" by the ground points
+  EXPECT_TRUE(r.separable_given);
+  EXPECT_EQ(r.separable_total, 2u);
+  EXPECT_EQ(r.separable_removed, 2u);
+  EXPECT_DOUBLE_EQ(r.da_separable, 1.0);
+  ASSERT_EQ(r.classes.size(), 3u);
+  EXPECT_EQ(r.classes[2].name, "hd near static");
+  EXPECT_EQ(r.classes[2].total, 2u);
+}
+
 TEST(Hd, UnlabelledTruthThrows) {
   PointCloud truth;
   truth.push_back(0, 0, 0);

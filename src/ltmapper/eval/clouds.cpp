@@ -146,6 +146,7 @@ struct HdEvaluator::Impl {
   // (class code, object id) -> (total, preserved)
   std::map<std::pair<int, std::int32_t>, std::pair<std::size_t, std::size_t>> tally;
   std::size_t out_of_range = 0;
+  std::unique_ptr<geometry::KdTree> static_ref;
   Impl(PointCloud out, const EvalConfig& c, std::map<int, std::string> oc, int t)
       : tree(std::move(out)), cfg(c), object_classes(std::move(oc)), threads(t) {}
 };
@@ -157,6 +158,13 @@ HdEvaluator::HdEvaluator(PointCloud output, const EvalConfig& cfg,
 }
 HdEvaluator::~HdEvaluator() = default;
 
+void HdEvaluator::SetStaticReference(PointCloud static_truth) {
+  impl_->static_ref = std::make_unique<geometry::KdTree>(std::move(static_truth));
+}
+
+// Tally key of HD points near static truth (object ids of HD points are pooled otherwise).
+constexpr std::int32_t kNearStatic = -2;
+
 void HdEvaluator::Add(const PointCloud& truth, const Eigen::Vector3d& sensor) {
   if (truth.empty()) return;
   if (truth.cls.size() != truth.size())
@@ -165,8 +173,10 @@ void HdEvaluator::Add(const PointCloud& truth, const Eigen::Vector3d& sensor) {
   const float d2 = float(impl_->cfg.hd_match_dist_m * impl_->cfg.hd_match_dist_m);
   const double max_range = impl_->cfg.hd_truth_max_range_m;
   const Eigen::Vector3f s = sensor.cast<float>();
-  // 0 = matched, 1 = unmatched, 2 = out of range.
-  std::vector<std::uint8_t> state(truth.size(), 1);
+  // 0 = matched, 1 = unmatched, 2 = out of range; near[i]: HD point near static truth.
+  std::vector<std::uint8_t> state(truth.size(), 1), near(truth.size(), 0);
+  const geometry::KdTree* ref = impl_->static_ref.get();
+  const float near2 = float(impl_->cfg.hd_near_static_m * impl_->cfg.hd_near_static_m);
   auto arena = MakeArena(impl_->threads);
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, truth.size(), 1024),
@@ -180,6 +190,9 @@ void HdEvaluator::Add(const PointCloud& truth, const Eigen::Vector3d& sensor) {
                             continue;
                           }
                           if (impl_->tree.Nearest(p, &idx, &sq) && sq <= d2) state[i] = 0;
+                          if (ref && truth.cls[i] == PointClass::kHD && ref->Nearest(p, &idx, &sq) &&
+                              sq <= near2)
+                            near[i] = 1;
                         }
                       });
   });
@@ -191,7 +204,9 @@ void HdEvaluator::Add(const PointCloud& truth, const Eigen::Vector3d& sensor) {
     const int cls = int(truth.cls[i]);
     // Object ids only separate LD objects among static points (HD actors are pooled as "hd").
     const std::int32_t obj =
-        truth.cls[i] == PointClass::kStatic && !truth.object.empty() ? std::max(truth.object[i], -1) : -1;
+        truth.cls[i] == PointClass::kStatic && !truth.object.empty() ? std::max(truth.object[i], -1)
+        : near[i]                                                    ? kNearStatic
+                                                                     : -1;
     auto& t = impl_->tally[{cls, obj}];
     ++t.first;
     if (state[i] == 0) ++t.second;
@@ -219,7 +234,11 @@ HdResult HdEvaluator::Result() const {
     } else if (cls == PointClass::kHD) {
       r.dynamic_total += tp.first;
       r.dynamic_removed += tp.first - tp.second;
-      name = "hd";
+      name = key.second == kNearStatic ? "hd near static" : "hd";
+      if (key.second != kNearStatic) {
+        r.separable_total += tp.first;
+        r.separable_removed += tp.first - tp.second;
+      }
     } else {
       r.ignored += tp.first;
       name = "unknown";
@@ -231,9 +250,11 @@ HdResult HdEvaluator::Result() const {
   }
   r.sa = Ratio(r.static_preserved, r.static_total);
   r.da = Ratio(r.dynamic_removed, r.dynamic_total);
+  r.separable_given = impl_->static_ref != nullptr;
+  if (r.separable_given) r.da_separable = Ratio(r.separable_removed, r.separable_total);
   if (!std::isnan(r.sa) && !std::isnan(r.da)) r.aa = std::sqrt(r.sa * r.da);
   auto rank = [](const std::string& n) {
-    return n == "static" ? 0 : n.rfind("ld:", 0) == 0 ? 1 : n == "hd" ? 2 : 3;
+    return n == "static" ? 0 : n.rfind("ld:", 0) == 0 ? 1 : n == "hd" ? 2 : n == "hd near static" ? 3 : 4;
   };
   for (auto& [name, row] : rows) r.classes.push_back(row);
   std::stable_sort(r.classes.begin(), r.classes.end(),

@@ -39,6 +39,9 @@ struct EvalConfig {
   double hd_match_dist_m = 0.1;            // [m] truth point preserved if an output point is this close
   double hd_truth_max_range_m = 0.0;       // [m] drop truth points farther from their sensor (0 = keep all)
   int hd_keyframe_stride = 1;              // use every n-th labelled scan of a session (sim form)
+  double hd_near_static_m = 0.1;           // [m] HD truth points this close to a static truth point are
+                                           // also scored apart ("hd near static": a map that keeps the
+                                           // static point keeps them at the match distance); 0 = off
   // LD changes.
   double ld_match_dist_m = 0.2;            // [m] predicted/truth change points closer than this match
   double ld_same_point_m = 0.001;          // [m] "same point" when removing predicted strong ND from
@@ -70,6 +73,7 @@ struct EvalConfig {
     v("hd.match_dist_m", hd_match_dist_m, "m", 1e-4, 10.0);
     v("hd.truth_max_range_m", hd_truth_max_range_m, "m", 0.0, 1e4);
     v("hd.keyframe_stride", hd_keyframe_stride, "", 1, 1000000);
+    v("hd.near_static_m", hd_near_static_m, "m", 0.0, 10.0);
     v("ld.match_dist_m", ld_match_dist_m, "m", 1e-4, 10.0);
     v("ld.same_point_m", ld_same_point_m, "m", 0.0, 1.0);
     v("restore.patch_m", patch_m, "m", 0.01, 1e4);
@@ -154,6 +158,11 @@ struct HdResult {
   std::size_t output_points = 0;
   std::size_t static_total = 0, static_preserved = 0;
   std::size_t dynamic_total = 0, dynamic_removed = 0;
+  // HD points farther than hd_near_static_m from every static truth point (when a static
+  // reference was given): DA over those alone.
+  bool separable_given = false;
+  std::size_t separable_total = 0, separable_removed = 0;
+  double da_separable = kNaN;
   std::size_t ignored = 0;  // truth points of class unknown or beyond hd_truth_max_range_m
   double sa = kNaN, da = kNaN, aa = kNaN;  // SA = preserved static / static, DA = removed HD / HD
   std::vector<ClassCount> classes;         // sorted: static, ld:*, hd, unknown
@@ -177,6 +186,8 @@ class HdEvaluator {
   // Truth points with labels (cls required; object optional: -1 / absent = permanent static).
   // `sensor` is where the points were observed from (for hd_truth_max_range_m).
   void Add(const PointCloud& truth, const Eigen::Vector3d& sensor = Eigen::Vector3d::Zero());
+  // Static truth points (world frame of the output) for the "hd near static" split; call before Add.
+  void SetStaticReference(PointCloud static_truth);
   HdResult Result() const;
 
  private:

@@ -159,6 +159,25 @@ std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir, cons
   if (files.size() != T_frame_sensor.size())
     throw Error(dir, 0, std::to_string(files.size()) + " labelled scans but " +
                             std::to_string(T_frame_sensor.size()) + " poses");
+  const std::size_t stride = std::size_t(cfg.hd_keyframe_stride);
+  if (cfg.hd_near_static_m > 0.0) {
+    // Static truth of the whole session (voxel near_static / 2) for the "hd near static" split.
+    PointCloud ref;
+    for (std::size_t k = 0; k < files.size(); k += stride) {
+      const std::string path = files[k].find('/') == std::string::npos ? Join(dir, files[k]) : files[k];
+      PointCloud scan = io::ReadPly(path);
+      if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+      std::vector<bool> is_static(scan.size());
+      for (std::size_t i = 0; i < scan.size(); ++i) is_static[i] = scan.cls[i] == PointClass::kStatic;
+      PointCloud st = scan.select(is_static);
+      st.cls.clear();
+      st.session.clear();
+      st.object.clear();
+      geometry::TransformInPlace(st, T_frame_sensor[k]);
+      ref.append(geometry::VoxelDownsample(st, 0.5 * cfg.hd_near_static_m, 1));
+    }
+    ev.SetStaticReference(geometry::VoxelDownsample(ref, 0.5 * cfg.hd_near_static_m));
+  }
   Progress progress("eval hd: labelled scans", (files.size() + cfg.hd_keyframe_stride - 1) / cfg.hd_keyframe_stride);
   std::size_t used = 0;
   for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.hd_keyframe_stride)) {

@@ -81,6 +81,10 @@ void WriteHd(json::Writer& w, const HdResult& h) {
       .Number("sa", h.sa)
       .Number("da", h.da)
       .Number("aa", h.aa);
+  if (h.separable_given)
+    w.Int("separable_total", (long long)h.separable_total)
+        .Int("separable_removed", (long long)h.separable_removed)
+        .Number("da_separable", h.da_separable);
   w.BeginArray("classes");
   for (const auto& c : h.classes)
     w.BeginObject()
@@ -281,8 +285,12 @@ void MdHd(std::ostringstream& md, const HdResult& h) {
              std::to_string(h.static_preserved) + " / " + std::to_string(h.static_total),
              std::to_string(h.dynamic_removed) + " / " + std::to_string(h.dynamic_total),
              std::to_string(h.ignored)})
-     << "\n"
-     << Header({"class", "points", "preserved", "removed", "preserved %"});
+     << "\n";
+  if (h.separable_given)
+    md << "DA over the HD points farther than the static-reference distance from every static truth point "
+          "(the 'hd near static' row cannot be told apart at the match distance): "
+       << Fmt(h.da_separable, 4) << " (" << h.separable_removed << " / " << h.separable_total << ").\n\n";
+  md << Header({"class", "points", "preserved", "removed", "preserved %"});
   for (const auto& c : h.classes)
     md << Row({c.name, std::to_string(c.total), std::to_string(c.preserved), std::to_string(c.total - c.preserved),
                Fmt(c.total ? 100.0 * double(c.preserved) / double(c.total) : kNaN, 2)});
