@@ -298,6 +298,33 @@ TEST(MapStore, FarQueryKeyframesBecomeMapKeyframes) {
   EXPECT_TRUE(s.Fsck().ok);
 }
 
+// A keyframe a step creates (new territory) keeps its changes in the base cloud: its weak PD (a
+// new object where the reference saw free space) is part of that step's changes, so objects in
+// new territory are clustered; its strong PD (surfaces seen for the first time) is not.
+TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
+  test::TempDir tmp;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  PointCloud cloud = Grid(-3, -3, 0, 20, 20, 0.3f);  // first seen: strong PD
+  cloud.cls.assign(cloud.size(), PointClass::kPDStrong);
+  PointCloud car = Car(2, 2);
+  car.cls.assign(car.size(), PointClass::kPDWeak);
+  cloud.append(car);
+  const auto r = s.IntegrateSession({"s1"}, "s0", {}, {{6, At(100, 0), cloud}});
+  ASSERT_EQ(r.keyframes_new, 1u);
+  const PointCloud ch = s.StepChanges(1);
+  ASSERT_EQ(ch.size(), car.size());
+  for (std::size_t i = 0; i < ch.size(); ++i) {
+    EXPECT_EQ(ch.cls[i], PointClass::kPDWeak);
+    EXPECT_EQ(ch.session[i], 1);
+    EXPECT_GE(ch.points[i].x, 101.9f);  // world frame: the keyframe sits at x = 100
+  }
+  const auto objects = s.Objects();
+  ASSERT_EQ(objects.size(), 1u);
+  EXPECT_EQ(objects[0].points, car.size());
+}
+
 TEST(MapStore, ExceptionMidIntegrationLeavesPreviousState) {
   test::TempDir tmp;
   Scene sc;

@@ -196,7 +196,8 @@ class Store {
   // everything within meta_carve_radius_m of any point a step removed as seen-through (strong ND).
   PointCloud Meta(const Region& region = {}) const;
   // The changes of one step in the world frame: PD strong/weak (added), ND strong (removed),
-  // ND weak (kept). cls set, session = the step.
+  // ND weak (kept), plus the weak PD of the keyframes the step created (new territory).
+  // cls set, session = the step.
   PointCloud StepChanges(int session, const Region& region = {}) const;
   // Euclidean clustering of strong ND and PD per step (PCL).
   std::vector<MapObject> Objects() const;

@@ -813,6 +813,19 @@ PointCloud Store::StepChanges(int session, const Region& region) const {
     }
     parts[k] = ToWorld(changes, blobs[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
   });
+  // Keyframes this step created (new territory) hold their changes in the base cloud: their
+  // weak PD (space the reference saw free, e.g. a new object) is a change of the step too.
+  std::vector<Impl::KfBlobs> created;
+  for (auto& b : s.LoadBlobs(session, session))
+    if (b.rec.session == session) created.push_back(std::move(b));
+  std::vector<PointCloud> fresh(created.size());
+  ParallelFor(s.threads, created.size(), [&](std::size_t k) {
+    QCloud changes;
+    for (const QPoint& p : s.Rollback(created[k]))
+      if (p.session == session && p.cls == std::uint8_t(PointClass::kPDWeak)) changes.push_back(p);
+    fresh[k] = ToWorld(changes, created[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+  });
+  for (auto& f : fresh) parts.push_back(std::move(f));
   Region no_voxel = region;
   no_voxel.voxel_m = 0;
   return Concat(parts, no_voxel, s.threads);
