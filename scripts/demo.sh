@@ -60,6 +60,8 @@ step "5/6 LT-map: rollback to the first session, storage"
   --md "$OUT/eval/42_livemeta.md" --json "$OUT/eval/42_livemeta.json" >/dev/null
 "$LTM" eval livemeta --sim "$OUT/sim" --aligned "$RUN/aligned" --live "$RUN/live.pcd" --meta "$RUN/meta.pcd" --class all \
   --md "$OUT/eval/43_livemeta_all.md" --json "$OUT/eval/43_livemeta_all.json" >/dev/null
+[ -f "$RUN/objects/objects.csv" ] && "$LTM" eval objects --sim "$OUT/sim" --objects "$RUN/objects" --aligned "$RUN/aligned" \
+  --md "$OUT/eval/44_objects.md" --json "$OUT/eval/44_objects.json" >/dev/null
 rm -rf "$OUT/snapshots" && mkdir -p "$OUT/snapshots"
 for s in "${NAMES[@]}"; do
   [ -f "$RUN/changes/$s/static_map.pcd" ] && ln -f "$RUN/changes/$s/static_map.pcd" "$OUT/snapshots/$s.pcd"
