@@ -148,6 +148,9 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   const auto b = Drive(boxes, 0.7, nullptr);
   RemovertConfig cfg;
   const PointCloud ma = removert::BuildSessionMap(a, cfg, 2), mb = removert::BuildSessionMap(b, cfg, 2);
+  // With the default distance-dependent radius almost nothing is left either way.
+  const auto defaults = removert::DetectLd(ma, mb, a, b, cfg, 2);
+  cfg.ld_radius_rel = 0.0;  // the same-surface test alone
   auto total = [](const removert::LdResult& r) {
     return r.nd_strong.size() + r.nd_weak.size() + r.pd_strong.size() + r.pd_weak.size();
   };
@@ -158,7 +161,9 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   std::printf("changes in an unchanged world: %zu with the same-surface test, %zu without (maps %zu + %zu); "
               "dropped ND %zu PD %zu\n",
               total(with), total(without), ma.size(), mb.size(), with.stats.nd_same, with.stats.pd_same);
+  std::printf("with the default distance-dependent radius too: %zu\n", total(defaults));
   EXPECT_GT(total(without), 1000u);
+  EXPECT_LE(double(total(defaults)), 0.05 * double(total(without)));
   EXPECT_LE(double(total(with)), 0.25 * double(total(without)));
   // Nothing in this world was seen through: no strong ND, no weak PD either way.
   EXPECT_LE(with.nd_strong.size() + with.pd_weak.size(), total(with) / 20 + 10);

@@ -6,25 +6,56 @@
 
 #include "ltmapper/geometry/geometry.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <memory>
 
 namespace ltm::removert {
 
 namespace {
-// mask[i] = points[i] has fewer than k neighbours within r in `other`.
-std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, const RemovertConfig& cfg,
-                          int threads) {
+PointCloud Positions(const std::vector<WorldKeyframe>& kfs) {
+  PointCloud c;
+  for (const auto& kf : kfs) {
+    const Eigen::Vector3d t = kf.T_world_sensor.translation();
+    c.push_back(float(t.x()), float(t.y()), float(t.z()));
+  }
+  return c;
+}
+
+// mask[i] = points[i] has fewer than k neighbours within r_i in `other`, where r_i = ld_radius_m
+// + ld_radius_rel * (the larger distance from the point to the nearest keyframe of either
+// session): a surface seen from afar carries the sessions' rotation error times that distance.
+std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
+                          const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   std::vector<bool> mask(points.size(), true);
   if (other.empty() || points.empty()) return mask;
   const geometry::KdTree tree(other);
+  const bool rel = cfg.ld_radius_rel > 0.0 && !own_kf.empty() && !other_kf.empty();
+  std::unique_ptr<geometry::KdTree> own_tree, other_tree;
+  if (rel) {
+    own_tree = std::make_unique<geometry::KdTree>(own_kf);
+    other_tree = std::make_unique<geometry::KdTree>(other_kf);
+  }
   const std::size_t k = std::size_t(cfg.ld_min_neighbors);
-  const float r = float(cfg.ld_radius_m);
+  const float r0 = float(cfg.ld_radius_m), rr = float(cfg.ld_radius_rel);
+  const float r_max = float(cfg.ld_radius_max_m);
   std::vector<std::uint8_t> m(points.size(), 1);
   const std::size_t chunk = 4096;
   detail::ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
     const std::size_t b = c * chunk, e = std::min(points.size(), b + chunk);
-    for (std::size_t i = b; i < e; ++i)
-      m[i] = tree.CountWithin(points.points[i].xyz(), r, k) < k ? 1 : 0;
+    for (std::size_t i = b; i < e; ++i) {
+      const Eigen::Vector3f p = points.points[i].xyz();
+      float r = r0;
+      if (rel) {
+        std::uint32_t j;
+        float d_own = 0.f, d_other = 0.f;
+        own_tree->Nearest(p, &j, &d_own);
+        other_tree->Nearest(p, &j, &d_other);
+        r = std::min(r_max, r0 + rr * std::sqrt(std::max(d_own, d_other)));
+      }
+      m[i] = tree.CountWithin(p, r, k) < k ? 1 : 0;
+    }
   });
   for (std::size_t i = 0; i < m.size(); ++i) mask[i] = m[i] != 0;
   return mask;
@@ -41,8 +72,9 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   res.stats.central_points = central_map.size();
   res.stats.query_points = query_map.size();
 
-  const PointCloud nd = central_map.select(Missing(central_map, query_map, cfg, threads));
-  const PointCloud pd = query_map.select(Missing(query_map, central_map, cfg, threads));
+  const PointCloud ckf = Positions(central_keyframes), qkf = Positions(query_keyframes);
+  const PointCloud nd = central_map.select(Missing(central_map, query_map, ckf, qkf, cfg, threads));
+  const PointCloud pd = query_map.select(Missing(query_map, central_map, qkf, ckf, cfg, threads));
 
   // Weak ND preservation: ND the query never saw through stays in the map.
   {

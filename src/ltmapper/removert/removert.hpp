@@ -56,6 +56,9 @@ struct RemovertConfig {
                                        // far in range: grazing ground; 0 = plain range hits
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
+  double ld_radius_rel = 0.01;    // [-] ... plus this times the larger of the point's distances to either session's
+                                  // nearest keyframe ... (rotation error grows with viewing distance)
+  double ld_radius_max_m = 1.0;   // [m] ... at most this
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
   std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
@@ -103,6 +106,8 @@ struct RemovertConfig {
     v("hd.revert_hit_ratio", revert_hit_ratio, "", 0.0, 1000.0);
     v("hd.revert_surface_max_m", revert_surface_max_m, "m", 0.0, 100.0);
     v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
+    v("ld.radius_rel", ld_radius_rel, "", 0.0, 1.0);
+    v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);
     v("ld.min_neighbors", ld_min_neighbors, "points", 1, 1000);
     v("ld.resolutions_deg", ld_resolutions_deg, "deg", 0.01, 10.0);
     v("ld.min_votes", ld_min_votes, "keyframes", 1, 65535);
