@@ -216,6 +216,7 @@ void SetupLd(CLI::App& parent) {
     std::string truth_dir, pred_dir, kept_map, central_static, truth_transform;
     std::string sim, changes, pair, aligned;
     std::string truth_frame = "central", truth_mapping = "keyframe";
+    std::string errors;
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("ld", "LD changes: precision / recall / F1 of PD and ND, strong and weak");
@@ -230,6 +231,8 @@ void SetupLd(CLI::App& parent) {
   cmd->add_option("--changes", o->changes, "LT-removert output dir (pair folder, <central>/static_map.pcd)");
   cmd->add_option("--pair", o->pair, "Session pair, e.g. 00_01");
   cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world (see --truth-mapping)");
+  cmd->add_option("--errors", o->errors,
+                  "Write DIR/false_positives.ply and DIR/false_negatives.ply (class field: which PD/ND cloud)");
   AddTruthFrame(*cmd, o->truth_frame);
   AddTruthMapping(*cmd, o->truth_mapping);
   cmd->callback([o] {
@@ -282,6 +285,13 @@ void SetupLd(CLI::App& parent) {
       report.inputs.push_back({"kept map", central_static + " minus predicted strong ND"});
     }
     report.ld = eval::EvaluateLd(truth, pred, kept ? &*kept : nullptr, cfg, o->common.threads);
+    if (!o->errors.empty()) {
+      const eval::LdErrors e = eval::LdErrorClouds(truth, pred, cfg, o->common.threads);
+      io::MakeDirs(o->errors);
+      io::WritePly(Join(o->errors, "false_positives.ply"), e.false_positives);
+      io::WritePly(Join(o->errors, "false_negatives.ply"), e.false_negatives);
+      report.inputs.push_back({"error clouds", o->errors});
+    }
     Finish(report, *o);
   });
 }

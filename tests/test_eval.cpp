@@ -333,6 +333,30 @@ TEST(Ld, HandComputedCorruption) {
   EXPECT_TRUE(std::isnan(r.weak_nd_preserved));
 }
 
+TEST(Ld, ErrorCloudsCountsMatchPrecisionAndRecall) {
+  const ChangeClouds t = TruthChanges();
+  ChangeClouds p;
+  p.pd_strong = Row(6, 0.f);
+  p.pd_strong.append(Row(2, 50.f));  // 2 false positives
+  p.nd_weak = t.nd_weak;             // ND: 8 strong truth points missed
+  const auto r = EvaluateLd(t, p, nullptr, EvalConfig{});
+  const LdErrors e = LdErrorClouds(t, p, EvalConfig{});
+  EXPECT_EQ(e.false_positives.size(), (r.pd.predicted - r.pd.predicted_matched) + (r.nd.predicted - r.nd.predicted_matched));
+  EXPECT_EQ(e.false_negatives.size(), (r.pd.truth - r.pd.truth_matched) + (r.nd.truth - r.nd.truth_matched));
+  ASSERT_EQ(e.false_positives.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(e.false_positives.cls[i], PointClass::kPDStrong);
+    EXPECT_FLOAT_EQ(e.false_positives.points[i].x, p.pd_strong.points[6 + i].x);
+  }
+  std::size_t missed_nd_strong = 0, missed_pd = 0;
+  for (const PointClass c : e.false_negatives.cls) {
+    missed_nd_strong += c == PointClass::kNDStrong;
+    missed_pd += c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+  }
+  EXPECT_EQ(missed_nd_strong, 8u);
+  EXPECT_EQ(missed_pd, 9u);  // 4 strong beyond the 6 found, 5 weak
+}
+
 TEST(Ld, WeakNdKeptDerivedFromChanges) {
   // Central map = static row + strong ND + weak ND. The method predicts 2 of the 4 weak ND as
   // strong (so removes them): kept fraction 2/4.

@@ -312,6 +312,49 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
   return r;
 }
 
+namespace {
+// Points of `c` (labelled `cls`) with (want_matched) / without a point of `tree` within `dist`.
+void AppendUnmatched(const PointCloud& c, PointClass cls, const geometry::KdTree& tree, double dist,
+                     tbb::task_arena& arena, PointCloud* out) {
+  std::vector<std::uint8_t> miss(c.size(), 1);
+  const float d2 = float(dist * dist);
+  if (tree.size() > 0) {
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::uint32_t idx = 0;
+        float sq = 0.f;
+        for (std::size_t i = r.begin(); i != r.end(); ++i)
+          miss[i] = tree.Nearest(c.points[i].xyz(), &idx, &sq) && sq <= d2 ? 0 : 1;
+      });
+    });
+  }
+  for (std::size_t i = 0; i < c.size(); ++i)
+    if (miss[i]) {
+      out->points.push_back(c.points[i]);
+      out->cls.push_back(cls);
+    }
+}
+}  // namespace
+
+LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& pred, const EvalConfig& cfg, int threads) {
+  ValidateConfig(cfg, "eval config");
+  auto arena = MakeArena(threads);
+  const double d = cfg.ld_match_dist_m;
+  auto tree = [](const PointCloud& c) { return geometry::KdTree(std::make_shared<const PointCloud>(c)); };
+  const auto t_pd = tree(Concat(truth.pd_strong, truth.pd_weak)), t_nd = tree(Concat(truth.nd_strong, truth.nd_weak));
+  const auto p_pd = tree(Concat(pred.pd_strong, pred.pd_weak)), p_nd = tree(Concat(pred.nd_strong, pred.nd_weak));
+  LdErrors e;
+  AppendUnmatched(pred.pd_strong, PointClass::kPDStrong, t_pd, d, arena, &e.false_positives);
+  AppendUnmatched(pred.pd_weak, PointClass::kPDWeak, t_pd, d, arena, &e.false_positives);
+  AppendUnmatched(pred.nd_strong, PointClass::kNDStrong, t_nd, d, arena, &e.false_positives);
+  AppendUnmatched(pred.nd_weak, PointClass::kNDWeak, t_nd, d, arena, &e.false_positives);
+  AppendUnmatched(truth.pd_strong, PointClass::kPDStrong, p_pd, d, arena, &e.false_negatives);
+  AppendUnmatched(truth.pd_weak, PointClass::kPDWeak, p_pd, d, arena, &e.false_negatives);
+  AppendUnmatched(truth.nd_strong, PointClass::kNDStrong, p_nd, d, arena, &e.false_negatives);
+  AppendUnmatched(truth.nd_weak, PointClass::kNDWeak, p_nd, d, arena, &e.false_negatives);
+  return e;
+}
+
 PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
                               const EvalConfig& cfg, int threads) {
   ValidateConfig(cfg, "eval config");

@@ -224,6 +224,15 @@ struct LdResult {
 // after the update (static / live map): weak-ND truth points within d of it count as kept.
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& predicted,
                     const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0);
+// Where the LD prediction is wrong, pooled per kind (PD vs PD, ND vs ND) at ld_match_dist_m:
+// predicted points with no truth point of their kind within d (false positives) and truth
+// points with no predicted point within d (false negatives). `cls` keeps each point's own class
+// (kPDStrong ... kNDWeak), so a PLY of either shows which output or truth cloud it came from.
+struct LdErrors {
+  PointCloud false_positives, false_negatives;
+};
+LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& predicted, const EvalConfig& cfg,
+                       int threads = 0);
 // Kept map derived from a removert output: the central static map minus the points that have a
 // predicted strong-ND point within ld_same_point_m (strong ND is removed, weak ND kept).
 PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
