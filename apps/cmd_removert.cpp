@@ -46,9 +46,9 @@ void RunRemovert(const RemovertArgs& a) {
   const auto rep = removert::RunRemovertStage(cfg, a.sessions, poses, a.out, a.common.threads);
   for (std::size_t s = 0; s < rep.sessions.size(); ++s) {
     const auto& h = rep.hd[s];
-    spdlog::info("{}: {} map points, {} removed as HD ({:.2f} %), {} reverted", rep.sessions[s],
-                 h.map_points, h.removed,
-                 h.map_points ? 100.0 * double(h.removed) / double(h.map_points) : 0.0, h.reverted);
+    spdlog::info("{}: {} map points, {} removed as HD + {} dilated ({:.2f} %), {} reverted", rep.sessions[s],
+                 h.map_points, h.removed, h.dilated,
+                 h.map_points ? 100.0 * double(h.removed + h.dilated) / double(h.map_points) : 0.0, h.reverted);
   }
   for (std::size_t p = 0; p < rep.pairs.size(); ++p) {
     const auto& l = rep.ld[p];

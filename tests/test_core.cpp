@@ -121,6 +121,9 @@ TEST(Config, SetFieldOverridesByKey) {
   EXPECT_FALSE(c.flag);
   EXPECT_EQ(c.mode, "dcs");
   EXPECT_EQ(c.list, (std::vector<double>{0.5, 1.5}));
+  SetField(f, "list=[0.25, 2]");  // YAML flow form
+  EXPECT_EQ(c.list, (std::vector<double>{0.25, 2.0}));
+  EXPECT_THROW(SetField(f, "list=[0.25,x]"), Error);
   EXPECT_THROW(SetField(f, "nokey=1"), Error);
   EXPECT_THROW(SetField(f, "voxel_m=abc"), Error);
   EXPECT_THROW(SetField(f, "voxel_m=1x"), Error);

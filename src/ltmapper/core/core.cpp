@@ -212,8 +212,11 @@ void SetField(const ConfigFields& fields, const std::string& kv) {
         break;
       case ConfigField::Kind::kString: *static_cast<std::string*>(f.ptr) = value; break;
       case ConfigField::Kind::kDoubleList: {
+        // "0.4,0.8" or YAML's flow form "[0.4, 0.8]".
+        std::string items = value;
+        if (items.size() >= 2 && items.front() == '[' && items.back() == ']') items = items.substr(1, items.size() - 2);
         std::vector<double> list;
-        std::stringstream ss(value);
+        std::stringstream ss(items);
         std::string item;
         while (std::getline(ss, item, ',')) list.push_back(number(item));
         *static_cast<std::vector<double>*>(f.ptr) = list;

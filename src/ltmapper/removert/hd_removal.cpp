@@ -124,6 +124,28 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
       ++st.removed;
     }
   }
+  // Dilation: the map points next to a removed point (a wheel's or a foot's contact with the
+  // ground shares its voxels with the ground) go too. Decided against the removed set before
+  // dilation, so it grows by one radius, not transitively.
+  if (cfg.dilate_m > 0.0 && st.removed > 0) {
+    const PointCloud removed = map.select(dynamic);
+    const geometry::KdTree tree(removed);
+    const float r2 = float(cfg.dilate_m * cfg.dilate_m);
+    std::vector<std::uint8_t> grow(map.size(), 0);
+    const std::size_t chunk = 8192;
+    detail::ParallelFor((map.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
+      const std::size_t b = c * chunk, e = std::min(map.size(), b + chunk);
+      std::uint32_t j = 0;
+      float d2 = 0.f;
+      for (std::size_t i = b; i < e; ++i)
+        if (!dynamic[i] && tree.Nearest(map.points[i].xyz(), &j, &d2) && d2 <= r2) grow[i] = 1;
+    });
+    for (std::size_t i = 0; i < map.size(); ++i)
+      if (grow[i]) {
+        dynamic[i] = true;
+        ++st.dilated;
+      }
+  }
   std::vector<bool> keep(dynamic.size());
   for (std::size_t i = 0; i < dynamic.size(); ++i) keep[i] = !dynamic[i];
   res.static_map = map.select(keep);

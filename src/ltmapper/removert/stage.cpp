@@ -154,10 +154,10 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     spdlog::info("removert: HD removal of {} ({} keyframes)", rep.sessions[s], kfs[s].size());
     HdResult hd = RemoveHd(kfs[s], cfg, threads);
     const HdStats& st = hd.stats;
-    spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} ({:.2f} %), "
+    spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} + {} dilated ({:.2f} %), "
                  "{:.1f} s map + {:.1f} s votes",
-                 rep.sessions[s], st.map_points, st.candidates, st.reverted, st.removed,
-                 st.map_points ? 100.0 * double(st.removed) / double(st.map_points) : 0.0,
+                 rep.sessions[s], st.map_points, st.candidates, st.reverted, st.removed, st.dilated,
+                 st.map_points ? 100.0 * double(st.removed + st.dilated) / double(st.map_points) : 0.0,
                  st.seconds_map, st.seconds_votes);
     const std::string dir = out_dir + "/" + rep.sessions[s];
     io::MakeDirs(dir);
@@ -333,7 +333,7 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
       const HdStats& h = rep.hd[s];
       os << "    {\"name\": " << JsonStr(rep.sessions[s]) << ", \"keyframes\": " << kfs[s].size()
          << ", \"map_points\": " << h.map_points << ", \"candidates\": " << h.candidates
-         << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed
+         << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed << ", \"dilated\": " << h.dilated
          << ", \"removed_per_resolution\": [";
       for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
         os << (l ? ", " : "") << h.removed_per_resolution[l];
