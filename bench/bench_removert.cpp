@@ -5,6 +5,9 @@
 //   /tmp/ltm_bench_removert), LTM_BENCH_THREADS (default 2), LTM_BENCH_KEYFRAMES (default 500)
 //
 // CPU seconds come from getrusage (all threads), so "per keyframe per core" = CPU s / keyframes.
+// BM_Votes times the hot loop alone (CountVisibility at the removal resolutions over a session
+// map built beforehand); BM_Stage2Sessions splits the stage into HD (map + votes), LD and the
+// rest (loading the sessions, writing the outputs).
 #include "ltmapper/core/core.hpp"
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/removert/removert.hpp"
@@ -99,6 +102,26 @@ void BM_HdRemovalSession(benchmark::State& st) {
 }
 BENCHMARK(BM_HdRemovalSession)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
+void BM_Votes(benchmark::State& st) {
+  const auto kfs = Keyframes(0);
+  const ltm::removert::RemovertConfig cfg;
+  const ltm::PointCloud map = ltm::removert::BuildSessionMap(kfs, cfg, Threads());
+  for (auto _ : st) {
+    const double c0 = CpuSeconds();
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto votes = ltm::removert::CountVisibility(map, kfs, cfg.remove_resolutions_deg, cfg, Threads());
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double cpu = CpuSeconds() - c0;
+    benchmark::DoNotOptimize(votes.see.data());
+    st.counters["map_points"] = double(map.size());
+    st.counters["wall_s"] = wall;
+    st.counters["cpu_s"] = cpu;
+    st.counters["s_per_kf_per_core"] = cpu / double(kfs.size());
+  }
+  PrintSettings(st);
+}
+BENCHMARK(BM_Votes)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
 void BM_Stage2Sessions(benchmark::State& st) {
   const std::string d = SimDir();
   const std::string out = d + "/bench_changes";
@@ -110,7 +133,13 @@ void BM_Stage2Sessions(benchmark::State& st) {
         cfg, {d + "/sessions/session_00", d + "/sessions/session_01"},
         {d + "/truth/session_00/poses_world.txt", d + "/truth/session_01/poses_world.txt"}, out,
         Threads());
+    double hd = 0, ld = 0;
+    for (const auto& h : rep.hd) hd += h.seconds_map + h.seconds_votes;
+    for (const auto& l : rep.ld) ld += l.seconds;
     st.counters["stage_s"] = rep.seconds;
+    st.counters["hd_s"] = hd;
+    st.counters["ld_s"] = ld;
+    st.counters["rest_s"] = rep.seconds - hd - ld;
     st.counters["cpu_s"] = CpuSeconds() - c0;
     st.counters["peak_rss_MB"] = double(rep.peak_rss_bytes) / 1e6;
   }

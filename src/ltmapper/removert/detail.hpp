@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -39,7 +40,8 @@ inline float FastAtan2(float y, float x) {
 geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_deg);
 
 // Range images of one scan at several resolutions, built from one (pitch, yaw) evaluation per
-// point. Min range per pixel, +inf = no return.
+// point. Min range per pixel, +inf = no return. Build() reuses the buffers, so one image per
+// worker serves all its keyframes.
 class MultiResImage {
  public:
   MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg);
@@ -49,6 +51,8 @@ class MultiResImage {
   void Build(const PointCloud& scan);
   int levels() const { return int(levels_.size()); }
   // Angles of a point (sensor frame). False when outside the vertical FOV or at ~0 range.
+  // Project() and Build() evaluate the same float operations four points at a time (SSE2):
+  // keep them in step.
   bool Angles(const Eigen::Vector3f& p, float* range, float* pitch, float* yaw) const {
     const float rxy2 = p.x() * p.x() + p.y() * p.y();
     const float r = std::sqrt(rxy2 + p.z() * p.z());
@@ -60,27 +64,45 @@ class MultiResImage {
     *yaw = FastAtan2(p.y(), p.x());
     return true;
   }
-  std::size_t Pixel(int level, float pitch, float yaw) const {
-    const Level& L = levels_[std::size_t(level)];
-    int row = int((up_ - pitch) * L.row_scale);
-    if (row >= L.rows) row = L.rows - 1;
-    if (row < 0) row = 0;
-    int col = int((kPiF - yaw) * L.col_scale);
-    if (col >= L.cols) col -= L.cols;
-    if (col < 0) col = 0;
-    return std::size_t(row) * std::size_t(L.cols) + std::size_t(col);
-  }
+  // The points (x[i], y[i], z[i]) (world frame; readable up to n + 3: batches of four) within
+  // 3D distance sqrt(radius2) of the sensor position c, moved into the sensor frame
+  // (Rt (p - c)), whose Angles() are valid: returns how many; their input positions go to
+  // idx[0, count) and their Angles() to range / pitch / yaw[0, count) (n long each). Batches of
+  // four (SSE2) use the same float operations in the same order as the scalar code (Eigen's
+  // products included), so the results are identical.
+  std::size_t Project(const float* x, const float* y, const float* z, std::size_t n,
+                      const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, float radius2,
+                      std::uint32_t* idx, float* range, float* pitch, float* yaw) const;
+  // One level's pixel rule, small enough for hot loops to keep in registers.
+  struct Grid {
+    int rows = 0, cols = 0;
+    float row_scale = 0.f, col_scale = 0.f;  // pixels per rad
+    float up = 0.f;                          // [rad] top of the FOV
+    std::size_t Pixel(float pitch, float yaw) const {
+      int row = int((up - pitch) * row_scale);
+      if (row >= rows) row = rows - 1;
+      if (row < 0) row = 0;
+      int col = int((kPiF - yaw) * col_scale);
+      if (col >= cols) col -= cols;
+      if (col < 0) col = 0;
+      return std::size_t(row) * std::size_t(cols) + std::size_t(col);
+    }
+  };
+  const Grid& GridOf(int level) const { return levels_[std::size_t(level)].grid; }
+  std::size_t Pixel(int level, float pitch, float yaw) const { return GridOf(level).Pixel(pitch, yaw); }
   float At(int level, std::size_t pixel) const { return levels_[std::size_t(level)].range[pixel]; }
   float Pooled(int level, std::size_t pixel) const { return levels_[std::size_t(level)].pooled[pixel]; }
-  int Rows(int level) const { return levels_[std::size_t(level)].rows; }
-  int Cols(int level) const { return levels_[std::size_t(level)].cols; }
+  // (pooled, range) of each pixel side by side: the vote test reads both, from one cache line.
+  const float* Pairs(int level) const { return levels_[std::size_t(level)].pairs.data(); }
+  int Rows(int level) const { return GridOf(level).rows; }
+  int Cols(int level) const { return GridOf(level).cols; }
 
  private:
   struct Level {
-    int rows = 0, cols = 0;
-    float row_scale = 0.f, col_scale = 0.f;  // pixels per rad
-    std::vector<float> range, pooled, tmp;
+    Grid grid;
+    std::vector<float> range, pooled, tmp, pairs;
   };
+  void Pool(Level& L) const;
   int window_ = 0;
   float up_ = 0.f, down_ = 0.f;  // [rad]
   float min_range_ = 0.f, max_range_ = 0.f;
@@ -88,15 +110,40 @@ class MultiResImage {
 };
 
 // 2D tile index over a cloud's xy: points sorted by tile, each tile a contiguous range.
+// Coordinates are kept as separate x / y / z arrays (plus 3 padding entries, so batches of four
+// may read past a tile's end).
 class TileIndex {
  public:
   TileIndex(const PointCloud& cloud, double tile_m);
   // order()[k] = index into the original cloud of the k-th sorted point.
   const std::vector<std::uint32_t>& order() const { return order_; }
-  const std::vector<Eigen::Vector3f>& sorted() const { return sorted_; }
-  // Calls f(begin, end) (sorted positions) for every tile within `radius` (2D) of `c`.
-  void ForTilesNear(const Eigen::Vector3f& c, float radius,
-                    const std::function<void(std::uint32_t, std::uint32_t)>& f) const;
+  const float* x() const { return x_.data(); }
+  const float* y() const { return y_.data(); }
+  const float* z() const { return z_.data(); }
+  std::size_t tiles() const { return ranges_.size(); }
+  // Calls f(tile, begin, end) (tile id in [0, tiles()), sorted positions [begin, end)) for every
+  // tile within `radius` (2D) of `c`.
+  template <class F>
+  void ForTilesNear(const Eigen::Vector3f& c, float radius, F&& f) const {
+    const double t = tile_m_;
+    const std::int32_t x0 = std::int32_t(std::floor((c.x() - radius) / t));
+    const std::int32_t x1 = std::int32_t(std::floor((c.x() + radius) / t));
+    const std::int32_t y0 = std::int32_t(std::floor((c.y() - radius) / t));
+    const std::int32_t y1 = std::int32_t(std::floor((c.y() + radius) / t));
+    const double r2 = double(radius) * radius;
+    for (std::int32_t ix = x0; ix <= x1; ++ix) {
+      for (std::int32_t iy = y0; iy <= y1; ++iy) {
+        // Distance from c to the tile's rectangle.
+        const double dx = std::max({ix * t - c.x(), 0.0, c.x() - (ix + 1) * t});
+        const double dy = std::max({iy * t - c.y(), 0.0, c.y() - (iy + 1) * t});
+        if (dx * dx + dy * dy > r2) continue;
+        auto it = tiles_.find(Key(ix, iy));
+        if (it == tiles_.end()) continue;
+        const auto& rg = ranges_[it->second];
+        f(it->second, rg.first, rg.second);
+      }
+    }
+  }
 
  private:
   static std::int64_t Key(std::int32_t ix, std::int32_t iy) {
@@ -104,8 +151,9 @@ class TileIndex {
   }
   double tile_m_;
   std::vector<std::uint32_t> order_;
-  std::vector<Eigen::Vector3f> sorted_;
-  std::unordered_map<std::int64_t, std::pair<std::uint32_t, std::uint32_t>> tiles_;
+  std::vector<float> x_, y_, z_;
+  std::unordered_map<std::int64_t, std::uint32_t> tiles_;        // key -> tile id
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges_;  // tile id -> [begin, end)
 };
 
 // The keyframe's scan (memory or file).

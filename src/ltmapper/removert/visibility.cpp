@@ -1,17 +1,32 @@
 // Visibility votes: the hot loop shared by HD removal (map vs own scans), weak/strong ND (central
 // ND points vs query scans) and weak/strong PD (query PD points vs central scans).
+//
+// Per keyframe: its scan's range images (one set per worker, rebuilt in place), then for every
+// tile of points within the submap radius: projection of the tile's points (four at a time),
+// their votes per level into the worker's scratch, and those added to the tile's counters under
+// the tile's lock. The SSE2 code repeats the scalar code's float operations in the same order,
+// so the votes are the same with or without it.
 #include "ltmapper/removert/detail.hpp"
 
 #include "ltmapper/io/io.hpp"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <numeric>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <mutex>
 #include <string>
+#include <utility>
 
 namespace ltm::removert {
 namespace detail {
@@ -25,6 +40,154 @@ geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_d
   return c;
 }
 
+namespace {
+
+#if defined(__SSE2__)
+// Four-lane twins of FastAtan2 and MultiResImage::Angles. Each lane performs the scalar code's
+// IEEE float operations in the same order (no FMA contraction in SSE; sqrt and division are
+// correctly rounded in both) and branches become selects, so every lane is bit-identical to the
+// scalar result: pixels, and so votes, do not depend on the code path.
+inline __m128 Select(__m128 mask, __m128 a, __m128 b) {
+  return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+}
+
+inline __m128 FastAtan2x4(__m128 y, __m128 x) {
+  const __m128 sign = _mm_set1_ps(-0.f);
+  const __m128 zero = _mm_setzero_ps();
+  const __m128 ax = _mm_andnot_ps(sign, x), ay = _mm_andnot_ps(sign, y);
+  const __m128 x_major = _mm_cmpgt_ps(ax, ay);
+  const __m128 mx = Select(x_major, ax, ay);
+  const __m128 mn = Select(x_major, ay, ax);
+  const __m128 a = _mm_div_ps(mn, mx);  // 0 / 0 where mx == 0: replaced by 0 below
+  const __m128 s = _mm_mul_ps(a, a);
+  __m128 r = _mm_sub_ps(_mm_mul_ps(_mm_set1_ps(0.0208351f), s), _mm_set1_ps(0.085133f));
+  r = _mm_add_ps(_mm_mul_ps(r, s), _mm_set1_ps(0.180141f));
+  r = _mm_sub_ps(_mm_mul_ps(r, s), _mm_set1_ps(0.3302995f));
+  r = _mm_add_ps(_mm_mul_ps(r, s), _mm_set1_ps(0.999866f));
+  r = _mm_mul_ps(r, a);
+  r = Select(_mm_cmpgt_ps(ay, ax), _mm_sub_ps(_mm_set1_ps(0.5f * kPiF), r), r);
+  r = Select(_mm_cmplt_ps(x, zero), _mm_sub_ps(_mm_set1_ps(kPiF), r), r);
+  r = Select(_mm_cmplt_ps(y, zero), _mm_xor_ps(r, sign), r);
+  return _mm_andnot_ps(_mm_cmpeq_ps(mx, zero), r);
+}
+
+// MultiResImage::Angles of four points: the mask of the valid lanes.
+inline __m128 Angles4(__m128 x, __m128 y, __m128 z, __m128 up, __m128 down, __m128* range,
+                      __m128* pitch, __m128* yaw) {
+  const __m128 rxy2 = _mm_add_ps(_mm_mul_ps(x, x), _mm_mul_ps(y, y));
+  const __m128 r = _mm_sqrt_ps(_mm_add_ps(rxy2, _mm_mul_ps(z, z)));
+  const __m128 pt = FastAtan2x4(z, _mm_sqrt_ps(rxy2));
+  const __m128 ok = _mm_cmpgt_ps(r, _mm_set1_ps(1e-6f));
+  const __m128 out_of_fov = _mm_or_ps(_mm_cmpgt_ps(pt, up), _mm_cmplt_ps(pt, down));
+  *range = r;
+  *pitch = pt;
+  *yaw = FastAtan2x4(y, x);
+  return _mm_andnot_ps(out_of_fov, ok);
+}
+#endif
+
+// Votes of one tile's valid points at one level (see CountVisibility): kSee, kHit, kOcc or 0 at
+// vote[idx[j]]. Both lookups of a point come from one (pooled, range) pixel pair. The SSE2 path
+// takes four points at a time without branches (the tests mispredict often, and a mispredict
+// also cancels the next points' lookups in flight) with the scalar code's float operations.
+// Surface hits (normals given) need the points' tan(incidence).
+constexpr std::uint8_t kSee = 1, kHit = 2, kOcc = 4;
+struct VoteTest {
+  float tol_abs = 0.f, tol_rel = 0.f;
+  float pixel_rad = 0.f;      // [rad] the level's pixel
+  float surface_max = 0.f;    // [m] cap of the surface-hit range allowance
+  std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
+};
+
+#if defined(__SSE2__)
+// MultiResImage::Grid::Pixel of four points, in 32-bit lanes (pixel counts stay far below 2^31:
+// resolutions >= 0.01 deg).
+inline __m128i Pixel4(const MultiResImage::Grid& g, __m128 pitch, __m128 yaw) {
+  const __m128i zero = _mm_setzero_si128();
+  __m128i row = _mm_cvttps_epi32(_mm_mul_ps(_mm_sub_ps(_mm_set1_ps(g.up), pitch), _mm_set1_ps(g.row_scale)));
+  const __m128i last_row = _mm_set1_epi32(g.rows - 1);
+  const __m128i past_last = _mm_cmpgt_epi32(row, last_row);
+  row = _mm_or_si128(_mm_and_si128(past_last, last_row), _mm_andnot_si128(past_last, row));
+  row = _mm_andnot_si128(_mm_cmplt_epi32(row, zero), row);
+  __m128i col = _mm_cvttps_epi32(_mm_mul_ps(_mm_sub_ps(_mm_set1_ps(kPiF), yaw), _mm_set1_ps(g.col_scale)));
+  const __m128i cols = _mm_set1_epi32(g.cols);
+  col = _mm_sub_epi32(col, _mm_and_si128(_mm_cmpgt_epi32(col, _mm_set1_epi32(g.cols - 1)), cols));
+  col = _mm_andnot_si128(_mm_cmplt_epi32(col, zero), col);
+  // row * cols in 32-bit lanes (SSE2 multiplies lanes 0, 2 and 1, 3 separately).
+  const __m128i even = _mm_mul_epu32(row, cols);
+  const __m128i odd = _mm_mul_epu32(_mm_srli_si128(row, 4), _mm_srli_si128(cols, 4));
+  const __m128i prod = _mm_unpacklo_epi32(_mm_shuffle_epi32(even, _MM_SHUFFLE(0, 0, 2, 0)),
+                                          _mm_shuffle_epi32(odd, _MM_SHUFFLE(0, 0, 2, 0)));
+  return _mm_add_epi32(prod, col);
+}
+#endif
+
+// Arrays range / pitch / yaw / tan_inc hold m valid points plus 3 entries of padding (0).
+template <bool kSurface>
+void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTest t, std::size_t m,
+               const std::uint32_t* idx, const float* range, const float* pitch, const float* yaw,
+               const float* tan_inc, std::uint8_t* vote) {
+#if defined(__SSE2__)
+  const __m128 sign = _mm_set1_ps(-0.f), inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 tol_abs = _mm_set1_ps(t.tol_abs), tol_rel = _mm_set1_ps(t.tol_rel);
+  const __m128 surface_max = _mm_set1_ps(t.surface_max), pixel_rad = _mm_set1_ps(t.pixel_rad);
+  const __m128i code_see = _mm_set1_epi32(kSee), code_hit = _mm_set1_epi32(kHit);
+  const __m128i code_occ = _mm_set1_epi32(t.occluded);
+  alignas(16) std::int32_t pix[4], code[4];
+  for (std::size_t j = 0; j < m; j += 4) {
+    const __m128i pix4 = Pixel4(grid, _mm_loadu_ps(pitch + j), _mm_loadu_ps(yaw + j));
+    _mm_store_si128(reinterpret_cast<__m128i*>(pix), pix4);
+    // Lanes 0..3 of (pooled, range): two pairs per register, then split.
+    const __m128 p01 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[0])),
+                                    reinterpret_cast<const __m64*>(pairs + 2 * pix[1]));
+    const __m128 p23 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[2])),
+                                    reinterpret_cast<const __m64*>(pairs + 2 * pix[3]));
+    const __m128 s = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
+    const __m128 at = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(3, 1, 3, 1));
+    const __m128 r = _mm_loadu_ps(range + j);
+    const __m128 tol = _mm_add_ps(tol_abs, _mm_mul_ps(tol_rel, r));
+    // See-through: even the nearest return in the window around the point's pixel lies beyond
+    // it (so grazing surfaces and silhouette edges, whose neighbouring pixels return nearer,
+    // give no vote). Hit: the pixel's own or the window's nearest return is at the point's
+    // range, or (surface) within the range one pixel spans on the point's plane. No return
+    // anywhere in the window: no evidence.
+    const __m128 evidence = _mm_cmplt_ps(_mm_andnot_ps(sign, s), inf);
+    const __m128 see = _mm_and_ps(evidence, _mm_cmpgt_ps(s, _mm_add_ps(r, tol)));
+    const __m128 at_off = _mm_andnot_ps(sign, _mm_sub_ps(at, r));
+    const __m128 s_off = _mm_andnot_ps(sign, _mm_sub_ps(s, r));
+    __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
+    if constexpr (kSurface) {
+      // std::min(surface_max, std::max(tol, r * pixel_rad * tan_inc)): max_ps / min_ps with the
+      // same operand order pick the same value, NaN included.
+      const __m128 spread = _mm_mul_ps(_mm_mul_ps(r, pixel_rad), _mm_loadu_ps(tan_inc + j));
+      near = _mm_or_ps(near, _mm_cmple_ps(at_off, _mm_min_ps(_mm_max_ps(spread, tol), surface_max)));
+    }
+    const __m128 hit = _mm_andnot_ps(see, _mm_and_ps(evidence, near));
+    const __m128 occ = _mm_andnot_ps(_mm_or_ps(see, hit), evidence);
+    const __m128i c = _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), code_see),
+                                                _mm_and_si128(_mm_castps_si128(hit), code_hit)),
+                                   _mm_and_si128(_mm_castps_si128(occ), code_occ));
+    _mm_store_si128(reinterpret_cast<__m128i*>(code), c);
+    const std::size_t lanes = std::min<std::size_t>(4, m - j);
+    for (std::size_t k = 0; k < lanes; ++k) vote[idx[j + k]] = std::uint8_t(code[k]);
+  }
+#else
+  for (std::size_t j = 0; j < m; ++j) {
+    const std::size_t pix = grid.Pixel(pitch[j], yaw[j]);
+    const float s = pairs[2 * pix], at = pairs[2 * pix + 1];
+    const float r = range[j];
+    const float tol = t.tol_abs + t.tol_rel * r;
+    if (!std::isfinite(s)) continue;  // no return anywhere in the window: no evidence
+    bool hit = std::fabs(s - r) <= tol || std::fabs(at - r) <= tol;
+    if constexpr (kSurface)
+      hit = hit || std::fabs(at - r) <= std::min(t.surface_max, std::max(tol, r * t.pixel_rad * tan_inc[j]));
+    vote[idx[j]] = s > r + tol ? kSee : (hit ? kHit : t.occluded);
+  }
+#endif
+}
+
+}  // namespace
+
 MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg) {
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   up_ = float(cfg.fov_up_deg * kDeg);
@@ -36,105 +199,210 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
   for (double res : resolutions_deg) {
     const geometry::RangeImageConfig rc = LevelConfig(cfg, res);
     Level L;
-    L.rows = rc.rows;
-    L.cols = rc.cols;
-    L.row_scale = float(rc.rows / fov);
-    L.col_scale = float(rc.cols / (2.0 * 3.14159265358979323846));
-    L.range.assign(std::size_t(L.rows) * L.cols, std::numeric_limits<float>::infinity());
+    L.grid.rows = rc.rows;
+    L.grid.cols = rc.cols;
+    L.grid.row_scale = float(rc.rows / fov);
+    L.grid.col_scale = float(rc.cols / (2.0 * 3.14159265358979323846));
+    L.grid.up = up_;
+    L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
     L.pooled = L.range;
     L.tmp = L.range;
+    L.pairs.assign(2 * L.range.size(), std::numeric_limits<float>::infinity());
     levels_.push_back(std::move(L));
   }
+}
+
+std::size_t MultiResImage::Project(const float* x, const float* y, const float* z, std::size_t n,
+                                   const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, float radius2,
+                                   std::uint32_t* idx, float* range, float* pitch, float* yaw) const {
+  std::size_t m = 0;
+#if defined(__SSE2__)
+  const __m128 cx = _mm_set1_ps(c.x()), cy = _mm_set1_ps(c.y()), cz = _mm_set1_ps(c.z());
+  __m128 R[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) R[i][j] = _mm_set1_ps(Rt(i, j));
+  const __m128 rad2 = _mm_set1_ps(radius2), up = _mm_set1_ps(up_), down = _mm_set1_ps(down_);
+  alignas(16) float rs[4], ps[4], ys[4];
+  for (std::size_t i = 0; i < n; i += 4) {
+    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(x + i), cx);
+    const __m128 dy = _mm_sub_ps(_mm_loadu_ps(y + i), cy);
+    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(z + i), cz);
+    // Eigen's association for 3-vectors: d.squaredNorm() = dx^2 + (dy^2 + dz^2) and
+    // (Rt d)_k = Rt(k,0) dx + (Rt(k,1) dy + Rt(k,2) dz).
+    const __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+    __m128 p[3];
+    for (int k = 0; k < 3; ++k)
+      p[k] = _mm_add_ps(_mm_mul_ps(R[k][0], dx),
+                        _mm_add_ps(_mm_mul_ps(R[k][1], dy), _mm_mul_ps(R[k][2], dz)));
+    __m128 r, pt, yw;
+    const __m128 valid = Angles4(p[0], p[1], p[2], up, down, &r, &pt, &yw);
+    const __m128 ok = _mm_andnot_ps(_mm_cmpgt_ps(d2, rad2), valid);
+    int mask = _mm_movemask_ps(ok);
+    if (n - i < 4) mask &= (1 << (n - i)) - 1;
+    if (mask == 0) continue;
+    _mm_store_ps(rs, r);
+    _mm_store_ps(ps, pt);
+    _mm_store_ps(ys, yw);
+    for (int k = 0; k < 4; ++k) {
+      if (!(mask >> k & 1)) continue;
+      idx[m] = std::uint32_t(i + std::size_t(k));
+      range[m] = rs[k];
+      pitch[m] = ps[k];
+      yaw[m] = ys[k];
+      ++m;
+    }
+  }
+#else
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f d = Eigen::Vector3f(x[i], y[i], z[i]) - c;
+    if (d.squaredNorm() > radius2) continue;
+    if (!Angles(Rt * d, &range[m], &pitch[m], &yaw[m])) continue;
+    idx[m++] = std::uint32_t(i);
+  }
+#endif
+  return m;
 }
 
 void MultiResImage::Build(const PointCloud& scan) {
   for (Level& L : levels_) std::fill(L.range.begin(), L.range.end(), std::numeric_limits<float>::infinity());
   const int nl = levels();
-  for (const PointXYZI& q : scan.points) {
-    float r, pitch, yaw;
-    if (!Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw)) continue;
-    if (r < min_range_ || r > max_range_) continue;
+  auto add = [&](float r, float pitch, float yaw) {
+    if (r < min_range_ || r > max_range_) return;
     for (int l = 0; l < nl; ++l) {
-      float& px = levels_[std::size_t(l)].range[Pixel(l, pitch, yaw)];
+      Level& L = levels_[std::size_t(l)];
+      float& px = L.range[L.grid.Pixel(pitch, yaw)];
       if (r < px) px = r;
     }
-  }
-  // Separable min filter: along columns (wrapping) into tmp, then along rows into pooled.
-  const int w = window_;
-  for (Level& L : levels_) {
-    if (w == 0) {
-      L.pooled = L.range;
-      continue;
-    }
-    for (int r = 0; r < L.rows; ++r) {
-      const float* src = &L.range[std::size_t(r) * L.cols];
-      float* dst = &L.tmp[std::size_t(r) * L.cols];
-      for (int c = 0; c < L.cols; ++c) {
-        float m = src[c];
-        for (int d = 1; d <= w; ++d) {
-          int a = c - d, b = c + d;
-          if (a < 0) a += L.cols;
-          if (b >= L.cols) b -= L.cols;
-          m = std::min(m, std::min(src[a], src[b]));
+  };
+  std::size_t i = 0;
+  const std::size_t n = scan.size();
+#if defined(__SSE2__)
+  // PointXYZI is four packed floats: load four points and transpose to x / y / z lanes.
+  static_assert(sizeof(PointXYZI) == 4 * sizeof(float) && offsetof(PointXYZI, x) == 0,
+                "PointXYZI must be x y z intensity floats");
+  const float* raw = reinterpret_cast<const float*>(scan.points.data());
+  const __m128 up = _mm_set1_ps(up_), down = _mm_set1_ps(down_);
+  const __m128 min_range = _mm_set1_ps(min_range_), max_range = _mm_set1_ps(max_range_);
+  alignas(16) float rs[4];
+  alignas(16) std::int32_t pix[4];
+  for (; i + 4 <= n; i += 4) {
+    __m128 px = _mm_loadu_ps(raw + 4 * i), py = _mm_loadu_ps(raw + 4 * i + 4);
+    __m128 pz = _mm_loadu_ps(raw + 4 * i + 8), pi = _mm_loadu_ps(raw + 4 * i + 12);
+    _MM_TRANSPOSE4_PS(px, py, pz, pi);
+    __m128 r, pt, yw;
+    const __m128 ok = Angles4(px, py, pz, up, down, &r, &pt, &yw);
+    const __m128 out_of_range = _mm_or_ps(_mm_cmplt_ps(r, min_range), _mm_cmpgt_ps(r, max_range));
+    const int mask = _mm_movemask_ps(_mm_andnot_ps(out_of_range, ok));
+    if (mask == 0) continue;
+    _mm_store_ps(rs, r);
+    for (Level& L : levels_) {
+      _mm_store_si128(reinterpret_cast<__m128i*>(pix), Pixel4(L.grid, pt, yw));
+      for (int k = 0; k < 4; ++k)
+        if (mask >> k & 1) {
+          float& m = L.range[std::size_t(pix[k])];
+          m = std::min(m, rs[k]);  // if (r < m) m = r
         }
-        dst[c] = m;
-      }
     }
-    for (int r = 0; r < L.rows; ++r) {
-      const int r0 = std::max(0, r - w), r1 = std::min(L.rows - 1, r + w);
-      float* dst = &L.pooled[std::size_t(r) * L.cols];
-      for (int c = 0; c < L.cols; ++c) {
-        float m = std::numeric_limits<float>::infinity();
-        for (int rr = r0; rr <= r1; ++rr) m = std::min(m, L.tmp[std::size_t(rr) * L.cols + c]);
-        dst[c] = m;
+  }
+#endif
+  for (; i < n; ++i) {
+    const PointXYZI& q = scan.points[i];
+    float r, pitch, yaw;
+    if (Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw)) add(r, pitch, yaw);
+  }
+  for (Level& L : levels_) {
+    Pool(L);
+    for (std::size_t q = 0; q < L.range.size(); ++q) {
+      L.pairs[2 * q] = L.pooled[q];
+      L.pairs[2 * q + 1] = L.range[q];
+    }
+  }
+}
+
+// Separable min filter: along columns (wrapping) into tmp, then along rows into pooled. Min is
+// exact and there are no NaNs, so the evaluation order does not change the result.
+void MultiResImage::Pool(Level& L) const {
+  const int w = window_;
+  if (w == 0) {
+    std::copy(L.range.begin(), L.range.end(), L.pooled.begin());
+    return;
+  }
+  const int rows = L.grid.rows, cols = L.grid.cols;
+  for (int r = 0; r < rows; ++r) {
+    const float* src = &L.range[std::size_t(r) * cols];
+    float* dst = &L.tmp[std::size_t(r) * cols];
+    // Columns whose window wraps around.
+    auto wrapped = [&](int c) {
+      float m = src[c];
+      for (int d = 1; d <= w; ++d) {
+        int a = c - d, b = c + d;
+        if (a < 0) a += cols;
+        if (b >= cols) b -= cols;
+        m = std::min(m, std::min(src[a], src[b]));
       }
+      dst[c] = m;
+    };
+    const int lo = std::min(w, cols), hi = std::max(lo, cols - w);
+    for (int c = 0; c < lo; ++c) wrapped(c);
+    for (int c = hi; c < cols; ++c) wrapped(c);
+    // Interior: no wrap, vectorisable.
+    std::copy(src + lo, src + hi, dst + lo);
+    for (int d = 1; d <= w; ++d)
+      for (int c = lo; c < hi; ++c) dst[c] = std::min(dst[c], std::min(src[c - d], src[c + d]));
+  }
+  for (int r = 0; r < rows; ++r) {
+    const int r0 = std::max(0, r - w), r1 = std::min(rows - 1, r + w);
+    float* dst = &L.pooled[std::size_t(r) * cols];
+    std::copy(&L.tmp[std::size_t(r0) * cols], &L.tmp[std::size_t(r0) * cols] + cols, dst);
+    for (int rr = r0 + 1; rr <= r1; ++rr) {
+      const float* src = &L.tmp[std::size_t(rr) * cols];
+      for (int c = 0; c < cols; ++c) dst[c] = std::min(dst[c], src[c]);
     }
   }
 }
 
 TileIndex::TileIndex(const PointCloud& cloud, double tile_m) : tile_m_(tile_m) {
   const std::size_t n = cloud.size();
-  std::vector<std::int64_t> keys(n);
+  // Tiles in key order, points in input order within a tile: a counting sort by tile (tile ids
+  // first by appearance, then renumbered by key).
+  std::vector<std::uint32_t> tile(n);
+  std::vector<std::int64_t> keys;  // by first appearance
+  std::int64_t last_key = 0;
+  std::uint32_t last_id = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const PointXYZI& p = cloud.points[i];
-    keys[i] = Key(std::int32_t(std::floor(p.x / tile_m)), std::int32_t(std::floor(p.y / tile_m)));
+    const std::int64_t key =
+        Key(std::int32_t(std::floor(p.x / tile_m)), std::int32_t(std::floor(p.y / tile_m)));
+    if (keys.empty() || key != last_key) {  // neighbouring points mostly share a tile
+      const auto [it, added] = tiles_.try_emplace(key, std::uint32_t(keys.size()));
+      if (added) keys.push_back(key);
+      last_key = key;
+      last_id = it->second;
+    }
+    tile[i] = last_id;
   }
+  std::vector<std::uint32_t> by_key(keys.size()), rank(keys.size());
+  for (std::size_t t = 0; t < keys.size(); ++t) by_key[t] = std::uint32_t(t);
+  std::sort(by_key.begin(), by_key.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return keys[a] < keys[b]; });
+  for (std::size_t r = 0; r < by_key.size(); ++r) rank[by_key[r]] = std::uint32_t(r);
+  for (auto& kv : tiles_) kv.second = rank[kv.second];
+  std::vector<std::uint32_t> next(keys.size() + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) ++next[rank[tile[i]] + 1];
+  for (std::size_t r = 0; r < keys.size(); ++r) next[r + 1] += next[r];
+  ranges_.resize(keys.size());
+  for (std::size_t r = 0; r < keys.size(); ++r) ranges_[r] = {next[r], next[r + 1]};
   order_.resize(n);
-  std::iota(order_.begin(), order_.end(), 0u);
-  std::stable_sort(order_.begin(), order_.end(),
-                   [&](std::uint32_t a, std::uint32_t b) { return keys[a] < keys[b]; });
-  sorted_.resize(n);
+  for (std::size_t i = 0; i < n; ++i) order_[next[rank[tile[i]]]++] = std::uint32_t(i);
+  constexpr std::size_t kPad = 3;  // batches of four may read past the last point
+  x_.assign(n + kPad, 0.f);
+  y_.assign(n + kPad, 0.f);
+  z_.assign(n + kPad, 0.f);
   for (std::size_t k = 0; k < n; ++k) {
     const PointXYZI& p = cloud.points[order_[k]];
-    sorted_[k] = Eigen::Vector3f(p.x, p.y, p.z);
-  }
-  std::size_t k = 0;
-  while (k < n) {
-    std::size_t e = k + 1;
-    const std::int64_t key = keys[order_[k]];
-    while (e < n && keys[order_[e]] == key) ++e;
-    tiles_[key] = {std::uint32_t(k), std::uint32_t(e)};
-    k = e;
-  }
-}
-
-void TileIndex::ForTilesNear(const Eigen::Vector3f& c, float radius,
-                             const std::function<void(std::uint32_t, std::uint32_t)>& f) const {
-  const double t = tile_m_;
-  const std::int32_t x0 = std::int32_t(std::floor((c.x() - radius) / t));
-  const std::int32_t x1 = std::int32_t(std::floor((c.x() + radius) / t));
-  const std::int32_t y0 = std::int32_t(std::floor((c.y() - radius) / t));
-  const std::int32_t y1 = std::int32_t(std::floor((c.y() + radius) / t));
-  const double r2 = double(radius) * radius;
-  for (std::int32_t ix = x0; ix <= x1; ++ix) {
-    for (std::int32_t iy = y0; iy <= y1; ++iy) {
-      // Distance from c to the tile's rectangle.
-      const double dx = std::max({ix * t - c.x(), 0.0, c.x() - (ix + 1) * t});
-      const double dy = std::max({iy * t - c.y(), 0.0, c.y() - (iy + 1) * t});
-      if (dx * dx + dy * dy > r2) continue;
-      auto it = tiles_.find(Key(ix, iy));
-      if (it != tiles_.end()) f(it->second.first, it->second.second);
-    }
+    x_[k] = p.x;
+    y_[k] = p.y;
+    z_[k] = p.z;
   }
 }
 
@@ -186,13 +454,14 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   if (n == 0 || L == 0 || keyframes.empty()) return out;
 
   const detail::TileIndex index(points, cfg.tile_m);
-  const auto& pts = index.sorted();
+  const auto& order = index.order();
   // Counters in tile order; each keyframe adds at most 1 per point and level, so uint16 with
-  // fewer than 65535 keyframes never overflows.
-  std::unique_ptr<std::atomic<std::uint16_t>[]> see(new std::atomic<std::uint16_t>[n * L]());
-  std::unique_ptr<std::atomic<std::uint16_t>[]> hit(new std::atomic<std::uint16_t>[n * L]());
-  std::unique_ptr<std::atomic<std::uint16_t>[]> occ(
-      count_occluded ? new std::atomic<std::uint16_t>[n * L]() : nullptr);
+  // fewer than 65535 keyframes never overflows. A worker classifies one tile's points against
+  // its keyframe into its own scratch, then adds the votes under the tile's lock: plain adds
+  // instead of one atomic per point and level, and workers on different keyframes rarely want
+  // the same tile at the same time.
+  std::vector<std::uint16_t> see(n * L, 0), hit(n * L, 0), occ(count_occluded ? n * L : 0, 0);
+  std::unique_ptr<std::mutex[]> tile_locks(new std::mutex[index.tiles()]);
   const float radius = float(cfg.submap_radius_m);
   const float r2 = radius * radius;
   const float tol_abs = float(cfg.tol_abs_m), tol_rel = float(cfg.tol_rel);
@@ -203,57 +472,88 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   for (std::size_t l = 0; l < L; ++l) pixel_rad[l] = float(resolutions_deg[l] * 3.14159265358979323846 / 180.0);
   const int nl = int(L);
 
+  // Per worker: the range images (reused from keyframe to keyframe) and one tile's projections
+  // (valid points: position in the tile, range, pitch, yaw, tan(incidence)) and votes.
+  using detail::kHit, detail::kOcc, detail::kSee;
+  detail::VoteTest test;
+  test.tol_abs = tol_abs;
+  test.tol_rel = tol_rel;
+  test.surface_max = surface_max;
+  test.occluded = count_occluded ? kOcc : 0;
+  struct Scratch {
+    detail::MultiResImage img;
+    std::vector<std::uint32_t> idx;
+    std::vector<float> range, pitch, yaw, tan_inc;
+    std::vector<std::uint8_t> votes;  // [level * tile size + position in the tile]
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch(
+      [&] { return Scratch{detail::MultiResImage(cfg, resolutions_deg), {}, {}, {}, {}, {}, {}}; });
+
   detail::ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
     const WorldKeyframe& kf = keyframes[k];
-    const auto scan = detail::LoadScan(kf);
-    detail::MultiResImage img(cfg, resolutions_deg);
-    img.Build(*scan);
+    Scratch& sc = scratch.local();
+    sc.img.Build(*detail::LoadScan(kf));
+    const detail::MultiResImage& img = sc.img;
     const Eigen::Matrix3f Rt = kf.T_world_sensor.linear().transpose().cast<float>();
     const Eigen::Vector3f c = kf.T_world_sensor.translation().cast<float>();
-    index.ForTilesNear(c, radius, [&](std::uint32_t b, std::uint32_t e) {
-      for (std::uint32_t i = b; i < e; ++i) {
-        const Eigen::Vector3f d = pts[i] - c;
-        if (d.squaredNorm() > r2) continue;
-        const Eigen::Vector3f ps = Rt * d;
-        float r, pitch, yaw;
-        if (!img.Angles(ps, &r, &pitch, &yaw)) continue;
-        const float tol = tol_abs + tol_rel * r;
+    index.ForTilesNear(c, radius, [&](std::uint32_t tile, std::uint32_t b, std::uint32_t e) {
+      const std::size_t tn = e - b;
+      if (sc.idx.size() < tn) {
+        sc.idx.resize(tn);
+        sc.range.resize(tn + 3);
+        sc.pitch.resize(tn + 3);
+        sc.yaw.resize(tn + 3);
+        if (surface) sc.tan_inc.resize(tn + 3);
+      }
+      const std::size_t m = img.Project(index.x() + b, index.y() + b, index.z() + b, tn, c, Rt, r2,
+                                        sc.idx.data(), sc.range.data(), sc.pitch.data(), sc.yaw.data());
+      if (m == 0) return;
+      for (std::size_t j = m; j < m + 3; ++j) sc.range[j] = sc.pitch[j] = sc.yaw[j] = 0.f;  // padding
+      if (surface) {
         // tan(incidence) of the ray on the point's surface (capped at grazing incidence).
-        float tan_inc = 0.f;
-        if (surface) {
-          const float c = std::fabs((*options.normals)[index.order()[i]].dot(d)) / r;
-          tan_inc = std::sqrt(std::max(0.f, 1.f - c * c)) / std::max(c, 1e-3f);
+        for (std::size_t j = 0; j < m; ++j) {
+          const std::size_t i = b + sc.idx[j];
+          const Eigen::Vector3f d = Eigen::Vector3f(index.x()[i], index.y()[i], index.z()[i]) - c;
+          const float cs = std::fabs((*options.normals)[order[i]].dot(d)) / sc.range[j];
+          sc.tan_inc[j] = std::sqrt(std::max(0.f, 1.f - cs * cs)) / std::max(cs, 1e-3f);
         }
-        for (int l = 0; l < nl; ++l) {
-          // See-through: even the nearest return in the window around the point's pixel lies
-          // beyond it (so grazing surfaces and silhouette edges, whose neighbouring pixels
-          // return nearer, give no vote). Hit: the pixel's own or the window's nearest return
-          // is at the point's range.
-          const std::size_t pix = img.Pixel(l, pitch, yaw);
-          const float s = img.Pooled(l, pix);
-          if (!std::isfinite(s)) continue;  // no return anywhere in the window: no evidence
-          const std::size_t slot = std::size_t(l) * n + i;
-          if (s > r + tol) {
-            see[slot].fetch_add(1, std::memory_order_relaxed);
-          } else if (std::fabs(s - r) <= tol || std::fabs(img.At(l, pix) - r) <= tol ||
-                     (surface && std::fabs(img.At(l, pix) - r) <=
-                                     std::min(surface_max, std::max(tol, r * pixel_rad[std::size_t(l)] * tan_inc)))) {
-            hit[slot].fetch_add(1, std::memory_order_relaxed);
-          } else if (count_occluded) {
-            occ[slot].fetch_add(1, std::memory_order_relaxed);
-          }
+        for (std::size_t j = m; j < m + 3; ++j) sc.tan_inc[j] = 0.f;
+      }
+      sc.votes.assign(L * tn, 0);
+      for (int l = 0; l < nl; ++l) {
+        detail::VoteTest t = test;
+        t.pixel_rad = pixel_rad[std::size_t(l)];
+        std::uint8_t* vote = sc.votes.data() + std::size_t(l) * tn;
+        if (surface)
+          detail::VoteLevel<true>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
+                                  sc.pitch.data(), sc.yaw.data(), sc.tan_inc.data(), vote);
+        else
+          detail::VoteLevel<false>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
+                                   sc.pitch.data(), sc.yaw.data(), nullptr, vote);
+      }
+      const std::lock_guard<std::mutex> lock(tile_locks[tile]);
+      for (std::size_t l = 0; l < L; ++l) {
+        const std::uint8_t* vote = sc.votes.data() + l * tn;
+        std::uint16_t* sv = see.data() + l * n + b;
+        std::uint16_t* hv = hit.data() + l * n + b;
+        for (std::size_t i = 0; i < tn; ++i) {
+          sv[i] = std::uint16_t(sv[i] + (vote[i] & kSee));
+          hv[i] = std::uint16_t(hv[i] + ((vote[i] & kHit) >> 1));
+        }
+        if (count_occluded) {
+          std::uint16_t* ov = occ.data() + l * n + b;
+          for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + ((vote[i] & kOcc) >> 2));
         }
       }
     });
   });
 
-  const auto& order = index.order();
   for (std::size_t l = 0; l < L; ++l) {
     for (std::size_t i = 0; i < n; ++i) {
       const std::size_t orig = std::size_t(order[i]);
-      out.see[l * n + orig] = see[l * n + i].load(std::memory_order_relaxed);
-      out.hit[l * n + orig] = hit[l * n + i].load(std::memory_order_relaxed);
-      if (count_occluded) out.occ[l * n + orig] = occ[l * n + i].load(std::memory_order_relaxed);
+      out.see[l * n + orig] = see[l * n + i];
+      out.hit[l * n + orig] = hit[l * n + i];
+      if (count_occluded) out.occ[l * n + orig] = occ[l * n + i];
     }
   }
   return out;
