@@ -76,6 +76,41 @@ TEST(RemovertVotes, SeeThroughHitAndOcclusion) {
   }
 }
 
+TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
+  // Sensor 1.8 m above flat ground (z = 0), 2 deg pixels. Ground point A at 20 m: its own pixel's
+  // return is the ground 24 m away (the next ring), the window also holds a nearer ring (17 m):
+  // far ground sampled sparsely, a surface hit. Ground point B: its pixel's return is an object
+  // 0.36 m above the ground in front of it: occluded, not a hit, although as near in range.
+  const Pose T = test::At(0, 0, 1.8);
+  WorldKeyframe kf;
+  kf.T_world_sensor = T;
+  auto scan = std::make_shared<PointCloud>();
+  scan->push_back(24.f, -0.05f, -1.8f);        // ground ring beyond A, same pixel
+  scan->push_back(17.f, -0.05f, -1.8f);        // ground ring before A, the row below
+  scan->push_back(16.f, 4.f, 0.36f - 1.8f);    // object in front of B, same pixel
+  kf.cloud = scan;
+  PointCloud pts;
+  pts.push_back(20.f, 0.f, 0.f);  // A
+  pts.push_back(20.f, 5.f, 0.f);  // B
+  const std::vector<Eigen::Vector3f> up(2, Eigen::Vector3f::UnitZ());
+  RemovertConfig cfg;
+  removert::VisibilityOptions opt;
+  opt.count_occluded = true;
+  opt.normals = &up;
+  opt.surface_max_m = 10.0;
+  const auto v = removert::CountVisibility(pts, {kf}, {2.0}, cfg, 1, opt);
+  EXPECT_EQ(v.See(0, 0), 0);
+  EXPECT_EQ(v.Hit(0, 0), 1);
+  EXPECT_EQ(v.See(0, 1), 0);
+  EXPECT_EQ(v.Hit(0, 1), 0);
+  EXPECT_EQ(v.occ[1], 1);
+  // Without normals A is only occluded too (the plain range test misses sparse far ground).
+  opt.normals = nullptr;
+  const auto plain = removert::CountVisibility(pts, {kf}, {2.0}, cfg, 1, opt);
+  EXPECT_EQ(plain.Hit(0, 0), 0);
+  EXPECT_EQ(plain.occ[0], 1);
+}
+
 // The street scene: 21 keyframes 2 m apart along x.
 struct Street {
   std::vector<WorldKeyframe> kfs;

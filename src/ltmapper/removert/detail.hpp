@@ -44,7 +44,8 @@ geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_d
 // worker serves all its keyframes.
 class MultiResImage {
  public:
-  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg);
+  // keep_returns: Build() also keeps each pixel's nearest return (sensor frame, Returns()).
+  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, bool keep_returns = false);
   // Projects a scan (sensor frame); returns within [min_range, max_range] only. Then each
   // level's min-pooled twin: the min over the (2w+1) x (2w+1) window centred on each pixel
   // (columns wrap around), w = window_px.
@@ -94,6 +95,9 @@ class MultiResImage {
   float Pooled(int level, std::size_t pixel) const { return levels_[std::size_t(level)].pooled[pixel]; }
   // (pooled, range) of each pixel side by side: the vote test reads both, from one cache line.
   const float* Pairs(int level) const { return levels_[std::size_t(level)].pairs.data(); }
+  // Per pixel, the sensor-frame position of its nearest return (only with keep_returns; valid
+  // where At() is finite).
+  const Eigen::Vector3f* Returns(int level) const { return levels_[std::size_t(level)].ret.data(); }
   int Rows(int level) const { return GridOf(level).rows; }
   int Cols(int level) const { return GridOf(level).cols; }
 
@@ -101,8 +105,10 @@ class MultiResImage {
   struct Level {
     Grid grid;
     std::vector<float> range, pooled, tmp, pairs;
+    std::vector<Eigen::Vector3f> ret;  // keep_returns
   };
   void Pool(Level& L) const;
+  bool keep_returns_ = false;
   int window_ = 0;
   float up_ = 0.f, down_ = 0.f;  // [rad]
   float min_range_ = 0.f, max_range_ = 0.f;

@@ -73,7 +73,8 @@ struct RemovertConfig {
   double ld_normal_radius_m = 1.0;   // [m] neighbourhood (own map, at most 16 points) for the normals of
                                       // raw changes; a line-like neighbourhood (far ground rings) takes
                                       // the normal perpendicular to the line closest to vertical
-  double ld_surface_max_m = 10.0;     // [m] cap of the same-surface range allowance (grazing far ground)
+  double ld_surface_max_m = 10.0;     // [m] a return on the point's plane at most this far from it in range is
+                                      // a same-surface hit (grazing far ground; an occluder is off the plane)
   int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through that this many of the other
                                   // session's keyframes hit on its surface plane (surface hits, see
                                   // VisibilityOptions) is the same surface, sampled more sparsely:
@@ -207,10 +208,10 @@ struct VisibilityVotes {
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
 };
 // Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit
-// when the nearest return of its own pixel lies within the range that one pixel spans on the
-// point's surface plane, r * pixel * tan(incidence), clamped to [tolerance, surface_max_m]: a
-// surface seen at a grazing angle (far ground) is sampled metres apart in range, so the plain
-// tolerance test misses it (LD "same surface" test).
+// when the nearest return of its own pixel lies on the point's surface plane (distance to the
+// plane within the tolerance) and at most surface_max_m from it in range: a surface seen at a
+// grazing angle (far ground) is sampled metres apart in range, so the plain range test misses
+// it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
 struct VisibilityOptions {
   bool count_occluded = false;
   const std::vector<Eigen::Vector3f>* normals = nullptr;

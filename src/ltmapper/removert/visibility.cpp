@@ -90,14 +90,22 @@ inline __m128 Angles4(__m128 x, __m128 y, __m128 z, __m128 up, __m128 down, __m1
 // vote[idx[j]]. Both lookups of a point come from one (pooled, range) pixel pair. The SSE2 path
 // takes four points at a time without branches (the tests mispredict often, and a mispredict
 // also cancels the next points' lookups in flight) with the scalar code's float operations.
-// Surface hits (normals given) need the points' tan(incidence).
+// Surface hits (normals given) need the points' planes in the sensor frame and the image's
+// nearest return per pixel (MultiResImage keep_returns).
 constexpr std::uint8_t kSee = 1, kHit = 2, kOcc = 4;
 struct VoteTest {
   float tol_abs = 0.f, tol_rel = 0.f;
-  float pixel_rad = 0.f;      // [rad] the level's pixel
-  float surface_max = 0.f;    // [m] cap of the surface-hit range allowance
+  float surface_max = 0.f;    // [m] cap of the surface-hit range difference
   std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
 };
+// Surface hit: the pixel's nearest return q lies on the point's plane (n . q = off, sensor
+// frame) within the tolerance, at most surface_max from the point in range. Far ground at a
+// grazing angle is sampled by rings metres apart in range, so the plain range test misses it;
+// an occluder in front of the point (a wall, a car) is off its plane.
+inline bool OnPlane(const float* plane, const Eigen::Vector3f& q, float at_off, float tol, float surface_max) {
+  return at_off <= surface_max &&
+         std::fabs(plane[0] * q.x() + plane[1] * q.y() + plane[2] * q.z() - plane[3]) <= tol;
+}
 
 #if defined(__SSE2__)
 // MultiResImage::Grid::Pixel of four points, in 32-bit lanes (pixel counts stay far below 2^31:
@@ -122,15 +130,15 @@ inline __m128i Pixel4(const MultiResImage::Grid& g, __m128 pitch, __m128 yaw) {
 }
 #endif
 
-// Arrays range / pitch / yaw / tan_inc hold m valid points plus 3 entries of padding (0).
+// Arrays range / pitch / yaw hold m valid points plus 3 entries of padding (0); with kSurface,
+// plane holds 4 floats per point (sensor-frame normal, offset) and returns the image's.
 template <bool kSurface>
 void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTest t, std::size_t m,
                const std::uint32_t* idx, const float* range, const float* pitch, const float* yaw,
-               const float* tan_inc, std::uint8_t* vote) {
+               const float* plane, const Eigen::Vector3f* returns, std::uint8_t* vote) {
 #if defined(__SSE2__)
   const __m128 sign = _mm_set1_ps(-0.f), inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
   const __m128 tol_abs = _mm_set1_ps(t.tol_abs), tol_rel = _mm_set1_ps(t.tol_rel);
-  const __m128 surface_max = _mm_set1_ps(t.surface_max), pixel_rad = _mm_set1_ps(t.pixel_rad);
   const __m128i code_see = _mm_set1_epi32(kSee), code_hit = _mm_set1_epi32(kHit);
   const __m128i code_occ = _mm_set1_epi32(t.occluded);
   alignas(16) std::int32_t pix[4], code[4];
@@ -149,19 +157,13 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
     // See-through: even the nearest return in the window around the point's pixel lies beyond
     // it (so grazing surfaces and silhouette edges, whose neighbouring pixels return nearer,
     // give no vote). Hit: the pixel's own or the window's nearest return is at the point's
-    // range, or (surface) within the range one pixel spans on the point's plane. No return
+    // range, or (surface) its own return lies on the point's plane (OnPlane). No return
     // anywhere in the window: no evidence.
     const __m128 evidence = _mm_cmplt_ps(_mm_andnot_ps(sign, s), inf);
     const __m128 see = _mm_and_ps(evidence, _mm_cmpgt_ps(s, _mm_add_ps(r, tol)));
     const __m128 at_off = _mm_andnot_ps(sign, _mm_sub_ps(at, r));
     const __m128 s_off = _mm_andnot_ps(sign, _mm_sub_ps(s, r));
-    __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
-    if constexpr (kSurface) {
-      // std::min(surface_max, std::max(tol, r * pixel_rad * tan_inc)): max_ps / min_ps with the
-      // same operand order pick the same value, NaN included.
-      const __m128 spread = _mm_mul_ps(_mm_mul_ps(r, pixel_rad), _mm_loadu_ps(tan_inc + j));
-      near = _mm_or_ps(near, _mm_cmple_ps(at_off, _mm_min_ps(_mm_max_ps(spread, tol), surface_max)));
-    }
+    const __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
     const __m128 hit = _mm_andnot_ps(see, _mm_and_ps(evidence, near));
     const __m128 occ = _mm_andnot_ps(_mm_or_ps(see, hit), evidence);
     const __m128i c = _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), code_see),
@@ -169,6 +171,18 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
                                    _mm_and_si128(_mm_castps_si128(occ), code_occ));
     _mm_store_si128(reinterpret_cast<__m128i*>(code), c);
     const std::size_t lanes = std::min<std::size_t>(4, m - j);
+    if constexpr (kSurface) {
+      // Occluded lanes whose own pixel has a return: the (rarer) plane test, one at a time.
+      int cand = _mm_movemask_ps(_mm_and_ps(occ, _mm_cmplt_ps(at, inf)));
+      if (cand) {
+        alignas(16) float offs[4], tols[4];
+        _mm_store_ps(offs, at_off);
+        _mm_store_ps(tols, tol);
+        for (std::size_t k = 0; k < lanes; ++k)
+          if ((cand >> k & 1) && OnPlane(plane + 4 * (j + k), returns[std::size_t(pix[k])], offs[k], tols[k], t.surface_max))
+            code[k] = kHit;
+      }
+    }
     for (std::size_t k = 0; k < lanes; ++k) vote[idx[j + k]] = std::uint8_t(code[k]);
   }
 #else
@@ -180,7 +194,8 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
     if (!std::isfinite(s)) continue;  // no return anywhere in the window: no evidence
     bool hit = std::fabs(s - r) <= tol || std::fabs(at - r) <= tol;
     if constexpr (kSurface)
-      hit = hit || std::fabs(at - r) <= std::min(t.surface_max, std::max(tol, r * t.pixel_rad * tan_inc[j]));
+      hit = hit || (!(s > r + tol) && std::isfinite(at) &&
+                    OnPlane(plane + 4 * j, returns[pix], std::fabs(at - r), tol, t.surface_max));
     vote[idx[j]] = s > r + tol ? kSee : (hit ? kHit : t.occluded);
   }
 #endif
@@ -188,7 +203,9 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
 
 }  // namespace
 
-MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg) {
+MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg,
+                             bool keep_returns)
+    : keep_returns_(keep_returns) {
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   up_ = float(cfg.fov_up_deg * kDeg);
   down_ = float(cfg.fov_down_deg * kDeg);
@@ -208,6 +225,7 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
     L.pooled = L.range;
     L.tmp = L.range;
     L.pairs.assign(2 * L.range.size(), std::numeric_limits<float>::infinity());
+    if (keep_returns_) L.ret.assign(L.range.size(), Eigen::Vector3f::Zero());
     levels_.push_back(std::move(L));
   }
 }
@@ -309,6 +327,17 @@ void MultiResImage::Build(const PointCloud& scan) {
     const PointXYZI& q = scan.points[i];
     float r, pitch, yaw;
     if (Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw)) add(r, pitch, yaw);
+  }
+  if (keep_returns_) {
+    // The return that set each pixel's min range (same Angles / Pixel as above: same floats).
+    for (const PointXYZI& q : scan.points) {
+      float r, pitch, yaw;
+      if (!Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw) || r < min_range_ || r > max_range_) continue;
+      for (Level& L : levels_) {
+        const std::size_t pix = L.grid.Pixel(pitch, yaw);
+        if (L.range[pix] == r) L.ret[pix] = Eigen::Vector3f(q.x, q.y, q.z);
+      }
+    }
   }
   for (Level& L : levels_) {
     Pool(L);
@@ -465,15 +494,13 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   const float radius = float(cfg.submap_radius_m);
   const float r2 = radius * radius;
   const float tol_abs = float(cfg.tol_abs_m), tol_rel = float(cfg.tol_rel);
-  // Surface hits: range one pixel spans on the point's plane per unit range and tan(incidence).
+  // Surface hits: the pixel's nearest return on the point's plane (OnPlane).
   const float surface_max = float(options.surface_max_m);
   const bool surface = options.normals != nullptr && surface_max > 0.f;
-  std::vector<float> pixel_rad(L);
-  for (std::size_t l = 0; l < L; ++l) pixel_rad[l] = float(resolutions_deg[l] * 3.14159265358979323846 / 180.0);
   const int nl = int(L);
 
   // Per worker: the range images (reused from keyframe to keyframe) and one tile's projections
-  // (valid points: position in the tile, range, pitch, yaw, tan(incidence)) and votes.
+  // (valid points: position in the tile, range, pitch, yaw, sensor-frame plane) and votes.
   using detail::kHit, detail::kOcc, detail::kSee;
   detail::VoteTest test;
   test.tol_abs = tol_abs;
@@ -483,11 +510,11 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   struct Scratch {
     detail::MultiResImage img;
     std::vector<std::uint32_t> idx;
-    std::vector<float> range, pitch, yaw, tan_inc;
+    std::vector<float> range, pitch, yaw, plane;
     std::vector<std::uint8_t> votes;  // [level * tile size + position in the tile]
   };
   tbb::enumerable_thread_specific<Scratch> scratch(
-      [&] { return Scratch{detail::MultiResImage(cfg, resolutions_deg), {}, {}, {}, {}, {}, {}}; });
+      [&] { return Scratch{detail::MultiResImage(cfg, resolutions_deg, surface), {}, {}, {}, {}, {}, {}}; });
 
   detail::ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
     const WorldKeyframe& kf = keyframes[k];
@@ -503,33 +530,35 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
         sc.range.resize(tn + 3);
         sc.pitch.resize(tn + 3);
         sc.yaw.resize(tn + 3);
-        if (surface) sc.tan_inc.resize(tn + 3);
+        if (surface) sc.plane.resize(4 * (tn + 3));
       }
       const std::size_t m = img.Project(index.x() + b, index.y() + b, index.z() + b, tn, c, Rt, r2,
                                         sc.idx.data(), sc.range.data(), sc.pitch.data(), sc.yaw.data());
       if (m == 0) return;
       for (std::size_t j = m; j < m + 3; ++j) sc.range[j] = sc.pitch[j] = sc.yaw[j] = 0.f;  // padding
       if (surface) {
-        // tan(incidence) of the ray on the point's surface (capped at grazing incidence).
+        // Each point's plane in the sensor frame: normal n_s = Rt n, offset n_s . (Rt (p - c)).
         for (std::size_t j = 0; j < m; ++j) {
           const std::size_t i = b + sc.idx[j];
-          const Eigen::Vector3f d = Eigen::Vector3f(index.x()[i], index.y()[i], index.z()[i]) - c;
-          const float cs = std::fabs((*options.normals)[order[i]].dot(d)) / sc.range[j];
-          sc.tan_inc[j] = std::sqrt(std::max(0.f, 1.f - cs * cs)) / std::max(cs, 1e-3f);
+          const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(index.x()[i], index.y()[i], index.z()[i]) - c);
+          const Eigen::Vector3f ns = Rt * (*options.normals)[order[i]];
+          float* pl = &sc.plane[4 * j];
+          pl[0] = ns.x();
+          pl[1] = ns.y();
+          pl[2] = ns.z();
+          pl[3] = ns.dot(ps);
         }
-        for (std::size_t j = m; j < m + 3; ++j) sc.tan_inc[j] = 0.f;
       }
       sc.votes.assign(L * tn, 0);
       for (int l = 0; l < nl; ++l) {
-        detail::VoteTest t = test;
-        t.pixel_rad = pixel_rad[std::size_t(l)];
+        const detail::VoteTest& t = test;
         std::uint8_t* vote = sc.votes.data() + std::size_t(l) * tn;
         if (surface)
           detail::VoteLevel<true>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
-                                  sc.pitch.data(), sc.yaw.data(), sc.tan_inc.data(), vote);
+                                  sc.pitch.data(), sc.yaw.data(), sc.plane.data(), img.Returns(l), vote);
         else
           detail::VoteLevel<false>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
-                                   sc.pitch.data(), sc.yaw.data(), nullptr, vote);
+                                   sc.pitch.data(), sc.yaw.data(), nullptr, nullptr, vote);
       }
       const std::lock_guard<std::mutex> lock(tile_locks[tile]);
       for (std::size_t l = 0; l < L; ++l) {
