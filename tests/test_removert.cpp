@@ -204,6 +204,28 @@ TEST(RemovertHd, RemovesMoversKeepsStaticStreet) {
               sc.sa, sc.da, res.stats.candidates, res.stats.reverted, res.stats.removed);
   EXPECT_GE(sc.sa, 0.99);
   EXPECT_GE(sc.da, 0.95);
+  EXPECT_EQ(res.hd_map.size(), res.stats.removed + res.stats.dilated);
+
+  // Dilation off: the same removal, nothing added; with 0.5 m (the movers ride 0.3 m above the
+  // ground here) ground points are added, each within 0.5 m of a removed point.
+  RemovertConfig plain = cfg, wide = cfg;
+  plain.dilate_m = 0.0;
+  wide.dilate_m = 0.5;
+  const auto p = removert::RemoveHd(s.kfs, plain, 2);
+  const auto w = removert::RemoveHd(s.kfs, wide, 2);
+  EXPECT_EQ(p.stats.dilated, 0u);
+  EXPECT_EQ(p.stats.removed, res.stats.removed);
+  EXPECT_EQ(w.stats.removed, res.stats.removed);
+  EXPECT_GT(w.stats.dilated, 0u);
+  EXPECT_EQ(w.hd_map.size(), w.stats.removed + w.stats.dilated);
+  const geometry::KdTree removed(p.hd_map);
+  std::size_t far = 0;
+  for (const auto& q : w.hd_map.points) {
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    far += !(removed.Nearest(q.xyz(), &j, &d2) && d2 <= 0.25f * 1.0001f);
+  }
+  EXPECT_EQ(far, 0u);
 }
 
 TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {

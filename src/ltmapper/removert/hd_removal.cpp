@@ -24,6 +24,7 @@
 #include <cstdint>
 #include <limits>
 #include <mutex>
+#include <unordered_set>
 #include <utility>
 
 namespace ltm::removert {
@@ -352,14 +353,31 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
     const PointCloud removed = map.select(dynamic);
     const geometry::KdTree tree(removed);
     const float r2 = float(cfg.dilate_m * cfg.dilate_m);
+    // Cells (edge 4 * dilate_m) touched by some removed point's dilation ball: most map points
+    // are far from every removed point and skip the kd-tree after one hash lookup.
+    const double cell = 4.0 * cfg.dilate_m;
+    auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
+      return (x & 0x1FFFFF) | ((y & 0x1FFFFF) << 21) | ((z & 0x1FFFFF) << 42);
+    };
+    auto index = [&](float v, double off) { return std::int64_t(std::floor((double(v) + off) / cell)); };
+    std::unordered_set<std::int64_t> touched;
+    for (const PointXYZI& q : removed.points)
+      for (int dx = -1; dx <= 1; dx += 2)
+        for (int dy = -1; dy <= 1; dy += 2)
+          for (int dz = -1; dz <= 1; dz += 2)
+            touched.insert(key(index(q.x, dx * cfg.dilate_m), index(q.y, dy * cfg.dilate_m),
+                               index(q.z, dz * cfg.dilate_m)));
     std::vector<std::uint8_t> grow(map.size(), 0);
     const std::size_t chunk = 8192;
     detail::ParallelFor((map.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
       const std::size_t b = c * chunk, e = std::min(map.size(), b + chunk);
       std::uint32_t j = 0;
       float d2 = 0.f;
-      for (std::size_t i = b; i < e; ++i)
-        if (!dynamic[i] && tree.Nearest(map.points[i].xyz(), &j, &d2) && d2 <= r2) grow[i] = 1;
+      for (std::size_t i = b; i < e; ++i) {
+        const PointXYZI& p = map.points[i];
+        if (dynamic[i] || !touched.count(key(index(p.x, 0.0), index(p.y, 0.0), index(p.z, 0.0)))) continue;
+        if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= r2) grow[i] = 1;
+      }
     });
     for (std::size_t i = 0; i < map.size(); ++i)
       if (grow[i]) {
