@@ -217,6 +217,7 @@ void SetupLd(CLI::App& parent) {
     std::string sim, changes, pair, aligned;
     std::string truth_frame = "central", truth_mapping = "keyframe";
     std::string errors;
+    bool from_scans = false;
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("ld", "LD changes: precision / recall / F1 of PD and ND, strong and weak");
@@ -231,6 +232,9 @@ void SetupLd(CLI::App& parent) {
   cmd->add_option("--changes", o->changes, "LT-removert output dir (pair folder, <central>/static_map.pcd)");
   cmd->add_option("--pair", o->pair, "Session pair, e.g. 00_01");
   cmd->add_option("--aligned", o->aligned, "LT-SLAM output: map the truth into the estimated world (see --truth-mapping)");
+  cmd->add_flag("--truth-from-scans", o->from_scans,
+                "With --sim: rebuild the truth from the labelled scans placed with the method's poses "
+                "(its maps' own blur far from the trajectory) instead of moving the truth clouds");
   cmd->add_option("--errors", o->errors,
                   "Write DIR/false_positives.ply and DIR/false_negatives.ply (class field: which PD/ND cloud)");
   AddTruthFrame(*cmd, o->truth_frame);
@@ -257,8 +261,17 @@ void SetupLd(CLI::App& parent) {
       // PD points are query static_world points, ND points central ones (docs/FORMATS.md).
       const eval::ChangeClouds w = eval::ReadChangeClouds(tdir);
       const int th = o->common.threads;
-      truth = {m.Map(w.pd_strong, std::size_t(q), th), m.Map(w.pd_weak, std::size_t(q), th),
-               m.Map(w.nd_strong, std::size_t(c), th), m.Map(w.nd_weak, std::size_t(c), th)};
+      if (o->from_scans) {
+        const double v = cfg.ld_match_dist_m;
+        auto pd = eval::ChangesFromLabelledScans(o->sim, std::size_t(q), {&w.pd_strong, &w.pd_weak}, m, v, th);
+        auto nd = eval::ChangesFromLabelledScans(o->sim, std::size_t(c), {&w.nd_strong, &w.nd_weak}, m, v, th);
+        truth = {std::move(pd[0]), std::move(pd[1]), std::move(nd[0]), std::move(nd[1])};
+        report.inputs.push_back({"truth built from", "labelled scans placed with the method's poses, voxel " +
+                                                         std::to_string(v) + " m"});
+      } else {
+        truth = {m.Map(w.pd_strong, std::size_t(q), th), m.Map(w.pd_weak, std::size_t(q), th),
+                 m.Map(w.nd_strong, std::size_t(c), th), m.Map(w.nd_weak, std::size_t(c), th)};
+      }
       pred = eval::ReadChangeClouds(pdir);
       if (central_static.empty() && o->kept_map.empty()) {
         // The central session is the pair's first number, indexing the sim's sessions.

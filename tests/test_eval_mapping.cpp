@@ -94,6 +94,60 @@ TEST(TruthMapping, KeyframeMappingIsExactNextToEachKeyframe) {
   EXPECT_TRUE(g.ScanPose(7, 9, truth[2]).isApprox(MakePose(1, 2, 3, 4) * truth[2]));
 }
 
+TEST(TruthMapping, ChangesFromLabelledScansPlaceEachScanWithItsEstimatedPose) {
+  TempDir dir;
+  const std::string sim = dir / "sim";
+  const std::string sdir = sim + "/truth/session_00";
+  std::vector<Pose> truth, est;
+  Drive(4, &truth, &est);
+  // Per keyframe a 1 m x 1 m patch of points 0.25 m apart (sensor frame), one HD point on it.
+  // The points of keyframes 1 and 3 are the change; the static world is the scans in the true world.
+  PointCloud world, change;
+  std::vector<PointCloud> expected_est(1);
+  for (std::size_t k = 0; k < truth.size(); ++k) {
+    PointCloud scan;
+    for (int i = 0; i < 5; ++i)
+      for (int j = 0; j < 5; ++j) {
+        scan.push_back(2.f + 0.25f * float(i), 0.25f * float(j), -1.f);
+        scan.cls.push_back(PointClass::kStatic);
+      }
+    scan.push_back(2.5f, 0.5f, -0.5f);
+    scan.cls.push_back(PointClass::kHD);
+    io::WritePly(sdir + "/labels/00000" + std::to_string(k) + ".ply", scan);
+    std::vector<bool> st(scan.size(), true);
+    st.back() = false;
+    const PointCloud w = geometry::Transform(scan.select(st), truth[k]);
+    world.append(w);
+    if (k % 2 == 1) {
+      change.append(w);
+      expected_est[0].append(geometry::Transform(scan.select(st), est[k]));
+    }
+  }
+  world.cls.clear();
+  change.cls.clear();
+  io::WritePcd(sdir + "/static_world.pcd", world);
+  io::WriteKittiPoses(sdir + "/poses_world.txt", truth);
+  TruthMapping m;
+  m.mode = "keyframe";
+  m.sessions.resize(1);
+  m.sessions[0].name = "session_00";
+  m.sessions[0].truth = truth;
+  m.sessions[0].est = est;
+  const PointCloud none;
+  const auto got = ChangesFromLabelledScans(sim, 0, {&change, &none}, m, 0.1, 2);
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_TRUE(got[1].empty());
+  ASSERT_EQ(got[0].size(), expected_est[0].size());  // 0.1 m voxels keep the 0.25 m grid, HD dropped
+  const geometry::KdTree tree(expected_est[0]);
+  for (const PointXYZI& p : got[0].points) {
+    std::uint32_t j = 0;
+    float d2 = 1.f;
+    ASSERT_TRUE(tree.Nearest(p.xyz(), &j, &d2));
+    EXPECT_LT(d2, 1e-8f);
+  }
+  test::ExpectError([&] { ChangesFromLabelledScans(sim, 3, {&change}, m, 0.1); }, {"no sim session"});
+}
+
 TEST(TruthMapping, PoseCountMismatchAndNoPosesAreErrors) {
   std::vector<Pose> truth, est;
   Drive(5, &truth, &est);

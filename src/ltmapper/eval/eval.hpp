@@ -289,6 +289,19 @@ TruthMapping GlobalTruthMapping(const Pose& T_est_truth, const std::string& desc
 // sim session (counts must agree).
 TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string& aligned_dir);
 
+// LD truth rebuilt the way the method builds its maps: the labelled scans of sim session
+// `session` (truth/<name>/labels) placed with `mapping.ScanPose` (the estimated pose of each
+// keyframe), keeping the static points whose true-world position has, as its nearest point of the
+// session's truth/<name>/static_world.pcd, a point marked by one of `changes` (the session's
+// change clouds, true world; each marks its nearest static-world point within voxel_m / 2), each
+// labelled with that cloud's class, then voxelised at `voxel_m`. Far from the trajectory the per-keyframe
+// mapping of MapTruthByKeyframes blurs by the sessions' relative rotation error times the
+// viewing distance; this truth has exactly the method's blur. Returns one cloud per input.
+std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
+                                                 const std::vector<const PointCloud*>& changes,
+                                                 const TruthMapping& mapping, double voxel_m, int threads = 0);
+
+
 // ----------------------------------------------------------------------------- live / meta map
 // The criterion "the live map contains new parked cars; the meta map does not": truth objects of
 // some classes (cars) that are new since session 0 (present in the last session, absent from 0)

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <mutex>
 
 namespace fs = std::filesystem;
 
@@ -128,6 +129,69 @@ TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string&
   }
   return m;
 }
+
+std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
+                                                 const std::vector<const PointCloud*>& changes,
+                                                 const TruthMapping& mapping, double voxel_m, int threads) {
+  const auto names = SimSessionNames(sim_dir);
+  if (session >= names.size())
+    throw Error(Join(sim_dir, "truth"), 0, "no sim session " + std::to_string(session));
+  const std::string tdir = Join(Join(sim_dir, "truth"), names[session]);
+  const std::vector<Pose> T_true = ReadPoses(Join(tdir, "poses_world.txt"));
+  const std::string ldir = Join(tdir, "labels");
+  if (!fs::is_directory(ldir)) throw Error(ldir, 0, "no labelled scans");
+  const auto files = io::ListIndexedFiles(ldir, ".ply");
+  if (files.size() != T_true.size())
+    throw Error(ldir, 0, std::to_string(files.size()) + " labelled scans but " + std::to_string(T_true.size()) + " poses");
+  // Which static-world points are changes (each change point is one of them, at distance 0).
+  auto world = std::make_shared<const PointCloud>(io::ReadCloud(Join(tdir, "static_world.pcd")));
+  const geometry::KdTree tree(world);
+  std::vector<std::int8_t> label(world->size(), -1);
+  // LD object truth is voxelised apart from the static world (a car's voxel there may also hold
+  // ground points), so a change point marks its nearest static-world point within voxel_m / 2.
+  const float same2 = float(0.25 * voxel_m * voxel_m);
+  for (std::size_t c = 0; c < changes.size(); ++c)
+    for (const PointXYZI& p : changes[c]->points) {
+      std::uint32_t j = 0;
+      float d2 = 0.f;
+      if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= same2) label[j] = std::int8_t(c);
+    }
+  std::vector<PointCloud> out(changes.size());
+  std::mutex out_mutex;
+  auto arena = MakeArena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, files.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t k = r.begin(); k != r.end(); ++k) {
+        const std::string path = files[k].find('/') == std::string::npos ? Join(ldir, files[k]) : files[k];
+        const PointCloud scan = io::ReadPly(path);
+        if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+        const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
+        const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
+        const Eigen::Vector3f t = T_true[k].translation().cast<float>();
+        std::vector<PointCloud> part(changes.size());
+        for (std::size_t i = 0; i < scan.size(); ++i) {
+          if (scan.cls[i] != PointClass::kStatic) continue;
+          std::uint32_t j = 0;
+          float d2 = 0.f;
+          if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] < 0) continue;
+          part[std::size_t(label[j])].points.push_back(scan.points[i]);
+        }
+        for (PointCloud& p : part) {
+          geometry::TransformInPlace(p, T_est);
+          p = geometry::VoxelDownsample(p, voxel_m, 1);
+        }
+        const std::lock_guard<std::mutex> lock(out_mutex);
+        for (std::size_t c = 0; c < part.size(); ++c) out[c].append(part[c]);
+      }
+    });
+  });
+  for (PointCloud& c : out) {
+    c = geometry::VoxelDownsample(c, voxel_m, threads);
+    c.cls.clear();
+  }
+  return out;
+}
+
 
 // ------------------------------------------------------------------------------ live / meta
 LiveMetaResult EvaluateLiveMeta(const std::vector<LiveMetaObject>& truth, const PointCloud& live,
