@@ -81,6 +81,18 @@ TEST(RemovertLd, NdPdStrongWeak) {
   const Scene s = MakeScene();
   RemovertConfig cfg;
   const auto ld = removert::DetectLd(s.cmap, s.qmap, s.central, s.query, cfg, 2);
+  // central_nd marks exactly the central map points that are in nd_strong / nd_weak.
+  ASSERT_EQ(ld.central_nd.size(), s.cmap.size());
+  const PointCloud marked = s.cmap.select(ld.central_nd);
+  EXPECT_EQ(marked.size(), ld.nd_strong.size() + ld.nd_weak.size());
+  const geometry::KdTree nd_tree(marked);
+  for (const PointCloud* c : {&ld.nd_strong, &ld.nd_weak})
+    for (const PointXYZI& p : c->points) {
+      std::uint32_t j = 0;
+      float d2 = 1.f;
+      ASSERT_TRUE(nd_tree.Nearest(p.xyz(), &j, &d2));
+      EXPECT_EQ(d2, 0.f);
+    }
   const test::Box car_c = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, 0);
   const test::Box car_q = test::MakeBox(-7, -6, 0.3, -3, -4, 1.8, 0);
   const test::Box hidden = test::MakeBox(13, -9, 0.0, 17, -7, 2.0, 0);

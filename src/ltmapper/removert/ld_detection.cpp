@@ -73,7 +73,8 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   res.stats.query_points = query_map.size();
 
   const PointCloud ckf = Positions(central_keyframes), qkf = Positions(query_keyframes);
-  const PointCloud nd = central_map.select(Missing(central_map, query_map, ckf, qkf, cfg, threads));
+  const std::vector<bool> missing = Missing(central_map, query_map, ckf, qkf, cfg, threads);
+  const PointCloud nd = central_map.select(missing);
   const PointCloud pd = query_map.select(Missing(query_map, central_map, qkf, ckf, cfg, threads));
 
   // Weak ND preservation: ND the query never saw through stays in the map.
@@ -93,6 +94,9 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
     res.nd_strong = nd.select(strong);
     res.nd_weak = nd.select(weak);
     res.nd_unobserved = nd.select(unobs);
+    res.central_nd.assign(central_map.size(), false);
+    for (std::size_t i = 0, j = 0; i < central_map.size(); ++i)
+      if (missing[i]) res.central_nd[i] = strong[j] || weak[j], ++j;
   }
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
   {

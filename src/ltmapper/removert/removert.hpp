@@ -183,6 +183,7 @@ struct LdResult {
   PointCloud pd_strong, pd_weak;  // query map points, world frame
   PointCloud pd_unobserved;       // query points the central never had in view (new territory)
   PointCloud nd_unobserved;       // central points the query never had in view (kept, no change)
+  std::vector<bool> central_nd;   // per central map point: it is in nd_strong or nd_weak
   LdStats stats;
 };
 // LD changes between the HD-free central and query maps (world frame). The keyframes (scans +

@@ -18,15 +18,11 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
-#include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <iomanip>
-#include <memory>
 #include <set>
 #include <sstream>
-#include <unordered_set>
 
 namespace ltm::removert {
 namespace {
@@ -89,65 +85,6 @@ std::vector<std::vector<std::uint32_t>> Buckets(const std::vector<std::uint32_t>
   for (std::size_t i = 0; i < owner.size(); ++i)
     if (owner[i] < n) b[owner[i]].push_back(std::uint32_t(i));
   return b;
-}
-
-// keep[i] = no point of `subset` lies at squared distance 0 (as float, the kd-tree's test) from
-// cloud[i]. For a point whose coordinates are all finite and at least 2^-50 in magnitude that
-// means equal coordinates: a different float that close differs by 2^-74 or more, and the
-// square of that does not round to 0. Those points are looked up in a hash of the subset's
-// coordinates; the others (near an axis plane through the origin, non-finite) ask the kd-tree.
-std::vector<bool> NotIn(const PointCloud& cloud, const PointCloud& subset, int threads) {
-  std::vector<bool> keep(cloud.size(), true);
-  if (subset.empty()) return keep;
-  struct Key {
-    std::uint32_t x, y, z;
-    bool operator==(const Key& o) const { return x == o.x && y == o.y && z == o.z; }
-  };
-  auto key = [](const PointXYZI& p) {
-    Key k;
-    std::memcpy(&k.x, &p.x, 4);
-    std::memcpy(&k.y, &p.y, 4);
-    std::memcpy(&k.z, &p.z, 4);
-    return k;
-  };
-  struct KeyHash {
-    std::size_t operator()(const Key& k) const {
-      // Multiplicative mixing of the three bit patterns (64-bit odd constants).
-      return std::size_t((std::uint64_t(k.x) * 0x9E3779B97F4A7C15ull) ^
-                         (std::uint64_t(k.y) * 0xC2B2AE3D27D4EB4Full) ^
-                         (std::uint64_t(k.z) * 0x165667B19E3779F9ull));
-    }
-  };
-  constexpr float kMinExact = 0x1p-50f;
-  auto exact = [&](const PointXYZI& p) {
-    return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::fabs(p.x) >= kMinExact &&
-           std::fabs(p.y) >= kMinExact && std::fabs(p.z) >= kMinExact;
-  };
-  std::unordered_set<Key, KeyHash> coords;
-  coords.reserve(subset.size());
-  for (const PointXYZI& p : subset.points) coords.insert(key(p));
-  std::vector<std::uint8_t> in(cloud.size(), 0), other(cloud.size(), 0);
-  const std::size_t chunk = 8192;
-  detail::ParallelFor((cloud.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
-    for (std::size_t i = c * chunk; i < std::min(cloud.size(), (c + 1) * chunk); ++i) {
-      const PointXYZI& p = cloud.points[i];
-      if (exact(p))
-        in[i] = coords.count(key(p)) ? 1 : 0;
-      else
-        other[i] = 1;
-    }
-  });
-  std::unique_ptr<geometry::KdTree> tree;
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
-    if (other[i]) {
-      if (!tree) tree = std::make_unique<geometry::KdTree>(subset);
-      std::uint32_t k;
-      float d2;
-      in[i] = tree->Nearest(cloud.points[i].xyz(), &k, &d2) && d2 == 0.f;
-    }
-    keep[i] = !in[i];
-  }
-  return keep;
 }
 
 PointCloud Voxel(const PointCloud& c, double voxel_m) {
@@ -263,12 +200,12 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     PointCloud pd_strong_kf = ld.pd_strong;
     pd_strong_kf.append(ld.pd_unobserved);
 
-    // Central static minus ND (ND points are exactly central static points).
+    // Central static minus ND.
     const PointCloud& cmap = static_maps[std::size_t(c)];
-    PointCloud nd_all = ld.nd_strong;
-    nd_all.append(ld.nd_weak);
     if (cfg.write_ply) {
-      PointCloud all = Labelled(cmap.select(NotIn(cmap, nd_all, threads)), PointClass::kStatic, c);
+      std::vector<bool> unchanged(cmap.size());
+      for (std::size_t i = 0; i < cmap.size(); ++i) unchanged[i] = !ld.central_nd[i];
+      PointCloud all = Labelled(cmap.select(unchanged), PointClass::kStatic, c);
       all.append(Labelled(ld.nd_strong, PointClass::kNDStrong, c));
       all.append(Labelled(ld.nd_weak, PointClass::kNDWeak, c));
       all.append(Labelled(ld.pd_strong, PointClass::kPDStrong, q));
