@@ -284,12 +284,25 @@ std::size_t MultiResImage::Project(const float* x, const float* y, const float* 
 void MultiResImage::Build(const PointCloud& scan) {
   for (Level& L : levels_) std::fill(L.range.begin(), L.range.end(), std::numeric_limits<float>::infinity());
   const int nl = levels();
-  auto add = [&](float r, float pitch, float yaw) {
+  // The pixel's min range, and with keep_returns the return that has it (the last of equals).
+  auto keep = [](Level& L, std::size_t pix, float r, const PointXYZI& q) {
+    float& m = L.range[pix];
+    if (r <= m) {
+      m = r;
+      L.ret[pix] = Eigen::Vector3f(q.x, q.y, q.z);
+    }
+  };
+  auto add = [&](float r, float pitch, float yaw, const PointXYZI& q) {
     if (r < min_range_ || r > max_range_) return;
     for (int l = 0; l < nl; ++l) {
       Level& L = levels_[std::size_t(l)];
-      float& px = L.range[L.grid.Pixel(pitch, yaw)];
-      if (r < px) px = r;
+      const std::size_t pix = L.grid.Pixel(pitch, yaw);
+      if (keep_returns_) {
+        keep(L, pix, r, q);
+      } else {
+        float& px = L.range[pix];
+        if (r < px) px = r;
+      }
     }
   };
   std::size_t i = 0;
@@ -317,8 +330,12 @@ void MultiResImage::Build(const PointCloud& scan) {
       _mm_store_si128(reinterpret_cast<__m128i*>(pix), Pixel4(L.grid, pt, yw));
       for (int k = 0; k < 4; ++k)
         if (mask >> k & 1) {
-          float& m = L.range[std::size_t(pix[k])];
-          m = std::min(m, rs[k]);  // if (r < m) m = r
+          if (keep_returns_) {
+            keep(L, std::size_t(pix[k]), rs[k], scan.points[i + std::size_t(k)]);
+          } else {
+            float& m = L.range[std::size_t(pix[k])];
+            m = std::min(m, rs[k]);  // if (r < m) m = r
+          }
         }
     }
   }
@@ -326,18 +343,7 @@ void MultiResImage::Build(const PointCloud& scan) {
   for (; i < n; ++i) {
     const PointXYZI& q = scan.points[i];
     float r, pitch, yaw;
-    if (Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw)) add(r, pitch, yaw);
-  }
-  if (keep_returns_) {
-    // The return that set each pixel's min range (same Angles / Pixel as above: same floats).
-    for (const PointXYZI& q : scan.points) {
-      float r, pitch, yaw;
-      if (!Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw) || r < min_range_ || r > max_range_) continue;
-      for (Level& L : levels_) {
-        const std::size_t pix = L.grid.Pixel(pitch, yaw);
-        if (L.range[pix] == r) L.ret[pix] = Eigen::Vector3f(q.x, q.y, q.z);
-      }
-    }
+    if (Angles(Eigen::Vector3f(q.x, q.y, q.z), &r, &pitch, &yaw)) add(r, pitch, yaw, q);
   }
   for (Level& L : levels_) {
     Pool(L);
