@@ -165,11 +165,8 @@ TEST(Voxel, FarCoordinatesAndWideKeys) {
   EXPECT_THROW(VoxelDownsample(c, 1e-20, 1), Error);
 }
 
-TEST(Voxel, ThreadCountDoesNotChangeOutput) {
-  PointCloud c = RandomCloud(200000, 40.f, 5);
-  AddArrays(c);
-  const PointCloud a = VoxelDownsample(c, 0.3, 1);
-  const PointCloud b = VoxelDownsample(c, 0.3, 2);
+// Bit-identical points, in the same order.
+void ExpectSamePoints(const PointCloud& a, const PointCloud& b) {
   ASSERT_EQ(a.size(), b.size());
   for (std::size_t i = 0; i < a.size(); ++i) {
     ASSERT_EQ(a.points[i].x, b.points[i].x);
@@ -177,6 +174,33 @@ TEST(Voxel, ThreadCountDoesNotChangeOutput) {
     ASSERT_EQ(a.points[i].z, b.points[i].z);
     ASSERT_EQ(a.points[i].intensity, b.points[i].intensity);
   }
+}
+
+TEST(Voxel, RunsOfVoxelisedCloudsMergeToTheSameResult) {
+  // Three voxelised clouds, overlapping, concatenated; then one run out of order.
+  PointCloud cat;
+  std::vector<std::size_t> starts;
+  for (int k = 0; k < 3; ++k) {
+    PointCloud c = RandomCloud(30000, 20.f, 11 + k);
+    for (auto& p : c.points) p.x += 5.f * float(k);
+    starts.push_back(cat.size());
+    cat.append(VoxelDownsample(c, 0.25, 1));
+  }
+  const PointCloud want = VoxelDownsample(cat, 0.25, 2);
+  ExpectSamePoints(VoxelDownsampleRuns(cat, starts, 0.25, 2), want);
+  ExpectSamePoints(VoxelDownsampleRuns(cat, starts, 0.25, 1), want);
+  std::swap(cat.points[starts[1] + 3], cat.points[starts[1] + 4000]);  // run 1 no longer sorted
+  ExpectSamePoints(VoxelDownsampleRuns(cat, starts, 0.25, 2), VoxelDownsample(cat, 0.25, 2));
+  EXPECT_THROW(VoxelDownsampleRuns(cat, {5, 10}, 0.25), Error);
+  EXPECT_THROW(VoxelDownsampleRuns(cat, {0, 10, 3}, 0.25), Error);
+}
+
+TEST(Voxel, ThreadCountDoesNotChangeOutput) {
+  PointCloud c = RandomCloud(200000, 40.f, 5);
+  AddArrays(c);
+  const PointCloud a = VoxelDownsample(c, 0.3, 1);
+  const PointCloud b = VoxelDownsample(c, 0.3, 2);
+  ExpectSamePoints(a, b);
   EXPECT_EQ(a.object, b.object);
 }
 

@@ -30,6 +30,11 @@ std::size_t RemoveNonFinite(PointCloud& cloud);
 // and in point-index order, so the output is bit-identical for any thread count. Output order is
 // deterministic (sorted by voxel key) whatever the thread count.
 PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads = 0);
+// The same result for a concatenation of VoxelDownsample outputs (same voxel), the i-th starting
+// at run_starts[i] (ascending from 0): their voxel-ordered runs are merged instead of sorted
+// again. Runs out of voxel order are sorted as VoxelDownsample would.
+PointCloud VoxelDownsampleRuns(const PointCloud& cloud, const std::vector<std::size_t>& run_starts, double voxel_m,
+                               int threads = 0);
 
 // ----------------------------------------------------------------------------------- kd-tree
 // nanoflann kd-tree over a cloud's xyz. Owns a copy of the cloud or shares it. The cloud must be

@@ -19,6 +19,8 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace ltm::geometry {
 
@@ -84,10 +86,57 @@ inline bool VoxelOf(const PointXYZI& p, double voxel_m, Index3* k) {
   return true;
 }
 
+// LSD radix sort of packed records by key, `bits` wide (stable: records in index order stay in
+// index order within a key, which is the (key, idx) order of PackedRec::operator<). One thread;
+// faster than a comparison sort on a single scan.
+void RadixSort(std::vector<PackedRec>& recs, int bits) {
+  constexpr int kDigit = 11;
+  std::vector<PackedRec> tmp(recs.size());
+  std::vector<std::uint32_t> count(std::size_t(1) << kDigit);
+  const std::uint64_t mask = (std::uint64_t(1) << kDigit) - 1;
+  for (int shift = 0; shift < bits; shift += kDigit) {
+    std::fill(count.begin(), count.end(), 0u);
+    for (const PackedRec& r : recs) ++count[(r.key >> shift) & mask];
+    std::uint32_t sum = 0;
+    for (auto& c : count) sum += std::exchange(c, sum);
+    for (const PackedRec& r : recs) tmp[count[(r.key >> shift) & mask]++] = r;
+    recs.swap(tmp);
+  }
+}
+
+// Records of a concatenation of voxelised clouds (runs starting at `runs`, ascending, first 0),
+// each run sorted by key: pairwise std::merge of the runs (equal keys from the earlier run, i.e.
+// lower index, first). False, leaving recs unchanged, when a run is out of order.
+bool MergeRuns(std::vector<PackedRec>& recs, std::vector<std::size_t> runs) {
+  const std::size_t n = recs.size();
+  runs.push_back(n);
+  for (std::size_t r = 0; r + 1 < runs.size(); ++r)
+    for (std::size_t i = runs[r] + 1; i < runs[r + 1]; ++i)
+      if (recs[i].key < recs[i - 1].key) return false;
+  std::vector<PackedRec> tmp(n);
+  while (runs.size() > 2) {
+    const std::size_t pairs = (runs.size() - 1) / 2;
+    tbb::parallel_for(std::size_t(0), pairs, [&](std::size_t q) {
+      const std::size_t b0 = runs[2 * q], b1 = runs[2 * q + 1], b2 = runs[2 * q + 2];
+      std::merge(recs.begin() + b0, recs.begin() + b1, recs.begin() + b1, recs.begin() + b2, tmp.begin() + b0);
+    });
+    std::vector<std::size_t> merged;
+    for (std::size_t q = 0; q < pairs; ++q) merged.push_back(runs[2 * q]);
+    if ((runs.size() - 1) % 2 == 1) {  // odd run out: copied as it is
+      const std::size_t b0 = runs[runs.size() - 2];
+      std::copy(recs.begin() + b0, recs.end(), tmp.begin() + b0);
+      merged.push_back(b0);
+    }
+    merged.push_back(n);
+    recs.swap(tmp);
+    runs.swap(merged);
+  }
+  return true;
+}
+
 // Sorted records -> one centroid per run of equal keys.
 template <class Rec>
-PointCloud Reduce(const PointCloud& cloud, std::vector<Rec>& recs) {
-  tbb::parallel_sort(recs.begin(), recs.end());
+PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
   std::vector<std::size_t> starts;
   starts.reserve(recs.size() / 4 + 1);
   for (std::size_t i = 0; i < recs.size(); ++i)
@@ -122,7 +171,8 @@ PointCloud Reduce(const PointCloud& cloud, std::vector<Rec>& recs) {
   return out;
 }
 
-PointCloud Downsample(const PointCloud& cloud, double voxel_m) {
+// `runs` (may be null): the cloud is a concatenation of voxelised clouds starting there.
+PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, const std::vector<std::size_t>* runs) {
   const std::size_t n = cloud.size();
   const Bounds b = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, n, kGrain), Bounds{},
@@ -162,7 +212,13 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m) {
   const std::size_t m = b.finite;
 
   bool packable = true;
-  for (int a = 0; a < 3; ++a) packable = packable && (b.hi[a] - b.lo[a]) < kPackSpan;
+  int width[3];  // bits of each axis' index span: keys as narrow as the cloud allows
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t span = b.hi[a] - b.lo[a];
+    packable = packable && span < kPackSpan;
+    width[a] = 0;
+    while ((span >> width[a]) != 0) ++width[a];
+  }
   if (packable) {
     std::vector<PackedRec> recs(m);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
@@ -171,12 +227,17 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m) {
       for (std::size_t j = r.begin(); j != r.end(); ++j) {
         const std::uint32_t i = point_index(j);
         VoxelOf(cloud.points[i], voxel_m, &k);
-        const std::uint64_t key = (std::uint64_t(k[0] - b.lo[0]) << (2 * kPackBits)) |
-                                  (std::uint64_t(k[1] - b.lo[1]) << kPackBits) |
-                                  std::uint64_t(k[2] - b.lo[2]);
+        const std::uint64_t key = (std::uint64_t(k[0] - b.lo[0]) << (width[1] + width[2])) |
+                                  (std::uint64_t(k[1] - b.lo[1]) << width[2]) | std::uint64_t(k[2] - b.lo[2]);
         recs[j] = {key, i};
       }
     });
+    // Runs of a concatenation of voxelised clouds are merged (only with every point finite, so
+    // record j is point j); one thread radix-sorts; else a parallel comparison sort.
+    if (!(runs && all_finite && MergeRuns(recs, *runs))) {
+      if (threads == 1) RadixSort(recs, width[0] + width[1] + width[2]);
+      else tbb::parallel_sort(recs.begin(), recs.end());
+    }
     return Reduce(cloud, recs);
   }
   std::vector<WideRec> recs(m);
@@ -188,12 +249,11 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m) {
       VoxelOf(cloud.points[i], voxel_m, &recs[j].key);
     }
   });
+  tbb::parallel_sort(recs.begin(), recs.end());
   return Reduce(cloud, recs);
 }
 
-}  // namespace
-
-PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads) {
+PointCloud Run(const PointCloud& cloud, double voxel_m, int threads, const std::vector<std::size_t>* runs) {
   if (!(voxel_m > 0.0) || !std::isfinite(voxel_m))
     throw Error("VoxelDownsample: voxel size must be a positive finite number, got " +
                 std::to_string(voxel_m));
@@ -204,8 +264,23 @@ PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads)
   if (cloud.empty()) return PointCloud{};
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   PointCloud out;
-  arena.execute([&] { out = Downsample(cloud, voxel_m); });
+  arena.execute([&] { out = Downsample(cloud, voxel_m, threads, runs); });
   return out;
+}
+
+}  // namespace
+
+PointCloud VoxelDownsample(const PointCloud& cloud, double voxel_m, int threads) {
+  return Run(cloud, voxel_m, threads, nullptr);
+}
+
+PointCloud VoxelDownsampleRuns(const PointCloud& cloud, const std::vector<std::size_t>& run_starts, double voxel_m,
+                               int threads) {
+  for (std::size_t r = 0; r < run_starts.size(); ++r)
+    if ((r == 0 && run_starts[r] != 0) || (r > 0 && run_starts[r] < run_starts[r - 1]) ||
+        run_starts[r] > cloud.size())
+      throw Error("VoxelDownsampleRuns: run starts must ascend from 0 within the cloud");
+  return Run(cloud, voxel_m, threads, run_starts.empty() ? nullptr : &run_starts);
 }
 
 }  // namespace ltm::geometry

@@ -22,10 +22,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
-#include <limits>
 #include <mutex>
 #include <unordered_set>
-#include <utility>
 
 namespace ltm::removert {
 
@@ -40,221 +38,12 @@ void RemovertConfig::Validate(const std::string& where) const {
   if (ld_resolutions_deg.empty()) fail("ld.resolutions_deg must not be empty");
 }
 
-namespace {
-
-// ---- Session-map voxelisation: the same clouds as geometry::VoxelDownsample, point for point
-// (voxel index floor(coordinate / voxel), centroids summed in double in point order, output in
-// voxel (x, y, z) order), faster on what BuildSessionMap voxelises: single scans (radix sort of
-// the voxel keys instead of a comparison sort) and concatenations of voxelised clouds, whose
-// sorted runs are merged instead of sorted again. Clouds outside that (optional arrays,
-// non-finite points, voxel indices spanning 2^21 or more per axis, a run out of order) go to
-// VoxelDownsample itself.
-
-constexpr int kAxisBits = 21;                          // largest voxel index span per axis: 2^21
-constexpr double kMaxVoxelIndex = 4503599627370496.0;  // 2^52: beyond, floor() is no integer test
-constexpr std::size_t kChunk = 1 << 16;                // points per parallel task
-
-// f(c) for c in [0, chunks): in parallel, or in the calling thread for threads == 1 (a scan
-// inside BuildSessionMap's own parallel loop).
-template <class F>
-void ForChunks(std::size_t chunks, int threads, F&& f) {
-  if (threads == 1) {
-    for (std::size_t c = 0; c < chunks; ++c) f(c);
-  } else {
-    detail::ParallelFor(chunks, threads, f);
-  }
-}
-
-// Voxel index floor(c / voxel_m) as VoxelDownsample computes it (double division), false when
-// not an integer below 2^52 in magnitude (NaN, infinity). Truncation and a correction instead of
-// std::floor: the same integer, without a libm call per coordinate.
-inline bool VoxelIndex(float c, double voxel_m, std::int64_t* k) {
-  const double v = double(c) / voxel_m;
-  if (!(std::fabs(v) < kMaxVoxelIndex)) return false;
-  std::int64_t t = std::int64_t(v);
-  if (double(t) > v) --t;
-  *k = t;
-  return true;
-}
-
-// Voxel keys of the cloud's points: (ix, iy, iz) relative to the lowest indices, packed so that
-// integer order is (x, y, z) order; *bits = the key width. False when the cloud is not handled.
-bool VoxelKeys(const PointCloud& cloud, double voxel_m, int threads, std::vector<std::uint64_t>* keys,
-               int* bits) {
-  const std::size_t n = cloud.size();
-  if (!cloud.cls.empty() || !cloud.session.empty() || !cloud.object.empty()) return false;
-  if (n == 0 || n >= std::numeric_limits<std::uint32_t>::max()) return false;
-  if (!(voxel_m > 0.0) || !std::isfinite(voxel_m)) return false;
-  // Index bounds from coordinate bounds (the index is monotonic in the coordinate).
-  const std::size_t chunks = (n + kChunk - 1) / kChunk;
-  struct Box {
-    float lo[3], hi[3];
-  };
-  std::vector<Box> boxes(chunks);
-  ForChunks(chunks, threads, [&](std::size_t c) {
-    Box B;
-    const PointXYZI& p0 = cloud.points[c * kChunk];
-    B.lo[0] = B.hi[0] = p0.x;
-    B.lo[1] = B.hi[1] = p0.y;
-    B.lo[2] = B.hi[2] = p0.z;
-    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      const PointXYZI& p = cloud.points[i];
-      B.lo[0] = std::min(B.lo[0], p.x);
-      B.hi[0] = std::max(B.hi[0], p.x);
-      B.lo[1] = std::min(B.lo[1], p.y);
-      B.hi[1] = std::max(B.hi[1], p.y);
-      B.lo[2] = std::min(B.lo[2], p.z);
-      B.hi[2] = std::max(B.hi[2], p.z);
-    }
-    boxes[c] = B;
-  });
-  std::int64_t lo[3], hi[3];
-  int shift[3];
-  for (int a = 0; a < 3; ++a) {
-    float l = boxes[0].lo[a], h = boxes[0].hi[a];
-    for (const Box& B : boxes) {
-      l = std::min(l, B.lo[a]);
-      h = std::max(h, B.hi[a]);
-    }
-    if (!VoxelIndex(l, voxel_m, &lo[a]) || !VoxelIndex(h, voxel_m, &hi[a])) return false;
-    const std::uint64_t span = std::uint64_t(hi[a] - lo[a]);
-    if (span >> kAxisBits) return false;
-    int w = 0;
-    while ((span >> w) != 0) ++w;
-    shift[a] = w;
-  }
-  *bits = shift[0] + shift[1] + shift[2];
-  keys->resize(n);
-  std::vector<std::uint8_t> ok(chunks, 1);
-  ForChunks(chunks, threads, [&](std::size_t c) {
-    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      const PointXYZI& p = cloud.points[i];
-      std::int64_t k[3] = {0, 0, 0};
-      // Not an index, or outside the bounds: a NaN coordinate (the bounds skip NaNs).
-      if (!(VoxelIndex(p.x, voxel_m, &k[0]) && VoxelIndex(p.y, voxel_m, &k[1]) &&
-            VoxelIndex(p.z, voxel_m, &k[2]))) {
-        ok[c] = 0;
-        return;
-      }
-      for (int a = 0; a < 3; ++a)
-        if (k[a] < lo[a] || k[a] > hi[a]) {
-          ok[c] = 0;
-          return;
-        }
-      (*keys)[i] = (std::uint64_t(k[0] - lo[0]) << (shift[1] + shift[2])) |
-                   (std::uint64_t(k[1] - lo[1]) << shift[2]) | std::uint64_t(k[2] - lo[2]);
-    }
-  });
-  return std::all_of(ok.begin(), ok.end(), [](std::uint8_t o) { return o != 0; });
-}
-
-// One centroid per run of equal keys along `order` (point indices by key, then index), as
-// geometry::VoxelDownsample computes it. In parallel chunks of `order`: a chunk takes the runs
-// that start in it.
-PointCloud Centroids(const PointCloud& cloud, const std::vector<std::uint64_t>& keys,
-                     const std::vector<std::uint32_t>& order, int threads) {
-  const std::size_t n = order.size();
-  auto starts_run = [&](std::size_t j) { return j == 0 || keys[order[j]] != keys[order[j - 1]]; };
-  const std::size_t chunks = (n + kChunk - 1) / kChunk;
-  std::vector<std::size_t> first(chunks + 1, 0);  // output index of each chunk's first run
-  ForChunks(chunks, threads, [&](std::size_t c) {
-    for (std::size_t j = c * kChunk; j < std::min(n, (c + 1) * kChunk); ++j)
-      first[c + 1] += starts_run(j) ? 1 : 0;
-  });
-  for (std::size_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
-  PointCloud out;
-  out.points.resize(first[chunks]);
-  ForChunks(chunks, threads, [&](std::size_t c) {
-    std::size_t v = first[c];
-    for (std::size_t j = c * kChunk; j < std::min(n, (c + 1) * kChunk); ++j) {
-      if (!starts_run(j)) continue;
-      const std::uint64_t key = keys[order[j]];
-      double sx = 0, sy = 0, sz = 0, si = 0;
-      std::size_t e = j;
-      for (; e < n && keys[order[e]] == key; ++e) {
-        const PointXYZI& p = cloud.points[order[e]];
-        sx += p.x;
-        sy += p.y;
-        sz += p.z;
-        si += p.intensity;
-      }
-      const double inv = 1.0 / double(e - j);
-      out.points[v++] = {float(sx * inv), float(sy * inv), float(sz * inv), float(si * inv)};
-    }
-  });
-  return out;
-}
-
-// VoxelDownsample(scan, voxel_m, 1) of one scan: LSD radix sort of the keys (stable, so equal
-// keys stay in index order).
-PointCloud VoxelScan(const PointCloud& scan, double voxel_m) {
-  if (scan.empty()) return PointCloud{};
-  std::vector<std::uint64_t> keys;
-  int bits = 0;
-  if (!VoxelKeys(scan, voxel_m, 1, &keys, &bits)) return geometry::VoxelDownsample(scan, voxel_m, 1);
-  constexpr int kDigit = 11;
-  const std::size_t n = scan.size();
-  std::vector<std::uint32_t> order(n), tmp(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = std::uint32_t(i);
-  std::vector<std::uint32_t> count(std::size_t(1) << kDigit);
-  for (int shift = 0; shift < bits; shift += kDigit) {
-    std::fill(count.begin(), count.end(), 0u);
-    const std::uint64_t mask = (std::uint64_t(1) << kDigit) - 1;
-    for (std::uint32_t i : order) ++count[(keys[i] >> shift) & mask];
-    std::uint32_t sum = 0;
-    for (auto& c : count) sum += std::exchange(c, sum);
-    for (std::uint32_t i : order) tmp[count[(keys[i] >> shift) & mask]++] = i;
-    order.swap(tmp);
-  }
-  return Centroids(scan, keys, order, 1);
-}
-
-// VoxelDownsample(cloud, voxel_m, threads) of a concatenation of voxelised clouds starting at
-// `runs` (ascending, runs[0] = 0): pairwise stable merges of the runs, each already in key order.
-PointCloud VoxelRuns(const PointCloud& cloud, std::vector<std::size_t> runs, double voxel_m,
-                     int threads) {
-  if (cloud.empty()) return PointCloud{};
-  const std::size_t n = cloud.size();
-  std::vector<std::uint64_t> keys;
-  int bits = 0;
-  bool sorted = VoxelKeys(cloud, voxel_m, threads, &keys, &bits);
-  runs.push_back(n);
-  for (std::size_t r = 0; sorted && r + 1 < runs.size(); ++r)
-    for (std::size_t i = runs[r] + 1; i < runs[r + 1] && sorted; ++i) sorted = keys[i - 1] <= keys[i];
-  if (!sorted) return geometry::VoxelDownsample(cloud, voxel_m, threads);
-  std::vector<std::uint32_t> order(n), tmp(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = std::uint32_t(i);
-  // std::merge takes equal keys from the first range first: (key, index) order.
-  auto by_key = [&](std::uint32_t a, std::uint32_t b) { return keys[a] < keys[b]; };
-  while (runs.size() > 2) {
-    const std::size_t pairs = (runs.size() - 1) / 2;
-    detail::ParallelFor(pairs, threads, [&](std::size_t q) {
-      const std::size_t b0 = runs[2 * q], b1 = runs[2 * q + 1], b2 = runs[2 * q + 2];
-      std::merge(order.begin() + b0, order.begin() + b1, order.begin() + b1, order.begin() + b2,
-                 tmp.begin() + b0, by_key);
-    });
-    std::vector<std::size_t> merged;
-    for (std::size_t q = 0; q < pairs; ++q) merged.push_back(runs[2 * q]);
-    if ((runs.size() - 1) % 2 == 1) {  // odd run out: copied as it is
-      const std::size_t b0 = runs[runs.size() - 2];
-      std::copy(order.begin() + b0, order.end(), tmp.begin() + b0);
-      merged.push_back(b0);
-    }
-    merged.push_back(n);
-    order.swap(tmp);
-    runs.swap(merged);
-  }
-  return Centroids(cloud, keys, order, threads);
-}
-
-}  // namespace
-
 PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                            int threads) {
   // Batches of keyframes: each scan is range filtered, moved to the world frame and the batch
   // voxelised; the accumulated map is re-voxelised whenever it doubles, so memory stays at
-  // about two maps plus one batch of scans. Every voxelisation equals VoxelDownsample's; the
-  // voxelised clouds are in voxel order, so each concatenation is a list of sorted runs.
+  // about two maps plus one batch of scans. Voxelised clouds are in voxel order, so each
+  // concatenation is a list of sorted runs (VoxelDownsampleRuns merges them).
   const std::size_t batch = std::size_t(std::max(8, 4 * (threads > 0 ? threads : 2)));
   PointCloud acc;
   std::vector<std::size_t> acc_runs;  // starts of acc's sorted runs
@@ -270,7 +59,7 @@ PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const Re
       local.session.clear();
       local.object.clear();
       geometry::TransformInPlace(local, kf.T_world_sensor);
-      parts[k] = VoxelScan(local, cfg.map_voxel_m);
+      parts[k] = geometry::VoxelDownsample(local, cfg.map_voxel_m, 1);
     });
     PointCloud merged;
     std::vector<std::size_t> part_runs;
@@ -279,14 +68,14 @@ PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const Re
       merged.append(p);
     }
     acc_runs.push_back(acc.size());
-    acc.append(VoxelRuns(merged, part_runs, cfg.map_voxel_m, threads));
+    acc.append(geometry::VoxelDownsampleRuns(merged, part_runs, cfg.map_voxel_m, threads));
     if (acc.size() > 2 * std::max<std::size_t>(last_size, 1 << 16)) {
-      acc = VoxelRuns(acc, acc_runs, cfg.map_voxel_m, threads);
+      acc = geometry::VoxelDownsampleRuns(acc, acc_runs, cfg.map_voxel_m, threads);
       acc_runs.assign(1, 0);
       last_size = acc.size();
     }
   }
-  return VoxelRuns(acc, acc_runs, cfg.map_voxel_m, threads);
+  return geometry::VoxelDownsampleRuns(acc, acc_runs, cfg.map_voxel_m, threads);
 }
 
 HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
