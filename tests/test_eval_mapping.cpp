@@ -146,6 +146,15 @@ TEST(TruthMapping, ChangesFromLabelledScansPlaceEachScanWithItsEstimatedPose) {
     EXPECT_LT(d2, 1e-8f);
   }
   test::ExpectError([&] { ChangesFromLabelledScans(sim, 3, {&change}, m, 0.1); }, {"no sim session"});
+
+  // Labelled scan folders: missing, wrong count, a scan without classes.
+  test::ExpectError([&] { LabelledScanPaths(sim + "/truth/none", 4); }, {"none/labels", "no labelled scans"});
+  test::ExpectError([&] { LabelledScanPaths(sdir, 5); }, {"labels", "4 labelled scans but 5 poses"});
+  EXPECT_EQ(LabelledScanPaths(sdir, 4).size(), 4u);
+  PointCloud plain;
+  plain.push_back(1.f, 2.f, 3.f);
+  io::WritePly(dir / "plain.ply", plain);
+  test::ExpectError([&] { ReadLabelledScan(dir / "plain.ply"); }, {"plain.ply", "no 'class' field"});
 }
 
 TEST(TruthMapping, PoseCountMismatchAndNoPosesAreErrors) {

@@ -469,6 +469,11 @@ std::vector<SessionTrajectory> LoadSimTrajectories(const std::string& sim_dir,
                                                    std::vector<std::string>* missing);
 // DIR/truth/objects.csv -> id -> class (empty map when the file is absent).
 std::map<int, std::string> ReadObjectClasses(const std::string& objects_csv);
+// Paths of the labelled scans <session_truth_dir>/labels/*.ply in keyframe order; ltm::Error
+// naming the folder when it is missing or holds other than `keyframes` scans.
+std::vector<std::string> LabelledScanPaths(const std::string& session_truth_dir, std::size_t keyframes);
+// One labelled scan (PLY with a per-point 'class' field, else ltm::Error naming the file).
+PointCloud ReadLabelledScan(const std::string& path);
 // Feeds a session's labelled scans (truth/<session>/labels/*.ply) placed with
 // T_frame_sensor[k] (one per keyframe, keyframe order) into `ev`; returns scans used.
 std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir,

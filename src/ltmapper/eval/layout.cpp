@@ -151,22 +151,32 @@ std::map<int, std::string> ReadObjectClasses(const std::string& path) {
   return out;
 }
 
+std::vector<std::string> LabelledScanPaths(const std::string& session_truth_dir, std::size_t keyframes) {
+  const std::string dir = Join(session_truth_dir, "labels");
+  if (!fs::is_directory(dir)) throw Error(dir, 0, "no labelled scans");
+  auto files = io::ListIndexedFiles(dir, ".ply");
+  if (files.size() != keyframes)
+    throw Error(dir, 0, std::to_string(files.size()) + " labelled scans but " + std::to_string(keyframes) + " poses");
+  for (auto& f : files)
+    if (f.find('/') == std::string::npos) f = Join(dir, f);
+  return files;
+}
+
+PointCloud ReadLabelledScan(const std::string& path) {
+  PointCloud scan = io::ReadPly(path);
+  if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+  return scan;
+}
+
 std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir, const std::string& session,
                                const std::vector<Pose>& T_frame_sensor, const EvalConfig& cfg) {
-  const std::string dir = Join(Join(Join(sim_dir, "truth"), session), "labels");
-  if (!fs::is_directory(dir)) throw Error(dir, 0, "no labelled scans");
-  const auto files = io::ListIndexedFiles(dir, ".ply");
-  if (files.size() != T_frame_sensor.size())
-    throw Error(dir, 0, std::to_string(files.size()) + " labelled scans but " +
-                            std::to_string(T_frame_sensor.size()) + " poses");
+  const auto files = LabelledScanPaths(Join(Join(sim_dir, "truth"), session), T_frame_sensor.size());
   const std::size_t stride = std::size_t(cfg.hd_keyframe_stride);
   if (cfg.hd_near_static_m > 0.0) {
     // Static truth of the whole session (voxel near_static / 2) for the "hd near static" split.
     PointCloud ref;
     for (std::size_t k = 0; k < files.size(); k += stride) {
-      const std::string path = files[k].find('/') == std::string::npos ? Join(dir, files[k]) : files[k];
-      PointCloud scan = io::ReadPly(path);
-      if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+      const PointCloud scan = ReadLabelledScan(files[k]);
       std::vector<bool> is_static(scan.size());
       for (std::size_t i = 0; i < scan.size(); ++i) is_static[i] = scan.cls[i] == PointClass::kStatic;
       PointCloud st = scan.select(is_static);
@@ -181,9 +191,7 @@ std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir, cons
   Progress progress("eval hd: labelled scans", (files.size() + cfg.hd_keyframe_stride - 1) / cfg.hd_keyframe_stride);
   std::size_t used = 0;
   for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.hd_keyframe_stride)) {
-    const std::string path = files[k].find('/') == std::string::npos ? Join(dir, files[k]) : files[k];
-    PointCloud scan = io::ReadPly(path);
-    if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+    PointCloud scan = ReadLabelledScan(files[k]);
     geometry::TransformInPlace(scan, T_frame_sensor[k]);
     ev.Add(scan, T_frame_sensor[k].translation());
     ++used;

@@ -138,11 +138,7 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
     throw Error(Join(sim_dir, "truth"), 0, "no sim session " + std::to_string(session));
   const std::string tdir = Join(Join(sim_dir, "truth"), names[session]);
   const std::vector<Pose> T_true = ReadPoses(Join(tdir, "poses_world.txt"));
-  const std::string ldir = Join(tdir, "labels");
-  if (!fs::is_directory(ldir)) throw Error(ldir, 0, "no labelled scans");
-  const auto files = io::ListIndexedFiles(ldir, ".ply");
-  if (files.size() != T_true.size())
-    throw Error(ldir, 0, std::to_string(files.size()) + " labelled scans but " + std::to_string(T_true.size()) + " poses");
+  const auto files = LabelledScanPaths(tdir, T_true.size());
   // Which static-world points are changes (each change point is one of them, at distance 0).
   auto world = std::make_shared<const PointCloud>(io::ReadCloud(Join(tdir, "static_world.pcd")));
   const geometry::KdTree tree(world);
@@ -162,9 +158,7 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, files.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t k = r.begin(); k != r.end(); ++k) {
-        const std::string path = files[k].find('/') == std::string::npos ? Join(ldir, files[k]) : files[k];
-        const PointCloud scan = io::ReadPly(path);
-        if (scan.cls.size() != scan.size()) throw Error(path, 0, "labelled scan has no 'class' field");
+        const PointCloud scan = ReadLabelledScan(files[k]);
         const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
         const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
         const Eigen::Vector3f t = T_true[k].translation().cast<float>();

@@ -257,10 +257,7 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
     if (slot.empty()) continue;
     const std::string sdir = Join(truth_dir, names[std::size_t(s)]);
     const auto poses = ReadPoses(Join(sdir, "poses_world.txt"));
-    const std::string ldir = Join(sdir, "labels");
-    const auto files = io::ListIndexedFiles(ldir, ".ply");
-    if (files.size() != poses.size())
-      throw Error(ldir, 0, std::to_string(files.size()) + " labelled scans but " + std::to_string(poses.size()) + " poses");
+    const auto files = LabelledScanPaths(sdir, poses.size());
     std::vector<std::size_t> scans;
     for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.obj_keyframe_stride)) scans.push_back(k);
     // Per scan: points of each wanted object in the estimate frame; merged in scan order.
@@ -269,10 +266,8 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
     arena.execute([&] {
       tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t j) {
         const std::size_t k = scans[j];
-        const std::string path = files[k].find('/') == std::string::npos ? Join(ldir, files[k]) : files[k];
-        const PointCloud scan = io::ReadPly(path);
-        if (scan.cls.size() != scan.size() || scan.object.size() != scan.size())
-          throw Error(path, 0, "labelled scan needs 'class' and 'object' fields");
+        const PointCloud scan = ReadLabelledScan(files[k]);
+        if (scan.object.size() != scan.size()) throw Error(files[k], 0, "labelled scan needs an 'object' field");
         const Pose T = mapping.ScanPose(std::size_t(s), k, poses[k]);
         for (std::size_t i = 0; i < scan.size(); ++i) {
           if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
