@@ -266,8 +266,8 @@ void SetupLd(CLI::App& parent) {
         auto pd = eval::ChangesFromLabelledScans(o->sim, std::size_t(q), {&w.pd_strong, &w.pd_weak}, m, v, th);
         auto nd = eval::ChangesFromLabelledScans(o->sim, std::size_t(c), {&w.nd_strong, &w.nd_weak}, m, v, th);
         truth = {std::move(pd[0]), std::move(pd[1]), std::move(nd[0]), std::move(nd[1])};
-        report.inputs.push_back({"truth built from", "labelled scans placed with the method's poses, voxel " +
-                                                         std::to_string(v) + " m"});
+        report.inputs.push_back(
+            {"truth built from", fmt::format("labelled scans placed with the method's poses, voxel {} m", v)});
       } else {
         truth = {m.Map(w.pd_strong, std::size_t(q), th), m.Map(w.pd_weak, std::size_t(q), th),
                  m.Map(w.nd_strong, std::size_t(c), th), m.Map(w.nd_weak, std::size_t(c), th)};

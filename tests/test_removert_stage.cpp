@@ -6,7 +6,6 @@
 
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
-#include "ltmapper/removert/detail.hpp"
 #include "ltmapper/removert/removert.hpp"
 #include "ltmapper/slam/slam.hpp"
 
@@ -198,9 +197,10 @@ TEST(RemovertReal, KittiHeadHdRemoval) {
   reg.reg_voxel_m = 0.1;
   reg.reg_max_correspondence_m = 0.3;
   std::vector<removert::WorldKeyframe> gicp_kfs = kfs;
-  PointCloud prev = geometry::VoxelDownsample(*removert::detail::LoadScan(kfs[0]), reg.reg_voxel_m);
+  auto scan = [](const removert::WorldKeyframe& kf) { return kf.cloud ? *kf.cloud : io::ReadCloud(kf.cloud_path); };
+  PointCloud prev = geometry::VoxelDownsample(scan(kfs[0]), reg.reg_voxel_m);
   for (std::size_t k = 1; k < kfs.size(); ++k) {
-    const PointCloud cur = geometry::VoxelDownsample(*removert::detail::LoadScan(kfs[k]), reg.reg_voxel_m);
+    const PointCloud cur = geometry::VoxelDownsample(scan(kfs[k]), reg.reg_voxel_m);
     const Pose init = kfs[k - 1].T_world_sensor.inverse() * kfs[k].T_world_sensor;
     const slam::RegistrationResult r = slam::RegisterGicp(prev, cur, init, reg);
     ASSERT_TRUE(r.accepted) << "scan " << k << ": " << r.reason;

@@ -142,11 +142,16 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
     const PointCloud removed = map.select(dynamic);
     const geometry::KdTree tree(removed);
     const float r2 = float(cfg.dilate_m * cfg.dilate_m);
-    // Cells (edge 4 * dilate_m) touched by some removed point's dilation ball: most map points
-    // are far from every removed point and skip the kd-tree after one hash lookup.
-    const double cell = 4.0 * cfg.dilate_m;
+    // Cells touched by some removed point's dilation ball: most map points are far from every
+    // removed point and skip the kd-tree after one hash lookup. Any cell edge >= 2 radii works
+    // (a ball then touches at most 2 cells per axis, found from its bounding box's corners);
+    // keys keep 21 bits per axis, so cells 2^21 apart share a key: a wasted kd-tree query, never
+    // a wrong answer (the kd-tree decides).
+    constexpr double kCellRadii = 4.0;
+    const double cell = kCellRadii * cfg.dilate_m;
     auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
-      return (x & 0x1FFFFF) | ((y & 0x1FFFFF) << 21) | ((z & 0x1FFFFF) << 42);
+      constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
+      return (x & kMask) | ((y & kMask) << 21) | ((z & kMask) << 42);
     };
     auto index = [&](float v, double off) { return std::int64_t(std::floor((double(v) + off) / cell)); };
     std::unordered_set<std::int64_t> touched;
