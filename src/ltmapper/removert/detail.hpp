@@ -91,14 +91,11 @@ class MultiResImage {
   };
   const Grid& GridOf(int level) const { return levels_[std::size_t(level)].grid; }
   std::size_t Pixel(int level, float pitch, float yaw) const { return GridOf(level).Pixel(pitch, yaw); }
-  float At(int level, std::size_t pixel) const { return levels_[std::size_t(level)].range[pixel]; }
-  float Pooled(int level, std::size_t pixel) const { return levels_[std::size_t(level)].pooled[pixel]; }
   // (pooled, range) of each pixel side by side: the vote test reads both, from one cache line.
   const float* Pairs(int level) const { return levels_[std::size_t(level)].pairs.data(); }
   // Per pixel, the sensor-frame position of its nearest return (only with keep_returns; valid
-  // where At() is finite).
+  // where the pixel has a return).
   const Eigen::Vector3f* Returns(int level) const { return levels_[std::size_t(level)].ret.data(); }
-  int Rows(int level) const { return GridOf(level).rows; }
   int Cols(int level) const { return GridOf(level).cols; }
 
  private:
