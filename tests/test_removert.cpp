@@ -111,6 +111,55 @@ TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
   EXPECT_EQ(plain.occ[0], 1);
 }
 
+TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
+  // Sensor 1.8 m above flat ground (z = 0); four ground points 20 m away (elevation -5.1 deg),
+  // none sampled: each lies between two beams of its own column, at azimuths 0, 30, -30, 60 deg.
+  const Pose T = test::At(0, 0, 1.8);
+  auto at = [](double yaw_deg, double rho, double z) {
+    const double a = yaw_deg * M_PI / 180.0;
+    return Eigen::Vector3f(float(rho * std::cos(a)), float(rho * std::sin(a)), float(z - 1.8));
+  };
+  auto scan = std::make_shared<PointCloud>();
+  auto add = [&](const Eigen::Vector3f& q) { scan->push_back(q.x(), q.y(), q.z()); };
+  add(at(0, 17, 0));       // A: ground rings before and beyond it: observed
+  add(at(0, 24, 0));
+  add(at(30, 17, 0.25));   // C: both beams hit ground 0.25 m higher (within the plane tolerance):
+  add(at(30, 24, 0.25));   //    the ray to C meets that surface 2.8 m before C: C lies in a trough
+  add(at(-30, 16, 0.5));   // B: the lower beam hits an object in front: occluded
+  add(at(-30, 24, 0));
+  add(at(60, 17, 0));      // D: ground below, no return above (beyond max range): its far edge
+  WorldKeyframe kf;
+  kf.T_world_sensor = T;
+  kf.cloud = scan;
+  PointCloud pts;
+  for (double yaw : {0.0, 30.0, -30.0, 60.0}) {
+    const Eigen::Vector3f p = at(yaw, 20, 0);
+    pts.push_back(p.x(), p.y(), 0.f);
+  }
+  const std::vector<Eigen::Vector3f> up(pts.size(), Eigen::Vector3f::UnitZ());
+  RemovertConfig cfg;
+  removert::BeamTest beams;
+  removert::VisibilityOptions opt;
+  opt.normals = &up;
+  opt.beams = &beams;
+  const auto v = removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt);
+  ASSERT_EQ(v.beam_hits.size(), pts.size());
+  EXPECT_EQ(v.beam_hits[0], 1);
+  EXPECT_EQ(v.beam_hits[1], 0);
+  EXPECT_EQ(v.beam_hits[2], 0);
+  EXPECT_EQ(v.beam_hits[3], 1);
+  // The plain pixel test (2 deg pixel, surface hits up to 10 m) calls C and B's lower rows the
+  // same surface: C is a hit there.
+  opt.beams = nullptr;
+  opt.surface_max_m = 10.0;
+  const auto pixel = removert::CountVisibility(pts, {kf}, {2.0}, cfg, 1, opt);
+  EXPECT_EQ(pixel.Hit(0, 1), 1);
+  // D's edge rule is bounded in range: with edge_max_m below the 3 m to its ring, not observed.
+  beams.edge_max_m = 2.0;
+  opt.beams = &beams;
+  EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[3], 0);
+}
+
 // The street scene: 21 keyframes 2 m apart along x.
 struct Street {
   std::vector<WorldKeyframe> kfs;

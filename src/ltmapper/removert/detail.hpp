@@ -112,6 +112,26 @@ class MultiResImage {
   std::vector<Level> levels_;
 };
 
+// A scan's nearest return per (column, row) cell of BeamTest::col_deg x row_deg, stored column
+// by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
+// the first returns above and below a direction are the two beams around it.
+class ColumnImage {
+ public:
+  ColumnImage(const RemovertConfig& cfg, const BeamTest& test);
+  void Build(const PointCloud& scan);
+  // BeamTest for a point at (range, pitch, yaw) (sensor frame) on the plane n . x = off
+  // (plane[0..3], sensor frame).
+  bool Observed(float range, float pitch, float yaw, const float* plane) const;
+
+ private:
+  BeamTest test_;
+  int rows_ = 0, cols_ = 0, span_ = 0;
+  float row_scale_ = 0.f, col_scale_ = 0.f, up_ = 0.f, down_ = 0.f;
+  float min_range_ = 0.f, max_range_ = 0.f;
+  std::vector<float> range_;          // [col * rows + row], +inf = no return
+  std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
+};
+
 // 2D tile index over a cloud's xy: points sorted by tile, each tile a contiguous range.
 // Coordinates are kept as separate x / y / z arrays (plus 3 padding entries, so batches of four
 // may read past a tile's end).

@@ -79,10 +79,23 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   VisibilityOptions opt;
   opt.count_occluded = true;
   std::vector<Eigen::Vector3f> normals;
-  if (cfg.ld_same_min_hits > 0 && cfg.ld_surface_max_m > 0.0) {
+  BeamTest test;
+  const bool beams = cfg.ld_same_min_hits > 0 && cfg.same_test == "beams";
+  if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
     normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads);
     opt.normals = &normals;
-    opt.surface_max_m = cfg.ld_surface_max_m;
+    if (beams) {
+      test.col_deg = cfg.ld_beam_col_deg;
+      test.row_deg = cfg.ld_beam_row_deg;
+      test.span_deg = cfg.ld_beam_span_deg;
+      test.tol_m = cfg.ld_beam_tol_m;
+      test.tol_rel = cfg.ld_beam_tol_rel;
+      test.grazing_max_m = cfg.ld_beam_grazing_max_m;
+      test.edge_max_m = cfg.ld_beam_edge_max_m;
+      opt.beams = &test;
+    } else {
+      opt.surface_max_m = cfg.ld_surface_max_m;
+    }
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
   for (std::size_t i = 0; i < points.size(); ++i) {
@@ -96,6 +109,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     }
     out.seen[i] = seen;
     out.observed[i] = observed;
+    if (beams) hits = v.beam_hits[i];
     out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
   }
   return out;

@@ -9,9 +9,10 @@
 //                edges and thin structures).
 //   LD detection between the HD-free central and query maps (kd-tree: fewer than k neighbours
 //                within r in the other session = change): ND from central, PD from query. A
-//                raw change the other session's scans hit on its surface plane (and did not see
-//                through) is the same surface sampled more sparsely (far ground between rings):
-//                no change (ld.same_min_hits).
+//                raw change whose surface the other session's scans observed (BeamTest: the two
+//                beams around the exact ray towards it) and did not see through is the same
+//                surface sampled more sparsely (far ground between rings): no change
+//                (ld.same_min_hits).
 //   Occlusion    ND the query never saw through = weak ND (kept in the map); PD in space some
 //                central scan saw through (observed free) = weak PD; otherwise strong.
 //
@@ -79,6 +80,16 @@ struct RemovertConfig {
                                   // session's keyframes hit on its surface plane (surface hits, see
                                   // VisibilityOptions) is the same surface, sampled more sparsely:
                                   // no change (0 = off)
+  std::string same_test = "beams";  // beams: the beam test (ld.beam_*, BeamTest); pixel: the nearest return of
+                                   // the point's LD-resolution pixel or window on its plane (ld.surface_max_m)
+  double ld_beam_col_deg = 0.4;    // [deg] column width of the beam test (>= the scans' azimuth step)
+  double ld_beam_row_deg = 0.1;    // [deg] row height (well below the beams' elevation spacing)
+  double ld_beam_span_deg = 1.5;   // [deg] how far above / below the point's direction to look for the beams
+  double ld_beam_tol_m = 0.3;      // [m] a return this close to the point's plane is on its surface ...
+  double ld_beam_tol_rel = 0.005;  // [-] ... plus this times the range (rotation error between the sessions)
+  double ld_beam_grazing_max_m = 2.0;  // [m] the along-ray tolerance tol / cos(incidence) at most this
+  double ld_beam_edge_max_m = 60.0;    // [m] at a surface's edge (one beam on it, the other without a return or
+                                       // beyond it) the return on it at most this far from the point in range
   bool covisible_only = false;    // true: a raw change counts only where the other session had its line
                                   // of sight at all (a return in the window); else unobserved
   std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
@@ -123,6 +134,14 @@ struct RemovertConfig {
     v("ld.normal_radius_m", ld_normal_radius_m, "m", 0.05, 10.0);
     v("ld.surface_max_m", ld_surface_max_m, "m", 0.0, 100.0);
     v("ld.same_min_hits", ld_same_min_hits, "keyframes", 0, 65535);
+    v("ld.same_test", same_test, {"beams", "pixel"});
+    v("ld.beam_col_deg", ld_beam_col_deg, "deg", 0.01, 10.0);
+    v("ld.beam_row_deg", ld_beam_row_deg, "deg", 0.01, 10.0);
+    v("ld.beam_span_deg", ld_beam_span_deg, "deg", 0.01, 30.0);
+    v("ld.beam_tol_m", ld_beam_tol_m, "m", 0.0, 10.0);
+    v("ld.beam_tol_rel", ld_beam_tol_rel, "", 0.0, 1.0);
+    v("ld.beam_grazing_max_m", ld_beam_grazing_max_m, "m", 0.0, 100.0);
+    v("ld.beam_edge_max_m", ld_beam_edge_max_m, "m", 0.0, 1000.0);
     v("ld.covisible_only", covisible_only);
     v("ld.pairs", pairs, {"central", "consecutive"});
     v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);
@@ -199,12 +218,30 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
 // range > point range + tolerance) and how many hit it (|scan range - point range| <=
 // tolerance), counting keyframes within submap_radius_m of the point. The building block of HD
 // removal and of the weak/strong decisions; exposed for tests and ablations.
+// Did a scan observe the surface of a point (LD "same surface": the other session has it, only
+// sampled more sparsely)? The exact ray towards the point is not among the beams, so it is
+// judged from the beams around it, in the point's column (col_deg wide, rows of row_deg):
+//  - a return in the point's own cell: on the point's plane (within tol_m + tol_rel * range)
+//    and within the along-ray tolerance of it, tol / cos(incidence) capped at grazing_max_m;
+//  - else the nearest returns above and below its direction (within span_deg): both on the
+//    plane, and the ray towards the point meets the line through them (the surface between the
+//    two beams) within that along-ray tolerance: so a point in a trough behind a crest the lower
+//    beam hit, or behind an occluder, is not observed;
+//  - else one of them on the plane at most edge_max_m from the point in range and the other
+//    without a return or beyond the point (the surface's edge, far ground below the sky).
+// The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
+struct BeamTest {
+  double col_deg = 0.4, row_deg = 0.1, span_deg = 1.5;  // [deg]
+  double tol_m = 0.3, tol_rel = 0.005;                  // [m], [-]
+  double grazing_max_m = 2.0, edge_max_m = 60.0;        // [m]
+};
 struct VisibilityVotes {
   std::size_t points = 0;
   int levels = 0;
   std::vector<std::uint16_t> see;  // [level * points + i]
   std::vector<std::uint16_t> hit;
   std::vector<std::uint16_t> occ;  // occluded (nearer return); only when count_occluded
+  std::vector<std::uint16_t> beam_hits;  // [i] keyframes that observed the point's surface by the BeamTest
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
 };
@@ -217,6 +254,8 @@ struct VisibilityOptions {
   bool count_occluded = false;
   const std::vector<Eigen::Vector3f>* normals = nullptr;
   double surface_max_m = 0.0;  // [m]
+  // With normals: the beam test per keyframe (BeamTest; VisibilityVotes::beam_hits).
+  const BeamTest* beams = nullptr;
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,

@@ -396,6 +396,97 @@ void MultiResImage::Pool(Level& L) const {
   }
 }
 
+ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test) : test_(test) {
+  const double col_deg = test.col_deg, row_deg = test.row_deg, span_deg = test.span_deg;
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  up_ = float(cfg.fov_up_deg * kDeg);
+  down_ = float(cfg.fov_down_deg * kDeg);
+  min_range_ = float(cfg.min_range_m);
+  max_range_ = float(cfg.max_range_m);
+  rows_ = std::max(1, int(std::ceil((cfg.fov_up_deg - cfg.fov_down_deg) / row_deg - 1e-9)));
+  cols_ = std::max(1, int(std::lround(360.0 / col_deg)));
+  span_ = std::max(1, int(std::lround(span_deg / row_deg)));
+  row_scale_ = float(rows_ / ((cfg.fov_up_deg - cfg.fov_down_deg) * kDeg));
+  col_scale_ = float(cols_ / (2.0 * 3.14159265358979323846));
+  range_.assign(std::size_t(rows_) * std::size_t(cols_), std::numeric_limits<float>::infinity());
+  ret_.assign(range_.size(), Eigen::Vector3f::Zero());
+}
+
+void ColumnImage::Build(const PointCloud& scan) {
+  std::fill(range_.begin(), range_.end(), std::numeric_limits<float>::infinity());
+  for (const PointXYZI& q : scan.points) {
+    const float rxy2 = q.x * q.x + q.y * q.y;
+    const float r = std::sqrt(rxy2 + q.z * q.z);
+    if (!(r >= min_range_ && r <= max_range_)) continue;
+    const float pitch = FastAtan2(q.z, std::sqrt(rxy2));
+    if (pitch > up_ || pitch < down_) continue;
+    const int row = std::min(rows_ - 1, std::max(0, int((up_ - pitch) * row_scale_)));
+    int col = int((kPiF - FastAtan2(q.y, q.x)) * col_scale_);
+    if (col >= cols_) col -= cols_;
+    col = std::max(0, col);
+    const std::size_t cell = std::size_t(col) * std::size_t(rows_) + std::size_t(row);
+    if (r < range_[cell]) {
+      range_[cell] = r;
+      ret_[cell] = Eigen::Vector3f(q.x, q.y, q.z);
+    }
+  }
+}
+
+bool ColumnImage::Observed(float range, float pitch, float yaw, const float* plane) const {
+  const float tol = float(test_.tol_m + test_.tol_rel * range);
+  const float grazing_max = float(test_.grazing_max_m);
+  const int row = std::min(rows_ - 1, std::max(0, int((up_ - pitch) * row_scale_)));
+  int col = int((kPiF - yaw) * col_scale_);
+  if (col >= cols_) col -= cols_;
+  col = std::max(0, col);
+  const float* rc = range_.data() + std::size_t(col) * std::size_t(rows_);
+  const Eigen::Vector3f* qc = ret_.data() + std::size_t(col) * std::size_t(rows_);
+  // Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol`
+  // from the surface, so up to tol / cos along a grazing ray, at most graze_max_.
+  auto along = [&](float cosine) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), grazing_max)); };
+  // 0: no return, 1: on the point's plane, 2: nearer (occluder), 3: farther (past the surface's edge).
+  auto kind = [&](int r) {
+    const Eigen::Vector3f& q = qc[r];
+    const float off = std::fabs(plane[0] * q.x() + plane[1] * q.y() + plane[2] * q.z() - plane[3]);
+    if (off <= tol) return 1;
+    return rc[r] < range ? 2 : 3;
+  };
+  const float cp = std::cos(pitch);
+  const float cos_n = std::fabs(plane[0] * cp * std::cos(yaw) + plane[1] * cp * std::sin(yaw) + plane[2] * std::sin(pitch));
+  if (std::isfinite(rc[row])) return kind(row) == 1 && std::fabs(rc[row] - range) <= along(cos_n);
+  int above = 0, below = 0, ra = -1, rb = -1;
+  for (int r = row - 1; r >= std::max(0, row - span_); --r)
+    if (std::isfinite(rc[r])) {
+      above = kind(r);
+      ra = r;
+      break;
+    }
+  for (int r = row + 1; r <= std::min(rows_ - 1, row + span_); ++r)
+    if (std::isfinite(rc[r])) {
+      below = kind(r);
+      rb = r;
+      break;
+    }
+  if (above == 1 && below == 1) {
+    // The surface between the two beams as the line through their returns in the column's
+    // (horizontal range, height) plane: the ray towards the point must meet it within the
+    // along-ray tolerance of the point (not in a trough behind a crest the lower beam hit).
+    const Eigen::Vector2f a(qc[ra].head<2>().norm(), qc[ra].z()), b(qc[rb].head<2>().norm(), qc[rb].z());
+    const Eigen::Vector2f d(cp, std::sin(pitch));
+    const Eigen::Vector2f ab = b - a;
+    // s d - t ab = a (Cramer's rule).
+    const float det = ab.x() * d.y() - ab.y() * d.x();
+    const float len = ab.norm();
+    if (!(std::fabs(det) > 1e-6f * len)) return false;
+    const float s = (ab.x() * a.y() - ab.y() * a.x()) / det;
+    return std::fabs(s - range) <= along(std::fabs(det) / len);
+  }
+  // One side on the surface, the other without a return or past it: the surface's edge.
+  const int on = above == 1 ? ra : below == 1 ? rb : -1;
+  const int other = above == 1 ? below : above;
+  return on >= 0 && (other == 0 || other == 3) && std::fabs(rc[on] - range) <= float(test_.edge_max_m);
+}
+
 TileIndex::TileIndex(const PointCloud& cloud, double tile_m) : tile_m_(tile_m) {
   const std::size_t n = cloud.size();
   // Tiles in key order, points in input order within a tile: a counting sort by tile (tile ids
@@ -486,6 +577,8 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   out.see.assign(n * L, 0);
   out.hit.assign(n * L, 0);
   if (count_occluded) out.occ.assign(n * L, 0);
+  const bool beams = options.normals != nullptr && options.beams != nullptr;
+  if (beams) out.beam_hits.assign(n, 0);
   if (n == 0 || L == 0 || keyframes.empty()) return out;
 
   const detail::TileIndex index(points, cfg.tile_m);
@@ -496,13 +589,14 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   // instead of one atomic per point and level, and workers on different keyframes rarely want
   // the same tile at the same time.
   std::vector<std::uint16_t> see(n * L, 0), hit(n * L, 0), occ(count_occluded ? n * L : 0, 0);
+  std::vector<std::uint16_t> beam_hits(beams ? n : 0, 0);
   std::unique_ptr<std::mutex[]> tile_locks(new std::mutex[index.tiles()]);
   const float radius = float(cfg.submap_radius_m);
   const float r2 = radius * radius;
   const float tol_abs = float(cfg.tol_abs_m), tol_rel = float(cfg.tol_rel);
   // Surface hits: the pixel's nearest return on the point's plane (OnPlane).
   const float surface_max = float(options.surface_max_m);
-  const bool surface = options.normals != nullptr && surface_max > 0.f;
+  const bool surface = options.normals != nullptr && (surface_max > 0.f || beams);
   const int nl = int(L);
 
   // Per worker: the range images (reused from keyframe to keyframe) and one tile's projections
@@ -518,14 +612,25 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
     std::vector<std::uint32_t> idx;
     std::vector<float> range, pitch, yaw, plane;
     std::vector<std::uint8_t> votes;  // [level * tile size + position in the tile]
+    std::unique_ptr<detail::ColumnImage> columns;  // beam test (options.beams)
+    std::vector<std::uint8_t> seen_beams;          // [position in the tile]
   };
   tbb::enumerable_thread_specific<Scratch> scratch(
-      [&] { return Scratch{detail::MultiResImage(cfg, resolutions_deg, surface), {}, {}, {}, {}, {}, {}}; });
+      [&] {
+        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f), {}, {}, {}, {}, {}, {}, {}, {}};
+        if (beams)
+          sc.columns = std::make_unique<detail::ColumnImage>(cfg, *options.beams);
+        return sc;
+      });
 
   detail::ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
     const WorldKeyframe& kf = keyframes[k];
     Scratch& sc = scratch.local();
-    sc.img.Build(*detail::LoadScan(kf));
+    {
+      const auto scan = detail::LoadScan(kf);
+      sc.img.Build(*scan);
+      if (beams) sc.columns->Build(*scan);
+    }
     const detail::MultiResImage& img = sc.img;
     const Eigen::Matrix3f Rt = kf.T_world_sensor.linear().transpose().cast<float>();
     const Eigen::Vector3f c = kf.T_world_sensor.translation().cast<float>();
@@ -555,11 +660,16 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
           pl[3] = ns.dot(ps);
         }
       }
+      if (beams) {
+        sc.seen_beams.assign(tn, 0);
+        for (std::size_t j = 0; j < m; ++j)
+          sc.seen_beams[sc.idx[j]] = sc.columns->Observed(sc.range[j], sc.pitch[j], sc.yaw[j], &sc.plane[4 * j]);
+      }
       sc.votes.assign(L * tn, 0);
       for (int l = 0; l < nl; ++l) {
         const detail::VoteTest& t = test;
         std::uint8_t* vote = sc.votes.data() + std::size_t(l) * tn;
-        if (surface)
+        if (surface && surface_max > 0.f)
           detail::VoteLevel<true>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
                                   sc.pitch.data(), sc.yaw.data(), sc.plane.data(), img.Returns(l), vote);
         else
@@ -567,6 +677,10 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
                                    sc.pitch.data(), sc.yaw.data(), nullptr, nullptr, vote);
       }
       const std::lock_guard<std::mutex> lock(tile_locks[tile]);
+      if (beams) {
+        std::uint16_t* ov = beam_hits.data() + b;
+        for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + sc.seen_beams[i]);
+      }
       for (std::size_t l = 0; l < L; ++l) {
         const std::uint8_t* vote = sc.votes.data() + l * tn;
         std::uint16_t* sv = see.data() + l * n + b;
@@ -583,6 +697,8 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
     });
   });
 
+  if (beams)
+    for (std::size_t i = 0; i < n; ++i) out.beam_hits[std::size_t(order[i])] = beam_hits[i];
   for (std::size_t l = 0; l < L; ++l) {
     for (std::size_t i = 0; i < n; ++i) {
       const std::size_t orig = std::size_t(order[i]);
