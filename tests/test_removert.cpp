@@ -148,6 +148,26 @@ TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
   EXPECT_EQ(v.beam_hits[1], 0);
   EXPECT_EQ(v.beam_hits[2], 0);
   EXPECT_EQ(v.beam_hits[3], 1);
+  // E: a wall (y = 6 m) seen obliquely (8 deg), its beams 0.15 deg off E's azimuth in the same
+  // column, so 0.8 m nearer in range (more than the tolerance): the surface through them still
+  // meets E's ray at E.
+  removert::BeamTest defaults;
+  const double col_scale = std::lround(360.0 / defaults.col_deg) / (2.0 * M_PI);
+  const double yaw_e = M_PI - (std::floor((M_PI - 8.0 * M_PI / 180.0) * col_scale) + 0.5) / col_scale;
+  auto on_wall = [](double yaw, double pitch_deg) {
+    const double rho = 6.0 / std::sin(yaw);
+    return Eigen::Vector3f(float(rho * std::cos(yaw)), 6.f, float(rho * std::tan(pitch_deg * M_PI / 180.0)));
+  };
+  const double off = 0.15 * M_PI / 180.0;
+  add(on_wall(yaw_e + off, 0.6));
+  add(on_wall(yaw_e + off, -0.6));
+  const Eigen::Vector3f e = on_wall(yaw_e, 0.0);
+  PointCloud wall;
+  wall.push_back(e.x(), e.y(), e.z() + 1.8f);
+  const std::vector<Eigen::Vector3f> wall_normal = {Eigen::Vector3f::UnitY()};
+  opt.normals = &wall_normal;
+  EXPECT_EQ(removert::CountVisibility(wall, {kf}, {1.0}, cfg, 1, opt).beam_hits[0], 1);
+  opt.normals = &up;
   // The plain pixel test (2 deg pixel, surface hits up to 10 m) calls C and B's lower rows the
   // same surface: C is a hit there.
   opt.beams = nullptr;

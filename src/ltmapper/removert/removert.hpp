@@ -224,9 +224,9 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
 //  - a return in the point's own cell: on the point's plane (within tol_m + tol_rel * range)
 //    and within the along-ray tolerance of it, tol / cos(incidence) capped at grazing_max_m;
 //  - else the nearest returns above and below its direction (within span_deg): both on the
-//    plane, and the ray towards the point meets the line through them (the surface between the
-//    two beams) within that along-ray tolerance: so a point in a trough behind a crest the lower
-//    beam hit, or behind an occluder, is not observed;
+//    plane, and the ray towards the point meets the surface between them (the plane through
+//    both returns along the point's surface contour) within that along-ray tolerance: so a
+//    point in a trough behind a crest the lower beam hit, or behind an occluder, is not observed;
 //  - else one of them on the plane at most edge_max_m from the point in range and the other
 //    without a return or beyond the point (the surface's edge, far ground below the sky).
 // The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).

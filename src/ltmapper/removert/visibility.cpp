@@ -468,18 +468,22 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const float* pla
       break;
     }
   if (above == 1 && below == 1) {
-    // The surface between the two beams as the line through their returns in the column's
-    // (horizontal range, height) plane: the ray towards the point must meet it within the
-    // along-ray tolerance of the point (not in a trough behind a crest the lower beam hit).
-    const Eigen::Vector2f a(qc[ra].head<2>().norm(), qc[ra].z()), b(qc[rb].head<2>().norm(), qc[rb].z());
-    const Eigen::Vector2f d(cp, std::sin(pitch));
-    const Eigen::Vector2f ab = b - a;
-    // s d - t ab = a (Cramer's rule).
-    const float det = ab.x() * d.y() - ab.y() * d.x();
-    const float len = ab.norm();
-    if (!(std::fabs(det) > 1e-6f * len)) return false;
-    const float s = (ab.x() * a.y() - ab.y() * a.x()) / det;
-    return std::fabs(s - range) <= along(std::fabs(det) / len);
+    // The surface between the two beams: the plane through their returns that holds the
+    // horizontal direction along the point's surface (its contour line; across the ray for
+    // level ground). The ray towards the point must meet it within the along-ray tolerance of
+    // the point: not in a trough behind a crest the lower beam hit. A plane, not the returns'
+    // ranges: on a surface seen obliquely the column's returns lie at other azimuths than the point.
+    const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
+    const Eigen::Vector3f u(cp * std::cos(yaw), cp * std::sin(yaw), std::sin(pitch));
+    Eigen::Vector3f t = nrm.cross(Eigen::Vector3f::UnitZ());
+    if (t.norm() < 0.1f) t = Eigen::Vector3f(-u.y(), u.x(), 0.f);
+    Eigen::Vector3f m = (qc[ra] - qc[rb]).cross(t);
+    if (m.norm() < 1e-6f) m = nrm;
+    m.normalize();
+    const float cosine = std::fabs(m.dot(u));
+    if (cosine < 1e-6f) return false;
+    const float s = m.dot(qc[ra]) / m.dot(u);
+    return std::fabs(s - range) <= along(cosine);
   }
   // One side on the surface, the other without a return or past it: the surface's edge.
   const int on = above == 1 ? ra : below == 1 ? rb : -1;
