@@ -119,9 +119,9 @@ class ColumnImage {
  public:
   ColumnImage(const RemovertConfig& cfg, const BeamTest& test);
   void Build(const PointCloud& scan);
-  // BeamTest for a point at (range, pitch, yaw) (sensor frame) on the plane n . x = off
-  // (plane[0..3], sensor frame).
-  bool Observed(float range, float pitch, float yaw, const float* plane) const;
+  // BeamTest for a point ps (sensor frame; its range, pitch and yaw as MultiResImage::Angles
+  // gives them) on the plane n . x = off (plane[0..3], sensor frame).
+  bool Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
 
  private:
   BeamTest test_;

@@ -84,6 +84,24 @@ inline __m128 Angles4(__m128 x, __m128 y, __m128 z, __m128 up, __m128 down, __m1
   *yaw = FastAtan2x4(y, x);
   return _mm_andnot_ps(out_of_fov, ok);
 }
+
+// Angles of the four scan points from index i (PointXYZI: four packed floats, transposed to x /
+// y / z lanes): the mask of those inside the FOV and [min_range, max_range].
+struct ScanBounds4 {
+  __m128 up, down, min_range, max_range;
+};
+inline int ScanAngles4(const PointCloud& scan, std::size_t i, const ScanBounds4& bd, __m128* r, __m128* pt,
+                       __m128* yw) {
+  static_assert(sizeof(PointXYZI) == 4 * sizeof(float) && offsetof(PointXYZI, x) == 0,
+                "PointXYZI must be x y z intensity floats");
+  const float* raw = reinterpret_cast<const float*>(scan.points.data()) + 4 * i;
+  __m128 px = _mm_loadu_ps(raw), py = _mm_loadu_ps(raw + 4);
+  __m128 pz = _mm_loadu_ps(raw + 8), pi = _mm_loadu_ps(raw + 12);
+  _MM_TRANSPOSE4_PS(px, py, pz, pi);
+  const __m128 ok = Angles4(px, py, pz, bd.up, bd.down, r, pt, yw);
+  const __m128 out_of_range = _mm_or_ps(_mm_cmplt_ps(*r, bd.min_range), _mm_cmpgt_ps(*r, bd.max_range));
+  return _mm_movemask_ps(_mm_andnot_ps(out_of_range, ok));
+}
 #endif
 
 // Votes of one tile's valid points at one level (see CountVisibility): kSee, kHit, kOcc or 0 at
@@ -308,22 +326,12 @@ void MultiResImage::Build(const PointCloud& scan) {
   std::size_t i = 0;
   const std::size_t n = scan.size();
 #if defined(__SSE2__)
-  // PointXYZI is four packed floats: load four points and transpose to x / y / z lanes.
-  static_assert(sizeof(PointXYZI) == 4 * sizeof(float) && offsetof(PointXYZI, x) == 0,
-                "PointXYZI must be x y z intensity floats");
-  const float* raw = reinterpret_cast<const float*>(scan.points.data());
-  const __m128 up = _mm_set1_ps(up_), down = _mm_set1_ps(down_);
-  const __m128 min_range = _mm_set1_ps(min_range_), max_range = _mm_set1_ps(max_range_);
+  const ScanBounds4 bd{_mm_set1_ps(up_), _mm_set1_ps(down_), _mm_set1_ps(min_range_), _mm_set1_ps(max_range_)};
   alignas(16) float rs[4];
   alignas(16) std::int32_t pix[4];
   for (; i + 4 <= n; i += 4) {
-    __m128 px = _mm_loadu_ps(raw + 4 * i), py = _mm_loadu_ps(raw + 4 * i + 4);
-    __m128 pz = _mm_loadu_ps(raw + 4 * i + 8), pi = _mm_loadu_ps(raw + 4 * i + 12);
-    _MM_TRANSPOSE4_PS(px, py, pz, pi);
     __m128 r, pt, yw;
-    const __m128 ok = Angles4(px, py, pz, up, down, &r, &pt, &yw);
-    const __m128 out_of_range = _mm_or_ps(_mm_cmplt_ps(r, min_range), _mm_cmpgt_ps(r, max_range));
-    const int mask = _mm_movemask_ps(_mm_andnot_ps(out_of_range, ok));
+    const int mask = ScanAngles4(scan, i, bd, &r, &pt, &yw);
     if (mask == 0) continue;
     _mm_store_ps(rs, r);
     for (Level& L : levels_) {
@@ -414,14 +422,9 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test) : test
 
 void ColumnImage::Build(const PointCloud& scan) {
   std::fill(range_.begin(), range_.end(), std::numeric_limits<float>::infinity());
-  for (const PointXYZI& q : scan.points) {
-    const float rxy2 = q.x * q.x + q.y * q.y;
-    const float r = std::sqrt(rxy2 + q.z * q.z);
-    if (!(r >= min_range_ && r <= max_range_)) continue;
-    const float pitch = FastAtan2(q.z, std::sqrt(rxy2));
-    if (pitch > up_ || pitch < down_) continue;
+  auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
     const int row = std::min(rows_ - 1, std::max(0, int((up_ - pitch) * row_scale_)));
-    int col = int((kPiF - FastAtan2(q.y, q.x)) * col_scale_);
+    int col = int((kPiF - yaw) * col_scale_);
     if (col >= cols_) col -= cols_;
     col = std::max(0, col);
     const std::size_t cell = std::size_t(col) * std::size_t(rows_) + std::size_t(row);
@@ -429,10 +432,37 @@ void ColumnImage::Build(const PointCloud& scan) {
       range_[cell] = r;
       ret_[cell] = Eigen::Vector3f(q.x, q.y, q.z);
     }
+  };
+  std::size_t i = 0;
+  const std::size_t n = scan.size();
+#if defined(__SSE2__)
+  // Four points at a time through the angle kernel MultiResImage::Build uses.
+  const ScanBounds4 bd{_mm_set1_ps(up_), _mm_set1_ps(down_), _mm_set1_ps(min_range_), _mm_set1_ps(max_range_)};
+  alignas(16) float rs[4], ps[4], ys[4];
+  for (; i + 4 <= n; i += 4) {
+    __m128 r, pt, yw;
+    const int mask = ScanAngles4(scan, i, bd, &r, &pt, &yw);
+    if (mask == 0) continue;
+    _mm_store_ps(rs, r);
+    _mm_store_ps(ps, pt);
+    _mm_store_ps(ys, yw);
+    for (int k = 0; k < 4; ++k)
+      if (mask >> k & 1) put(rs[k], ps[k], ys[k], scan.points[i + std::size_t(k)]);
+  }
+#endif
+  for (; i < n; ++i) {
+    const PointXYZI& q = scan.points[i];
+    const float rxy2 = q.x * q.x + q.y * q.y;
+    const float r = std::sqrt(rxy2 + q.z * q.z);
+    if (!(r > 1e-6f) || r < min_range_ || r > max_range_) continue;
+    const float pitch = FastAtan2(q.z, std::sqrt(rxy2));
+    if (pitch > up_ || pitch < down_) continue;
+    put(r, pitch, FastAtan2(q.y, q.x), q);
   }
 }
 
-bool ColumnImage::Observed(float range, float pitch, float yaw, const float* plane) const {
+bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
+                           const float* plane) const {
   const float tol = float(test_.tol_m + test_.tol_rel * range);
   const float grazing_max = float(test_.grazing_max_m);
   const int row = std::min(rows_ - 1, std::max(0, int((up_ - pitch) * row_scale_)));
@@ -442,7 +472,7 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const float* pla
   const float* rc = range_.data() + std::size_t(col) * std::size_t(rows_);
   const Eigen::Vector3f* qc = ret_.data() + std::size_t(col) * std::size_t(rows_);
   // Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol`
-  // from the surface, so up to tol / cos along a grazing ray, at most graze_max_.
+  // from the surface, so up to tol / cos along a grazing ray, at most grazing_max_m.
   auto along = [&](float cosine) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), grazing_max)); };
   // 0: no return, 1: on the point's plane, 2: nearer (occluder), 3: farther (past the surface's edge).
   auto kind = [&](int r) {
@@ -451,8 +481,9 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const float* pla
     if (off <= tol) return 1;
     return rc[r] < range ? 2 : 3;
   };
-  const float cp = std::cos(pitch);
-  const float cos_n = std::fabs(plane[0] * cp * std::cos(yaw) + plane[1] * cp * std::sin(yaw) + plane[2] * std::sin(pitch));
+  const Eigen::Vector3f u = ps / range;  // the ray's direction
+  const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
+  const float cos_n = std::fabs(nrm.dot(u));
   if (std::isfinite(rc[row])) return kind(row) == 1 && std::fabs(rc[row] - range) <= along(cos_n);
   int above = 0, below = 0, ra = -1, rb = -1;
   for (int r = row - 1; r >= std::max(0, row - span_); --r)
@@ -473,8 +504,6 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const float* pla
     // level ground). The ray towards the point must meet it within the along-ray tolerance of
     // the point: not in a trough behind a crest the lower beam hit. A plane, not the returns'
     // ranges: on a surface seen obliquely the column's returns lie at other azimuths than the point.
-    const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
-    const Eigen::Vector3f u(cp * std::cos(yaw), cp * std::sin(yaw), std::sin(pitch));
     Eigen::Vector3f t = nrm.cross(Eigen::Vector3f::UnitZ());
     if (t.norm() < 0.1f) t = Eigen::Vector3f(-u.y(), u.x(), 0.f);
     Eigen::Vector3f m = (qc[ra] - qc[rb]).cross(t);
@@ -651,8 +680,10 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
                                         sc.idx.data(), sc.range.data(), sc.pitch.data(), sc.yaw.data());
       if (m == 0) return;
       for (std::size_t j = m; j < m + 3; ++j) sc.range[j] = sc.pitch[j] = sc.yaw[j] = 0.f;  // padding
+      if (beams) sc.seen_beams.assign(tn, 0);
       if (surface) {
-        // Each point's plane in the sensor frame: normal n_s = Rt n, offset n_s . (Rt (p - c)).
+        // Each point's plane in the sensor frame: normal n_s = Rt n, offset n_s . (Rt (p - c)),
+        // and with options.beams its beam test.
         for (std::size_t j = 0; j < m; ++j) {
           const std::size_t i = b + sc.idx[j];
           const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(index.x()[i], index.y()[i], index.z()[i]) - c);
@@ -662,12 +693,8 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
           pl[1] = ns.y();
           pl[2] = ns.z();
           pl[3] = ns.dot(ps);
+          if (beams) sc.seen_beams[sc.idx[j]] = sc.columns->Observed(sc.range[j], sc.pitch[j], sc.yaw[j], ps, pl);
         }
-      }
-      if (beams) {
-        sc.seen_beams.assign(tn, 0);
-        for (std::size_t j = 0; j < m; ++j)
-          sc.seen_beams[sc.idx[j]] = sc.columns->Observed(sc.range[j], sc.pitch[j], sc.yaw[j], &sc.plane[4 * j]);
       }
       sc.votes.assign(L * tn, 0);
       for (int l = 0; l < nl; ++l) {
