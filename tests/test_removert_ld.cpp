@@ -181,5 +181,48 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   EXPECT_LE(with.nd_strong.size() + with.pd_weak.size(), total(with) / 20 + 10);
 }
 
+
+// The query sampled a wall only up to x = -0.1 m (its coverage ends there), the central the whole
+// wall; both seen from 50 m, so the kd-tree radius is 0.3 m + 1 % x 50 m = 0.8 m. Central points
+// 0.4-0.7 m past that rim have a query point within 0.8 m, all to one side of them: with
+// ld.rim_frac they go on as raw changes (no scan sees them here: weak ND); without it the
+// kd-tree absorbs them. A whole wall the query placed 0.5 m off along its normal (pose error)
+// has its neighbours all around each point: no rim inside it.
+TEST(RemovertLd, PointsPastTheRimOfTheOtherCoverageAreChanges) {
+  PointCloud wall, half, shifted;
+  for (int i = -30; i <= 30; ++i)
+    for (int j = 0; j <= 30; ++j) {
+      const float x = 0.1f * float(i), z = 0.1f * float(j);
+      wall.push_back(x, 10.f, z);
+      if (i <= -1) half.push_back(x, 10.f, z);
+      shifted.push_back(x, 10.5f, z);
+    }
+  WorldKeyframe kf;
+  kf.T_world_sensor = test::At(0, -40, 1.8);
+  kf.cloud = std::make_shared<PointCloud>();  // no returns: no visibility evidence either way
+  RemovertConfig cfg;
+  auto nd = [&](const PointCloud& query, const RemovertConfig& c) {
+    const auto r = removert::DetectLd(wall, query, {kf}, {kf}, c, 1);
+    PointCloud all = r.nd_strong;
+    all.append(r.nd_weak);
+    return all;
+  };
+  RemovertConfig off = cfg;
+  off.ld_rim_frac = 0.0;
+  const PointCloud with = nd(half, cfg), without = nd(half, off);
+  auto count_x = [](const PointCloud& c, float lo, float hi) {
+    std::size_t n = 0;
+    for (const auto& p : c.points) n += p.x > lo && p.x < hi;
+    return n;
+  };
+  EXPECT_EQ(count_x(with, 0.35f, 0.65f), 3u * 31u);  // x = 0.4, 0.5, 0.6: past the rim
+  EXPECT_EQ(count_x(without, 0.35f, 0.65f), 0u);
+  EXPECT_EQ(count_x(with, -3.5f, 0.15f), 0u);        // closer than 0.3 m to a query point: no change
+  EXPECT_EQ(count_x(with, 0.75f, 3.5f), count_x(without, 0.75f, 3.5f));
+  std::size_t inside = 0;
+  for (const auto& p : nd(shifted, cfg).points) inside += std::fabs(p.x) < 2.f && p.z > 0.8f && p.z < 2.2f;
+  EXPECT_EQ(inside, 0u);
+}
+
 }  // namespace
 }  // namespace ltm

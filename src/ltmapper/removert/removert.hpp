@@ -64,6 +64,10 @@ struct RemovertConfig {
                                   // nearest keyframe ... (rotation error grows with viewing distance)
   double ld_radius_max_m = 1.0;   // [m] ... at most this
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
+  double ld_rim_frac = 0.45;      // [-] a point whose neighbours are all beyond ld.radius_m and to one side of
+                                  // it (centroid of the nearest 16 off it by more than this times r, along
+                                  // their surface) is past the rim of the other session's coverage: a raw
+                                  // change for the beam test (0 = off)
   std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
@@ -125,6 +129,7 @@ struct RemovertConfig {
     v("ld.radius_rel", ld_radius_rel, "", 0.0, 1.0);
     v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);
     v("ld.min_neighbors", ld_min_neighbors, "points", 1, 1000);
+    v("ld.rim_frac", ld_rim_frac, "", 0.0, 1.0);
     v("ld.resolutions_deg", ld_resolutions_deg, "deg", 0.01, 10.0);
     v("ld.min_votes", ld_min_votes, "keyframes", 1, 65535);
     v("ld.min_ratio", ld_min_ratio, "", 0.0, 1.0);
