@@ -55,6 +55,18 @@ TEST(Run, NeedsTwoExistingSessions) {
   }
 }
 
+TEST(Run, ResumeMarkerHoldsTheStageKey) {
+  test::TempDir dir;
+  const std::string marker = dir / "STAGE_DONE";
+  EXPECT_FALSE(pipeline::StageDone(marker, "sessions: a b\nremovert: x\n"));  // no marker
+  pipeline::MarkStageDone(marker, "sessions: a b\nremovert: x\n");
+  EXPECT_TRUE(pipeline::StageDone(marker, "sessions: a b\nremovert: x\n"));
+  EXPECT_FALSE(pipeline::StageDone(marker, "sessions: a b\nremovert: y\n"));  // a parameter changed
+  EXPECT_FALSE(pipeline::StageDone(marker, "sessions: a b c\nremovert: x\n"));
+  test::WriteText(marker, "ok\n");  // a marker written before markers held keys: rerun
+  EXPECT_FALSE(pipeline::StageDone(marker, "sessions: a b\nremovert: x\n"));
+}
+
 TEST(Run, BadStageNameInConfigIsAnError) {
   pipeline::RunConfig cfg;
   cfg.from_stage = "everything";

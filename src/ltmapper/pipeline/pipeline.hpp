@@ -17,7 +17,8 @@ struct RunConfig {
   std::string removert_config;  // LT-removert params file ("" = built-in defaults)
   std::string map_config;       // LT-map params file ("" = built-in defaults)
   std::string store_name = "map.ltmap";                          // store file inside the out dir
-  std::string from_stage = "auto";  // auto: resume after the last finished stage; else rerun from it
+  std::string from_stage = "auto";  // auto: resume after the last finished stage whose inputs and
+                                    // resolved config are unchanged; else rerun from it
   bool export_maps = true;          // write live.pcd, meta.pcd and objects/ next to the store
 
   template <class V>
@@ -55,6 +56,12 @@ struct RunReport {
 RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
                       const std::string& out_dir, int threads = 0);
 std::string FormatRunReport(const RunReport& report);
+
+// Resume markers: a finished stage writes `marker` holding its key (the session directories, the
+// stage's resolved config and the keys of the stages before it); a later run skips the stage
+// only when the marker holds the same key, so a changed parameter or session list reruns it.
+void MarkStageDone(const std::string& marker, const std::string& key);
+bool StageDone(const std::string& marker, const std::string& key);
 
 // A report is a list of items in order: Markdown files (their text is included) and PNG
 // pictures (linked, with a caption). Writes `out_base`.md and a self-contained-looking

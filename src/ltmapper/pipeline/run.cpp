@@ -42,25 +42,38 @@ Config LoadStageConfig(const std::string& path, const std::string& what) {
   return cfg;
 }
 
-void MarkDone(const std::string& dir) {
-  io::WriteFileAtomic((fs::path(dir) / kDoneMarker).string(), [](std::ostream& os) { os << "ok\n"; });
-}
-bool IsDone(const std::string& dir) { return fs::exists(fs::path(dir) / kDoneMarker); }
+std::string Marker(const std::string& dir) { return (fs::path(dir) / kDoneMarker).string(); }
 
-// Index of the first stage to run: `from_stage` when given, else the first without a marker.
-std::size_t FirstStage(const RunConfig& cfg, const std::string& aligned, const std::string& changes,
-                       const std::string& store) {
+// Index of the first stage to run: `from_stage` when given, else the first whose marker does
+// not hold its key.
+std::size_t FirstStage(const RunConfig& cfg, const std::vector<std::string>& markers,
+                       const std::vector<std::string>& keys) {
   if (cfg.from_stage != "auto") {
     for (std::size_t i = 0; i < kStages.size(); ++i)
       if (kStages[i] == cfg.from_stage) return i;
   }
-  if (!IsDone(aligned)) return 0;
-  if (!IsDone(changes)) return 1;
-  if (!fs::exists(store + ".done")) return 2;
-  return 3;
+  for (std::size_t i = 0; i < markers.size(); ++i) {
+    if (StageDone(markers[i], keys[i])) continue;
+    if (fs::exists(markers[i]))
+      spdlog::info("run: {} finished with other inputs or parameters: running it again", kStages[i]);
+    return i;
+  }
+  return markers.size();
 }
 
 }  // namespace
+
+void MarkStageDone(const std::string& marker, const std::string& key) {
+  io::WriteFileAtomic(marker, [&](std::ostream& os) { os << key; });
+}
+
+bool StageDone(const std::string& marker, const std::string& key) {
+  std::ifstream in(marker, std::ios::binary);
+  if (!in) return false;
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str() == key;
+}
 
 RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
                       const std::string& out_dir, int threads) {
@@ -78,21 +91,28 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   const std::string aligned_dir = (fs::path(out_dir) / "aligned").string();
   const std::string changes_dir = (fs::path(out_dir) / "changes").string();
   const std::string store_path = (fs::path(out_dir) / cfg.store_name).string();
-  const std::size_t first = FirstStage(cfg, aligned_dir, changes_dir, store_path);
-
   const auto slam_cfg = LoadStageConfig<slam::SlamConfig>(cfg.slam_config, "LT-SLAM");
   const auto rem_cfg = LoadStageConfig<removert::RemovertConfig>(cfg.removert_config, "LT-removert");
   const auto map_cfg = LoadStageConfig<map::MapConfig>(cfg.map_config, "LT-map");
+  // Each stage's key: the sessions, its resolved config, and the keys before it.
+  std::vector<std::string> keys(3);
+  keys[0] = "sessions:\n";
+  for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
+  keys[0] += "slam:\n" + ConfigToString(slam_cfg);
+  keys[1] = keys[0] + "removert:\n" + ConfigToString(rem_cfg);
+  keys[2] = keys[1] + "map:\n" + ConfigToString(map_cfg) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";
+  const std::vector<std::string> markers = {Marker(aligned_dir), Marker(changes_dir), store_path + ".done"};
+  const std::size_t first = FirstStage(cfg, markers, keys);
 
   // ------------------------------------------------------------------------ 1. LT-SLAM
   auto t0 = std::chrono::steady_clock::now();
   if (first <= 0) {
     spdlog::info("run [1/3] LT-SLAM: {} sessions -> {}", session_dirs.size(), aligned_dir);
-    fs::remove(fs::path(aligned_dir) / kDoneMarker);
+    fs::remove(markers[0]);
     const auto res = slam::RunSlamStage(slam_cfg, session_dirs, aligned_dir, threads);
     for (const auto& s : res.sessions)
       if (!s.aligned) spdlog::warn("run: session '{}' NOT aligned: {}", s.name, s.reason);
-    MarkDone(aligned_dir);
+    MarkStageDone(markers[0], keys[0]);
     report.stages.push_back({"slam", false, Since(t0)});
   } else {
     spdlog::info("run [1/3] LT-SLAM: finished output found in {}, skipped", aligned_dir);
@@ -119,9 +139,9 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   t0 = std::chrono::steady_clock::now();
   if (first <= 1) {
     spdlog::info("run [2/3] LT-removert: {} aligned sessions -> {}", aligned_dirs.size(), changes_dir);
-    fs::remove(fs::path(changes_dir) / kDoneMarker);
+    fs::remove(markers[1]);
     removert::RunRemovertStage(rem_cfg, aligned_dirs, poses_files, changes_dir, threads);
-    MarkDone(changes_dir);
+    MarkStageDone(markers[1], keys[1]);
     report.stages.push_back({"removert", false, Since(t0)});
   } else {
     spdlog::info("run [2/3] LT-removert: finished output found in {}, skipped", changes_dir);
@@ -132,7 +152,7 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   t0 = std::chrono::steady_clock::now();
   if (first <= 2) {
     spdlog::info("run [3/3] LT-map: -> {}", store_path);
-    fs::remove(store_path + ".done");
+    fs::remove(markers[2]);
     // The store is rebuilt from the stage outputs: integrating is one transaction per session,
     // but a partially integrated store from a killed run is simply replaced.
     for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(store_path + suffix);
@@ -156,7 +176,7 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
       map::WriteLabelledCloud((fs::path(out_dir) / "meta.pcd").string(), store.Meta(region));
       map::WriteObjects((fs::path(out_dir) / "objects").string(), store.Objects());
     }
-    io::WriteFileAtomic(store_path + ".done", [](std::ostream& os) { os << "ok\n"; });
+    MarkStageDone(markers[2], keys[2]);
     report.stages.push_back({"map", false, Since(t0)});
   } else {
     spdlog::info("run [3/3] LT-map: finished store found at {}, skipped", store_path);
