@@ -504,8 +504,11 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vec
     // level ground). The ray towards the point must meet it within the along-ray tolerance of
     // the point: not in a trough behind a crest the lower beam hit. A plane, not the returns'
     // ranges: on a surface seen obliquely the column's returns lie at other azimuths than the point.
+    // A surface within ~6 deg of level (|n x z| = sin slope < kLevelSine) has no contour
+    // direction to speak of: take the horizontal across the ray.
+    constexpr float kLevelSine = 0.1f;
     Eigen::Vector3f t = nrm.cross(Eigen::Vector3f::UnitZ());
-    if (t.norm() < 0.1f) t = Eigen::Vector3f(-u.y(), u.x(), 0.f);
+    if (t.norm() < kLevelSine) t = Eigen::Vector3f(-u.y(), u.x(), 0.f);
     Eigen::Vector3f m = (qc[ra] - qc[rb]).cross(t);
     if (m.norm() < 1e-6f) m = nrm;
     m.normalize();
