@@ -79,37 +79,27 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   VisibilityOptions opt;
   opt.count_occluded = true;
   std::vector<Eigen::Vector3f> normals;
-  BeamTest test;
-  const bool beams = cfg.ld_same_min_hits > 0 && cfg.same_test == "beams";
+  const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
     normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads);
     opt.normals = &normals;
-    if (beams) {
-      test.col_deg = cfg.ld_beam_col_deg;
-      test.row_deg = cfg.ld_beam_row_deg;
-      test.span_deg = cfg.ld_beam_span_deg;
-      test.tol_m = cfg.ld_beam_tol_m;
-      test.tol_rel = cfg.ld_beam_tol_rel;
-      test.grazing_max_m = cfg.ld_beam_grazing_max_m;
-      test.edge_max_m = cfg.ld_beam_edge_max_m;
-      opt.beams = &test;
-    } else {
+    if (beams)
+      opt.beams = &cfg.ld_beam;
+    else
       opt.surface_max_m = cfg.ld_surface_max_m;
-    }
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
   for (std::size_t i = 0; i < points.size(); ++i) {
     bool seen = false, observed = false;
-    int hits = 0;
+    int hits = beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
       observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
-      hits = std::max(hits, int(h));
+      if (!beams) hits = std::max(hits, int(h));
     }
     out.seen[i] = seen;
     out.observed[i] = observed;
-    if (beams) hits = v.beam_hits[i];
     out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
   }
   return out;

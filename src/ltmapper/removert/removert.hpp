@@ -30,6 +30,30 @@
 
 namespace ltm::removert {
 
+// Did a scan observe the surface of a point (LD "same surface": the other session has it, only
+// sampled more sparsely)? The exact ray towards the point is not among the beams, so it is
+// judged from the beams around it, in the point's column (col_deg wide, rows of row_deg):
+//  - a return in the point's own cell: on the point's plane (within tol_m + tol_rel * range)
+//    and within the along-ray tolerance of it, tol / cos(incidence) capped at grazing_max_m;
+//  - else the nearest returns above and below its direction (within span_deg): both on the
+//    plane, and the ray towards the point meets the surface between them (the plane through
+//    both returns along the point's surface contour) within that along-ray tolerance: so a
+//    point in a trough behind a crest the lower beam hit, or behind an occluder, is not observed;
+//  - else one of them on the plane at most edge_max_m from the point in range and the other
+//    without a return or beyond the point (the surface's edge, far ground below the sky).
+// The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
+// The defaults are those of RemovertConfig::ld_beam (config keys ld.beam_*).
+struct BeamTest {
+  double col_deg = 0.4;         // [deg] column width (>= the scans' azimuth step)
+  double row_deg = 0.1;         // [deg] row height (well below the beams' elevation spacing)
+  double span_deg = 1.5;        // [deg] how far above / below the point's direction to look for the beams
+  double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface ...
+  double tol_rel = 0.005;       // [-] ... plus this times the range (rotation error between the sessions)
+  double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
+  double edge_max_m = 60.0;     // [m] at a surface's edge (one beam on it, the other without a return or
+                                //     beyond it) the return on it at most this far from the point in range
+};
+
 struct RemovertConfig {
   // --- sensor and range images
   double fov_up_deg = 16.0;       // [deg] upper edge of the range images' vertical FOV
@@ -84,16 +108,9 @@ struct RemovertConfig {
                                   // session's keyframes hit on its surface plane (surface hits, see
                                   // VisibilityOptions) is the same surface, sampled more sparsely:
                                   // no change (0 = off)
-  std::string same_test = "beams";  // beams: the beam test (ld.beam_*, BeamTest); pixel: the nearest return of
-                                   // the point's LD-resolution pixel or window on its plane (ld.surface_max_m)
-  double ld_beam_col_deg = 0.4;    // [deg] column width of the beam test (>= the scans' azimuth step)
-  double ld_beam_row_deg = 0.1;    // [deg] row height (well below the beams' elevation spacing)
-  double ld_beam_span_deg = 1.5;   // [deg] how far above / below the point's direction to look for the beams
-  double ld_beam_tol_m = 0.3;      // [m] a return this close to the point's plane is on its surface ...
-  double ld_beam_tol_rel = 0.005;  // [-] ... plus this times the range (rotation error between the sessions)
-  double ld_beam_grazing_max_m = 2.0;  // [m] the along-ray tolerance tol / cos(incidence) at most this
-  double ld_beam_edge_max_m = 60.0;    // [m] at a surface's edge (one beam on it, the other without a return or
-                                       // beyond it) the return on it at most this far from the point in range
+  std::string ld_same_test = "beams";  // beams: the beam test (ld_beam, BeamTest); pixel: the nearest return of
+                                      // the point's LD-resolution pixel or window on its plane (ld.surface_max_m)
+  BeamTest ld_beam;                    // keys ld.beam_*
   bool covisible_only = false;    // true: a raw change counts only where the other session had its line
                                   // of sight at all (a return in the window); else unobserved
   std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
@@ -139,14 +156,14 @@ struct RemovertConfig {
     v("ld.normal_radius_m", ld_normal_radius_m, "m", 0.05, 10.0);
     v("ld.surface_max_m", ld_surface_max_m, "m", 0.0, 100.0);
     v("ld.same_min_hits", ld_same_min_hits, "keyframes", 0, 65535);
-    v("ld.same_test", same_test, {"beams", "pixel"});
-    v("ld.beam_col_deg", ld_beam_col_deg, "deg", 0.01, 10.0);
-    v("ld.beam_row_deg", ld_beam_row_deg, "deg", 0.01, 10.0);
-    v("ld.beam_span_deg", ld_beam_span_deg, "deg", 0.01, 30.0);
-    v("ld.beam_tol_m", ld_beam_tol_m, "m", 0.0, 10.0);
-    v("ld.beam_tol_rel", ld_beam_tol_rel, "", 0.0, 1.0);
-    v("ld.beam_grazing_max_m", ld_beam_grazing_max_m, "m", 0.0, 100.0);
-    v("ld.beam_edge_max_m", ld_beam_edge_max_m, "m", 0.0, 1000.0);
+    v("ld.same_test", ld_same_test, {"beams", "pixel"});
+    v("ld.beam_col_deg", ld_beam.col_deg, "deg", 0.01, 10.0);
+    v("ld.beam_row_deg", ld_beam.row_deg, "deg", 0.01, 10.0);
+    v("ld.beam_span_deg", ld_beam.span_deg, "deg", 0.01, 30.0);
+    v("ld.beam_tol_m", ld_beam.tol_m, "m", 0.0, 10.0);
+    v("ld.beam_tol_rel", ld_beam.tol_rel, "", 0.0, 1.0);
+    v("ld.beam_grazing_max_m", ld_beam.grazing_max_m, "m", 0.0, 100.0);
+    v("ld.beam_edge_max_m", ld_beam.edge_max_m, "m", 0.0, 1000.0);
     v("ld.covisible_only", covisible_only);
     v("ld.pairs", pairs, {"central", "consecutive"});
     v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);
@@ -223,23 +240,6 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
 // range > point range + tolerance) and how many hit it (|scan range - point range| <=
 // tolerance), counting keyframes within submap_radius_m of the point. The building block of HD
 // removal and of the weak/strong decisions; exposed for tests and ablations.
-// Did a scan observe the surface of a point (LD "same surface": the other session has it, only
-// sampled more sparsely)? The exact ray towards the point is not among the beams, so it is
-// judged from the beams around it, in the point's column (col_deg wide, rows of row_deg):
-//  - a return in the point's own cell: on the point's plane (within tol_m + tol_rel * range)
-//    and within the along-ray tolerance of it, tol / cos(incidence) capped at grazing_max_m;
-//  - else the nearest returns above and below its direction (within span_deg): both on the
-//    plane, and the ray towards the point meets the surface between them (the plane through
-//    both returns along the point's surface contour) within that along-ray tolerance: so a
-//    point in a trough behind a crest the lower beam hit, or behind an occluder, is not observed;
-//  - else one of them on the plane at most edge_max_m from the point in range and the other
-//    without a return or beyond the point (the surface's edge, far ground below the sky).
-// The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
-struct BeamTest {
-  double col_deg = 0.4, row_deg = 0.1, span_deg = 1.5;  // [deg]
-  double tol_m = 0.3, tol_rel = 0.005;                  // [m], [-]
-  double grazing_max_m = 2.0, edge_max_m = 60.0;        // [m]
-};
 struct VisibilityVotes {
   std::size_t points = 0;
   int levels = 0;
