@@ -197,6 +197,18 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                          int threads);
 
+// The at most kNeighbourhoodPoints nearest points of `cloud` within `radius` of p: how many, their
+// mean offset from p, and the eigen decomposition (ascending) of their covariance.
+constexpr std::size_t kNeighbourhoodPoints = 16;
+struct Neighbourhood {
+  int n = 0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d eigenvalues = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d eigenvectors = Eigen::Matrix3d::Identity();
+};
+Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& cloud, const Eigen::Vector3f& p,
+                               float radius);
+
 // Unit normals of `points` from their neighbourhood in `map` (at most 16 nearest within
 // radius_m): the PCA normal of a planar neighbourhood; for a line-like one (a far ground ring,
 // a pole) the direction perpendicular to the line closest to vertical; +z with < 2 neighbours.

@@ -6,8 +6,6 @@
 
 #include "ltmapper/geometry/geometry.hpp"
 
-#include <Eigen/Eigenvalues>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -47,24 +45,11 @@ std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, con
   // surface (the centroid of the nearest ones off the point by more than rim_frac * r in their
   // plane): the point lies past the rim of what the other session sampled, not on a surface
   // the poses shifted. It goes on as a raw change; the beam test decides.
-  auto AtRim = [&](const geometry::KdTree& t, const PointCloud& cloud, const Eigen::Vector3f& p, float r) {
-    constexpr std::size_t kRimNeighbours = 16;
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
-    int n = 0;
-    for (const auto& [j, d2] : t.Knn(p, kRimNeighbours)) {
-      if (d2 > r * r) continue;
-      const Eigen::Vector3d q = (cloud.points[j].xyz() - p).cast<double>();
-      mean += q;
-      second += q * q.transpose();
-      ++n;
-    }
-    if (n < 3) return true;
-    mean /= n;
-    const Eigen::Matrix3d cov = second / n - mean * mean.transpose();
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-    const Eigen::Vector3d nrm = es.eigenvectors().col(0);
-    const Eigen::Vector3d lateral = mean - mean.dot(nrm) * nrm;
+  auto AtRim = [&](const Eigen::Vector3f& p, float r) {
+    const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
+    if (nb.n < 3) return true;
+    const Eigen::Vector3d nrm = nb.eigenvectors.col(0);
+    const Eigen::Vector3d lateral = nb.mean - nb.mean.dot(nrm) * nrm;
     return lateral.norm() > cfg.ld_rim_frac * r;
   };
   std::vector<std::uint8_t> m(points.size(), 1);
@@ -82,7 +67,7 @@ std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, con
         r = std::min(r_max, r0 + rr * std::sqrt(std::max(d_own, d_other)));
       }
       m[i] = tree.CountWithin(p, r, k) < k ? 1 : 0;
-      if (!m[i] && rim && r > r0 && tree.CountWithin(p, r0, 1) == 0) m[i] = AtRim(tree, other, p, r) ? 1 : 0;
+      if (!m[i] && rim && r > r0 && tree.CountWithin(p, r0, 1) == 0) m[i] = AtRim(p, r) ? 1 : 0;
     }
   });
   for (std::size_t i = 0; i < m.size(); ++i) mask[i] = m[i] != 0;

@@ -23,41 +23,48 @@
 
 namespace ltm::removert::detail {
 
+Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& cloud, const Eigen::Vector3f& p,
+                               float radius) {
+  Neighbourhood nb;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
+  const float r2 = radius * radius;
+  for (const auto& [j, d2] : tree.Knn(p, kNeighbourhoodPoints)) {
+    if (d2 > r2) continue;
+    const Eigen::Vector3d q = (cloud.points[j].xyz() - p).cast<double>();
+    sum += q;
+    second += q * q.transpose();
+    ++nb.n;
+  }
+  if (nb.n == 0) return nb;
+  nb.mean = sum / nb.n;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(second / nb.n - nb.mean * nb.mean.transpose());
+  nb.eigenvalues = es.eigenvalues();
+  nb.eigenvectors = es.eigenvectors();
+  return nb;
+}
+
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
                                              double radius_m, int threads) {
   std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
   if (points.empty() || map.empty()) return normals;
   const geometry::KdTree tree(std::make_shared<const PointCloud>(map));
-  const float r2 = float(radius_m * radius_m);
-  constexpr std::size_t kMaxNeighbours = 16;
   const std::size_t chunk = 2048;
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
     const std::size_t b = ch * chunk, e = std::min(points.size(), b + chunk);
     for (std::size_t i = b; i < e; ++i) {
-      const auto nn = tree.Knn(points.points[i].xyz(), kMaxNeighbours);
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      int n = 0;
-      for (const auto& [j, d2] : nn)
-        if (d2 <= r2) mean += map.points[j].xyz().cast<double>(), ++n;
-      if (n < 2) continue;
-      mean /= n;
-      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-      for (const auto& [j, d2] : nn)
-        if (d2 <= r2) {
-          const Eigen::Vector3d q = map.points[j].xyz().cast<double>() - mean;
-          cov += q * q.transpose();
-        }
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-      const Eigen::Vector3d ev = es.eigenvalues();  // ascending
+      const Neighbourhood nb = FitNeighbourhood(tree, map, points.points[i].xyz(), float(radius_m));
+      if (nb.n < 2) continue;
+      const Eigen::Vector3d& ev = nb.eigenvalues;  // ascending
       Eigen::Vector3d nrm;
       // Planar when the two largest spreads are comparable; else a line: the direction
       // perpendicular to it closest to vertical.
-      if (n >= 3 && ev(1) > 0.05 * ev(2)) {
-        nrm = es.eigenvectors().col(0);
+      if (nb.n >= 3 && ev(1) > 0.05 * ev(2)) {
+        nrm = nb.eigenvectors.col(0);
       } else {
-        const Eigen::Vector3d line = es.eigenvectors().col(2);
+        const Eigen::Vector3d line = nb.eigenvectors.col(2);
         nrm = Eigen::Vector3d::UnitZ() - line.z() * line;
-        if (nrm.norm() < 1e-6) nrm = es.eigenvectors().col(0);
+        if (nrm.norm() < 1e-6) nrm = nb.eigenvectors.col(0);
       }
       normals[i] = nrm.normalized().cast<float>();
     }
