@@ -79,14 +79,22 @@ class MultiResImage {
     int rows = 0, cols = 0;
     float row_scale = 0.f, col_scale = 0.f;  // pixels per rad
     float up = 0.f;                          // [rad] top of the FOV
-    std::size_t Pixel(float pitch, float yaw) const {
+    // rows x cols pixels of row_deg x col_deg over the config's vertical FOV and 360 deg.
+    static Grid Make(const RemovertConfig& cfg, double row_deg, double col_deg);
+    int Row(float pitch) const {
       int row = int((up - pitch) * row_scale);
       if (row >= rows) row = rows - 1;
       if (row < 0) row = 0;
+      return row;
+    }
+    int Col(float yaw) const {
       int col = int((kPiF - yaw) * col_scale);
       if (col >= cols) col -= cols;
       if (col < 0) col = 0;
-      return std::size_t(row) * std::size_t(cols) + std::size_t(col);
+      return col;
+    }
+    std::size_t Pixel(float pitch, float yaw) const {
+      return std::size_t(Row(pitch)) * std::size_t(cols) + std::size_t(Col(yaw));
     }
   };
   const Grid& GridOf(int level) const { return levels_[std::size_t(level)].grid; }
@@ -125,10 +133,11 @@ class ColumnImage {
 
  private:
   BeamTest test_;
-  int rows_ = 0, cols_ = 0, span_ = 0;
-  float row_scale_ = 0.f, col_scale_ = 0.f, up_ = 0.f, down_ = 0.f;
+  MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
+  int span_ = 0;              // [rows]
+  float down_ = 0.f;          // [rad]
   float min_range_ = 0.f, max_range_ = 0.f;
-  std::vector<float> range_;          // [col * rows + row], +inf = no return
+  std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
 };
 

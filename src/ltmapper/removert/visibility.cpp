@@ -31,12 +31,24 @@
 namespace ltm::removert {
 namespace detail {
 
+MultiResImage::Grid MultiResImage::Grid::Make(const RemovertConfig& cfg, double row_deg, double col_deg) {
+  constexpr double kPi = 3.14159265358979323846, kDeg = kPi / 180.0;
+  Grid g;
+  g.rows = std::max(1, int(std::ceil((cfg.fov_up_deg - cfg.fov_down_deg) / row_deg - 1e-9)));
+  g.cols = std::max(1, int(std::lround(360.0 / col_deg)));
+  g.row_scale = float(g.rows / ((cfg.fov_up_deg - cfg.fov_down_deg) * kDeg));
+  g.col_scale = float(g.cols / (2.0 * kPi));
+  g.up = float(cfg.fov_up_deg * kDeg);  // = MultiResImage::up_, which Angles() checks
+  return g;
+}
+
 geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_deg) {
+  const MultiResImage::Grid g = MultiResImage::Grid::Make(cfg, pixel_deg, pixel_deg);
   geometry::RangeImageConfig c;
   c.fov_up_deg = cfg.fov_up_deg;
   c.fov_down_deg = cfg.fov_down_deg;
-  c.rows = std::max(1, int(std::ceil((cfg.fov_up_deg - cfg.fov_down_deg) / pixel_deg - 1e-9)));
-  c.cols = std::max(1, int(std::lround(360.0 / pixel_deg)));
+  c.rows = g.rows;
+  c.cols = g.cols;
   return c;
 }
 
@@ -120,9 +132,12 @@ struct VoteTest {
 // frame) within the tolerance, at most surface_max from the point in range. Far ground at a
 // grazing angle is sampled by rings metres apart in range, so the plain range test misses it;
 // an occluder in front of the point (a wall, a car) is off its plane.
+// Distance of q from the plane n . x = off (plane[0..3]).
+inline float PlaneDistance(const float* plane, const Eigen::Vector3f& q) {
+  return std::fabs(plane[0] * q.x() + plane[1] * q.y() + plane[2] * q.z() - plane[3]);
+}
 inline bool OnPlane(const float* plane, const Eigen::Vector3f& q, float at_off, float tol, float surface_max) {
-  return at_off <= surface_max &&
-         std::fabs(plane[0] * q.x() + plane[1] * q.y() + plane[2] * q.z() - plane[3]) <= tol;
+  return at_off <= surface_max && PlaneDistance(plane, q) <= tol;
 }
 
 #if defined(__SSE2__)
@@ -230,15 +245,9 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   window_ = cfg.window_px;
-  const double fov = (cfg.fov_up_deg - cfg.fov_down_deg) * kDeg;
   for (double res : resolutions_deg) {
-    const geometry::RangeImageConfig rc = LevelConfig(cfg, res);
     Level L;
-    L.grid.rows = rc.rows;
-    L.grid.cols = rc.cols;
-    L.grid.row_scale = float(rc.rows / fov);
-    L.grid.col_scale = float(rc.cols / (2.0 * 3.14159265358979323846));
-    L.grid.up = up_;
+    L.grid = Grid::Make(cfg, res, res);
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
     L.pooled = L.range;
     L.tmp = L.range;
@@ -404,30 +413,21 @@ void MultiResImage::Pool(Level& L) const {
   }
 }
 
-ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test) : test_(test) {
-  const double col_deg = test.col_deg, row_deg = test.row_deg, span_deg = test.span_deg;
+ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test)
+    : test_(test), grid_(MultiResImage::Grid::Make(cfg, test.row_deg, test.col_deg)) {
+  span_ = std::max(1, int(std::lround(test.span_deg / test.row_deg)));
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
-  up_ = float(cfg.fov_up_deg * kDeg);
   down_ = float(cfg.fov_down_deg * kDeg);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
-  rows_ = std::max(1, int(std::ceil((cfg.fov_up_deg - cfg.fov_down_deg) / row_deg - 1e-9)));
-  cols_ = std::max(1, int(std::lround(360.0 / col_deg)));
-  span_ = std::max(1, int(std::lround(span_deg / row_deg)));
-  row_scale_ = float(rows_ / ((cfg.fov_up_deg - cfg.fov_down_deg) * kDeg));
-  col_scale_ = float(cols_ / (2.0 * 3.14159265358979323846));
-  range_.assign(std::size_t(rows_) * std::size_t(cols_), std::numeric_limits<float>::infinity());
+  range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
   ret_.assign(range_.size(), Eigen::Vector3f::Zero());
 }
 
 void ColumnImage::Build(const PointCloud& scan) {
   std::fill(range_.begin(), range_.end(), std::numeric_limits<float>::infinity());
   auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
-    const int row = std::min(rows_ - 1, std::max(0, int((up_ - pitch) * row_scale_)));
-    int col = int((kPiF - yaw) * col_scale_);
-    if (col >= cols_) col -= cols_;
-    col = std::max(0, col);
-    const std::size_t cell = std::size_t(col) * std::size_t(rows_) + std::size_t(row);
+    const std::size_t cell = std::size_t(grid_.Col(yaw)) * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
     if (r < range_[cell]) {
       range_[cell] = r;
       ret_[cell] = Eigen::Vector3f(q.x, q.y, q.z);
@@ -437,7 +437,7 @@ void ColumnImage::Build(const PointCloud& scan) {
   const std::size_t n = scan.size();
 #if defined(__SSE2__)
   // Four points at a time through the angle kernel MultiResImage::Build uses.
-  const ScanBounds4 bd{_mm_set1_ps(up_), _mm_set1_ps(down_), _mm_set1_ps(min_range_), _mm_set1_ps(max_range_)};
+  const ScanBounds4 bd{_mm_set1_ps(grid_.up), _mm_set1_ps(down_), _mm_set1_ps(min_range_), _mm_set1_ps(max_range_)};
   alignas(16) float rs[4], ps[4], ys[4];
   for (; i + 4 <= n; i += 4) {
     __m128 r, pt, yw;
@@ -456,7 +456,7 @@ void ColumnImage::Build(const PointCloud& scan) {
     const float r = std::sqrt(rxy2 + q.z * q.z);
     if (!(r > 1e-6f) || r < min_range_ || r > max_range_) continue;
     const float pitch = FastAtan2(q.z, std::sqrt(rxy2));
-    if (pitch > up_ || pitch < down_) continue;
+    if (pitch > grid_.up || pitch < down_) continue;
     put(r, pitch, FastAtan2(q.y, q.x), q);
   }
 }
@@ -465,20 +465,16 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vec
                            const float* plane) const {
   const float tol = float(test_.tol_m + test_.tol_rel * range);
   const float grazing_max = float(test_.grazing_max_m);
-  const int row = std::min(rows_ - 1, std::max(0, int((up_ - pitch) * row_scale_)));
-  int col = int((kPiF - yaw) * col_scale_);
-  if (col >= cols_) col -= cols_;
-  col = std::max(0, col);
-  const float* rc = range_.data() + std::size_t(col) * std::size_t(rows_);
-  const Eigen::Vector3f* qc = ret_.data() + std::size_t(col) * std::size_t(rows_);
+  const int rows = grid_.rows, row = grid_.Row(pitch);
+  const std::size_t column = std::size_t(grid_.Col(yaw)) * std::size_t(rows);
+  const float* rc = range_.data() + column;
+  const Eigen::Vector3f* qc = ret_.data() + column;
   // Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol`
   // from the surface, so up to tol / cos along a grazing ray, at most grazing_max_m.
   auto along = [&](float cosine) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), grazing_max)); };
   // 0: no return, 1: on the point's plane, 2: nearer (occluder), 3: farther (past the surface's edge).
   auto kind = [&](int r) {
-    const Eigen::Vector3f& q = qc[r];
-    const float off = std::fabs(plane[0] * q.x() + plane[1] * q.y() + plane[2] * q.z() - plane[3]);
-    if (off <= tol) return 1;
+    if (PlaneDistance(plane, qc[r]) <= tol) return 1;
     return rc[r] < range ? 2 : 3;
   };
   const Eigen::Vector3f u = ps / range;  // the ray's direction
@@ -492,7 +488,7 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vec
       ra = r;
       break;
     }
-  for (int r = row + 1; r <= std::min(rows_ - 1, row + span_); ++r)
+  for (int r = row + 1; r <= std::min(rows - 1, row + span_); ++r)
     if (std::isfinite(rc[r])) {
       below = kind(r);
       rb = r;
