@@ -249,6 +249,7 @@ void SetupLd(CLI::App& parent) {
     eval::Report report;
     eval::ChangeClouds truth, pred;
     std::string central_static = o->central_static;
+    std::optional<eval::LdTrajectories> traj;  // keyframe positions in the output frame (LD bands)
     if (sim_form) {
       const std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
       const std::string pdir = eval::FindPairDir(o->changes, o->pair);
@@ -258,6 +259,21 @@ void SetupLd(CLI::App& parent) {
         Usage("eval ld: --pair must be CC_QQ (sim session indices), got '" + o->pair + "'");
       const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
       report.inputs.push_back({"truth mapping", m.description});
+      {
+        // Where each session's sensor was, in the output frame: the true poses placed by the mapping.
+        const auto names = eval::SimSessionNames(o->sim);
+        auto positions = [&](int s) {
+          PointCloud c;
+          if (std::size_t(s) >= names.size()) return c;
+          const auto poses = eval::ReadPoses(Join(Join(Join(o->sim, "truth"), names[std::size_t(s)]), "poses_world.txt"));
+          for (std::size_t k = 0; k < poses.size(); ++k) {
+            const Eigen::Vector3d t = m.ScanPose(std::size_t(s), k, poses[k]).translation();
+            c.push_back(float(t.x()), float(t.y()), float(t.z()));
+          }
+          return c;
+        };
+        traj = eval::LdTrajectories{positions(c), positions(q)};
+      }
       // PD points are query static_world points, ND points central ones (docs/FORMATS.md).
       const eval::ChangeClouds w = eval::ReadChangeClouds(tdir);
       const int th = o->common.threads;
@@ -297,7 +313,7 @@ void SetupLd(CLI::App& parent) {
       kept = eval::KeptMapFromChanges(io::ReadCloud(central_static), pred.nd_strong, cfg, o->common.threads);
       report.inputs.push_back({"kept map", central_static + " minus predicted strong ND"});
     }
-    report.ld = eval::EvaluateLd(truth, pred, kept ? &*kept : nullptr, cfg, o->common.threads);
+    report.ld = eval::EvaluateLd(truth, pred, kept ? &*kept : nullptr, cfg, o->common.threads, traj ? &*traj : nullptr);
     if (!o->errors.empty()) {
       const eval::LdErrors e = eval::LdErrorClouds(truth, pred, cfg, o->common.threads);
       io::MakeDirs(o->errors);

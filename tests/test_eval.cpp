@@ -293,6 +293,44 @@ TEST(Ld, TruthAsPredictionIsPerfect) {
   EXPECT_DOUBLE_EQ(r.nd_strength_accuracy, 1.0);
 }
 
+TEST(Ld, DistanceBandsSplitByTheObservingTrajectory) {
+  ChangeClouds t;
+  t.pd_strong = Row(10, 0.f);  // x = 0..9: distance to the central keyframe (0, -5) is sqrt(x^2 + 25)
+  t.nd_strong = Row(8, 20.f);  // ~80 m from the query keyframe (0, 100)
+  ChangeClouds p;
+  p.pd_strong = Row(5, 0.f);         // x = 0..4: all within 8 m, all true
+  p.pd_strong.append(Row(2, 0.f, 50.f));  // two false positives ~50 m away
+  p.nd_strong = t.nd_strong;
+  LdTrajectories traj;
+  traj.central.push_back(0.f, -5.f, 0.f);
+  traj.query.push_back(0.f, 100.f, 0.f);
+  EvalConfig cfg;
+  cfg.ld_bands_m = {8.0};
+  const auto r = EvaluateLd(t, p, nullptr, cfg, 0, &traj);
+  ASSERT_EQ(r.bands.size(), 2u);
+  EXPECT_DOUBLE_EQ(r.bands[0].max_m, 8.0);
+  EXPECT_TRUE(std::isinf(r.bands[1].max_m));
+  // Band [0, 8): truth x = 0..6 (sqrt(36 + 25) < 8), 5 of them found; every prediction true.
+  EXPECT_EQ(r.bands[0].pd.truth, 7u);
+  EXPECT_EQ(r.bands[0].pd.predicted, 5u);
+  EXPECT_DOUBLE_EQ(r.bands[0].pd.precision, 1.0);
+  EXPECT_NEAR(r.bands[0].pd.recall, 5.0 / 7.0, 1e-12);
+  // Band [8, inf): truth x = 7..9 missed; the two far predictions false.
+  EXPECT_EQ(r.bands[1].pd.truth, 3u);
+  EXPECT_DOUBLE_EQ(r.bands[1].pd.recall, 0.0);
+  EXPECT_EQ(r.bands[1].pd.predicted, 2u);
+  EXPECT_DOUBLE_EQ(r.bands[1].pd.precision, 0.0);
+  // ND lies by the query trajectory: all far, all found.
+  EXPECT_EQ(r.bands[0].nd.truth, 0u);
+  EXPECT_EQ(r.bands[1].nd.truth, 8u);
+  EXPECT_DOUBLE_EQ(r.bands[1].nd.recall, 1.0);
+  // The pooled figures do not depend on the bands; without trajectories there are none.
+  const auto pooled = EvaluateLd(t, p, nullptr, cfg);
+  EXPECT_TRUE(pooled.bands.empty());
+  EXPECT_DOUBLE_EQ(pooled.pd.precision, r.pd.precision);
+  EXPECT_DOUBLE_EQ(pooled.pd.recall, r.pd.recall);
+}
+
 TEST(Ld, HandComputedCorruption) {
   const ChangeClouds t = TruthChanges();
   ChangeClouds p;

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <unordered_map>
 
 namespace ltm::eval {
@@ -270,8 +271,32 @@ HdResult EvaluateHd(const PointCloud& truth, const PointCloud& output, const Eva
 }
 
 // ------------------------------------------------------------------------------------- LD
+namespace {
+// Distance of each point of `c` to its nearest point of `keyframes` (keyframe positions).
+std::vector<float> DistanceTo(const PointCloud& c, const PointCloud& keyframes, tbb::task_arena& arena) {
+  std::vector<float> out(c.size(), std::numeric_limits<float>::infinity());
+  if (keyframes.empty()) return out;
+  const geometry::KdTree tree(std::make_shared<const PointCloud>(keyframes));
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+      std::uint32_t idx = 0;
+      float sq = 0.f;
+      for (std::size_t i = r.begin(); i != r.end(); ++i)
+        if (tree.Nearest(c.points[i].xyz(), &idx, &sq)) out[i] = std::sqrt(sq);
+    });
+  });
+  return out;
+}
+// The points of `c` whose distance lies in [lo, hi).
+PointCloud InBand(const PointCloud& c, const std::vector<float>& dist, double lo, double hi) {
+  std::vector<bool> keep(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) keep[i] = dist[i] >= lo && dist[i] < hi;
+  return c.select(keep);
+}
+}  // namespace
+
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const PointCloud* kept_map,
-                    const EvalConfig& cfg, int threads) {
+                    const EvalConfig& cfg, int threads, const LdTrajectories* trajectories) {
   ValidateConfig(cfg, "eval config");
   auto arena = MakeArena(threads);
   const double d = cfg.ld_match_dist_m;
@@ -301,6 +326,25 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
   Strength(pred.nd_strong, pred.nd_weak, t_nd, truth.nd_strong.size(), d, arena, &r.nd_matched,
            &r.nd_strength_correct);
   r.nd_strength_accuracy = Ratio(r.nd_strength_correct, r.nd_matched);
+
+  if (trajectories && !cfg.ld_bands_m.empty()) {
+    std::vector<double> edges = cfg.ld_bands_m;
+    std::sort(edges.begin(), edges.end());
+    edges.push_back(std::numeric_limits<double>::infinity());
+    const auto d_tpd = DistanceTo(truth_pd, trajectories->central, arena);
+    const auto d_ppd = DistanceTo(pred_pd, trajectories->central, arena);
+    const auto d_tnd = DistanceTo(truth_nd, trajectories->query, arena);
+    const auto d_pnd = DistanceTo(pred_nd, trajectories->query, arena);
+    double lo = 0.0;
+    for (const double hi : edges) {
+      LdBand b;
+      b.max_m = hi;
+      b.pd = Prf(InBand(truth_pd, d_tpd, lo, hi), InBand(pred_pd, d_ppd, lo, hi), t_pd, p_pd, d, arena);
+      b.nd = Prf(InBand(truth_nd, d_tnd, lo, hi), InBand(pred_nd, d_pnd, lo, hi), t_nd, p_nd, d, arena);
+      r.bands.push_back(b);
+      lo = hi;
+    }
+  }
 
   r.weak_nd_truth = truth.nd_weak.size();
   if (kept_map) {

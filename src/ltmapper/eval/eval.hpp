@@ -46,6 +46,9 @@ struct EvalConfig {
   double ld_match_dist_m = 0.2;            // [m] predicted/truth change points closer than this match
   double ld_same_point_m = 0.001;          // [m] "same point" when removing predicted strong ND from
                                            // the central static map to derive the kept map
+  std::vector<double> ld_bands_m = {20.0, 40.0, 60.0};  // [m] upper edges of the distance bands (from
+                                           // the session that had to observe the place) for P / R per
+                                           // band; a last band holds the rest; empty = no bands
   // Restoration (paper table).
   double patch_m = 5.0;                    // [m] edge of the cubic patches
   int patch_min_points = 25;               // a patch is valid when BOTH maps have >= this many points
@@ -76,6 +79,7 @@ struct EvalConfig {
     v("hd.near_static_m", hd_near_static_m, "m", 0.0, 10.0);
     v("ld.match_dist_m", ld_match_dist_m, "m", 1e-4, 10.0);
     v("ld.same_point_m", ld_same_point_m, "m", 0.0, 1.0);
+    v("ld.bands_m", ld_bands_m, "m", 0.0, 1e6);
     v("restore.patch_m", patch_m, "m", 0.01, 1e4);
     v("restore.min_points", patch_min_points, "", 1, 100000000);
     v("restore.chamfer", chamfer, {"mean", "fan_squared"});
@@ -206,9 +210,18 @@ struct PrfStats {
   std::size_t truth = 0, truth_matched = 0;          // truth points within d of a prediction
   double precision = kNaN, recall = kNaN, f1 = kNaN;
 };
+// Pooled PD and ND by distance band: a PD point's distance to the nearest central keyframe (the
+// session that would have had to observe its place), an ND point's to the nearest query keyframe;
+// precision over the predicted points of the band, recall over its truth points, each matched
+// against all points of the other set. Band k holds distances in [max_m of band k-1, max_m).
+struct LdBand {
+  double max_m = 0.0;  // +inf for the last band
+  PrfStats pd, nd;
+};
 struct LdResult {
   double match_dist_m = 0.0;
   PrfStats pd_strong, pd_weak, pd, nd_strong, nd_weak, nd;  // pd / nd: strong and weak pooled
+  std::vector<LdBand> bands;  // empty without keyframe positions (LdTrajectories) or ld.bands_m
   // Weak ND (static in central, never seen through by the query) must stay in the map.
   bool kept_map_given = false;
   std::size_t weak_nd_truth = 0, weak_nd_kept = 0;
@@ -220,10 +233,16 @@ struct LdResult {
   std::size_t nd_matched = 0, nd_strength_correct = 0;
   double nd_strength_accuracy = kNaN;
 };
+// Keyframe positions of the pair's sessions, in the frame of the change clouds (for LdBand).
+struct LdTrajectories {
+  PointCloud central, query;
+};
 // Truth and prediction in the same frame. `kept_map` (may be null) is the map the method keeps
 // after the update (static / live map): weak-ND truth points within d of it count as kept.
+// With `trajectories` (may be null) the result holds the distance bands of cfg.ld_bands_m.
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& predicted,
-                    const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0);
+                    const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0,
+                    const LdTrajectories* trajectories = nullptr);
 // Where the LD prediction is wrong, pooled per kind (PD vs PD, ND vs ND) at ld_match_dist_m:
 // predicted points with no truth point of their kind within d (false positives) and truth
 // points with no predicted point within d (false negatives). `cls` keeps each point's own class

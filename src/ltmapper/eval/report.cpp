@@ -104,6 +104,14 @@ void WriteLd(json::Writer& w, const LdResult& l) {
   WritePrf(w, "nd_strong", l.nd_strong);
   WritePrf(w, "nd_weak", l.nd_weak);
   WritePrf(w, "nd", l.nd);
+  w.BeginArray("bands");
+  for (const LdBand& b : l.bands) {
+    w.BeginObject().Number("max_m", b.max_m);  // +inf for the last band: written as null
+    WritePrf(w, "pd", b.pd);
+    WritePrf(w, "nd", b.nd);
+    w.EndObject();
+  }
+  w.EndArray();
   w.BeginObject("weak_nd_kept")
       .Bool("kept_map_given", l.kept_map_given)
       .Int("truth", (long long)l.weak_nd_truth)
@@ -313,6 +321,18 @@ void MdLd(std::ostringstream& md, const LdResult& l) {
      << "\n- PD strength correct: " << l.pd_strength_correct << " / " << l.pd_matched << " = "
      << Fmt(l.pd_strength_accuracy, 4) << "\n- ND strength correct: " << l.nd_strength_correct << " / "
      << l.nd_matched << " = " << Fmt(l.nd_strength_accuracy, 4) << "\n\n";
+  if (l.bands.empty()) return;
+  md << "By distance from the session that had to observe the place (PD: nearest central keyframe, ND: "
+        "nearest query keyframe):\n\n"
+     << Header({"distance [m]", "PD truth", "PD precision", "PD recall", "ND truth", "ND precision", "ND recall"});
+  double lo = 0.0;
+  for (const LdBand& b : l.bands) {
+    const std::string band = std::isinf(b.max_m) ? ">= " + Fmt(lo, 0) : Fmt(lo, 0) + " - " + Fmt(b.max_m, 0);
+    md << Row({band, std::to_string(b.pd.truth), Fmt(b.pd.precision, 4), Fmt(b.pd.recall, 4),
+               std::to_string(b.nd.truth), Fmt(b.nd.precision, 4), Fmt(b.nd.recall, 4)});
+    lo = b.max_m;
+  }
+  md << "\n";
 }
 
 void MdRestore(std::ostringstream& md, const RestoreResult& r) {
