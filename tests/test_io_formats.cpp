@@ -2,6 +2,7 @@
 #include "ltmapper/io/io.hpp"
 #include "test_util.hpp"
 
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -81,6 +82,49 @@ TEST(Pcd, XyzOnlyAndDoubleFieldsRead) {
   EXPECT_FLOAT_EQ(c.points[1].x, -4.f);
   EXPECT_FLOAT_EQ(c.points[1].z, 6.25f);
   EXPECT_FLOAT_EQ(c.points[0].intensity, 0.f);
+}
+
+// Binary PCDs as drivers write them: extra fields around x y z (a 2-byte ring), fields out of
+// order, a NaN point; and double x y z, which take the general reader.
+TEST(Pcd, BinaryWithExtraFieldsOrderAndNaN) {
+  test::TempDir tmp;
+  struct Rec {
+    float t, x, y, z;
+    std::uint16_t ring;
+    float intensity;
+  };
+  auto bytes = [](const void* p, std::size_t n) { return std::string(static_cast<const char*>(p), n); };
+  const Rec recs[3] = {{0.1f, 1.f, 2.f, 3.f, 7, 40.f},
+                       {0.2f, std::nanf(""), 5.f, 6.f, 8, 41.f},
+                       {0.3f, -7.f, 8.5f, -9.f, 9, 42.f}};
+  std::string data;
+  for (const Rec& r : recs)
+    data += bytes(&r.t, 4) + bytes(&r.x, 4) + bytes(&r.y, 4) + bytes(&r.z, 4) + bytes(&r.ring, 2) +
+            bytes(&r.intensity, 4);
+  test::WriteText(tmp / "f.pcd",
+                  "VERSION 0.7\nFIELDS t x y z ring intensity\nSIZE 4 4 4 4 2 4\nTYPE F F F F U F\n"
+                  "COUNT 1 1 1 1 1 1\nWIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA binary\n" + data);
+  io::CloudReadStats st;
+  const PointCloud c = io::ReadPcd(tmp / "f.pcd", &st);
+  EXPECT_EQ(st.points_in_file, 3u);
+  EXPECT_EQ(st.non_finite_dropped, 1u);
+  ASSERT_EQ(c.size(), 2u);
+  EXPECT_FLOAT_EQ(c.points[0].x, 1.f);
+  EXPECT_FLOAT_EQ(c.points[0].intensity, 40.f);
+  EXPECT_FLOAT_EQ(c.points[1].y, 8.5f);
+  EXPECT_FLOAT_EQ(c.points[1].z, -9.f);
+  EXPECT_FLOAT_EQ(c.points[1].intensity, 42.f);
+
+  std::string ddata;
+  const double xyz[2][3] = {{1.25, -2.5, 3.0}, {4.0, 5.5, -6.75}};
+  for (const auto& p : xyz) ddata += bytes(p, 24);
+  test::WriteText(tmp / "d.pcd",
+                  "VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+                  "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA binary\n" + ddata);
+  const PointCloud d = io::ReadPcd(tmp / "d.pcd");
+  ASSERT_EQ(d.size(), 2u);
+  EXPECT_FLOAT_EQ(d.points[0].y, -2.5f);
+  EXPECT_FLOAT_EQ(d.points[1].z, -6.75f);
 }
 
 TEST(KittiBin, RoundTripAndReadCloudDispatch) {

@@ -9,11 +9,13 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -191,6 +193,75 @@ std::size_t TypeSize(std::uint8_t datatype) {
   }
 }
 
+// Where a point field lies in a point record: byte offset and PCL datatype; datatype 0 = absent.
+struct FieldAt {
+  std::size_t offset = 0;
+  std::uint8_t datatype = 0;
+};
+// Raw point records: `rows` rows of `cols` points, `row_step` bytes per row, `point_step` per point.
+struct Records {
+  const std::uint8_t* data = nullptr;
+  std::size_t rows = 0, cols = 0, row_step = 0, point_step = 0;
+};
+
+// Appends the finite points of `rec` to `cloud` (`value` reads one field value; intensity 0 when
+// absent); returns how many were dropped as non-finite.
+template <class Value>
+std::size_t AppendPoints(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, Value value,
+                         PointCloud* cloud) {
+  std::size_t dropped = 0;
+  for (std::size_t r = 0; r < rec.rows; ++r) {
+    const std::uint8_t* row = rec.data + r * rec.row_step;
+    for (std::size_t c = 0; c < rec.cols; ++c) {
+      const std::uint8_t* p = row + c * rec.point_step;
+      const auto x = value(p + fx.offset, fx.datatype);
+      const auto y = value(p + fy.offset, fy.datatype);
+      const auto z = value(p + fz.offset, fz.datatype);
+      const auto in = fi.datatype ? value(p + fi.offset, fi.datatype) : decltype(x)(0);
+      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z) || !std::isfinite(in)) {
+        ++dropped;
+        continue;
+      }
+      cloud->push_back(float(x), float(y), float(z), float(in));
+    }
+  }
+  return dropped;
+}
+
+// The points of `rec`: float fields without the per-value type switch, others through ReadValue.
+PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, std::size_t* dropped) {
+  PointCloud cloud;
+  cloud.reserve(rec.rows * rec.cols);
+  auto is_float = [](FieldAt f) { return f.datatype == 0 || f.datatype == pcl::PCLPointField::FLOAT32; };
+  auto read_float = [](const std::uint8_t* p, std::uint8_t) {
+    float v;
+    std::memcpy(&v, p, 4);
+    return v;
+  };
+  *dropped = is_float(fx) && is_float(fy) && is_float(fz) && is_float(fi)
+                 ? AppendPoints(rec, fx, fy, fz, fi, read_float, &cloud)
+                 : AppendPoints(rec, fx, fy, fz, fi, ReadValue, &cloud);
+  return cloud;
+}
+
+// x y z (intensity) of an uncompressed binary PCD when each is a single 4-byte float: their
+// offsets in the point record, else nothing (the file goes through PCL).
+std::optional<std::array<FieldAt, 4>> FloatFields(const PcdHeader& h) {
+  std::array<FieldAt, 4> at{};
+  const char* names[4] = {"x", "y", "z", "intensity"};
+  std::size_t offset = 0;
+  for (std::size_t i = 0; i < h.fields.size(); ++i) {
+    for (int k = 0; k < 4; ++k) {
+      if (h.fields[i] != names[k]) continue;
+      if (h.types[i] != 'F' || h.sizes[i] != 4 || h.counts[i] != 1) return std::nullopt;
+      at[std::size_t(k)] = {offset, pcl::PCLPointField::FLOAT32};
+    }
+    offset += std::size_t(h.sizes[i]) * std::size_t(h.counts[i]);
+  }
+  if (!at[0].datatype || !at[1].datatype || !at[2].datatype) return std::nullopt;
+  return at;
+}
+
 }  // namespace
 
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
@@ -204,6 +275,31 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
     if (h.points == 0) {  // a valid empty scan; PCL would only print a warning
       if (stats) *stats = CloudReadStats{};
       return PointCloud{};
+    }
+    // Uncompressed binary float x y z: the header is parsed and the size checked already, so
+    // read the records here in one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's
+    // loadPCDFile 1.4-1.9 ms; going through PCL's reader and a per-value type switch took ~1.5-2 ms).
+    if (h.data == "binary") {
+      if (const auto f = FloatFields(h)) {
+        Records rec;
+        rec.cols = std::size_t(h.points);
+        rec.rows = 1;
+        rec.point_step = h.PointStep();
+        rec.row_step = rec.cols * rec.point_step;
+        std::vector<std::uint8_t> bytes(rec.row_step);
+        in.clear();
+        in.seekg(std::streamoff(h.data_offset));
+        if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
+          throw Error(path + ": cannot read the PCD data section");
+        rec.data = bytes.data();
+        std::size_t dropped = 0;
+        PointCloud cloud = ReadRecords(rec, (*f)[0], (*f)[1], (*f)[2], (*f)[3], &dropped);
+        if (stats) {
+          stats->points_in_file = rec.cols;
+          stats->non_finite_dropped = dropped;
+        }
+        return cloud;
+      }
     }
   }
 
@@ -241,24 +337,10 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
       throw Error(path + ": PCD field '" + f->name + "' has an unsupported type or offset");
   }
 
-  PointCloud cloud;
-  cloud.reserve(n);
+  auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
+  const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
   std::size_t dropped = 0;
-  for (std::size_t r = 0; r < blob.height; ++r) {
-    const std::uint8_t* row = blob.data.data() + r * std::size_t(blob.row_step);
-    for (std::size_t c = 0; c < blob.width; ++c) {
-      const std::uint8_t* p = row + c * std::size_t(blob.point_step);
-      const double x = ReadValue(p + fx->offset, fx->datatype);
-      const double y = ReadValue(p + fy->offset, fy->datatype);
-      const double z = ReadValue(p + fz->offset, fz->datatype);
-      const double in = fi ? ReadValue(p + fi->offset, fi->datatype) : 0.0;
-      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z) || !std::isfinite(in)) {
-        ++dropped;
-        continue;
-      }
-      cloud.push_back(float(x), float(y), float(z), float(in));
-    }
-  }
+  PointCloud cloud = ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), &dropped);
   if (stats) {
     stats->points_in_file = n;
     stats->non_finite_dropped = dropped;
