@@ -259,21 +259,9 @@ void SetupLd(CLI::App& parent) {
         Usage("eval ld: --pair must be CC_QQ (sim session indices), got '" + o->pair + "'");
       const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
       report.inputs.push_back({"truth mapping", m.description});
-      {
-        // Where each session's sensor was, in the output frame: the true poses placed by the mapping.
-        const auto names = eval::SimSessionNames(o->sim);
-        auto positions = [&](int s) {
-          PointCloud c;
-          if (std::size_t(s) >= names.size()) return c;
-          const auto poses = eval::ReadPoses(Join(Join(Join(o->sim, "truth"), names[std::size_t(s)]), "poses_world.txt"));
-          for (std::size_t k = 0; k < poses.size(); ++k) {
-            const Eigen::Vector3d t = m.ScanPose(std::size_t(s), k, poses[k]).translation();
-            c.push_back(float(t.x()), float(t.y()), float(t.z()));
-          }
-          return c;
-        };
-        traj = eval::LdTrajectories{positions(c), positions(q)};
-      }
+      // Where each session's sensor was, in the output frame (LD distance bands).
+      traj = eval::LdTrajectories{eval::SensorPositions(o->sim, std::size_t(c), m),
+                                  eval::SensorPositions(o->sim, std::size_t(q), m)};
       // PD points are query static_world points, ND points central ones (docs/FORMATS.md).
       const eval::ChangeClouds w = eval::ReadChangeClouds(tdir);
       const int th = o->common.threads;

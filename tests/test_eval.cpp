@@ -308,7 +308,9 @@ TEST(Ld, DistanceBandsSplitByTheObservingTrajectory) {
   cfg.ld_bands_m = {8.0};
   const auto r = EvaluateLd(t, p, nullptr, cfg, 0, &traj);
   ASSERT_EQ(r.bands.size(), 2u);
+  EXPECT_DOUBLE_EQ(r.bands[0].min_m, 0.0);
   EXPECT_DOUBLE_EQ(r.bands[0].max_m, 8.0);
+  EXPECT_DOUBLE_EQ(r.bands[1].min_m, 8.0);
   EXPECT_TRUE(std::isinf(r.bands[1].max_m));
   // Band [0, 8): truth x = 0..6 (sqrt(36 + 25) < 8), 5 of them found; every prediction true.
   EXPECT_EQ(r.bands[0].pd.truth, 7u);
@@ -329,6 +331,11 @@ TEST(Ld, DistanceBandsSplitByTheObservingTrajectory) {
   EXPECT_TRUE(pooled.bands.empty());
   EXPECT_DOUBLE_EQ(pooled.pd.precision, r.pd.precision);
   EXPECT_DOUBLE_EQ(pooled.pd.recall, r.pd.recall);
+  // Band edges out of order or repeated are a config error, not silently reordered.
+  cfg.ld_bands_m = {40.0, 20.0};
+  EXPECT_THROW(EvaluateLd(t, p, nullptr, cfg, 0, &traj), Error);
+  cfg.ld_bands_m = {20.0, 20.0};
+  EXPECT_THROW(EvaluateLd(t, p, nullptr, cfg, 0, &traj), Error);
 }
 
 TEST(Ld, HandComputedCorruption) {

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <unordered_map>
 
@@ -329,7 +330,8 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
 
   if (trajectories && !cfg.ld_bands_m.empty()) {
     std::vector<double> edges = cfg.ld_bands_m;
-    std::sort(edges.begin(), edges.end());
+    if (std::adjacent_find(edges.begin(), edges.end(), std::greater_equal<double>()) != edges.end())
+      throw Error("eval config: ld.bands_m must be strictly increasing");
     edges.push_back(std::numeric_limits<double>::infinity());
     const auto d_tpd = DistanceTo(truth_pd, trajectories->central, arena);
     const auto d_ppd = DistanceTo(pred_pd, trajectories->central, arena);
@@ -338,6 +340,7 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
     double lo = 0.0;
     for (const double hi : edges) {
       LdBand b;
+      b.min_m = lo;
       b.max_m = hi;
       b.pd = Prf(InBand(truth_pd, d_tpd, lo, hi), InBand(pred_pd, d_ppd, lo, hi), t_pd, p_pd, d, arena);
       b.nd = Prf(InBand(truth_nd, d_tnd, lo, hi), InBand(pred_nd, d_pnd, lo, hi), t_nd, p_nd, d, arena);

@@ -213,9 +213,9 @@ struct PrfStats {
 // Pooled PD and ND by distance band: a PD point's distance to the nearest central keyframe (the
 // session that would have had to observe its place), an ND point's to the nearest query keyframe;
 // precision over the predicted points of the band, recall over its truth points, each matched
-// against all points of the other set. Band k holds distances in [max_m of band k-1, max_m).
+// against all points of the other set.
 struct LdBand {
-  double max_m = 0.0;  // +inf for the last band
+  double min_m = 0.0, max_m = 0.0;  // distances in [min_m, max_m); max_m = +inf for the last band
   PrfStats pd, nd;
 };
 struct LdResult {
@@ -239,7 +239,8 @@ struct LdTrajectories {
 };
 // Truth and prediction in the same frame. `kept_map` (may be null) is the map the method keeps
 // after the update (static / live map): weak-ND truth points within d of it count as kept.
-// With `trajectories` (may be null) the result holds the distance bands of cfg.ld_bands_m.
+// With `trajectories` (may be null) the result holds the distance bands of cfg.ld_bands_m
+// (strictly increasing, else ltm::Error).
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& predicted,
                     const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0,
                     const LdTrajectories* trajectories = nullptr);
@@ -308,6 +309,10 @@ TruthMapping GlobalTruthMapping(const Pose& T_est_truth, const std::string& desc
 // sim session (counts must agree).
 TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string& aligned_dir);
 
+// Sensor positions of sim session `session` (truth/<name>/poses_world.txt) in the estimate frame,
+// placed by `mapping.ScanPose`, one point per keyframe (LdTrajectories); ltm::Error naming the
+// truth folder when there is no such session.
+PointCloud SensorPositions(const std::string& sim_dir, std::size_t session, const TruthMapping& mapping);
 // LD truth rebuilt the way the method builds its maps: the labelled scans of sim session
 // `session` (truth/<name>/labels) placed with `mapping.ScanPose` (the estimated pose of each
 // keyframe), keeping the static points whose true-world position has, as its nearest point of the

@@ -130,13 +130,31 @@ TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string&
   return m;
 }
 
-std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
-                                                 const std::vector<const PointCloud*>& changes,
-                                                 const TruthMapping& mapping, double voxel_m, int threads) {
+namespace {
+// truth/<name> of sim session `session`, or ltm::Error naming the truth folder.
+std::string SessionTruthDir(const std::string& sim_dir, std::size_t session) {
   const auto names = SimSessionNames(sim_dir);
   if (session >= names.size())
     throw Error(Join(sim_dir, "truth"), 0, "no sim session " + std::to_string(session));
-  const std::string tdir = Join(Join(sim_dir, "truth"), names[session]);
+  return Join(Join(sim_dir, "truth"), names[session]);
+}
+}  // namespace
+
+PointCloud SensorPositions(const std::string& sim_dir, std::size_t session, const TruthMapping& mapping) {
+  const std::vector<Pose> T_true = ReadPoses(Join(SessionTruthDir(sim_dir, session), "poses_world.txt"));
+  PointCloud c;
+  c.reserve(T_true.size());
+  for (std::size_t k = 0; k < T_true.size(); ++k) {
+    const Eigen::Vector3d t = mapping.ScanPose(session, k, T_true[k]).translation();
+    c.push_back(float(t.x()), float(t.y()), float(t.z()));
+  }
+  return c;
+}
+
+std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
+                                                 const std::vector<const PointCloud*>& changes,
+                                                 const TruthMapping& mapping, double voxel_m, int threads) {
+  const std::string tdir = SessionTruthDir(sim_dir, session);
   const std::vector<Pose> T_true = ReadPoses(Join(tdir, "poses_world.txt"));
   const auto files = LabelledScanPaths(tdir, T_true.size());
   // Which static-world points are changes (each change point is one of them, at distance 0).

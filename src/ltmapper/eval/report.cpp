@@ -106,7 +106,7 @@ void WriteLd(json::Writer& w, const LdResult& l) {
   WritePrf(w, "nd", l.nd);
   w.BeginArray("bands");
   for (const LdBand& b : l.bands) {
-    w.BeginObject().Number("max_m", b.max_m);  // +inf for the last band: written as null
+    w.BeginObject().Number("min_m", b.min_m).Number("max_m", b.max_m);  // last max_m +inf: written as null
     WritePrf(w, "pd", b.pd);
     WritePrf(w, "nd", b.nd);
     w.EndObject();
@@ -325,12 +325,10 @@ void MdLd(std::ostringstream& md, const LdResult& l) {
   md << "By distance from the session that had to observe the place (PD: nearest central keyframe, ND: "
         "nearest query keyframe):\n\n"
      << Header({"distance [m]", "PD truth", "PD precision", "PD recall", "ND truth", "ND precision", "ND recall"});
-  double lo = 0.0;
   for (const LdBand& b : l.bands) {
-    const std::string band = std::isinf(b.max_m) ? ">= " + Fmt(lo, 0) : Fmt(lo, 0) + " - " + Fmt(b.max_m, 0);
+    const std::string band = std::isinf(b.max_m) ? ">= " + Fmt(b.min_m, 0) : Fmt(b.min_m, 0) + " - " + Fmt(b.max_m, 0);
     md << Row({band, std::to_string(b.pd.truth), Fmt(b.pd.precision, 4), Fmt(b.pd.recall, 4),
                std::to_string(b.nd.truth), Fmt(b.nd.precision, 4), Fmt(b.nd.recall, 4)});
-    lo = b.max_m;
   }
   md << "\n";
 }
