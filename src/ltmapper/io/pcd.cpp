@@ -228,8 +228,9 @@ std::size_t AppendPoints(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz,
   return dropped;
 }
 
-// The points of `rec`: float fields without the per-value type switch, others through ReadValue.
-PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, std::size_t* dropped) {
+// The points of `rec`: float fields without the per-value type switch, others through ReadValue;
+// fills `stats` (may be null).
+PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, CloudReadStats* stats) {
   PointCloud cloud;
   cloud.reserve(rec.rows * rec.cols);
   auto is_float = [](FieldAt f) { return f.datatype == 0 || f.datatype == pcl::PCLPointField::FLOAT32; };
@@ -238,9 +239,13 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
     std::memcpy(&v, p, 4);
     return v;
   };
-  *dropped = is_float(fx) && is_float(fy) && is_float(fz) && is_float(fi)
-                 ? AppendPoints(rec, fx, fy, fz, fi, read_float, &cloud)
-                 : AppendPoints(rec, fx, fy, fz, fi, ReadValue, &cloud);
+  const std::size_t dropped = is_float(fx) && is_float(fy) && is_float(fz) && is_float(fi)
+                                  ? AppendPoints(rec, fx, fy, fz, fi, read_float, &cloud)
+                                  : AppendPoints(rec, fx, fy, fz, fi, ReadValue, &cloud);
+  if (stats) {
+    stats->points_in_file = rec.rows * rec.cols;
+    stats->non_finite_dropped = dropped;
+  }
   return cloud;
 }
 
@@ -292,13 +297,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
         if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
           throw Error(path + ": cannot read the PCD data section");
         rec.data = bytes.data();
-        std::size_t dropped = 0;
-        PointCloud cloud = ReadRecords(rec, (*f)[0], (*f)[1], (*f)[2], (*f)[3], &dropped);
-        if (stats) {
-          stats->points_in_file = rec.cols;
-          stats->non_finite_dropped = dropped;
-        }
-        return cloud;
+        return ReadRecords(rec, (*f)[0], (*f)[1], (*f)[2], (*f)[3], stats);
       }
     }
   }
@@ -339,13 +338,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
 
   auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
   const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
-  std::size_t dropped = 0;
-  PointCloud cloud = ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), &dropped);
-  if (stats) {
-    stats->points_in_file = n;
-    stats->non_finite_dropped = dropped;
-  }
-  return cloud;
+  return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), stats);
 }
 
 namespace {
