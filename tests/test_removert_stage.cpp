@@ -106,6 +106,42 @@ TEST(RemovertStage, WritesFormatsAndPartitions) {
   EXPECT_NE(json.find("\"peak_rss_bytes\""), std::string::npos);
 }
 
+// Three sessions (parked car, none, the car again): each pair is decided on its own two
+// sessions' maps, in both pair modes (the stage keeps only the maps later pairs need).
+TEST(RemovertStage, ThreeSessionsCentralAndConsecutivePairs) {
+  test::TempDir tmp;
+  const std::string s0 = tmp / "session_00", s1 = tmp / "session_01", s2 = tmp / "session_02";
+  const std::vector<std::vector<Pose>> w = {WriteStreetSession(s0, -10.0, 8, true),
+                                            WriteStreetSession(s1, -10.0, 8, false),
+                                            WriteStreetSession(s2, -10.0, 8, true)};
+  std::vector<std::string> poses;
+  for (std::size_t s = 0; s < w.size(); ++s) {
+    poses.push_back(tmp / ("p" + std::to_string(s) + ".txt"));
+    io::WriteKittiPoses(poses.back(), w[s]);
+  }
+  auto count = [](const std::string& f) { return io::ReadPcd(f).size(); };
+  removert::RemovertConfig cfg;
+  cfg.write_keyframes = false;
+  cfg.write_ply = false;
+  const std::string central = tmp / "central";
+  const auto rc = removert::RunRemovertStage(cfg, {s0, s1, s2}, poses, central, 2);
+  ASSERT_EQ(rc.pairs.size(), 2u);
+  EXPECT_EQ(rc.pairs[1], std::make_pair(0, 2));
+  EXPECT_GT(count(central + "/pair_00_01/nd_strong.pcd"), 200u);  // the car left
+  EXPECT_LT(count(central + "/pair_00_02/nd_strong.pcd"), 50u);   // the car is there again
+  EXPECT_LT(count(central + "/pair_00_02/pd_weak.pcd"), 50u);
+
+  cfg.pairs = "consecutive";
+  const std::string consecutive = tmp / "consecutive";
+  const auto rq = removert::RunRemovertStage(cfg, {s0, s1, s2}, poses, consecutive, 2);
+  ASSERT_EQ(rq.pairs.size(), 2u);
+  EXPECT_EQ(rq.pairs[1], std::make_pair(1, 2));
+  EXPECT_GT(count(consecutive + "/pair_00_01/nd_strong.pcd"), 200u);
+  EXPECT_GT(count(consecutive + "/pair_01_02/pd_weak.pcd"), 200u);  // the car came back, in space s1 saw free
+  EXPECT_LT(count(consecutive + "/pair_01_02/nd_strong.pcd"), 50u);
+  EXPECT_EQ(count(consecutive + "/pair_00_01/nd_strong.pcd"), count(central + "/pair_00_01/nd_strong.pcd"));
+}
+
 TEST(RemovertStage, BadInputsAreErrors) {
   test::TempDir tmp;
   const std::string s0 = tmp / "s0";

@@ -18,7 +18,9 @@
 //
 // All work is per keyframe and parallel (TBB, threads passed in); scans are streamed from disk
 // (at most one per worker in memory) and each keyframe only touches the map points within
-// `submap_radius_m` of it (tile index), so memory is the session maps plus O(threads) scans.
+// `submap_radius_m` of it (tile index), so memory is the maps of at most two sessions (the
+// central and the current query: a session's maps are freed when no later pair needs them) plus
+// O(threads) scans; it still grows with the length of a session (its whole map is in memory).
 #pragma once
 
 #include "ltmapper/core/core.hpp"

@@ -148,9 +148,15 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
   }
   io::MakeDirs(out_dir);
 
-  // ---- HD removal per session.
+  // Pairs: (central 0, q) for every query, or consecutive (q-1, q).
+  for (std::size_t q = 1; q < ns; ++q) {
+    const int c = cfg.pairs == "consecutive" ? int(q) - 1 : 0;
+    rep.pairs.emplace_back(c, int(q));
+  }
+
+  // ---- HD removal of one session: its HD-free and HD maps stay in memory while a pair needs them.
   std::vector<PointCloud> static_maps(ns), hd_maps(ns);
-  for (std::size_t s = 0; s < ns; ++s) {
+  auto remove_hd = [&](std::size_t s) {
     spdlog::info("removert: HD removal of {} ({} keyframes)", rep.sessions[s], kfs[s].size());
     HdResult hd = RemoveHd(kfs[s], cfg, threads);
     const HdStats& st = hd.stats;
@@ -171,14 +177,10 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     rep.hd.push_back(st);
     static_maps[s] = std::move(hd.static_map);
     hd_maps[s] = std::move(hd.hd_map);
-  }
+  };
 
-  // ---- LD per pair.
-  for (std::size_t q = 1; q < ns; ++q) {
-    const int c = cfg.pairs == "consecutive" ? int(q) - 1 : 0;
-    rep.pairs.emplace_back(c, int(q));
-  }
-  for (const auto& [c, q] : rep.pairs) {
+  // ---- LD of one pair.
+  auto detect_ld = [&](int c, int q) {
     const std::string pname = PairName(rep.sessions, c, q);
     spdlog::info("removert: LD {} vs {}", rep.sessions[std::size_t(c)], rep.sessions[std::size_t(q)]);
     const LdResult ld = DetectLd(static_maps[std::size_t(c)], static_maps[std::size_t(q)],
@@ -314,6 +316,23 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     std::vector<int> new_idx;
     for (int j : new_list) new_idx.push_back(qkf[std::size_t(j)].index);
     rep.new_keyframes.push_back(new_idx);
+  };
+
+  // Sessions in order: HD removal of session s, then the pairs whose query is s (their central
+  // came earlier). A session's maps are freed as soon as no later pair needs them, so memory
+  // holds at most two sessions' maps (central + current query), not all N.
+  for (std::size_t s = 0; s < ns; ++s) {
+    remove_hd(s);
+    for (const auto& [c, q] : rep.pairs)
+      if (std::size_t(q) == s) detect_ld(c, q);
+    for (std::size_t t = 0; t <= s; ++t) {
+      bool needed = false;
+      for (const auto& [c, q] : rep.pairs) needed = needed || (std::size_t(c) == t && std::size_t(q) > s);
+      if (!needed) {
+        static_maps[t] = PointCloud();
+        hd_maps[t] = PointCloud();
+      }
+    }
   }
 
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
