@@ -252,9 +252,9 @@ TEST(RemovertReal, KittiHeadHdRemoval) {
 
   // Six scans give each map point few observers, too few for the default revert evidence (5
   // hits and 4x the see-through votes, set for sessions of hundreds of keyframes): near ground,
-  // seen only at the bottom of the FOV of the scans a few metres away, stays removed. Sparse
-  // sessions revert with less evidence (hd.revert_min_hits=2, hd.revert_hit_ratio=1.5; on the
-  // dense simulator that costs DA, so it is not the default).
+  // seen only at the bottom of the FOV of the scans a few metres away, stays removed. Sessions of
+  // a handful of scans revert with less evidence (hd.revert_min_hits=2, hd.revert_hit_ratio=1.5;
+  // on the simulator's longer sessions, dense or sparse, that costs DA, so it is not the default).
   removert::RemovertConfig sparse = cfg;
   sparse.revert_min_hits = 2;
   sparse.revert_hit_ratio = 1.5;
