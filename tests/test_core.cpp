@@ -85,6 +85,11 @@ TEST(PointCloud, AppendDropsArraysPresentOnOneSideOnly) {
   PointCloud e;
   e.append(a);
   EXPECT_EQ(e.cls.size(), 1u);
+  // Appending an empty cloud changes nothing: the labels stay (it has no points to lack them).
+  PointCloud f = a;
+  f.append(PointCloud{});
+  EXPECT_EQ(f.cls.size(), 1u);
+  EXPECT_NO_THROW(f.CheckConsistent("f"));
   EXPECT_NO_THROW(d.CheckConsistent("d"));
   d.cls.pop_back();
   EXPECT_THROW(d.CheckConsistent("d"), Error);

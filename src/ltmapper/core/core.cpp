@@ -69,6 +69,7 @@ std::vector<T> Pick(const std::vector<T>& v, std::size_t n, Pred keep) {
 }  // namespace
 
 void PointCloud::append(const PointCloud& other) {
+  if (other.empty()) return;  // nothing to add: keep this cloud's arrays (an empty part has none)
   const std::size_t before = size();
   AppendArray(cls, other.cls, before, other.size());
   AppendArray(session, other.session, before, other.size());

@@ -65,7 +65,7 @@ struct PointCloud {
     points.push_back({x, y, z, intensity});
   }
   // Appends the points of `other` (and its optional arrays when both clouds have them, or when
-  // this cloud is empty).
+  // this cloud is empty); appending an empty cloud changes nothing.
   void append(const PointCloud& other);
   // Keeps points whose mask entry is true (mask.size() == size()), all arrays together.
   PointCloud select(const std::vector<bool>& mask) const;
