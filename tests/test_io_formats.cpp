@@ -4,6 +4,8 @@
 
 #include <cstdint>
 #include <gtest/gtest.h>
+#include <pcl/io/pcd_io.h>
+#include <pcl/point_types.h>
 
 #include <cmath>
 #include <filesystem>
@@ -71,6 +73,59 @@ TEST_P(PcdFormats, EmptyCloudRoundTrips) {
 INSTANTIATE_TEST_SUITE_P(All, PcdFormats,
                          ::testing::Values(io::PcdFormat::kAscii, io::PcdFormat::kBinary,
                                            io::PcdFormat::kBinaryCompressed));
+
+TEST(Pcd, BinaryIsByteForByteWhatPclWrites) {
+  test::TempDir tmp;
+  PointCloud c = RandomCloud(777);
+  c.cls.assign(c.size(), PointClass::kHD);  // arrays are not part of a PCD
+  io::WritePcd(tmp / "ours.pcd", c, io::PcdFormat::kBinary);
+  pcl::PointCloud<pcl::PointXYZI> pc;
+  for (const auto& p : c.points) {
+    pcl::PointXYZI q;
+    q.x = p.x;
+    q.y = p.y;
+    q.z = p.z;
+    q.intensity = p.intensity;
+    pc.push_back(q);
+  }
+  ASSERT_EQ(pcl::PCDWriter().writeBinary(tmp / "pcl.pcd", pc), 0);
+  EXPECT_EQ(test::ReadText(tmp / "ours.pcd"), test::ReadText(tmp / "pcl.pcd"));
+}
+
+TEST(Ply, PartsWriteTheLabelledConcatenation) {
+  test::TempDir tmp;
+  const PointCloud a = RandomCloud(100), b = RandomCloud(70), empty;
+  std::vector<bool> keep(a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) keep[i] = i % 3 != 0;
+  io::WritePly(tmp / "parts.ply", {{&a, PointClass::kStatic, 0, -1, &keep},
+                                   {&empty, PointClass::kHD, 0},
+                                   {&b, PointClass::kPDStrong, 2, 1}});
+  // The same points built as one labelled cloud.
+  PointCloud want;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    if (keep[i]) {
+      want.points.push_back(a.points[i]);
+      want.cls.push_back(PointClass::kStatic);
+      want.session.push_back(0);
+      want.object.push_back(-1);
+    }
+  for (const auto& p : b.points) {
+    want.points.push_back(p);
+    want.cls.push_back(PointClass::kPDStrong);
+    want.session.push_back(2);
+    want.object.push_back(1);
+  }
+  io::WritePly(tmp / "want.ply", want);
+  EXPECT_EQ(test::ReadText(tmp / "parts.ply"), test::ReadText(tmp / "want.ply"));
+  const PointCloud r = io::ReadPly(tmp / "parts.ply");
+  ASSERT_EQ(r.size(), want.size());
+  EXPECT_EQ(r.cls, want.cls);
+  EXPECT_EQ(r.object, want.object);
+  // A mask of the wrong length is an error naming the file; nothing is written.
+  std::vector<bool> short_mask(5, true);
+  EXPECT_THROW(io::WritePly(tmp / "bad.ply", {{&a, PointClass::kStatic, 0, -1, &short_mask}}), Error);
+  EXPECT_FALSE(fs::exists(tmp / "bad.ply"));
+}
 
 TEST(Pcd, XyzOnlyAndDoubleFieldsRead) {
   test::TempDir tmp;

@@ -44,6 +44,18 @@ PointCloud ReadCloud(const std::string& path, CloudReadStats* stats = nullptr);
 // Binary little-endian PLY with float x y z intensity and, when present, uchar class,
 // ushort session, int object (CloudCompare shows them as scalar fields).
 void WritePly(const std::string& path, const PointCloud& cloud);
+// One part of a labelled PLY: the points of `cloud` (those with keep[i] when `keep` is given),
+// each with class `cls`, session `session` and object `object`.
+struct PlyPart {
+  const PointCloud* cloud = nullptr;
+  PointClass cls = PointClass::kStatic;
+  std::uint16_t session = 0;
+  std::int32_t object = -1;
+  const std::vector<bool>* keep = nullptr;
+};
+// The same file as WritePly of the parts' labelled concatenation (class, session and object
+// fields), streamed from the parts without building that concatenation.
+void WritePly(const std::string& path, const std::vector<PlyPart>& parts);
 PointCloud ReadPly(const std::string& path);  // reads what WritePly writes
 
 // -------------------------------------------------------------------------- scan context

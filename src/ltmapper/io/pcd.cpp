@@ -343,17 +343,34 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
 
 namespace {
 // An empty cloud is a valid PCD (POINTS 0), but PCL's writers refuse it: write the header here.
+// The header PCL's PCDWriter writes for x y z intensity floats (the same bytes).
+void WritePcdHeader(std::ostream& out, std::size_t points, const char* data) {
+  out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
+         "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH "
+      << points << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << points << "\nDATA " << data << "\n";
+}
+
 void WriteEmptyPcd(const std::string& tmp, PcdFormat format) {
   std::ofstream out(tmp, std::ios::binary);
-  out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
-         "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 0\nHEIGHT 1\n"
-         "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA "
-      << (format == PcdFormat::kAscii ? "ascii" : "binary") << "\n";
+  WritePcdHeader(out, 0, format == PcdFormat::kAscii ? "ascii" : "binary");
   if (!out) throw Error(tmp + ": write failed");
 }
 }  // namespace
 
 void WritePcd(const std::string& path, const PointCloud& cloud, PcdFormat format) {
+  if (format == PcdFormat::kBinary) {
+    // Streamed from the cloud's own array (x y z intensity, 16 bytes a point, as the format
+    // stores them on this little-endian machine): no copy of the cloud, unlike PCL's writer (a
+    // 32-byte-per-point PCL cloud plus the mapped file), so writing a session map costs no memory.
+    static_assert(sizeof(PointXYZI) == 16, "PointXYZI must be four packed floats");
+    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "binary PCD data is little-endian");
+    WriteFileAtomic(path, [&](std::ostream& out) {
+      WritePcdHeader(out, cloud.size(), "binary");
+      out.write(reinterpret_cast<const char*>(cloud.points.data()),
+                std::streamsize(cloud.size() * sizeof(PointXYZI)));
+    });
+    return;
+  }
   WritePathAtomic(path, [&](const std::string& tmp) {
     if (cloud.empty()) {
       WriteEmptyPcd(tmp, format);

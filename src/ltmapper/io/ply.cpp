@@ -57,13 +57,13 @@ double PlyValue(const char* p, const std::string& t) {
 }
 }  // namespace
 
-void WritePly(const std::string& path, const PointCloud& cloud) {
-  cloud.CheckConsistent(path);
-  const bool has_cls = !cloud.cls.empty(), has_ses = !cloud.session.empty(),
-             has_obj = !cloud.object.empty();
+namespace {
+// Header and chunked binary body; `point(i, buf)` appends the record of output point i.
+template <class PointFn>
+void WritePlyRecords(const std::string& path, std::size_t n, bool has_cls, bool has_ses, bool has_obj,
+                     const PointFn& point) {
   std::ostringstream header;
-  header << "ply\nformat binary_little_endian 1.0\ncomment ltmapper\nelement vertex "
-         << cloud.size()
+  header << "ply\nformat binary_little_endian 1.0\ncomment ltmapper\nelement vertex " << n
          << "\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\n";
   if (has_cls) header << "property uchar class\n";
   if (has_ses) header << "property ushort session\n";
@@ -73,21 +73,67 @@ void WritePly(const std::string& path, const PointCloud& cloud) {
     out << header.str();
     std::string buf;
     const std::size_t chunk = 65536;
-    for (std::size_t begin = 0; begin < cloud.size(); begin += chunk) {
+    for (std::size_t begin = 0; begin < n; begin += chunk) {
       buf.clear();
-      const std::size_t end = std::min(cloud.size(), begin + chunk);
-      for (std::size_t i = begin; i < end; ++i) {
-        const auto& p = cloud.points[i];
-        Put(buf, p.x);
-        Put(buf, p.y);
-        Put(buf, p.z);
-        Put(buf, p.intensity);
-        if (has_cls) Put(buf, static_cast<std::uint8_t>(cloud.cls[i]));
-        if (has_ses) Put(buf, cloud.session[i]);
-        if (has_obj) Put(buf, cloud.object[i]);
-      }
+      const std::size_t end = std::min(n, begin + chunk);
+      for (std::size_t i = begin; i < end; ++i) point(i, buf);
       out.write(buf.data(), std::streamsize(buf.size()));
     }
+  });
+}
+
+void PutXyzi(std::string& buf, const PointXYZI& p) {
+  Put(buf, p.x);
+  Put(buf, p.y);
+  Put(buf, p.z);
+  Put(buf, p.intensity);
+}
+}  // namespace
+
+void WritePly(const std::string& path, const PointCloud& cloud) {
+  cloud.CheckConsistent(path);
+  const bool has_cls = !cloud.cls.empty(), has_ses = !cloud.session.empty(),
+             has_obj = !cloud.object.empty();
+  WritePlyRecords(path, cloud.size(), has_cls, has_ses, has_obj, [&](std::size_t i, std::string& buf) {
+    PutXyzi(buf, cloud.points[i]);
+    if (has_cls) Put(buf, static_cast<std::uint8_t>(cloud.cls[i]));
+    if (has_ses) Put(buf, cloud.session[i]);
+    if (has_obj) Put(buf, cloud.object[i]);
+  });
+}
+
+void WritePly(const std::string& path, const std::vector<PlyPart>& parts) {
+  // Output point -> (part, index in its cloud), walked in order by a cursor.
+  std::size_t n = 0;
+  for (const PlyPart& part : parts) {
+    if (!part.cloud) throw Error(path + ": PLY part without a cloud");
+    if (part.keep && part.keep->size() != part.cloud->size())
+      throw Error(path + ": PLY part mask has " + std::to_string(part.keep->size()) + " entries for " +
+                  std::to_string(part.cloud->size()) + " points");
+    if (!part.keep) {
+      n += part.cloud->size();
+    } else {
+      for (bool k : *part.keep) n += k;
+    }
+  }
+  std::size_t p = 0, i = 0;
+  WritePlyRecords(path, n, true, true, true, [&](std::size_t, std::string& buf) {
+    for (;;) {  // next kept point: skip finished parts and masked-out points
+      const PlyPart& part = parts[p];
+      if (i >= part.cloud->size()) {
+        ++p;
+        i = 0;
+      } else if (part.keep && !(*part.keep)[i]) {
+        ++i;
+      } else {
+        break;
+      }
+    }
+    const PlyPart& part = parts[p];
+    PutXyzi(buf, part.cloud->points[i++]);
+    Put(buf, static_cast<std::uint8_t>(part.cls));
+    Put(buf, part.session);
+    Put(buf, part.object);
   });
 }
 

@@ -170,9 +170,9 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     io::WritePcd(dir + "/static_map.pcd", hd.static_map);
     io::WritePcd(dir + "/hd_map.pcd", hd.hd_map);
     if (cfg.write_ply) {
-      PointCloud all = Labelled(hd.static_map, PointClass::kStatic, int(s));
-      all.append(Labelled(hd.hd_map, PointClass::kHD, int(s)));
-      io::WritePly(dir + "/map.ply", all);
+      const auto ses = std::uint16_t(s);
+      io::WritePly(dir + "/map.ply", {{&hd.static_map, PointClass::kStatic, ses},
+                                      {&hd.hd_map, PointClass::kHD, ses}});
     }
     rep.hd.push_back(st);
     static_maps[s] = std::move(hd.static_map);
@@ -207,15 +207,14 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     if (cfg.write_ply) {
       std::vector<bool> unchanged(cmap.size());
       for (std::size_t i = 0; i < cmap.size(); ++i) unchanged[i] = !ld.central_nd[i];
-      PointCloud all = Labelled(cmap.select(unchanged), PointClass::kStatic, c);
-      all.append(Labelled(ld.nd_strong, PointClass::kNDStrong, c));
-      all.append(Labelled(ld.nd_weak, PointClass::kNDWeak, c));
-      all.append(Labelled(ld.pd_strong, PointClass::kPDStrong, q));
-      all.append(Labelled(ld.pd_weak, PointClass::kPDWeak, q));
-      PointCloud unobs = Labelled(ld.pd_unobserved, PointClass::kPDStrong, q);
-      std::fill(unobs.object.begin(), unobs.object.end(), 1);  // object 1 = new territory
-      all.append(unobs);
-      io::WritePly(dir + "/changes.ply", all);
+      const auto cs = std::uint16_t(c), qs = std::uint16_t(q);
+      constexpr std::int32_t kNoObject = -1, kNewTerritory = 1;  // object field of changes.ply
+      io::WritePly(dir + "/changes.ply", {{&cmap, PointClass::kStatic, cs, kNoObject, &unchanged},
+                                          {&ld.nd_strong, PointClass::kNDStrong, cs},
+                                          {&ld.nd_weak, PointClass::kNDWeak, cs},
+                                          {&ld.pd_strong, PointClass::kPDStrong, qs},
+                                          {&ld.pd_weak, PointClass::kPDWeak, qs},
+                                          {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory}});
     }
 
     // ---- Keyframe assignment (rule at the top of this file).
