@@ -195,6 +195,33 @@ TEST(Voxel, RunsOfVoxelisedCloudsMergeToTheSameResult) {
   EXPECT_THROW(VoxelDownsampleRuns(cat, {0, 10, 3}, 0.25), Error);
 }
 
+TEST(Voxel, ManyRunsMergeInKeyRangesToTheSameResult) {
+  // Enough points for several parallel key ranges; runs overlap in space, carry per-point arrays
+  // (taken from a voxel's first point, in run order), and share voxels with up to 12 others.
+  PointCloud cat;
+  std::vector<std::size_t> starts;
+  for (int k = 0; k < 12; ++k) {
+    PointCloud c = RandomCloud(60000, 15.f, 100 + k, {float(k), 0.f, 0.f});
+    AddArrays(c);
+    starts.push_back(cat.size());
+    cat.append(VoxelDownsample(c, 0.3, 1));
+  }
+  ASSERT_GT(cat.size(), 4u * 65536u);
+  const PointCloud want = VoxelDownsample(cat, 0.3, 2);
+  for (int threads : {1, 2}) {
+    const PointCloud got = VoxelDownsampleRuns(cat, starts, 0.3, threads);
+    ExpectSamePoints(got, want);
+    EXPECT_EQ(got.cls, want.cls);
+    EXPECT_EQ(got.session, want.session);
+    EXPECT_EQ(got.object, want.object);
+  }
+  // Empty runs are allowed.
+  std::vector<std::size_t> with_empty = starts;
+  with_empty.insert(with_empty.begin() + 3, starts[3]);
+  with_empty.push_back(cat.size());
+  ExpectSamePoints(VoxelDownsampleRuns(cat, with_empty, 0.3, 2), want);
+}
+
 TEST(Voxel, ThreadCountDoesNotChangeOutput) {
   PointCloud c = RandomCloud(200000, 40.f, 5);
   AddArrays(c);

@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <string>
 #include <utility>
@@ -30,6 +31,7 @@ constexpr int kPackBits = 21;                     // bits per axis in the packed
 constexpr std::int64_t kPackSpan = std::int64_t(1) << kPackBits;
 constexpr double kMaxVoxelIndex = 4.0e18;         // |index| beyond this would overflow int64
 constexpr std::size_t kGrain = 4096;              // points per TBB task
+constexpr std::size_t kMergeRangePoints = 65536;  // points per parallel key range of a run merge
 
 using Index3 = std::array<std::int64_t, 3>;
 
@@ -107,36 +109,6 @@ void RadixSort(std::vector<PackedRec>& recs, int bits) {
   }
 }
 
-// Records of a concatenation of voxelised clouds (runs starting at `runs`, ascending, first 0),
-// each run sorted by key: pairwise std::merge of the runs (equal keys from the earlier run, i.e.
-// lower index, first). False, leaving recs unchanged, when a run is out of order.
-bool MergeRuns(std::vector<PackedRec>& recs, std::vector<std::size_t> runs) {
-  const std::size_t n = recs.size();
-  runs.push_back(n);
-  for (std::size_t r = 0; r + 1 < runs.size(); ++r)
-    for (std::size_t i = runs[r] + 1; i < runs[r + 1]; ++i)
-      if (recs[i].key < recs[i - 1].key) return false;
-  std::vector<PackedRec> tmp(n);
-  while (runs.size() > 2) {
-    const std::size_t pairs = (runs.size() - 1) / 2;
-    tbb::parallel_for(std::size_t(0), pairs, [&](std::size_t q) {
-      const std::size_t b0 = runs[2 * q], b1 = runs[2 * q + 1], b2 = runs[2 * q + 2];
-      std::merge(recs.begin() + b0, recs.begin() + b1, recs.begin() + b1, recs.begin() + b2, tmp.begin() + b0);
-    });
-    std::vector<std::size_t> merged;
-    for (std::size_t q = 0; q < pairs; ++q) merged.push_back(runs[2 * q]);
-    if ((runs.size() - 1) % 2 == 1) {  // odd run out: copied as it is
-      const std::size_t b0 = runs[runs.size() - 2];
-      std::copy(recs.begin() + b0, recs.end(), tmp.begin() + b0);
-      merged.push_back(b0);
-    }
-    merged.push_back(n);
-    recs.swap(tmp);
-    runs.swap(merged);
-  }
-  return true;
-}
-
 // Sorted records -> one centroid per run of equal keys.
 template <class Rec>
 PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
@@ -172,6 +144,126 @@ PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
     }
   });
   return out;
+}
+
+// A concatenation of voxelised clouds (runs starting at `runs`, ascending, first 0), every
+// point finite, keys from `key`: one centroid per voxel by a k-way merge of the runs, read
+// straight from the points, with no record arrays (the record path holds two 16-byte records per
+// input point). Key ranges, split at keys of the longest run, are merged in parallel. A voxel's
+// points are summed in run order and its arrays come from its first point, as the record path
+// does (std::merge keeps equal keys in run order), so the output is bit-identical to it.
+// False, writing nothing, when a run is out of order.
+template <class KeyFn>
+bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const KeyFn& key, PointCloud* out) {
+  const std::size_t n = cloud.size();
+  runs.push_back(n);
+  struct Span {
+    std::size_t b, e;
+  };
+  std::vector<Span> spans;
+  for (std::size_t r = 0; r + 1 < runs.size(); ++r)
+    if (runs[r + 1] > runs[r]) spans.push_back({runs[r], runs[r + 1]});
+  if (spans.empty()) return false;
+  std::vector<char> sorted(spans.size(), 1);
+  tbb::parallel_for(std::size_t(0), spans.size(), [&](std::size_t r) {
+    std::uint64_t prev = key(cloud.points[spans[r].b]);
+    for (std::size_t i = spans[r].b + 1; i < spans[r].e && sorted[r]; ++i) {
+      const std::uint64_t k = key(cloud.points[i]);
+      sorted[r] = k >= prev;
+      prev = k;
+    }
+  });
+  for (char ok : sorted)
+    if (!ok) return false;
+
+  // Split keys: evenly spaced keys of the longest run, strictly increasing.
+  const Span longest = *std::max_element(spans.begin(), spans.end(), [](const Span& a, const Span& b) {
+    return a.e - a.b < b.e - b.b;
+  });
+  const std::size_t ranges = std::max<std::size_t>(1, std::min<std::size_t>(256, n / kMergeRangePoints));
+  std::vector<std::uint64_t> split;
+  for (std::size_t t = 1; t < ranges; ++t) {
+    const std::uint64_t k = key(cloud.points[longest.b + (longest.e - longest.b) * t / ranges]);
+    if (split.empty() || k > split.back()) split.push_back(k);
+  }
+  const std::size_t nr = split.size() + 1;
+  // bound[r * (nr + 1) + t]: first point of run r in range t (key >= split[t - 1]).
+  std::vector<std::size_t> bound(spans.size() * (nr + 1));
+  tbb::parallel_for(std::size_t(0), spans.size(), [&](std::size_t r) {
+    std::size_t* row = &bound[r * (nr + 1)];
+    row[0] = spans[r].b;
+    row[nr] = spans[r].e;
+    for (std::size_t t = 1; t < nr; ++t) {
+      std::size_t lo = row[t - 1], hi = spans[r].e;
+      while (lo < hi) {
+        const std::size_t mid = lo + (hi - lo) / 2;
+        if (key(cloud.points[mid]) < split[t - 1]) lo = mid + 1;
+        else hi = mid;
+      }
+      row[t] = lo;
+    }
+  });
+
+  const bool has_cls = !cloud.cls.empty(), has_session = !cloud.session.empty(), has_object = !cloud.object.empty();
+  std::vector<PointCloud> parts(nr);
+  tbb::parallel_for(std::size_t(0), nr, [&](std::size_t t) {
+    struct Head {
+      std::uint64_t key;
+      std::uint32_t run;
+      std::size_t i;
+      bool operator>(const Head& o) const { return key != o.key ? key > o.key : run > o.run; }
+    };
+    std::vector<Head> heap;
+    std::size_t total = 0;
+    for (std::size_t r = 0; r < spans.size(); ++r) {
+      const std::size_t b = bound[r * (nr + 1) + t], e = bound[r * (nr + 1) + t + 1];
+      total += e - b;
+      if (b < e) heap.push_back({key(cloud.points[b]), std::uint32_t(r), b});
+    }
+    const auto later = std::greater<Head>();
+    std::make_heap(heap.begin(), heap.end(), later);
+    PointCloud& part = parts[t];
+    part.points.reserve(total);
+    auto pop = [&]() {  // the smallest head; its run's next point takes its place
+      std::pop_heap(heap.begin(), heap.end(), later);
+      const Head h = heap.back();
+      const std::size_t next = h.i + 1;
+      if (next < bound[h.run * (nr + 1) + t + 1]) {
+        heap.back() = {key(cloud.points[next]), h.run, next};
+        std::push_heap(heap.begin(), heap.end(), later);
+      } else {
+        heap.pop_back();
+      }
+      return h;
+    };
+    while (!heap.empty()) {
+      const Head first = pop();
+      double sx = 0, sy = 0, sz = 0, si = 0, count = 0;
+      auto add = [&](std::size_t i) {
+        const PointXYZI& p = cloud.points[i];
+        sx += p.x;
+        sy += p.y;
+        sz += p.z;
+        si += p.intensity;
+        count += 1;
+      };
+      add(first.i);
+      while (!heap.empty() && heap.front().key == first.key) add(pop().i);
+      const double inv = 1.0 / count;
+      part.points.push_back({float(sx * inv), float(sy * inv), float(sz * inv), float(si * inv)});
+      if (has_cls) part.cls.push_back(cloud.cls[first.i]);
+      if (has_session) part.session.push_back(cloud.session[first.i]);
+      if (has_object) part.object.push_back(cloud.object[first.i]);
+    }
+  });
+  std::size_t m = 0;
+  for (const auto& part : parts) m += part.size();
+  out->points.reserve(m);
+  for (auto& part : parts) {
+    out->append(part);
+    part = PointCloud();
+  }
+  return true;
 }
 
 // `runs` (may be null): the cloud is a concatenation of voxelised clouds starting there.
@@ -223,24 +315,25 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, cons
     while ((span >> width[a]) != 0) ++width[a];
   }
   if (packable) {
+    auto packed_key = [&](const PointXYZI& p) {
+      Index3 k{0, 0, 0};
+      VoxelOf(p, voxel_m, &k);
+      return (std::uint64_t(k[0] - b.lo[0]) << (width[1] + width[2])) |
+             (std::uint64_t(k[1] - b.lo[1]) << width[2]) | std::uint64_t(k[2] - b.lo[2]);
+    };
+    PointCloud merged;
+    if (runs && all_finite && ReduceRuns(cloud, *runs, packed_key, &merged)) return merged;
     std::vector<PackedRec> recs(m);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
                       [&](const tbb::blocked_range<std::size_t>& r) {
-      Index3 k{0, 0, 0};
       for (std::size_t j = r.begin(); j != r.end(); ++j) {
         const std::uint32_t i = point_index(j);
-        VoxelOf(cloud.points[i], voxel_m, &k);
-        const std::uint64_t key = (std::uint64_t(k[0] - b.lo[0]) << (width[1] + width[2])) |
-                                  (std::uint64_t(k[1] - b.lo[1]) << width[2]) | std::uint64_t(k[2] - b.lo[2]);
-        recs[j] = {key, i};
+        recs[j] = {packed_key(cloud.points[i]), i};
       }
     });
-    // Runs of a concatenation of voxelised clouds are merged (only with every point finite, so
-    // record j is point j); one thread radix-sorts; else a parallel comparison sort.
-    if (!(runs && all_finite && MergeRuns(recs, *runs))) {
-      if (threads == 1) RadixSort(recs, width[0] + width[1] + width[2]);
-      else tbb::parallel_sort(recs.begin(), recs.end());
-    }
+    // One thread radix-sorts; else a parallel comparison sort.
+    if (threads == 1) RadixSort(recs, width[0] + width[1] + width[2]);
+    else tbb::parallel_sort(recs.begin(), recs.end());
     return Reduce(cloud, recs);
   }
   std::vector<WideRec> recs(m);
