@@ -6,6 +6,8 @@
 // Common case: the occupied voxel indices span < 2^21 per axis and pack into one uint64 relative
 // to the minimum index (16-byte records, fast sort). Otherwise (e.g. 1 cm voxels over +-1e6 m)
 // a 3 x int64 key is used; both orders are lexicographic (x, y, z).
+// A concatenation of voxelised clouds (VoxelDownsampleRuns) is reduced without records: its runs
+// are already in key order, so a k-way merge per key range gives the same sums in the same order.
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <tbb/blocked_range.h>
