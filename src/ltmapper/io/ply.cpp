@@ -25,34 +25,55 @@ void Put(std::string& buf, T v) {
   buf.append(b, sizeof(T));
 }
 
+// A vertex property's scalar type, resolved from its header name once (not per value).
+enum class PlyType { kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kFloat32, kFloat64, kUnknown };
+
 struct PlyProperty {
   std::string name;
-  std::string type;
+  std::string type_name;
+  PlyType type = PlyType::kUnknown;
   std::size_t size = 0;
   std::size_t offset = 0;
 };
 
-std::size_t PlyTypeSize(const std::string& t) {
-  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
-  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-  if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32")
-    return 4;
-  if (t == "double" || t == "float64") return 8;
+PlyType ParsePlyType(const std::string& t) {
+  if (t == "char" || t == "int8") return PlyType::kInt8;
+  if (t == "uchar" || t == "uint8") return PlyType::kUInt8;
+  if (t == "short" || t == "int16") return PlyType::kInt16;
+  if (t == "ushort" || t == "uint16") return PlyType::kUInt16;
+  if (t == "int" || t == "int32") return PlyType::kInt32;
+  if (t == "uint" || t == "uint32") return PlyType::kUInt32;
+  if (t == "float" || t == "float32") return PlyType::kFloat32;
+  if (t == "double" || t == "float64") return PlyType::kFloat64;
+  return PlyType::kUnknown;
+}
+
+std::size_t PlyTypeSize(PlyType t) {
+  switch (t) {
+    case PlyType::kInt8: case PlyType::kUInt8: return 1;
+    case PlyType::kInt16: case PlyType::kUInt16: return 2;
+    case PlyType::kInt32: case PlyType::kUInt32: case PlyType::kFloat32: return 4;
+    case PlyType::kFloat64: return 8;
+    case PlyType::kUnknown: break;
+  }
   return 0;
 }
 
-double PlyValue(const char* p, const std::string& t) {
+double PlyValue(const char* p, PlyType t) {
   auto get = [p](auto v) {
     std::memcpy(&v, p, sizeof(v));
     return double(v);
   };
-  if (t == "char" || t == "int8") return get(std::int8_t{});
-  if (t == "uchar" || t == "uint8") return get(std::uint8_t{});
-  if (t == "short" || t == "int16") return get(std::int16_t{});
-  if (t == "ushort" || t == "uint16") return get(std::uint16_t{});
-  if (t == "int" || t == "int32") return get(std::int32_t{});
-  if (t == "uint" || t == "uint32") return get(std::uint32_t{});
-  if (t == "float" || t == "float32") return get(float{});
+  switch (t) {
+    case PlyType::kInt8: return get(std::int8_t{});
+    case PlyType::kUInt8: return get(std::uint8_t{});
+    case PlyType::kInt16: return get(std::int16_t{});
+    case PlyType::kUInt16: return get(std::uint16_t{});
+    case PlyType::kInt32: return get(std::int32_t{});
+    case PlyType::kUInt32: return get(std::uint32_t{});
+    case PlyType::kFloat32: return get(float{});
+    case PlyType::kFloat64: case PlyType::kUnknown: break;
+  }
   return get(double{});
 }
 }  // namespace
@@ -177,10 +198,11 @@ PointCloud ReadPly(const std::string& path) {
     } else if (key == "property") {
       if (!in_vertex) continue;
       PlyProperty p;
-      ss >> p.type >> p.name;
-      if (p.type == "list") throw Error(path, lineno, "list properties on vertices are not supported");
+      ss >> p.type_name >> p.name;
+      if (p.type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
+      p.type = ParsePlyType(p.type_name);
       p.size = PlyTypeSize(p.type);
-      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + p.type + "'");
+      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + p.type_name + "'");
       p.offset = step;
       step += p.size;
       props.push_back(p);
