@@ -342,7 +342,6 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
 }
 
 namespace {
-// An empty cloud is a valid PCD (POINTS 0), but PCL's writers refuse it: write the header here.
 // The header PCL's PCDWriter writes for x y z intensity floats (the same bytes).
 void WritePcdHeader(std::ostream& out, std::size_t points, const char* data) {
   out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
@@ -350,6 +349,7 @@ void WritePcdHeader(std::ostream& out, std::size_t points, const char* data) {
       << points << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << points << "\nDATA " << data << "\n";
 }
 
+// An empty cloud is a valid PCD (POINTS 0), but PCL's writers refuse it: write the header here.
 void WriteEmptyPcd(const std::string& tmp, PcdFormat format) {
   std::ofstream out(tmp, std::ios::binary);
   WritePcdHeader(out, 0, format == PcdFormat::kAscii ? "ascii" : "binary");

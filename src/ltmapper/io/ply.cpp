@@ -2,6 +2,7 @@
 // intensity, and when the cloud has them uchar class, ushort session, int object.
 #include "ltmapper/io/io.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -30,7 +31,6 @@ enum class PlyType { kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kFloat32, 
 
 struct PlyProperty {
   std::string name;
-  std::string type_name;
   PlyType type = PlyType::kUnknown;
   std::size_t size = 0;
   std::size_t offset = 0;
@@ -76,9 +76,7 @@ double PlyValue(const char* p, PlyType t) {
   }
   return get(double{});
 }
-}  // namespace
 
-namespace {
 // Header and chunked binary body; `point(i, buf)` appends the record of output point i.
 template <class PointFn>
 void WritePlyRecords(const std::string& path, std::size_t n, bool has_cls, bool has_ses, bool has_obj,
@@ -131,11 +129,7 @@ void WritePly(const std::string& path, const std::vector<PlyPart>& parts) {
     if (part.keep && part.keep->size() != part.cloud->size())
       throw Error(path + ": PLY part mask has " + std::to_string(part.keep->size()) + " entries for " +
                   std::to_string(part.cloud->size()) + " points");
-    if (!part.keep) {
-      n += part.cloud->size();
-    } else {
-      for (bool k : *part.keep) n += k;
-    }
+    n += part.keep ? std::size_t(std::count(part.keep->begin(), part.keep->end(), true)) : part.cloud->size();
   }
   std::size_t p = 0, i = 0;
   WritePlyRecords(path, n, true, true, true, [&](std::size_t, std::string& buf) {
@@ -198,11 +192,12 @@ PointCloud ReadPly(const std::string& path) {
     } else if (key == "property") {
       if (!in_vertex) continue;
       PlyProperty p;
-      ss >> p.type_name >> p.name;
-      if (p.type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
-      p.type = ParsePlyType(p.type_name);
+      std::string type_name;
+      ss >> type_name >> p.name;
+      if (type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
+      p.type = ParsePlyType(type_name);
       p.size = PlyTypeSize(p.type);
-      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + p.type_name + "'");
+      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + type_name + "'");
       p.offset = step;
       step += p.size;
       props.push_back(p);
