@@ -42,15 +42,6 @@ std::string PairName(const std::vector<std::string>& names, int c, int q) {
   return buf;
 }
 
-PointCloud Labelled(const PointCloud& cloud, PointClass cls, int session) {
-  PointCloud out;
-  out.points = cloud.points;
-  out.cls.assign(cloud.size(), cls);
-  out.session.assign(cloud.size(), std::uint16_t(session));
-  out.object.assign(cloud.size(), -1);
-  return out;
-}
-
 PointCloud Positions(const std::vector<WorldKeyframe>& kfs) {
   PointCloud c;
   for (const auto& kf : kfs) {
@@ -91,19 +82,26 @@ PointCloud Voxel(const PointCloud& c, double voxel_m) {
   return voxel_m > 0.0 ? geometry::VoxelDownsample(c, voxel_m, 1) : c;
 }
 
-void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor,
-                      const std::vector<std::pair<std::string, PointCloud>>& parts,
-                      const std::vector<PointClass>& classes, int session_of_part0,
-                      const std::vector<int>& sessions, const RemovertConfig& cfg) {
+// One cloud of a keyframe folder: file name (without .pcd), world-frame points, class and session.
+struct KeyframePart {
+  const char* name;
+  PointCloud cloud;
+  PointClass cls;
+  int session;
+};
+
+// The parts in the keyframe's local frame as PCDs, and with a class field in classes.ply.
+void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const std::vector<KeyframePart>& parts,
+                      const RemovertConfig& cfg) {
   io::MakeDirs(dir);
-  PointCloud all;
+  std::vector<PointCloud> local(parts.size());
+  std::vector<io::PlyPart> ply;
   for (std::size_t p = 0; p < parts.size(); ++p) {
-    const PointCloud local = Voxel(detail::ToLocal(parts[p].second, T_world_sensor), cfg.keyframe_voxel_m);
-    io::WritePcd(dir + "/" + parts[p].first + ".pcd", local);
-    if (cfg.write_ply) all.append(Labelled(local, classes[p], sessions[p]));
+    local[p] = Voxel(detail::ToLocal(parts[p].cloud, T_world_sensor), cfg.keyframe_voxel_m);
+    io::WritePcd(dir + "/" + parts[p].name + ".pcd", local[p]);
+    ply.push_back({&local[p], parts[p].cls, std::uint16_t(parts[p].session)});
   }
-  (void)session_of_part0;
-  if (cfg.write_ply) io::WritePly(dir + "/classes.ply", all);
+  if (cfg.write_ply) io::WritePly(dir + "/classes.ply", ply);
 }
 
 std::string JsonStr(const std::string& s) {
@@ -273,22 +271,20 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     if (cfg.write_keyframes) {
       detail::ParallelFor(nc, threads, [&](std::size_t k) {
         WriteKeyframeDir(dir + "/keyframes/" + Index6(ckf[k].index), ckf[k].T_world_sensor,
-                         {{"static", pick(cmap, b_static[k])},
-                          {"hd", pick(hd_maps[std::size_t(c)], b_hd[k])},
-                          {"pd_strong", pick(pd_strong_kf, b_pds[k])},
-                          {"pd_weak", pick(ld.pd_weak, b_pdw[k])},
-                          {"nd_strong", pick(ld.nd_strong, b_nds[k])},
-                          {"nd_weak", pick(ld.nd_weak, b_ndw[k])}},
-                         {PointClass::kStatic, PointClass::kHD, PointClass::kPDStrong,
-                          PointClass::kPDWeak, PointClass::kNDStrong, PointClass::kNDWeak},
-                         c, {c, c, q, q, c, c}, cfg);
+                         {{"static", pick(cmap, b_static[k]), PointClass::kStatic, c},
+                          {"hd", pick(hd_maps[std::size_t(c)], b_hd[k]), PointClass::kHD, c},
+                          {"pd_strong", pick(pd_strong_kf, b_pds[k]), PointClass::kPDStrong, q},
+                          {"pd_weak", pick(ld.pd_weak, b_pdw[k]), PointClass::kPDWeak, q},
+                          {"nd_strong", pick(ld.nd_strong, b_nds[k]), PointClass::kNDStrong, c},
+                          {"nd_weak", pick(ld.nd_weak, b_ndw[k]), PointClass::kNDWeak, c}},
+                         cfg);
       });
       detail::ParallelFor(new_list.size(), threads, [&](std::size_t t) {
         const std::size_t j = std::size_t(new_list[t]);
         WriteKeyframeDir(dir + "/new_keyframes/" + Index6(qkf[j].index), qkf[j].T_world_sensor,
-                         {{"pd_strong", pick(pd_strong_kf, b_pds[nc + j])},
-                          {"pd_weak", pick(ld.pd_weak, b_pdw[nc + j])}},
-                         {PointClass::kPDStrong, PointClass::kPDWeak}, q, {q, q}, cfg);
+                         {{"pd_strong", pick(pd_strong_kf, b_pds[nc + j]), PointClass::kPDStrong, q},
+                          {"pd_weak", pick(ld.pd_weak, b_pdw[nc + j]), PointClass::kPDWeak, q}},
+                         cfg);
       });
     }
     // Keyframe list: kind, session, index, point counts, world pose (KITTI 12 numbers).
