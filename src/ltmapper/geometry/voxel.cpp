@@ -34,6 +34,7 @@ constexpr std::int64_t kPackSpan = std::int64_t(1) << kPackBits;
 constexpr double kMaxVoxelIndex = 4.0e18;         // |index| beyond this would overflow int64
 constexpr std::size_t kGrain = 4096;              // points per TBB task
 constexpr std::size_t kMergeRangePoints = 65536;  // points per parallel key range of a run merge
+constexpr std::size_t kMaxMergeRanges = 256;      // at most this many key ranges
 
 using Index3 = std::array<std::int64_t, 3>;
 
@@ -111,6 +112,24 @@ void RadixSort(std::vector<PackedRec>& recs, int bits) {
   }
 }
 
+// Centroid of a voxel's points, summed in double in the order they are added (the order fixes
+// the result bit for bit).
+struct VoxelSum {
+  double x = 0, y = 0, z = 0, intensity = 0;
+  std::size_t n = 0;
+  void Add(const PointXYZI& p) {
+    x += p.x;
+    y += p.y;
+    z += p.z;
+    intensity += p.intensity;
+    ++n;
+  }
+  PointXYZI Mean() const {
+    const double inv = 1.0 / double(n);
+    return {float(x * inv), float(y * inv), float(z * inv), float(intensity * inv)};
+  }
+};
+
 // Sorted records -> one centroid per run of equal keys.
 template <class Rec>
 PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
@@ -129,16 +148,9 @@ PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain / 4),
                     [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t v = r.begin(); v != r.end(); ++v) {
-      double sx = 0, sy = 0, sz = 0, si = 0;
-      for (std::size_t j = starts[v]; j < starts[v + 1]; ++j) {
-        const PointXYZI& p = cloud.points[recs[j].idx];
-        sx += p.x;
-        sy += p.y;
-        sz += p.z;
-        si += p.intensity;
-      }
-      const double inv = 1.0 / double(starts[v + 1] - starts[v]);
-      out.points[v] = {float(sx * inv), float(sy * inv), float(sz * inv), float(si * inv)};
+      VoxelSum sum;
+      for (std::size_t j = starts[v]; j < starts[v + 1]; ++j) sum.Add(cloud.points[recs[j].idx]);
+      out.points[v] = sum.Mean();
       const std::uint32_t first = recs[starts[v]].idx;
       if (!cloud.cls.empty()) out.cls[v] = cloud.cls[first];
       if (!cloud.session.empty()) out.session[v] = cloud.session[first];
@@ -182,7 +194,7 @@ bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const Ke
   const Span longest = *std::max_element(spans.begin(), spans.end(), [](const Span& a, const Span& b) {
     return a.e - a.b < b.e - b.b;
   });
-  const std::size_t ranges = std::max<std::size_t>(1, std::min<std::size_t>(256, n / kMergeRangePoints));
+  const std::size_t ranges = std::max<std::size_t>(1, std::min(kMaxMergeRanges, n / kMergeRangePoints));
   std::vector<std::uint64_t> split;
   for (std::size_t t = 1; t < ranges; ++t) {
     const std::uint64_t k = key(cloud.points[longest.b + (longest.e - longest.b) * t / ranges]);
@@ -240,19 +252,10 @@ bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const Ke
     };
     while (!heap.empty()) {
       const Head first = pop();
-      double sx = 0, sy = 0, sz = 0, si = 0, count = 0;
-      auto add = [&](std::size_t i) {
-        const PointXYZI& p = cloud.points[i];
-        sx += p.x;
-        sy += p.y;
-        sz += p.z;
-        si += p.intensity;
-        count += 1;
-      };
-      add(first.i);
-      while (!heap.empty() && heap.front().key == first.key) add(pop().i);
-      const double inv = 1.0 / count;
-      part.points.push_back({float(sx * inv), float(sy * inv), float(sz * inv), float(si * inv)});
+      VoxelSum sum;
+      sum.Add(cloud.points[first.i]);
+      while (!heap.empty() && heap.front().key == first.key) sum.Add(cloud.points[pop().i]);
+      part.points.push_back(sum.Mean());
       if (has_cls) part.cls.push_back(cloud.cls[first.i]);
       if (has_session) part.session.push_back(cloud.session[first.i]);
       if (has_object) part.object.push_back(cloud.object[first.i]);
