@@ -42,7 +42,7 @@ eval::EvalConfig LoadEvalConfig(const EvalOptions& o) {
   eval::EvalConfig cfg;
   if (!o.config.empty()) io::LoadConfig(o.config, cfg);
   for (const auto& kv : o.set) SetField(FieldsOf(cfg), kv);
-  ValidateConfig(cfg, o.config.empty() ? "eval config" : o.config);
+  cfg.Validate(o.config.empty() ? "eval config" : o.config);
   spdlog::info("eval config{}:\n{}", o.config.empty() ? " (defaults)" : " " + o.config, ConfigToString(cfg));
   return cfg;
 }

@@ -336,6 +336,9 @@ TEST(Ld, DistanceBandsSplitByTheObservingTrajectory) {
   EXPECT_THROW(EvaluateLd(t, p, nullptr, cfg, 0, &traj), Error);
   cfg.ld_bands_m = {20.0, 20.0};
   EXPECT_THROW(EvaluateLd(t, p, nullptr, cfg, 0, &traj), Error);
+  // ... whether or not bands are asked for: the config itself is wrong.
+  EXPECT_THROW(EvaluateLd(t, p, nullptr, cfg), Error);
+  EXPECT_THROW(cfg.Validate(), Error);
 }
 
 TEST(Ld, HandComputedCorruption) {

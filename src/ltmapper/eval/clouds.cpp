@@ -14,6 +14,12 @@
 #include <unordered_map>
 
 namespace ltm::eval {
+
+void EvalConfig::Validate(const std::string& where) const {
+  ValidateConfig(*this, where);
+  if (std::adjacent_find(ld_bands_m.begin(), ld_bands_m.end(), std::greater_equal<double>()) != ld_bands_m.end())
+    throw Error(where + ": ld.bands_m must be strictly increasing");
+}
 namespace {
 
 tbb::task_arena MakeArena(int threads) {
@@ -155,7 +161,7 @@ struct HdEvaluator::Impl {
 
 HdEvaluator::HdEvaluator(PointCloud output, const EvalConfig& cfg,
                          std::map<int, std::string> object_classes, int threads) {
-  ValidateConfig(cfg, "eval config");
+  cfg.Validate();
   impl_ = std::make_unique<Impl>(std::move(output), cfg, std::move(object_classes), threads);
 }
 HdEvaluator::~HdEvaluator() = default;
@@ -298,7 +304,7 @@ PointCloud InBand(const PointCloud& c, const std::vector<float>& dist, double lo
 
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const PointCloud* kept_map,
                     const EvalConfig& cfg, int threads, const LdTrajectories* trajectories) {
-  ValidateConfig(cfg, "eval config");
+  cfg.Validate();
   auto arena = MakeArena(threads);
   const double d = cfg.ld_match_dist_m;
   LdResult r;
@@ -329,9 +335,7 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
   r.nd_strength_accuracy = Ratio(r.nd_strength_correct, r.nd_matched);
 
   if (trajectories && !cfg.ld_bands_m.empty()) {
-    std::vector<double> edges = cfg.ld_bands_m;
-    if (std::adjacent_find(edges.begin(), edges.end(), std::greater_equal<double>()) != edges.end())
-      throw Error("eval config: ld.bands_m must be strictly increasing");
+    std::vector<double> edges = cfg.ld_bands_m;  // strictly increasing (cfg.Validate)
     edges.push_back(std::numeric_limits<double>::infinity());
     const auto d_tpd = DistanceTo(truth_pd, trajectories->central, arena);
     const auto d_ppd = DistanceTo(pred_pd, trajectories->central, arena);
@@ -384,7 +388,7 @@ void AppendUnmatched(const PointCloud& c, PointClass cls, const geometry::KdTree
 }  // namespace
 
 LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& pred, const EvalConfig& cfg, int threads) {
-  ValidateConfig(cfg, "eval config");
+  cfg.Validate();
   auto arena = MakeArena(threads);
   const double d = cfg.ld_match_dist_m;
   auto tree = [](const PointCloud& c) { return geometry::KdTree(std::make_shared<const PointCloud>(c)); };
@@ -404,7 +408,7 @@ LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& pred, cons
 
 PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
                               const EvalConfig& cfg, int threads) {
-  ValidateConfig(cfg, "eval config");
+  cfg.Validate();
   if (nd_strong.empty()) return central_static;
   const geometry::KdTree tree(std::make_shared<const PointCloud>(nd_strong));
   const float eps2 = float(cfg.ld_same_point_m * cfg.ld_same_point_m);
@@ -426,7 +430,7 @@ PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud
 // -------------------------------------------------------------------------------- restore
 RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
                               int threads) {
-  ValidateConfig(cfg, "eval config");
+  cfg.Validate();
   RestoreResult r;
   r.patch_m = cfg.patch_m;
   r.min_points = cfg.patch_min_points;

@@ -92,6 +92,8 @@ struct EvalConfig {
     v("objects.min_change_points", obj_min_change_points, "", 0, 100000000);
     v("livemeta.min_fraction", livemeta_min_fraction, "", 0.0, 1.0);
   }
+  // Range checks plus the cross-field rules (ld.bands_m strictly increasing); ltm::Error naming `where`.
+  void Validate(const std::string& where = "eval config") const;
 };
 
 // ----------------------------------------------------------------------------- trajectories

@@ -89,7 +89,7 @@ Pose AlignRigid(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen
 
 TrajResult EvaluateTrajectories(const std::vector<SessionTrajectory>& sessions,
                                 const EvalConfig& cfg) {
-  ValidateConfig(cfg, "eval config");
+  cfg.Validate();
   if (sessions.empty()) throw Error("trajectory evaluation: no sessions given");
   for (const auto& s : sessions) {
     if (s.truth.size() != s.est.size())
