@@ -2,6 +2,7 @@
 // stage runs on it. Exit code 1 when the session cannot be loaded at all.
 #include "command.hpp"
 
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
 #include <spdlog/spdlog.h>
@@ -18,6 +19,22 @@ struct InfoArgs {
   bool no_scans = false;
 };
 
+// The sensor as the stages will see it: estimated from up to 8 scans spread over the session.
+void PrintSensor(const ltm::Session& session) {
+  constexpr std::size_t kScans = 8;
+  std::vector<ltm::PointCloud> scans;
+  const std::size_t n = std::min(kScans, session.keyframes.size());
+  for (std::size_t k = 0; k < n; ++k) {
+    const ltm::Keyframe& kf = session.keyframes[k * session.keyframes.size() / n];
+    scans.push_back(kf.cloud ? *kf.cloud : ltm::io::ReadCloud(kf.cloud_path));
+  }
+  try {
+    std::cout << "sensor: " << ltm::geometry::EstimateSensor(scans).Describe() << "\n" << std::flush;
+  } catch (const ltm::Error& e) {
+    std::cout << "sensor: not estimated (" << e.what() << ")\n" << std::flush;
+  }
+}
+
 void RunInfo(const InfoArgs& a) {
   ltm::io::SessionInfo info;
   if (!a.kitti_poses.empty()) {
@@ -30,6 +47,12 @@ void RunInfo(const InfoArgs& a) {
   }
   std::cout << ltm::io::FormatSessionInfo(info) << std::flush;
   if (!info.load_error.empty()) throw ltm::Error("session cannot be loaded: " + info.load_error);
+  if (!a.no_scans) {
+    std::unique_ptr<ltm::Pose> Tr;
+    if (!a.calib.empty()) Tr = std::make_unique<ltm::Pose>(ltm::io::ReadTransform(a.calib));
+    PrintSensor(a.kitti_poses.empty() ? ltm::io::LoadSession(a.dir)
+                                      : ltm::io::LoadKittiSession(a.dir, a.kitti_poses, Tr.get()));
+  }
   if (!info.problems.empty())
     spdlog::warn("{}: {} problem(s) listed above", a.dir, info.problems.size());
 }

@@ -22,7 +22,7 @@ using removert::RemovertConfig;
 using removert::WorldKeyframe;
 
 TEST(RemovertProjection, FastPixelsAgreeWithGeometryRangeImage) {
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   for (double res : {0.4, 1.0}) {
     const geometry::RangeImageConfig rc = removert::detail::LevelConfig(cfg, res);
     const geometry::RangeImage ref(rc);
@@ -63,7 +63,7 @@ TEST(RemovertVotes, SeeThroughHitAndOcclusion) {
   pts.push_back(10.f, 0.3f, 1.8f);   // on the wall: hit
   pts.push_back(15.f, 0.3f, 1.8f);   // behind the wall: occluded, no vote
   pts.push_back(-200.f, 0.f, 1.8f);  // beyond the submap radius: no vote
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   const auto v = removert::CountVisibility(pts, {kf}, {0.4, 1.0}, cfg, 1);
   for (int l = 0; l < 2; ++l) {
     EXPECT_EQ(v.See(l, 0), 1);
@@ -93,7 +93,7 @@ TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
   pts.push_back(20.f, 0.f, 0.f);  // A
   pts.push_back(20.f, 5.f, 0.f);  // B
   const std::vector<Eigen::Vector3f> up(2, Eigen::Vector3f::UnitZ());
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   removert::VisibilityOptions opt;
   opt.count_occluded = true;
   opt.normals = &up;
@@ -137,7 +137,7 @@ TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
     pts.push_back(p.x(), p.y(), 0.f);
   }
   const std::vector<Eigen::Vector3f> up(pts.size(), Eigen::Vector3f::UnitZ());
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   removert::BeamTest beams;
   removert::VisibilityOptions opt;
   opt.normals = &up;
@@ -265,7 +265,7 @@ Score ScoreHd(const PointCloud& truth, const PointCloud& static_map, double d = 
 
 TEST(RemovertHd, RemovesMoversKeepsStaticStreet) {
   const Street s = MakeStreet();
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   const auto res = removert::RemoveHd(s.kfs, cfg, 2);
   EXPECT_EQ(res.static_map.size() + res.hd_map.size(), res.stats.map_points);
   const Score sc = ScoreHd(s.truth, res.static_map);
@@ -299,9 +299,9 @@ TEST(RemovertHd, RemovesMoversKeepsStaticStreet) {
 
 TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {
   const Street s = MakeStreet(0.05);  // 5 cm, 0.06 deg pose noise
-  RemovertConfig ours;
+  RemovertConfig ours = test::ConfigFor();
   // The public LT-mapper code: one resolution, plain pixel test, any see-through removes, no revert.
-  RemovertConfig single;
+  RemovertConfig single = test::ConfigFor();
   single.remove_resolutions_deg = {ours.remove_resolutions_deg.front()};
   single.revert = false;
   single.window_px = 0;
@@ -328,18 +328,22 @@ TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {
 }
 
 TEST(RemovertHd, EmptyInputsAndBadConfig) {
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   const auto r = removert::RemoveHdFromMap(PointCloud{}, {}, cfg, 1);
   EXPECT_TRUE(r.static_map.empty());
   cfg.remove_resolutions_deg.clear();
   EXPECT_THROW(cfg.Validate(), Error);
-  RemovertConfig bad;
-  bad.fov_up_deg = -30.0;
+  RemovertConfig bad;  // a table needs at least two elevations
+  bad.sensor = "table";
+  bad.sensor_elevations_deg = {3.0};
   EXPECT_THROW(bad.Validate(), Error);
+  RemovertConfig stray;  // elevations without sensor.model: table
+  stray.sensor_elevations_deg = {3.0, 1.0};
+  EXPECT_THROW(stray.Validate(), Error);
   WorldKeyframe kf;  // neither cloud nor path
   PointCloud one;
   one.push_back(1, 2, 3);
-  EXPECT_THROW(removert::RemoveHdFromMap(one, {kf}, RemovertConfig{}, 1), Error);
+  EXPECT_THROW(removert::RemoveHdFromMap(one, {kf}, test::ConfigFor(), 1), Error);
 }
 
 }  // namespace

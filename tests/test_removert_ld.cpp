@@ -61,7 +61,7 @@ Scene MakeScene() {
   qb.push_back(test::MakeBox(10, -5.3, 0, 20, -5, 3.5, kWallQuery));
   s.central = Drive(cb, 0.0, nullptr);
   s.query = Drive(qb, 0.7, nullptr);
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   s.cmap = removert::BuildSessionMap(s.central, cfg, 2);
   s.qmap = removert::BuildSessionMap(s.query, cfg, 2);
   return s;
@@ -79,7 +79,7 @@ std::size_t CountIn(const PointCloud& pts, const test::Box& b, double m = 0.05) 
 
 TEST(RemovertLd, NdPdStrongWeak) {
   const Scene s = MakeScene();
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   const auto ld = removert::DetectLd(s.cmap, s.qmap, s.central, s.query, cfg, 2);
   // central_nd marks exactly the central map points that are in nd_strong / nd_weak.
   ASSERT_EQ(ld.central_nd.size(), s.cmap.size());
@@ -145,7 +145,7 @@ TEST(RemovertLd, NdPdStrongWeak) {
 TEST(RemovertLd, IdenticalSessionsHaveNoChanges) {
   auto boxes = Common();
   const auto a = Drive(boxes, 0.0, nullptr);
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   const PointCloud m = removert::BuildSessionMap(a, cfg, 2);
   const auto ld = removert::DetectLd(m, m, a, a, cfg, 2);
   EXPECT_EQ(ld.nd_strong.size() + ld.nd_weak.size() + ld.pd_strong.size() + ld.pd_weak.size(), 0u);
@@ -158,7 +158,7 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   const auto boxes = Common();
   const auto a = Drive(boxes, 0.0, nullptr);
   const auto b = Drive(boxes, 0.7, nullptr);
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   const PointCloud ma = removert::BuildSessionMap(a, cfg, 2), mb = removert::BuildSessionMap(b, cfg, 2);
   // With the default distance-dependent radius almost nothing is left either way.
   const auto defaults = removert::DetectLd(ma, mb, a, b, cfg, 2);
@@ -200,7 +200,7 @@ TEST(RemovertLd, PointsPastTheRimOfTheOtherCoverageAreChanges) {
   WorldKeyframe kf;
   kf.T_world_sensor = test::At(0, -40, 1.8);
   kf.cloud = std::make_shared<PointCloud>();  // no returns: no visibility evidence either way
-  RemovertConfig cfg;
+  RemovertConfig cfg = test::ConfigFor();
   auto nd = [&](const PointCloud& query, const RemovertConfig& c) {
     const auto r = removert::DetectLd(wall, query, {kf}, {kf}, c, 1);
     PointCloud all = r.nd_strong;

@@ -26,6 +26,16 @@ struct Lidar {
   double max_range = 80.0;
 };
 
+// The removert config for scans of `lidar`: its beam table given explicitly (sensor.model:
+// table), resolved, as a user of that sensor would write it.
+inline removert::RemovertConfig ConfigFor(const Lidar& lidar = {}) {
+  removert::RemovertConfig cfg;
+  cfg.sensor = "table";
+  for (int b = 0; b < lidar.beams; ++b)
+    cfg.sensor_elevations_deg.push_back(lidar.fov_up_deg - b * (lidar.fov_up_deg - lidar.fov_down_deg) / (lidar.beams - 1));
+  return removert::WithSensor(cfg, {});
+}
+
 // Ray / box slab test: entry distance t > 0 or +inf.
 inline double HitBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Box& b) {
   double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();

@@ -209,9 +209,10 @@ TEST(RemovertReal, KittiHeadHdRemoval) {
     w.cloud = kf.cloud;
     kfs.push_back(w);
   }
-  removert::RemovertConfig cfg;
-  cfg.fov_up_deg = 2.0;  // Velodyne HDL-64E: +2 .. -24.8 deg (beyond it a range image has no beams,
-  cfg.fov_down_deg = -24.8;  // and the window around the bottom row would see through near ground)
+  // No sensor key: the HDL-64E's beams are estimated from the scans.
+  const removert::RemovertConfig cfg = removert::WithSensor(removert::RemovertConfig{}, kfs);
+  std::printf("KITTI 00 head, sensor %s\n", cfg.sensor_model.Describe().c_str());
+  EXPECT_EQ(cfg.sensor_model.beams(), 64);
   auto removed_fraction = [](const removert::HdResult& r) {
     return double(r.stats.removed + r.stats.dilated) / double(r.stats.map_points);
   };

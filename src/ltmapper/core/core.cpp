@@ -139,8 +139,8 @@ void ConfigFields::operator()(const std::string& key, std::string& v,
   fields_.push_back({key, ConfigField::Kind::kString, &v, "", 0, 0, std::move(choices)});
 }
 void ConfigFields::operator()(const std::string& key, std::vector<double>& v,
-                              const std::string& unit, double lo, double hi) {
-  fields_.push_back({key, ConfigField::Kind::kDoubleList, &v, unit, lo, hi, {}});
+                              const std::string& unit, double lo, double hi, bool allow_empty) {
+  fields_.push_back({key, ConfigField::Kind::kDoubleList, &v, unit, lo, hi, {}, allow_empty});
 }
 
 namespace {
@@ -174,7 +174,7 @@ void ValidateFields(const ConfigFields& fields, const std::string& where) {
       }
       case ConfigField::Kind::kDoubleList: {
         const auto& list = *static_cast<std::vector<double>*>(f.ptr);
-        if (list.empty()) throw Error(where + ": key '" + f.key + "' must not be an empty list");
+        if (list.empty() && !f.allow_empty) throw Error(where + ": key '" + f.key + "' must not be an empty list");
         for (double v : list) CheckRange(f, v, where);
         break;
       }

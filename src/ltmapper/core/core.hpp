@@ -117,6 +117,7 @@ struct ConfigField {
   std::string unit;
   double lo = 0.0, hi = 0.0;             // inclusive range for numbers and list entries
   std::vector<std::string> choices;      // allowed strings (empty = any non-empty string)
+  bool allow_empty = false;              // lists: [] is a valid value (e.g. "no table given")
 };
 
 class ConfigFields {
@@ -126,7 +127,7 @@ class ConfigFields {
   void operator()(const std::string& key, bool& v);
   void operator()(const std::string& key, std::string& v, std::vector<std::string> choices = {});
   void operator()(const std::string& key, std::vector<double>& v, const std::string& unit,
-                  double lo, double hi);
+                  double lo, double hi, bool allow_empty = false);
   const std::vector<ConfigField>& fields() const { return fields_; }
 
  private:

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "ltmapper/core/core.hpp"
+#include "ltmapper/geometry/sensor.hpp"  // SensorModel: beam tables, presets, estimation
 
 #include <memory>
 #include <utility>

@@ -132,7 +132,7 @@ class Loader {
           Range(f, item, v);
           list.push_back(v);
         }
-        if (list.empty()) throw Error(path_, Line(n), Where(f) + ": must not be an empty list");
+        if (list.empty() && !f.allow_empty) throw Error(path_, Line(n), Where(f) + ": must not be an empty list");
         pending_.push_back([&f, list] { *static_cast<std::vector<double>*>(f.ptr) = list; });
         break;
       }

@@ -107,8 +107,10 @@ class MultiResImage {
   int Cols(int level) const { return GridOf(level).cols; }
 
  private:
+  static std::vector<int> WindowRows(const RemovertConfig& cfg, int rows, double row_deg);
   struct Level {
     Grid grid;
+    std::vector<int> window_rows;  // per row: vertical half-window of the pool (WindowRows)
     std::vector<float> range, pooled, tmp, pairs;
     std::vector<Eigen::Vector3f> ret;  // keep_returns
   };
@@ -134,7 +136,7 @@ class ColumnImage {
  private:
   BeamTest test_;
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
-  int span_ = 0;              // [rows]
+  std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams
   float down_ = 0.f;          // [rad]
   float min_range_ = 0.f, max_range_ = 0.f;
   std::vector<float> range_;          // +inf = no return

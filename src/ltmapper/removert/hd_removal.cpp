@@ -30,7 +30,13 @@ namespace ltm::removert {
 void RemovertConfig::Validate(const std::string& where) const {
   ValidateConfig(*this, where);
   auto fail = [&](const std::string& what) { throw Error(where + ": " + what); };
-  if (!(fov_up_deg > fov_down_deg)) fail("sensor.fov_up_deg must be above sensor.fov_down_deg");
+  if (sensor == "table" || !sensor_elevations_deg.empty()) {
+    try {
+      geometry::ResolveSensor(sensor, sensor_elevations_deg, {}, "sensor");
+    } catch (const Error& e) {
+      fail(e.what());
+    }
+  }
   if (!(max_range_m > min_range_m)) fail("sensor.max_range_m must exceed sensor.min_range_m");
   if (remove_resolutions_deg.empty()) fail("hd.remove_resolutions_deg must not be empty");
   if (revert && revert_resolutions_deg.empty())
@@ -79,8 +85,9 @@ PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const Re
 }
 
 HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
-                         const RemovertConfig& cfg, int threads) {
-  cfg.Validate();
+                         const RemovertConfig& user_cfg, int threads) {
+  user_cfg.Validate();
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
   const auto t0 = std::chrono::steady_clock::now();
   const int n_remove = int(cfg.remove_resolutions_deg.size());
   const VisibilityVotes votes = CountVisibility(map, keyframes, cfg.remove_resolutions_deg, cfg, threads);

@@ -77,9 +77,10 @@ std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, con
 
 LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
                   const std::vector<WorldKeyframe>& central_keyframes,
-                  const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg,
+                  const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg,
                   int threads) {
-  cfg.Validate();
+  user_cfg.Validate();
+  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
   const auto t0 = std::chrono::steady_clock::now();
   LdResult res;
   res.stats.central_points = central_map.size();

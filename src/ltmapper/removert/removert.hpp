@@ -24,6 +24,7 @@
 #pragma once
 
 #include "ltmapper/core/core.hpp"
+#include "ltmapper/geometry/sensor.hpp"
 
 #include <cstdint>
 #include <memory>
@@ -58,8 +59,17 @@ struct BeamTest {
 
 struct RemovertConfig {
   // --- sensor and range images
-  double fov_up_deg = 16.0;       // [deg] upper edge of the range images' vertical FOV
-  double fov_down_deg = -26.0;    // [deg] lower edge
+  std::string sensor = "auto";    // auto: estimated from the scans (geometry::EstimateSensor); a preset
+                                  // name (geometry::SensorPresetNames); table: sensor.elevations_deg
+  std::vector<double> sensor_elevations_deg;  // [deg] per-beam elevations (sensor: table)
+  // Resolved by WithSensor() (not keys): the model, and the range images' vertical FOV (the
+  // outer beams plus one beam spacing). Each image row's vertical window reaches at least one
+  // beam spacing above and below it (SensorModel::SpacingAt), so a map point is always judged
+  // against the beams on both sides of its direction: a single beam above grazing ground that
+  // returns farther is no see-through evidence.
+  geometry::SensorModel sensor_model;
+  double fov_up_deg = 0.0;        // [deg] upper edge of the range images' vertical FOV
+  double fov_down_deg = 0.0;      // [deg] lower edge
   double min_range_m = 2.0;       // [m] scan returns closer than this are ignored (ego vehicle)
   double max_range_m = 100.0;     // [m] scan returns farther than this are ignored
   double submap_radius_m = 60.0;  // [m] a keyframe tests only map points this close to it
@@ -125,8 +135,8 @@ struct RemovertConfig {
 
   template <class V>
   void Visit(V& v) {
-    v("sensor.fov_up_deg", fov_up_deg, "deg", -90.0, 90.0);
-    v("sensor.fov_down_deg", fov_down_deg, "deg", -90.0, 90.0);
+    v("sensor.model", sensor, SensorChoices());
+    v("sensor.elevations_deg", sensor_elevations_deg, "deg", -89.9, 89.9, true);
     v("sensor.min_range_m", min_range_m, "m", 0.0, 1000.0);
     v("sensor.max_range_m", max_range_m, "m", 0.1, 10000.0);
     v("submap_radius_m", submap_radius_m, "m", 1.0, 10000.0);
@@ -174,8 +184,11 @@ struct RemovertConfig {
     v("out.write_keyframes", write_keyframes);
     v("out.write_ply", write_ply);
   }
-  // Range checks plus the cross-field rules (FOV order, non-empty resolution lists, ...).
+  // Range checks plus the cross-field rules (non-empty resolution lists, sensor table, ...).
   void Validate(const std::string& where = "removert config") const;
+  bool SensorResolved() const { return fov_up_deg > fov_down_deg; }
+  // Allowed values of sensor.model: auto, table and the presets.
+  static std::vector<std::string> SensorChoices();
 };
 
 // A keyframe placed in the world: its scan (sensor frame) is either in memory (`cloud`) or read
@@ -186,6 +199,11 @@ struct WorldKeyframe {
   std::shared_ptr<const PointCloud> cloud;
   std::string cloud_path;
 };
+
+// The config with its sensor resolved (sensor_model, fov_*_deg): the preset or table, else
+// estimated from up to 8 of the keyframes' scans (spread over the session). A resolved config is
+// returned unchanged; every entry point below calls it, so callers may pass either.
+RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes);
 
 // ------------------------------------------------------------------------------ HD removal
 struct HdStats {

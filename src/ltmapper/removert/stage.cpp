@@ -115,10 +115,10 @@ std::string JsonStr(const std::string& s) {
 
 }  // namespace
 
-StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
+StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<std::string>& session_dirs,
                              const std::vector<std::string>& poses_files, const std::string& out_dir,
                              int threads) {
-  cfg.Validate();
+  user_cfg.Validate();
   const auto t0 = std::chrono::steady_clock::now();
   if (session_dirs.empty()) throw Error("removert: no sessions given");
   if (poses_files.size() != session_dirs.size())
@@ -145,6 +145,8 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
     }
   }
   io::MakeDirs(out_dir);
+  // One sensor for every session (the central session's scans when estimated).
+  const RemovertConfig cfg = WithSensor(user_cfg, kfs[0]);
 
   // Pairs: (central 0, q) for every query, or consecutive (q-1, q).
   for (std::size_t q = 1; q < ns; ++q) {

@@ -236,6 +236,20 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
 
 }  // namespace
 
+// Per row: the vertical half-window [rows] of the min pool: window_px, widened until it reaches
+// one beam spacing (at the row's elevation) above and below any direction inside the row, so a
+// point is always compared with the beams on both sides of it.
+std::vector<int> MultiResImage::WindowRows(const RemovertConfig& cfg, int rows, double row_deg) {
+  std::vector<int> w(std::size_t(rows), cfg.window_px);
+  if (cfg.window_px == 0 || !cfg.SensorResolved()) return w;
+  for (int r = 0; r < rows; ++r) {
+    const double elevation = cfg.fov_up_deg - (r + 0.5) * row_deg;
+    const double spacing = cfg.sensor_model.SpacingAt(elevation);
+    w[std::size_t(r)] = std::max(cfg.window_px, int(std::ceil(spacing / row_deg - 1e-6)));
+  }
+  return w;
+}
+
 MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg,
                              bool keep_returns)
     : keep_returns_(keep_returns) {
@@ -248,6 +262,7 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
   for (double res : resolutions_deg) {
     Level L;
     L.grid = Grid::Make(cfg, res, res);
+    L.window_rows = WindowRows(cfg, L.grid.rows, res);
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
     L.pooled = L.range;
     L.tmp = L.range;
@@ -403,7 +418,8 @@ void MultiResImage::Pool(Level& L) const {
       for (int c = lo; c < hi; ++c) dst[c] = std::min(dst[c], std::min(src[c - d], src[c + d]));
   }
   for (int r = 0; r < rows; ++r) {
-    const int r0 = std::max(0, r - w), r1 = std::min(rows - 1, r + w);
+    const int wr = L.window_rows[std::size_t(r)];
+    const int r0 = std::max(0, r - wr), r1 = std::min(rows - 1, r + wr);
     float* dst = &L.pooled[std::size_t(r) * cols];
     std::copy(&L.tmp[std::size_t(r0) * cols], &L.tmp[std::size_t(r0) * cols] + cols, dst);
     for (int rr = r0 + 1; rr <= r1; ++rr) {
@@ -415,7 +431,15 @@ void MultiResImage::Pool(Level& L) const {
 
 ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test)
     : test_(test), grid_(MultiResImage::Grid::Make(cfg, test.row_deg, test.col_deg)) {
-  span_ = std::max(1, int(std::lround(test.span_deg / test.row_deg)));
+  // Per row: how far to look for the beams above and below: span_deg, or two local beam
+  // spacings where the beams are sparser (one of them may have dropped its return).
+  constexpr double kSpanSpacings = 2.0;
+  span_.resize(std::size_t(grid_.rows));
+  for (int r = 0; r < grid_.rows; ++r) {
+    const double elevation = cfg.fov_up_deg - (r + 0.5) * test.row_deg;
+    const double spacing = cfg.SensorResolved() ? cfg.sensor_model.SpacingAt(elevation) : 0.0;
+    span_[std::size_t(r)] = std::max(1, int(std::lround(std::max(test.span_deg, kSpanSpacings * spacing) / test.row_deg)));
+  }
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   down_ = float(cfg.fov_down_deg * kDeg);
   min_range_ = float(cfg.min_range_m);
@@ -482,13 +506,13 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vec
   const float cos_n = std::fabs(nrm.dot(u));
   if (std::isfinite(rc[row])) return kind(row) == 1 && std::fabs(rc[row] - range) <= along(cos_n);
   int above = 0, below = 0, ra = -1, rb = -1;
-  for (int r = row - 1; r >= std::max(0, row - span_); --r)
+  for (int r = row - 1; r >= std::max(0, row - span_[std::size_t(row)]); --r)
     if (std::isfinite(rc[r])) {
       above = kind(r);
       ra = r;
       break;
     }
-  for (int r = row + 1; r <= std::min(rows - 1, row + span_); ++r)
+  for (int r = row + 1; r <= std::min(rows - 1, row + span_[std::size_t(row)]); ++r)
     if (std::isfinite(rc[r])) {
       below = kind(r);
       rb = r;
@@ -592,8 +616,9 @@ PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
 
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
-                                const RemovertConfig& cfg, int threads,
+                                const RemovertConfig& user_cfg, int threads,
                                 const VisibilityOptions& options) {
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
   const bool count_occluded = options.count_occluded;
   if (options.normals && options.normals->size() != points.size())
     throw Error("removert: " + std::to_string(options.normals->size()) + " normals for " +

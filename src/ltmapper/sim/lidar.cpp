@@ -65,11 +65,11 @@ struct Simulator::Impl {
     for (const auto& o : sc.ld) ld_info.push_back(o.info);
     arena.execute([&] { Build(); });
     Check("building the scenes");
-    const int B = cfg.beams, C = cfg.columns;
+    const int B = sc.cfg.beams, C = sc.cfg.columns;
     dirs.resize(std::size_t(B) * C);
+    const std::vector<double> elevations = BeamElevationsDeg(sc.cfg);
     for (int b = 0; b < B; ++b) {
-      const double el = (B == 1 ? cfg.fov_up_deg
-                                : cfg.fov_up_deg - b * (cfg.fov_up_deg - cfg.fov_down_deg) / (B - 1)) * M_PI / 180.0;
+      const double el = elevations[std::size_t(b)] * M_PI / 180.0;
       for (int c = 0; c < C; ++c) {
         // Column 0 at azimuth +180 deg, azimuth decreasing with the column (geometry::RangeImage).
         const double az = M_PI - 2.0 * M_PI * c / C;

@@ -1,6 +1,8 @@
 // Config checks and the tiny test scenario.
 #include "ltmapper/sim/sim.hpp"
 
+#include "ltmapper/geometry/geometry.hpp"
+
 #include <cmath>
 
 namespace ltm::sim {
@@ -20,6 +22,31 @@ void CheckConfig(const SimConfig& c, const std::string& where) {
     fail("world.road_half_width_m + world.sidewalk_m leave no room for blocks (must be < block_m / 2 - 2)");
   }
   if (c.lane_offset_m >= c.road_half_width_m) fail("route.lane_offset_m must lie inside the road");
+}
+
+std::vector<std::string> LidarPresetChoices() {
+  std::vector<std::string> c = {"uniform"};
+  for (const std::string& n : geometry::SensorPresetNames()) c.push_back(n);
+  return c;
+}
+
+SimConfig ResolveLidar(const SimConfig& cfg) {
+  if (cfg.lidar_preset == "uniform") return cfg;
+  const geometry::SensorModel m = geometry::SensorPreset(cfg.lidar_preset);
+  SimConfig r = cfg;
+  r.beams = m.beams();
+  r.fov_up_deg = m.fov_up_deg;
+  r.fov_down_deg = m.fov_down_deg;
+  r.columns = int(std::lround(360.0 / m.azimuth_step_deg));
+  return r;
+}
+
+std::vector<double> BeamElevationsDeg(const SimConfig& cfg) {
+  if (cfg.lidar_preset != "uniform") return geometry::SensorPreset(cfg.lidar_preset).elevations_deg;
+  const int B = cfg.beams;
+  std::vector<double> e(std::size_t(B), cfg.fov_up_deg);
+  for (int b = 1; b < B; ++b) e[std::size_t(b)] = cfg.fov_up_deg - b * (cfg.fov_up_deg - cfg.fov_down_deg) / (B - 1);
+  return e;
 }
 
 SimConfig TinyConfig() {

@@ -24,6 +24,9 @@
 
 namespace ltm::sim {
 
+// Allowed values of lidar.preset: "uniform" and the sensor presets (geometry::SensorPresetNames).
+std::vector<std::string> LidarPresetChoices();
+
 struct SimConfig {
   int seed = 1;
   // --- world (street grid city block) ---
@@ -44,6 +47,9 @@ struct SimConfig {
   double pole_spacing_m = 25.0;         // [m] street lamps along sidewalks
   double parking_fill = 0.4;            // share of parking slots with a permanently parked car
   // --- lidar ---
+  std::string lidar_preset = "uniform"; // uniform: `beams` evenly from fov_up to fov_down; else a real
+                                        // sensor's beam table and columns (geometry::SensorPreset), which
+                                        // then set beams / fov_up_deg / fov_down_deg / columns
   int beams = 64;                       // 16 / 32 / 64 / 128 (any 1..256)
   double fov_up_deg = 15.0;             // [deg] top beam elevation
   double fov_down_deg = -25.0;          // [deg] bottom beam elevation (beams uniform in between)
@@ -108,6 +114,7 @@ struct SimConfig {
     v("world.tree_fill", tree_fill, "", 0.0, 1.0);
     v("world.pole_spacing_m", pole_spacing_m, "m", 5.0, 500.0);
     v("world.parking_fill", parking_fill, "", 0.0, 1.0);
+    v("lidar.preset", lidar_preset, LidarPresetChoices());
     v("lidar.beams", beams, "", 1, 256);
     v("lidar.fov_up_deg", fov_up_deg, "deg", -89.0, 89.0);
     v("lidar.fov_down_deg", fov_down_deg, "deg", -89.0, 89.0);
@@ -151,6 +158,11 @@ struct SimConfig {
 
 // Throws ltm::Error for combinations Visit() ranges cannot express (fov order, heights ...).
 void CheckConfig(const SimConfig& cfg, const std::string& where = "sim config");
+// The config with lidar.beams / fov_up_deg / fov_down_deg / columns taken from lidar.preset (a
+// uniform config is returned as it is). Every stage of the simulator works on this.
+SimConfig ResolveLidar(const SimConfig& cfg);
+// Elevation of each beam [deg], top beam first: the preset's table, or uniform.
+std::vector<double> BeamElevationsDeg(const SimConfig& cfg);
 // A tiny scenario for tests: 16 beams x 360 columns, 2 sessions x 15 keyframes, 100 m world.
 SimConfig TinyConfig();
 

@@ -320,7 +320,8 @@ std::size_t DirBytes(const std::string& dir) {
 
 }  // namespace
 
-SimReport Simulate(const SimConfig& cfg, const std::string& out_dir, int threads) {
+SimReport Simulate(const SimConfig& user_cfg, const std::string& out_dir, int threads) {
+  const SimConfig cfg = ResolveLidar(user_cfg);
   const auto t_total = Clock::now();
   SimReport rep;
   auto t = Clock::now();

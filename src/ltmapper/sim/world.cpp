@@ -551,9 +551,10 @@ std::vector<LdObject> PlaceLd(const SimConfig& cfg, const Grid& grid, const Terr
 
 }  // namespace
 
-Scenario BuildScenario(const SimConfig& cfg) {
+Scenario BuildScenario(const SimConfig& user_cfg) {
   Scenario sc;
-  sc.cfg = cfg;
+  sc.cfg = ResolveLidar(user_cfg);
+  const SimConfig& cfg = sc.cfg;
   const auto seed = std::uint64_t(cfg.seed);
   Rng terrain_rng(Hash(seed, 1));
   sc.terrain = MakeTerrain(cfg, terrain_rng);

@@ -1,0 +1,34 @@
+// The sensor model of a removert run: resolved once from the config or the scans.
+#include "ltmapper/removert/detail.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+namespace ltm::removert {
+
+std::vector<std::string> RemovertConfig::SensorChoices() {
+  std::vector<std::string> c = {"auto", "table"};
+  for (const std::string& n : geometry::SensorPresetNames()) c.push_back(n);
+  return c;
+}
+
+RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes) {
+  if (cfg.SensorResolved()) return cfg;
+  constexpr std::size_t kEstimateScans = 8;  // enough points for every beam's peak
+  std::vector<PointCloud> scans;
+  if (cfg.sensor == "auto") {
+    const std::size_t n = std::min(kEstimateScans, keyframes.size());
+    for (std::size_t k = 0; k < n; ++k) scans.push_back(*detail::LoadScan(keyframes[k * keyframes.size() / n]));
+  }
+  RemovertConfig out = cfg;
+  out.sensor_model = geometry::ResolveSensor(cfg.sensor, cfg.sensor_elevations_deg, scans, "sensor");
+  const geometry::SensorModel& m = out.sensor_model;
+  // One beam spacing beyond the outer beams: their returns land inside the images.
+  out.fov_up_deg = std::min(89.9, m.fov_up_deg + m.SpacingAt(m.fov_up_deg));
+  out.fov_down_deg = std::max(-89.9, m.fov_down_deg - m.SpacingAt(m.fov_down_deg));
+  spdlog::info("removert sensor {}", m.Describe());
+  return out;
+}
+
+}  // namespace ltm::removert
