@@ -236,16 +236,17 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
 
 }  // namespace
 
-// Per row: the vertical half-window [rows] of the min pool: window_px, widened until it reaches
-// one beam spacing (at the row's elevation) above and below any direction inside the row, so a
-// point is always compared with the beams on both sides of it.
+// Per row: how many rows above and below the pool looks for the nearest beam: window_px, or two
+// local beam spacings (at the row's elevation) where the beams are sparser than the rows (one
+// beam may have dropped its return).
 std::vector<int> MultiResImage::WindowRows(const RemovertConfig& cfg, int rows, double row_deg) {
   std::vector<int> w(std::size_t(rows), cfg.window_px);
   if (cfg.window_px == 0 || !cfg.SensorResolved()) return w;
+  constexpr double kSpanSpacings = 2.0;
   for (int r = 0; r < rows; ++r) {
     const double elevation = cfg.fov_up_deg - (r + 0.5) * row_deg;
     const double spacing = cfg.sensor_model.SpacingAt(elevation);
-    w[std::size_t(r)] = std::max(cfg.window_px, int(std::ceil(spacing / row_deg - 1e-6)));
+    w[std::size_t(r)] = std::max(cfg.window_px, int(std::ceil(kSpanSpacings * spacing / row_deg - 1e-6)));
   }
   return w;
 }
@@ -417,16 +418,33 @@ void MultiResImage::Pool(Level& L) const {
     for (int d = 1; d <= w; ++d)
       for (int c = lo; c < hi; ++c) dst[c] = std::min(dst[c], std::min(src[c - d], src[c + d]));
   }
-  for (int r = 0; r < rows; ++r) {
-    const int wr = L.window_rows[std::size_t(r)];
-    const int r0 = std::max(0, r - wr), r1 = std::min(rows - 1, r + wr);
-    float* dst = &L.pooled[std::size_t(r) * cols];
-    std::copy(&L.tmp[std::size_t(r0) * cols], &L.tmp[std::size_t(r0) * cols] + cols, dst);
-    for (int rr = r0 + 1; rr <= r1; ++rr) {
-      const float* src = &L.tmp[std::size_t(rr) * cols];
-      for (int c = 0; c < cols; ++c) dst[c] = std::min(dst[c], src[c]);
+  // Vertical: the pixel's own row and the nearest row with a return above and below it in the
+  // same column (within window_rows): the beams on both sides of any direction inside the row,
+  // and no farther beams, whose returns (the ground in front of a low mover) would hide it.
+  std::copy(L.tmp.begin(), L.tmp.end(), L.pooled.begin());
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<float> last(std::size_t(cols), inf);
+  std::vector<int> last_row(std::size_t(cols), -1);
+  auto sweep = [&](int r0, int r1, int step) {  // rows r0 -> r1 (inclusive); last = nearest finite before
+    std::fill(last.begin(), last.end(), inf);
+    std::fill(last_row.begin(), last_row.end(), -1);
+    for (int r = r0;; r += step) {
+      const int wr = L.window_rows[std::size_t(r)];
+      float* dst = &L.pooled[std::size_t(r) * cols];
+      const float* src = &L.tmp[std::size_t(r) * cols];
+      for (int c = 0; c < cols; ++c) {
+        if (last_row[std::size_t(c)] >= 0 && std::abs(r - last_row[std::size_t(c)]) <= wr)
+          dst[c] = std::min(dst[c], last[std::size_t(c)]);
+        if (src[c] < inf) {
+          last[std::size_t(c)] = src[c];
+          last_row[std::size_t(c)] = r;
+        }
+      }
+      if (r == r1) break;
     }
-  }
+  };
+  sweep(0, rows - 1, 1);   // nearest return above (smaller rows)
+  sweep(rows - 1, 0, -1);  // nearest return below
 }
 
 ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test)
