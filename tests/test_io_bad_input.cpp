@@ -135,6 +135,55 @@ TEST(BadInput, PcdHeaderSizeAndCountAreCheckedBeforeAnyRead) {
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "cannot hold"});
 }
 
+TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {
+  test::TempDir tmp;
+  const std::string g = tmp / "ids.g2o";
+  for (const char* id : {"2.2e16", "1e10", "nan", "-3e9", "1.5"}) {
+    test::WriteText(g, std::string("VERTEX_SE3:QUAT ") + id + " 0 0 0 0 0 0 1\n");
+    test::ExpectError([&] { io::ReadG2o(g); }, {g + ":1", "vertex id", "not an integer in int range"});
+    test::WriteText(g, std::string("VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nEDGE_SE3:QUAT 0 ") + id +
+                           " 0 0 0 0 0 0 1\n");
+    test::ExpectError([&] { io::ReadG2o(g); }, {g + ":2", "edge id", "not an integer in int range"});
+  }
+}
+
+// A binary PLY of `n` stated vertices with float x y z and the float properties `extra`, and
+// `body` as data.
+std::string PlyText(std::size_t n, const std::vector<std::string>& extra, const std::string& body) {
+  std::string h = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(n) +
+                  "\nproperty float x\nproperty float y\nproperty float z\n";
+  for (const auto& e : extra) h += "property float " + e + "\n";
+  return h + "end_header\n" + body;
+}
+
+std::string Floats(std::initializer_list<float> v) {
+  return std::string(reinterpret_cast<const char*>(v.begin()), v.size() * sizeof(float));
+}
+
+TEST(BadInput, PlyCountsAndIntegerFieldsAreChecked) {
+  test::TempDir tmp;
+  const std::string f = tmp / "v.ply";
+  // 200 M vertices claimed by a tiny file: an error before any allocation (once 2.4 GB, 41 s).
+  test::WriteText(f, PlyText(200000000, {}, Floats({1, 2, 3})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "truncated PLY", "200000000 vertices"});
+  test::WriteText(f, PlyText(std::size_t(1) << 62, {}, Floats({1, 2, 3})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "truncated PLY"});
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  test::WriteText(f, PlyText(2, {"class"}, Floats({1, 2, 3, 1, 4, 5, 6, nan})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "vertex 1", "class"});
+  test::WriteText(f, PlyText(1, {"session"}, Floats({1, 2, 3, 1e10f})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "vertex 0", "session"});
+  test::WriteText(f, PlyText(1, {"object"}, Floats({1, 2, 3, nan})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "vertex 0", "object"});
+  // In range: read as before.
+  test::WriteText(f, PlyText(1, {"class", "session", "object"}, Floats({1, 2, 3, 2, 7, -1})));
+  const PointCloud c = io::ReadPly(f);
+  ASSERT_EQ(c.size(), 1u);
+  EXPECT_EQ(int(c.cls[0]), 2);
+  EXPECT_EQ(c.session[0], 7);
+  EXPECT_EQ(c.object[0], -1);
+}
+
 TEST(BadInput, NonFinitePointsDroppedAndCounted) {
   test::TempDir tmp;
   PointCloud c = Line(10);

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -99,6 +100,25 @@ void WritePlyRecords(const std::string& path, std::size_t n, bool has_cls, bool 
       out.write(buf.data(), std::streamsize(buf.size()));
     }
   });
+}
+
+// Bytes from the stream's position to the end of the file (the position is kept).
+std::size_t BytesLeft(std::istream& in) {
+  const auto here = in.tellg();
+  in.seekg(0, std::ios::end);
+  const auto end = in.tellg();
+  in.seekg(here);
+  return here < 0 || end < here ? 0 : std::size_t(end - here);
+}
+
+// A vertex's integer field read as a double: NaN or a value outside T's range is an error
+// naming the file and the vertex (casting it would be undefined behaviour).
+template <class T>
+T IntegerField(double v, const std::string& path, std::size_t vertex, const char* name) {
+  if (!(v >= double(std::numeric_limits<T>::lowest()) && v <= double(std::numeric_limits<T>::max())))
+    throw Error(path + ": vertex " + std::to_string(vertex) + " has " + name + " " + std::to_string(v) +
+                " outside its range");
+  return static_cast<T>(v);
 }
 
 void PutXyzi(std::string& buf, const PointXYZI& p) {
@@ -219,6 +239,11 @@ PointCloud ReadPly(const std::string& path) {
     if (p.name == "object" || p.name == "scalar_object") po = &p;
   }
   if (!px || !py || !pz) throw Error(path + ": PLY vertices have no x y z");
+  // The stated count against the file's length before allocating (step >= 3: x y z exist).
+  const std::size_t have = BytesLeft(in);
+  if (n > have / step)
+    throw Error(path + ": truncated PLY: " + std::to_string(n) + " vertices of " + std::to_string(step) +
+                " bytes, the file holds " + std::to_string(have) + " data bytes");
   std::vector<char> data(n * step);
   in.read(data.data(), std::streamsize(data.size()));
   if (std::size_t(in.gcount()) != data.size())
@@ -238,12 +263,12 @@ PointCloud ReadPly(const std::string& path) {
     p.intensity = pi ? float(PlyValue(rec + pi->offset, pi->type)) : 0.f;
     if (pc) {
       const double c = PlyValue(rec + pc->offset, pc->type);
-      if (c < 0 || c > double(PointClass::kNDWeak))
+      if (!(c >= 0 && c <= double(PointClass::kNDWeak)))  // NaN fails too
         throw Error(path + ": vertex " + std::to_string(i) + " has unknown class " + std::to_string(c));
       cloud.cls[i] = static_cast<PointClass>(int(c));
     }
-    if (ps) cloud.session[i] = static_cast<std::uint16_t>(PlyValue(rec + ps->offset, ps->type));
-    if (po) cloud.object[i] = static_cast<std::int32_t>(PlyValue(rec + po->offset, po->type));
+    if (ps) cloud.session[i] = IntegerField<std::uint16_t>(PlyValue(rec + ps->offset, ps->type), path, i, "session");
+    if (po) cloud.object[i] = IntegerField<std::int32_t>(PlyValue(rec + po->offset, po->type), path, i, "object");
   }
   return cloud;
 }
