@@ -118,6 +118,9 @@ void WriteSession(const std::string& dir, const Session& session,
                   const std::vector<Eigen::MatrixXd>& scds = {});
 // Loads the cloud of a keyframe (from memory or its path).
 std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats = nullptr);
+// The stages' one check on a keyframe's scan (LT-SLAM registration, LT-removert maps and
+// visibility): a scan without finite points is an error "<where>: empty scan (no finite points)".
+void RequireScanPoints(const PointCloud& scan, const std::string& where);
 
 // What `ltmapper info` prints: counts, scan sizes, pose span, path length, edges, problems.
 struct SessionInfo {

@@ -156,7 +156,12 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
   std::vector<PointCloud> static_maps(ns), hd_maps(ns);
   auto remove_hd = [&](std::size_t s) {
     spdlog::info("removert: HD removal of {} ({} keyframes)", rep.sessions[s], kfs[s].size());
-    HdResult hd = RemoveHd(kfs[s], cfg, threads);
+    HdResult hd;
+    try {
+      hd = RemoveHd(kfs[s], cfg, threads);
+    } catch (const Error& e) {  // name the session: an empty scan rejects it, as LT-SLAM does
+      throw Error("removert: session '" + rep.sessions[s] + "': " + e.what());
+    }
     const HdStats& st = hd.stats;
     spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} + {} dilated ({:.2f} %), "
                  "{:.1f} s map + {:.1f} s votes",
