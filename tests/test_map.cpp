@@ -374,6 +374,70 @@ TEST(MapStore, ReopenAndDigestStable) {
   EXPECT_NE(log.find("s1"), std::string::npos) << log;
 }
 
+// A committed integration is in the store file itself, not only in its -wal: the file copied
+// alone (what a user backs up) holds it (once "malformed" or missing the session).
+TEST(MapStore, CommittedIntegrationIsInTheFileAlone) {
+  test::TempDir tmp, copies;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  s.IntegrateSession({"s1"}, "s0", Step1(), {});
+  std::filesystem::copy_file(tmp / "m.ltmap", copies / "c.ltmap");
+  const Store c = Store::Open(copies / "c.ltmap");
+  EXPECT_EQ(c.Sessions().size(), 2u);
+  EXPECT_TRUE(c.Fsck().ok);
+  EXPECT_EQ(c.Digest(), s.Digest());
+}
+
+// Read-only media or another user's store: readers open it read-only, write nothing, create no
+// -wal / -shm (they failed with "attempt to write a readonly database: PRAGMA journal_mode").
+TEST(MapStore, ReadOnlyStoreInReadOnlyDirectoryCanBeRead) {
+  test::TempDir tmp;
+  Scene sc;
+  const std::string dir = tmp / "ro", path = dir + "/m.ltmap";
+  std::filesystem::create_directories(dir);
+  std::uint64_t digest = 0;
+  {
+    Store s = Store::Create(path, Cfg());
+    s.IntegrateBase({"s0"}, sc.base);
+    s.IntegrateSession({"s1"}, "s0", Step1(), {});
+    digest = s.Digest();
+  }
+  auto listing = [&] {
+    std::vector<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  ASSERT_EQ(listing(), std::vector<std::string>{"m.ltmap"});  // closed: no -wal / -shm left
+  {  // writable directory: a reader still leaves nothing behind
+    const Store s = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+    EXPECT_EQ(s.Digest(), digest);
+  }
+  EXPECT_EQ(listing(), std::vector<std::string>{"m.ltmap"});
+  namespace fs = std::filesystem;
+  fs::permissions(path, fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  fs::permissions(dir, fs::perms::owner_read | fs::perms::owner_exec | fs::perms::group_read |
+                           fs::perms::group_exec | fs::perms::others_read | fs::perms::others_exec);
+  struct Restore {  // so TempDir can remove it
+    std::string dir;
+    ~Restore() { std::filesystem::permissions(dir, std::filesystem::perms::owner_all); }
+  } restore{dir};
+  if (access(path.c_str(), W_OK) == 0 || access(dir.c_str(), W_OK) == 0)
+    GTEST_SKIP() << "running as root: chmod does not make the store read-only";
+  const Store s = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+  EXPECT_EQ(s.Sessions().size(), 2u);
+  EXPECT_TRUE(s.Fsck().ok);
+  EXPECT_EQ(s.Digest(), digest);
+  EXPECT_GT(s.Live().size(), 0u);
+  EXPECT_GT(s.Meta().size(), 0u);
+  EXPECT_GT(s.MapAt(0).size(), 0u);
+  EXPECT_EQ(listing(), std::vector<std::string>{"m.ltmap"});
+  // Writing through it is an error naming the store, not a crash.
+  Store w = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+  test::ExpectError([&] { w.IntegrateSession({"s2"}, "s0", Step1(), {}); }, {path});
+}
+
 // Flips one byte inside a stored blob through SQLite: fsck must name it.
 TEST(MapStore, FsckDetectsCorruptedBlob) {
   test::TempDir tmp;

@@ -184,7 +184,7 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   }
 
   {
-    map::Store store = map::Store::Open(store_path, map_cfg);
+    const map::Store store = map::Store::Open(store_path, map_cfg, map::Store::Access::kReadOnly);
     const auto totals = store.Totals();
     report.store_bytes = totals.file_bytes;
     report.map_points_live = totals.base_points;
