@@ -18,9 +18,21 @@ namespace ltm::map::detail {
 namespace {
 
 constexpr char kMagic[4] = {'L', 'T', 'M', 'B'};
-constexpr std::uint16_t kVersion = 1;
+// Blob versions: 1 (stores of schema version 1) seeded the checksum with a truncated FNV offset
+// basis, 2 with FNV-1a 64's own; the layout is the same. New blobs are version 2, both decode.
+constexpr std::uint16_t kVersionLegacyBasis = 1;
+constexpr std::uint16_t kVersion = 2;
+constexpr std::uint64_t kLegacyFnvBasis = 1469598103934665603ull;  // 14695981039346656037 missing its last digit
 constexpr std::size_t kHeaderSize = 64;
 constexpr std::size_t kChecksumOffset = 56;
+// Most bytes zstd can produce per compressed byte: a block holds at most 128 KiB
+// (ZSTD_BLOCKSIZE_MAX) and costs at least 4 bytes (3-byte block header + 1 RLE byte), so a
+// stated raw size above compressed size x 32768 is a lie, refused before allocating it.
+constexpr std::size_t kZstdMaxRatio = (std::size_t(1) << 17) / 4;
+
+std::uint64_t ChecksumBasis(std::uint16_t version) {
+  return version == kVersionLegacyBasis ? kLegacyFnvBasis : kFnvOffsetBasis;
+}
 
 std::uint64_t Mix(std::uint64_t x) {  // splitmix64 finaliser
   x ^= x >> 30;
@@ -208,7 +220,7 @@ std::string EncodeQ(const QCloud& q, double resolution_m, double intensity_step,
   Put<double>(out, 24, resolution_m);
   Put<double>(out, 32, intensity_step);
   for (int a = 0; a < 4; ++a) Put<std::int32_t>(out, 40 + 4 * std::size_t(a), lo[a]);
-  std::uint64_t h = Fnv1a64(out.data(), kChecksumOffset);
+  std::uint64_t h = Fnv1a64(out.data(), kChecksumOffset, ChecksumBasis(kVersion));
   h = Fnv1a64(out.data() + kHeaderSize, comp, h);
   Put<std::uint64_t>(out, kChecksumOffset, h);
   return out;
@@ -220,17 +232,28 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
   auto fail = [&](const std::string& why) -> void { throw Error(what + ": corrupt blob: " + why); };
   if (size < kHeaderSize) fail("shorter than its header (" + std::to_string(size) + " bytes)");
   if (std::memcmp(p, kMagic, 4) != 0) fail("bad magic");
-  if (Get<std::uint16_t>(p, 4) != kVersion) fail("unsupported blob version " + std::to_string(Get<std::uint16_t>(p, 4)));
+  const std::uint16_t version = Get<std::uint16_t>(p, 4);
+  if (version != kVersion && version != kVersionLegacyBasis)
+    fail("unsupported blob version " + std::to_string(version));
   const int wxyz = Get<std::uint8_t>(p, 6), wi = Get<std::uint8_t>(p, 7);
   const std::size_t n = Get<std::uint32_t>(p, 8), raw_size = Get<std::uint32_t>(p, 12),
                     comp = Get<std::uint32_t>(p, 16);
   if (kHeaderSize + comp != size) fail("payload size " + std::to_string(comp) + " != blob size - header");
-  std::uint64_t h = Fnv1a64(p, kChecksumOffset);
+  std::uint64_t h = Fnv1a64(p, kChecksumOffset, ChecksumBasis(version));
   h = Fnv1a64(p + kHeaderSize, comp, h);
   if (h != Get<std::uint64_t>(p, kChecksumOffset)) fail("checksum mismatch");
   auto valid_w = [](int w) { return w == 1 || w == 2 || w == 4; };
   if (!valid_w(wxyz) || !valid_w(wi)) fail("bad field widths");
   if (raw_size != n * std::size_t(3 * wxyz + wi + 4)) fail("raw size does not match the point count");
+  // The stated raw size against what the payload can hold, before allocating it (a 74-byte
+  // blob once claimed 2.4 GB): zstd's ratio bound and the frame's own content size.
+  if (raw_size > comp * kZstdMaxRatio)
+    fail("raw size " + std::to_string(raw_size) + " cannot come from " + std::to_string(comp) + " compressed bytes");
+  const unsigned long long frame_size = ZSTD_getFrameContentSize(p + kHeaderSize, comp);
+  if (frame_size != raw_size)
+    fail("raw size " + std::to_string(raw_size) + " but the zstd frame holds " +
+         (ZSTD_isError(frame_size) || frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? std::string("an unknown size")
+                                                                             : std::to_string(frame_size) + " bytes"));
   const double res = Get<double>(p, 24), istep = Get<double>(p, 32);
   if (!(res > 0) || !(istep > 0)) fail("bad resolution");
   std::int32_t lo[4];

@@ -24,7 +24,11 @@ using detail::QPoint;
 
 namespace {
 
-constexpr int kSchemaVersion = 1;
+// Schema versions: 2 seeds blob checksums with FNV-1a's offset basis (blob version 2); 1 with a
+// truncated one. Version 1 stores still open (their blobs keep version 1 and verify with the old
+// basis); the first integration into one marks it version 2, since it adds version 2 blobs.
+constexpr int kSchemaVersion = 2;
+constexpr int kOldestSchemaVersion = 1;
 constexpr int kApplicationId = 0x4C544D50;  // "LTMP"
 
 const char* kSchema = R"sql(
@@ -66,6 +70,12 @@ CREATE INDEX deltas_by_session ON deltas(session);
 )sql";
 
 constexpr int kBusyTimeoutMs = 10000;  // how long a statement waits for another connection's lock
+
+bool ReadableSchema(const std::string& version) {
+  for (int v = kOldestSchemaVersion; v <= kSchemaVersion; ++v)
+    if (version == std::to_string(v)) return true;
+  return false;
+}
 
 std::string PoseToText(const Pose& T) {
   std::string s;
@@ -396,9 +406,9 @@ Store Store::Open(const std::string& path, const MapConfig& cfg, Access access) 
   } catch (const Error&) {
     throw Error(path + ": not an ltmapper map store (no schema_info table)");
   }
-  if (version != std::to_string(kSchemaVersion))
-    throw Error(path + ": map store schema version " + version + ", this ltmapper reads version " +
-                std::to_string(kSchemaVersion));
+  if (!ReadableSchema(version))
+    throw Error(path + ": map store schema version " + version + ", this ltmapper reads versions " +
+                std::to_string(kOldestSchemaVersion) + " to " + std::to_string(kSchemaVersion));
   impl->cfg.resolution_m = std::stod(impl->Info("resolution_m"));
   impl->cfg.intensity_step = std::stod(impl->Info("intensity_step"));
   return Store(std::move(impl));
@@ -408,7 +418,11 @@ namespace {
 // Commits explicitly; rolls back when destroyed without Commit() (exceptions).
 class Transaction {
  public:
-  explicit Transaction(Store::Impl& s) : s_(s) { s_.Exec("BEGIN IMMEDIATE"); }
+  // Every write adds current-version blobs, so it marks an older store current.
+  explicit Transaction(Store::Impl& s) : s_(s) {
+    s_.Exec("BEGIN IMMEDIATE");
+    s_.Exec("UPDATE schema_info SET value = '" + std::to_string(kSchemaVersion) + "' WHERE key = 'schema_version'");
+  }
   // COMMIT, then the checkpoint that puts the committed data into the store file itself.
   void Commit() {
     s_.Exec("COMMIT");
@@ -868,7 +882,7 @@ FsckReport Store::Fsck() const {
   };
   try {
     const std::string v = s.Info("schema_version");
-    if (v != std::to_string(kSchemaVersion)) problem("schema version " + v);
+    if (!ReadableSchema(v)) problem("schema version " + v);
   } catch (const Error& e) {
     problem(e.what());
   }
