@@ -24,6 +24,10 @@ void WriteFileAtomic(const std::string& path, const std::function<void(std::ostr
 void WritePathAtomic(const std::string& path, const std::function<void(const std::string&)>& write);
 // Creates a directory and its parents; throws on failure.
 void MakeDirs(const std::string& dir);
+// MakeDirs, then checks that files can be created in `dir` ("<dir>: output directory is not
+// writable: <reason>"): the stages call it on their output before any work, so a read-only OUT
+// fails in the first second, not after the stage ran.
+void MakeWritableDir(const std::string& dir);
 
 // ----------------------------------------------------------------------------------- clouds
 struct CloudReadStats {

@@ -124,6 +124,7 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
   if (poses_files.size() != session_dirs.size())
     throw Error("removert: " + std::to_string(session_dirs.size()) + " sessions but " +
                 std::to_string(poses_files.size()) + " pose files");
+  io::MakeWritableDir(out_dir);
   StageReport rep;
   const std::size_t ns = session_dirs.size();
   std::vector<std::vector<WorldKeyframe>> kfs(ns);
@@ -144,7 +145,6 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
       kfs[s].push_back(std::move(w));
     }
   }
-  io::MakeDirs(out_dir);
 
   // Pairs: (central 0, q) for every query, or consecutive (q-1, q).
   for (std::size_t q = 1; q < ns; ++q) {
