@@ -37,6 +37,12 @@ struct PlyProperty {
   std::size_t offset = 0;
 };
 
+// A PLY header: vertex count, bytes per vertex and the vertex properties.
+struct PlyHeader {
+  std::size_t n = 0, step = 0;
+  std::vector<PlyProperty> props;
+};
+
 PlyType ParsePlyType(const std::string& t) {
   if (t == "char" || t == "int8") return PlyType::kInt8;
   if (t == "uchar" || t == "uint8") return PlyType::kUInt8;
@@ -127,6 +133,62 @@ void PutXyzi(std::string& buf, const PointXYZI& p) {
   Put(buf, p.z);
   Put(buf, p.intensity);
 }
+
+// The header up to end_header (`in` is left at the first data byte).
+PlyHeader ParsePlyHeader(const std::string& path, std::istream& in) {
+  std::string line;
+  std::size_t lineno = 0;
+  std::getline(in, line);
+  ++lineno;
+  if (line != "ply" && line != "ply\r") throw Error(path, 1, "not a PLY file");
+  PlyHeader h;
+  bool in_vertex = false, seen_vertex = false, format_ok = false;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ss(line);
+    std::string key;
+    ss >> key;
+    if (key == "end_header") break;
+    if (key == "comment" || key == "obj_info" || key.empty()) continue;
+    if (key == "format") {
+      std::string fmt;
+      ss >> fmt;
+      if (fmt != "binary_little_endian")
+        throw Error(path, lineno, "PLY format '" + fmt + "' not supported (binary_little_endian only)");
+      format_ok = true;
+    } else if (key == "element") {
+      std::string name;
+      long long count = -1;
+      ss >> name >> count;
+      if (name == "vertex") {
+        if (count < 0) throw Error(path, lineno, "bad vertex count");
+        h.n = std::size_t(count);
+        in_vertex = seen_vertex = true;
+      } else {
+        if (!seen_vertex) throw Error(path, lineno, "PLY element '" + name + "' before 'vertex' is not supported");
+        in_vertex = false;  // elements after the vertices (faces ...) are ignored
+      }
+    } else if (key == "property") {
+      if (!in_vertex) continue;
+      PlyProperty p;
+      std::string type_name;
+      ss >> type_name >> p.name;
+      if (type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
+      p.type = ParsePlyType(type_name);
+      p.size = PlyTypeSize(p.type);
+      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + type_name + "'");
+      p.offset = h.step;
+      h.step += p.size;
+      h.props.push_back(p);
+    } else {
+      throw Error(path, lineno, "unknown PLY header line '" + line + "'");
+    }
+  }
+  if (!format_ok) throw Error(path + ": PLY header has no format line");
+  if (!seen_vertex) throw Error(path + ": PLY has no vertex element");
+  return h;
+}
 }  // namespace
 
 void WritePly(const std::string& path, const PointCloud& cloud) {
@@ -175,58 +237,9 @@ void WritePly(const std::string& path, const std::vector<PlyPart>& parts) {
 PointCloud ReadPly(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path + ": cannot open (no such file or not readable)");
-  std::string line;
-  std::size_t lineno = 0;
-  std::getline(in, line);
-  ++lineno;
-  if (line != "ply" && line != "ply\r") throw Error(path, 1, "not a PLY file");
-  std::size_t n = 0, step = 0;
-  bool in_vertex = false, seen_vertex = false, format_ok = false;
-  std::vector<PlyProperty> props;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ss(line);
-    std::string key;
-    ss >> key;
-    if (key == "end_header") break;
-    if (key == "comment" || key == "obj_info" || key.empty()) continue;
-    if (key == "format") {
-      std::string fmt;
-      ss >> fmt;
-      if (fmt != "binary_little_endian")
-        throw Error(path, lineno, "PLY format '" + fmt + "' not supported (binary_little_endian only)");
-      format_ok = true;
-    } else if (key == "element") {
-      std::string name;
-      long long count = -1;
-      ss >> name >> count;
-      if (name == "vertex") {
-        if (count < 0) throw Error(path, lineno, "bad vertex count");
-        n = std::size_t(count);
-        in_vertex = seen_vertex = true;
-      } else {
-        if (!seen_vertex) throw Error(path, lineno, "PLY element '" + name + "' before 'vertex' is not supported");
-        in_vertex = false;  // elements after the vertices (faces ...) are ignored
-      }
-    } else if (key == "property") {
-      if (!in_vertex) continue;
-      PlyProperty p;
-      std::string type_name;
-      ss >> type_name >> p.name;
-      if (type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
-      p.type = ParsePlyType(type_name);
-      p.size = PlyTypeSize(p.type);
-      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + type_name + "'");
-      p.offset = step;
-      step += p.size;
-      props.push_back(p);
-    } else {
-      throw Error(path, lineno, "unknown PLY header line '" + line + "'");
-    }
-  }
-  if (!format_ok) throw Error(path + ": PLY header has no format line");
-  if (!seen_vertex) throw Error(path + ": PLY has no vertex element");
+  const PlyHeader header = ParsePlyHeader(path, in);
+  const std::size_t n = header.n, step = header.step;
+  const std::vector<PlyProperty>& props = header.props;
   const PlyProperty *px = nullptr, *py = nullptr, *pz = nullptr, *pi = nullptr, *pc = nullptr,
                     *ps = nullptr, *po = nullptr;
   for (const auto& p : props) {

@@ -75,6 +75,25 @@ void GetPlanes(const unsigned char* p, std::size_t n, int w, std::int32_t origin
   }
 }
 
+// The `raw_size` bytes a zstd payload of `comp` bytes decompresses to. The stated size is checked
+// against what the payload can hold before it is allocated (a 74-byte blob once claimed 2.4 GB):
+// zstd's ratio bound and the frame's own content size; `fail(why)` throws.
+template <class Fail>
+std::string Decompress(const unsigned char* payload, std::size_t comp, std::size_t raw_size, const Fail& fail) {
+  if (raw_size > comp * kZstdMaxRatio)
+    fail("raw size " + std::to_string(raw_size) + " cannot come from " + std::to_string(comp) + " compressed bytes");
+  const unsigned long long frame_size = ZSTD_getFrameContentSize(payload, comp);
+  if (frame_size != raw_size)
+    fail("raw size " + std::to_string(raw_size) + " but the zstd frame holds " +
+         (ZSTD_isError(frame_size) || frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? std::string("an unknown size")
+                                                                             : std::to_string(frame_size) + " bytes"));
+  std::string raw(raw_size, '\0');
+  const std::size_t got = ZSTD_decompress(raw.data(), raw.size(), payload, comp);
+  if (ZSTD_isError(got)) fail(std::string("zstd: ") + ZSTD_getErrorName(got));
+  if (got != raw_size) fail("decompressed size mismatch");
+  return raw;
+}
+
 }  // namespace
 
 std::uint64_t Fnv1a64(const void* data, std::size_t size, std::uint64_t h) {
@@ -245,24 +264,11 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
   auto valid_w = [](int w) { return w == 1 || w == 2 || w == 4; };
   if (!valid_w(wxyz) || !valid_w(wi)) fail("bad field widths");
   if (raw_size != n * std::size_t(3 * wxyz + wi + 4)) fail("raw size does not match the point count");
-  // The stated raw size against what the payload can hold, before allocating it (a 74-byte
-  // blob once claimed 2.4 GB): zstd's ratio bound and the frame's own content size.
-  if (raw_size > comp * kZstdMaxRatio)
-    fail("raw size " + std::to_string(raw_size) + " cannot come from " + std::to_string(comp) + " compressed bytes");
-  const unsigned long long frame_size = ZSTD_getFrameContentSize(p + kHeaderSize, comp);
-  if (frame_size != raw_size)
-    fail("raw size " + std::to_string(raw_size) + " but the zstd frame holds " +
-         (ZSTD_isError(frame_size) || frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? std::string("an unknown size")
-                                                                             : std::to_string(frame_size) + " bytes"));
   const double res = Get<double>(p, 24), istep = Get<double>(p, 32);
   if (!(res > 0) || !(istep > 0)) fail("bad resolution");
   std::int32_t lo[4];
   for (int a = 0; a < 4; ++a) lo[a] = Get<std::int32_t>(p, 40 + 4 * std::size_t(a));
-
-  std::string raw(raw_size, '\0');
-  const std::size_t got = ZSTD_decompress(raw.data(), raw.size(), p + kHeaderSize, comp);
-  if (ZSTD_isError(got)) fail(std::string("zstd: ") + ZSTD_getErrorName(got));
-  if (got != raw_size) fail("decompressed size mismatch");
+  const std::string raw = Decompress(p + kHeaderSize, comp, raw_size, fail);
 
   QCloud q(n);
   const auto* r = reinterpret_cast<const unsigned char*>(raw.data());

@@ -421,7 +421,8 @@ class Transaction {
   // Every write adds current-version blobs, so it marks an older store current.
   explicit Transaction(Store::Impl& s) : s_(s) {
     s_.Exec("BEGIN IMMEDIATE");
-    s_.Exec("UPDATE schema_info SET value = '" + std::to_string(kSchemaVersion) + "' WHERE key = 'schema_version'");
+    const std::string current = "'" + std::to_string(kSchemaVersion) + "'";
+    s_.Exec("UPDATE schema_info SET value = " + current + " WHERE key = 'schema_version' AND value <> " + current);
   }
   // COMMIT, then the checkpoint that puts the committed data into the store file itself.
   void Commit() {
