@@ -1,5 +1,5 @@
 // `ltmapper info <session-dir>`: what a session holds and what is wrong with it, before any
-// stage runs on it. Exit code 1 when the session cannot be loaded at all.
+// stage runs on it. Exit code 1 when the session cannot be loaded at all or every scan is empty.
 #include "command.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
@@ -47,6 +47,8 @@ void RunInfo(const InfoArgs& a) {
   }
   std::cout << ltm::io::FormatSessionInfo(info) << std::flush;
   if (!info.load_error.empty()) throw ltm::Error("session cannot be loaded: " + info.load_error);
+  if (info.scans_read > 0 && info.points_total == 0)
+    throw ltm::Error(a.dir + ": every scan is empty (no finite points); slam, removert and run refuse it");
   if (!a.no_scans) {
     std::unique_ptr<ltm::Pose> Tr;
     if (!a.calib.empty()) Tr = std::make_unique<ltm::Pose>(ltm::io::ReadTransform(a.calib));

@@ -49,8 +49,11 @@ map::Region RegionOf(const MapOptions& o, const map::MapConfig& cfg) {
   return r;
 }
 
-map::Store OpenStore(const MapOptions& o, const map::MapConfig& cfg) {
-  map::Store s = map::Store::Open(o.store, cfg);
+// Readers (everything but integrate) open the store read-only: it may sit on read-only media or
+// belong to another user, and reading it must leave no -wal / -shm behind.
+map::Store OpenStore(const MapOptions& o, const map::MapConfig& cfg,
+                     map::Store::Access access = map::Store::Access::kReadOnly) {
+  map::Store s = map::Store::Open(o.store, cfg, access);
   s.set_threads(o.common.threads);
   return s;
 }
@@ -122,7 +125,7 @@ void Setup(CLI::App& parent) {
     const MapOptions& o = *opts;
     const auto cfg = LoadMapConfig(o);
     if (!std::filesystem::exists(o.store)) Report(map::InitFromDirs(o.store, cfg, o.dirs, o.central, o.common.threads), "central");
-    map::Store store = OpenStore(o, cfg);
+    map::Store store = OpenStore(o, cfg, map::Store::Access::kReadWrite);
     std::vector<std::string> todo = o.sessions;
     if (todo.empty()) {
       const auto names = map::AlignedSessions(o.dirs, store.Sessions().at(0).name);

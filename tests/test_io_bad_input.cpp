@@ -89,6 +89,101 @@ TEST(BadInput, PcdHeaderDisagreesWithData) {
   test::ExpectError([&] { io::ReadPcd(tmp / "e.pcd"); }, {"e.pcd"});
 }
 
+// A binary PCD header with FIELDS x y z p and the given SIZE / COUNT lines, `points` points and
+// `data_bytes` zero bytes of data.
+std::string PcdWithFields(const std::string& size, const std::string& count, std::size_t points,
+                          std::size_t data_bytes) {
+  return "VERSION 0.7\nFIELDS x y z p\nSIZE " + size + "\nTYPE F F F F\nCOUNT " + count + "\nWIDTH " +
+         std::to_string(points) + "\nHEIGHT 1\nPOINTS " + std::to_string(points) + "\nDATA binary\n" +
+         std::string(data_bytes, '\0');
+}
+
+TEST(BadInput, PcdHeaderSizeAndCountAreCheckedBeforeAnyRead) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  // Audit cases: SIZE -12 once wrapped the point step to 0 (segfault), -8 read 10 points out of bounds.
+  test::WriteText(f, PcdWithFields("4 4 4 -12", "1 1 1 1", 1000, 0));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "SIZE -12", "'p'"});
+  test::WriteText(f, PcdWithFields("4 4 4 -8", "1 1 1 1", 10, 80));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "SIZE -8"});
+  test::WriteText(f, PcdWithFields("4 4 4 0", "1 1 1 1", 10, 120));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "SIZE 0"});
+  test::WriteText(f, PcdWithFields("4 4 4 3", "1 1 1 1", 10, 150));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "SIZE 3"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 -1", 10, 120));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "COUNT -1", "'p'"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 0", 10, 120));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "COUNT 0"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 4000000000", 10, 160));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "COUNT 4000000000"});
+  // Point counts whose byte size overflows 64 bits, or that the file cannot hold.
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1", std::size_t(1) << 62, 160));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "truncated"});
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 4294967296\n"
+                     "HEIGHT 4294967296\nDATA binary\n");
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "WIDTH*HEIGHT"});
+  // A point step that does not match the data (16 bytes a point announced, 12 present).
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1", 10, 120));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "truncated"});
+  // Compressed: 8 bytes cannot decompress to 16 MB.
+  std::string c = "VERSION 0.7\nFIELDS x y z p\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 1048576\n"
+                  "HEIGHT 1\nPOINTS 1048576\nDATA binary_compressed\n";
+  const std::uint32_t sizes[2] = {8, 16u << 20};
+  c.append(reinterpret_cast<const char*>(sizes), 8);
+  c.append(8, '\0');
+  test::WriteText(f, c);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "cannot hold"});
+}
+
+TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {
+  test::TempDir tmp;
+  const std::string g = tmp / "ids.g2o";
+  for (const char* id : {"2.2e16", "1e10", "nan", "-3e9", "1.5"}) {
+    test::WriteText(g, std::string("VERTEX_SE3:QUAT ") + id + " 0 0 0 0 0 0 1\n");
+    test::ExpectError([&] { io::ReadG2o(g); }, {g + ":1", "vertex id", "not an integer in int range"});
+    test::WriteText(g, std::string("VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nEDGE_SE3:QUAT 0 ") + id +
+                           " 0 0 0 0 0 0 1\n");
+    test::ExpectError([&] { io::ReadG2o(g); }, {g + ":2", "edge id", "not an integer in int range"});
+  }
+}
+
+// A binary PLY of `n` stated vertices with float x y z and the float properties `extra`, and
+// `body` as data.
+std::string PlyText(std::size_t n, const std::vector<std::string>& extra, const std::string& body) {
+  std::string h = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(n) +
+                  "\nproperty float x\nproperty float y\nproperty float z\n";
+  for (const auto& e : extra) h += "property float " + e + "\n";
+  return h + "end_header\n" + body;
+}
+
+std::string Floats(std::initializer_list<float> v) {
+  return std::string(reinterpret_cast<const char*>(v.begin()), v.size() * sizeof(float));
+}
+
+TEST(BadInput, PlyCountsAndIntegerFieldsAreChecked) {
+  test::TempDir tmp;
+  const std::string f = tmp / "v.ply";
+  // 200 M vertices claimed by a tiny file: an error before any allocation (once 2.4 GB, 41 s).
+  test::WriteText(f, PlyText(200000000, {}, Floats({1, 2, 3})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "truncated PLY", "200000000 vertices"});
+  test::WriteText(f, PlyText(std::size_t(1) << 62, {}, Floats({1, 2, 3})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "truncated PLY"});
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  test::WriteText(f, PlyText(2, {"class"}, Floats({1, 2, 3, 1, 4, 5, 6, nan})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "vertex 1", "class"});
+  test::WriteText(f, PlyText(1, {"session"}, Floats({1, 2, 3, 1e10f})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "vertex 0", "session"});
+  test::WriteText(f, PlyText(1, {"object"}, Floats({1, 2, 3, nan})));
+  test::ExpectError([&] { io::ReadPly(f); }, {f, "vertex 0", "object"});
+  // In range: read as before.
+  test::WriteText(f, PlyText(1, {"class", "session", "object"}, Floats({1, 2, 3, 2, 7, -1})));
+  const PointCloud c = io::ReadPly(f);
+  ASSERT_EQ(c.size(), 1u);
+  EXPECT_EQ(int(c.cls[0]), 2);
+  EXPECT_EQ(c.session[0], 7);
+  EXPECT_EQ(c.object[0], -1);
+}
+
 TEST(BadInput, NonFinitePointsDroppedAndCounted) {
   test::TempDir tmp;
   PointCloud c = Line(10);

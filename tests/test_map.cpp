@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <tuple>
 
@@ -93,6 +94,74 @@ TEST(MapBlob, ChecksumDetectsEveryFlippedByte) {
   EXPECT_THROW(DecodeBlob(blob.substr(0, blob.size() - 1)), Error);
   EXPECT_THROW(DecodeBlob(std::string()), Error);
   EXPECT_NO_THROW(DecodeBlob(blob));
+}
+
+// Blob header fields (README.md) and the FNV-1a 64 checksum, written here independently of the
+// codec: a forged blob carries a valid checksum, so the checksum proves nothing about the sizes.
+constexpr std::size_t kVersionAt = 4, kPointsAt = 8, kRawAt = 12, kChecksumAt = 56, kHeader = 64;
+constexpr std::uint64_t kFnv1a64Basis = 14695981039346656037ull;
+constexpr std::uint64_t kSchema1Basis = 1469598103934665603ull;  // blob version 1's truncated basis
+
+std::uint64_t Fnv(const char* p, std::size_t n, std::uint64_t h) {
+  for (std::size_t k = 0; k < n; ++k) {
+    h ^= static_cast<unsigned char>(p[k]);
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+template <class T>
+void SetField(std::string& blob, std::size_t at, T v) {
+  std::memcpy(&blob[at], &v, sizeof(T));
+}
+template <class T>
+T GetField(const std::string& blob, std::size_t at) {
+  T v;
+  std::memcpy(&v, &blob[at], sizeof(T));
+  return v;
+}
+void Reseal(std::string& blob, std::uint64_t basis) {
+  const std::uint64_t h = Fnv(blob.data() + kHeader, blob.size() - kHeader, Fnv(blob.data(), kChecksumAt, basis));
+  SetField(blob, kChecksumAt, h);
+}
+// The same blob as a schema-1 store wrote it: version 1, checksum with the truncated basis.
+std::string AsVersion1(std::string blob) {
+  SetField<std::uint16_t>(blob, kVersionAt, 1);
+  Reseal(blob, kSchema1Basis);
+  return blob;
+}
+
+TEST(MapBlob, ChecksumIsFnv1a64AndVersion1BlobsStillDecode) {
+  const PointCloud c = Cat(Grid(-5, -5, 0, 20, 20, 0.25f), Car(1, 1));
+  const std::string blob = EncodeBlob(c, kRes, 0.01);
+  EXPECT_EQ(GetField<std::uint16_t>(blob, kVersionAt), 2);
+  std::string resealed = blob;
+  Reseal(resealed, kFnv1a64Basis);
+  EXPECT_EQ(resealed, blob) << "new blobs must carry FNV-1a 64 with its real offset basis";
+  const std::string old = AsVersion1(blob);
+  ASSERT_NE(old, blob);
+  const PointCloud a = DecodeBlob(blob), b = DecodeBlob(old, "version 1 blob");
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) ASSERT_EQ(a.points[k].xyz(), b.points[k].xyz());
+  // A version 1 header with a version 2 checksum (or the reverse) is corrupt.
+  std::string mixed = blob;
+  SetField<std::uint16_t>(mixed, kVersionAt, 1);
+  Reseal(mixed, kFnv1a64Basis);
+  EXPECT_THROW(DecodeBlob(mixed), Error);
+}
+
+TEST(MapBlob, StatedRawSizeCheckedBeforeAllocating) {
+  const std::string empty = EncodeBlob(PointCloud{}, kRes, 0.01);  // widths 1: 8 raw bytes a point
+  std::string forged = empty;
+  SetField<std::uint32_t>(forged, kPointsAt, 100000000);  // 800 MB from a ~75-byte blob
+  SetField<std::uint32_t>(forged, kRawAt, 800000000);
+  Reseal(forged, kFnv1a64Basis);
+  test::ExpectError([&] { DecodeBlob(forged, "forged blob"); }, {"forged blob", "cannot come from"});
+  // Within the ratio bound but not what the zstd frame says it holds.
+  SetField<std::uint32_t>(forged, kPointsAt, 1000);
+  SetField<std::uint32_t>(forged, kRawAt, 8000);
+  Reseal(forged, kFnv1a64Basis);
+  test::ExpectError([&] { DecodeBlob(forged, "forged blob"); }, {"forged blob", "zstd frame holds 0 bytes"});
+  EXPECT_NO_THROW(DecodeBlob(empty));
 }
 
 TEST(MapBlob, RejectsPointsOutsideTheGrid) {
@@ -372,6 +441,148 @@ TEST(MapStore, ReopenAndDigestStable) {
   EXPECT_THROW(Store::Open(tmp / "missing.ltmap"), Error);
   const std::string log = FormatLog(s);
   EXPECT_NE(log.find("s1"), std::string::npos) << log;
+}
+
+// Runs `sql` on the store file through SQLite directly (the test's view of an old or foreign store).
+void ExecSql(const std::string& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  char* err = nullptr;
+  EXPECT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err), SQLITE_OK) << (err ? err : "") << ": " << sql;
+  sqlite3_free(err);
+  sqlite3_close(db);
+}
+
+// Rewrites every blob of `table` as a schema-1 store wrote it (version 1, truncated FNV basis).
+void BlobsToVersion1(const std::string& path, const std::string& table) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  std::vector<std::pair<long long, std::string>> rows;
+  sqlite3_stmt* st = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, ("SELECT rowid, data FROM " + table).c_str(), -1, &st, nullptr), SQLITE_OK);
+  while (sqlite3_step(st) == SQLITE_ROW)
+    rows.emplace_back(sqlite3_column_int64(st, 0),
+                      std::string(static_cast<const char*>(sqlite3_column_blob(st, 1)), std::size_t(sqlite3_column_bytes(st, 1))));
+  sqlite3_finalize(st);
+  ASSERT_EQ(sqlite3_prepare_v2(db, ("UPDATE " + table + " SET data = ? WHERE rowid = ?").c_str(), -1, &st, nullptr),
+            SQLITE_OK);
+  for (const auto& [rowid, blob] : rows) {
+    const std::string old = AsVersion1(blob);
+    sqlite3_bind_blob(st, 1, old.data(), int(old.size()), SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 2, rowid);
+    ASSERT_EQ(sqlite3_step(st), SQLITE_DONE);
+    sqlite3_reset(st);
+  }
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+}
+
+TEST(MapStore, SchemaVersion1StoreStillOpensAndIsMarkedCurrentByAWrite) {
+  test::TempDir tmp;
+  Scene sc;
+  const std::string path = tmp / "m.ltmap";
+  std::uint64_t digest_new = 0;
+  {
+    Store s = Store::Create(path, Cfg());
+    s.IntegrateBase({"s0"}, sc.base);
+  }
+  {
+    const Store s = Store::Open(path);
+    digest_new = s.Digest();
+  }
+  ExecSql(path, "UPDATE schema_info SET value = '1' WHERE key = 'schema_version'");
+  BlobsToVersion1(path, "base_clouds");
+  std::vector<std::tuple<long, long, long>> keys_new;
+  {
+    const Store s = Store::Open(path);
+    keys_new = Keys(s.MapAt(0));
+  }
+  {
+    const Store s = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+    const FsckReport r = s.Fsck();
+    EXPECT_TRUE(r.ok) << (r.problems.empty() ? "" : r.problems[0]);
+    EXPECT_NE(s.Digest(), digest_new);  // the blobs' bytes differ, their points do not
+    EXPECT_EQ(Keys(s.MapAt(0)), keys_new);
+  }
+  {
+    Store s = Store::Open(path, Cfg());
+    s.IntegrateSession({"s1"}, "s0", Step1(), {});
+    EXPECT_TRUE(s.Fsck().ok);
+  }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "SELECT value FROM schema_info WHERE key = 'schema_version'", -1, &st, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "2");
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+  ExecSql(path, "UPDATE schema_info SET value = '3' WHERE key = 'schema_version'");
+  test::ExpectError([&] { Store::Open(path); }, {path, "schema version 3"});
+}
+
+// A committed integration is in the store file itself, not only in its -wal: the file copied
+// alone (what a user backs up) holds it (once "malformed" or missing the session).
+TEST(MapStore, CommittedIntegrationIsInTheFileAlone) {
+  test::TempDir tmp, copies;
+  Scene sc;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, sc.base);
+  s.IntegrateSession({"s1"}, "s0", Step1(), {});
+  std::filesystem::copy_file(tmp / "m.ltmap", copies / "c.ltmap");
+  const Store c = Store::Open(copies / "c.ltmap");
+  EXPECT_EQ(c.Sessions().size(), 2u);
+  EXPECT_TRUE(c.Fsck().ok);
+  EXPECT_EQ(c.Digest(), s.Digest());
+}
+
+// Read-only media or another user's store: readers open it read-only, write nothing, create no
+// -wal / -shm (they failed with "attempt to write a readonly database: PRAGMA journal_mode").
+TEST(MapStore, ReadOnlyStoreInReadOnlyDirectoryCanBeRead) {
+  test::TempDir tmp;
+  Scene sc;
+  const std::string dir = tmp / "ro", path = dir + "/m.ltmap";
+  std::filesystem::create_directories(dir);
+  std::uint64_t digest = 0;
+  {
+    Store s = Store::Create(path, Cfg());
+    s.IntegrateBase({"s0"}, sc.base);
+    s.IntegrateSession({"s1"}, "s0", Step1(), {});
+    digest = s.Digest();
+  }
+  auto listing = [&] {
+    std::vector<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  ASSERT_EQ(listing(), std::vector<std::string>{"m.ltmap"});  // closed: no -wal / -shm left
+  {  // writable directory: a reader still leaves nothing behind
+    const Store s = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+    EXPECT_EQ(s.Digest(), digest);
+  }
+  EXPECT_EQ(listing(), std::vector<std::string>{"m.ltmap"});
+  namespace fs = std::filesystem;
+  fs::permissions(path, fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  fs::permissions(dir, fs::perms::owner_read | fs::perms::owner_exec | fs::perms::group_read |
+                           fs::perms::group_exec | fs::perms::others_read | fs::perms::others_exec);
+  struct Restore {  // so TempDir can remove it
+    std::string dir;
+    ~Restore() { std::filesystem::permissions(dir, std::filesystem::perms::owner_all); }
+  } restore{dir};
+  if (access(path.c_str(), W_OK) == 0 || access(dir.c_str(), W_OK) == 0)
+    GTEST_SKIP() << "running as root: chmod does not make the store read-only";
+  const Store s = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+  EXPECT_EQ(s.Sessions().size(), 2u);
+  EXPECT_TRUE(s.Fsck().ok);
+  EXPECT_EQ(s.Digest(), digest);
+  EXPECT_GT(s.Live().size(), 0u);
+  EXPECT_GT(s.Meta().size(), 0u);
+  EXPECT_GT(s.MapAt(0).size(), 0u);
+  EXPECT_EQ(listing(), std::vector<std::string>{"m.ltmap"});
+  // Writing through it is an error naming the store, not a crash.
+  Store w = Store::Open(path, Cfg(), Store::Access::kReadOnly);
+  test::ExpectError([&] { w.IntegrateSession({"s2"}, "s0", Step1(), {}); }, {path});
 }
 
 // Flips one byte inside a stored blob through SQLite: fsck must name it.

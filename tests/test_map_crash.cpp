@@ -120,6 +120,71 @@ TEST(MapCli, InitIntegrateLogFsckExport) {
   EXPECT_NE(test::RunCli("map fsck --store " + tmp / "missing.ltmap", &out), 0);
 }
 
+std::vector<std::string> Listing(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// Read-only media or another user's store (file 0444 in a 0555 directory): every reader works
+// and leaves no -wal / -shm behind (they failed with "attempt to write a readonly database").
+TEST(MapCli, ReadOnlyStoreCanBeRead) {
+  test::TempDir tmp;
+  WriteLayout(tmp.str(), 4);
+  const std::string dirs = " --aligned " + tmp / "aligned" + " --changes " + tmp / "changes";
+  const std::string ro = tmp / "ro", store = ro + "/m.ltmap";
+  fs::create_directories(ro);
+  std::string out;
+  ASSERT_EQ(test::RunCli("map integrate --quiet --store " + store + dirs, &out), 0) << out;
+  ASSERT_EQ(Listing(ro), std::vector<std::string>{"m.ltmap"});  // a finished command leaves the file alone
+  fs::permissions(store, fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  fs::permissions(ro, fs::perms::owner_read | fs::perms::owner_exec | fs::perms::group_read | fs::perms::group_exec |
+                          fs::perms::others_read | fs::perms::others_exec);
+  struct Restore {  // so TempDir can remove it
+    std::string dir;
+    ~Restore() { fs::permissions(dir, fs::perms::owner_all); }
+  } restore{ro};
+  if (access(store.c_str(), W_OK) == 0 || access(ro.c_str(), W_OK) == 0)
+    GTEST_SKIP() << "running as root: chmod does not make the store read-only";
+  for (const std::string& sub : std::vector<std::string>{"log", "fsck", "export --quiet --out " + tmp / "e.pcd", "live --quiet --out " + tmp / "l.pcd",
+                                "meta --quiet --out " + tmp / "m.pcd", "restore --quiet --session 0 --out " + tmp / "r.pcd",
+                                "objects --quiet --out " + tmp / "objects"}) {
+    EXPECT_EQ(test::RunCli("map " + sub + " --store " + store, &out), 0) << sub << "\n" << out;
+    EXPECT_EQ(Listing(ro), std::vector<std::string>{"m.ltmap"}) << sub;
+  }
+  EXPECT_GT(io::ReadPcd(tmp / "e.pcd").size(), 0u);
+  // Integrating into it is an error naming the store.
+  EXPECT_NE(test::RunCli("map integrate --quiet --store " + store + dirs + " --session session_01", &out), 0);
+  EXPECT_NE(out.find(store), std::string::npos) << out;
+}
+
+// A kill during store creation left "NAME.ltmap.tmp-PID" and its -wal; the next create removes
+// the temporaries of processes that no longer run (and only those).
+TEST(MapCli, StaleTemporariesOfAKilledCreateAreRemoved) {
+  test::TempDir tmp;
+  WriteLayout(tmp.str(), 3);
+  const pid_t dead = fork();
+  if (dead == 0) _exit(0);
+  ASSERT_GT(dead, 0);
+  waitpid(dead, nullptr, 0);  // its pid now names no process
+  const std::string store = tmp / "m.ltmap", stale = store + ".tmp-" + std::to_string(dead);
+  const std::string alive = store + ".tmp-" + std::to_string(getppid()), other = store + ".tmp-notapid";
+  for (const std::string& f : std::vector<std::string>{stale, stale + "-wal", stale + "-shm", alive, other})
+    test::WriteText(f, "leftover");
+  std::string out;
+  ASSERT_EQ(test::RunCli("map integrate --quiet --store " + store + " --aligned " + tmp / "aligned" + " --changes " +
+                             tmp / "changes",
+                         &out),
+            0)
+      << out;
+  for (const std::string& f : std::vector<std::string>{stale, stale + "-wal", stale + "-shm"})
+    EXPECT_FALSE(fs::exists(f)) << f;
+  EXPECT_TRUE(fs::exists(alive));  // a running process's temporary is not ours to remove
+  EXPECT_TRUE(fs::exists(other));
+  EXPECT_TRUE(fs::exists(store));
+}
+
 TEST(MapCrash, SigkillDuringIntegrationLeavesPreviousOrNextState) {
   test::TempDir tmp;
   WriteLayout(tmp.str(), 20);

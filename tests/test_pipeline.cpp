@@ -81,5 +81,30 @@ TEST(Cli, RunAndReportUsageErrorsExitNonZero) {
   EXPECT_NE(test::RunCli("report --out /tmp/ltm_r --item /nonexistent.md", &out), 0);
 }
 
+// A read-only OUT is reported at once by every stage command, naming the directory (slam found
+// out after 98 s of alignment; `run --from map` printed a raw "filesystem error").
+TEST(Cli, ReadOnlyOutIsAnErrorBeforeAnyWork) {
+  test::TempDir tmp;
+  const std::string ro = tmp / "ro";
+  for (const char* d : {"ro", "s0", "s1"}) std::filesystem::create_directories(tmp / d);
+  std::filesystem::permissions(ro, std::filesystem::perms::owner_read | std::filesystem::perms::owner_exec);
+  struct Restore {  // so TempDir can remove it
+    std::string dir;
+    ~Restore() { std::filesystem::permissions(dir, std::filesystem::perms::owner_all); }
+  } restore{ro};
+  if (access(ro.c_str(), W_OK) == 0) GTEST_SKIP() << "running as root: chmod does not make OUT read-only";
+  const std::string sessions = " --sessions " + tmp / "s0" + " " + tmp / "s1";
+  test::WriteText(tmp / "p.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n");
+  for (const std::string& cmd : std::vector<std::string>{"slam" + sessions + " --out " + ro,
+                                                         "run" + sessions + " --out " + ro + " --from map",
+                                                         "removert --sessions " + tmp / "s0" + " --poses " + tmp / "p.txt" +
+                                                             " --out " + ro}) {
+    std::string out;
+    EXPECT_NE(test::RunCli(cmd + " --quiet", &out), 0) << cmd;
+    EXPECT_NE(out.find(ro + ": output directory is not writable"), std::string::npos) << cmd << "\n" << out;
+    EXPECT_EQ(out.find("filesystem error"), std::string::npos) << cmd << "\n" << out;
+  }
+}
+
 }  // namespace
 }  // namespace ltm

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 
@@ -152,6 +153,33 @@ TEST(RemovertStage, BadInputsAreErrors) {
   EXPECT_THROW(removert::RunRemovertStage(cfg, {s0}, {}, tmp / "out", 1), Error);
   EXPECT_THROW(removert::RunRemovertStage(cfg, {tmp / "missing"}, {tmp / "short.txt"}, tmp / "out", 1),
                Error);
+}
+
+// A query session whose every scan is NaN: removert refused it with no word before (it exited 0
+// and flagged the whole central map as weak ND); now the stage's scan check (the one LT-SLAM
+// uses) names the session, and `info` exits non-zero listing the problem.
+TEST(RemovertStage, SessionWithoutFinitePointsIsAnError) {
+  if (!fs::exists(LTM_EXE)) GTEST_SKIP() << "ltmapper executable not built";
+  test::TempDir tmp;
+  const std::string s0 = tmp / "s0", s1 = tmp / "s1";
+  const auto w0 = WriteStreetSession(s0, 0.0, 3, false);
+  const auto w1 = WriteStreetSession(s1, 0.0, 3, false);
+  PointCloud nan_scan;
+  for (int k = 0; k < 100; ++k) nan_scan.push_back(std::nanf(""), std::nanf(""), std::nanf(""), 1.f);
+  for (const auto& e : fs::directory_iterator(s1 + "/Scans")) io::WritePcd(e.path().string(), nan_scan);
+  io::WriteKittiPoses(tmp / "p0.txt", w0);
+  io::WriteKittiPoses(tmp / "p1.txt", w1);
+  std::string out;
+  EXPECT_NE(test::RunCli("removert --quiet --threads 2 --sessions " + s0 + " " + s1 + " --poses " + tmp / "p0.txt" +
+                             " " + tmp / "p1.txt" + " --out " + tmp / "out",
+                         &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("session 's1'"), std::string::npos) << out;
+  EXPECT_NE(out.find("empty scan"), std::string::npos) << out;
+  EXPECT_NE(test::RunCli("info " + s1, &out), 0) << out;
+  EXPECT_NE(out.find("every scan is empty"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCli("info " + s0, &out), 0) << out;
 }
 
 TEST(RemovertStage, ConfigFileParsesToDefaults) {

@@ -6,6 +6,8 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <system_error>
@@ -48,6 +50,12 @@ void MakeDirs(const std::string& dir) {
   if (ec || !fs::is_directory(dir)) {
     throw Error(dir + ": cannot create directory" + (ec ? ": " + ec.message() : std::string()));
   }
+}
+
+void MakeWritableDir(const std::string& dir) {
+  MakeDirs(dir);
+  if (::access(dir.c_str(), W_OK | X_OK) != 0)
+    throw Error(dir + ": output directory is not writable: " + std::strerror(errno));
 }
 
 void WriteFileAtomic(const std::string& path, const std::function<void(std::ostream&)>& write) {

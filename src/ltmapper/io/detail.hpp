@@ -23,6 +23,9 @@ Pose PoseFromQuat(const Eigen::Vector3d& t, double qx, double qy, double qz, dou
                   const std::string& file, std::size_t line);
 // Splits a line into numbers; throws naming file:line on a token that is not a number.
 std::vector<double> ParseNumbers(const std::string& text, const std::string& file, std::size_t line);
+// `v` as an int: throws "<what> <v> is not an integer in int range" naming file:line when it is
+// NaN, fractional or out of range (casting such a double to int is undefined behaviour).
+int IntegerId(double v, const std::string& what, const std::string& file, std::size_t line);
 // Formats a double so that it reads back to the same value (shortest of %.15g / %.17g).
 std::string FormatDouble(double v);
 

@@ -31,8 +31,7 @@ G2oGraph ReadG2o(const std::string& path) {
       if (v.size() != 8)
         throw Error(path, lineno, "VERTEX_SE3:QUAT needs 8 numbers (id x y z qx qy qz qw), found " +
                                       std::to_string(v.size()));
-      const int id = int(v[0]);
-      if (double(id) != v[0]) throw Error(path, lineno, "vertex id is not an integer");
+      const int id = detail::IntegerId(v[0], "vertex id", path, lineno);
       if (vertex_line.count(id))
         throw Error(path, lineno, "duplicate vertex id " + std::to_string(id) + " (first on line " +
                                       std::to_string(vertex_line[id]) + ")");
@@ -44,9 +43,8 @@ G2oGraph ReadG2o(const std::string& path) {
         throw Error(path, lineno, "EDGE_SE3:QUAT needs 9 numbers (a b x y z qx qy qz qw) plus "
                                   "optionally 21 information values, found " + std::to_string(v.size()));
       Edge e;
-      e.from = int(v[0]);
-      e.to = int(v[1]);
-      if (double(e.from) != v[0] || double(e.to) != v[1]) throw Error(path, lineno, "edge ids are not integers");
+      e.from = detail::IntegerId(v[0], "edge id", path, lineno);
+      e.to = detail::IntegerId(v[1], "edge id", path, lineno);
       e.T_from_to = detail::PoseFromQuat({v[2], v[3], v[4]}, v[5], v[6], v[7], v[8], path, lineno);
       if (v.size() == 30) {
         std::size_t k = 9;

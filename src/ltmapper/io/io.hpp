@@ -24,6 +24,10 @@ void WriteFileAtomic(const std::string& path, const std::function<void(std::ostr
 void WritePathAtomic(const std::string& path, const std::function<void(const std::string&)>& write);
 // Creates a directory and its parents; throws on failure.
 void MakeDirs(const std::string& dir);
+// MakeDirs, then checks that files can be created in `dir` ("<dir>: output directory is not
+// writable: <reason>"): the stages call it on their output before any work, so a read-only OUT
+// fails in the first second, not after the stage ran.
+void MakeWritableDir(const std::string& dir);
 
 // ----------------------------------------------------------------------------------- clouds
 struct CloudReadStats {
@@ -118,6 +122,9 @@ void WriteSession(const std::string& dir, const Session& session,
                   const std::vector<Eigen::MatrixXd>& scds = {});
 // Loads the cloud of a keyframe (from memory or its path).
 std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats = nullptr);
+// The stages' one check on a keyframe's scan (LT-SLAM registration, LT-removert maps and
+// visibility): a scan without finite points is an error "<where>: empty scan (no finite points)".
+void RequireScanPoints(const PointCloud& scan, const std::string& where);
 
 // What `ltmapper info` prints: counts, scan sizes, pose span, path length, edges, problems.
 struct SessionInfo {

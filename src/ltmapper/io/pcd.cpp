@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <sstream>
 
@@ -23,9 +24,17 @@ namespace fs = std::filesystem;
 namespace ltm::io {
 namespace {
 
+// Most values one PCD field may hold (COUNT): descriptors use a few hundred (VFH 308) to a few
+// thousand (shape context 1980); the bound keeps the point step far from overflowing while no
+// real file comes near it.
+constexpr long long kPcdMaxCount = 1 << 20;
+// Largest expansion of PCL's LZF (binary_compressed): a 3-byte back-reference copies at most
+// 264 bytes, so a block never decompresses to more than 88 times its size.
+constexpr std::size_t kLzfMaxRatio = 88;
+
 struct PcdHeader {
   std::vector<std::string> fields;
-  std::vector<int> sizes, counts;
+  std::vector<long long> sizes, counts;  // checked by CheckFields before any use
   std::vector<char> types;
   long long width = -1, height = -1, points = -1;
   std::string data;            // ascii | binary | binary_compressed
@@ -38,7 +47,7 @@ struct PcdHeader {
   }
   std::size_t Values() const {
     std::size_t s = 0;
-    for (int c : counts) s += std::size_t(c);
+    for (long long c : counts) s += std::size_t(c);
     return s;
   }
 };
@@ -48,6 +57,26 @@ long long ParseCount(const std::string& path, std::size_t line, const std::strin
   long long v = -1;
   if (!(ss >> v) || v < 0) throw Error(path, line, "bad " + key + " value in PCD header");
   return v;
+}
+
+// SIZE, TYPE and COUNT of every field: values the format defines, so the point step is the
+// true record size (a negative or zero SIZE once wrapped the step to 0 and let reads run past
+// the data).
+void CheckFields(const std::string& path, const PcdHeader& h) {
+  for (std::size_t i = 0; i < h.fields.size(); ++i) {
+    const std::string field = "field '" + h.fields[i] + "'";
+    const long long size = h.sizes[i], count = h.counts[i];
+    if (size != 1 && size != 2 && size != 4 && size != 8)  // the byte sizes the format defines
+      throw Error(path + ": PCD header SIZE " + std::to_string(size) + " of " + field + " (expected 1, 2, 4 or 8)");
+    if (count < 1 || count > kPcdMaxCount)
+      throw Error(path + ": PCD header COUNT " + std::to_string(count) + " of " + field + " (expected 1.." +
+                  std::to_string(kPcdMaxCount) + ")");
+    const char type = h.types[i];
+    if (type != 'F' && type != 'I' && type != 'U')
+      throw Error(path + ": PCD header TYPE '" + std::string(1, type) + "' of " + field + " (expected F, I or U)");
+    if (type == 'F' && size != 4 && size != 8)
+      throw Error(path + ": PCD header SIZE " + std::to_string(size) + " of float " + field + " (expected 4 or 8)");
+  }
 }
 
 PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
@@ -64,11 +93,11 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
     if (key == "FIELDS" || key == "COLUMNS") {
       for (std::string f; ss >> f;) h.fields.push_back(f);
     } else if (key == "SIZE") {
-      for (int v; ss >> v;) h.sizes.push_back(v);
+      for (long long v; ss >> v;) h.sizes.push_back(v);
     } else if (key == "TYPE") {
       for (std::string t; ss >> t;) h.types.push_back(t.empty() ? '?' : t[0]);
     } else if (key == "COUNT") {
-      for (int v; ss >> v;) h.counts.push_back(v);
+      for (long long v; ss >> v;) h.counts.push_back(v);
     } else if (key == "WIDTH") {
       h.width = ParseCount(path, lineno, key, ss);
     } else if (key == "HEIGHT") {
@@ -98,8 +127,12 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   if (h.sizes.size() != h.fields.size() || h.types.size() != h.fields.size() ||
       h.counts.size() != h.fields.size())
     throw Error(path + ": PCD header FIELDS/SIZE/TYPE/COUNT have different lengths");
+  CheckFields(path, h);
   if (h.width < 0) throw Error(path + ": PCD header has no WIDTH");
   if (h.height < 0) h.height = 1;
+  if (h.height != 0 && h.width > std::numeric_limits<long long>::max() / h.height)
+    throw Error(path + ": PCD header WIDTH*HEIGHT " + std::to_string(h.width) + "*" + std::to_string(h.height) +
+                " is out of range");
   if (h.points < 0) h.points = h.width * h.height;
   if (h.points != h.width * h.height)
     throw Error(path + ": PCD header POINTS " + std::to_string(h.points) + " != WIDTH*HEIGHT " +
@@ -114,30 +147,33 @@ void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& 
   const std::size_t file_size = std::size_t(in.tellg());
   const std::size_t have = file_size >= h.data_offset ? file_size - h.data_offset : 0;
   const std::size_t n = std::size_t(h.points);
+  const std::size_t step = h.PointStep();  // >= 1 (CheckFields); counts compared by division: no overflow
   if (h.data == "binary") {
-    const std::size_t want = n * h.PointStep();
-    if (have < want)
-      throw Error(path + ": truncated PCD: header announces " + std::to_string(n) + " points (" +
-                  std::to_string(want) + " bytes) but the file holds " + std::to_string(have) +
-                  " data bytes");
+    if (n > have / step)
+      throw Error(path + ": truncated PCD: header announces " + std::to_string(n) + " points of " +
+                  std::to_string(step) + " bytes but the file holds " + std::to_string(have) + " data bytes");
+    const std::size_t want = n * step;
     // A few trailing bytes (a newline some writers add) are tolerated; whole extra points mean
     // the header's count is wrong.
-    if (have > want && have - want >= h.PointStep())
+    if (have > want && have - want >= step)
       throw Error(path + ": PCD header disagrees with data: " + std::to_string(n) + " points need " +
                   std::to_string(want) + " bytes but the file holds " + std::to_string(have));
   } else if (h.data == "binary_compressed") {
     if (n == 0) return;
     if (have < 8) throw Error(path + ": truncated PCD: compressed data section is missing");
-    std::uint32_t sizes[2] = {0, 0};
+    std::uint32_t sizes[2] = {0, 0};  // compressed, uncompressed byte counts
     in.seekg(std::streamoff(h.data_offset));
     in.read(reinterpret_cast<char*>(sizes), 8);
-    if (std::size_t(sizes[1]) != n * h.PointStep())
-      throw Error(path + ": PCD header disagrees with data: " + std::to_string(n) +
-                  " points need " + std::to_string(n * h.PointStep()) +
-                  " bytes uncompressed, the data says " + std::to_string(sizes[1]));
+    if (n != sizes[1] / step || sizes[1] % step != 0)
+      throw Error(path + ": PCD header disagrees with data: " + std::to_string(n) + " points of " +
+                  std::to_string(step) + " bytes, the data says " + std::to_string(sizes[1]) +
+                  " bytes uncompressed");
     if (have < 8 + std::size_t(sizes[0]))
       throw Error(path + ": truncated PCD: compressed block of " + std::to_string(sizes[0]) +
                   " bytes but only " + std::to_string(have - 8) + " present");
+    if (std::size_t(sizes[1]) > std::size_t(sizes[0]) * kLzfMaxRatio)
+      throw Error(path + ": corrupt PCD: " + std::to_string(sizes[0]) + " compressed bytes cannot hold " +
+                  std::to_string(sizes[1]) + " bytes uncompressed");
   } else {  // ascii: one line per point, each with the announced number of values
     in.seekg(std::streamoff(h.data_offset));
     std::string line;

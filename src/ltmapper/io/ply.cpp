@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -34,6 +35,12 @@ struct PlyProperty {
   PlyType type = PlyType::kUnknown;
   std::size_t size = 0;
   std::size_t offset = 0;
+};
+
+// A PLY header: vertex count, bytes per vertex and the vertex properties.
+struct PlyHeader {
+  std::size_t n = 0, step = 0;
+  std::vector<PlyProperty> props;
 };
 
 PlyType ParsePlyType(const std::string& t) {
@@ -101,11 +108,86 @@ void WritePlyRecords(const std::string& path, std::size_t n, bool has_cls, bool 
   });
 }
 
+// Bytes from the stream's position to the end of the file (the position is kept).
+std::size_t BytesLeft(std::istream& in) {
+  const auto here = in.tellg();
+  in.seekg(0, std::ios::end);
+  const auto end = in.tellg();
+  in.seekg(here);
+  return here < 0 || end < here ? 0 : std::size_t(end - here);
+}
+
+// A vertex's integer field read as a double: NaN or a value outside T's range is an error
+// naming the file and the vertex (casting it would be undefined behaviour).
+template <class T>
+T IntegerField(double v, const std::string& path, std::size_t vertex, const char* name) {
+  if (!(v >= double(std::numeric_limits<T>::lowest()) && v <= double(std::numeric_limits<T>::max())))
+    throw Error(path + ": vertex " + std::to_string(vertex) + " has " + name + " " + std::to_string(v) +
+                " outside its range");
+  return static_cast<T>(v);
+}
+
 void PutXyzi(std::string& buf, const PointXYZI& p) {
   Put(buf, p.x);
   Put(buf, p.y);
   Put(buf, p.z);
   Put(buf, p.intensity);
+}
+
+// The header up to end_header (`in` is left at the first data byte).
+PlyHeader ParsePlyHeader(const std::string& path, std::istream& in) {
+  std::string line;
+  std::size_t lineno = 0;
+  std::getline(in, line);
+  ++lineno;
+  if (line != "ply" && line != "ply\r") throw Error(path, 1, "not a PLY file");
+  PlyHeader h;
+  bool in_vertex = false, seen_vertex = false, format_ok = false;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ss(line);
+    std::string key;
+    ss >> key;
+    if (key == "end_header") break;
+    if (key == "comment" || key == "obj_info" || key.empty()) continue;
+    if (key == "format") {
+      std::string fmt;
+      ss >> fmt;
+      if (fmt != "binary_little_endian")
+        throw Error(path, lineno, "PLY format '" + fmt + "' not supported (binary_little_endian only)");
+      format_ok = true;
+    } else if (key == "element") {
+      std::string name;
+      long long count = -1;
+      ss >> name >> count;
+      if (name == "vertex") {
+        if (count < 0) throw Error(path, lineno, "bad vertex count");
+        h.n = std::size_t(count);
+        in_vertex = seen_vertex = true;
+      } else {
+        if (!seen_vertex) throw Error(path, lineno, "PLY element '" + name + "' before 'vertex' is not supported");
+        in_vertex = false;  // elements after the vertices (faces ...) are ignored
+      }
+    } else if (key == "property") {
+      if (!in_vertex) continue;
+      PlyProperty p;
+      std::string type_name;
+      ss >> type_name >> p.name;
+      if (type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
+      p.type = ParsePlyType(type_name);
+      p.size = PlyTypeSize(p.type);
+      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + type_name + "'");
+      p.offset = h.step;
+      h.step += p.size;
+      h.props.push_back(p);
+    } else {
+      throw Error(path, lineno, "unknown PLY header line '" + line + "'");
+    }
+  }
+  if (!format_ok) throw Error(path + ": PLY header has no format line");
+  if (!seen_vertex) throw Error(path + ": PLY has no vertex element");
+  return h;
 }
 }  // namespace
 
@@ -155,58 +237,9 @@ void WritePly(const std::string& path, const std::vector<PlyPart>& parts) {
 PointCloud ReadPly(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path + ": cannot open (no such file or not readable)");
-  std::string line;
-  std::size_t lineno = 0;
-  std::getline(in, line);
-  ++lineno;
-  if (line != "ply" && line != "ply\r") throw Error(path, 1, "not a PLY file");
-  std::size_t n = 0, step = 0;
-  bool in_vertex = false, seen_vertex = false, format_ok = false;
-  std::vector<PlyProperty> props;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ss(line);
-    std::string key;
-    ss >> key;
-    if (key == "end_header") break;
-    if (key == "comment" || key == "obj_info" || key.empty()) continue;
-    if (key == "format") {
-      std::string fmt;
-      ss >> fmt;
-      if (fmt != "binary_little_endian")
-        throw Error(path, lineno, "PLY format '" + fmt + "' not supported (binary_little_endian only)");
-      format_ok = true;
-    } else if (key == "element") {
-      std::string name;
-      long long count = -1;
-      ss >> name >> count;
-      if (name == "vertex") {
-        if (count < 0) throw Error(path, lineno, "bad vertex count");
-        n = std::size_t(count);
-        in_vertex = seen_vertex = true;
-      } else {
-        if (!seen_vertex) throw Error(path, lineno, "PLY element '" + name + "' before 'vertex' is not supported");
-        in_vertex = false;  // elements after the vertices (faces ...) are ignored
-      }
-    } else if (key == "property") {
-      if (!in_vertex) continue;
-      PlyProperty p;
-      std::string type_name;
-      ss >> type_name >> p.name;
-      if (type_name == "list") throw Error(path, lineno, "list properties on vertices are not supported");
-      p.type = ParsePlyType(type_name);
-      p.size = PlyTypeSize(p.type);
-      if (p.size == 0) throw Error(path, lineno, "unknown PLY property type '" + type_name + "'");
-      p.offset = step;
-      step += p.size;
-      props.push_back(p);
-    } else {
-      throw Error(path, lineno, "unknown PLY header line '" + line + "'");
-    }
-  }
-  if (!format_ok) throw Error(path + ": PLY header has no format line");
-  if (!seen_vertex) throw Error(path + ": PLY has no vertex element");
+  const PlyHeader header = ParsePlyHeader(path, in);
+  const std::size_t n = header.n, step = header.step;
+  const std::vector<PlyProperty>& props = header.props;
   const PlyProperty *px = nullptr, *py = nullptr, *pz = nullptr, *pi = nullptr, *pc = nullptr,
                     *ps = nullptr, *po = nullptr;
   for (const auto& p : props) {
@@ -219,6 +252,11 @@ PointCloud ReadPly(const std::string& path) {
     if (p.name == "object" || p.name == "scalar_object") po = &p;
   }
   if (!px || !py || !pz) throw Error(path + ": PLY vertices have no x y z");
+  // The stated count against the file's length before allocating (step >= 3: x y z exist).
+  const std::size_t have = BytesLeft(in);
+  if (n > have / step)
+    throw Error(path + ": truncated PLY: " + std::to_string(n) + " vertices of " + std::to_string(step) +
+                " bytes, the file holds " + std::to_string(have) + " data bytes");
   std::vector<char> data(n * step);
   in.read(data.data(), std::streamsize(data.size()));
   if (std::size_t(in.gcount()) != data.size())
@@ -238,12 +276,12 @@ PointCloud ReadPly(const std::string& path) {
     p.intensity = pi ? float(PlyValue(rec + pi->offset, pi->type)) : 0.f;
     if (pc) {
       const double c = PlyValue(rec + pc->offset, pc->type);
-      if (c < 0 || c > double(PointClass::kNDWeak))
+      if (!(c >= 0 && c <= double(PointClass::kNDWeak)))  // NaN fails too
         throw Error(path + ": vertex " + std::to_string(i) + " has unknown class " + std::to_string(c));
       cloud.cls[i] = static_cast<PointClass>(int(c));
     }
-    if (ps) cloud.session[i] = static_cast<std::uint16_t>(PlyValue(rec + ps->offset, ps->type));
-    if (po) cloud.object[i] = static_cast<std::int32_t>(PlyValue(rec + po->offset, po->type));
+    if (ps) cloud.session[i] = IntegerField<std::uint16_t>(PlyValue(rec + ps->offset, ps->type), path, i, "session");
+    if (po) cloud.object[i] = IntegerField<std::int32_t>(PlyValue(rec + po->offset, po->type), path, i, "object");
   }
   return cloud;
 }

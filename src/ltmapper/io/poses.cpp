@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace ltm::io {
@@ -57,6 +58,13 @@ std::vector<double> ParseNumbers(const std::string& text, const std::string& fil
     out.push_back(v);
   }
   return out;
+}
+
+int IntegerId(double v, const std::string& what, const std::string& file, std::size_t line) {
+  constexpr double lo = std::numeric_limits<int>::min(), hi = std::numeric_limits<int>::max();
+  if (!(v >= lo && v <= hi) || v != std::trunc(v))
+    throw Error(file, line, what + " " + FormatDouble(v) + " is not an integer in int range");
+  return int(v);
 }
 
 std::string FormatDouble(double v) {

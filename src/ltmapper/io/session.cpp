@@ -214,4 +214,8 @@ std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadSta
   return std::make_shared<const PointCloud>(ReadCloud(kf.cloud_path, stats));
 }
 
+void RequireScanPoints(const PointCloud& scan, const std::string& where) {
+  if (scan.empty()) throw Error(where + ": empty scan (no finite points)");
+}
+
 }  // namespace ltm::io

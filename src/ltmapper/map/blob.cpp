@@ -18,9 +18,21 @@ namespace ltm::map::detail {
 namespace {
 
 constexpr char kMagic[4] = {'L', 'T', 'M', 'B'};
-constexpr std::uint16_t kVersion = 1;
+// Blob versions: 1 (stores of schema version 1) seeded the checksum with a truncated FNV offset
+// basis, 2 with FNV-1a 64's own; the layout is the same. New blobs are version 2, both decode.
+constexpr std::uint16_t kVersionLegacyBasis = 1;
+constexpr std::uint16_t kVersion = 2;
+constexpr std::uint64_t kLegacyFnvBasis = 1469598103934665603ull;  // 14695981039346656037 missing its last digit
 constexpr std::size_t kHeaderSize = 64;
 constexpr std::size_t kChecksumOffset = 56;
+// Most bytes zstd can produce per compressed byte: a block holds at most 128 KiB
+// (ZSTD_BLOCKSIZE_MAX) and costs at least 4 bytes (3-byte block header + 1 RLE byte), so a
+// stated raw size above compressed size x 32768 is a lie, refused before allocating it.
+constexpr std::size_t kZstdMaxRatio = (std::size_t(1) << 17) / 4;
+
+std::uint64_t ChecksumBasis(std::uint16_t version) {
+  return version == kVersionLegacyBasis ? kLegacyFnvBasis : kFnvOffsetBasis;
+}
 
 std::uint64_t Mix(std::uint64_t x) {  // splitmix64 finaliser
   x ^= x >> 30;
@@ -61,6 +73,25 @@ void GetPlanes(const unsigned char* p, std::size_t n, int w, std::int32_t origin
     for (int b = 0; b < w; ++b) v |= std::uint32_t(p[std::size_t(b) * n + k]) << (8 * b);
     set(k, std::int32_t(std::int64_t(origin) + std::int64_t(v)));
   }
+}
+
+// The `raw_size` bytes a zstd payload of `comp` bytes decompresses to. The stated size is checked
+// against what the payload can hold before it is allocated (a 74-byte blob once claimed 2.4 GB):
+// zstd's ratio bound and the frame's own content size; `fail(why)` throws.
+template <class Fail>
+std::string Decompress(const unsigned char* payload, std::size_t comp, std::size_t raw_size, const Fail& fail) {
+  if (raw_size > comp * kZstdMaxRatio)
+    fail("raw size " + std::to_string(raw_size) + " cannot come from " + std::to_string(comp) + " compressed bytes");
+  const unsigned long long frame_size = ZSTD_getFrameContentSize(payload, comp);
+  if (frame_size != raw_size)
+    fail("raw size " + std::to_string(raw_size) + " but the zstd frame holds " +
+         (ZSTD_isError(frame_size) || frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? std::string("an unknown size")
+                                                                             : std::to_string(frame_size) + " bytes"));
+  std::string raw(raw_size, '\0');
+  const std::size_t got = ZSTD_decompress(raw.data(), raw.size(), payload, comp);
+  if (ZSTD_isError(got)) fail(std::string("zstd: ") + ZSTD_getErrorName(got));
+  if (got != raw_size) fail("decompressed size mismatch");
+  return raw;
 }
 
 }  // namespace
@@ -208,7 +239,7 @@ std::string EncodeQ(const QCloud& q, double resolution_m, double intensity_step,
   Put<double>(out, 24, resolution_m);
   Put<double>(out, 32, intensity_step);
   for (int a = 0; a < 4; ++a) Put<std::int32_t>(out, 40 + 4 * std::size_t(a), lo[a]);
-  std::uint64_t h = Fnv1a64(out.data(), kChecksumOffset);
+  std::uint64_t h = Fnv1a64(out.data(), kChecksumOffset, ChecksumBasis(kVersion));
   h = Fnv1a64(out.data() + kHeaderSize, comp, h);
   Put<std::uint64_t>(out, kChecksumOffset, h);
   return out;
@@ -220,12 +251,14 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
   auto fail = [&](const std::string& why) -> void { throw Error(what + ": corrupt blob: " + why); };
   if (size < kHeaderSize) fail("shorter than its header (" + std::to_string(size) + " bytes)");
   if (std::memcmp(p, kMagic, 4) != 0) fail("bad magic");
-  if (Get<std::uint16_t>(p, 4) != kVersion) fail("unsupported blob version " + std::to_string(Get<std::uint16_t>(p, 4)));
+  const std::uint16_t version = Get<std::uint16_t>(p, 4);
+  if (version != kVersion && version != kVersionLegacyBasis)
+    fail("unsupported blob version " + std::to_string(version));
   const int wxyz = Get<std::uint8_t>(p, 6), wi = Get<std::uint8_t>(p, 7);
   const std::size_t n = Get<std::uint32_t>(p, 8), raw_size = Get<std::uint32_t>(p, 12),
                     comp = Get<std::uint32_t>(p, 16);
   if (kHeaderSize + comp != size) fail("payload size " + std::to_string(comp) + " != blob size - header");
-  std::uint64_t h = Fnv1a64(p, kChecksumOffset);
+  std::uint64_t h = Fnv1a64(p, kChecksumOffset, ChecksumBasis(version));
   h = Fnv1a64(p + kHeaderSize, comp, h);
   if (h != Get<std::uint64_t>(p, kChecksumOffset)) fail("checksum mismatch");
   auto valid_w = [](int w) { return w == 1 || w == 2 || w == 4; };
@@ -235,11 +268,7 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
   if (!(res > 0) || !(istep > 0)) fail("bad resolution");
   std::int32_t lo[4];
   for (int a = 0; a < 4; ++a) lo[a] = Get<std::int32_t>(p, 40 + 4 * std::size_t(a));
-
-  std::string raw(raw_size, '\0');
-  const std::size_t got = ZSTD_decompress(raw.data(), raw.size(), p + kHeaderSize, comp);
-  if (ZSTD_isError(got)) fail(std::string("zstd: ") + ZSTD_getErrorName(got));
-  if (got != raw_size) fail("decompressed size mismatch");
+  const std::string raw = Decompress(p + kHeaderSize, comp, raw_size, fail);
 
   QCloud q(n);
   const auto* r = reinterpret_cast<const unsigned char*>(raw.data());

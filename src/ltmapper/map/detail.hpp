@@ -60,7 +60,9 @@ std::string EncodeQ(const QCloud& q, double resolution_m, double intensity_step,
 // Verifies the checksum and the sizes; returns the points and the blob's resolution / step.
 QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, double* resolution_m = nullptr,
                double* intensity_step = nullptr);
-std::uint64_t Fnv1a64(const void* data, std::size_t size, std::uint64_t h = 1469598103934665603ull);
+// FNV-1a 64 offset basis (the hash of no bytes).
+constexpr std::uint64_t kFnvOffsetBasis = 14695981039346656037ull;
+std::uint64_t Fnv1a64(const void* data, std::size_t size, std::uint64_t h = kFnvOffsetBasis);
 
 // ---- composition on the grid (exact: stored ND are copies of the points they remove)
 // Forward: drop every state point whose key is a removed key of `delta`, append kAdded points.

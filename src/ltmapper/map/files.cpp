@@ -9,6 +9,8 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -27,6 +29,37 @@ void ParallelFor(int threads, std::size_t n, F f) {
   arena.execute([&] {
     tbb::parallel_for(std::size_t(0), n, [&](std::size_t k) { f(k); });
   });
+}
+
+// A store is built as "<store>.tmp-<pid>" (plus SQLite's -wal / -shm / -journal) and renamed.
+constexpr const char* kTempInfix = ".tmp-";
+constexpr std::size_t kMaxPidDigits = 9;  // pid_max is at most 2^22 (7 digits): longer is no pid
+
+void RemoveStoreFiles(const std::string& path) {
+  std::error_code ec;
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) fs::remove(path + suffix, ec);
+}
+
+// Removes the temporaries of `store_path` left by creating processes that no longer run (a
+// kill during `map init` left "<store>.tmp-<pid>" and a -wal of up to tens of MB behind).
+void RemoveStaleTemps(const std::string& store_path) {
+  const fs::path store(store_path);
+  const fs::path dir = store.has_parent_path() ? store.parent_path() : fs::path(".");
+  const std::string prefix = store.filename().string() + kTempInfix;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string rest = name.substr(prefix.size());
+    const std::size_t digits = rest.find_first_not_of("0123456789");
+    const std::string suffix = digits == std::string::npos ? "" : rest.substr(digits);
+    if (digits == 0 || rest.size() - suffix.size() > kMaxPidDigits) continue;  // not "<pid>[suffix]"
+    if (suffix != "" && suffix != "-wal" && suffix != "-shm" && suffix != "-journal") continue;
+    const pid_t pid = pid_t(std::stol(rest.substr(0, rest.size() - suffix.size())));
+    if (::kill(pid, 0) == 0 || errno != ESRCH) continue;  // alive (or another user's): not ours to remove
+    spdlog::info("map: removing {} (left by process {}, which no longer runs)", entry.path().string(), pid);
+    fs::remove(entry.path(), ec);
+  }
 }
 
 PointCloud ReadIfExists(const std::string& path) {
@@ -166,20 +199,16 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
       kfs.push_back({idx[k], poses[k], geometry::Transform(world.select(own[k]), poses[k].inverse())});
     spdlog::info("map init: no pair directory; {} keyframes from {}", kfs.size(), smap);
   }
-  const std::string tmp = store_path + ".tmp-" + std::to_string(::getpid());
-  std::error_code ec;
-  fs::remove(tmp, ec);
-  fs::remove(tmp + "-wal", ec);
-  fs::remove(tmp + "-shm", ec);
+  RemoveStaleTemps(store_path);
+  const std::string tmp = store_path + kTempInfix + std::to_string(::getpid());
+  RemoveStoreFiles(tmp);
   IntegrationResult r;
   try {
     Store store = Store::Create(tmp, cfg);
     store.set_threads(threads);
     r = store.IntegrateBase({cname, ReadAnchor(dirs, cname), ConfigToString(cfg)}, kfs);
   } catch (...) {
-    fs::remove(tmp, ec);
-    fs::remove(tmp + "-wal", ec);
-    fs::remove(tmp + "-shm", ec);
+    RemoveStoreFiles(tmp);
     throw;
   }
   // The store is closed (WAL checkpointed into the main file): publish it with one rename.

@@ -152,9 +152,12 @@ class Store {
  public:
   // Creates a new store file (error when `path` exists). Encoding values come from `cfg`.
   static Store Create(const std::string& path, const MapConfig& cfg);
+  // kReadOnly: SQLITE_OPEN_READONLY, no journal mode switch, nothing written or created (works on
+  // read-only media and on another user's store); integrating through such a store fails.
+  enum class Access { kReadWrite, kReadOnly };
   // Opens an existing store; checks the schema version. Integration parameters come from `cfg`,
   // the encoding (resolution, intensity step) from the store.
-  static Store Open(const std::string& path, const MapConfig& cfg = {});
+  static Store Open(const std::string& path, const MapConfig& cfg = {}, Access access = Access::kReadWrite);
   Store(Store&&) noexcept;
   Store& operator=(Store&&) noexcept;
   ~Store();

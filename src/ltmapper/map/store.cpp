@@ -24,7 +24,11 @@ using detail::QPoint;
 
 namespace {
 
-constexpr int kSchemaVersion = 1;
+// Schema versions: 2 seeds blob checksums with FNV-1a's offset basis (blob version 2); 1 with a
+// truncated one. Version 1 stores still open (their blobs keep version 1 and verify with the old
+// basis); the first integration into one marks it version 2, since it adds version 2 blobs.
+constexpr int kSchemaVersion = 2;
+constexpr int kOldestSchemaVersion = 1;
 constexpr int kApplicationId = 0x4C544D50;  // "LTMP"
 
 const char* kSchema = R"sql(
@@ -64,6 +68,14 @@ CREATE TABLE deltas(
   PRIMARY KEY(keyframe, session));
 CREATE INDEX deltas_by_session ON deltas(session);
 )sql";
+
+constexpr int kBusyTimeoutMs = 10000;  // how long a statement waits for another connection's lock
+
+bool ReadableSchema(const std::string& version) {
+  for (int v = kOldestSchemaVersion; v <= kSchemaVersion; ++v)
+    if (version == std::to_string(v)) return true;
+  return false;
+}
 
 std::string PoseToText(const Pose& T) {
   std::string s;
@@ -197,8 +209,19 @@ struct Store::Impl {
   MapConfig cfg;
   int threads = 0;
 
+  bool read_only = false;
+
   ~Impl() {
+    if (db && !read_only) ToRollbackJournal();
     if (db) sqlite3_close_v2(db);
+  }
+  // At rest the store is in rollback-journal mode, so a read-only reader (read-only media,
+  // another user's store) needs no -wal / -shm and creates none. Best effort: while another
+  // connection is open the switch fails and the store stays in WAL mode (all committed data is
+  // already in the file: Checkpoint() after each integration).
+  void ToRollbackJournal() {
+    sqlite3_busy_timeout(db, 0);
+    sqlite3_exec(db, "PRAGMA journal_mode = DELETE", nullptr, nullptr, nullptr);
   }
   void Exec(const std::string& sql) const {
     char* err = nullptr;
@@ -213,17 +236,29 @@ struct Store::Impl {
     return st.Step() ? st.Text(0) : std::string();
   }
   void OpenDb(int flags) {
+    read_only = (flags & SQLITE_OPEN_READONLY) != 0;
     if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
       const std::string msg = db ? sqlite3_errmsg(db) : "out of memory";
-      throw Error(path + ": cannot open map store: " + msg);
+      throw Error(path + ": cannot open map store" + (read_only ? " read-only: " : ": ") + msg);
     }
     sqlite3_extended_result_codes(db, 1);
-    sqlite3_busy_timeout(db, 10000);
+    sqlite3_busy_timeout(db, kBusyTimeoutMs);
     Exec("PRAGMA foreign_keys = ON");
+    if (read_only) return;  // readers write nothing: no journal mode switch
     const std::string mode = Pragma("journal_mode = WAL");
     if (mode != "wal") throw Error(path + ": cannot switch the map store to WAL (journal_mode = " + mode + ")");
     // FULL: a committed integration survives power loss, not only a killed process.
     Exec("PRAGMA synchronous = FULL");
+  }
+  // Copies the WAL into the store file and empties it, so the file alone holds every committed
+  // integration; a full disk or a reader holding the WAL is an error, not a WAL-only success.
+  void Checkpoint() const {
+    int wal_frames = 0, copied = 0;
+    const int rc = sqlite3_wal_checkpoint_v2(db, nullptr, SQLITE_CHECKPOINT_TRUNCATE, &wal_frames, &copied);
+    if (rc != SQLITE_OK || copied != wal_frames)
+      throw Error(path + ": the integration is committed but could not be copied from " + path +
+                  "-wal into the store file (" + (rc == SQLITE_OK ? "incomplete" : sqlite3_errmsg(db)) +
+                  "); keep the -wal file next to the store and run the command again");
   }
   std::string Info(const std::string& key) const {
     Stmt st(db, "SELECT value FROM schema_info WHERE key = ?", path);
@@ -358,22 +393,22 @@ Store Store::Create(const std::string& path, const MapConfig& cfg) {
   return Store(std::move(impl));
 }
 
-Store Store::Open(const std::string& path, const MapConfig& cfg) {
+Store Store::Open(const std::string& path, const MapConfig& cfg, Access access) {
   ValidateConfig(cfg, "map config");
   if (!std::filesystem::is_regular_file(path)) throw Error(path + ": map store not found");
   auto impl = std::make_unique<Impl>();
   impl->path = path;
   impl->cfg = cfg;
-  impl->OpenDb(SQLITE_OPEN_READWRITE);
+  impl->OpenDb(access == Access::kReadOnly ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE);
   std::string version;
   try {
     version = impl->Info("schema_version");
   } catch (const Error&) {
     throw Error(path + ": not an ltmapper map store (no schema_info table)");
   }
-  if (version != std::to_string(kSchemaVersion))
-    throw Error(path + ": map store schema version " + version + ", this ltmapper reads version " +
-                std::to_string(kSchemaVersion));
+  if (!ReadableSchema(version))
+    throw Error(path + ": map store schema version " + version + ", this ltmapper reads versions " +
+                std::to_string(kOldestSchemaVersion) + " to " + std::to_string(kSchemaVersion));
   impl->cfg.resolution_m = std::stod(impl->Info("resolution_m"));
   impl->cfg.intensity_step = std::stod(impl->Info("intensity_step"));
   return Store(std::move(impl));
@@ -383,10 +418,17 @@ namespace {
 // Commits explicitly; rolls back when destroyed without Commit() (exceptions).
 class Transaction {
  public:
-  explicit Transaction(Store::Impl& s) : s_(s) { s_.Exec("BEGIN IMMEDIATE"); }
+  // Every write adds current-version blobs, so it marks an older store current.
+  explicit Transaction(Store::Impl& s) : s_(s) {
+    s_.Exec("BEGIN IMMEDIATE");
+    const std::string current = "'" + std::to_string(kSchemaVersion) + "'";
+    s_.Exec("UPDATE schema_info SET value = " + current + " WHERE key = 'schema_version' AND value <> " + current);
+  }
+  // COMMIT, then the checkpoint that puts the committed data into the store file itself.
   void Commit() {
     s_.Exec("COMMIT");
     done_ = true;
+    s_.Checkpoint();
   }
   ~Transaction() {
     if (!done_) sqlite3_exec(s_.db, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -841,7 +883,7 @@ FsckReport Store::Fsck() const {
   };
   try {
     const std::string v = s.Info("schema_version");
-    if (v != std::to_string(kSchemaVersion)) problem("schema version " + v);
+    if (!ReadableSchema(v)) problem("schema version " + v);
   } catch (const Error& e) {
     problem(e.what());
   }

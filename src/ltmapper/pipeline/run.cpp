@@ -87,7 +87,7 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   const auto t_run = std::chrono::steady_clock::now();
   RunReport report;
   for (const auto& d : session_dirs) report.sessions.push_back(SessionName(d));
-  io::MakeDirs(out_dir);
+  io::MakeWritableDir(out_dir);  // before any stage (and before --from removes a stage's outputs)
   const std::string aligned_dir = (fs::path(out_dir) / "aligned").string();
   const std::string changes_dir = (fs::path(out_dir) / "changes").string();
   const std::string store_path = (fs::path(out_dir) / cfg.store_name).string();
@@ -184,7 +184,7 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   }
 
   {
-    map::Store store = map::Store::Open(store_path, map_cfg);
+    const map::Store store = map::Store::Open(store_path, map_cfg, map::Store::Access::kReadOnly);
     const auto totals = store.Totals();
     report.store_bytes = totals.file_bytes;
     report.map_points_live = totals.base_points;

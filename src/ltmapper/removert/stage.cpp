@@ -124,6 +124,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
   if (poses_files.size() != session_dirs.size())
     throw Error("removert: " + std::to_string(session_dirs.size()) + " sessions but " +
                 std::to_string(poses_files.size()) + " pose files");
+  io::MakeWritableDir(out_dir);
   StageReport rep;
   const std::size_t ns = session_dirs.size();
   std::vector<std::vector<WorldKeyframe>> kfs(ns);
@@ -144,7 +145,6 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
       kfs[s].push_back(std::move(w));
     }
   }
-  io::MakeDirs(out_dir);
   // One sensor for every session (the central session's scans when estimated).
   const RemovertConfig cfg = WithSensor(user_cfg, kfs[0]);
 
@@ -158,7 +158,12 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
   std::vector<PointCloud> static_maps(ns), hd_maps(ns);
   auto remove_hd = [&](std::size_t s) {
     spdlog::info("removert: HD removal of {} ({} keyframes)", rep.sessions[s], kfs[s].size());
-    HdResult hd = RemoveHd(kfs[s], cfg, threads);
+    HdResult hd;
+    try {
+      hd = RemoveHd(kfs[s], cfg, threads);
+    } catch (const Error& e) {  // name the session: an empty scan rejects it, as LT-SLAM does
+      throw Error("removert: session '" + rep.sessions[s] + "': " + e.what());
+    }
     const HdStats& st = hd.stats;
     spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} + {} dilated ({:.2f} %), "
                  "{:.1f} s map + {:.1f} s votes",

@@ -606,12 +606,15 @@ TileIndex::TileIndex(const PointCloud& cloud, double tile_m) : tile_m_(tile_m) {
   }
 }
 
+// A scan read from its file must hold finite points (the stages' one check, as in LT-SLAM); a
+// cloud given in memory is the caller's (an empty one is "no returns", used by the tests).
 std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
   if (kf.cloud) return kf.cloud;
   if (kf.cloud_path.empty())
     throw Error("removert: keyframe " + std::to_string(kf.index) + " has neither a cloud nor a path");
   auto cloud = std::make_shared<PointCloud>(io::ReadCloud(kf.cloud_path));
   geometry::RemoveNonFinite(*cloud);
+  io::RequireScanPoints(*cloud, kf.cloud_path + " (keyframe " + std::to_string(kf.index) + ")");
   return cloud;
 }
 

@@ -51,7 +51,7 @@ class CloudStore {
     const Session& ses = sessions_[s];
     const Keyframe& kf = ses.keyframes[k];
     auto cloud = io::KeyframeCloud(kf);
-    if (!cloud || cloud->empty()) throw Error(KeyframeWhere(ses, kf) + ": empty scan");
+    io::RequireScanPoints(*cloud, KeyframeWhere(ses, kf));
     return cloud;
   }
   // Stores the downsampled version of an already loaded scan.

@@ -195,6 +195,7 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
 SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
                         const std::string& out_dir, int threads) {
   if (session_dirs.empty()) throw Error("slam: no session directories given");
+  io::MakeWritableDir(out_dir);  // before minutes of alignment, not after
   std::vector<Session> sessions;
   std::set<std::string> names;
   for (const auto& dir : session_dirs) {
