@@ -278,8 +278,8 @@ TEST(RemovertHd, RemovesMoversKeepsStaticStreet) {
   // Dilation off: the same removal, nothing added; with 0.5 m (the movers ride 0.3 m above the
   // ground here) ground points are added, each within 0.5 m of a removed point.
   RemovertConfig plain = cfg, wide = cfg;
-  plain.dilate_m = 0.0;
-  wide.dilate_m = 0.5;
+  plain.dilate_voxels = 0.0;
+  wide.dilate_voxels = 5.0;
   const auto p = removert::RemoveHd(s.kfs, plain, 2);
   const auto w = removert::RemoveHd(s.kfs, wide, 2);
   EXPECT_EQ(p.stats.dilated, 0u);

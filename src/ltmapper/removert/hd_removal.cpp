@@ -145,17 +145,18 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
   // Dilation: the map points next to a removed point (a wheel's or a foot's contact with the
   // ground shares its voxels with the ground) go too. Decided against the removed set before
   // dilation, so it grows by one radius, not transitively.
-  if (cfg.dilate_m > 0.0 && st.removed > 0) {
+  const double dilate_m = cfg.DilateM();
+  if (dilate_m > 0.0 && st.removed > 0) {
     const PointCloud removed = map.select(dynamic);
     const geometry::KdTree tree(removed);
-    const float r2 = float(cfg.dilate_m * cfg.dilate_m);
+    const float r2 = float(dilate_m * dilate_m);
     // Cells touched by some removed point's dilation ball: most map points are far from every
     // removed point and skip the kd-tree after one hash lookup. Any cell edge >= 2 radii works
     // (a ball then touches at most 2 cells per axis, found from its bounding box's corners);
     // keys keep 21 bits per axis, so cells 2^21 apart share a key: a wasted kd-tree query, never
     // a wrong answer (the kd-tree decides).
     constexpr double kCellRadii = 4.0;
-    const double cell = kCellRadii * cfg.dilate_m;
+    const double cell = kCellRadii * dilate_m;
     auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
       constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
       return (x & kMask) | ((y & kMask) << 21) | ((z & kMask) << 42);
@@ -166,8 +167,8 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
       for (int dx = -1; dx <= 1; dx += 2)
         for (int dy = -1; dy <= 1; dy += 2)
           for (int dz = -1; dz <= 1; dz += 2)
-            touched.insert(key(index(q.x, dx * cfg.dilate_m), index(q.y, dy * cfg.dilate_m),
-                               index(q.z, dz * cfg.dilate_m)));
+            touched.insert(key(index(q.x, dx * dilate_m), index(q.y, dy * dilate_m),
+                               index(q.z, dz * dilate_m)));
     std::vector<std::uint8_t> grow(map.size(), 0);
     const std::size_t chunk = 8192;
     detail::ParallelFor((map.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {

@@ -91,9 +91,11 @@ struct RemovertConfig {
   double revert_surface_max_m = 10.0;  // [m] revert hits include hits on the candidate's surface plane
                                        // (VisibilityOptions; normals over ld.normal_radius_m) up to this
                                        // far in range: grazing ground; 0 = plain range hits
-  double dilate_m = 0.1;          // [m] map points this close to a removed HD point are removed too: where
-                                  // a mover touched the ground (wheels, feet) its trace and the ground share
-                                  // voxels and cannot be told apart; 0 = off
+  double dilate_voxels = 1.732;   // [map voxels] map points within this many map_voxel_m of a removed HD point
+                                  // are removed too: where a mover touched the ground (wheels, feet) its trace
+                                  // and the ground share voxels and cannot be told apart; sqrt(3) = one voxel
+                                  // diagonal, the farthest two points of one voxel; 0 = off
+  double DilateM() const { return dilate_voxels * map_voxel_m; }  // [m]
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
   double ld_radius_rel = 0.01;    // [-] ... plus this times the larger of the point's distances to either session's
@@ -153,7 +155,7 @@ struct RemovertConfig {
     v("hd.revert_min_hits", revert_min_hits, "keyframes", 1, 65535);
     v("hd.revert_hit_ratio", revert_hit_ratio, "", 0.0, 1000.0);
     v("hd.revert_surface_max_m", revert_surface_max_m, "m", 0.0, 100.0);
-    v("hd.dilate_m", dilate_m, "m", 0.0, 10.0);
+    v("hd.dilate_voxels", dilate_voxels, "map voxels", 0.0, 10.0);
     v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
     v("ld.radius_rel", ld_radius_rel, "", 0.0, 1.0);
     v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);
@@ -212,7 +214,7 @@ struct HdStats {
   std::size_t candidates = 0;   // union over the removal resolutions
   std::size_t reverted = 0;
   std::size_t removed = 0;      // candidates - reverted
-  std::size_t dilated = 0;      // further points within hd.dilate_m of a removed point
+  std::size_t dilated = 0;      // further points within hd.dilate_voxels map voxels of a removed point
   double seconds_map = 0, seconds_votes = 0;
 };
 struct HdResult {
