@@ -249,5 +249,111 @@ TEST(Cli, InfoKittiLayout) {
   EXPECT_NE(out.find("missing.txt"), std::string::npos) << out;
 }
 
+// ---------------------------------------------------------------- layouts users' tools write
+void ExpectPosesNear(const Session& s, const Session& ref) {
+  ASSERT_EQ(s.keyframes.size(), ref.keyframes.size());
+  for (std::size_t k = 0; k < s.keyframes.size(); ++k) {
+    EXPECT_EQ(s.keyframes[k].index, ref.keyframes[k].index);
+    EXPECT_LT((s.keyframes[k].T_session_sensor.matrix() - ref.keyframes[k].T_session_sensor.matrix()).norm(), 1e-5);
+  }
+}
+
+TEST(SessionLayouts, ScanFolderWithKittiOrTumPoses) {
+  const Session ref = MakeSession(4);
+  std::vector<Pose> poses;
+  std::vector<io::StampedPose> stamped;
+  for (const auto& kf : ref.keyframes) {
+    poses.push_back(kf.T_session_sensor);
+    stamped.push_back({0.1 * kf.index, kf.T_session_sensor});
+  }
+  for (const std::string pose_file : {"poses_kitti.txt", "poses_tum.txt", "poses.txt"}) {
+    test::TempDir tmp;
+    const std::string dir = tmp / "drive";
+    fs::create_directories(dir + "/scans");
+    for (const auto& kf : ref.keyframes) io::WritePcd(dir + "/scans/" + std::to_string(kf.index) + ".pcd", *kf.cloud);
+    if (pose_file == "poses_tum.txt")
+      io::WriteTumPoses(dir + "/" + pose_file, stamped);
+    else
+      io::WriteKittiPoses(dir + "/" + pose_file, poses);
+    const io::SessionLayout l = io::DetectSessionLayout(dir);
+    EXPECT_EQ(l.name, pose_file == "poses_tum.txt" ? "scans+tum-poses" : "scans+kitti-poses");
+    const Session s = io::LoadSession(dir);
+    ExpectPosesNear(s, ref);
+    EXPECT_EQ(s.odometry.size(), 3u);
+    const io::SessionInfo info = io::InspectSession(dir);
+    EXPECT_EQ(info.layout, l.name);
+    EXPECT_EQ(info.keyframes, 4u);
+    EXPECT_TRUE(info.load_error.empty()) << info.load_error;
+  }
+}
+
+TEST(SessionLayouts, KittiOdometryWithCalib) {
+  test::TempDir tmp;
+  const std::string dir = tmp / "seq";
+  const Session ref = MakeSession(3);
+  Pose Tr = Planar(0.3, -0.1, 0.2);  // a camera-from-LiDAR transform
+  std::vector<Pose> cam;
+  fs::create_directories(dir + "/velodyne");
+  for (const auto& kf : ref.keyframes) {
+    io::WriteKittiBin(dir + "/velodyne/" + std::to_string(kf.index) + ".bin", *kf.cloud);
+    cam.push_back(Tr * kf.T_session_sensor * Tr.inverse());  // P = Tr * T_w_velo * Tr^-1
+  }
+  io::WriteKittiPoses(dir + "/poses.txt", cam);
+  std::ostringstream calib;
+  calib << "Tr:";
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) calib << " " << Tr.matrix()(r, c);
+  test::WriteText(dir + "/calib.txt", calib.str() + "\n");
+  EXPECT_EQ(io::DetectSessionLayout(dir).name, "kitti-odometry");
+  ExpectPosesNear(io::LoadSession(dir), ref);
+}
+
+TEST(SessionLayouts, KthDynamicMapWorldFrameScansWithViewpoints) {
+  test::TempDir tmp;
+  const std::string dir = tmp / "kth";
+  const Session ref = MakeSession(3);
+  for (const auto& kf : ref.keyframes) {
+    // World-frame points, sensor pose in VIEWPOINT (tx ty tz qw qx qy qz), ascii.
+    const Pose& T = kf.T_session_sensor;
+    const Eigen::Quaterniond q(T.linear());
+    std::ostringstream pcd;
+    pcd.precision(9);
+    pcd << "VERSION .7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH "
+        << kf.cloud->size() << "\nHEIGHT 1\nVIEWPOINT " << T.translation().x() << " " << T.translation().y() << " "
+        << T.translation().z() << " " << q.w() << " " << q.x() << " " << q.y() << " " << q.z() << "\nPOINTS "
+        << kf.cloud->size() << "\nDATA ascii\n";
+    for (const PointXYZI& p : kf.cloud->points) {
+      const Eigen::Vector3d w = T * p.xyz().cast<double>();
+      pcd << w.x() << " " << w.y() << " " << w.z() << " " << p.intensity << "\n";
+    }
+    test::WriteText(dir + "/pcd/" + std::to_string(1000 + kf.index).substr(1) + ".pcd", pcd.str());
+  }
+  EXPECT_EQ(io::DetectSessionLayout(dir).name, "kth-dynamicmap");
+  const Session s = io::LoadSession(dir);
+  ExpectPosesNear(s, ref);
+  for (std::size_t k = 0; k < s.keyframes.size(); ++k) {  // back in the sensor frame
+    const PointCloud& got = *s.keyframes[k].cloud;
+    const PointCloud& want = *ref.keyframes[k].cloud;
+    ASSERT_EQ(got.size(), want.size());
+    for (std::size_t i = 0; i < got.size(); ++i) EXPECT_LT((got.points[i].xyz() - want.points[i].xyz()).norm(), 1e-4);
+  }
+  const std::string bad = tmp / "bad";
+  test::WriteText(bad + "/pcd/000000.pcd", "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\n"
+                                           "HEIGHT 1\nVIEWPOINT 0 0 0 1\nPOINTS 0\nDATA ascii\n");
+  EXPECT_THROW(io::LoadSession(bad), Error);  // VIEWPOINT with 4 numbers
+}
+
+TEST(SessionLayouts, UnknownLayoutNamesTheExpectedOnes) {
+  test::TempDir tmp;
+  fs::create_directories(tmp / "empty");
+  try {
+    io::LoadSession(tmp / "empty");
+    FAIL() << "an empty folder loaded";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    for (const char* name : {"SC-LIO-SAM", "FAST-LIO-SAM", "KITTI", "KTH"}) EXPECT_NE(what.find(name), std::string::npos) << what;
+  }
+}
+
 }  // namespace
 }  // namespace ltm

@@ -110,16 +110,51 @@ void ScanStats(const std::vector<IndexedFile>& scans, SessionInfo& info) {
 
 }  // namespace
 
+// Layouts other than SC-LIO-SAM: what the loader reads, then the pose and scan statistics.
+SessionInfo InspectLoaded(const std::string& dir, const SessionLayout& layout, bool read_scans) {
+  SessionInfo info;
+  info.dir = dir;
+  info.layout = layout.name;
+  info.pose_source = layout.poses.empty() ? "VIEWPOINT of each scan" : layout.poses;
+  const auto scans = ListLenient(layout.scans_dir, layout.scan_ext, info);
+  info.scans_found = scans.size();
+  try {
+    const Session s = LoadSession(dir);
+    std::vector<Pose> poses;
+    for (const Keyframe& kf : s.keyframes) poses.push_back(kf.T_session_sensor);
+    info.keyframes = poses.size();
+    info.odometry_edges = s.odometry.size();
+    info.loop_edges = s.loops.size();
+    PoseStats(poses, info);
+  } catch (const Error& e) {
+    info.load_error = e.what();
+    info.problems.push_back(e.what());
+  }
+  if (read_scans) ScanStats(scans, info);
+  return info;
+}
+
 SessionInfo InspectSession(const std::string& dir, bool read_scans) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such session directory");
   const fs::path root(dir);
+  // Scans/ without a pose file is an SC-LIO-SAM session with a problem, listed below.
+  if (!fs::is_directory(root / "Scans", ec) || (!fs::exists(root / "singlesession_posegraph.g2o", ec) &&
+                                                !fs::exists(root / "optimized_poses.txt", ec))) {
+    try {
+      const SessionLayout layout = DetectSessionLayout(dir);
+      return InspectLoaded(dir, layout, read_scans);
+    } catch (const Error&) {
+      if (!fs::is_directory(root / "Scans", ec)) throw;
+    }
+  }
   const std::string scans_dir = (root / "Scans").string();
   if (!fs::is_directory(scans_dir, ec))
     throw Error(dir + ": missing Scans/ folder (expected Scans/NNNNNN.pcd keyframe scans)");
 
   SessionInfo info;
   info.dir = dir;
+  info.layout = "sc-lio-sam";
   const auto scans = ListLenient(scans_dir, ".pcd", info);
   info.scans_found = scans.size();
   if (scans.empty()) info.problems.push_back(scans_dir + ": no .pcd scans");
@@ -222,6 +257,7 @@ SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses
     throw Error(dir + ": missing velodyne/ folder (expected velodyne/NNNNNN.bin)");
   SessionInfo info;
   info.dir = dir;
+  info.layout = "kitti-odometry";
   info.pose_source = poses_path + (T_cam_velo ? " (camera poses, with Tr)" : "");
   const auto scans = ListLenient(velo_dir, ".bin", info);
   info.scans_found = scans.size();
@@ -261,6 +297,7 @@ std::string FormatSessionInfo(const SessionInfo& info) {
   std::ostringstream os;
   char buf[256];
   os << "session " << info.dir << "\n";
+  os << "  layout:          " << info.layout << "\n";
   os << "  keyframes:       " << info.keyframes << " (poses from " << info.pose_source << ")\n";
   os << "  scans:           " << info.scans_found << " found, " << info.scds_found << " SCDs"
      << (info.scds_found == 0 ? " (Scan Context computed when needed)" : "") << "\n";

@@ -37,6 +37,9 @@ struct CloudReadStats {
 // PCD (ascii, binary, binary_compressed) through PCL's reader. Needs fields x y z; intensity
 // optional (0 when absent). Truncated files and headers that disagree with the data are errors.
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats = nullptr);
+// The sensor pose of a PCD's VIEWPOINT header line (tx ty tz qw qx qy qz; identity when absent):
+// the KTH DynamicMap benchmark stores each scan in the world frame with its sensor pose there.
+Pose ReadPcdViewpoint(const std::string& path);
 enum class PcdFormat { kAscii, kBinary, kBinaryCompressed };
 void WritePcd(const std::string& path, const PointCloud& cloud,
               PcdFormat format = PcdFormat::kBinary);
@@ -103,12 +106,31 @@ struct SessionLoadOptions {
   bool load_clouds = false;
   bool require_g2o = false;
 };
-// Session directory as SC-LIO-SAM / SC-A-LOAM / FAST-LIO savers write it:
-//   Scans/NNNNNN.pcd, optional SCDs/NNNNNN.scd, singlesession_posegraph.g2o and/or
-//   optimized_poses.txt. Poses come from the g2o vertices when present (else the KITTI file),
-//   odometry edges from the g2o (else derived from consecutive poses). Scan files are sorted by
-//   the integer value of their names. Pose count != scan count, duplicate indices, a missing
-//   directory or missing files are errors.
+// The layouts of session directories that users' tools write, detected from the files present
+// (first match wins):
+//   sc-lio-sam       Scans/NNNNNN.pcd, optional SCDs/NNNNNN.scd, singlesession_posegraph.g2o and/or
+//                    optimized_poses.txt (SC-LIO-SAM / SC-A-LOAM / FAST-LIO savers)
+//   scans+kitti-poses, scans+tum-poses
+//                    scans/ (or Scans/) NNNNNN.pcd + poses_kitti.txt, poses_tum.txt or poses.txt: one
+//                    pose per scan in index order (FAST-LIO-SAM, KISS-ICP results beside the scans)
+//   kitti-odometry   velodyne/NNNNNN.bin + poses.txt (+ calib.txt: its Tr, camera poses)
+//   kth-dynamicmap   pcd/NNNNNN.pcd, points in the world frame, sensor pose in each VIEWPOINT
+//                    (KTH DynamicMap benchmark)
+struct SessionLayout {
+  std::string name;                 // one of the names above
+  std::string scans_dir;            // the scan folder
+  std::string scan_ext = ".pcd";
+  std::string poses;                // pose file (empty for kth-dynamicmap)
+  std::string poses_format = "kitti";  // kitti | tum | viewpoint (the g2o for sc-lio-sam)
+  std::string calib;                // kitti-odometry: calib.txt when present
+};
+// ltm::Error naming the expected layouts when `dir` holds none of them.
+SessionLayout DetectSessionLayout(const std::string& dir);
+// Loads a session of any layout above. SC-LIO-SAM: poses come from the g2o vertices when present
+// (else optimized_poses.txt), odometry edges from the g2o (else derived from consecutive poses).
+// Scan files are sorted by the integer value of their names. Pose count != scan count, duplicate
+// indices, a missing directory or missing files are errors. kth-dynamicmap scans are read now and
+// moved into their sensor frames (Keyframe::cloud).
 Session LoadSession(const std::string& dir, const SessionLoadOptions& opt = {});
 // KITTI odometry layout: `dir/velodyne/NNNNNN.bin` + a poses file (12 numbers per line, one per
 // scan index, maybe more lines than scans). When `T_cam_velo` is given (KITTI's `Tr`), the poses
@@ -136,6 +158,7 @@ struct SessionInfo {
   Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero(), bbox_max = Eigen::Vector3d::Zero();
   double path_length_m = 0.0;
   std::size_t odometry_edges = 0, loop_edges = 0;
+  std::string layout;                  // DetectSessionLayout's name
   std::string pose_source;             // "g2o" or "optimized_poses.txt"
   std::vector<std::string> problems;   // missing / inconsistent files, one line each
   std::size_t scans_read = 0;          // scans read successfully (points_* are over these)

@@ -38,6 +38,7 @@ struct PcdHeader {
   std::vector<char> types;
   long long width = -1, height = -1, points = -1;
   std::string data;            // ascii | binary | binary_compressed
+  std::vector<double> viewpoint;  // VIEWPOINT tx ty tz qw qx qy qz (empty when absent)
   std::size_t data_offset = 0; // byte offset of the first data byte
   std::size_t header_lines = 0;
   std::size_t PointStep() const {
@@ -89,7 +90,12 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
     std::istringstream ss(line);
     std::string key;
     if (!(ss >> key) || key[0] == '#') continue;
-    if (key == "VERSION" || key == "VIEWPOINT") continue;
+    if (key == "VERSION") continue;
+    if (key == "VIEWPOINT") {
+      for (double v; ss >> v;) h.viewpoint.push_back(v);
+      if (h.viewpoint.size() != 7) throw Error(path, lineno, "VIEWPOINT needs 7 numbers: tx ty tz qw qx qy qz");
+      continue;
+    }
     if (key == "FIELDS" || key == "COLUMNS") {
       for (std::string f; ss >> f;) h.fields.push_back(f);
     } else if (key == "SIZE") {
@@ -304,6 +310,21 @@ std::optional<std::array<FieldAt, 4>> FloatFields(const PcdHeader& h) {
 }
 
 }  // namespace
+
+Pose ReadPcdViewpoint(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path + ": cannot open");
+  const PcdHeader h = ParseHeader(path, in);
+  Pose T = Pose::Identity();
+  if (h.viewpoint.empty()) return T;
+  const Eigen::Quaterniond q(h.viewpoint[3], h.viewpoint[4], h.viewpoint[5], h.viewpoint[6]);
+  if (!(q.norm() > 1e-9) || !std::isfinite(q.norm()))
+    throw Error(path + ": VIEWPOINT quaternion is zero or not finite");
+  T.linear() = q.normalized().toRotationMatrix();
+  T.translation() = Eigen::Vector3d(h.viewpoint[0], h.viewpoint[1], h.viewpoint[2]);
+  if (!T.translation().allFinite()) throw Error(path + ": VIEWPOINT translation is not finite");
+  return T;
+}
 
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   std::error_code ec;

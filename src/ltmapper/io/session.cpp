@@ -66,12 +66,12 @@ void LoadClouds(Session& s) {
 
 }  // namespace
 
-Session LoadSession(const std::string& dir, const SessionLoadOptions& opt) {
+namespace {
+
+// SC-LIO-SAM / SC-A-LOAM: Scans/ + singlesession_posegraph.g2o and / or optimized_poses.txt.
+Session LoadScLioSam(const std::string& dir, const SessionLoadOptions& opt) {
   std::error_code ec;
-  if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such session directory");
   const std::string scans_dir = (fs::path(dir) / "Scans").string();
-  if (!fs::is_directory(scans_dir, ec))
-    throw Error(dir + ": missing Scans/ folder (expected Scans/NNNNNN.pcd keyframe scans)");
   const std::vector<std::string> scans = ListIndexedFiles(scans_dir, ".pcd");
   if (scans.empty()) throw Error(scans_dir + ": no .pcd scans");
 
@@ -125,6 +125,131 @@ Session LoadSession(const std::string& dir, const SessionLoadOptions& opt) {
   }
   if (opt.load_clouds) LoadClouds(s);
   return s;
+}
+
+// A scan folder plus one pose per scan in index order (FAST-LIO-SAM: scans/ + poses_kitti.txt /
+// poses_tum.txt; KISS-ICP results next to the scans).
+Session LoadScansWithPoses(const std::string& dir, const SessionLayout& layout, const SessionLoadOptions& opt) {
+  const std::vector<std::string> scans = ListIndexedFiles(layout.scans_dir, layout.scan_ext);
+  if (scans.empty()) throw Error(layout.scans_dir + ": no " + layout.scan_ext + " scans");
+  std::vector<Pose> poses;
+  if (layout.poses_format == "tum") {
+    for (const StampedPose& p : ReadTumPoses(layout.poses)) poses.push_back(p.pose);
+  } else {
+    poses = ReadKittiPoses(layout.poses);
+  }
+  if (poses.size() != scans.size())
+    throw Error(layout.poses + ": " + std::to_string(poses.size()) + " poses but " + layout.scans_dir + " holds " +
+                std::to_string(scans.size()) + " scans (one pose per scan, in index order)");
+  Session s;
+  s.dir = dir;
+  s.name = BaseName(dir);
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    Keyframe kf;
+    kf.index = FileIndex(scans[i]);
+    kf.cloud_path = scans[i];
+    kf.T_session_sensor = poses[i];
+    s.keyframes.push_back(std::move(kf));
+  }
+  DeriveOdometry(s);
+  if (opt.load_clouds) LoadClouds(s);
+  return s;
+}
+
+// KTH DynamicMap benchmark: pcd/NNNNNN.pcd in the world frame, the sensor pose in VIEWPOINT.
+// The scans are moved into their sensor frames here (in memory), as every stage expects.
+Session LoadKth(const std::string& dir, const SessionLayout& layout) {
+  const std::vector<std::string> scans = ListIndexedFiles(layout.scans_dir, ".pcd");
+  if (scans.empty()) throw Error(layout.scans_dir + ": no .pcd scans");
+  Session s;
+  s.dir = dir;
+  s.name = BaseName(dir);
+  s.keyframes.resize(scans.size());
+  tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t i) {
+    Keyframe& kf = s.keyframes[i];
+    kf.index = FileIndex(scans[i]);
+    kf.cloud_path = scans[i];
+    kf.T_session_sensor = ReadPcdViewpoint(scans[i]);
+    PointCloud world = ReadPcd(scans[i]);
+    const Eigen::Isometry3f T_sensor_world = kf.T_session_sensor.inverse().cast<float>();
+    for (PointXYZI& p : world.points) {
+      const Eigen::Vector3f q = T_sensor_world * p.xyz();
+      p.x = q.x(), p.y = q.y(), p.z = q.z();
+    }
+    kf.cloud = std::make_shared<const PointCloud>(std::move(world));
+  });
+  DeriveOdometry(s);
+  return s;
+}
+
+bool IsDir(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_directory(p, ec);
+}
+bool IsFile(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_regular_file(p, ec);
+}
+
+}  // namespace
+
+SessionLayout DetectSessionLayout(const std::string& dir) {
+  if (!IsDir(dir)) throw Error(dir + ": no such session directory");
+  const fs::path root(dir);
+  SessionLayout l;
+  if (IsDir(root / "Scans") && (IsFile(root / "singlesession_posegraph.g2o") || IsFile(root / "optimized_poses.txt"))) {
+    l.name = "sc-lio-sam";
+    l.scans_dir = (root / "Scans").string();
+    l.poses = IsFile(root / "singlesession_posegraph.g2o") ? (root / "singlesession_posegraph.g2o").string()
+                                                            : (root / "optimized_poses.txt").string();
+    return l;
+  }
+  for (const char* scans : {"Scans", "scans"}) {
+    if (!IsDir(root / scans)) continue;
+    l.scans_dir = (root / scans).string();
+    for (const auto& [file, format] : {std::pair{"poses_kitti.txt", "kitti"}, {"poses_tum.txt", "tum"}, {"poses.txt", "kitti"}})
+      if (IsFile(root / file)) {
+        l.name = std::string("scans+") + format + "-poses";
+        l.poses = (root / file).string();
+        l.poses_format = format;
+        return l;
+      }
+  }
+  if (IsDir(root / "velodyne") && IsFile(root / "poses.txt")) {
+    l.name = "kitti-odometry";
+    l.scans_dir = (root / "velodyne").string();
+    l.scan_ext = ".bin";
+    l.poses = (root / "poses.txt").string();
+    if (IsFile(root / "calib.txt")) l.calib = (root / "calib.txt").string();
+    return l;
+  }
+  if (IsDir(root / "Scans") || IsDir(root / "scans"))
+    throw Error(dir + ": no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt (SC-LIO-SAM), nor "
+                "poses_kitti.txt / poses_tum.txt / poses.txt beside the scans");
+  if (IsDir(root / "pcd")) {
+    l.name = "kth-dynamicmap";
+    l.scans_dir = (root / "pcd").string();
+    l.poses_format = "viewpoint";
+    return l;
+  }
+  throw Error(dir + ": not a session directory; expected one of: Scans/NNNNNN.pcd + singlesession_posegraph.g2o or "
+              "optimized_poses.txt (SC-LIO-SAM); scans/NNNNNN.pcd + poses_kitti.txt, poses_tum.txt or poses.txt "
+              "(FAST-LIO-SAM, KISS-ICP); velodyne/NNNNNN.bin + poses.txt [+ calib.txt] (KITTI odometry); "
+              "pcd/NNNNNN.pcd with VIEWPOINT poses (KTH DynamicMap benchmark)");
+}
+
+Session LoadSession(const std::string& dir, const SessionLoadOptions& opt) {
+  const SessionLayout l = DetectSessionLayout(dir);
+  if (opt.require_g2o && l.name != "sc-lio-sam")
+    throw Error(dir + ": missing singlesession_posegraph.g2o (required)");
+  if (l.name == "sc-lio-sam") return LoadScLioSam(dir, opt);
+  if (l.name == "kitti-odometry") {
+    std::unique_ptr<Pose> Tr;
+    if (!l.calib.empty()) Tr = std::make_unique<Pose>(ReadTransform(l.calib));
+    return LoadKittiSession(dir, l.poses, Tr.get(), opt);
+  }
+  if (l.name == "kth-dynamicmap") return LoadKth(dir, l);
+  return LoadScansWithPoses(dir, l, opt);
 }
 
 Session LoadKittiSession(const std::string& dir, const std::string& poses_path,

@@ -91,10 +91,11 @@ struct RemovertConfig {
   double revert_surface_max_m = 10.0;  // [m] revert hits include hits on the candidate's surface plane
                                        // (VisibilityOptions; normals over ld.normal_radius_m) up to this
                                        // far in range: grazing ground; 0 = plain range hits
-  double dilate_voxels = 1.732;   // [map voxels] map points within this many map_voxel_m of a removed HD point
+  double dilate_voxels = 1.5;     // [map voxels] map points within this many map_voxel_m of a removed HD point
                                   // are removed too: where a mover touched the ground (wheels, feet) its trace
-                                  // and the ground share voxels and cannot be told apart; sqrt(3) = one voxel
-                                  // diagonal, the farthest two points of one voxel; 0 = off
+                                  // and the ground share voxels and cannot be told apart; 1.5 = the centroids
+                                  // of the neighbouring voxels (one voxel apart, each up to half a voxel off
+                                  // its centre); 0 = off
   double DilateM() const { return dilate_voxels * map_voxel_m; }  // [m]
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
@@ -201,6 +202,10 @@ struct WorldKeyframe {
   std::shared_ptr<const PointCloud> cloud;
   std::string cloud_path;
 };
+
+// A session's keyframes placed with its own poses (T_session_sensor as the world frame): HD
+// removal of one drive, e.g. a KTH DynamicMap sequence whose poses are already in its world.
+std::vector<WorldKeyframe> KeyframesOf(const Session& session);
 
 // The config with its sensor resolved (sensor_model, fov_*_deg): the preset or table, else
 // estimated from up to 8 of the keyframes' scans (spread over the session). A resolved config is

@@ -13,6 +13,19 @@ std::vector<std::string> RemovertConfig::SensorChoices() {
   return c;
 }
 
+std::vector<WorldKeyframe> KeyframesOf(const Session& session) {
+  std::vector<WorldKeyframe> out;
+  for (const Keyframe& kf : session.keyframes) {
+    WorldKeyframe w;
+    w.index = kf.index;
+    w.T_world_sensor = kf.T_session_sensor;
+    w.cloud = kf.cloud;
+    w.cloud_path = kf.cloud_path;
+    out.push_back(std::move(w));
+  }
+  return out;
+}
+
 RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes) {
   if (cfg.SensorResolved()) return cfg;
   constexpr std::size_t kEstimateScans = 8;  // enough points for every beam's peak
