@@ -5,6 +5,8 @@
 #include "ltmapper/eval/eval.hpp"
 
 #include <map>
+#include <optional>
+#include <utility>
 
 namespace ltm::py_bind {
 namespace {
@@ -40,6 +42,27 @@ py::list TrajectoriesToList(const std::vector<eval::SessionTrajectory>& sessions
     out.append(d);
   }
   return out;
+}
+
+eval::ChangeClouds ChangesFromPython(const py::object& obj, const std::string& what) {
+  const py::dict d = py::cast<py::dict>(obj);
+  eval::ChangeClouds c;
+  const std::pair<const char*, PointCloud*> parts[] = {
+      {"pd_strong", &c.pd_strong}, {"pd_weak", &c.pd_weak}, {"nd_strong", &c.nd_strong}, {"nd_weak", &c.nd_weak}};
+  for (const auto& [key, cloud] : parts) {
+    if (!d.contains(key)) throw py::value_error(what + ": missing \"" + std::string(key) + "\"");
+    *cloud = CloudFromPython(d[key], what + "[\"" + key + "\"]");
+  }
+  return c;
+}
+
+py::dict ChangesToDict(const eval::ChangeClouds& c) {
+  py::dict d;
+  d["pd_strong"] = PointsToNumpy(c.pd_strong);
+  d["pd_weak"] = PointsToNumpy(c.pd_weak);
+  d["nd_strong"] = PointsToNumpy(c.nd_strong);
+  d["nd_weak"] = PointsToNumpy(c.nd_weak);
+  return d;
 }
 
 std::map<int, std::string> ObjectClasses(const py::object& obj) {
@@ -146,6 +169,52 @@ void BindEval(py::module_& m) {
   m.def(
       "read_poses", [](const std::string& path) { return PosesToNumpy(eval::ReadPoses(path)); }, py::arg("path"),
       "KITTI (12 numbers) or TUM (8) pose file as (N,4,4).");
+  m.def(
+      "read_change_clouds", [](const std::string& dir) { return ChangesToDict(eval::ReadChangeClouds(dir)); },
+      py::arg("dir"), "The four change clouds {pd_strong, pd_weak, nd_strong, nd_weak}.pcd of a pair folder.");
+  m.def("find_pair_dir", &eval::FindPairDir, py::arg("root"), py::arg("pair"),
+        "ROOT/pair_<pair> (\"00_01\" also finds pair_session_00_session_01 ...).");
+  m.def(
+      "kept_map_from_changes",
+      [](const py::object& central_static, const py::object& nd_strong, const py::object& cfg_obj, int threads) {
+        const eval::EvalConfig cfg = cfg_obj.is_none() ? eval::EvalConfig{} : py::cast<eval::EvalConfig>(cfg_obj);
+        const PointCloud a = CloudFromPython(central_static, "central_static"), b = CloudFromPython(nd_strong, "nd_strong");
+        PointCloud k;
+        {
+          py::gil_scoped_release unlock;
+          k = eval::KeptMapFromChanges(a, b, cfg, threads);
+        }
+        return PointsToNumpy(k);
+      },
+      py::arg("central_static"), py::arg("nd_strong"), py::arg("cfg") = py::none(), py::arg("threads") = 0,
+      "The central static map minus the points with a predicted strong-ND point within ld.same_point_m.");
+  m.def(
+      "evaluate_ld",
+      [](const py::object& truth, const py::object& predicted, const py::object& kept_map, const py::object& cfg_obj,
+         const py::object& trajectories, int threads) {
+        const eval::EvalConfig cfg = cfg_obj.is_none() ? eval::EvalConfig{} : py::cast<eval::EvalConfig>(cfg_obj);
+        cfg.Validate("eval config");
+        const eval::ChangeClouds t = ChangesFromPython(truth, "truth"), p = ChangesFromPython(predicted, "predicted");
+        std::optional<PointCloud> kept;
+        if (!kept_map.is_none()) kept = CloudFromPython(kept_map, "kept_map");
+        std::optional<eval::LdTrajectories> traj;
+        if (!trajectories.is_none()) {
+          const py::tuple tp = py::cast<py::tuple>(trajectories);
+          if (tp.size() != 2) throw py::value_error("trajectories: (central positions, query positions)");
+          traj = eval::LdTrajectories{CloudFromPython(tp[0], "central positions"), CloudFromPython(tp[1], "query positions")};
+        }
+        eval::Report r;
+        {
+          py::gil_scoped_release unlock;
+          r.ld = eval::EvaluateLd(t, p, kept ? &*kept : nullptr, cfg, threads, traj ? &*traj : nullptr);
+        }
+        return Section(r, "ld");
+      },
+      py::arg("truth"), py::arg("predicted"), py::arg("kept_map") = py::none(), py::arg("cfg") = py::none(),
+      py::arg("trajectories") = py::none(), py::arg("threads") = 0,
+      "P / R / F1 of PD and ND (`ltmapper eval ld`). truth / predicted: dicts of the four change clouds (as "
+      "read_change_clouds returns), same frame; kept_map: the map kept after the update (weak-ND check); "
+      "trajectories: (central, query) keyframe positions (N,3) for the distance bands. Returns the \"ld\" dict.");
   m.def("sim_session_names", &eval::SimSessionNames, py::arg("sim_dir"));
   m.def("read_object_classes", &eval::ReadObjectClasses, py::arg("objects_csv"));
 }

@@ -234,6 +234,13 @@ def test_stages_store_eval():
     truth = ltmapper.read_ply(os.path.join(sim_dir(), "truth", "session_00", "static_world.ply"))
     h2 = ltmapper.evaluate_hd(truth, static)
     assert h2["static_total"] > 0 and h2["sa"] > 0.5
+    # LD: LT-removert ran on the true world poses, so its changes and the sim truth share a frame.
+    pred = ltmapper.read_change_clouds(ltmapper.find_pair_dir(changes, "00_01"))
+    truth_ld = ltmapper.read_change_clouds(ltmapper.find_pair_dir(os.path.join(sim_dir(), "truth"), "00_01"))
+    kept = ltmapper.kept_map_from_changes(static, pred["nd_strong"])
+    ld = ltmapper.evaluate_ld(truth_ld, pred, kept_map=kept)
+    assert ld["pd"]["truth"] == len(truth_ld["pd_strong"]) + len(truth_ld["pd_weak"]) and ld["weak_nd_kept"]["kept_map_given"]
+    raises(ValueError, ltmapper.evaluate_ld, {"pd_strong": pred["pd_strong"]}, pred)
     raises(ltmapper.Error, ltmapper.evaluate_hd_sim, sim_dir(), "session_09", static,
            ltmapper.read_kitti_poses(truth_poses(0)))
 
