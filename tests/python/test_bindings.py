@@ -179,6 +179,9 @@ def test_remove_hd():
     assert static.dtype == np.float32 and static.shape[1] == 4 and len(static) > 1000
     assert r["stats"]["map_points"] == len(static) + len(hd) and r["stats"]["removed"] > 0
     raises(ltmapper.Error, ltmapper.remove_hd, ltmapper.RemovertConfig(), s, poses[:5])
+    m = ltmapper.build_session_map(ltmapper.RemovertConfig(), s, poses)
+    assert len(m) == r["stats"]["map_points"]
+    assert ltmapper.resolve_removert_sensor(ltmapper.RemovertConfig(), s).beams == 16
 
 
 def test_stages_store_eval():
@@ -217,6 +220,19 @@ def test_stages_store_eval():
     assert len(live["points"]) > 0 and len(meta["points"]) > 0
     assert len(st.map_at("session_00", box=((-5, -5, -5), (5, 5, 5)))["points"]) <= len(st.map_at(0)["points"])
     assert isinstance(st.objects(), list) and st.fsck()["ok"] and st.totals()["file_bytes"] > 0
+    ch = st.step_changes(1, voxel=0.0)
+    assert set(np.unique(ch["cls"])) <= {3, 4, 5, 6} and (ch["session"] == 1).all()
+    kf = st.keyframes()[0]
+    assert len(st.keyframe_cloud(kf["id"], 0)["points"]) == kf["base_points"] or kf["delta_count"] > 0
+    st.write_objects(os.path.join(w, "objects"))
+    assert os.path.exists(os.path.join(w, "objects", "objects.csv"))
+    assert "session_01" in st.log() and st.digest() == ltmapper.Store(store_path).digest()
+    # The same store step by step: map_init, then Store(read_only=False).integrate.
+    p2 = os.path.join(w, "m2.ltmap")
+    assert ltmapper.map_init(p2, ltmapper.MapConfig(), truth_aligned, changes)["session"] == 0
+    st2 = ltmapper.Store(p2, read_only=False)
+    assert st2.integrate(truth_aligned, changes, "session_01")["points"] == steps[1]["points"]
+    raises(ltmapper.Error, ltmapper.map_init, p2, ltmapper.MapConfig(), truth_aligned, changes, match="exists")
     raises(ltmapper.Error, st.map_at, "no_such_session", match="no_such_session")
     raises(ltmapper.Error, ltmapper.Store, os.path.join(w, "none.ltmap"), match="none.ltmap")
 
