@@ -19,6 +19,7 @@ PACKAGES=(
   libspdlog-dev          # logging
   libpng-dev             # PNG renders
   libgtest-dev libgmock-dev libbenchmark-dev   # tests and benchmarks
+  pybind11-dev python3-dev python3-numpy       # Python bindings (python/, `import ltmapper`)
 )
 
 missing=()

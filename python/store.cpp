@@ -1,0 +1,269 @@
+// ltmapper.Store: the LT-map store (map::Store) with clouds as NumPy dicts and records as dicts.
+#include "convert.hpp"
+
+#include "ltmapper/map/map.hpp"
+
+namespace ltm::py_bind {
+
+py::dict IntegrationToDict(const map::IntegrationResult& r) {
+  py::dict d;
+  d["session"] = r.session;
+  d["keyframes_new"] = r.keyframes_new;
+  d["keyframes_changed"] = r.keyframes_changed;
+  d["pd_strong"] = r.pd_strong;
+  d["pd_weak"] = r.pd_weak;
+  d["nd_strong"] = r.nd_strong;
+  d["nd_weak"] = r.nd_weak;
+  d["superseded"] = r.superseded;
+  d["restored"] = r.restored;
+  d["points"] = r.points;
+  d["bytes"] = r.bytes;
+  d["seconds"] = r.seconds;
+  return d;
+}
+
+namespace {
+
+py::array_t<double> Vec3(const Eigen::Vector3d& v) {
+  py::array_t<double> a(3);
+  for (int i = 0; i < 3; ++i) a.mutable_at(i) = v[i];
+  return a;
+}
+
+py::dict SessionToDict(const map::SessionRecord& s) {
+  py::dict d;
+  d["order"] = s.order;
+  d["name"] = s.name;
+  d["reference"] = s.reference;
+  d["anchor"] = PoseToNumpy(s.anchor);
+  d["params"] = s.params;
+  d["integrated_utc"] = s.integrated_utc;
+  d["keyframes_new"] = s.keyframes_new;
+  d["keyframes_changed"] = s.keyframes_changed;
+  d["pd_strong"] = s.pd_strong;
+  d["pd_weak"] = s.pd_weak;
+  d["nd_strong"] = s.nd_strong;
+  d["nd_weak"] = s.nd_weak;
+  d["superseded"] = s.superseded;
+  d["restored"] = s.restored;
+  d["points"] = s.points;
+  d["bytes"] = s.bytes;
+  return d;
+}
+
+py::dict KeyframeToDict(const map::KeyframeRecord& k) {
+  py::dict d;
+  d["id"] = k.id;
+  d["session"] = k.session;
+  d["source_index"] = k.source_index;
+  d["T_world_sensor"] = PoseToNumpy(k.T_world_sensor);
+  d["base_points"] = k.base_points;
+  d["base_bytes"] = k.base_bytes;
+  d["delta_count"] = k.delta_count;
+  d["delta_bytes"] = k.delta_bytes;
+  return d;
+}
+
+py::dict ObjectToDict(const map::MapObject& o) {
+  py::dict d;
+  d["id"] = o.id;
+  d["session"] = o.session;
+  d["reference"] = o.reference;
+  d["cls"] = std::string(ToString(o.cls));
+  d["points"] = o.points;
+  d["centroid"] = Vec3(o.centroid);
+  d["lo"] = Vec3(o.lo);
+  d["hi"] = Vec3(o.hi);
+  d["cloud"] = CloudToDict(o.cloud);
+  return d;
+}
+
+// Session given as an order number or a name.
+int SessionArg(const map::Store& s, const py::object& session) {
+  if (py::isinstance<py::str>(session)) return s.SessionOrder(py::cast<std::string>(session));
+  const int k = py::cast<int>(session);
+  if (k < 0 || k > s.LatestSession())
+    throw Error(s.path() + ": no session " + std::to_string(k) + " (0.." + std::to_string(s.LatestSession()) + ")");
+  return k;
+}
+
+// box = ((x, y, z), (x, y, z)) or None; voxel None = the store config's output_voxel_m.
+map::Region RegionArg(const map::Store& s, const py::object& box, const py::object& voxel) {
+  map::Region r;
+  r.voxel_m = voxel.is_none() ? s.config().output_voxel_m : py::cast<double>(voxel);
+  if (r.voxel_m < 0) throw py::value_error("voxel must be >= 0");
+  if (!box.is_none()) {
+    const auto b = py::cast<std::vector<std::vector<double>>>(box);
+    if (b.size() != 2 || b[0].size() != 3 || b[1].size() != 3)
+      throw py::value_error("box must be ((xmin, ymin, zmin), (xmax, ymax, zmax))");
+    r.use_box = true;
+    r.lo = Eigen::Vector3d(b[0][0], b[0][1], b[0][2]);
+    r.hi = Eigen::Vector3d(b[1][0], b[1][1], b[1][2]);
+    if ((r.lo.array() > r.hi.array()).any()) throw py::value_error("box: min must not exceed max");
+  }
+  return r;
+}
+
+template <class F>
+py::dict Cloud(F&& f) {
+  PointCloud c;
+  {
+    py::gil_scoped_release unlock;
+    c = f();
+  }
+  return CloudToDict(c);
+}
+
+}  // namespace
+
+void BindStore(py::module_& m) {
+  using map::Store;
+  py::class_<Store>(m, "Store",
+                    "An LT-map store (NAME.ltmap). Clouds come back as dicts {points (N,4) float32, cls uint8, "
+                    "session uint16[, object int32]} in the world frame; class codes index ltmapper.CLASS_NAMES.")
+      .def(py::init([](const std::string& path, const py::object& cfg, bool read_only, int threads) {
+             const map::MapConfig c = cfg.is_none() ? map::MapConfig{} : py::cast<map::MapConfig>(cfg);
+             Store s = Store::Open(path, c, read_only ? Store::Access::kReadOnly : Store::Access::kReadWrite);
+             s.set_threads(threads);
+             return s;
+           }),
+           py::arg("path"), py::arg("cfg") = py::none(), py::arg("read_only") = true, py::arg("threads") = 0,
+           "Opens an existing store (read-only by default: nothing is written, no -wal / -shm left behind).")
+      .def_property_readonly("path", &Store::path)
+      .def_property_readonly("config", [](const Store& s) { return s.config(); },
+                             "The MapConfig in use (encoding fields as stored).")
+      .def("set_threads", &Store::set_threads, py::arg("threads"))
+      .def("sessions",
+           [](const Store& s) {
+             py::list out;
+             for (const auto& r : s.Sessions()) out.append(SessionToDict(r));
+             return out;
+           })
+      .def("session_names",
+           [](const Store& s) {
+             std::vector<std::string> out;
+             for (const auto& r : s.Sessions()) out.push_back(r.name);
+             return out;
+           })
+      .def("keyframes",
+           [](const Store& s) {
+             py::list out;
+             for (const auto& k : s.Keyframes()) out.append(KeyframeToDict(k));
+             return out;
+           })
+      .def("session_order", &Store::SessionOrder, py::arg("name"))
+      .def_property_readonly("latest_session", &Store::LatestSession)
+      .def("totals",
+           [](const Store& s) {
+             const auto t = s.Totals();
+             py::dict d;
+             d["file_bytes"] = t.file_bytes;
+             d["base_bytes"] = t.base_bytes;
+             d["delta_bytes"] = t.delta_bytes;
+             d["base_points"] = t.base_points;
+             d["delta_points"] = t.delta_points;
+             return d;
+           })
+      .def(
+          "keyframe_cloud",
+          [](const Store& s, int id, const py::object& session) {
+            const int k = SessionArg(s, session);
+            return Cloud([&] { return s.KeyframeCloud(id, k); });
+          },
+          py::arg("keyframe_id"), py::arg("session"), "One keyframe as of a session, in its local frame.")
+      .def(
+          "map_at",
+          [](const Store& s, const py::object& session, const py::object& box, const py::object& voxel) {
+            const int k = SessionArg(s, session);
+            const map::Region r = RegionArg(s, box, voxel);
+            return Cloud([&] { return s.MapAt(k, r); });
+          },
+          py::arg("session"), py::arg("box") = py::none(), py::arg("voxel") = py::none(),
+          "The map as it was at a session (order or name), by chained inverse deltas (`map restore`).")
+      .def(
+          "live",
+          [](const Store& s, const py::object& box, const py::object& voxel) {
+            const map::Region r = RegionArg(s, box, voxel);
+            return Cloud([&] { return s.Live(r); });
+          },
+          py::arg("box") = py::none(), py::arg("voxel") = py::none(), "The live map (latest state).")
+      .def(
+          "meta",
+          [](const Store& s, const py::object& box, const py::object& voxel) {
+            const map::Region r = RegionArg(s, box, voxel);
+            return Cloud([&] { return s.Meta(r); });
+          },
+          py::arg("box") = py::none(), py::arg("voxel") = py::none(),
+          "The meta map (first states plus strong PD, seen-through space carved).")
+      .def(
+          "step_changes",
+          [](const Store& s, const py::object& session, const py::object& box, const py::object& voxel) {
+            const int k = SessionArg(s, session);
+            const map::Region r = RegionArg(s, box, voxel);
+            return Cloud([&] { return s.StepChanges(k, r); });
+          },
+          py::arg("session"), py::arg("box") = py::none(), py::arg("voxel") = py::none(),
+          "The PD / ND changes one step applied (world frame).")
+      .def(
+          "objects",
+          [](const Store& s) {
+            std::vector<map::MapObject> objs;
+            {
+              py::gil_scoped_release unlock;
+              objs = s.Objects();
+            }
+            py::list out;
+            for (const auto& o : objs) out.append(ObjectToDict(o));
+            return out;
+          },
+          "Changed objects (clusters of strong ND / PD per step) as dicts with their clouds.")
+      .def(
+          "write_objects",
+          [](const Store& s, const std::string& dir) {
+            py::gil_scoped_release unlock;
+            map::WriteObjects(dir, s.Objects());
+          },
+          py::arg("dir"), "`ltmapper map objects`: objects.csv / .json / .ply and clouds/ into DIR.")
+      .def(
+          "integrate",
+          [](Store& s, const std::string& aligned, const std::string& changes, const std::string& session,
+             const std::string& sessions_root) {
+            map::PipelineDirs dirs{aligned, changes, sessions_root};
+            map::IntegrationResult r;
+            {
+              py::gil_scoped_release unlock;
+              r = map::IntegrateFromDirs(s, dirs, session);
+            }
+            return IntegrationToDict(r);
+          },
+          py::arg("aligned"), py::arg("changes"), py::arg("session"), py::arg("sessions_root") = "",
+          "Integrates one query session from the LT-SLAM / LT-removert output dirs (store opened read_only=False).")
+      .def("fsck",
+           [](const Store& s) {
+             map::FsckReport r;
+             {
+               py::gil_scoped_release unlock;
+               r = s.Fsck();
+             }
+             py::dict d;
+             d["ok"] = r.ok;
+             d["problems"] = r.problems;
+             d["sessions"] = r.sessions;
+             d["keyframes"] = r.keyframes;
+             d["blobs"] = r.blobs;
+             d["points"] = r.points;
+             d["bytes"] = r.bytes;
+             return d;
+           })
+      .def("digest", &Store::Digest)
+      .def("log", [](const Store& s) { return map::FormatLog(s); }, "The `ltmapper map log` table.")
+      .def("__repr__", [](const Store& s) {
+        return "<ltmapper.Store '" + s.path() + "' " + std::to_string(s.LatestSession() + 1) + " sessions>";
+      });
+  m.def(
+      "write_labelled_cloud",
+      [](const std::string& path, const py::object& cloud) { map::WriteLabelledCloud(path, CloudFromPython(cloud, path)); },
+      py::arg("path"), py::arg("cloud"), "Writes a labelled cloud dict as .pcd or .ply (class / session / object fields).");
+}
+
+}  // namespace ltm::py_bind

@@ -1,0 +1,280 @@
+"""Tests of the Python bindings (`import ltmapper`) on a tiny simulated scenario.
+
+Run by ctest (`python_bindings`: /usr/bin/python3 with PYTHONPATH=build/python), directly
+(`PYTHONPATH=build/python python3 tests/python/test_bindings.py`) or with pytest.
+"""
+import atexit
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+import ltmapper
+
+SOURCE_DIR = os.environ.get(
+    "LTM_SOURCE_DIR", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+_state = {}
+
+
+def work():
+    """A temporary directory with the tiny scenario simulated once (2 sessions x 10 keyframes)."""
+    if "dir" not in _state:
+        d = tempfile.mkdtemp(prefix="ltm_py_")
+        atexit.register(shutil.rmtree, d, True)
+        ltmapper.set_log_level("warn")
+        cfg = ltmapper.SimConfig.tiny()
+        cfg.route.sessions = 2
+        cfg.route.keyframes = 10
+        _state["dir"] = d
+        _state["sim_report"] = ltmapper.simulate(cfg, os.path.join(d, "sim"), threads=2)
+    return _state["dir"]
+
+
+def sim_dir():
+    return os.path.join(work(), "sim")
+
+
+def session_dir(k):
+    return os.path.join(sim_dir(), "sessions", "session_%02d" % k)
+
+
+def truth_poses(k):
+    return os.path.join(sim_dir(), "truth", "session_%02d" % k, "poses_world.txt")
+
+
+def raises(exc, fn, *args, match=None, **kwargs):
+    try:
+        fn(*args, **kwargs)
+    except exc as e:
+        if match is not None:
+            assert match in str(e), "expected %r in %r" % (match, str(e))
+        return e
+    raise AssertionError("%s did not raise %s" % (getattr(fn, "__name__", fn), exc.__name__))
+
+
+# ----------------------------------------------------------------------------------- tests
+def test_module():
+    assert ltmapper.CLASS_NAMES[1] == "static" and len(ltmapper.CLASS_NAMES) == 7
+    assert issubclass(ltmapper.Error, RuntimeError)
+    raises(ValueError, ltmapper.set_log_level, "loud")
+
+
+def test_simulate():
+    work()
+    r = _state["sim_report"]
+    assert r["sessions"] == 2 and r["keyframes"] == 20 and r["points"] > 0
+    assert ltmapper.sim_session_names(sim_dir()) == ["session_00", "session_01"]
+
+
+def test_session():
+    s = ltmapper.load_session(session_dir(0))
+    assert s.name == "session_00" and len(s) == 10 and len(s.keyframes) == 10
+    assert s.poses.shape == (10, 4, 4) and s.poses.dtype == np.float64
+    np.testing.assert_allclose(s.poses[:, 3, :], np.tile([0, 0, 0, 1], (10, 1)))
+    np.testing.assert_allclose(s.keyframes[3].pose, s.poses[3])
+    scan = s.scan(0)
+    assert scan.dtype == np.float32 and scan.ndim == 2 and scan.shape[1] == 4 and len(scan) > 100
+    np.testing.assert_array_equal(scan, s.keyframes[0].scan())
+    np.testing.assert_array_equal(s.scan(-1), s.scans()[-1])
+    assert list(s.indices) == [k.index for k in s.keyframes] and s.find(s.indices[2]) == 2
+    assert len(s.odometry) == 9 and s.odometry[0]["T_from_to"].shape == (4, 4)
+    raises(IndexError, s.scan, 10)
+    assert "10" in ltmapper.inspect_session(session_dir(0))
+    # A bad path raises ltmapper.Error carrying the C++ message (naming the path).
+    e = raises(ltmapper.Error, ltmapper.load_session, os.path.join(work(), "missing"))
+    assert "missing" in str(e)
+
+
+def test_cloud_round_trip():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-50, 50, size=(1000, 4)).astype(np.float32)
+    for fmt in ("binary", "ascii", "binary_compressed"):
+        p = os.path.join(work(), "cloud_%s.pcd" % fmt)
+        ltmapper.write_pcd(p, a, format=fmt)
+        b = ltmapper.read_cloud(p)
+        assert b.dtype == np.float32 and b.shape == (1000, 4)
+        if fmt == "ascii":
+            np.testing.assert_allclose(b, a, rtol=1e-6)
+        else:
+            np.testing.assert_array_equal(b, a)
+    # (N,3) input gets intensity 0; KITTI .bin round trip.
+    p = os.path.join(work(), "xyz.bin")
+    ltmapper.write_kitti_bin(p, a[:, :3].astype(np.float64))
+    b = ltmapper.read_cloud(p)
+    np.testing.assert_array_equal(b[:, :3], a[:, :3])
+    assert not b[:, 3].any()
+    # Labelled PLY round trip.
+    lab = {"points": a, "cls": np.full(1000, 3, np.uint8), "session": np.arange(1000, dtype=np.uint16) % 3,
+           "object": np.arange(1000, dtype=np.int32) - 1}
+    p = os.path.join(work(), "lab.ply")
+    ltmapper.write_ply(p, lab)
+    b = ltmapper.read_ply(p)
+    for k in ("points", "cls", "session", "object"):
+        np.testing.assert_array_equal(b[k], lab[k])
+    raises(ValueError, ltmapper.write_pcd, p, np.zeros((5, 2)))
+    raises(ltmapper.Error, ltmapper.read_cloud, os.path.join(work(), "nope.pcd"), match="nope.pcd")
+
+
+def test_configs():
+    c = ltmapper.RemovertConfig()
+    d = c.to_dict()
+    assert set(d) == set(c.keys()) and "hd.dilate_voxels" in d
+    assert c.hd.dilate_voxels == d["hd.dilate_voxels"] == c.get("hd.dilate_voxels")
+    c.hd.dilate_voxels = 1.0
+    c.set("ld.weak_nd=false")
+    c.set("sensor.model", "vlp16")
+    assert c.to_dict()["hd.dilate_voxels"] == 1.0 and c.ld.weak_nd is False and c.sensor.model == "vlp16"
+    raises(TypeError, setattr, c.ld, "weak_nd", 1)
+    raises(ltmapper.Error, setattr, c, "submap_radius_m", -5.0)  # out of range: value kept
+    assert c.submap_radius_m == d["submap_radius_m"]
+    raises(AttributeError, getattr, c, "no_such_key")
+    e = raises(ltmapper.Error, c.set, "hd.no_such_key=1")
+    assert "no_such_key" in str(e)
+    # YAML: the shipped params files load; an unknown key raises with the file and key named.
+    for name, cls in (("params_ltslam.yaml", ltmapper.SlamConfig), ("params_ltremovert.yaml", ltmapper.RemovertConfig),
+                      ("params_ltmap.yaml", ltmapper.MapConfig), ("params_eval.yaml", ltmapper.EvalConfig),
+                      ("params_sim.yaml", ltmapper.SimConfig)):
+        cfg = cls.from_yaml(os.path.join(SOURCE_DIR, "config", name))
+        assert cfg.to_dict() == cls().to_dict() or name == "params_sim.yaml" or cfg.keys() == cls().keys()
+    bad = os.path.join(work(), "bad.yaml")
+    with open(bad, "w") as f:
+        f.write("hd:\n  dilate_voxels: 1.0\n  bogus_key: 3\n")
+    e = raises(ltmapper.Error, ltmapper.RemovertConfig.from_yaml, bad)
+    assert "bogus_key" in str(e) and "bad.yaml" in str(e)
+    # save_yaml / from_yaml round trip, dict constructor, copy.
+    out = os.path.join(work(), "saved.yaml")
+    c.save_yaml(out)
+    assert ltmapper.RemovertConfig.from_yaml(out) == c
+    m = ltmapper.MapConfig({"output_voxel_m": 0.0, "object_min_points": 5})
+    assert m.output_voxel_m == 0.0 and m.object_min_points == 5
+    m2 = m.copy()
+    m2.output_voxel_m = 0.5
+    assert m.output_voxel_m == 0.0
+    raises(ltmapper.Error, ltmapper.MapConfig, {"bogus": 1})
+
+
+def test_sensor():
+    assert "vlp16" in ltmapper.sensor_presets()
+    v = ltmapper.sensor_preset("vlp16")
+    assert v.beams == 16 and v.to_dict()["beams"] == 16
+    raises(ltmapper.Error, ltmapper.sensor_preset, "nope", match="vlp16")
+    s = ltmapper.load_session(session_dir(0))
+    est = ltmapper.estimate_sensor([s.scan(i) for i in range(3)])
+    assert est.source == "estimated" and est.beams == 16, est.describe()
+    t = ltmapper.sensor_from_table([10.0, 0.0, -10.0])
+    assert t.beams == 3
+
+
+def test_remove_hd():
+    s = ltmapper.load_session(session_dir(0))
+    poses = ltmapper.read_kitti_poses(truth_poses(0))
+    assert poses.shape == (10, 4, 4)
+    r = ltmapper.remove_hd(ltmapper.RemovertConfig(), s, poses, threads=2)
+    static, hd = r["static_map"], r["hd_map"]
+    assert static.dtype == np.float32 and static.shape[1] == 4 and len(static) > 1000
+    assert r["stats"]["map_points"] == len(static) + len(hd) and r["stats"]["removed"] > 0
+    raises(ltmapper.Error, ltmapper.remove_hd, ltmapper.RemovertConfig(), s, poses[:5])
+    m = ltmapper.build_session_map(ltmapper.RemovertConfig(), s, poses)
+    assert len(m) == r["stats"]["map_points"]
+    assert ltmapper.resolve_removert_sensor(ltmapper.RemovertConfig(), s).beams == 16
+
+
+def test_stages_store_eval():
+    """LT-SLAM -> LT-removert -> LT-map through the bindings, then the Store and the evaluators."""
+    w = work()
+    aligned, changes, store_path = os.path.join(w, "aligned"), os.path.join(w, "changes"), os.path.join(w, "m.ltmap")
+    slam = ltmapper.run_slam(ltmapper.SlamConfig(), session_dir(0), [session_dir(1)], aligned, threads=2)
+    assert [s["name"] for s in slam["sessions"]] == ["session_00", "session_01"]
+    assert slam["sessions"][0]["aligned"] and slam["sessions"][0]["T_world_sensor"].shape == (10, 4, 4)
+    assert "session_00" in ltmapper.aligned_sessions(aligned)
+    # The tiny routes are too short for LT-SLAM to align session_01 reliably; the map stage gets
+    # the true world poses in LT-SLAM's layout instead (the same frame LT-removert runs in below).
+    truth_aligned = os.path.join(w, "aligned_truth")
+    for k in (0, 1):
+        d = os.path.join(truth_aligned, "session_%02d" % k)
+        os.makedirs(d)
+        ltmapper.write_kitti_poses(os.path.join(d, "poses_world.txt"), ltmapper.read_kitti_poses(truth_poses(k)))
+        ltmapper.write_kitti_poses(os.path.join(d, "anchor.txt"), np.eye(4)[None])
+    assert ltmapper.aligned_sessions(truth_aligned) == ["session_00", "session_01"]
+    rem = ltmapper.run_removert(ltmapper.RemovertConfig(), [session_dir(0), session_dir(1)],
+                                [truth_poses(0), truth_poses(1)], changes, threads=2)
+    assert rem["sessions"] == ["session_00", "session_01"] and rem["pairs"] == [(0, 1)]
+    assert rem["hd"][0]["map_points"] > 0
+    static = ltmapper.read_cloud(os.path.join(changes, "session_00", "static_map.pcd"))
+    assert len(static) > 1000
+    steps = ltmapper.map_integrate(store_path, ltmapper.MapConfig(), truth_aligned, changes, threads=2)
+    assert [s["name"] for s in steps] == ["central", "session_01"] and steps[0]["points"] > 0
+
+    st = ltmapper.Store(store_path)
+    assert st.session_names()[0] == "session_00" and st.latest_session == len(steps) - 1
+    assert st.sessions()[0]["anchor"].shape == (4, 4) and st.keyframes()[0]["T_world_sensor"].shape == (4, 4)
+    for k in range(st.latest_session + 1):
+        m = st.map_at(k, voxel=0.0)
+        assert m["points"].shape[1] == 4 and len(m["cls"]) == len(m["points"]) > 0
+    live, meta = st.live(), st.meta()
+    assert len(live["points"]) > 0 and len(meta["points"]) > 0
+    assert len(st.map_at("session_00", box=((-5, -5, -5), (5, 5, 5)))["points"]) <= len(st.map_at(0)["points"])
+    assert isinstance(st.objects(), list) and st.fsck()["ok"] and st.totals()["file_bytes"] > 0
+    ch = st.step_changes(1, voxel=0.0)
+    assert set(np.unique(ch["cls"])) <= {3, 4, 5, 6} and (ch["session"] == 1).all()
+    kf = st.keyframes()[0]
+    assert len(st.keyframe_cloud(kf["id"], 0)["points"]) == kf["base_points"] or kf["delta_count"] > 0
+    st.write_objects(os.path.join(w, "objects"))
+    assert os.path.exists(os.path.join(w, "objects", "objects.csv"))
+    assert "session_01" in st.log() and st.digest() == ltmapper.Store(store_path).digest()
+    # The same store step by step: map_init, then Store(read_only=False).integrate.
+    p2 = os.path.join(w, "m2.ltmap")
+    assert ltmapper.map_init(p2, ltmapper.MapConfig(), truth_aligned, changes)["session"] == 0
+    st2 = ltmapper.Store(p2, read_only=False)
+    assert st2.integrate(truth_aligned, changes, "session_01")["points"] == steps[1]["points"]
+    raises(ltmapper.Error, ltmapper.map_init, p2, ltmapper.MapConfig(), truth_aligned, changes, match="exists")
+    raises(ltmapper.Error, st.map_at, "no_such_session", match="no_such_session")
+    raises(ltmapper.Error, ltmapper.Store, os.path.join(w, "none.ltmap"), match="none.ltmap")
+
+    # Evaluators: trajectories (dicts of the report JSON) and HD removal on the sim truth.
+    tr = ltmapper.load_sim_trajectories(sim_dir(), "")  # drifted session odometry
+    assert tr["missing"] == [] and len(tr["sessions"]) == 2
+    t = ltmapper.evaluate_trajectories(tr["sessions"])
+    assert t["ate"]["trans_m"]["n"] == 20 and math.isfinite(t["ate"]["trans_m"]["rmse"])
+    assert ltmapper.load_sim_trajectories(sim_dir(), aligned)["sessions"][0]["est"].shape == (10, 4, 4)
+    same = [(s["name"], s["truth"], s["truth"]) for s in tr["sessions"]]
+    assert ltmapper.evaluate_trajectories(same)["ate"]["trans_m"]["rmse"] < 1e-9
+    hd = ltmapper.evaluate_hd_sim(sim_dir(), "session_00", static, ltmapper.read_kitti_poses(truth_poses(0)),
+                                  threads=2)
+    assert hd["scans"] == 10 and hd["sa"] > 0.9 and 0.0 <= hd["da"] <= 1.0
+    truth = ltmapper.read_ply(os.path.join(sim_dir(), "truth", "session_00", "static_world.ply"))
+    h2 = ltmapper.evaluate_hd(truth, static)
+    assert h2["static_total"] > 0 and h2["sa"] > 0.5
+    # LD: LT-removert ran on the true world poses, so its changes and the sim truth share a frame.
+    pred = ltmapper.read_change_clouds(ltmapper.find_pair_dir(changes, "00_01"))
+    truth_ld = ltmapper.read_change_clouds(ltmapper.find_pair_dir(os.path.join(sim_dir(), "truth"), "00_01"))
+    kept = ltmapper.kept_map_from_changes(static, pred["nd_strong"])
+    ld = ltmapper.evaluate_ld(truth_ld, pred, kept_map=kept)
+    assert ld["pd"]["truth"] == len(truth_ld["pd_strong"]) + len(truth_ld["pd_weak"]) and ld["weak_nd_kept"]["kept_map_given"]
+    raises(ValueError, ltmapper.evaluate_ld, {"pd_strong": pred["pd_strong"]}, pred)
+    raises(ltmapper.Error, ltmapper.evaluate_hd_sim, sim_dir(), "session_09", static,
+           ltmapper.read_kitti_poses(truth_poses(0)))
+
+
+if __name__ == "__main__":
+    t0 = time.time()
+    tests = [(n, f) for n, f in sorted(globals().items(), key=lambda kv: kv[0]) if n.startswith("test_")]
+    tests.sort(key=lambda nf: nf[1].__code__.co_firstlineno)
+    failed = 0
+    for name, fn in tests:
+        t = time.time()
+        try:
+            fn()
+            print("ok   %-28s %.2f s" % (name, time.time() - t), flush=True)
+        except Exception:
+            failed += 1
+            import traceback
+            traceback.print_exc()
+            print("FAIL %s" % name, flush=True)
+    print("%d passed, %d failed in %.1f s" % (len(tests) - failed, failed, time.time() - t0))
+    sys.exit(1 if failed else 0)
