@@ -447,8 +447,23 @@ void MultiResImage::Pool(Level& L) const {
   sweep(rows - 1, 0, -1);  // nearest return below
 }
 
-ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test)
-    : test_(test), grid_(MultiResImage::Grid::Make(cfg, test.row_deg, test.col_deg)) {
+// The beam test's cells for the sensor: columns at least one azimuth step wide (else a column
+// may hold no return of a beam), rows at most half the finest beam spacing (else two beams share
+// a cell and the one above / below is lost).
+static BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test) {
+  if (!cfg.SensorResolved()) return test;
+  const geometry::SensorModel& m = cfg.sensor_model;
+  test.col_deg = std::max(test.col_deg, m.azimuth_step_deg);
+  double finest = m.MaxSpacing();
+  for (std::size_t i = 1; i < m.elevations_deg.size(); ++i)
+    finest = std::min(finest, m.elevations_deg[i - 1] - m.elevations_deg[i]);
+  if (finest > 0.0) test.row_deg = std::min(test.row_deg, 0.5 * finest);
+  return test;
+}
+
+ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
+    : test_(ForSensor(cfg, test_in)), grid_(MultiResImage::Grid::Make(cfg, test_.row_deg, test_.col_deg)) {
+  const BeamTest& test = test_;
   // Per row: how far to look for the beams above and below: span_deg, or two local beam
   // spacings where the beams are sparser (one of them may have dropped its return).
   constexpr double kSpanSpacings = 2.0;
