@@ -110,7 +110,8 @@ class MultiResImage {
   static std::vector<int> WindowRows(const RemovertConfig& cfg, int rows, double row_deg);
   struct Level {
     Grid grid;
-    std::vector<int> window_rows;  // per row: vertical half-window of the pool (WindowRows)
+    std::vector<int> window_rows;  // per row: how far the pool looks for the nearest beam (WindowRows)
+    int scatter_rows = 0;          // rows within the beams' estimated scatter: pooled whole
     std::vector<float> range, pooled, tmp, pairs;
     std::vector<Eigen::Vector3f> ret;  // keep_returns
   };

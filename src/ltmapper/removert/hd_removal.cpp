@@ -84,6 +84,68 @@ PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const Re
   return geometry::VoxelDownsampleRuns(acc, acc_runs, cfg.map_voxel_m, threads);
 }
 
+namespace {
+
+// The removed points that have removed points at least body_m / 2 above or below them within
+// body_m: points of removed bodies that stand up from the ground (a mover), not of removed flat
+// patches (ground the votes got wrong).
+PointCloud BodyPoints(const PointCloud& removed, double body_m, int threads) {
+  if (removed.empty()) return removed;
+  const geometry::KdTree tree(removed);
+  std::vector<std::uint8_t> bottom(removed.size(), 0);
+  detail::ParallelFor(removed.size(), threads, [&](std::size_t i) {
+    const PointXYZI& p = removed.points[i];
+    for (const auto& [j, d2] : tree.Radius(p.xyz(), float(body_m)))
+      if (std::fabs(removed.points[j].z - p.z) >= float(0.5 * body_m)) {
+        bottom[i] = 1;
+        return;
+      }
+  });
+  std::vector<bool> keep(removed.size());
+  for (std::size_t i = 0; i < removed.size(); ++i) keep[i] = bottom[i] != 0;
+  return removed.select(keep);
+}
+
+// Per map point: 1 when it is not in `dynamic` and lies within radius_m of a point of `seeds`.
+std::vector<std::uint8_t> GrowMask(const PointCloud& map, const std::vector<bool>& dynamic, const PointCloud& seeds,
+                                   double radius_m, int threads) {
+  std::vector<std::uint8_t> grow(map.size(), 0);
+  if (seeds.empty() || radius_m <= 0.0) return grow;
+  const geometry::KdTree tree(seeds);
+  const float r2 = float(radius_m * radius_m);
+  // Cells touched by some seed's ball: most map points are far from every seed and skip the
+  // kd-tree after one hash lookup. Any cell edge >= 2 radii works (a ball then touches at most
+  // 2 cells per axis, found from its bounding box's corners); keys keep 21 bits per axis, so
+  // cells 2^21 apart share a key: a wasted kd-tree query, never a wrong answer (the kd-tree decides).
+  constexpr double kCellRadii = 4.0;
+  const double cell = kCellRadii * radius_m;
+  auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
+    constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
+    return (x & kMask) | ((y & kMask) << 21) | ((z & kMask) << 42);
+  };
+  auto index = [&](float v, double off) { return std::int64_t(std::floor((double(v) + off) / cell)); };
+  std::unordered_set<std::int64_t> touched;
+  for (const PointXYZI& q : seeds.points)
+    for (int dx = -1; dx <= 1; dx += 2)
+      for (int dy = -1; dy <= 1; dy += 2)
+        for (int dz = -1; dz <= 1; dz += 2)
+          touched.insert(key(index(q.x, dx * radius_m), index(q.y, dy * radius_m), index(q.z, dz * radius_m)));
+  const std::size_t chunk = 8192;
+  detail::ParallelFor((map.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
+    const std::size_t b = c * chunk, e = std::min(map.size(), b + chunk);
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    for (std::size_t i = b; i < e; ++i) {
+      const PointXYZI& p = map.points[i];
+      if (dynamic[i] || !touched.count(key(index(p.x, 0.0), index(p.y, 0.0), index(p.z, 0.0)))) continue;
+      if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= r2) grow[i] = 1;
+    }
+  });
+  return grow;
+}
+
+}  // namespace
+
 HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
                          const RemovertConfig& user_cfg, int threads) {
   user_cfg.Validate();
@@ -142,45 +204,18 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
       ++st.removed;
     }
   }
-  // Dilation: the map points next to a removed point (a wheel's or a foot's contact with the
-  // ground shares its voxels with the ground) go too. Decided against the removed set before
-  // dilation, so it grows by one radius, not transitively.
-  const double dilate_m = cfg.DilateM();
-  if (dilate_m > 0.0 && st.removed > 0) {
+  // Dilation: the map points next to a removed point go too (a wheel's or a foot's contact with
+  // the ground shares its voxels with the ground): one map voxel around every removed point, and
+  // hd.dilate_voxels around the points of removed bodies (BodyPoints), not around removed patches
+  // of flat ground. Decided against the removed set before dilation: no transitive growth.
+  if (st.removed > 0 && cfg.dilate_voxels > 0.0) {
     const PointCloud removed = map.select(dynamic);
-    const geometry::KdTree tree(removed);
-    const float r2 = float(dilate_m * dilate_m);
-    // Cells touched by some removed point's dilation ball: most map points are far from every
-    // removed point and skip the kd-tree after one hash lookup. Any cell edge >= 2 radii works
-    // (a ball then touches at most 2 cells per axis, found from its bounding box's corners);
-    // keys keep 21 bits per axis, so cells 2^21 apart share a key: a wasted kd-tree query, never
-    // a wrong answer (the kd-tree decides).
-    constexpr double kCellRadii = 4.0;
-    const double cell = kCellRadii * dilate_m;
-    auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
-      constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
-      return (x & kMask) | ((y & kMask) << 21) | ((z & kMask) << 42);
-    };
-    auto index = [&](float v, double off) { return std::int64_t(std::floor((double(v) + off) / cell)); };
-    std::unordered_set<std::int64_t> touched;
-    for (const PointXYZI& q : removed.points)
-      for (int dx = -1; dx <= 1; dx += 2)
-        for (int dy = -1; dy <= 1; dy += 2)
-          for (int dz = -1; dz <= 1; dz += 2)
-            touched.insert(key(index(q.x, dx * dilate_m), index(q.y, dy * dilate_m),
-                               index(q.z, dz * dilate_m)));
-    std::vector<std::uint8_t> grow(map.size(), 0);
-    const std::size_t chunk = 8192;
-    detail::ParallelFor((map.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
-      const std::size_t b = c * chunk, e = std::min(map.size(), b + chunk);
-      std::uint32_t j = 0;
-      float d2 = 0.f;
-      for (std::size_t i = b; i < e; ++i) {
-        const PointXYZI& p = map.points[i];
-        if (dynamic[i] || !touched.count(key(index(p.x, 0.0), index(p.y, 0.0), index(p.z, 0.0)))) continue;
-        if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= r2) grow[i] = 1;
-      }
-    });
+    std::vector<std::uint8_t> grow = GrowMask(map, dynamic, removed, std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m, threads);
+    if (cfg.dilate_voxels > 1.0) {
+      const std::vector<std::uint8_t> body =
+          GrowMask(map, dynamic, BodyPoints(removed, cfg.dilate_body_m, threads), cfg.DilateM(), threads);
+      for (std::size_t i = 0; i < grow.size(); ++i) grow[i] |= body[i];
+    }
     for (std::size_t i = 0; i < map.size(); ++i)
       if (grow[i]) {
         dynamic[i] = true;

@@ -91,12 +91,15 @@ struct RemovertConfig {
   double revert_surface_max_m = 10.0;  // [m] revert hits include hits on the candidate's surface plane
                                        // (VisibilityOptions; normals over ld.normal_radius_m) up to this
                                        // far in range: grazing ground; 0 = plain range hits
-  double dilate_voxels = 1.5;     // [map voxels] map points within this many map_voxel_m of a removed HD point
-                                  // are removed too: where a mover touched the ground (wheels, feet) its trace
-                                  // and the ground share voxels and cannot be told apart; 1.5 = the centroids
-                                  // of the neighbouring voxels (one voxel apart, each up to half a voxel off
-                                  // its centre); 0 = off
+  double dilate_voxels = 1.5;     // [map voxels] map points within one map voxel of a removed HD point, and
+                                  // within this many voxels of a removed body's point (dilate_body_m), are removed
+                                  // too: where a mover touched the ground (wheels, feet) its trace and the ground
+                                  // share voxels and cannot be told apart; 1.5 = the centroids of the neighbouring
+                                  // voxels (one voxel apart, each up to half a voxel off its centre); 0 = off
   double DilateM() const { return dilate_voxels * map_voxel_m; }  // [m]
+  double dilate_body_m = 0.5;     // [m] a removed body's points: removed points with removed points within this
+                                  // distance and at least half of it above or below them (a car's flank, a
+                                  // pedestrian's legs), not removed patches of flat ground
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
   double ld_radius_rel = 0.01;    // [-] ... plus this times the larger of the point's distances to either session's
@@ -157,6 +160,7 @@ struct RemovertConfig {
     v("hd.revert_hit_ratio", revert_hit_ratio, "", 0.0, 1000.0);
     v("hd.revert_surface_max_m", revert_surface_max_m, "m", 0.0, 100.0);
     v("hd.dilate_voxels", dilate_voxels, "map voxels", 0.0, 10.0);
+    v("hd.dilate_body_m", dilate_body_m, "m", 0.01, 10.0);
     v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
     v("ld.radius_rel", ld_radius_rel, "", 0.0, 1.0);
     v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);

@@ -264,6 +264,7 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
     Level L;
     L.grid = Grid::Make(cfg, res, res);
     L.window_rows = WindowRows(cfg, L.grid.rows, res);
+    L.scatter_rows = cfg.SensorResolved() ? int(std::lround(cfg.sensor_model.spread_deg / res)) : 0;
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
     L.pooled = L.range;
     L.tmp = L.range;
@@ -418,33 +419,46 @@ void MultiResImage::Pool(Level& L) const {
     for (int d = 1; d <= w; ++d)
       for (int c = lo; c < hi; ++c) dst[c] = std::min(dst[c], std::min(src[c - d], src[c + d]));
   }
-  // Vertical: the pixel's own row and the nearest row with a return above and below it in the
-  // same column (within window_rows): the beams on both sides of any direction inside the row,
-  // and no farther beams, whose returns (the ground in front of a low mover) would hide it.
-  std::copy(L.tmp.begin(), L.tmp.end(), L.pooled.begin());
+  // Vertical: every row within the beams' own scatter (L.scatter_rows: the estimated spread of a
+  // beam's returns about its elevation, 0 for an ideal sensor), then the nearest row with a
+  // return beyond that above and below, within L.window_rows: the beams on both sides of any
+  // direction inside the row, and no farther beams, whose returns (the ground in front of a low
+  // mover) would hide it.
+  const int ws = L.scatter_rows;
   const float inf = std::numeric_limits<float>::infinity();
-  std::vector<float> last(std::size_t(cols), inf);
-  std::vector<int> last_row(std::size_t(cols), -1);
-  auto sweep = [&](int r0, int r1, int step) {  // rows r0 -> r1 (inclusive); last = nearest finite before
+  for (int r = 0; r < rows; ++r) {
+    float* dst = &L.pooled[std::size_t(r) * cols];
+    std::copy(&L.tmp[std::size_t(r) * cols], &L.tmp[std::size_t(r) * cols] + cols, dst);
+    for (int rr = std::max(0, r - ws); rr <= std::min(rows - 1, r + ws); ++rr) {
+      const float* src = &L.tmp[std::size_t(rr) * cols];
+      for (int c = 0; c < cols; ++c) dst[c] = std::min(dst[c], src[c]);
+    }
+  }
+  // Nearest return at or beyond each row, per column, swept from the top (above) and the bottom
+  // (below); row r takes the one found at r - ws - 1 (above) and r + ws + 1 (below).
+  std::vector<float> last(static_cast<std::size_t>(cols));
+  std::vector<int> last_row(static_cast<std::size_t>(cols));
+  auto sweep = [&](int step) {
     std::fill(last.begin(), last.end(), inf);
     std::fill(last_row.begin(), last_row.end(), -1);
-    for (int r = r0;; r += step) {
+    const int first = step > 0 ? 0 : rows - 1;
+    for (int k = 0; k < rows; ++k) {
+      const int r = first + step * k;     // the row to pool
+      const int q = r - step * (ws + 1);  // the row whose nearest return it takes
+      if (q >= 0 && q < rows) {
+        const float* src = &L.tmp[std::size_t(q) * cols];
+        for (int c = 0; c < cols; ++c)
+          if (src[c] < inf) last[std::size_t(c)] = src[c], last_row[std::size_t(c)] = q;
+      }
       const int wr = L.window_rows[std::size_t(r)];
       float* dst = &L.pooled[std::size_t(r) * cols];
-      const float* src = &L.tmp[std::size_t(r) * cols];
-      for (int c = 0; c < cols; ++c) {
+      for (int c = 0; c < cols; ++c)
         if (last_row[std::size_t(c)] >= 0 && std::abs(r - last_row[std::size_t(c)]) <= wr)
           dst[c] = std::min(dst[c], last[std::size_t(c)]);
-        if (src[c] < inf) {
-          last[std::size_t(c)] = src[c];
-          last_row[std::size_t(c)] = r;
-        }
-      }
-      if (r == r1) break;
     }
   };
-  sweep(0, rows - 1, 1);   // nearest return above (smaller rows)
-  sweep(rows - 1, 0, -1);  // nearest return below
+  sweep(1);   // nearest return above (smaller rows)
+  sweep(-1);  // nearest return below
 }
 
 // The beam test's cells for the sensor: columns at least one azimuth step wide (else a column
