@@ -67,7 +67,8 @@ TEST(SlamAlign, SessionsWithoutOverlapAreNotAligned) {
       test::SynthSession(w1, "c", Pose::Identity(), -20, 20, 5.0, 0.0, 1),
       test::SynthSession(w2, "q", test::MakePose(10, 20, 0, 1.0), -20, 20, 5.0, 0.0, 2)};
   SlamConfig cfg = FastConfig();
-  cfg.sc_dist_threshold = 0.6;  // invite candidates: verification has to reject them
+  cfg.sc_per_query = 5;  // invite candidates: verification has to reject them
+  cfg.sc_close_ratio = 1.0;
   const SlamResult r = AlignSessions(s, cfg, 2);
   EXPECT_TRUE(r.sessions[0].aligned);
   EXPECT_FALSE(r.sessions[1].aligned);

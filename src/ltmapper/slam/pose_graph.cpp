@@ -315,6 +315,28 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
         reason[s] = os.str();
         continue;
       }
+      // Ambiguity (repetitive places): the largest group of loops that disagrees with the chosen
+      // anchor is a rival placement. The chosen one must lead it by graph.min_loops loops, the
+      // evidence asked of any placement at all; otherwise wait for more loops (retry).
+      std::vector<bool> agrees(cand.size(), false);
+      for (std::size_t j : best_inliers) agrees[j] = true;
+      std::size_t rival = 0;
+      for (std::size_t i = 0; i < cand.size(); ++i) {
+        if (agrees[i] || consistent(cand[best], cand[i])) continue;
+        std::size_t support = 0;
+        for (std::size_t j = 0; j < cand.size(); ++j) {
+          support += (!agrees[j] && consistent(cand[i], cand[j])) ? 1 : 0;
+        }
+        rival = std::max(rival, support);
+      }
+      if (int(best_inliers.size()) < int(rival) + cfg.min_loops) {
+        std::ostringstream os;
+        os << "ambiguous: " << best_inliers.size() << " consistent verified loop(s) against a rival "
+           << "placement with " << rival << " (need a lead of graph.min_loops = " << cfg.min_loops
+           << ")";
+        reason[s] = os.str();
+        continue;
+      }
       g.aligned[s] = true;
       g.anchors[s] = cand[best].A;
       std::vector<bool> in(cand.size(), false);
