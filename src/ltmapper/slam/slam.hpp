@@ -152,12 +152,13 @@ struct RegistrationResult {
   double inlier_rms_m = 1e9;  // RMS NN distance of the inliers
   double inlier_radius_m = 0, rms_bound_m = 0;  // the derived gates (InlierRadius, InlierRmsBound)
   bool converged = false;
-  bool accepted = false;  // converged and fitness / overlap / correction within the thresholds
+  bool accepted = false;  // converged, inlier ratio / inlier RMS / correction within the gates
   std::string reason;     // why not accepted
 };
 // GICP of `source` onto `target` (both already downsampled to reg_voxel_m), from
 // `T_target_source_init`: a coarse stage on reg_coarse_voxel_m clouds with a wide correspondence
-// distance (the initial translation may be metres off), then the fine stage.
+// distance (the initial translation may be metres off), then the fine stage. Accepted when the
+// inlier ratio (radius InlierRadius) >= reg_min_overlap and the inlier RMS <= InlierRmsBound.
 // Verification gates derived from the voxel v and the range noise sigma (see registration.cpp).
 double InlierRadius(double voxel_m, double range_noise_m);
 double InlierRmsBound(double voxel_m, double range_noise_m);
