@@ -50,12 +50,11 @@ double InlierRadius(double voxel_m, double range_noise_m) {
 
 double InlierRmsBound(double voxel_m, double range_noise_m) {
   // A correctly placed source centroid lies, at worst, anywhere in the voxel of the target
-  // centroid it matches: a uniform offset on each of the three axes (variance v^2 / 12 each),
-  // an RMS of v / 2, which is 1 / sqrt(3) of the half diagonal. The same ratio of the inlier
-  // radius carries the range noise with it. (On a plane the offset has two axes only, v / sqrt(6):
-  // true loops measure between the two.)
-  return InlierRadius(voxel_m, range_noise_m) * std::sqrt(kAxes * kUniformVariance) /
-         kHalfVoxelDiagonal;
+  // centroid it matches: a uniform offset on each of the three axes (variance v^2 / 12 each, an
+  // RMS of v / 2); the range noise of both clouds adds 2 sigma^2. (On a plane the offset has two
+  // axes only, v / sqrt(6): true loops measure between the two.)
+  return std::sqrt(kAxes * kUniformVariance * voxel_m * voxel_m +
+                   2.0 * range_noise_m * range_noise_m);
 }
 
 namespace {
