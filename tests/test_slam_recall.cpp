@@ -87,8 +87,8 @@ TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
   int false_loops = 0;
   for (const LoopRecord& l : r.loops) {
     if (!l.accepted) continue;
-    const Pose truth =
-        s.T_world_sensor(l.a.session)[l.a.keyframe].inverse() * s.T_world_sensor(l.b.session)[l.b.keyframe];
+    const Pose truth = s.T_world_sensor(l.a.session)[l.a.keyframe].inverse() *
+                       s.T_world_sensor(l.b.session)[l.b.keyframe];
     const Pose err = truth.inverse() * l.T_a_b;
     false_loops += err.translation().norm() > kFalseLoopM ||
                    Eigen::AngleAxisd(err.linear()).angle() / kDeg > kFalseLoopDeg;

@@ -340,9 +340,9 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
       const std::size_t rival = RivalSupport(cand, best, best_inliers, consistent);
       if (int(best_inliers.size()) < int(rival) + cfg.min_loops) {
         std::ostringstream os;
-        os << "ambiguous: " << best_inliers.size() << " consistent verified loop(s) against a rival "
-           << "placement with " << rival << " (need a lead of graph.min_loops = " << cfg.min_loops
-           << ")";
+        os << "ambiguous: " << best_inliers.size()
+           << " consistent verified loop(s) against a rival placement with " << rival
+           << " (need a lead of graph.min_loops = " << cfg.min_loops << ")";
         reason[s] = os.str();
         continue;
       }

@@ -117,8 +117,8 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
 
   // ---- loops table
   io::WriteFileAtomic((fs::path(out_dir) / "loops.csv").string(), [&](std::ostream& os) {
-    os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,inlier_ratio,inlier_rms_m,accepted,residual_t_m,residual_r_deg,"
-          "tx,ty,tz,qx,qy,qz,qw,status\n";
+    os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,inlier_ratio,inlier_rms_m,accepted,"
+          "residual_t_m,residual_r_deg,tx,ty,tz,qx,qy,qz,qw,status\n";
     os << std::setprecision(6);
     for (const LoopRecord& l : res.loops) {
       const Session& A = sessions[l.a.session];
