@@ -67,7 +67,8 @@ TEST(SlamAlign, SessionsWithoutOverlapAreNotAligned) {
       test::SynthSession(w1, "c", Pose::Identity(), -20, 20, 5.0, 0.0, 1),
       test::SynthSession(w2, "q", test::MakePose(10, 20, 0, 1.0), -20, 20, 5.0, 0.0, 2)};
   SlamConfig cfg = FastConfig();
-  cfg.sc_dist_threshold = 0.6;  // invite candidates: verification has to reject them
+  cfg.sc_per_query = 5;  // invite candidates: verification has to reject them
+  cfg.sc_close_ratio = 1.0;
   const SlamResult r = AlignSessions(s, cfg, 2);
   EXPECT_TRUE(r.sessions[0].aligned);
   EXPECT_FALSE(r.sessions[1].aligned);
@@ -143,4 +144,38 @@ TEST(SlamAlign, CliValidatesArguments) {
                              "/config/params_ltslam.yaml --sessions /nonexistent_a /nonexistent_b --out " +
                              (tmp / "o"), &out), 0);
   EXPECT_EQ(out.find("params_ltslam.yaml"), std::string::npos) << out;
+}
+
+TEST(SlamAlign, RetryAlignsAChainOnATinyBudget) {
+  // c and q2 never see the same place (100 m apart, 40 m scans); q1 drives across both. With one
+  // Scan Context registration per pair and round, q1 aligns only through retry rounds, and q2
+  // then through q1 (a chain), its retries offered against every aligned session.
+  constexpr double kHalf = 110.0;  // world half size [m]
+  constexpr int kBoxes = 130;
+  const PointCloud world = test::SynthWorld(43, kHalf, kBoxes);
+  const Pose A1 = test::MakePose(-40, 35, 1.0, 100 * kDeg);
+  const Pose A2 = test::MakePose(55, -20, -1.0, -140 * kDeg);
+  std::vector<Pose> t2;
+  std::vector<Session> s = {
+      test::SynthSession(world, "c", Pose::Identity(), -100, -50, 4.0, 0.0, 1),
+      // No drift on q1: nothing corrects it between its two overlaps, 120 m apart.
+      test::SynthSession(world, "q1", A1, -70, 70, 4.0, 0.0, 2),
+      test::SynthSession(world, "q2", A2, 50, 100, 4.0, 0.0005, 3, &t2)};
+  SlamConfig cfg = FastConfig();
+  cfg.sc_max_loops_per_pair = 1;
+  cfg.sc_retry_rounds = 12;
+  const SlamResult r = AlignSessions(s, cfg, 2);
+  ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
+  ASSERT_TRUE(r.sessions[2].aligned) << r.sessions[2].reason;
+  EXPECT_LT(WorldRmse(r.sessions[2], t2), 0.1);
+  int chain = 0;
+  for (const auto& l : r.loops) {
+    if (!l.accepted) continue;
+    EXPECT_FALSE(l.a.session == 0 && l.b.session == 2) << "c and q2 never overlap";
+    chain += l.a.session == 1 && l.b.session == 2;
+  }
+  EXPECT_GE(chain, cfg.min_loops);
+  EXPECT_GT(r.registrations, 3) << "3 pairs x 1 in the first round: more means retries ran";
+  std::printf("chain c - q1 - q2: q2 world RMSE %.3f m, %d q1-q2 loops, %d GICP, %.2f s\n",
+              WorldRmse(r.sessions[2], t2), chain, r.registrations, r.time_total_s);
 }

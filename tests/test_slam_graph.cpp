@@ -340,6 +340,34 @@ TEST(SlamGraph, QueryAnchoredThroughAnotherQuery) {
   }
 }
 
+TEST(SlamGraph, RepetitivePlacesDoNotDecideByACoinToss) {
+  // Repetitive world: besides true loops, a group of loops agrees on a placement shifted by one
+  // "block" (all measurements offset alike). With the rival as strong as the truth the query is
+  // not aligned; once the truth leads by graph.min_loops loops it is aligned at the truth.
+  SlamConfig cfg;
+  const Pose A = test::MakePose(-30, 20, 0, -60 * kDeg);
+  TwoSessions t = MakeTwoSessions(A, 0, 12, cfg);
+  const Pose block = test::MakePose(25, 0, 0, 0);  // the period of the repetition
+  std::vector<LoopRecord> tied;
+  for (int i = 0; i < 4; ++i) tied.push_back(t.loops[i]);
+  for (int i = 4; i < 8; ++i) {
+    LoopRecord l = t.loops[i];
+    l.T_a_b = block * l.T_a_b;
+    tied.push_back(l);
+  }
+  SlamResult r = OptimizeSessions(t.sessions, tied, cfg, 1);
+  EXPECT_FALSE(r.sessions[1].aligned);
+  EXPECT_NE(r.sessions[1].reason.find("ambiguous"), std::string::npos) << r.sessions[1].reason;
+  std::vector<LoopRecord> lead = tied;
+  for (int i = 8; i < 8 + cfg.min_loops; ++i) lead.push_back(t.loops[i]);
+  r = OptimizeSessions(t.sessions, lead, cfg, 1);
+  ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
+  for (std::size_t i = 0; i < r.loops.size(); ++i) {
+    const bool rival = i >= 4 && i < 8;
+    EXPECT_EQ(r.loops[i].accepted, !rival) << i << ": " << r.loops[i].status;
+  }
+}
+
 TEST(SlamGraph, NoOverlapIsReportedNotAligned) {
   SlamConfig cfg;
   TwoSessions t = MakeTwoSessions(test::MakePose(10, 0, 0, 1), 0, 11, cfg);

@@ -115,6 +115,97 @@ void ParallelFor(tbb::task_arena& arena, std::size_t n, F&& f) {
   });
 }
 
+// Scan Context candidates of one query keyframe j of session b against session a: the best of
+// the ring-key neighbours and the others within (1 + sc_close_ratio) x its distance, at most
+// sc_per_query, best first.
+std::vector<LoopRecord> QueryCandidates(const std::vector<ScanContext>& sa, const RingTree& tree,
+                                        const ScanContext& query, int a, int b, int j,
+                                        const SlamConfig& cfg) {
+  const std::size_t k = std::min<std::size_t>(cfg.sc_candidates, sa.size());
+  std::vector<std::uint32_t> idx(k);
+  std::vector<float> d2(k);
+  const std::size_t got = tree.knnSearch(query.ring_key.data(), k, idx.data(), d2.data());
+  std::vector<LoopRecord> out;
+  for (std::size_t c = 0; c < got; ++c) {
+    const ScMatch m = CompareScanContexts(sa[idx[c]], query, cfg);
+    LoopRecord l;
+    l.a = {a, int(idx[c])};
+    l.b = {b, j};
+    l.source = "sc";
+    l.sc_distance = m.distance;
+    l.yaw_deg = m.yaw_rad * 180.0 / M_PI;
+    l.T_a_b = Pose(Eigen::AngleAxisd(m.yaw_rad, Eigen::Vector3d::UnitZ()));
+    out.push_back(l);
+  }
+  std::stable_sort(out.begin(), out.end(), [](const LoopRecord& x, const LoopRecord& y) {
+    return x.sc_distance < y.sc_distance;
+  });
+  std::size_t keep = 0;
+  while (keep < out.size() && int(keep) < cfg.sc_per_query &&
+         (keep == 0 || out[keep].sc_distance <= (1.0 + cfg.sc_close_ratio) * out[0].sc_distance)) {
+    ++keep;
+  }
+  out.resize(keep);
+  return out;
+}
+
+// Ranked Scan Context candidates of one session pair (a < b). The gate follows the pair's own
+// descriptor statistics: a candidate must be closer than the median of the pair's best distances
+// (one per query keyframe), i.e. stand out of what a typical query keyframe of b finds in a.
+// Batches of sc_max_loops_per_pair are handed out lowest distance first.
+struct PairCandidates {
+  int a = 0, b = 0;
+  double gate = 0.0;
+  std::vector<LoopRecord> ranked;
+  std::size_t next = 0;             // first candidate not handed out yet
+  std::vector<int> taken_queries;   // query keyframes of candidates handed out
+};
+
+PairCandidates RetrievePair(const std::vector<std::vector<ScanContext>>& sc, const RingTree& tree,
+                            int a, int b, const SlamConfig& cfg, tbb::task_arena& arena) {
+  std::vector<std::vector<LoopRecord>> per_query(sc[b].size());
+  ParallelFor(arena, sc[b].size(), [&](std::size_t j) {
+    per_query[j] = QueryCandidates(sc[a], tree, sc[b][j], a, b, int(j), cfg);
+  });
+  PairCandidates p;
+  p.a = a;
+  p.b = b;
+  std::vector<double> best;
+  for (const auto& q : per_query) {
+    if (!q.empty()) best.push_back(q.front().sc_distance);
+  }
+  if (best.empty()) return p;
+  std::nth_element(best.begin(), best.begin() + best.size() / 2, best.end());
+  p.gate = best[best.size() / 2];
+  for (const auto& q : per_query) {
+    for (const auto& l : q) {
+      if (l.sc_distance < p.gate) p.ranked.push_back(l);
+    }
+  }
+  std::stable_sort(p.ranked.begin(), p.ranked.end(), [](const LoopRecord& x, const LoopRecord& y) {
+    return x.sc_distance < y.sc_distance;
+  });
+  return p;
+}
+
+// The next batch of a pair: up to sc_max_loops_per_pair candidates, lowest distance first, whose
+// query keyframe is the same as, or at least sc_min_gap_keyframes away from, those taken before.
+std::vector<LoopRecord> NextBatch(PairCandidates& p, const SlamConfig& cfg) {
+  std::vector<LoopRecord> batch;
+  for (; p.next < p.ranked.size() && int(batch.size()) < cfg.sc_max_loops_per_pair; ++p.next) {
+    const LoopRecord& h = p.ranked[p.next];
+    bool close = false;
+    for (int q : p.taken_queries) {
+      const int gap = std::abs(q - h.b.keyframe);
+      close = close || (gap > 0 && gap < cfg.sc_min_gap_keyframes);
+    }
+    if (close) continue;
+    p.taken_queries.push_back(h.b.keyframe);
+    batch.push_back(h);
+  }
+  return batch;
+}
+
 void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg_in,
               tbb::task_arena& arena, const std::string& label, bool coarse) {
   SlamConfig cfg = cfg_in;
@@ -128,12 +219,50 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     const RegistrationResult r = RegisterGicp(target, source, l.T_a_b, cfg);
     l.T_a_b = r.T_target_source;
     l.fitness = r.fitness;
+    l.overlap = r.overlap;
+    l.inlier_rms_m = r.inlier_rms_m;
     l.verified = r.accepted;
     l.status = r.accepted ? "verified" : "rejected: " + r.reason;
     l.information = LoopInformation(r.fitness, cfg);
     progress.Tick();
   });
   progress.Done();
+}
+
+// Time and registrations spent by the stages after the first back-end pass.
+struct StageCost {
+  int registrations = 0;
+  double registration_s = 0.0, optimisation_s = 0.0;
+};
+
+// Retry: a query not aligned after the first pass gets the next-ranked Scan Context candidates
+// of every pair linking it to an already aligned session (the central or any aligned query, so
+// chains of sessions align), round after round until it aligns or the candidates run out.
+void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandidates>& pairs,
+                    std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
+                    const SlamConfig& cfg, tbb::task_arena& arena, int threads, StageCost& cost) {
+  for (int round = 0; round < cfg.sc_retry_rounds; ++round) {
+    std::vector<LoopRecord> cand;
+    for (PairCandidates& p : pairs) {
+      if (res.sessions[p.a].aligned == res.sessions[p.b].aligned) continue;
+      const std::vector<LoopRecord> batch = NextBatch(p, cfg);
+      cand.insert(cand.end(), batch.begin(), batch.end());
+    }
+    if (cand.empty()) return;
+    Stopwatch sw;
+    Register(cand, store, cfg, arena, "GICP retry, round " + std::to_string(round + 1), true);
+    cost.registrations += static_cast<int>(cand.size());
+    cost.registration_s += sw.Seconds();
+    std::size_t ok = 0;
+    for (const auto& l : cand) ok += l.verified ? 1 : 0;
+    spdlog::info("slam: retry round {}: {} scan context candidates for unaligned sessions, {} "
+                 "verified",
+                 round + 1, cand.size(), ok);
+    loops.insert(loops.end(), cand.begin(), cand.end());
+    sw = Stopwatch();
+    res = OptimizeSessions(sessions, loops, cfg, threads);
+    cost.optimisation_s += sw.Seconds();
+  }
 }
 
 }  // namespace
@@ -178,61 +307,20 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   // ---- retrieval: for every pair (a < b), each keyframe of b against the ring-key tree of a
   sw = Stopwatch();
   std::vector<LoopRecord> loops;
-  std::vector<std::vector<LoopRecord>> pair_candidates;
+  std::vector<PairCandidates> pairs;
   for (std::size_t a = 0; a + 1 < n; ++a) {
     RingKeys keys;
     for (const auto& d : sc[a]) keys.keys.push_back(d.ring_key);
     RingTree tree(static_cast<std::size_t>(cfg.sc_rings), keys,
                   nanoflann::KDTreeSingleIndexAdaptorParams(10));
     for (std::size_t b = a + 1; b < n; ++b) {
-      std::vector<LoopRecord> cand(sc[b].size());
-      std::vector<bool> found(sc[b].size(), false);
-      ParallelFor(arena, sc[b].size(), [&](std::size_t j) {
-        const std::size_t k = std::min<std::size_t>(cfg.sc_candidates, keys.keys.size());
-        std::vector<std::uint32_t> idx(k);
-        std::vector<float> d2(k);
-        const std::size_t got = tree.knnSearch(sc[b][j].ring_key.data(), k, idx.data(), d2.data());
-        ScMatch best;
-        int best_i = -1;
-        for (std::size_t c = 0; c < got; ++c) {
-          const ScMatch m = CompareScanContexts(sc[a][idx[c]], sc[b][j], cfg);
-          if (best_i < 0 || m.distance < best.distance) {
-            best = m;
-            best_i = static_cast<int>(idx[c]);
-          }
-        }
-        if (best_i >= 0 && best.distance < cfg.sc_dist_threshold) {
-          LoopRecord& l = cand[j];
-          l.a = {int(a), best_i};
-          l.b = {int(b), int(j)};
-          l.source = "sc";
-          l.sc_distance = best.distance;
-          l.yaw_deg = best.yaw_rad * 180.0 / M_PI;
-          l.T_a_b = Pose(Eigen::AngleAxisd(best.yaw_rad, Eigen::Vector3d::UnitZ()));
-          found[j] = true;
-        }
-      });
-      std::vector<LoopRecord> hits;
-      for (std::size_t j = 0; j < cand.size(); ++j) {
-        if (found[j]) hits.push_back(cand[j]);
-      }
-      // Best distances first, spread along the query trajectory, capped per pair.
-      std::stable_sort(hits.begin(), hits.end(), [](const LoopRecord& x, const LoopRecord& y) {
-        return x.sc_distance < y.sc_distance;
-      });
-      std::vector<LoopRecord> chosen;
-      for (const auto& h : hits) {
-        if (int(chosen.size()) >= cfg.sc_max_loops_per_pair) break;
-        bool close = false;
-        for (const auto& c : chosen) {
-          close = close || std::abs(c.b.keyframe - h.b.keyframe) < cfg.sc_min_gap_keyframes;
-        }
-        if (!close) chosen.push_back(h);
-      }
-      spdlog::info("slam: {} vs {}: {} scan context candidates below {:.2f}, {} selected",
-                   sessions[a].name, sessions[b].name, hits.size(), cfg.sc_dist_threshold,
-                   chosen.size());
-      loops.insert(loops.end(), chosen.begin(), chosen.end());
+      pairs.push_back(RetrievePair(sc, tree, int(a), int(b), cfg, arena));
+      const std::vector<LoopRecord> batch = NextBatch(pairs.back(), cfg);
+      spdlog::info("slam: {} vs {}: {} scan context candidates below the pair's median best "
+                   "distance {:.3f}, {} selected",
+                   sessions[a].name, sessions[b].name, pairs.back().ranked.size(),
+                   pairs.back().gate, batch.size());
+      loops.insert(loops.end(), batch.begin(), batch.end());
     }
   }
   const double t_retr = sw.Seconds();
@@ -247,6 +335,11 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   sw = Stopwatch();
   SlamResult res = OptimizeSessions(sessions, loops, cfg, threads);
   double t_opt = sw.Seconds();
+  StageCost retry;
+  RetryUnaligned(sessions, pairs, loops, res, store, cfg, arena, threads, retry);
+  registrations += retry.registrations;
+  t_reg += retry.registration_s;
+  t_opt += retry.optimisation_s;
 
   // ---- radius-search refinement: query keyframes without a loop look for keyframes of the
   // other session near them in the world frame, verified by GICP from the current estimate.

@@ -184,6 +184,25 @@ void LoopResidual(const Graph& g, LoopRecord& l) {
   l.residual_r_deg = AngleDeg(E.linear());
 }
 
+// Support of the strongest rival placement: among the candidates that disagree with the chosen
+// one (`best`, supported by `inliers`), the most that agree with one of them.
+template <class C, class F>
+std::size_t RivalSupport(const std::vector<C>& cand, std::size_t best,
+                         const std::vector<std::size_t>& inliers, const F& consistent) {
+  std::vector<bool> agrees(cand.size(), false);
+  for (std::size_t j : inliers) agrees[j] = true;
+  std::size_t rival = 0;
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    if (agrees[i] || consistent(cand[best], cand[i])) continue;
+    std::size_t support = 0;
+    for (std::size_t j = 0; j < cand.size(); ++j) {
+      support += (!agrees[j] && consistent(cand[i], cand[j])) ? 1 : 0;
+    }
+    rival = std::max(rival, support);
+  }
+  return rival;
+}
+
 }  // namespace
 
 void ValidateSessionGraphs(const std::vector<Session>& sessions) {
@@ -312,6 +331,18 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
         std::ostringstream os;
         os << "only " << best_inliers.size() << " mutually consistent verified loop(s) of "
            << cand.size() << " (need graph.min_loops = " << cfg.min_loops << ")";
+        reason[s] = os.str();
+        continue;
+      }
+      // Ambiguity (repetitive places): the largest group of loops that disagrees with the chosen
+      // anchor is a rival placement. The chosen one must lead it by graph.min_loops loops, the
+      // evidence asked of any placement at all; otherwise wait for more loops (retry).
+      const std::size_t rival = RivalSupport(cand, best, best_inliers, consistent);
+      if (int(best_inliers.size()) < int(rival) + cfg.min_loops) {
+        std::ostringstream os;
+        os << "ambiguous: " << best_inliers.size()
+           << " consistent verified loop(s) against a rival placement with " << rival
+           << " (need a lead of graph.min_loops = " << cfg.min_loops << ")";
         reason[s] = os.str();
         continue;
       }

@@ -26,10 +26,14 @@ struct SlamConfig {
   double sc_lidar_height_m = 2.0;     // bin value = max(z + height): height above the ground
   int sc_candidates = 10;             // top-k ring-key neighbours compared per query keyframe
   double sc_search_ratio = 0.1;       // fine shift search window, fraction of the sectors
-  double sc_dist_threshold = 0.4;     // candidate when 1 - mean cosine < this (GICP verifies)
+  // No fixed distance threshold: per session pair, a candidate must beat the median of that
+  // pair's best distances (one per query keyframe), and the pair's budget goes to the lowest.
+  int sc_per_query = 3;               // candidates kept per query keyframe: the best and ...
+  double sc_close_ratio = 0.1;        // ... others within (1 + this) x the best distance
   bool sc_read_files = true;          // use <session>/SCDs/NNNNNN.scd when present
-  int sc_max_loops_per_pair = 30;     // registrations per session pair from Scan Context
-  int sc_min_gap_keyframes = 1;       // min query-keyframe gap between selected SC candidates
+  int sc_max_loops_per_pair = 30;     // registrations per session pair and round, lowest first
+  int sc_min_gap_keyframes = 1;       // min gap between the query keyframes of selected candidates
+  int sc_retry_rounds = 3;            // unaligned sessions: rounds of the next-ranked candidates
 
   // --- registration (PCL GICP between keyframe submaps)
   double reg_min_range_m = 1.0;       // scan points closer than this are dropped (the vehicle)
@@ -41,9 +45,10 @@ struct SlamConfig {
   double reg_max_correspondence_m = 1.0;  // fine GICP correspondence distance
   int reg_max_iterations = 30;        // GICP outer iterations
   int reg_covariance_neighbours = 20; // k for GICP point covariances
-  double reg_fitness_range_m = 1.0;   // fitness = mean squared NN distance of points within this
-  double reg_fitness_threshold = 0.1; // accept when fitness < this [m^2]
-  double reg_min_overlap = 0.3;       // and this fraction of source points has a NN within range
+  // Verification (see RegisterGicp): inlier radius and RMS bound derive from the voxel and the
+  // sensor's range noise; inlier ratio >= min_overlap and inlier RMS <= bound accept a loop.
+  double reg_range_noise_m = 0.02;    // std-dev of the sensor's range noise
+  double reg_min_overlap = 0.3;       // min inlier ratio (source points with a NN within radius)
   double reg_max_correction_deg = 45.0;  // reject when GICP rotates this far from the initial guess
   double reg_max_translation_m = 15.0;   // reject when GICP moves this far from the initial guess
   double loop_sigma_t_m = 0.1;        // loop std-dev at fitness <= reg_fitness_floor
@@ -79,10 +84,12 @@ struct SlamConfig {
     v("sc.lidar_height_m", sc_lidar_height_m, "m", -10.0, 10.0);
     v("sc.candidates", sc_candidates, "keyframes", 1, 1000);
     v("sc.search_ratio", sc_search_ratio, "fraction", 0.0, 1.0);
-    v("sc.dist_threshold", sc_dist_threshold, "1-cos", 0.0, 1.0);
+    v("sc.per_query", sc_per_query, "candidates", 1, 1000);
+    v("sc.close_ratio", sc_close_ratio, "fraction", 0.0, 10.0);
     v("sc.read_files", sc_read_files);
     v("sc.max_loops_per_pair", sc_max_loops_per_pair, "loops", 0, 1000000);
     v("sc.min_gap_keyframes", sc_min_gap_keyframes, "keyframes", 0, 1000000);
+    v("sc.retry_rounds", sc_retry_rounds, "rounds", 0, 100);
     v("registration.min_range_m", reg_min_range_m, "m", 0.0, 100.0);
     v("registration.max_range_m", reg_max_range_m, "m", 1.0, 1000.0);
     v("registration.voxel_m", reg_voxel_m, "m", 0.01, 10.0);
@@ -92,8 +99,7 @@ struct SlamConfig {
     v("registration.max_correspondence_m", reg_max_correspondence_m, "m", 0.01, 100.0);
     v("registration.max_iterations", reg_max_iterations, "iterations", 1, 1000);
     v("registration.covariance_neighbours", reg_covariance_neighbours, "points", 5, 100);
-    v("registration.fitness_range_m", reg_fitness_range_m, "m", 0.01, 100.0);
-    v("registration.fitness_threshold", reg_fitness_threshold, "m^2", 0.0, 100.0);
+    v("registration.range_noise_m", reg_range_noise_m, "m", 0.0, 10.0);
     v("registration.min_overlap", reg_min_overlap, "fraction", 0.0, 1.0);
     v("registration.max_correction_deg", reg_max_correction_deg, "deg", 0.0, 180.0);
     v("registration.max_translation_m", reg_max_translation_m, "m", 0.0, 1000.0);
@@ -141,15 +147,21 @@ ScMatch CompareScanContexts(const ScanContext& a, const ScanContext& b, const Sl
 // ------------------------------------------------------------------------------ registration
 struct RegistrationResult {
   Pose T_target_source = Pose::Identity();
-  double fitness = 1e9;   // mean squared NN distance [m^2] of source points within fitness range
-  double overlap = 0.0;   // fraction of source points with a target NN within fitness range
+  double fitness = 1e9;   // mean squared NN distance [m^2] of the inliers (= inlier_rms^2)
+  double overlap = 0.0;   // inlier ratio: source points with a target NN within the inlier radius
+  double inlier_rms_m = 1e9;  // RMS NN distance of the inliers
+  double inlier_radius_m = 0, rms_bound_m = 0;  // the derived gates (InlierRadius, InlierRmsBound)
   bool converged = false;
-  bool accepted = false;  // converged and fitness / overlap / correction within the thresholds
+  bool accepted = false;  // converged, inlier ratio / inlier RMS / correction within the gates
   std::string reason;     // why not accepted
 };
 // GICP of `source` onto `target` (both already downsampled to reg_voxel_m), from
 // `T_target_source_init`: a coarse stage on reg_coarse_voxel_m clouds with a wide correspondence
-// distance (the initial translation may be metres off), then the fine stage.
+// distance (the initial translation may be metres off), then the fine stage. Accepted when the
+// inlier ratio (radius InlierRadius) >= reg_min_overlap and the inlier RMS <= InlierRmsBound.
+// Verification gates derived from the voxel v and the range noise sigma (see registration.cpp).
+double InlierRadius(double voxel_m, double range_noise_m);
+double InlierRmsBound(double voxel_m, double range_noise_m);
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
                                 const Pose& T_target_source_init, const SlamConfig& cfg);
 
@@ -161,6 +173,8 @@ struct LoopRecord {
   double yaw_deg = 0.0;           // Scan Context yaw (initial guess)
   Pose T_a_b = Pose::Identity();  // measurement z: p_a = T_a_b * p_b
   double fitness = -1.0;          // GICP fitness [m^2], -1 when not registered
+  double overlap = -1.0;          // inlier ratio, -1 when not registered
+  double inlier_rms_m = -1.0;     // RMS NN distance of the inliers, -1 when not registered
   bool verified = false;          // passed registration
   bool accepted = false;          // used in the final graph
   std::string status;             // accepted / why rejected

@@ -117,15 +117,16 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
 
   // ---- loops table
   io::WriteFileAtomic((fs::path(out_dir) / "loops.csv").string(), [&](std::ostream& os) {
-    os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,accepted,residual_t_m,residual_r_deg,"
-          "tx,ty,tz,qx,qy,qz,qw,status\n";
+    os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,inlier_ratio,inlier_rms_m,accepted,"
+          "residual_t_m,residual_r_deg,tx,ty,tz,qx,qy,qz,qw,status\n";
     os << std::setprecision(6);
     for (const LoopRecord& l : res.loops) {
       const Session& A = sessions[l.a.session];
       const Session& B = sessions[l.b.session];
       os << A.name << "-" << B.name << "," << A.keyframes[l.a.keyframe].index << ","
          << B.keyframes[l.b.keyframe].index << "," << l.source << "," << l.sc_distance << ","
-         << l.yaw_deg << "," << l.fitness << "," << (l.accepted ? 1 : 0) << "," << l.residual_t_m
+         << l.yaw_deg << "," << l.fitness << "," << l.overlap << "," << l.inlier_rms_m << ","
+         << (l.accepted ? 1 : 0) << "," << l.residual_t_m
          << "," << l.residual_r_deg << ",";
       const Eigen::Quaterniond q(l.T_a_b.linear());
       const Eigen::Vector3d t = l.T_a_b.translation();

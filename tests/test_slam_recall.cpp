@@ -1,0 +1,103 @@
+// LT-SLAM recall on the simulator (issue 15): two sessions of 120 keyframes of the default
+// scenario, which the fixed Scan Context threshold (0.4) and the fixed fitness gate (0.1 m^2)
+// left unaligned, must align with an inter-session consistency under 0.1 m against the truth;
+// no accepted loop may be false.
+#include "ltmapper/sim/sim.hpp"
+#include "ltmapper/slam/slam.hpp"
+#include "test_util.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+using namespace ltm;
+using namespace ltm::slam;
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+constexpr int kKeyframes = 120;          // the issue's failing case: 2 sessions x 120 keyframes
+constexpr double kNearCentralM = 5.0;    // query keyframes this close to the central path count
+constexpr double kConsistencyM = 0.1;    // acceptance: inter-session consistency RMSE
+// A loop farther than this from the truth is false (as bench/slam_check_loops.py counts).
+constexpr double kFalseLoopM = 1.0;
+constexpr double kFalseLoopDeg = 3.0;
+
+// Sessions in memory from the simulator: drifted odometry poses, scans cast on demand here.
+std::vector<Session> SimSessions(sim::Simulator& s) {
+  std::vector<Session> out;
+  for (int i = 0; i < s.sessions(); ++i) {
+    Session ses;
+    ses.name = "session_" + std::to_string(i);
+    const std::vector<Pose>& odo = s.T_session_sensor_drifted(i);
+    for (int k = 0; k < s.keyframes(i); ++k) {
+      Keyframe kf;
+      kf.index = k;
+      kf.T_session_sensor = odo[k];
+      kf.cloud = std::make_shared<PointCloud>(s.CastScan(i, k));
+      ses.keyframes.push_back(kf);
+      if (k > 0) {
+        Edge e;
+        e.from = k - 1;
+        e.to = k;
+        e.T_from_to = odo[k - 1].inverse() * odo[k];
+        ses.odometry.push_back(e);
+      }
+    }
+    out.push_back(std::move(ses));
+  }
+  return out;
+}
+
+// Relative pose error between each query keyframe and its nearest central keyframe (true
+// positions within kNearCentralM), estimated vs true: RMSE of the translation part.
+double ConsistencyRmse(const SlamResult& r, sim::Simulator& s, int* pairs) {
+  const auto& T0 = s.T_world_sensor(0);
+  const auto& T1 = s.T_world_sensor(1);
+  double sum = 0.0;
+  *pairs = 0;
+  for (std::size_t j = 0; j < T1.size(); ++j) {
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t bi = 0;
+    for (std::size_t i = 0; i < T0.size(); ++i) {
+      const double d = (T0[i].translation() - T1[j].translation()).norm();
+      if (d < best) best = d, bi = i;
+    }
+    if (best > kNearCentralM) continue;
+    const Pose truth = T0[bi].inverse() * T1[j];
+    const Pose est = r.sessions[0].T_world_sensor[bi].inverse() * r.sessions[1].T_world_sensor[j];
+    sum += (truth.inverse() * est).translation().squaredNorm();
+    ++*pairs;
+  }
+  return *pairs > 0 ? std::sqrt(sum / *pairs) : std::numeric_limits<double>::infinity();
+}
+}  // namespace
+
+TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
+  sim::SimConfig sc;
+  sc.sessions = 2;
+  sc.keyframes = kKeyframes;
+  sim::Simulator s(sc, 2);
+  const std::vector<Session> sessions = SimSessions(s);
+  SlamConfig cfg;
+  cfg.refine_rounds = 1;  // one radius round spreads the loops along the overlap (run time)
+  const SlamResult r = AlignSessions(sessions, cfg, 2);
+  ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
+  int pairs = 0;
+  const double rmse = ConsistencyRmse(r, s, &pairs);
+  int false_loops = 0;
+  for (const LoopRecord& l : r.loops) {
+    if (!l.accepted) continue;
+    const Pose truth = s.T_world_sensor(l.a.session)[l.a.keyframe].inverse() *
+                       s.T_world_sensor(l.b.session)[l.b.keyframe];
+    const Pose err = truth.inverse() * l.T_a_b;
+    false_loops += err.translation().norm() > kFalseLoopM ||
+                   Eigen::AngleAxisd(err.linear()).angle() / kDeg > kFalseLoopDeg;
+  }
+  std::printf("sim 2 x %d: %d loops accepted (%d false), consistency RMSE %.3f m over %d keyframe "
+              "pairs, %d GICP, %.2f s\n",
+              kKeyframes, r.sessions[1].loops_accepted, false_loops, rmse, pairs, r.registrations,
+              r.time_total_s);
+  EXPECT_GT(pairs, 0);
+  EXPECT_LT(rmse, kConsistencyM);
+  EXPECT_EQ(false_loops, 0);
+}
