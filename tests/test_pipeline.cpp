@@ -121,6 +121,9 @@ class Rerun : public ::testing::Test {
                     "hd: {cars: 2, pedestrians: 2}\n");
     test::WriteText(*root_ / "slam.yaml", "refine: {rounds: 0}\nsc: {max_loops_per_pair: 6}\n");
     test::WriteText(*root_ / "removert.yaml", "map_voxel_m: 0.3\n");
+    // Fewer new-territory keyframes than the defaults: a rerun with it used to read the earlier
+    // run's extra new_keyframes/ folders ("no 'new' row for keyframe ...").
+    test::WriteText(*root_ / "removert_far.yaml", "map_voxel_m: 0.3\nout: {new_keyframe_dist_m: 40.0}\n");
     std::string out;
     ASSERT_EQ(test::RunCli("sim --quiet --config " + *root_ / "sim.yaml" + " --out " + *root_ / "sim", &out), 0)
         << out;
@@ -131,9 +134,10 @@ class Rerun : public ::testing::Test {
   static std::string Session(const std::string& name) { return *root_ / ("sim/sessions/" + name); }
 
   // `ltmapper run` on sim sessions (names under sim/sessions/, or paths) into `out`; returns the output.
-  static std::string Run(const std::vector<std::string>& sessions, const std::string& out) {
+  static std::string Run(const std::vector<std::string>& sessions, const std::string& out,
+                         const std::string& removert = "removert.yaml") {
     std::string args = "run --quiet --threads 2 --slam-config " + *root_ / "slam.yaml" + " --removert-config " +
-                       *root_ / "removert.yaml" + " --out " + out + " --sessions";
+                       *root_ / removert + " --out " + out + " --sessions";
     for (const auto& s : sessions) args += " " + (s.find('/') == std::string::npos ? Session(s) : s);
     std::string log;
     EXPECT_EQ(test::RunCli(args, &log), 0) << args << "\n" << log;
@@ -175,7 +179,7 @@ std::string Rerun::fresh3_;
 
 // Issue #16: `run s00 s01` then `run s00 s01 s02` into the same OUT failed in LT-map on the
 // first run's new_keyframes/ folders. Now every stage replaces its folder whole: more, fewer or
-// other sessions into a used OUT give the files of a fresh OUT, byte for byte.
+// other sessions or other parameters into a used OUT give the files of a fresh OUT, byte for byte.
 // And with names whose alphabetical order differs from the command line, LT-map took the order
 // from a listing of aligned/ and swapped the pairs' changes: the run manifest keeps the
 // command-line order, so `base z_drive a_drive` gives the maps and changes of the same sessions
@@ -183,13 +187,19 @@ std::string Rerun::fresh3_;
 TEST_F(Rerun, SameOutWithMoreFewerOrOtherSessionsEqualsFreshOut) {
   namespace fs = std::filesystem;
   const std::string out = *root_ / "reused";
-  const auto fresh2 = Files(Run({"session_00", "session_01"}, out));
+  const auto fresh2 = Files(Run({"session_00", "session_01"}, out, "removert_far.yaml"));
   ASSERT_TRUE(fresh2.count("live.pcd"));
   ASSERT_TRUE(fresh2.count("changes/pair_00_01/keyframes.csv"));
   const auto fresh3 = Files(fresh3_);
   ASSERT_TRUE(fresh3.count("changes/pair_00_02/keyframes.csv")) << "the sim's sessions must all align";
-  ExpectSameFiles(Files(Run({"session_00", "session_01", "session_02"}, out)), fresh3);  // more
-  ExpectSameFiles(Files(Run({"session_00", "session_01"}, out)), fresh2);               // fewer
+  std::size_t new_kfs_3 = 0, new_kfs_2 = 0;
+  for (const auto& [rel, bytes] : fresh3) new_kfs_3 += rel.rfind("changes/pair_00_01/new_keyframes/", 0) == 0;
+  for (const auto& [rel, bytes] : fresh2) new_kfs_2 += rel.rfind("changes/pair_00_01/new_keyframes/", 0) == 0;
+  ASSERT_GT(new_kfs_3, new_kfs_2) << "the far config must leave fewer new keyframes";
+  // More sessions (and other LT-removert params).
+  ExpectSameFiles(Files(Run({"session_00", "session_01", "session_02"}, out)), fresh3);
+  // Fewer sessions, and fewer new keyframes than the run before left in OUT.
+  ExpectSameFiles(Files(Run({"session_00", "session_01"}, out, "removert_far.yaml")), fresh2);
 
   // Other sessions: the same three under names sorted differently from the command line.
   const std::string named = *root_ / "named";
