@@ -42,8 +42,8 @@ void RunRemovert(const RemovertArgs& a) {
   if (!a.aligned.empty()) {
     for (const auto& s : a.sessions) {
       const std::string name = std::filesystem::path(s).lexically_normal().filename().string();
-      poses.push_back(a.aligned + "/" + (name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name) +
-                      "/poses_world.txt");
+      poses.push_back(io::layout::PosesWorldFile(
+          a.aligned, name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name));
     }
   }
   if (poses.size() != a.sessions.size())

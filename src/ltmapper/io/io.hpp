@@ -62,6 +62,7 @@ std::string ManifestFile(const std::string& aligned_dir);                       
 std::string PosesWorldFile(const std::string& aligned_dir, const std::string& session);
 std::string AnchorFile(const std::string& aligned_dir, const std::string& session);
 std::string SessionChangesDir(const std::string& changes_dir, const std::string& session);
+std::string StaticMapFile(const std::string& changes_dir, const std::string& session);  // HD-free map
 // Pair folder of LT-removert: "pair_<c>_<q>", c and q = positions (2 digits) of the sessions
 // among the manifest's aligned sessions, in manifest order.
 std::string PairDirName(int central, int query);

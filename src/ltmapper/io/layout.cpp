@@ -117,6 +117,9 @@ std::string AnchorFile(const std::string& aligned_dir, const std::string& sessio
 std::string SessionChangesDir(const std::string& changes_dir, const std::string& session) {
   return Join(changes_dir, session);
 }
+std::string StaticMapFile(const std::string& changes_dir, const std::string& session) {
+  return Join(SessionChangesDir(changes_dir, session), "static_map.pcd");
+}
 std::string PairDirName(int central, int query) {
   char buf[64];
   std::snprintf(buf, sizeof(buf), "pair_%02d_%02d", central, query);

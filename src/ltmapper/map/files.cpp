@@ -216,7 +216,7 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
     });
     spdlog::info("map init: {} central keyframes from {}", kfs.size(), pair);
   } else {
-    const std::string smap = dirs.changes + "/" + cname + "/static_map.pcd";
+    const std::string smap = io::layout::StaticMapFile(dirs.changes, cname);
     const auto poses = io::ReadKittiPoses(io::layout::PosesWorldFile(dirs.aligned, cname));
     const auto idx = KeyframeIndices(dirs, cname, poses.size());
     const PointCloud world = io::ReadPcd(smap);

@@ -165,7 +165,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
                  st.seconds_map, st.seconds_votes);
     const std::string dir = io::layout::SessionChangesDir(out, rep.sessions[s]);
     io::MakeDirs(dir);
-    io::WritePcd(dir + "/static_map.pcd", hd.static_map);
+    io::WritePcd(io::layout::StaticMapFile(out, rep.sessions[s]), hd.static_map);
     io::WritePcd(dir + "/hd_map.pcd", hd.hd_map);
     if (cfg.write_ply) {
       const auto ses = std::uint16_t(s);
