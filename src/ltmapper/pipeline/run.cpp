@@ -88,6 +88,9 @@ struct RunPaths {
 
 // Which sessions LT-SLAM aligned, from its run manifest (never from which files exist).
 void ReadAligned(const std::string& aligned_dir, RunReport* report) {
+  if (!io::HasRunManifest(aligned_dir))
+    throw Error(io::layout::ManifestFile(aligned_dir) + ": not found (" + aligned_dir +
+                " was written by an older ltmapper): run again with --from slam");
   const io::RunManifest m = io::ReadRunManifest(aligned_dir);
   if (m.sessions.size() != report->sessions.size())
     throw Error(io::layout::ManifestFile(aligned_dir) + ": lists " + std::to_string(m.sessions.size()) +
