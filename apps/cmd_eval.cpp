@@ -176,7 +176,7 @@ void SetupHd(CLI::App& parent) {
     if (sim_form && o->output.empty() && o->changes.empty()) Usage("eval hd: give --changes DIR or --output F");
     if (!o->aligned.empty() && !o->poses.empty()) Usage("eval hd: give at most one of --aligned and --poses");
     const auto cfg = LoadEvalConfig(*o);
-    const std::string output = !o->output.empty() ? o->output : Join(Join(o->changes, o->session), "static_map.pcd");
+    const std::string output = !o->output.empty() ? o->output : io::layout::StaticMapFile(o->changes, o->session);
     const std::string objects = !o->objects.empty() ? o->objects : sim_form ? Join(Join(o->sim, "truth"), "objects.csv") : "";
     if (!o->objects.empty() && !fs::exists(o->objects)) throw Error(o->objects, 0, "no such file");
     eval::Report report;
@@ -191,7 +191,7 @@ void SetupHd(CLI::App& parent) {
     } else {
       std::vector<Pose> poses;
       if (!o->aligned.empty() || !o->poses.empty()) {
-        const std::string f = !o->poses.empty() ? o->poses : Join(Join(o->aligned, o->session), "poses_world.txt");
+        const std::string f = !o->poses.empty() ? o->poses : io::layout::PosesWorldFile(o->aligned, o->session);
         poses = eval::ReadPoses(f);
         report.inputs.push_back({"scan poses", f});
       } else {
@@ -282,7 +282,7 @@ void SetupLd(CLI::App& parent) {
         const auto names = eval::SimSessionNames(o->sim);
         const std::size_t c = std::size_t(std::stoul(o->pair.substr(0, o->pair.find('_'))));
         if (c < names.size()) {
-          const std::string f = Join(Join(o->changes, names[c]), "static_map.pcd");
+          const std::string f = io::layout::StaticMapFile(o->changes, names[c]);
           if (fs::exists(f)) central_static = f;
           else spdlog::warn("{} not found: weak-ND preservation not scored", f);
         }

@@ -98,7 +98,7 @@ void Setup(CLI::App& parent) {
     c->add_option("--aligned", o.dirs.aligned, "LT-SLAM output dir (aligned/)")->required();
     c->add_option("--changes", o.dirs.changes, "LT-removert output dir (changes/)")->required();
     c->add_option("--sessions", o.dirs.sessions, "Input session dirs root (optional: keyframe numbering)");
-    c->add_option("--central", o.central, "Central session name (default: first in aligned/)");
+    c->add_option("--central", o.central, "Central session name (default: the run's first session in aligned/manifest.yaml)");
   };
   auto region = [&o](CLI::App* c) {
     c->add_option("--min", o.box_min, "Box lower corner x y z [m] (world)")->expected(3);

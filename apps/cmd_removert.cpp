@@ -24,6 +24,8 @@ struct RemovertArgs {
   std::vector<std::string> set;
 };
 
+void Report(const removert::StageReport& rep, const std::string& out);
+
 void RunRemovert(const RemovertArgs& a) {
   if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
   removert::RemovertConfig cfg;
@@ -32,18 +34,25 @@ void RunRemovert(const RemovertArgs& a) {
   cfg.Validate(a.config.empty() ? "removert config" : a.config);
   spdlog::info("removert config:\n{}", ConfigToString(cfg));
 
+  if (!a.aligned.empty() && a.sessions.empty()) {  // the sessions and their order from the run manifest
+    Report(removert::RunRemovertStageOnRun(cfg, a.aligned, a.out, a.common.threads), a.out);
+    return;
+  }
   std::vector<std::string> poses = a.poses;
   if (!a.aligned.empty()) {
     for (const auto& s : a.sessions) {
       const std::string name = std::filesystem::path(s).lexically_normal().filename().string();
-      poses.push_back(a.aligned + "/" + (name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name) +
-                      "/poses_world.txt");
+      poses.push_back(io::layout::PosesWorldFile(
+          a.aligned, name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name));
     }
   }
   if (poses.size() != a.sessions.size())
     throw Error("need one pose file per session: " + std::to_string(a.sessions.size()) +
                 " sessions, " + std::to_string(poses.size()) + " pose files");
-  const auto rep = removert::RunRemovertStage(cfg, a.sessions, poses, a.out, a.common.threads);
+  Report(removert::RunRemovertStage(cfg, a.sessions, poses, a.out, a.common.threads), a.out);
+}
+
+void Report(const removert::StageReport& rep, const std::string& out) {
   for (std::size_t s = 0; s < rep.sessions.size(); ++s) {
     const auto& h = rep.hd[s];
     spdlog::info("{}: {} map points, {} removed as HD + {} dilated ({:.2f} %), {} reverted", rep.sessions[s],
@@ -57,7 +66,7 @@ void RunRemovert(const RemovertArgs& a) {
                  l.pd_weak, rep.new_keyframes[p].size());
   }
   spdlog::info("removert: {:.1f} s, peak memory {:.0f} MB, output {}", rep.seconds,
-               double(rep.peak_rss_bytes) / 1e6, a.out);
+               double(rep.peak_rss_bytes) / 1e6, out);
 }
 
 LTM_COMMAND(40, [](CLI::App& parent) {
@@ -67,8 +76,9 @@ LTM_COMMAND(40, [](CLI::App& parent) {
   AddCommonOptions(*cmd, a->common);
   cmd->add_option("--config", a->config, "params_ltremovert.yaml (every key optional)")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--sessions", a->sessions, "Session directories; the first is the central session")
-      ->required();
+  cmd->add_option("--sessions", a->sessions,
+                  "Session directories; the first is the central session (default with --aligned: the aligned "
+                  "sessions of its manifest.yaml, in run order)");
   auto* al = cmd->add_option("--aligned", a->aligned,
                              "LT-SLAM output dir: world poses from <dir>/<session>/poses_world.txt")
                  ->check(CLI::ExistingDirectory);
@@ -80,6 +90,7 @@ LTM_COMMAND(40, [](CLI::App& parent) {
   cmd->add_option("--set", a->set, "Override a config key, e.g. --set ld.weak_nd=false (repeatable)");
   cmd->callback([a] {
     if (a->aligned.empty() && a->poses.empty()) throw Error("removert: give --aligned DIR or --poses FILE...");
+    if (a->aligned.empty() && a->sessions.empty()) throw Error("removert: give --sessions DIR... with --poses");
     RunRemovert(*a);
   });
 });

@@ -1,10 +1,13 @@
 #include "ltmapper/pipeline/pipeline.hpp"
+#include "ltmapper/io/io.hpp"
 
 #include "test_util.hpp"
 
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <map>
+#include <memory>
 
 namespace ltm {
 namespace {
@@ -104,6 +107,166 @@ TEST(Cli, ReadOnlyOutIsAnErrorBeforeAnyWork) {
     EXPECT_NE(out.find(ro + ": output directory is not writable"), std::string::npos) << cmd << "\n" << out;
     EXPECT_EQ(out.find("filesystem error"), std::string::npos) << cmd << "\n" << out;
   }
+}
+
+// ------------------------------------------------------------------ reruns into the same OUT
+// Small simulated sessions shared by the rerun tests (one sim, one fresh 3-session run).
+class Rerun : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = std::make_unique<test::TempDir>();
+    // 3 sessions of 45 keyframes that LT-SLAM aligns, with lighter stage params: ~8 s a run.
+    test::WriteText(*root_ / "sim.yaml",
+                    "seed: 4\nworld: {extent_m: 150.0}\nroute: {sessions: 3, keyframes: 45, keyframe_spacing_m: 4.0}\n"
+                    "hd: {cars: 2, pedestrians: 2}\n");
+    test::WriteText(*root_ / "slam.yaml", "refine: {rounds: 0}\nsc: {max_loops_per_pair: 6}\n");
+    test::WriteText(*root_ / "removert.yaml", "map_voxel_m: 0.3\n");
+    // Fewer new-territory keyframes than the defaults: a rerun with it used to read the earlier
+    // run's extra new_keyframes/ folders ("no 'new' row for keyframe ...").
+    test::WriteText(*root_ / "removert_far.yaml", "map_voxel_m: 0.3\nout: {new_keyframe_dist_m: 40.0}\n");
+    std::string out;
+    ASSERT_EQ(test::RunCli("sim --quiet --config " + *root_ / "sim.yaml" + " --out " + *root_ / "sim", &out), 0)
+        << out;
+    fresh3_ = Run({"session_00", "session_01", "session_02"}, *root_ / "fresh3");
+  }
+  static void TearDownTestSuite() { root_.reset(); }
+
+  static std::string Session(const std::string& name) { return *root_ / ("sim/sessions/" + name); }
+
+  // `ltmapper run` on sim sessions (names under sim/sessions/, or paths) into `out`; returns the output.
+  static std::string Run(const std::vector<std::string>& sessions, const std::string& out,
+                         const std::string& removert = "removert.yaml") {
+    std::string args = "run --quiet --threads 2 --slam-config " + *root_ / "slam.yaml" + " --removert-config " +
+                       *root_ / removert + " --out " + out + " --sessions";
+    for (const auto& s : sessions) args += " " + (s.find('/') == std::string::npos ? Session(s) : s);
+    std::string log;
+    EXPECT_EQ(test::RunCli(args, &log), 0) << args << "\n" << log;
+    return out;
+  }
+
+  // Every file under `dir` (relative path -> bytes), except those holding timings.
+  static std::map<std::string, std::string> Files(const std::string& dir) {
+    namespace fs = std::filesystem;
+    std::map<std::string, std::string> files;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+      if (!e.is_regular_file()) continue;
+      const std::string rel = fs::relative(e.path(), dir).string();
+      const std::string name = e.path().filename().string();
+      if (name == "report.json" || name == "report.md" || name.rfind("run_report", 0) == 0 ||
+          name.rfind("map.ltmap", 0) == 0)
+        continue;  // timings (the store's content is checked through live.pcd / meta.pcd / objects)
+      files[rel] = test::ReadText(e.path().string());
+    }
+    return files;
+  }
+
+  static void ExpectSameFiles(const std::map<std::string, std::string>& got,
+                              const std::map<std::string, std::string>& want) {
+    for (const auto& [rel, bytes] : want) {
+      const auto it = got.find(rel);
+      if (it == got.end()) ADD_FAILURE() << "missing: " << rel;
+      else EXPECT_TRUE(it->second == bytes) << "differs from a fresh OUT: " << rel;
+    }
+    for (const auto& [rel, bytes] : got)
+      if (!want.count(rel)) ADD_FAILURE() << "stale file (not in a fresh OUT): " << rel;
+  }
+
+  static std::unique_ptr<test::TempDir> root_;
+  static std::string fresh3_;
+};
+std::unique_ptr<test::TempDir> Rerun::root_;
+std::string Rerun::fresh3_;
+
+// Issue #16: `run s00 s01` then `run s00 s01 s02` into the same OUT failed in LT-map on the
+// first run's new_keyframes/ folders. Now every stage replaces its folder whole: more, fewer or
+// other sessions or other parameters into a used OUT give the files of a fresh OUT, byte for byte.
+// And with names whose alphabetical order differs from the command line, LT-map took the order
+// from a listing of aligned/ and swapped the pairs' changes: the run manifest keeps the
+// command-line order, so `base z_drive a_drive` gives the maps and changes of the same sessions
+// under sorted names.
+TEST_F(Rerun, SameOutWithMoreFewerOrOtherSessionsEqualsFreshOut) {
+  namespace fs = std::filesystem;
+  const std::string out = *root_ / "reused";
+  const auto fresh2 = Files(Run({"session_00", "session_01"}, out, "removert_far.yaml"));
+  ASSERT_TRUE(fresh2.count("live.pcd"));
+  ASSERT_TRUE(fresh2.count("changes/pair_00_01/keyframes.csv"));
+  const auto fresh3 = Files(fresh3_);
+  ASSERT_TRUE(fresh3.count("changes/pair_00_02/keyframes.csv")) << "the sim's sessions must all align";
+  std::size_t new_kfs_3 = 0, new_kfs_2 = 0;
+  for (const auto& [rel, bytes] : fresh3) new_kfs_3 += rel.rfind("changes/pair_00_01/new_keyframes/", 0) == 0;
+  for (const auto& [rel, bytes] : fresh2) new_kfs_2 += rel.rfind("changes/pair_00_01/new_keyframes/", 0) == 0;
+  ASSERT_GT(new_kfs_3, new_kfs_2) << "the far config must leave fewer new keyframes";
+  // More sessions, other LT-removert params, and other session names: the three sessions under
+  // names sorted differently from the command line.
+  const std::string named = *root_ / "named";
+  fs::create_directories(named);
+  std::vector<std::string> sessions;
+  for (const auto& [name, target] : std::vector<std::pair<std::string, std::string>>{
+           {"base", "session_00"}, {"z_drive", "session_01"}, {"a_drive", "session_02"}}) {
+    fs::create_directory_symlink(Session(target), named + "/" + name);
+    sessions.push_back(named + "/" + name);
+  }
+  Run(sessions, out);
+  const auto manifest = io::ReadRunManifest(io::layout::AlignedDir(out));
+  ASSERT_EQ(manifest.sessions.size(), 3u);
+  EXPECT_EQ(manifest.sessions[1].name, "z_drive");
+  EXPECT_EQ(manifest.sessions[2].name, "a_drive");
+  const auto got = Files(out);
+  std::size_t compared = 0;
+  for (const auto& [rel, bytes] : fresh3) {  // what does not name a session: byte for byte
+    if (rel.rfind("changes/pair_", 0) != 0 && rel != "live.pcd" && rel != "meta.pcd" && rel.rfind("objects/", 0) != 0)
+      continue;
+    ++compared;
+    ASSERT_TRUE(got.count(rel)) << rel;
+    EXPECT_TRUE(got.at(rel) == bytes) << "differs from a fresh run under sorted names: " << rel;
+  }
+  EXPECT_GT(compared, 20u);
+  for (const auto& [rel, bytes] : got)  // the rest: the same files, renamed
+    if (rel.find("session_0") != std::string::npos) ADD_FAILURE() << "stale file: " << rel;
+  EXPECT_EQ(got.size(), fresh3.size());
+  std::string log;
+  ASSERT_EQ(test::RunCli("map log --store " + out + "/map.ltmap", &log), 0) << log;
+  EXPECT_LT(log.find("z_drive"), log.find("a_drive")) << log;
+  // Fewer sessions, and fewer new keyframes than the run before left in OUT.
+  ExpectSameFiles(Files(Run({"session_00", "session_01"}, out, "removert_far.yaml")), fresh2);
+}
+
+// A stage never replaces a folder that is not an ltmapper output of that stage.
+TEST(StagingDir, RefusesForeignFolderAndReplacesItsOwn) {
+  test::TempDir tmp;
+  test::WriteText(tmp / "mine/a.txt", "user data");
+  test::ExpectError([&] { io::StagingDir s(tmp / "mine", "report.json"); }, {tmp / "mine", "refusing"});
+  EXPECT_EQ(test::ReadText(tmp / "mine/a.txt"), "user data");
+  test::WriteText(tmp / "stage/report.json", "{}");
+  test::WriteText(tmp / "stage/old/stale.pcd", "x");
+  {
+    io::StagingDir s(tmp / "stage", "report.json");
+    test::WriteText(s.path() + "/report.json", "new");
+    EXPECT_TRUE(std::filesystem::exists(tmp / "stage/old/stale.pcd"));  // not before Publish
+    s.Publish();
+  }
+  EXPECT_FALSE(std::filesystem::exists(tmp / "stage/old"));
+  EXPECT_EQ(test::ReadText(tmp / "stage/report.json"), "new");
+  { io::StagingDir abandoned(tmp / "stage", "report.json"); }  // not published: nothing changes
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(tmp.str()), {}), 2);
+}
+
+TEST(RunManifest, RoundTripsAndNamesTheFileWhenBroken) {
+  test::TempDir tmp;
+  io::RunManifest m;
+  m.sessions = {{"base", "/d/base", true, ""}, {"z: drive", "/d/z", false, "no loop \"found\""}};
+  m.slam_config = "a: 1\nb: 2\n";
+  io::WriteRunManifest(tmp.str(), m);
+  const auto r = io::ReadRunManifest(tmp.str());
+  ASSERT_EQ(r.sessions.size(), 2u);
+  EXPECT_EQ(r.sessions[1].name, "z: drive");
+  EXPECT_EQ(r.sessions[1].reason, "no loop \"found\"");
+  EXPECT_FALSE(r.sessions[1].aligned);
+  EXPECT_EQ(r.slam_config, m.slam_config);
+  EXPECT_EQ(r.Aligned().size(), 1u);
+  test::WriteText(io::layout::ManifestFile(tmp.str()), "version: 1\nsessions: [{name: a}]\n");
+  test::ExpectError([&] { io::ReadRunManifest(tmp.str()); }, {"manifest.yaml", "malformed"});
+  test::ExpectError([&] { io::ReadRunManifest(tmp / "none"); }, {"manifest.yaml", "not found"});
 }
 
 }  // namespace

@@ -143,6 +143,42 @@ TEST(RemovertStage, ThreeSessionsCentralAndConsecutivePairs) {
   EXPECT_EQ(count(consecutive + "/pair_00_01/nd_strong.pcd"), count(central + "/pair_00_01/nd_strong.pcd"));
 }
 
+// The stage on an LT-SLAM output takes the aligned sessions of the run manifest in run order
+// (not alphabetical), and replaces its output folder whole: nothing of an earlier run survives.
+TEST(RemovertStage, RunManifestOrderAndNoStaleFolders) {
+  test::TempDir tmp;
+  const std::string zs = tmp / "z_first", as = tmp / "a_second", ns = tmp / "not_aligned";
+  const auto wz = WriteStreetSession(zs, -10.0, 8, true);
+  const auto wa = WriteStreetSession(as, -10.0, 8, false);
+  WriteStreetSession(ns, -10.0, 3, false);
+  const std::string aligned = tmp / "aligned";
+  io::WriteKittiPoses(io::layout::PosesWorldFile(aligned, "z_first"), wz);
+  io::WriteKittiPoses(io::layout::PosesWorldFile(aligned, "a_second"), wa);
+  io::RunManifest m;
+  m.sessions = {{"z_first", zs, true, ""}, {"not_aligned", ns, false, "test"}, {"a_second", as, true, ""}};
+  io::WriteRunManifest(aligned, m);
+  removert::RemovertConfig cfg;
+  cfg.write_keyframes = false;
+  cfg.write_ply = false;
+  const std::string out = tmp / "changes";
+  test::WriteText(out + "/report.json", "{}");  // an earlier run's output ...
+  test::WriteText(out + "/pair_00_02/nd_strong.pcd", "stale");
+  test::WriteText(out + "/old_session/static_map.pcd", "stale");
+  const auto rep = removert::RunRemovertStageOnRun(cfg, aligned, out, 2);
+  ASSERT_EQ(rep.sessions, (std::vector<std::string>{"z_first", "a_second"}));
+  EXPECT_GT(io::ReadPcd(out + "/pair_00_01/nd_strong.pcd").size(), 200u);  // z_first's car left
+  EXPECT_TRUE(fs::exists(out + "/z_first/static_map.pcd"));
+  EXPECT_FALSE(fs::exists(out + "/pair_00_02"));  // ... is gone
+  EXPECT_FALSE(fs::exists(out + "/old_session"));
+  for (const auto& e : fs::directory_iterator(tmp.str()))  // no temporary left next to it
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+  // A folder that is not an LT-removert output is never replaced.
+  test::WriteText(tmp / "mine/notes.txt", "user data");
+  test::ExpectError([&] { removert::RunRemovertStageOnRun(cfg, aligned, tmp / "mine", 2); },
+                    {tmp / "mine", "refusing to replace"});
+  EXPECT_EQ(test::ReadText(tmp / "mine/notes.txt"), "user data");
+}
+
 TEST(RemovertStage, BadInputsAreErrors) {
   test::TempDir tmp;
   const std::string s0 = tmp / "s0";

@@ -104,8 +104,11 @@ TEST(SlamAlign, StageWritesTheDocumentedFiles) {
   io::WriteSession(tmp / "s1", test::SynthSession(world, "s1", A, -22, 22, 4.0, 0.0005, 2));
   io::WriteSession(tmp / "s2", test::SynthSession(other, "s2", A, -10, 10, 5.0, 0, 3));
   const std::string out = tmp / "aligned";
-  // A stale world pose file from an earlier run must not survive for a session not aligned now.
+  // A stale world pose file from an earlier run must not survive for a session not aligned now
+  // (nor anything else of an earlier run: the stage replaces its whole folder).
+  test::WriteText(out + "/report.json", "{}\n");
   test::WriteText(out + "/s2/poses_world.txt", "stale\n");
+  test::WriteText(out + "/gone/poses_world.txt", "stale\n");
   const SlamResult r =
       RunSlamStage(FastConfig(), {tmp / "s0", tmp / "s1", tmp / "s2"}, out, 2);
   ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
@@ -118,6 +121,13 @@ TEST(SlamAlign, StageWritesTheDocumentedFiles) {
     EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
   }
   EXPECT_FALSE(fs::exists(out + "/s2/poses_world.txt"));
+  EXPECT_FALSE(fs::exists(out + "/gone"));
+  const io::RunManifest m = io::ReadRunManifest(out);
+  ASSERT_EQ(m.sessions.size(), 3u);
+  EXPECT_EQ(m.sessions[2].name, "s2");
+  EXPECT_FALSE(m.sessions[2].aligned);
+  EXPECT_FALSE(m.sessions[2].reason.empty());
+  EXPECT_EQ(m.Aligned().size(), 2u);
   EXPECT_EQ(io::ReadKittiPoses(out + "/s1/poses_world.txt").size(), r.sessions[1].T_world_sensor.size());
   const Pose anchor = io::ReadTransform(out + "/s1/anchor.txt");
   EXPECT_LT((anchor.translation() - r.sessions[1].anchor.translation()).norm(), 1e-4);

@@ -103,7 +103,7 @@ std::vector<SessionTrajectory> LoadSimTrajectories(const std::string& sim_dir, c
     s.truth = ReadPoses(Join(Join(Join(sim_dir, "truth"), name), "poses_world.txt"));
     const std::string est = est_dir.empty()
                                 ? Join(Join(Join(sim_dir, "sessions"), name), "optimized_poses.txt")
-                                : Join(Join(est_dir, name), "poses_world.txt");
+                                : io::layout::PosesWorldFile(est_dir, name);
     if (!fs::exists(est)) {
       if (missing) missing->push_back(name);
       continue;

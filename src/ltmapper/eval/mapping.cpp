@@ -118,7 +118,7 @@ TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string&
     SessionTrajectory s;
     s.name = name;
     s.truth = ReadPoses(Join(Join(Join(sim_dir, "truth"), name), "poses_world.txt"));
-    const std::string est = Join(Join(aligned_dir, name), "poses_world.txt");
+    const std::string est = io::layout::PosesWorldFile(aligned_dir, name);
     if (fs::exists(est)) {
       s.est = ReadPoses(est);
       if (s.est.size() != s.truth.size())

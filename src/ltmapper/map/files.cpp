@@ -100,21 +100,29 @@ std::map<std::pair<std::string, int>, Pose> ReadKeyframesCsv(const std::string& 
   return out;
 }
 
-std::vector<std::string> SubdirsSorted(const std::string& dir) {
-  std::vector<std::string> out;
-  if (!fs::is_directory(dir)) return out;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.is_directory()) out.push_back(e.path().filename().string());
-  std::sort(out.begin(), out.end(), [](const std::string& a, const std::string& b) {
-    return io::FileIndex(a) < io::FileIndex(b);
-  });
+// Indices of the keyframes of `kind` listed in a pair's keyframes.csv whose folder exists under
+// `dir` (LT-removert writes none with out.write_keyframes off), in index order.
+std::vector<int> ListedKeyframes(const std::map<std::pair<std::string, int>, Pose>& rows, const std::string& kind,
+                                 const std::string& dir) {
+  std::vector<int> out;
+  for (const auto& [key, T] : rows)
+    if (key.first == kind && fs::is_directory(dir + "/" + io::layout::KeyframeDirName(key.second)))
+      out.push_back(key.second);
   return out;
 }
 
+KeyframeDelta ReadDelta(const std::string& d, int index) {
+  KeyframeDelta kd;
+  kd.keyframe = index;
+  kd.pd_strong = ReadIfExists(d + "pd_strong.pcd");
+  kd.pd_weak = ReadIfExists(d + "pd_weak.pcd");
+  kd.nd_strong = ReadIfExists(d + "nd_strong.pcd");
+  kd.nd_weak = ReadIfExists(d + "nd_weak.pcd");
+  return kd;
+}
+
 std::string PairDir(const PipelineDirs& dirs, const std::vector<std::string>& names, int c, int q) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), "pair_%02d_%02d", c, q);
-  const std::string a = dirs.changes + "/" + buf;
+  const std::string a = dirs.changes + "/" + io::layout::PairDirName(c, q);
   if (fs::is_directory(a)) return a;
   const std::string b = dirs.changes + "/pair_" + names[std::size_t(c)] + "_" + names[std::size_t(q)];
   if (fs::is_directory(b)) return b;
@@ -122,19 +130,29 @@ std::string PairDir(const PipelineDirs& dirs, const std::vector<std::string>& na
 }
 
 Pose ReadAnchor(const PipelineDirs& dirs, const std::string& name) {
-  const std::string p = dirs.aligned + "/" + name + "/anchor.txt";
+  const std::string p = io::layout::AnchorFile(dirs.aligned, name);
   return fs::exists(p) ? io::ReadTransform(p) : Pose::Identity();
 }
 
-// Keyframe indices of a session in pose-file order: from the input session dir when given, else
+// The input folder of a session: from the run manifest, else <dirs.sessions>/<name>, else "".
+std::string SessionInputDir(const PipelineDirs& dirs, const std::string& name) {
+  if (io::HasRunManifest(dirs.aligned))
+    for (const auto& s : io::ReadRunManifest(dirs.aligned).sessions)
+      if (s.name == name) return s.dir;
+  if (!dirs.sessions.empty() && fs::is_directory(dirs.sessions + "/" + name)) return dirs.sessions + "/" + name;
+  return "";
+}
+
+// Keyframe indices of a session in pose-file order: from the input session dir when known, else
 // 0..n-1 (the simulator's and savers' numbering).
 std::vector<int> KeyframeIndices(const PipelineDirs& dirs, const std::string& name, std::size_t n) {
   std::vector<int> idx(n);
-  if (!dirs.sessions.empty() && fs::is_directory(dirs.sessions + "/" + name)) {
-    const Session s = io::LoadSession(dirs.sessions + "/" + name);
+  const std::string input = SessionInputDir(dirs, name);
+  if (!input.empty()) {
+    const Session s = io::LoadSession(input);
     if (s.keyframes.size() != n)
-      throw Error(dirs.aligned + "/" + name + "/poses_world.txt: " + std::to_string(n) + " poses but the session has " +
-                  std::to_string(s.keyframes.size()) + " keyframes");
+      throw Error(io::layout::PosesWorldFile(dirs.aligned, name) + ": " + std::to_string(n) +
+                  " poses but the session has " + std::to_string(s.keyframes.size()) + " keyframes");
     for (std::size_t k = 0; k < n; ++k) idx[k] = s.keyframes[k].index;
   } else {
     for (std::size_t k = 0; k < n; ++k) idx[k] = int(k);
@@ -144,13 +162,31 @@ std::vector<int> KeyframeIndices(const PipelineDirs& dirs, const std::string& na
 
 }  // namespace
 
-std::vector<std::string> AlignedSessions(const PipelineDirs& dirs, const std::string& central) {
-  if (!fs::is_directory(dirs.aligned)) throw Error(dirs.aligned + ": LT-SLAM output directory not found");
+namespace {
+// Without a run manifest (folders made by hand or by an older ltmapper): the folders holding
+// world poses, sorted by name.
+std::vector<std::string> ListedSessions(const PipelineDirs& dirs) {
+  spdlog::warn("map: {} has no run manifest: taking the session order from the folder names", dirs.aligned);
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(dirs.aligned))
     if (e.is_directory() && fs::exists(e.path() / "poses_world.txt")) names.push_back(e.path().filename().string());
   std::sort(names.begin(), names.end());
+  return names;
+}
+}  // namespace
+
+std::vector<std::string> AlignedSessions(const PipelineDirs& dirs, const std::string& central) {
+  if (!fs::is_directory(dirs.aligned)) throw Error(dirs.aligned + ": LT-SLAM output directory not found");
+  std::vector<std::string> names;
+  if (io::HasRunManifest(dirs.aligned)) {
+    for (const auto& s : io::ReadRunManifest(dirs.aligned).Aligned()) names.push_back(s.name);
+  } else {
+    names = ListedSessions(dirs);
+  }
   if (names.empty()) throw Error(dirs.aligned + ": no <session>/poses_world.txt (LT-SLAM output)");
+  if (!central.empty() && io::HasRunManifest(dirs.aligned) && central != names[0])
+    throw Error(io::layout::ManifestFile(dirs.aligned) + ": the central session of this run is '" + names[0] +
+                "', not '" + central + "' (LT-removert's pair folders are numbered in the run's order)");
   if (!central.empty()) {
     auto it = std::find(names.begin(), names.end(), central);
     if (it == names.end()) throw Error(dirs.aligned + ": no session named '" + central + "'");
@@ -176,14 +212,12 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
       if (key.first == "central") kfs.push_back({key.second, T, {}});
     std::sort(kfs.begin(), kfs.end(), [](const auto& a, const auto& b) { return a.index < b.index; });
     ParallelFor(threads, kfs.size(), [&](std::size_t k) {
-      char b2[32];
-      std::snprintf(b2, sizeof(b2), "%06d", kfs[k].index);
-      kfs[k].cloud = ReadIfExists(pair + "/keyframes/" + b2 + "/static.pcd");
+      kfs[k].cloud = ReadIfExists(pair + "/keyframes/" + io::layout::KeyframeDirName(kfs[k].index) + "/static.pcd");
     });
     spdlog::info("map init: {} central keyframes from {}", kfs.size(), pair);
   } else {
-    const std::string smap = dirs.changes + "/" + cname + "/static_map.pcd";
-    const auto poses = io::ReadKittiPoses(dirs.aligned + "/" + cname + "/poses_world.txt");
+    const std::string smap = io::layout::StaticMapFile(dirs.changes, cname);
+    const auto poses = io::ReadKittiPoses(io::layout::PosesWorldFile(dirs.aligned, cname));
     const auto idx = KeyframeIndices(dirs, cname, poses.size());
     const PointCloud world = io::ReadPcd(smap);
     PointCloud positions;
@@ -234,28 +268,21 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
   }
   if (pair.empty())
     throw Error(dirs.changes + ": no LT-removert pair directory for '" + names[0] + "' -> '" + query + "'");
+  // The pair's keyframes.csv is its manifest: only the keyframe folders it lists are read.
   const auto poses = ReadKeyframesCsv(pair + "/keyframes.csv");
-  const std::vector<std::string> kdirs = SubdirsSorted(pair + "/keyframes");
-  const std::vector<std::string> ndirs = SubdirsSorted(pair + "/new_keyframes");
-  std::vector<KeyframeDelta> deltas(kdirs.size());
-  std::vector<KeyframeInput> fresh(ndirs.size());
-  ParallelFor(0, kdirs.size() + ndirs.size(), [&](std::size_t k) {
-    if (k < kdirs.size()) {
-      const std::string d = pair + "/keyframes/" + kdirs[k] + "/";
-      KeyframeDelta& kd = deltas[k];
-      kd.keyframe = io::FileIndex(kdirs[k]);
-      kd.pd_strong = ReadIfExists(d + "pd_strong.pcd");
-      kd.pd_weak = ReadIfExists(d + "pd_weak.pcd");
-      kd.nd_strong = ReadIfExists(d + "nd_strong.pcd");
-      kd.nd_weak = ReadIfExists(d + "nd_weak.pcd");
+  const std::vector<int> kidx = ListedKeyframes(poses, "central", pair + "/keyframes");
+  const std::vector<int> nidx = ListedKeyframes(poses, "new", pair + "/new_keyframes");
+  std::vector<KeyframeDelta> deltas(kidx.size());
+  std::vector<KeyframeInput> fresh(nidx.size());
+  ParallelFor(0, kidx.size() + nidx.size(), [&](std::size_t k) {
+    if (k < kidx.size()) {
+      deltas[k] = ReadDelta(pair + "/keyframes/" + io::layout::KeyframeDirName(kidx[k]) + "/", kidx[k]);
     } else {
-      const std::string& name = ndirs[k - kdirs.size()];
-      const std::string d = pair + "/new_keyframes/" + name + "/";
-      KeyframeInput& in = fresh[k - kdirs.size()];
-      in.index = io::FileIndex(name);
-      auto pit = poses.find({"new", in.index});
-      if (pit == poses.end()) throw Error(pair + "/keyframes.csv: no 'new' row for keyframe " + name);
-      in.T_world_sensor = pit->second;
+      const int index = nidx[k - kidx.size()];
+      const std::string d = pair + "/new_keyframes/" + io::layout::KeyframeDirName(index) + "/";
+      KeyframeInput& in = fresh[k - kidx.size()];
+      in.index = index;
+      in.T_world_sensor = poses.at({"new", index});
       in.cloud = WithClass(ReadIfExists(d + "pd_strong.pcd"), PointClass::kPDStrong);
       in.cloud.append(WithClass(ReadIfExists(d + "pd_weak.pcd"), PointClass::kPDWeak));
     }

@@ -246,7 +246,9 @@ struct PipelineDirs {
   std::string changes;   // LT-removert output
   std::string sessions;  // optional: input session dirs (maps keyframe index -> pose line)
 };
-// Session names in the aligned dir, sorted (the central one first when `central` is given).
+// Aligned session names in run order, from the run manifest (io::ReadRunManifest); without a
+// manifest (folders made by hand), the aligned folders sorted by name, `central` moved first.
+// With a manifest, a `central` other than the run's first session is an error.
 std::vector<std::string> AlignedSessions(const PipelineDirs& dirs, const std::string& central = "");
 // Creates `store_path` atomically (temporary file, then rename) with the central session as base.
 IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& cfg,

@@ -52,7 +52,10 @@ struct RunReport {
 // Runs the three stages on `session_dirs` (first = central) into `out_dir`:
 //   out_dir/aligned/  out_dir/changes/  out_dir/<store_name>  [live.pcd meta.pcd objects/]
 //   out_dir/run_report.json, run_report.md
-// A query session LT-SLAM cannot align is reported and left out of the later stages.
+// A query session LT-SLAM cannot align is reported and left out of the later stages. The later
+// stages take the sessions, their order and which aligned from aligned/manifest.yaml; a stage
+// that runs replaces its whole folder (io::StagingDir), so a rerun into a used out_dir gives the
+// files of a fresh one.
 RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
                       const std::string& out_dir, int threads = 0);
 std::string FormatRunReport(const RunReport& report);

@@ -75,6 +75,123 @@ bool StageDone(const std::string& marker, const std::string& key) {
   return text.str() == key;
 }
 
+namespace {
+
+// Stage outputs of one run (io::layout names).
+struct RunPaths {
+  std::string aligned, changes, store, live, meta, objects;
+  explicit RunPaths(const std::string& out, const RunConfig& cfg)
+      : aligned(io::layout::AlignedDir(out)), changes(io::layout::ChangesDir(out)),
+        store((fs::path(out) / cfg.store_name).string()), live((fs::path(out) / "live.pcd").string()),
+        meta((fs::path(out) / "meta.pcd").string()), objects(io::layout::ObjectsDir(out)) {}
+};
+
+// Which sessions LT-SLAM aligned, from its run manifest (never from which files exist).
+void ReadAligned(const std::string& aligned_dir, RunReport* report) {
+  if (!io::HasRunManifest(aligned_dir))
+    throw Error(io::layout::ManifestFile(aligned_dir) + ": not found (" + aligned_dir +
+                " was written by an older ltmapper): run again with --from slam");
+  const io::RunManifest m = io::ReadRunManifest(aligned_dir);
+  if (m.sessions.size() != report->sessions.size())
+    throw Error(io::layout::ManifestFile(aligned_dir) + ": lists " + std::to_string(m.sessions.size()) +
+                " sessions, the run has " + std::to_string(report->sessions.size()));
+  if (!m.sessions[0].aligned)
+    throw Error(io::layout::ManifestFile(aligned_dir) + ": the central session is not aligned");
+  for (const auto& s : m.sessions) (s.aligned ? report->aligned : report->not_aligned).push_back(s.name);
+  if (report->aligned.size() < 2)
+    throw Error(aligned_dir + ": no query session could be aligned to the central one '" + report->sessions[0] +
+                "'; see " + aligned_dir + "/report.md");
+}
+
+// LT-map: the store rebuilt from the stage outputs, in the manifest's session order.
+void BuildStore(const RunPaths& p, const map::MapConfig& map_cfg, const RunReport& report, int threads) {
+  // Integrating is one transaction per session, but a partially integrated store from a killed
+  // run is simply replaced.
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.store + suffix);
+  map::PipelineDirs dirs;
+  dirs.aligned = p.aligned;
+  dirs.changes = p.changes;
+  map::InitFromDirs(p.store, map_cfg, dirs, report.aligned[0], threads);
+  map::Store store = map::Store::Open(p.store, map_cfg);
+  store.set_threads(threads);
+  for (std::size_t i = 1; i < report.aligned.size(); ++i) {
+    const auto r = map::IntegrateFromDirs(store, dirs, report.aligned[i]);
+    spdlog::info("run: integrated '{}': {} changed keyframes, {} new, PD {}+{} ND {}+{} in {:.2f} s",
+                 report.aligned[i], r.keyframes_changed, r.keyframes_new, r.pd_strong, r.pd_weak, r.nd_strong,
+                 r.nd_weak, r.seconds);
+  }
+}
+
+// live.pcd, meta.pcd and objects/ from the store; objects/ is replaced whole (StagingDir), so no
+// object of an earlier run survives. Without export, those of an earlier run are removed.
+void ExportMaps(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps) {
+  if (!export_maps) {
+    for (const auto& f : {p.live, p.meta}) fs::remove(f);
+    if (fs::exists(fs::path(p.objects) / "objects.csv")) fs::remove_all(p.objects);
+    return;
+  }
+  const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
+  map::Region region;
+  region.voxel_m = map_cfg.output_voxel_m;
+  map::WriteLabelledCloud(p.live, store.Live(region));
+  map::WriteLabelledCloud(p.meta, store.Meta(region));
+  io::StagingDir objects(p.objects, "objects.csv");
+  map::WriteObjects(objects.path(), store.Objects());
+  objects.Publish();
+}
+
+void FillMapFigures(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps, RunReport* report) {
+  {
+    const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
+    const auto totals = store.Totals();
+    report->store_bytes = totals.file_bytes;
+    report->map_points_live = totals.base_points;
+  }
+  if (!export_maps) return;
+  if (fs::exists(p.live)) report->map_points_live = io::ReadPcd(p.live).size();
+  if (fs::exists(p.meta)) report->map_points_meta = io::ReadPcd(p.meta).size();
+  const auto csv = fs::path(p.objects) / "objects.csv";
+  if (!fs::exists(csv)) return;
+  std::ifstream in(csv);
+  std::size_t lines = 0;
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty()) ++lines;
+  report->objects = lines > 0 ? lines - 1 : 0;  // header line
+}
+
+void WriteRunReport(const std::string& out_dir, const RunReport& report) {
+  const std::string text = FormatRunReport(report);
+  io::WriteFileAtomic((fs::path(out_dir) / "run_report.md").string(), [&](std::ostream& os) { os << text; });
+  io::WriteFileAtomic((fs::path(out_dir) / "run_report.json").string(), [&](std::ostream& os) {
+    os << "{\n  \"sessions\": " << report.sessions.size() << ",\n  \"aligned\": " << report.aligned.size()
+       << ",\n  \"not_aligned\": " << report.not_aligned.size() << ",\n  \"stages\": {";
+    for (std::size_t i = 0; i < report.stages.size(); ++i)
+      os << (i ? ", " : "") << "\"" << report.stages[i].stage << "\": {\"skipped\": "
+         << (report.stages[i].skipped ? "true" : "false") << ", \"seconds\": " << report.stages[i].seconds << "}";
+    os << "},\n  \"live_points\": " << report.map_points_live << ",\n  \"meta_points\": " << report.map_points_meta
+       << ",\n  \"objects\": " << report.objects << ",\n  \"store_bytes\": " << report.store_bytes
+       << ",\n  \"seconds\": " << report.seconds << ",\n  \"peak_rss_bytes\": " << report.peak_rss_bytes << "\n}\n";
+  });
+}
+
+// Runs stage `i` unless it is before `first` (finished, same key): times it and writes its marker.
+template <class F>
+void Stage(std::size_t i, std::size_t first, const std::string& marker, const std::string& key,
+           const std::string& what, RunReport* report, F run) {
+  if (i < first) {
+    spdlog::info("run [{}/3] {}: finished output found, skipped", i + 1, what);
+    report->stages.push_back({kStages[i], true, 0.0});
+    return;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  fs::remove(marker);
+  run();
+  MarkStageDone(marker, key);
+  report->stages.push_back({kStages[i], false, Since(t0)});
+}
+
+}  // namespace
+
 RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
                       const std::string& out_dir, int threads) {
   ValidateConfig(cfg, "run config");
@@ -88,137 +205,42 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   RunReport report;
   for (const auto& d : session_dirs) report.sessions.push_back(SessionName(d));
   io::MakeWritableDir(out_dir);  // before any stage (and before --from removes a stage's outputs)
-  const std::string aligned_dir = (fs::path(out_dir) / "aligned").string();
-  const std::string changes_dir = (fs::path(out_dir) / "changes").string();
-  const std::string store_path = (fs::path(out_dir) / cfg.store_name).string();
+  const RunPaths p(out_dir, cfg);
   const auto slam_cfg = LoadStageConfig<slam::SlamConfig>(cfg.slam_config, "LT-SLAM");
   const auto rem_cfg = LoadStageConfig<removert::RemovertConfig>(cfg.removert_config, "LT-removert");
   const auto map_cfg = LoadStageConfig<map::MapConfig>(cfg.map_config, "LT-map");
-  // Each stage's key: the sessions, its resolved config, and the keys before it.
+  // Each stage's key: the output layout version, the sessions, its resolved config, and the keys
+  // before it (outputs of a run without a manifest never count as finished).
   std::vector<std::string> keys(3);
-  keys[0] = "sessions:\n";
+  keys[0] = "layout: manifest-1\nsessions:\n";
   for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
   keys[0] += "slam:\n" + ConfigToString(slam_cfg);
   keys[1] = keys[0] + "removert:\n" + ConfigToString(rem_cfg);
   keys[2] = keys[1] + "map:\n" + ConfigToString(map_cfg) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";
-  const std::vector<std::string> markers = {Marker(aligned_dir), Marker(changes_dir), store_path + ".done"};
+  // A marker lies in its stage folder (written once the folder is published; a rerun replaces it).
+  const std::vector<std::string> markers = {Marker(p.aligned), Marker(p.changes), p.store + ".done"};
   const std::size_t first = FirstStage(cfg, markers, keys);
 
-  // ------------------------------------------------------------------------ 1. LT-SLAM
-  auto t0 = std::chrono::steady_clock::now();
-  if (first <= 0) {
-    spdlog::info("run [1/3] LT-SLAM: {} sessions -> {}", session_dirs.size(), aligned_dir);
-    fs::remove(markers[0]);
-    const auto res = slam::RunSlamStage(slam_cfg, session_dirs, aligned_dir, threads);
+  Stage(0, first, markers[0], keys[0], "LT-SLAM", &report, [&] {
+    spdlog::info("run [1/3] LT-SLAM: {} sessions -> {}", session_dirs.size(), p.aligned);
+    const auto res = slam::RunSlamStage(slam_cfg, session_dirs, p.aligned, threads);
     for (const auto& s : res.sessions)
       if (!s.aligned) spdlog::warn("run: session '{}' NOT aligned: {}", s.name, s.reason);
-    MarkStageDone(markers[0], keys[0]);
-    report.stages.push_back({"slam", false, Since(t0)});
-  } else {
-    spdlog::info("run [1/3] LT-SLAM: finished output found in {}, skipped", aligned_dir);
-    report.stages.push_back({"slam", true, 0.0});
-  }
-  // Which sessions have world poses (the central always; queries when aligned).
-  std::vector<std::string> aligned_dirs, poses_files;
-  for (std::size_t i = 0; i < session_dirs.size(); ++i) {
-    const std::string poses = (fs::path(aligned_dir) / report.sessions[i] / "poses_world.txt").string();
-    if (fs::exists(poses)) {
-      aligned_dirs.push_back(session_dirs[i]);
-      poses_files.push_back(poses);
-      report.aligned.push_back(report.sessions[i]);
-    } else {
-      if (i == 0) throw Error(poses, 0, "LT-SLAM wrote no poses for the central session");
-      report.not_aligned.push_back(report.sessions[i]);
-    }
-  }
-  if (aligned_dirs.size() < 2)
-    throw Error(aligned_dir + ": no query session could be aligned to the central one '" +
-                report.sessions[0] + "'; see " + aligned_dir + "/report.md");
-
-  // --------------------------------------------------------------------- 2. LT-removert
-  t0 = std::chrono::steady_clock::now();
-  if (first <= 1) {
-    spdlog::info("run [2/3] LT-removert: {} aligned sessions -> {}", aligned_dirs.size(), changes_dir);
-    fs::remove(markers[1]);
-    removert::RunRemovertStage(rem_cfg, aligned_dirs, poses_files, changes_dir, threads);
-    MarkStageDone(markers[1], keys[1]);
-    report.stages.push_back({"removert", false, Since(t0)});
-  } else {
-    spdlog::info("run [2/3] LT-removert: finished output found in {}, skipped", changes_dir);
-    report.stages.push_back({"removert", true, 0.0});
-  }
-
-  // --------------------------------------------------------------------------- 3. LT-map
-  t0 = std::chrono::steady_clock::now();
-  if (first <= 2) {
-    spdlog::info("run [3/3] LT-map: -> {}", store_path);
-    fs::remove(markers[2]);
-    // The store is rebuilt from the stage outputs: integrating is one transaction per session,
-    // but a partially integrated store from a killed run is simply replaced.
-    for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(store_path + suffix);
-    map::PipelineDirs dirs;
-    dirs.aligned = aligned_dir;
-    dirs.changes = changes_dir;
-    dirs.sessions = fs::path(session_dirs[0]).parent_path().string();
-    map::InitFromDirs(store_path, map_cfg, dirs, report.aligned[0], threads);
-    map::Store store = map::Store::Open(store_path, map_cfg);
-    store.set_threads(threads);
-    for (std::size_t i = 1; i < report.aligned.size(); ++i) {
-      const auto r = map::IntegrateFromDirs(store, dirs, report.aligned[i]);
-      spdlog::info("run: integrated '{}': {} changed keyframes, {} new, PD {}+{} ND {}+{} in {:.2f} s",
-                   report.aligned[i], r.keyframes_changed, r.keyframes_new, r.pd_strong, r.pd_weak,
-                   r.nd_strong, r.nd_weak, r.seconds);
-    }
-    if (cfg.export_maps) {
-      map::Region region;
-      region.voxel_m = map_cfg.output_voxel_m;
-      map::WriteLabelledCloud((fs::path(out_dir) / "live.pcd").string(), store.Live(region));
-      map::WriteLabelledCloud((fs::path(out_dir) / "meta.pcd").string(), store.Meta(region));
-      map::WriteObjects((fs::path(out_dir) / "objects").string(), store.Objects());
-    }
-    MarkStageDone(markers[2], keys[2]);
-    report.stages.push_back({"map", false, Since(t0)});
-  } else {
-    spdlog::info("run [3/3] LT-map: finished store found at {}, skipped", store_path);
-    report.stages.push_back({"map", true, 0.0});
-  }
-
-  {
-    const map::Store store = map::Store::Open(store_path, map_cfg, map::Store::Access::kReadOnly);
-    const auto totals = store.Totals();
-    report.store_bytes = totals.file_bytes;
-    report.map_points_live = totals.base_points;
-  }
-  if (cfg.export_maps) {
-    const auto live = (fs::path(out_dir) / "live.pcd").string();
-    const auto meta = (fs::path(out_dir) / "meta.pcd").string();
-    if (fs::exists(live)) report.map_points_live = io::ReadPcd(live).size();
-    if (fs::exists(meta)) report.map_points_meta = io::ReadPcd(meta).size();
-    const auto csv = fs::path(out_dir) / "objects" / "objects.csv";
-    if (fs::exists(csv)) {
-      std::ifstream in(csv);
-      std::string line;
-      std::size_t lines = 0;
-      while (std::getline(in, line))
-        if (!line.empty()) ++lines;
-      report.objects = lines > 0 ? lines - 1 : 0;  // header line
-    }
-  }
+  });
+  ReadAligned(p.aligned, &report);
+  Stage(1, first, markers[1], keys[1], "LT-removert", &report, [&] {
+    spdlog::info("run [2/3] LT-removert: {} aligned sessions -> {}", report.aligned.size(), p.changes);
+    removert::RunRemovertStageOnRun(rem_cfg, p.aligned, p.changes, threads);
+  });
+  Stage(2, first, markers[2], keys[2], "LT-map", &report, [&] {
+    spdlog::info("run [3/3] LT-map: -> {}", p.store);
+    BuildStore(p, map_cfg, report, threads);
+    ExportMaps(p, map_cfg, cfg.export_maps);
+  });
+  FillMapFigures(p, map_cfg, cfg.export_maps, &report);
   report.seconds = Since(t_run);
   report.peak_rss_bytes = PeakRssBytes();
-
-  const std::string text = FormatRunReport(report);
-  io::WriteFileAtomic((fs::path(out_dir) / "run_report.md").string(), [&](std::ostream& os) { os << text; });
-  io::WriteFileAtomic((fs::path(out_dir) / "run_report.json").string(), [&](std::ostream& os) {
-    os << "{\n  \"sessions\": " << report.sessions.size() << ",\n  \"aligned\": " << report.aligned.size()
-       << ",\n  \"not_aligned\": " << report.not_aligned.size() << ",\n  \"stages\": {";
-    for (std::size_t i = 0; i < report.stages.size(); ++i)
-      os << (i ? ", " : "") << "\"" << report.stages[i].stage << "\": {\"skipped\": "
-         << (report.stages[i].skipped ? "true" : "false") << ", \"seconds\": " << report.stages[i].seconds << "}";
-    os << "},\n  \"live_points\": " << report.map_points_live << ",\n  \"meta_points\": " << report.map_points_meta
-       << ",\n  \"objects\": " << report.objects << ",\n  \"store_bytes\": " << report.store_bytes
-       << ",\n  \"seconds\": " << report.seconds << ",\n  \"peak_rss_bytes\": " << report.peak_rss_bytes << "\n}\n";
-  });
+  WriteRunReport(out_dir, report);
   return report;
 }
 

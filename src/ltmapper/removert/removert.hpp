@@ -314,5 +314,10 @@ struct StageReport {
 StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
                              const std::vector<std::string>& poses_files, const std::string& out_dir,
                              int threads = 0);
+// The stage on an LT-SLAM output: the aligned sessions of `aligned_dir`'s run manifest
+// (io::ReadRunManifest), in run order, with their aligned/<session>/poses_world.txt. Pair folder
+// positions are therefore positions among the manifest's aligned sessions, as LT-map reads them.
+StageReport RunRemovertStageOnRun(const RemovertConfig& cfg, const std::string& aligned_dir,
+                                  const std::string& out_dir, int threads = 0);
 
 }  // namespace ltm::removert

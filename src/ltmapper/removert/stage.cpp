@@ -29,18 +29,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Index6(int index) {
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%06d", index);
-  return buf;
-}
-
-std::string PairName(const std::vector<std::string>& names, int c, int q) {
-  (void)names;
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), "pair_%02d_%02d", c, q);
-  return buf;
-}
+std::string Index6(int index) { return io::layout::KeyframeDirName(index); }
 
 PointCloud Positions(const std::vector<WorldKeyframe>& kfs) {
   PointCloud c;
@@ -125,6 +114,10 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
     throw Error("removert: " + std::to_string(session_dirs.size()) + " sessions but " +
                 std::to_string(poses_files.size()) + " pose files");
   io::MakeWritableDir(out_dir);
+  // The whole output is built in a fresh folder and replaces out_dir when complete, so no
+  // session or pair folder, or keyframe, of an earlier run survives.
+  io::StagingDir staging(out_dir, "report.json");
+  const std::string& out = staging.path();
   StageReport rep;
   const std::size_t ns = session_dirs.size();
   std::vector<std::vector<WorldKeyframe>> kfs(ns);
@@ -170,9 +163,9 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
                  rep.sessions[s], st.map_points, st.candidates, st.reverted, st.removed, st.dilated,
                  st.map_points ? 100.0 * double(st.removed + st.dilated) / double(st.map_points) : 0.0,
                  st.seconds_map, st.seconds_votes);
-    const std::string dir = out_dir + "/" + rep.sessions[s];
+    const std::string dir = io::layout::SessionChangesDir(out, rep.sessions[s]);
     io::MakeDirs(dir);
-    io::WritePcd(dir + "/static_map.pcd", hd.static_map);
+    io::WritePcd(io::layout::StaticMapFile(out, rep.sessions[s]), hd.static_map);
     io::WritePcd(dir + "/hd_map.pcd", hd.hd_map);
     if (cfg.write_ply) {
       const auto ses = std::uint16_t(s);
@@ -186,7 +179,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
 
   // ---- LD of one pair.
   auto detect_ld = [&](int c, int q) {
-    const std::string pname = PairName(rep.sessions, c, q);
+    const std::string pname = io::layout::PairDirName(c, q);
     spdlog::info("removert: LD {} vs {}", rep.sessions[std::size_t(c)], rep.sessions[std::size_t(q)]);
     const LdResult ld = DetectLd(static_maps[std::size_t(c)], static_maps[std::size_t(q)],
                                  kfs[std::size_t(c)], kfs[std::size_t(q)], cfg, threads);
@@ -195,7 +188,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
                  pname, ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
                  ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.seconds);
     rep.ld.push_back(ld.stats);
-    const std::string dir = out_dir + "/" + pname;
+    const std::string dir = out + "/" + pname;
     io::MakeDirs(dir);
     io::WritePcd(dir + "/pd_strong.pcd", ld.pd_strong);
     io::WritePcd(dir + "/pd_weak.pcd", ld.pd_weak);
@@ -340,7 +333,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   rep.peak_rss_bytes = PeakRssBytes();
 
-  io::WriteFileAtomic(out_dir + "/report.json", [&](std::ostream& os) {
+  io::WriteFileAtomic(out + "/report.json", [&](std::ostream& os) {
     os << std::setprecision(9) << "{\n  \"stage\": \"removert\",\n  \"sessions\": [\n";
     for (std::size_t s = 0; s < ns; ++s) {
       const HdStats& h = rep.hd[s];
@@ -357,7 +350,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
     for (std::size_t p = 0; p < rep.pairs.size(); ++p) {
       const LdStats& l = rep.ld[p];
       os << "    {\"central\": " << rep.pairs[p].first << ", \"query\": " << rep.pairs[p].second
-         << ", \"dir\": " << JsonStr(PairName(rep.sessions, rep.pairs[p].first, rep.pairs[p].second))
+         << ", \"dir\": " << JsonStr(io::layout::PairDirName(rep.pairs[p].first, rep.pairs[p].second))
          << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak
          << ", \"pd_strong\": " << l.pd_strong << ", \"pd_weak\": " << l.pd_weak
          << ", \"pd_unobserved\": " << l.pd_unobserved << ", \"nd_unobserved\": " << l.nd_unobserved
@@ -369,7 +362,18 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
     os << "  ],\n  \"seconds\": " << rep.seconds << ",\n  \"peak_rss_bytes\": " << rep.peak_rss_bytes
        << ",\n  \"threads\": " << threads << "\n}\n";
   });
+  staging.Publish();
   return rep;
+}
+
+StageReport RunRemovertStageOnRun(const RemovertConfig& cfg, const std::string& aligned_dir,
+                                  const std::string& out_dir, int threads) {
+  std::vector<std::string> dirs, poses;
+  for (const auto& s : io::ReadRunManifest(aligned_dir).Aligned()) {
+    dirs.push_back(s.dir);
+    poses.push_back(io::layout::PosesWorldFile(aligned_dir, s.name));
+  }
+  return RunRemovertStage(cfg, dirs, poses, out_dir, threads);
 }
 
 }  // namespace ltm::removert

@@ -63,8 +63,8 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
     const SessionAlignment& a = res.sessions[s];
     const std::string dir = (fs::path(out_dir) / a.name).string();
     io::MakeDirs(dir);
-    const std::string kitti = dir + "/poses_world.txt", tum = dir + "/poses_world_tum.txt",
-                      anchor = dir + "/anchor.txt", na = dir + "/NOT_ALIGNED.txt";
+    const std::string kitti = io::layout::PosesWorldFile(out_dir, a.name), tum = dir + "/poses_world_tum.txt",
+                      anchor = io::layout::AnchorFile(out_dir, a.name), na = dir + "/NOT_ALIGNED.txt";
     if (a.aligned) {
       io::WriteKittiPoses(kitti, a.T_world_sensor);
       std::vector<io::StampedPose> st;
@@ -73,10 +73,7 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
       }
       io::WriteTumPoses(tum, st);
       io::WriteKittiPoses(anchor, {a.anchor});
-      fs::remove(na);
-    } else {
-      // Never leave world poses of an earlier run next to a session that is not aligned now.
-      for (const auto& p : {kitti, tum, anchor}) fs::remove(p);
+    } else {  // out_dir is fresh (StagingDir): no world poses of an earlier run can be left here
       io::WriteFileAtomic(na, [&](std::ostream& os) {
         os << "session " << a.name << " is NOT aligned to the world frame: " << a.reason << "\n";
       });
@@ -191,12 +188,25 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
        << res.time_total_s << " s.\n";
   });
 }
+void WriteManifest(const std::vector<Session>& sessions, const std::vector<std::string>& session_dirs,
+                   const SlamResult& res, const SlamConfig& cfg, const std::string& out_dir) {
+  io::RunManifest m;
+  for (std::size_t s = 0; s < sessions.size(); ++s) {
+    const SessionAlignment& a = res.sessions[s];
+    m.sessions.push_back({a.name, fs::absolute(session_dirs[s]).lexically_normal().string(), a.aligned,
+                          a.aligned ? std::string() : a.reason});
+  }
+  m.slam_config = ConfigToString(cfg);
+  io::WriteRunManifest(out_dir, m);
+}
 }  // namespace
 
 SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
                         const std::string& out_dir, int threads) {
   if (session_dirs.empty()) throw Error("slam: no session directories given");
   io::MakeWritableDir(out_dir);  // before minutes of alignment, not after
+  // The whole output is built in a fresh folder and replaces out_dir when complete.
+  io::StagingDir staging(out_dir, "report.json");
   std::vector<Session> sessions;
   std::set<std::string> names;
   for (const auto& dir : session_dirs) {
@@ -211,7 +221,9 @@ SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& s
                  s.keyframes.size(), s.odometry.size(), s.loops.size());
   }
   SlamResult res = AlignSessions(sessions, cfg, threads);
-  WriteOutputs(sessions, res, cfg, out_dir);
+  WriteOutputs(sessions, res, cfg, staging.path());
+  WriteManifest(sessions, session_dirs, res, cfg, staging.path());
+  staging.Publish();
   for (const auto& a : res.sessions) {
     if (a.aligned) {
       spdlog::info("slam: {} aligned: {} loops accepted ({} radius), anchor t = [{:.2f} {:.2f} "
