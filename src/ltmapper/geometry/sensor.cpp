@@ -185,11 +185,14 @@ double GridFromDensity(const std::vector<PointCloud>& scans, double min_range_m)
 // no turns (column-major scans, shuffled points).
 struct RingFit {
   std::vector<double> elevations_deg;
-  double spread_deg = 0.0;  // RMS of the elevations about their ring's
+  double spread_deg = 0.0;  // robust sigma (1.4826 x median absolute deviation) of the elevations
+                            // about their ring's mean: near returns, few and bent most by the
+                            // lasers' offsets (or a deskewed sweep's moving origin), do not set it
 };
 RingFit RingsFromOrder(const PointCloud& scan, double min_range_m) {
   struct Acc {
-    double n = 0, y = 0, yy = 0;  // y = elevation [deg]
+    double n = 0, y = 0;  // y = elevation [deg]
+    std::vector<float> ys;
   };
   std::vector<Acc> rings;
   double unwrapped = 0.0, prev = 0.0;
@@ -205,21 +208,27 @@ RingFit RingsFromOrder(const PointCloud& scan, double min_range_m) {
     if (turn >= rings.size()) rings.resize(turn + 1);
     Acc& a = rings[turn];
     const double y = std::atan2(double(p.z), rxy) * kRadToDeg;
-    a.n += 1, a.y += y, a.yy += y * y;
+    a.n += 1, a.y += y;
+    a.ys.push_back(float(y));
   }
   RingFit fit;
   constexpr std::size_t kMinRings = 4;       // fewer turns: not a ring-ordered scan
   constexpr double kMinRingShare = 0.1;      // [-] of the largest ring: smaller ones are seams
   if (rings.size() < kMinRings) return fit;
-  double largest = 0.0, sq = 0.0, n = 0.0;
+  double largest = 0.0;
   for (const Acc& a : rings) largest = std::max(largest, a.n);
+  std::vector<float> dev;
   for (const Acc& a : rings) {
     if (a.n < kMinRingShare * largest) continue;
-    fit.elevations_deg.push_back(a.y / a.n);
-    sq += std::max(0.0, a.yy - a.y * a.y / a.n);
-    n += a.n;
+    const double mean = a.y / a.n;
+    fit.elevations_deg.push_back(mean);
+    for (float y : a.ys) dev.push_back(std::fabs(y - float(mean)));
   }
-  fit.spread_deg = std::sqrt(sq / std::max(n, 1.0));
+  constexpr double kMadToSigma = 1.4826;  // sigma of a normal distribution per median absolute deviation
+  if (!dev.empty()) {
+    std::nth_element(dev.begin(), dev.begin() + dev.size() / 2, dev.end());
+    fit.spread_deg = kMadToSigma * dev[dev.size() / 2];
+  }
   return fit;
 }
 

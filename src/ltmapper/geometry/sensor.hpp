@@ -26,7 +26,8 @@ struct SensorModel {
   double grid_deg = 0.0;               // [deg] non-repetitive: angular spacing of the points
   double fov_up_deg = 0.0;             // [deg] highest elevation sampled
   double fov_down_deg = 0.0;           // [deg] lowest elevation sampled
-  double spread_deg = 0.0;             // [deg] estimated: RMS of point elevations about their beam
+  double spread_deg = 0.0;             // [deg] estimated: scatter of point elevations about their beam (RMS
+                                       // from the histogram; robust sigma from the point order)
 
   int beams() const { return int(elevations_deg.size()); }
   // Elevation gap between the two beams around `elevation_deg` (the grid for non-repetitive

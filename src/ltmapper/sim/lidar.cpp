@@ -286,13 +286,46 @@ const std::vector<Pose>& Simulator::T_session_sensor_drifted(int s) const {
   return impl_->sc.sessions[std::size_t(s)].T_session_sensor_drifted;
 }
 
+namespace {
+
+// The sensor pose `dt` seconds after keyframe k, on the way to keyframe k + 1 (constant velocity
+// between keyframes: linear in translation, slerp in rotation; past the last keyframe the last
+// step's motion continues).
+Pose PoseAfter(const std::vector<Pose>& poses, std::size_t k, double dt, double seconds_per_keyframe) {
+  if (dt == 0.0 || poses.size() < 2) return poses[k];
+  const bool last = k + 1 >= poses.size();
+  const Pose& a = last ? poses[k - 1] : poses[k];
+  const Pose& b = last ? poses[k] : poses[k + 1];
+  const double f = dt / seconds_per_keyframe + (last ? 1.0 : 0.0);
+  const Eigen::Quaterniond qa(a.linear()), qb(b.linear());
+  Pose T = Pose::Identity();
+  T.linear() = qa.slerp(f, qb).toRotationMatrix();
+  T.translation() = a.translation() + f * (b.translation() - a.translation());
+  return T;
+}
+
+}  // namespace
+
+std::vector<Pose> Simulator::SweepPoses(int session, int keyframe) const {
+  const Impl& I = *impl_;
+  I.CheckIndex(session, keyframe);
+  const SimConfig& cfg = I.sc.cfg;
+  const auto& plan = I.sc.sessions[std::size_t(session)];
+  std::vector<Pose> out(std::size_t(cfg.columns), plan.T_world_sensor[std::size_t(keyframe)]);
+  if (cfg.sweep == "instant") return out;
+  for (int c = 0; c < cfg.columns; ++c)
+    out[std::size_t(c)] = PoseAfter(plan.T_world_sensor, std::size_t(keyframe), cfg.sweep_s * c / cfg.columns,
+                                    plan.seconds_per_keyframe);
+  return out;
+}
+
 PointCloud Simulator::CastScan(int session, int keyframe) {
   Impl& I = *impl_;
   I.SetKeyframe(session, keyframe);
   const SimConfig& cfg = I.sc.cfg;
   const Pose& T = I.sc.sessions[std::size_t(session)].T_world_sensor[std::size_t(keyframe)];
-  const Eigen::Matrix3f R = T.linear().cast<float>();
-  const Eigen::Vector3f o = T.translation().cast<float>();
+  // Per column: the pose it is fired from (all T unless the sweep takes time).
+  const std::vector<Pose> sweep = SweepPoses(session, keyframe);
   const int B = cfg.beams, C = cfg.columns;
   const std::size_t n = std::size_t(B) * C;
   std::vector<float> range(n, -1.f), intensity(n, 0.f);
@@ -309,6 +342,8 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
       alignas(64) int valid[16];
       RTCRayHit16 rh;
       for (int c = r.begin(); c < r.end(); ++c) {
+        const Eigen::Matrix3f R = sweep[std::size_t(c)].linear().cast<float>();
+        const Eigen::Vector3f o = sweep[std::size_t(c)].translation().cast<float>();
         for (int b0 = 0; b0 < B; b0 += 16) {
           for (int l = 0; l < 16; ++l) {
             const int b = b0 + l;
@@ -356,7 +391,8 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
     const double g = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
     const float rr = float(range[i] + cfg.range_noise_m * g);
     if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
-    const Eigen::Vector3f p = I.dirs[i] * rr;
+    Eigen::Vector3f p = I.dirs[i] * rr;  // the sensor frame when the ray was fired
+    if (cfg.sweep == "deskewed") p = (T.inverse() * sweep[i % std::size_t(C)]).cast<float>() * p;
     cloud.push_back(p.x(), p.y(), p.z(), intensity[i]);
     cloud.cls.push_back(cls[i]);
     cloud.object.push_back(object[i]);

@@ -59,6 +59,12 @@ struct SimConfig {
   double range_noise_m = 0.02;          // [m] std of Gaussian range noise
   double dropout = 0.02;                // probability a return is lost
   double sensor_height_m = 1.8;         // [m] above the road surface
+  std::string sweep = "instant";        // instant: every ray of a scan from the keyframe pose; distorted: column c
+                                        // fired sweep_s * c / columns after the keyframe, from the pose of that
+                                        // moment, its point written in the sensor frame of that moment (a raw
+                                        // sweep, as KITTI's); deskewed: the same rays, points moved into the
+                                        // keyframe's frame (as SC-LIO-SAM saves them)
+  double sweep_s = 0.1;                 // [s] duration of one sweep (10 Hz)
   // --- sessions and routes ---
   int sessions = 3;
   int keyframes = 300;                  // per session
@@ -124,6 +130,8 @@ struct SimConfig {
     v("lidar.range_noise_m", range_noise_m, "m", 0.0, 1.0);
     v("lidar.dropout", dropout, "", 0.0, 0.99);
     v("lidar.sensor_height_m", sensor_height_m, "m", 0.3, 10.0);
+    v("lidar.sweep", sweep, {"instant", "distorted", "deskewed"});
+    v("lidar.sweep_s", sweep_s, "s", 0.001, 1.0);
     v("route.sessions", sessions, "", 1, 64);
     v("route.keyframes", keyframes, "", 2, 100000);
     v("route.keyframe_spacing_m", keyframe_spacing_m, "m", 0.1, 20.0);
@@ -251,6 +259,9 @@ class Simulator {
   // object filled; noise and dropout applied (deterministic per ray). Points ordered beam by
   // beam (top beam first), column by column within a beam.
   PointCloud CastScan(int session, int keyframe);
+  // The world pose each column of a keyframe's scan is fired from (lidar.sweep: all the keyframe
+  // pose when instant, else moving on towards the next keyframe during sweep_s).
+  std::vector<Pose> SweepPoses(int session, int keyframe) const;
   // Rays from `origin_world` along unit `dirs_world` in the world of `session` with the HD
   // actors at `keyframe` (noise free, up to max_range). Runs in parallel.
   std::vector<RayHit> CastRays(int session, int keyframe, const Eigen::Vector3d& origin_world,
