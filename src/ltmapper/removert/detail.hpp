@@ -112,6 +112,8 @@ class MultiResImage {
     Grid grid;
     std::vector<int> window_rows;  // per row: how far the pool looks for the nearest beam (WindowRows)
     int scatter_rows = 0;          // rows within the beams' estimated scatter: pooled whole
+    bool both_sides = false;       // no rings: evidence only with a return above and below
+    std::vector<std::uint8_t> sides;
     std::vector<float> range, pooled, tmp, pairs;
     std::vector<Eigen::Vector3f> ret;  // keep_returns
   };

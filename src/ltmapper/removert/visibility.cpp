@@ -265,6 +265,7 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
     L.grid = Grid::Make(cfg, res, res);
     L.window_rows = WindowRows(cfg, L.grid.rows, res);
     L.scatter_rows = cfg.SensorResolved() ? int(std::lround(cfg.sensor_model.spread_deg / res)) : 0;
+    L.both_sides = cfg.SensorResolved() && !cfg.sensor_model.ring_based;
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
     L.pooled = L.range;
     L.tmp = L.range;
@@ -438,7 +439,12 @@ void MultiResImage::Pool(Level& L) const {
   // (below); row r takes the one found at r - ws - 1 (above) and r + ws + 1 (below).
   std::vector<float> last(static_cast<std::size_t>(cols));
   std::vector<int> last_row(static_cast<std::size_t>(cols));
+  // Without rings (a non-repetitive pattern) no row structure guarantees a return on each side of
+  // a direction: a pixel is evidence only where both sides had one (sides == 3).
+  std::vector<std::uint8_t>& sides = L.sides;
+  if (L.both_sides) sides.assign(L.pooled.size(), 0);
   auto sweep = [&](int step) {
+    const std::uint8_t side = step > 0 ? 1 : 2;
     std::fill(last.begin(), last.end(), inf);
     std::fill(last_row.begin(), last_row.end(), -1);
     const int first = step > 0 ? 0 : rows - 1;
@@ -453,12 +459,17 @@ void MultiResImage::Pool(Level& L) const {
       const int wr = L.window_rows[std::size_t(r)];
       float* dst = &L.pooled[std::size_t(r) * cols];
       for (int c = 0; c < cols; ++c)
-        if (last_row[std::size_t(c)] >= 0 && std::abs(r - last_row[std::size_t(c)]) <= wr)
+        if (last_row[std::size_t(c)] >= 0 && std::abs(r - last_row[std::size_t(c)]) <= wr) {
           dst[c] = std::min(dst[c], last[std::size_t(c)]);
+          if (L.both_sides) sides[std::size_t(r) * cols + c] |= side;
+        }
     }
   };
   sweep(1);   // nearest return above (smaller rows)
   sweep(-1);  // nearest return below
+  if (L.both_sides)
+    for (std::size_t q = 0; q < sides.size(); ++q)
+      if (sides[q] != 3) L.pooled[q] = inf;
 }
 
 // The beam test's cells for the sensor: columns at least one azimuth step wide (else a column

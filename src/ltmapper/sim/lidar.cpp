@@ -327,6 +327,12 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
   // Per column: the pose it is fired from (all T unless the sweep takes time).
   const std::vector<Pose> sweep = SweepPoses(session, keyframe);
   const int B = cfg.beams, C = cfg.columns;
+  // Ray directions: the fixed beam x column table, or this scan's rosette.
+  const std::vector<Eigen::Vector3f> rosette =
+      cfg.lidar_pattern == "rosette"
+          ? RosetteDirections(cfg, std::uint64_t(session) * 1000003u + std::uint64_t(keyframe))
+          : std::vector<Eigen::Vector3f>();
+  const std::vector<Eigen::Vector3f>& dirs = rosette.empty() ? I.dirs : rosette;
   const std::size_t n = std::size_t(B) * C;
   std::vector<float> range(n, -1.f), intensity(n, 0.f);
   std::vector<PointClass> cls(n, PointClass::kUnknown);
@@ -348,7 +354,7 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
           for (int l = 0; l < 16; ++l) {
             const int b = b0 + l;
             valid[l] = b < B ? -1 : 0;
-            const Eigen::Vector3f d = b < B ? Eigen::Vector3f(R * I.dirs[std::size_t(b) * C + c]) : Eigen::Vector3f::UnitX();
+            const Eigen::Vector3f d = b < B ? Eigen::Vector3f(R * dirs[std::size_t(b) * C + c]) : Eigen::Vector3f::UnitX();
             rh.ray.org_x[l] = o.x();
             rh.ray.org_y[l] = o.y();
             rh.ray.org_z[l] = o.z();
@@ -391,7 +397,7 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
     const double g = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
     const float rr = float(range[i] + cfg.range_noise_m * g);
     if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
-    Eigen::Vector3f p = I.dirs[i] * rr;  // the sensor frame when the ray was fired
+    Eigen::Vector3f p = dirs[i] * rr;  // the sensor frame when the ray was fired
     if (cfg.sweep == "deskewed") p = (T.inverse() * sweep[i % std::size_t(C)]).cast<float>() * p;
     cloud.push_back(p.x(), p.y(), p.z(), intensity[i]);
     cloud.cls.push_back(cls[i]);

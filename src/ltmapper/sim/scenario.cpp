@@ -3,6 +3,7 @@
 
 #include "ltmapper/geometry/geometry.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace ltm::sim {
@@ -30,7 +31,39 @@ std::vector<std::string> LidarPresetChoices() {
   return c;
 }
 
+bool InFieldOfView(const SimConfig& cfg, const Eigen::Vector3d& d) {
+  constexpr double kDeg = M_PI / 180.0, kEps = 1e-6;
+  const double n = d.norm();
+  if (!(n > 0.0)) return false;
+  if (cfg.lidar_pattern == "rosette") return std::acos(std::clamp(d.x() / n, -1.0, 1.0)) <= cfg.rosette_half_angle_deg * kDeg + kEps;
+  const double el = std::atan2(d.z(), std::hypot(d.x(), d.y()));
+  return !(el < cfg.fov_down_deg * M_PI / 180.0 - kEps || el > cfg.fov_up_deg * M_PI / 180.0 + kEps);
+}
+
+std::vector<Eigen::Vector3f> RosetteDirections(const SimConfig& cfg, std::uint64_t scan_index) {
+  constexpr double kGoldenAngle = 2.399963229728653;  // [rad] pi (3 - sqrt(5)): turns never repeat
+  constexpr double kPetals = 11.0;                     // rose curve cos(k theta): 2k petals per turn
+  const double alpha = cfg.rosette_half_angle_deg * M_PI / 180.0;
+  const double phase = kGoldenAngle * double(scan_index % 1000003);
+  std::vector<Eigen::Vector3f> dirs(std::size_t(cfg.rosette_points));
+  for (int i = 0; i < cfg.rosette_points; ++i) {
+    const double theta = 2.0 * M_PI * i / cfg.rosette_points;
+    const double rho = alpha * std::fabs(std::cos(kPetals * theta + phase)), phi = theta + phase;
+    dirs[std::size_t(i)] = Eigen::Vector3f(float(std::cos(rho)), float(std::sin(rho) * std::cos(phi)),
+                                           float(std::sin(rho) * std::sin(phi)));
+  }
+  return dirs;
+}
+
 SimConfig ResolveLidar(const SimConfig& cfg) {
+  if (cfg.lidar_pattern == "rosette") {
+    SimConfig r = cfg;
+    r.beams = 1;
+    r.columns = cfg.rosette_points;
+    r.fov_up_deg = cfg.rosette_half_angle_deg;
+    r.fov_down_deg = -cfg.rosette_half_angle_deg;
+    return r;
+  }
   if (cfg.lidar_preset == "uniform") return cfg;
   const geometry::SensorModel m = geometry::SensorPreset(cfg.lidar_preset);
   SimConfig r = cfg;

@@ -59,6 +59,11 @@ struct SimConfig {
   double range_noise_m = 0.02;          // [m] std of Gaussian range noise
   double dropout = 0.02;                // probability a return is lost
   double sensor_height_m = 1.8;         // [m] above the road surface
+  std::string lidar_pattern = "spinning";  // spinning: beams x columns; rosette: a Livox-like non-repetitive
+                                        // pattern of rosette_points directions per scan in a forward cone,
+                                        // turned by the golden angle from scan to scan (no rings)
+  int rosette_points = 20000;           // points per rosette scan
+  double rosette_half_angle_deg = 35.0; // [deg] half-angle of the rosette's cone around the forward axis
   std::string sweep = "instant";        // instant: every ray of a scan from the keyframe pose; distorted: column c
                                         // fired sweep_s * c / columns after the keyframe, from the pose of that
                                         // moment, its point written in the sensor frame of that moment (a raw
@@ -124,12 +129,15 @@ struct SimConfig {
     v("lidar.beams", beams, "", 1, 256);
     v("lidar.fov_up_deg", fov_up_deg, "deg", -89.0, 89.0);
     v("lidar.fov_down_deg", fov_down_deg, "deg", -89.0, 89.0);
-    v("lidar.columns", columns, "", 16, 8192);
+    v("lidar.columns", columns, "", 16, 1000000);
     v("lidar.min_range_m", min_range_m, "m", 0.0, 50.0);
     v("lidar.max_range_m", max_range_m, "m", 1.0, 1000.0);
     v("lidar.range_noise_m", range_noise_m, "m", 0.0, 1.0);
     v("lidar.dropout", dropout, "", 0.0, 0.99);
     v("lidar.sensor_height_m", sensor_height_m, "m", 0.3, 10.0);
+    v("lidar.pattern", lidar_pattern, {"spinning", "rosette"});
+    v("lidar.rosette_points", rosette_points, "", 100, 1000000);
+    v("lidar.rosette_half_angle_deg", rosette_half_angle_deg, "deg", 1.0, 89.0);
     v("lidar.sweep", sweep, {"instant", "distorted", "deskewed"});
     v("lidar.sweep_s", sweep_s, "s", 0.001, 1.0);
     v("route.sessions", sessions, "", 1, 64);
@@ -171,6 +179,12 @@ void CheckConfig(const SimConfig& cfg, const std::string& where = "sim config");
 SimConfig ResolveLidar(const SimConfig& cfg);
 // Elevation of each beam [deg], top beam first: the preset's table, or uniform.
 std::vector<double> BeamElevationsDeg(const SimConfig& cfg);
+// Whether a sensor-frame direction is inside the field of view (vertical FOV of a spinning
+// sensor, the cone of a rosette).
+bool InFieldOfView(const SimConfig& cfg, const Eigen::Vector3d& d_sensor);
+// The rosette's sensor-frame directions of one scan (lidar.pattern: rosette): a rose curve
+// rho = half_angle * |cos(k theta)| in the cone, turned by the golden angle per scan index.
+std::vector<Eigen::Vector3f> RosetteDirections(const SimConfig& cfg, std::uint64_t scan_index);
 // A tiny scenario for tests: 16 beams x 360 columns, 2 sessions x 15 keyframes, 100 m world.
 SimConfig TinyConfig();
 

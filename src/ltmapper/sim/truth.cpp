@@ -92,7 +92,6 @@ std::vector<char> SeenThrough(Simulator& sim, int session, const PointCloud& pts
   std::vector<char> seen(n, 0);
   std::vector<int> tested(n, 0);
   const double tol = cfg.visibility_tolerance_m;
-  const double el_lo = cfg.fov_down_deg * M_PI / 180.0 - 1e-6, el_hi = cfg.fov_up_deg * M_PI / 180.0 + 1e-6;
   const auto& poses = sim.T_world_sensor(session);
   std::vector<std::size_t> idx;
   std::vector<Eigen::Vector3f> dirs;
@@ -108,9 +107,7 @@ std::vector<char> SeenThrough(Simulator& sim, int session, const PointCloud& pts
       const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - o;
       const double r = d.norm();
       if (r < cfg.min_range_m || r + tol > cfg.max_range_m) continue;
-      const Eigen::Vector3d ds = Rt * d;
-      const double el = std::atan2(ds.z(), std::hypot(ds.x(), ds.y()));
-      if (el < el_lo || el > el_hi) continue;
+      if (!InFieldOfView(cfg, Rt * d)) continue;
       idx.push_back(i);
       dirs.push_back((d / r).cast<float>());
       ranges.push_back(float(r));
@@ -158,7 +155,6 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
   const std::size_t n = pts.size();
   std::vector<int> tested(n, 0);
   std::size_t rays = 0;
-  const double el_lo = cfg.fov_down_deg * M_PI / 180.0 - 1e-6, el_hi = cfg.fov_up_deg * M_PI / 180.0 + 1e-6;
   const auto& poses = sim.T_world_sensor(session);
   std::vector<std::size_t> todo, idx;
   for (std::size_t i = 0; i < n; ++i) {
@@ -181,9 +177,7 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
       if (std::abs(d.x()) > cfg.max_range_m || std::abs(d.y()) > cfg.max_range_m) continue;
       const double r = d.norm();
       if (r < cfg.min_range_m || r > cfg.max_range_m) continue;
-      const Eigen::Vector3d ds = Rt * d;
-      const double el = std::atan2(ds.z(), std::hypot(ds.x(), ds.y()));
-      if (el < el_lo || el > el_hi) continue;
+      if (!InFieldOfView(cfg, Rt * d)) continue;
       idx.push_back(i);
       dirs.push_back((d / r).cast<float>());
       ranges.push_back(float(r));
