@@ -59,6 +59,8 @@ struct SimConfig {
   double range_noise_m = 0.02;          // [m] std of Gaussian range noise
   double dropout = 0.02;                // probability a return is lost
   double sensor_height_m = 1.8;         // [m] above the road surface
+  double tilt_deg = 0.0;                // [deg] mounting pitch of the sensor on the vehicle (positive: nose
+                                        // down); the keyframe poses are the tilted sensor's
   std::string lidar_pattern = "spinning";  // spinning: beams x columns; rosette: a Livox-like non-repetitive
                                         // pattern of rosette_points directions per scan in a forward cone,
                                         // turned by the golden angle from scan to scan (no rings)
@@ -135,6 +137,7 @@ struct SimConfig {
     v("lidar.range_noise_m", range_noise_m, "m", 0.0, 1.0);
     v("lidar.dropout", dropout, "", 0.0, 0.99);
     v("lidar.sensor_height_m", sensor_height_m, "m", 0.3, 10.0);
+    v("lidar.tilt_deg", tilt_deg, "deg", -45.0, 45.0);
     v("lidar.pattern", lidar_pattern, {"spinning", "rosette"});
     v("lidar.rosette_points", rosette_points, "", 100, 1000000);
     v("lidar.rosette_half_angle_deg", rosette_half_angle_deg, "deg", 1.0, 89.0);

@@ -584,6 +584,10 @@ Scenario BuildScenario(const SimConfig& user_cfg) {
     SessionPlan plan;
     plan.centre = routes[s];
     plan.T_world_sensor = KeyframePoses(cfg, sc.grid, sc.terrain, plan.centre);
+    if (cfg.tilt_deg != 0.0) {  // the sensor pitched on its mount: rotation about its own y axis
+      const Eigen::Matrix3d tilt = Eigen::AngleAxisd(cfg.tilt_deg * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+      for (Pose& T : plan.T_world_sensor) T.linear() = T.linear() * tilt;
+    }
     Rng origin_rng(Hash(seed, 5, std::uint64_t(s)));
     plan.T_world_session =
         YawPose(origin_rng.Uniform(-1, 1) * cfg.origin_offset_m, origin_rng.Uniform(-1, 1) * cfg.origin_offset_m,
