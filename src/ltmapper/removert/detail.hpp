@@ -117,7 +117,9 @@ class MultiResImage {
     std::vector<float> range, pooled, tmp, pairs;
     std::vector<Eigen::Vector3f> ret;  // keep_returns
   };
-  void Pool(Level& L) const;
+  void Pool(Level& L) const;         // PoolColumns then PoolRows (or a copy when window_px is 0)
+  void PoolColumns(Level& L) const;  // horizontal min over +-window_px columns into tmp
+  void PoolRows(Level& L) const;     // vertical: scatter rows whole, then the nearest beam above / below
   bool keep_returns_ = false;
   int window_ = 0;
   float up_ = 0.f, down_ = 0.f;  // [rad]

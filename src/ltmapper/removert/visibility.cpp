@@ -392,11 +392,17 @@ void MultiResImage::Build(const PointCloud& scan) {
 // Separable min filter: along columns (wrapping) into tmp, then along rows into pooled. Min is
 // exact and there are no NaNs, so the evaluation order does not change the result.
 void MultiResImage::Pool(Level& L) const {
-  const int w = window_;
-  if (w == 0) {
+  if (window_ == 0) {
     std::copy(L.range.begin(), L.range.end(), L.pooled.begin());
     return;
   }
+  PoolColumns(L);
+  PoolRows(L);
+}
+
+// Horizontal: the min over the window_px columns on each side (wrapping) into L.tmp.
+void MultiResImage::PoolColumns(Level& L) const {
+  const int w = window_;
   const int rows = L.grid.rows, cols = L.grid.cols;
   for (int r = 0; r < rows; ++r) {
     const float* src = &L.range[std::size_t(r) * cols];
@@ -420,6 +426,11 @@ void MultiResImage::Pool(Level& L) const {
     for (int d = 1; d <= w; ++d)
       for (int c = lo; c < hi; ++c) dst[c] = std::min(dst[c], std::min(src[c - d], src[c + d]));
   }
+}
+
+// Vertical, from L.tmp into L.pooled.
+void MultiResImage::PoolRows(Level& L) const {
+  const int rows = L.grid.rows, cols = L.grid.cols;
   // Vertical: every row within the beams' own scatter (L.scatter_rows: the estimated spread of a
   // beam's returns about its elevation, 0 for an ideal sensor), then the nearest row with a
   // return beyond that above and below, within L.window_rows: the beams on both sides of any
