@@ -42,6 +42,7 @@ struct MapConfig {
   double object_ground_height_m = 0.25;  // change points this close above the lowest map point
                                          // of their cell are ground, not clustered
   double object_max_extent_m = 0.0;      // clusters with a larger xy box edge are not objects (0 = off)
+  double object_min_length_m = 1.0;      // clusters with a shorter longest horizontal edge are not objects
   double object_min_observed_fraction = 0.5;  // appeared: share of weak PD (reference saw the space free)
   double object_min_height_m = 0.5;      // top above the local ground
   double object_max_clearance_m = 1.0;  // lowest point above ground: higher = floating (0 = off)
@@ -52,6 +53,7 @@ struct MapConfig {
   double object_twin_radius_m = 1.0;     // other side's change this close = the same surface, misaligned
   double object_twin_max_fraction = 0.5; // clusters with at least this share of such points are ghosts
   double object_max_attached_fraction = 0.5;  // clusters mostly touching unchanged surfaces are fragments
+  double object_merge_inside_fraction = 0.5;  // a cluster this much inside a larger one's box joins it
   double object_moved_size_tol = 0.2;    // relative box-size difference of a moved object's two ends
   double object_moved_min_dist_m = 1.0;  // ends closer than this are one object re-scanned, not moved
 
@@ -71,6 +73,7 @@ struct MapConfig {
     v("object_ground_cell_m", object_ground_cell_m, "m", 0.0, 100.0);
     v("object_ground_height_m", object_ground_height_m, "m", 0.0, 10.0);
     v("object_max_extent_m", object_max_extent_m, "m", 0.0, 10000.0);
+    v("object_min_length_m", object_min_length_m, "m", 0.0, 10000.0);
     v("object_min_observed_fraction", object_min_observed_fraction, "", 0.0, 1.0);
     v("object_min_height_m", object_min_height_m, "m", 0.0, 100.0);
     v("object_max_clearance_m", object_max_clearance_m, "m", 0.0, 100.0);
@@ -81,6 +84,7 @@ struct MapConfig {
     v("object_twin_radius_m", object_twin_radius_m, "m", 0.0, 100.0);
     v("object_twin_max_fraction", object_twin_max_fraction, "", 0.0, 1.0);
     v("object_max_attached_fraction", object_max_attached_fraction, "", 0.0, 1.0);
+    v("object_merge_inside_fraction", object_merge_inside_fraction, "", 0.0, 1.0);
     v("object_moved_size_tol", object_moved_size_tol, "", 0.0, 10.0);
     v("object_moved_min_dist_m", object_moved_min_dist_m, "m", 0.0, 10000.0);
   }

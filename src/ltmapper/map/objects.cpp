@@ -284,7 +284,10 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
 // kiosks, trees) stand on the ground: a cluster whose lowest point is more than
 // object_max_clearance_m above the ground of its cell floats, a piece of a permanent surface
-// (canopy, facade above an occluder) whose lower part both sessions saw the same.
+// (canopy, facade above an occluder) whose lower part both sessions saw the same. Clusters whose
+// longest horizontal edge is below object_min_length_m are smaller than the objects the map
+// tracks: at a pedestrian's footprint they are most likely residues of moving actors that HD
+// removal missed in one session.
 std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
   if (!Covered(o, ctx, cfg)) return "coverage";
   if (o.twin_fraction >= cfg.object_twin_max_fraction) return "ghost";
@@ -295,6 +298,7 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
   if (width_m < cfg.object_min_samples * sample) return "sliver";
   if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
     return "flat";
+  if (o.size.x() < cfg.object_min_length_m) return "small";
   if (cfg.object_max_extent_m > 0.0 && o.size.x() > cfg.object_max_extent_m) return "extent";
   return "";
 }
@@ -347,6 +351,44 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   return o;
 }
 
+// Share of `part`'s points inside `whole`'s axis-aligned box grown by `margin`.
+double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
+  const Eigen::Vector3d lo = whole.lo.array() - margin, hi = whole.hi.array() + margin;
+  std::size_t n = 0;
+  for (const auto& p : part.cloud.points) {
+    const Eigen::Vector3d q = p.xyz().cast<double>();
+    n += (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() ? 1 : 0;
+  }
+  return double(n) / double(std::max<std::size_t>(part.points, 1));
+}
+
+// Parts of one object split by an occlusion gap wider than the cluster tolerance: an accepted
+// cluster with at least object_merge_inside_fraction of its points inside the box (grown by the
+// tolerance) of a larger accepted cluster of the same change joins it.
+void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
+  if (cfg.object_merge_inside_fraction <= 0.0) return;
+  std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
+  std::deque<MapObject> out;
+  for (auto& o : objects) {
+    MapObject* whole = nullptr;
+    for (auto& w : out)
+      if (w.change == o.change && InsideShare(o, w, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction) {
+        whole = &w;
+        break;
+      }
+    if (!whole) {
+      out.push_back(std::move(o));
+      continue;
+    }
+    whole->cloud.append(o.cloud);
+    whole->centroid.setZero();
+    Describe(*whole);
+    OrientedBox(*whole);
+    whole->height_above_ground = whole->hi.z() - whole->ground_z;
+  }
+  objects.swap(out);
+}
+
 // One step's objects (disappeared first: they can reveal appeared ones) and rejected clusters.
 void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx, std::vector<MapObject>& kept,
                  std::vector<MapObject>& rejected) {
@@ -370,6 +412,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
       if (!appeared) ctx.disappeared.push_back(&step_kept.back());
     }
   }
+  MergeParts(step_kept, cfg);
   for (auto& o : step_kept) kept.push_back(std::move(o));
 }
 
