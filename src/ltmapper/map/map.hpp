@@ -42,7 +42,7 @@ struct MapConfig {
   double object_ground_height_m = 0.25;  // change points this close above the lowest map point
                                          // of their cell are ground, not clustered
   double object_max_extent_m = 0.0;      // clusters with a larger xy box edge are not objects (0 = off)
-  double object_min_length_m = 1.0;      // clusters with a shorter longest horizontal edge are not objects
+  double object_min_length_m = 2.0;      // clusters with a shorter longest horizontal edge are not objects
   double object_min_observed_fraction = 0.5;  // appeared: share of weak PD (reference saw the space free)
   double object_min_height_m = 0.5;      // top above the local ground
   double object_max_clearance_m = 1.0;  // lowest point above ground: higher = floating (0 = off)

@@ -31,6 +31,12 @@ namespace ltm::map {
 namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
+// Extent of a uniform spread over a segment per standard deviation: L = sqrt(12) * std.
+const double kUniformExtentPerStd = std::sqrt(12.0);
+// Confidence margins reach 1 when a measure is this many times its minimum.
+constexpr double kFullMargin = 2.0;
+// Evidence of a revealed appeared cluster (blocked reference view, no see-through): half.
+constexpr double kRevealedEvidence = 0.5;
 
 struct CellKey {
   std::int64_t x, y;
@@ -278,7 +284,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // and ground. The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one or two scan rows wide) spans fewer than object_min_samples samples across its middle
-// principal axis (width = sqrt(12) * std, the extent of a uniform spread). A cluster whose top is
+// principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread). A cluster whose top is
 // below object_min_height_m above the local ground is a ground bump (kerb, misregistered
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
@@ -304,11 +310,12 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
 }
 
 // Confidence in [0, 1]: geometric mean of the see-through evidence (observed fraction; a revealed
-// cluster counts half) and of how far width and height clear their minimum (1 at twice it).
+// cluster counts half) and of how far width and height clear their minimum (1 at kFullMargin
+// times it).
 double Confidence(const MapObject& o, const MapConfig& cfg, double width_m, double min_width_m) {
   const double evidence = o.change == "appeared" && o.observed_fraction < cfg.object_min_observed_fraction
-                              ? 0.5 : o.observed_fraction;
-  auto margin = [](double v, double min) { return min > 0.0 ? std::clamp(v / (2.0 * min), 0.0, 1.0) : 1.0; };
+                              ? kRevealedEvidence : o.observed_fraction;
+  auto margin = [](double v, double min) { return min > 0.0 ? std::clamp(v / (kFullMargin * min), 0.0, 1.0) : 1.0; };
   return std::cbrt(evidence * margin(width_m, min_width_m) * margin(o.height_above_ground, cfg.object_min_height_m));
 }
 
@@ -343,7 +350,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   const Eigen::Vector3d* s = Nearest(ctx.all_sensors, o.centroid);
   o.range_m = s ? (*s - o.centroid).norm() : 0.0;
   const Spread3 sp = Spread(o);
-  const double width = std::sqrt(12.0) * sp.sigma.y();
+  const double width = kUniformExtentPerStd * sp.sigma.y();
   const double min_width =
       cfg.object_min_samples * std::max(cfg.output_voxel_m, o.range_m * cfg.object_sensor_step_deg * kDegToRad);
   o.rejected = Reject(o, ctx, cfg, width, sp);
