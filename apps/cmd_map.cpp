@@ -221,16 +221,18 @@ void Setup(CLI::App& parent) {
     if (!r.ok) throw Error(o.store + ": fsck found " + std::to_string(r.problems.size()) + " problem(s)");
   });
 
-  auto* objects = map_cmd->add_subcommand("objects", "Cluster strong ND / PD per step into objects (clouds + CSV/JSON)");
+  auto* objects = map_cmd->add_subcommand("objects", "Changed objects per step: clusters of strong ND / PD in observed space that pass the geometric rules (clouds + CSV/JSON, rejected.csv)");
   common(objects);
   objects->add_option("--out", o.out, "Output directory")->required();
   objects->callback([opts] {
     const MapOptions& o = *opts;
     const auto cfg = LoadMapConfig(o);
     const map::Store s = OpenStore(o, cfg);
-    const auto objs = s.Objects();
-    map::WriteObjects(o.out, objs);
-    spdlog::info("map: {} objects written to {}", objs.size(), o.out);
+    std::vector<map::MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    map::WriteObjects(o.out, objs, &rejected);
+    spdlog::info("map: {} objects written to {} ({} clusters rejected, rejected.csv)", objs.size(), o.out,
+                 rejected.size());
   });
 }
 

@@ -74,6 +74,14 @@ py::dict ObjectToDict(const map::MapObject& o) {
   d["centroid"] = Vec3(o.centroid);
   d["lo"] = Vec3(o.lo);
   d["hi"] = Vec3(o.hi);
+  d["change"] = o.change;
+  d["partner"] = o.partner;
+  d["exists_in"] = o.exists_in;
+  d["confidence"] = o.confidence;
+  d["box_center"] = Vec3(o.box_center);
+  d["size"] = Vec3(o.size);
+  d["yaw_rad"] = o.yaw_rad;
+  d["height_above_ground"] = o.height_above_ground;
   d["cloud"] = CloudToDict(o.cloud);
   return d;
 }
@@ -216,7 +224,8 @@ void BindStore(py::module_& m) {
             for (const auto& o : objs) out.append(ObjectToDict(o));
             return out;
           },
-          "Changed objects (clusters of strong ND / PD per step) as dicts with their clouds.")
+          "Changed objects a user can act on (clusters of strong ND / PD per step in observed space that "
+          "pass the geometric rules; change appeared / disappeared / moved, oriented box) as dicts with their clouds.")
       .def(
           "write_objects",
           [](const Store& s, const std::string& dir) {

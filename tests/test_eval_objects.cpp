@@ -64,9 +64,9 @@ TEST(Objects, EvaluateObjectsFoundFraction) {
   truth[4] = {"00_02", 11, "car", "open", 0, Grid(10, 10, 10.f, 0.f), {"00_02", "00_01"}};
   truth[5] = {"00_01", 12, "car", "occluded", 0, Grid(10, 10), {}, 5};   // 5 change points: not scored
   std::vector<ObjectCluster> clusters(3);
-  clusters[0] = {"00_01", 0, Grid(10, 10)};
-  clusters[1] = {"00_01", 1, Grid(40, 10, 5.f, 0.f)};  // 400 points, 100 of them the tree: IoU 0.25
-  clusters[2] = {"00_01", 2, Grid(10, 10, 10.f, 0.f)}; // where object 9 is, but wrong pair
+  clusters[0] = {"00_01", 0, Grid(10, 10), ""};
+  clusters[1] = {"00_01", 1, Grid(40, 10, 5.f, 0.f), ""};  // 400 points, 100 of them the tree: IoU 0.25
+  clusters[2] = {"00_01", 2, Grid(10, 10, 10.f, 0.f), ""}; // where object 9 is, but wrong pair
   const auto r = EvaluateObjects(truth, clusters, cfg, 2);
   ASSERT_EQ(r.objects.size(), 6u);
   EXPECT_TRUE(r.objects[0].found);
@@ -90,6 +90,56 @@ TEST(Objects, EvaluateObjectsFoundFraction) {
   rep.objects = r;
   EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.found_fraction"), 0.5, 1e-9);
   EXPECT_NE(ToMarkdown(rep).find("Changed objects"), std::string::npos);
+}
+
+// Precision: a cluster with no truth object of its pair at IoU >= min_iou is a false object.
+TEST(Objects, PrecisionRecallF1PerPairAndChange) {
+  const auto cfg = Cfg();
+  std::vector<ObjectTruth> truth(4);
+  truth[0] = {"00_01", 7, "car", "open", 0, Grid(10, 10), {}};             // disappeared, found
+  truth[1] = {"00_01", 8, "tree", "open", 1, Grid(10, 10, 5.f, 0.f), {}};  // appeared, glued: not found
+  truth[2] = {"00_02", 9, "car", "open", 2, Grid(10, 10, 30.f, 0.f), {}};  // appeared, no cluster
+  truth[3] = {"00_02", 11, "car", "open", 0, Grid(10, 10, 10.f, 0.f), {"00_02", "00_01"}};  // found at step 1
+  std::vector<ObjectCluster> clusters(4);
+  clusters[0] = {"00_01", 0, Grid(10, 10), "disappeared"};
+  clusters[1] = {"00_01", 1, Grid(40, 10, 5.f, 0.f), "appeared"};   // IoU 0.25 with the tree: false
+  clusters[2] = {"00_01", 2, Grid(10, 10, 10.f, 0.f), "disappeared"};
+  clusters[3] = {"00_02", 3, Grid(10, 10, 60.f, 0.f), "appeared"};  // nothing there: false
+  const auto r = EvaluateObjects(truth, clusters, cfg, 2);
+  ASSERT_EQ(r.cluster_scores.size(), 4u);
+  EXPECT_TRUE(r.cluster_scores[0].true_object);
+  EXPECT_EQ(r.cluster_scores[0].best_truth, 7);
+  EXPECT_FALSE(r.cluster_scores[1].true_object);
+  EXPECT_NEAR(r.cluster_scores[1].best_iou, 0.25, 1e-12);
+  EXPECT_TRUE(r.cluster_scores[2].true_object);  // truth 11 of 00_02 matches clusters of 00_01
+  EXPECT_FALSE(r.cluster_scores[3].true_object);
+  EXPECT_EQ(r.cluster_scores[3].best_truth, -1);
+  EXPECT_EQ(r.all.clusters, 4u);
+  EXPECT_EQ(r.all.true_clusters, 2u);
+  EXPECT_NEAR(r.all.precision, 0.5, 1e-12);
+  EXPECT_NEAR(r.all.recall, 0.5, 1e-12);
+  EXPECT_NEAR(r.all.f1, 0.5, 1e-12);
+  ASSERT_EQ(r.per_pair.size(), 2u);
+  EXPECT_EQ(r.per_pair[0].name, "00_01");
+  EXPECT_NEAR(r.per_pair[0].precision, 2.0 / 3.0, 1e-12);
+  EXPECT_NEAR(r.per_pair[0].recall, 0.5, 1e-12);
+  EXPECT_NEAR(r.per_pair[0].f1, 4.0 / 7.0, 1e-12);
+  EXPECT_NEAR(r.per_pair[1].precision, 0.0, 1e-12);
+  EXPECT_NEAR(r.per_pair[1].recall, 0.5, 1e-12);
+  ASSERT_EQ(r.per_change.size(), 2u);
+  EXPECT_EQ(r.per_change[0].name, "appeared");
+  EXPECT_NEAR(r.per_change[0].precision, 0.0, 1e-12);
+  EXPECT_NEAR(r.per_change[0].recall, 0.0, 1e-12);
+  EXPECT_NEAR(r.per_change[0].f1, 0.0, 1e-12);
+  EXPECT_NEAR(r.per_change[1].precision, 1.0, 1e-12);
+  EXPECT_NEAR(r.per_change[1].recall, 1.0, 1e-12);
+  Report rep;
+  rep.objects = r;
+  const std::string json = ToJson(rep);
+  EXPECT_NEAR(*JsonNumber(json, "objects.precision"), 0.5, 1e-9);
+  EXPECT_NEAR(*JsonNumber(json, "objects.per_pair.0.precision"), 2.0 / 3.0, 1e-9);
+  EXPECT_NEAR(*JsonNumber(json, "objects.per_change.1.recall"), 1.0, 1e-9);
+  EXPECT_NE(ToMarkdown(rep).find("| 00_01 | 2 | 1 | 3 | 2 | 0.667 | 0.500 | 0.571 |"), std::string::npos);
 }
 
 void WriteText(const std::string& path, const std::string& text) {
@@ -148,6 +198,8 @@ TEST(Objects, SimTruthAndClusterFiles) {
   const auto clusters = ReadObjectClusters(od);
   ASSERT_EQ(clusters.size(), 2u);
   EXPECT_EQ(clusters[0].pair, "00_01");
+  EXPECT_EQ(clusters[0].change, "disappeared");  // from the class column
+  EXPECT_EQ(clusters[1].change, "appeared");
   EXPECT_EQ(clusters[1].cloud.size(), 50u);
   const auto r = EvaluateObjects(truth, clusters, Cfg());
   EXPECT_TRUE(r.objects[0].found);

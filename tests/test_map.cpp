@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <random>
 #include <tuple>
 
@@ -317,17 +318,26 @@ TEST(MapStore, LiveHasWeakPdMetaDoesNot) {
   const PointCloud ch = s.StepChanges(1);
   EXPECT_EQ(count(ch, PointClass::kNDStrong), car);
   EXPECT_EQ(count(ch, PointClass::kNDWeak), 0);  // not stored by default (changes nothing)
-  // Objects: the parked car (weak PD), the wall (strong PD), the removed car (strong ND).
-  const auto objs = s.Objects();
-  ASSERT_EQ(objs.size(), 3u);
-  int pdw = 0, pds = 0, nds = 0;
+  // Objects: the parked car (weak PD) and the removed car (strong ND), the same box: one car
+  // moved. Car points in the ground band (z = 0.25 m) are ground; so is the wall (strong PD, a
+  // line 1.1 m up) where its xy cells hold no other point (their lowest point), and the removed
+  // car's row at y = 6 m, whose cell's lowest point is the car's own (0.25 m): 9 points.
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  ASSERT_EQ(objs.size(), 2u);
+  const auto above = [](const PointCloud& c) {
+    return std::size_t(std::count_if(c.points.begin(), c.points.end(), [](const PointXYZI& p) { return p.z > 0.26f; }));
+  };
+  int pdw = 0, nds = 0;
   for (const auto& o : objs) {
-    pdw += o.cls == PointClass::kPDWeak && o.points == std::size_t(weak);
-    pds += o.cls == PointClass::kPDStrong && o.points == std::size_t(strong);
-    nds += o.cls == PointClass::kNDStrong && o.points == std::size_t(car);
+    pdw += o.cls == PointClass::kPDWeak && o.points == above(Car(-4, -4));
+    nds += o.cls == PointClass::kNDStrong && o.points == above(Car(2, 2)) - 9;
     EXPECT_EQ(o.session, 1);
+    EXPECT_EQ(o.change, "moved");
+    EXPECT_EQ(o.partner, objs[o.id == 0 ? 1 : 0].id);
   }
-  EXPECT_EQ(pdw + pds + nds, 3);
+  EXPECT_EQ(pdw + nds, 2);
+  EXPECT_TRUE(rejected.empty());
   // Box export.
   Region box;
   box.use_box = true;
@@ -391,7 +401,96 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
   }
   const auto objects = s.Objects();
   ASSERT_EQ(objects.size(), 1u);
-  EXPECT_EQ(objects[0].points, car.size());
+  const auto above = std::count_if(car.points.begin(), car.points.end(), [](const PointXYZI& p) { return p.z > 0.26f; });
+  // The lowest layer is in the ground band; where the car's cells hold no ground (beyond the
+  // keyframe's 6 m grid) its own lowest layer is the cell's ground and the next layer is too.
+  EXPECT_LT(objects[0].points, std::size_t(above));
+  EXPECT_GT(objects[0].points, car.size() / 2);
+  EXPECT_EQ(objects[0].change, "appeared");
+  EXPECT_EQ(objects[0].exists_in, 1);
+}
+
+// ------------------------------------------------------------------------------------ objects
+// One step on a flat 40 m x 40 m ground keyframe holding `standing` (strong ND removes map
+// points, so what disappears must be in it); `d0` is keyframe 0's delta.
+std::vector<MapObject> StepObjects(const test::TempDir& tmp, const PointCloud& standing, const KeyframeDelta& d0,
+                                   std::vector<MapObject>* rejected) {
+  Store s = Store::Create(tmp / "o.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), standing)}});
+  s.IntegrateSession({"s1"}, "s0", {d0}, {});
+  return s.Objects(rejected);
+}
+
+PointCloud WithZ(PointCloud c, float dz) {
+  for (auto& p : c.points) p.z += dz;
+  return c;
+}
+
+TEST(MapObjects, GroundSliverRejectedCarKept) {
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.pd_weak = Car(-6, -6);                                     // a new car where the reference saw free space
+  d.pd_weak.append(WithZ(Grid(5, -10, 0, 20, 8, 0.25f), 0.3f)); // a flat patch just above the ground band
+  d.pd_weak.append(WithZ(Grid(-15, 5, 0, 40, 2, 0.1f), 0.4f));  // a rim: 4 m long, 0.1 m wide, flat
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, Car(8, 8), d, &rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].change, "appeared");
+  EXPECT_NEAR(objs[0].size.z(), 1.0, 0.01);  // oriented box: z 0.5 .. 1.5 (0.25 is in the ground band)
+  EXPECT_NEAR(std::max(objs[0].size.x(), objs[0].size.y()), 4.0, 0.01);
+  EXPECT_NEAR(objs[0].height_above_ground, 1.5, 0.01);
+  EXPECT_GT(objs[0].confidence, 0.9);
+  ASSERT_EQ(rejected.size(), 2u);
+  for (const auto& r : rejected) EXPECT_EQ(r.rejected, "low");  // both below object_min_height_m
+}
+
+TEST(MapObjects, RulesFromGeometry) {
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.pd_weak = WithZ(Grid(-15, 5, 0, 40, 1, 0.1f), 1.0f);  // sliver: 4 m long, one sample wide, 1 m up
+  d.pd_weak.append(WithZ(Grid(0, -15, 0, 12, 12, 0.25f), 0.9f)); // flat horizontal patch 0.9 m up (< 1 m clearance)
+  d.pd_weak.append(WithZ(Car(-10, -10), 2.0f));                  // a car 2 m above the ground: floating
+  d.pd_strong = Car(10, -10);                                    // strong PD, nothing removed in front: coverage
+  d.nd_strong = Car(8, 8);                                       // the removed car: an object
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, Car(8, 8), d, &rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].change, "disappeared");
+  EXPECT_EQ(objs[0].exists_in, 0);
+  std::map<std::string, int> why;
+  for (const auto& r : rejected) ++why[r.rejected];
+  EXPECT_EQ(why["sliver"], 1);
+  EXPECT_EQ(why["flat"], 1);
+  EXPECT_EQ(why["floating"], 1);
+  EXPECT_EQ(why["coverage"], 1);
+}
+
+TEST(MapObjects, MovedContainerAndStableIds) {
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.nd_strong = Car(8, 8, 2.4f, 6.0f, 2.5f);     // a container gone from here ...
+  d.pd_weak = Car(-12, -4, 2.4f, 6.0f, 2.5f);    // ... and the same box 20 m away
+  d.pd_weak.append(Car(-4, -16, 2.f, 4.f, 1.5f)); // a car: appeared, not the container's twin
+  const auto a = StepObjects(tmp, d.nd_strong, d, nullptr);
+  ASSERT_EQ(a.size(), 3u);
+  int moved = 0;
+  for (const auto& o : a) {
+    EXPECT_EQ(o.id, int(&o - a.data()));
+    if (o.change != "moved") continue;
+    ++moved;
+    ASSERT_GE(o.partner, 0);
+    EXPECT_EQ(a[std::size_t(o.partner)].partner, o.id);
+    EXPECT_NE(a[std::size_t(o.partner)].cls == PointClass::kNDStrong, o.cls == PointClass::kNDStrong);
+  }
+  EXPECT_EQ(moved, 2);
+  test::TempDir tmp2;
+  const auto b = StepObjects(tmp2, d.nd_strong, d, nullptr);  // same input, same ids
+  ASSERT_EQ(b.size(), a.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(b[k].id, a[k].id);
+    EXPECT_EQ(b[k].points, a[k].points);
+    EXPECT_EQ(b[k].partner, a[k].partner);
+  }
 }
 
 TEST(MapStore, ExceptionMidIntegrationLeavesPreviousState) {

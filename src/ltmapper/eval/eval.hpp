@@ -388,6 +388,26 @@ struct ObjectCluster {
   std::string pair;       // step's "<reference>_<session>", 2 digits each
   int id = -1;            // cluster id (objects.csv of `ltmapper map objects`)
   PointCloud cloud;
+  // "appeared" (PD cluster) or "disappeared" (ND cluster), from objects.csv's class column;
+  // "" when unknown (the cluster then counts in the per-pair rows only).
+  std::string change;
+};
+// A cluster against the truth objects of its pair: it is a true object when some truth object
+// eligible for its pair (ObjectTruth::match_pairs) reaches IoU >= obj_min_iou, else a false one.
+struct ClusterScore {
+  std::string pair, change;
+  int id = -1;
+  std::size_t points = 0;          // after voxelisation
+  int best_truth = -1;             // truth object id with the highest IoU (-1: none overlaps)
+  double best_iou = 0.0;
+  bool true_object = false;
+};
+// Precision = true clusters / clusters, recall = found / scored truth objects, F1 their harmonic
+// mean, for one slice (a pair, a change type or everything).
+struct ObjectsPrf {
+  std::string name;                // "00_01", "appeared", "disappeared", "all"
+  std::size_t truth_objects = 0, found = 0, clusters = 0, true_clusters = 0;
+  double precision = kNaN, recall = kNaN, f1 = kNaN;
 };
 struct ObjectScore {
   std::string pair;
@@ -409,6 +429,9 @@ struct ObjectsResult {
   std::size_t found = 0;
   double found_fraction = kNaN;
   std::vector<ObjectScore> objects;
+  std::vector<ClusterScore> cluster_scores;  // clusters of the scored pairs
+  ObjectsPrf all;                            // every scored pair and change type
+  std::vector<ObjectsPrf> per_pair, per_change;
 };
 // Point IoU of two point sets after voxel-downsampling both to obj_voxel_m (same density, so
 // counts are comparable): a point of A matches when B has a point within obj_match_dist_m and
@@ -416,7 +439,9 @@ struct ObjectsResult {
 // set IoU when the matched points pair up one to one. 0 when either set is empty.
 double PointIoU(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg);
 // Every truth object against the clusters of its pair (boxes grown by the match distance must
-// overlap); one cluster per object: the one with the highest IoU.
+// overlap); one cluster per object: the one with the highest IoU. Every cluster against the truth
+// objects of its pair, the same way (ClusterScore), for precision / recall / F1 per pair and per
+// change type (truth: appeared when the object exists in the pair's second session).
 ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
                               const EvalConfig& cfg, int threads = 0);
 // truth/objects.csv rows (id, class, present_in, placement; sessions as sim indices).
@@ -433,7 +458,8 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
                                             const TruthMapping& mapping, const EvalConfig& cfg, int threads = 0);
 // The clusters written by `ltmapper map objects` (objects.csv + objects.ply with object ids);
 // pair = reference and session columns (store session orders, = sim indices when the sessions
-// were integrated in sim order).
+// were integrated in sim order); change from the optional class column (pd_* appeared, nd_*
+// disappeared).
 std::vector<ObjectCluster> ReadObjectClusters(const std::string& objects_dir);
 
 // ----------------------------------------------------------------------------------- storage

@@ -13,6 +13,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <memory>
 #include <set>
 
 namespace fs = std::filesystem;
@@ -36,9 +38,11 @@ std::vector<std::string> SplitCsv(const std::string& line) {
   return out;
 }
 
-// Reads a CSV with a header line; calls row(fields, column index lookup, line number).
+// Reads a CSV with a header line; calls row(fields, line number) with the `required` columns, then
+// the `optional` ones ("" when the header lacks them).
 template <class F>
-void ReadCsv(const std::string& path, const std::vector<std::string>& required, F row) {
+void ReadCsv(const std::string& path, const std::vector<std::string>& required, F row,
+             const std::vector<std::string>& optional = {}) {
   std::ifstream in(path);
   if (!in) throw Error(path, 0, "cannot open");
   std::string line;
@@ -56,11 +60,15 @@ void ReadCsv(const std::string& path, const std::vector<std::string>& required, 
         if (it == header.end()) throw Error(path, line_no, "header has no column '" + r + "'");
         cols.push_back(std::size_t(it - header.begin()));
       }
+      for (const auto& o : optional) {
+        const auto it = std::find(header.begin(), header.end(), o);
+        cols.push_back(it == header.end() ? std::string::npos : std::size_t(it - header.begin()));
+      }
       continue;
     }
     if (f.size() < header.size()) throw Error(path, line_no, "too few columns");
     std::vector<std::string> v;
-    for (auto c : cols) v.push_back(f[c]);
+    for (auto c : cols) v.push_back(c == std::string::npos ? std::string() : f[c]);
     row(v, line_no);
   }
   if (header.empty()) throw Error(path, 0, "empty CSV");
@@ -127,6 +135,119 @@ double PointIoU(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg)
   return Iou(va, ta, vb, tb, cfg.obj_match_dist_m);
 }
 
+namespace {
+
+// Voxelised clouds with their boxes and trees (clusters or truth objects).
+struct Prepared {
+  std::vector<PointCloud> cloud;
+  std::vector<std::unique_ptr<geometry::KdTree>> tree;
+  std::vector<Box> box;
+  explicit Prepared(std::size_t n) : cloud(n), tree(n), box(n, Box(PointCloud{})) {}
+  void Set(std::size_t k, const PointCloud& c, double voxel_m) {
+    cloud[k] = Downsample(c, voxel_m);
+    box[k] = Box(cloud[k]);
+    tree[k] = std::make_unique<geometry::KdTree>(cloud[k]);
+  }
+};
+
+bool Eligible(const ObjectTruth& t, const std::string& cluster_pair) {
+  return t.match_pairs.empty() ? cluster_pair == t.pair
+                               : std::count(t.match_pairs.begin(), t.match_pairs.end(), cluster_pair) > 0;
+}
+
+// IoU of truth i and cluster k when eligible and their grown boxes overlap, else -1.
+double PairIou(const ObjectTruth& t, std::size_t i, const Prepared& tp, const ObjectCluster& c, std::size_t k,
+               const Prepared& cp, const EvalConfig& cfg) {
+  if (tp.cloud[i].empty() || cp.cloud[k].empty() || !Eligible(t, c.pair) ||
+      !tp.box[i].Overlaps(cp.box[k], float(cfg.obj_match_dist_m)))
+    return -1.0;
+  return Iou(tp.cloud[i], *tp.tree[i], cp.cloud[k], *cp.tree[k], cfg.obj_match_dist_m);
+}
+
+std::string TruthChange(const ObjectTruth& t) {
+  int a = -1, b = -1;
+  std::sscanf(t.pair.c_str(), "%d_%d", &a, &b);
+  return t.session == b ? "appeared" : "disappeared";
+}
+
+ObjectsPrf Slice(const std::string& name, const ObjectsResult& r, const std::vector<ObjectTruth>& truth,
+                 const std::function<bool(const ObjectTruth&)>& in_truth,
+                 const std::function<bool(const ClusterScore&)>& in_clusters) {
+  ObjectsPrf s;
+  s.name = name;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    if (r.objects[i].scored && in_truth(truth[i])) ++s.truth_objects, s.found += r.objects[i].found ? 1 : 0;
+  for (const auto& c : r.cluster_scores)
+    if (in_clusters(c)) ++s.clusters, s.true_clusters += c.true_object ? 1 : 0;
+  if (s.clusters) s.precision = double(s.true_clusters) / double(s.clusters);
+  if (s.truth_objects) s.recall = double(s.found) / double(s.truth_objects);
+  if (s.precision + s.recall > 0.0) s.f1 = 2.0 * s.precision * s.recall / (s.precision + s.recall);
+  else if (s.clusters && s.truth_objects) s.f1 = 0.0;
+  return s;
+}
+
+void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::set<std::string>& pairs) {
+  for (const auto& s : r.objects)
+    if (s.scored) ++r.truth_objects, r.found += s.found ? 1 : 0;
+  r.found_fraction = r.truth_objects ? double(r.found) / double(r.truth_objects) : kNaN;
+  r.all = Slice("all", r, truth, [](const ObjectTruth&) { return true; }, [](const ClusterScore&) { return true; });
+  for (const auto& p : pairs)
+    r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; },
+                               [&](const ClusterScore& c) { return c.pair == p; }));
+  for (const std::string ch : {"appeared", "disappeared"})
+    r.per_change.push_back(Slice(ch, r, truth, [&](const ObjectTruth& t) { return TruthChange(t) == ch; },
+                                 [&](const ClusterScore& c) { return c.change == ch; }));
+}
+
+void ScoreTruth(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
+                const std::vector<std::size_t>& used, const Prepared& tp, const Prepared& cp, const EvalConfig& cfg,
+                tbb::task_arena& arena) {
+  r.objects.resize(truth.size());
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) {
+      const ObjectTruth& t = truth[i];
+      ObjectScore& s = r.objects[i];
+      s.pair = t.pair;
+      s.id = t.id;
+      s.cls = t.cls;
+      s.placement = t.placement;
+      s.session = t.session;
+      s.points = tp.cloud[i].size();
+      s.change_points = t.change_points;
+      s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1)) &&
+                 (t.change_points < 0 || t.change_points >= long(cfg.obj_min_change_points));
+      for (const std::size_t k : used) {
+        const double iou = PairIou(t, i, tp, clusters[k], k, cp, cfg);
+        if (iou > s.best_iou) s.best_iou = iou, s.best_cluster = clusters[k].id, s.cluster_points = cp.cloud[k].size();
+      }
+      s.found = s.scored && s.best_iou >= cfg.obj_min_iou;
+    });
+  });
+}
+
+void ScoreClusters(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
+                   const std::vector<std::size_t>& used, const Prepared& tp, const Prepared& cp, const EvalConfig& cfg,
+                   tbb::task_arena& arena) {
+  r.cluster_scores.resize(used.size());
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), used.size(), [&](std::size_t u) {
+      const std::size_t k = used[u];
+      ClusterScore& s = r.cluster_scores[u];
+      s.pair = clusters[k].pair;
+      s.change = clusters[k].change;
+      s.id = clusters[k].id;
+      s.points = cp.cloud[k].size();
+      for (std::size_t i = 0; i < truth.size(); ++i) {
+        const double iou = PairIou(truth[i], i, tp, clusters[k], k, cp, cfg);
+        if (iou > s.best_iou) s.best_iou = iou, s.best_truth = truth[i].id;
+      }
+      s.true_object = s.best_iou >= cfg.obj_min_iou;
+    });
+  });
+}
+
+}  // namespace
+
 ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
                               const EvalConfig& cfg, int threads) {
   ObjectsResult r;
@@ -138,67 +259,19 @@ ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::
     pairs.insert(t.pair);
     pairs.insert(t.match_pairs.begin(), t.match_pairs.end());
   }
-  // Voxelised clusters of the scored pairs, with boxes and trees.
-  std::vector<std::size_t> used;
+  std::vector<std::size_t> used;  // clusters of the scored pairs
   for (std::size_t k = 0; k < clusters.size(); ++k)
     if (pairs.count(clusters[k].pair)) used.push_back(k);
   r.clusters = used.size();
-  std::vector<PointCloud> cc(clusters.size());
-  std::vector<std::unique_ptr<geometry::KdTree>> ct(clusters.size());
-  std::vector<Box> cb(clusters.size(), Box(PointCloud{}));
-  std::vector<PointCloud> tc(truth.size());
-  std::vector<std::unique_ptr<geometry::KdTree>> tt(truth.size());
+  Prepared cp(clusters.size()), tp(truth.size());
   tbb::task_arena arena = threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
   arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), used.size(), [&](std::size_t u) {
-      const std::size_t k = used[u];
-      cc[k] = Downsample(clusters[k].cloud, cfg.obj_voxel_m);
-      cb[k] = Box(cc[k]);
-      ct[k] = std::make_unique<geometry::KdTree>(cc[k]);
-    });
-    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) {
-      tc[i] = Downsample(truth[i].cloud, cfg.obj_voxel_m);
-      tt[i] = std::make_unique<geometry::KdTree>(tc[i]);
-    });
+    tbb::parallel_for(std::size_t(0), used.size(), [&](std::size_t u) { cp.Set(used[u], clusters[used[u]].cloud, cfg.obj_voxel_m); });
+    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) { tp.Set(i, truth[i].cloud, cfg.obj_voxel_m); });
   });
-  r.objects.resize(truth.size());
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) {
-      const ObjectTruth& t = truth[i];
-      ObjectScore& s = r.objects[i];
-      s.pair = t.pair;
-      s.id = t.id;
-      s.cls = t.cls;
-      s.placement = t.placement;
-      s.session = t.session;
-      s.points = tc[i].size();
-      s.change_points = t.change_points;
-      s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1)) &&
-                 (t.change_points < 0 || t.change_points >= long(cfg.obj_min_change_points));
-      if (tc[i].empty()) return;
-      const Box tb(tc[i]);
-      for (const std::size_t k : used) {
-        const bool eligible = t.match_pairs.empty()
-                                  ? clusters[k].pair == t.pair
-                                  : std::count(t.match_pairs.begin(), t.match_pairs.end(), clusters[k].pair) > 0;
-        if (!eligible || cc[k].empty() || !tb.Overlaps(cb[k], float(cfg.obj_match_dist_m)))
-          continue;
-        const double iou = Iou(tc[i], *tt[i], cc[k], *ct[k], cfg.obj_match_dist_m);
-        if (iou > s.best_iou) {
-          s.best_iou = iou;
-          s.best_cluster = clusters[k].id;
-          s.cluster_points = cc[k].size();
-        }
-      }
-      s.found = s.scored && s.best_iou >= cfg.obj_min_iou;
-    });
-  });
-  for (const auto& s : r.objects) {
-    if (!s.scored) continue;
-    ++r.truth_objects;
-    if (s.found) ++r.found;
-  }
-  r.found_fraction = r.truth_objects ? double(r.found) / double(r.truth_objects) : kNaN;
+  ScoreTruth(r, truth, clusters, used, tp, cp, cfg, arena);
+  ScoreClusters(r, truth, clusters, used, tp, cp, cfg, arena);
+  Summarise(r, truth, pairs);
   return r;
 }
 
@@ -306,10 +379,11 @@ std::vector<ObjectCluster> ReadObjectClusters(const std::string& dir) {
     ObjectCluster c;
     c.id = ToInt(f[0], csv, line);
     c.pair = PairName(ToInt(f[2], csv, line), ToInt(f[1], csv, line));
+    c.change = f[3].rfind("pd", 0) == 0 ? "appeared" : f[3].rfind("nd", 0) == 0 ? "disappeared" : "";
     if (slot.count(c.id)) throw Error(csv, line, "duplicate object id " + f[0]);
     slot[c.id] = out.size();
     out.push_back(std::move(c));
-  });
+  }, {"class"});
   if (out.empty()) return out;
   const PointCloud all = io::ReadPly(ply);
   if (all.object.size() != all.size()) throw Error(ply, 0, "no 'object' field");

@@ -166,6 +166,34 @@ void WriteStorage(json::Writer& w, const StorageResult& s) {
   w.EndArray().EndObject();
 }
 
+void WritePrf(json::Writer& w, const ObjectsPrf& p, const char* key = nullptr) {
+  (key ? w.BeginObject(key) : w.BeginObject())
+      .String("name", p.name)
+      .Int("truth_objects", (long long)p.truth_objects)
+      .Int("found", (long long)p.found)
+      .Int("clusters", (long long)p.clusters)
+      .Int("true_clusters", (long long)p.true_clusters)
+      .Number("precision", p.precision)
+      .Number("recall", p.recall)
+      .Number("f1", p.f1)
+      .EndObject();
+}
+
+void WriteClusterScores(json::Writer& w, const ObjectsResult& r) {
+  w.BeginArray("clusters_scored");
+  for (const auto& c : r.cluster_scores)
+    w.BeginObject()
+        .String("pair", c.pair)
+        .Int("id", c.id)
+        .String("change", c.change)
+        .Int("points", (long long)c.points)
+        .Int("best_truth", c.best_truth)
+        .Number("best_iou", c.best_iou)
+        .Bool("true_object", c.true_object)
+        .EndObject();
+  w.EndArray();
+}
+
 void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
   w.BeginObject("objects")
       .Number("match_dist_m", r.match_dist_m)
@@ -175,7 +203,17 @@ void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
       .Int("truth_objects", (long long)r.truth_objects)
       .Int("found", (long long)r.found)
       .Number("found_fraction", r.found_fraction)
-      .BeginArray("objects");
+      .Number("precision", r.all.precision)
+      .Number("recall", r.all.recall)
+      .Number("f1", r.all.f1);
+  WritePrf(w, r.all, "all");
+  w.BeginArray("per_pair");
+  for (const auto& p : r.per_pair) WritePrf(w, p);
+  w.EndArray().BeginArray("per_change");
+  for (const auto& p : r.per_change) WritePrf(w, p);
+  w.EndArray();
+  WriteClusterScores(w, r);
+  w.BeginArray("objects");
   for (const auto& o : r.objects)
     w.BeginObject()
         .String("pair", o.pair)
@@ -376,7 +414,17 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
      << Header({"truth objects", "found", "found fraction", "clusters"})
      << Row({std::to_string(r.truth_objects), std::to_string(r.found), Fmt(r.found_fraction, 3),
              std::to_string(r.clusters)})
-     << "\n"
+     << "\nA cluster is a true object when a truth object of its pair reaches IoU >= " << Fmt(r.min_iou, 2)
+     << ", else a false object. Precision = true clusters / clusters, recall = found / truth objects; "
+        "change: appeared (PD clusters, objects of the pair's second session), disappeared (ND).\n\n"
+     << Header({"slice", "truth objects", "found", "clusters", "true clusters", "precision", "recall", "F1"});
+  std::vector<ObjectsPrf> rows = r.per_pair;
+  rows.insert(rows.end(), r.per_change.begin(), r.per_change.end());
+  rows.push_back(r.all);
+  for (const auto& p : rows)
+    md << Row({p.name, std::to_string(p.truth_objects), std::to_string(p.found), std::to_string(p.clusters),
+               std::to_string(p.true_clusters), Fmt(p.precision, 3), Fmt(p.recall, 3), Fmt(p.f1, 3)});
+  md << "\n"
      << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "best cluster", "cluster points",
                 "IoU", "found"});
   for (const auto& o : r.objects)

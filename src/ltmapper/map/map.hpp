@@ -34,14 +34,28 @@ struct MapConfig {
   // Outputs.
   double meta_carve_radius_m = 0.2;      // meta map: points this close to any strong ND are carved
   double output_voxel_m = 0.1;           // voxel size of written maps (0 = every point)
-  // Objects (Euclidean clustering of strong ND and PD per session step).
+  // Objects (Euclidean clustering of strong ND and PD per session step; rules in objects.cpp).
   double object_tolerance_m = 0.5;
   int object_min_points = 20;
   int object_max_points = 1000000;
-  double object_ground_cell_m = 0.0;     // xy cell for the local ground height (0 = keep ground)
+  double object_ground_cell_m = 2.0;     // xy cell for the local ground height (0 = keep ground)
   double object_ground_height_m = 0.25;  // change points this close above the lowest map point
                                          // of their cell are ground, not clustered
   double object_max_extent_m = 0.0;      // clusters with a larger xy box edge are not objects (0 = off)
+  double object_min_length_m = 2.0;      // clusters with a shorter longest horizontal edge are not objects
+  double object_min_observed_fraction = 0.5;  // appeared: share of weak PD (reference saw the space free)
+  double object_min_height_m = 0.5;      // top above the local ground
+  double object_max_clearance_m = 1.0;  // lowest point above ground: higher = floating (0 = off)
+  double object_sensor_step_deg = 0.625; // coarser angular sampling step of the sensor
+  double object_min_samples = 3.0;       // sensor samples across the cluster's width and height
+  double object_flat_sigma_m = 0.05;     // thickness (std along the smallest axis) of a flat patch
+  double object_flat_tilt_deg = 20.0;    // flat patches with a normal this close to vertical are ground
+  double object_twin_radius_m = 1.0;     // other side's change this close = the same surface, misaligned
+  double object_twin_max_fraction = 0.5; // clusters with at least this share of such points are ghosts
+  double object_max_attached_fraction = 0.5;  // clusters mostly touching unchanged surfaces are fragments
+  double object_merge_inside_fraction = 0.5;  // a cluster this much inside a larger one's box joins it
+  double object_moved_size_tol = 0.2;    // relative box-size difference of a moved object's two ends
+  double object_moved_min_dist_m = 1.0;  // ends closer than this are one object re-scanned, not moved
 
   template <class V>
   void Visit(V& v) {
@@ -59,6 +73,20 @@ struct MapConfig {
     v("object_ground_cell_m", object_ground_cell_m, "m", 0.0, 100.0);
     v("object_ground_height_m", object_ground_height_m, "m", 0.0, 10.0);
     v("object_max_extent_m", object_max_extent_m, "m", 0.0, 10000.0);
+    v("object_min_length_m", object_min_length_m, "m", 0.0, 10000.0);
+    v("object_min_observed_fraction", object_min_observed_fraction, "", 0.0, 1.0);
+    v("object_min_height_m", object_min_height_m, "m", 0.0, 100.0);
+    v("object_max_clearance_m", object_max_clearance_m, "m", 0.0, 100.0);
+    v("object_sensor_step_deg", object_sensor_step_deg, "deg", 0.0, 45.0);
+    v("object_min_samples", object_min_samples, "", 0.0, 1000.0);
+    v("object_flat_sigma_m", object_flat_sigma_m, "m", 0.0, 10.0);
+    v("object_flat_tilt_deg", object_flat_tilt_deg, "deg", 0.0, 90.0);
+    v("object_twin_radius_m", object_twin_radius_m, "m", 0.0, 100.0);
+    v("object_twin_max_fraction", object_twin_max_fraction, "", 0.0, 1.0);
+    v("object_max_attached_fraction", object_max_attached_fraction, "", 0.0, 1.0);
+    v("object_merge_inside_fraction", object_merge_inside_fraction, "", 0.0, 1.0);
+    v("object_moved_size_tol", object_moved_size_tol, "", 0.0, 10.0);
+    v("object_moved_min_dist_m", object_moved_min_dist_m, "m", 0.0, 10000.0);
   }
 };
 
@@ -131,16 +159,29 @@ struct FsckReport {
 };
 
 struct MapObject {
-  int id = 0;
+  int id = 0;         // stable: order of (step, change, centroid x, y) over the store's objects
   int session = 0;    // step that detected it
   int reference = 0;  // session it was compared against
   PointClass cls = PointClass::kUnknown;  // majority class: kPDStrong, kPDWeak or kNDStrong
+  std::string change;  // "appeared" (PD), "disappeared" (strong ND), "moved" (either end of a move)
+  int partner = -1;    // moved: id of the other end (same step), else -1
+  int exists_in = 0;   // session whose scans hold the object (session for PD, reference for ND)
   std::size_t points = 0;
+  double confidence = 0.0;  // [0, 1] see objects.cpp Confidence()
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();  // axis-aligned box
+  // Oriented box: yaw of the longest horizontal axis, centre, size = length, width, height [m].
+  Eigen::Vector3d box_center = Eigen::Vector3d::Zero(), size = Eigen::Vector3d::Zero();
+  double yaw_rad = 0.0;
+  double ground_z = 0.0, height_above_ground = 0.0;  // local ground under it, top above it [m]
+  double clearance_m = 0.0;           // lowest point above the ground of its cell [m]
+  double range_m = 0.0;               // distance to the nearest map keyframe (sensor position)
+  double observed_fraction = 0.0;     // share of see-through evidence (strong ND / weak PD)
+  double twin_fraction = 0.0;         // share with a change of the other side within the twin radius
+  double attached_fraction = 0.0;     // share with an unchanged surface within the cluster tolerance
+  std::string rejected;               // why it is not an object ("" = an object)
   PointCloud cloud;  // world frame, cls / session / object set
 };
-
 // Summary totals for `ltmapper map log`.
 struct StoreTotals {
   std::size_t file_bytes = 0, base_bytes = 0, delta_bytes = 0;
@@ -202,8 +243,11 @@ class Store {
   // ND weak (kept), plus the weak PD of the keyframes the step created (new territory).
   // cls set, session = the step.
   PointCloud StepChanges(int session, const Region& region = {}) const;
-  // Euclidean clustering of strong ND and PD per step (PCL).
-  std::vector<MapObject> Objects() const;
+  // Objects a user can act on (objects.cpp): Euclidean clusters (PCL) of each step's strong ND
+  // and PD above the local ground, kept only in space both sessions observed and when they pass
+  // the geometric rules; moved pairs linked. `rejected` (optional) receives the other clusters
+  // with the reason.
+  std::vector<MapObject> Objects(std::vector<MapObject>* rejected = nullptr) const;
 
   // Schema version, PRAGMA integrity_check, foreign keys, every blob's checksum and decoding,
   // references between rows, and that every stored base equals its deltas' composition counts.
@@ -260,7 +304,9 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
 // Writes .pcd (x y z intensity class session object fields) or .ply by extension, atomically.
 void WriteLabelledCloud(const std::string& path, const PointCloud& cloud);
 // objects.csv, objects.json, objects.ply (all points with object ids), clouds/object_NNNN.pcd.
-void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects);
+// With `rejected`, also rejected.csv (same columns plus `reason`, no clouds).
+void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects,
+                  const std::vector<MapObject>* rejected = nullptr);
 // Human-readable `log` table.
 std::string FormatLog(const Store& store);
 

@@ -1,5 +1,16 @@
-// Automatic parsing of ephemeral objects (paper sec. "Automatic Parsing of Ephemeral Objects"):
-// Euclidean clustering (PCL) of each step's PD (strong and weak) and strong ND points.
+// Automatic parsing of ephemeral objects (paper sec. "Automatic Parsing of Ephemeral Objects"),
+// made into objects a user can act on. Per session step:
+//  1. Ground: change points within object_ground_height_m above the lowest map point of their
+//     xy cell (object_ground_cell_m) are ground, not clustered (they glue objects together).
+//  2. Euclidean clustering (PCL) of strong ND (disappeared) and of PD (appeared) separately.
+//  3. Coverage: a change is an object only in space both sessions observed. Strong ND is by
+//     definition seen through by the query. PD is weak when the reference saw its space free,
+//     strong when it never saw there (new territory, facades newly in view) or its view was
+//     blocked: an appeared cluster needs a majority of weak PD, or a disappeared cluster of the
+//     step between it and the nearest reference keyframe (revealed behind a removed wall).
+//  4. Geometry (Reject()): ghosts of misalignment, height above ground, width across the sensor's sampling at the
+//     cluster's range, flat horizontal patches, optional maximum extent.
+//  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/map/map.hpp"
 
 #include <pcl/point_cloud.h>
@@ -7,12 +18,25 @@
 #include <pcl/search/kdtree.h>
 #include <pcl/segmentation/extract_clusters.h>
 
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
 #include <cmath>
+#include <deque>
 #include <map>
+#include <tuple>
 #include <unordered_map>
 
 namespace ltm::map {
 namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+// Extent of a uniform spread over a segment per standard deviation: L = sqrt(12) * std.
+const double kUniformExtentPerStd = std::sqrt(12.0);
+// Confidence margins reach 1 when a measure is this many times its minimum.
+constexpr double kFullMargin = 2.0;
+// Evidence of a revealed appeared cluster (blocked reference view, no see-through): half.
+constexpr double kRevealedEvidence = 0.5;
 
 struct CellKey {
   std::int64_t x, y;
@@ -23,86 +47,446 @@ struct CellKeyHash {
 };
 using Floor = std::unordered_map<CellKey, float, CellKeyHash>;
 
-CellKey KeyOf(const PointXYZI& p, double cell) {
-  return {std::int64_t(std::floor(double(p.x) / cell)), std::int64_t(std::floor(double(p.y) / cell))};
+CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
+  return {std::int64_t(std::floor(double(p.x()) / cell)), std::int64_t(std::floor(double(p.y()) / cell))};
 }
 void Lower(Floor& floor, const PointCloud& c, double cell) {
   for (const auto& p : c.points) {
-    auto [it, added] = floor.emplace(KeyOf(p, cell), p.z);
+    auto [it, added] = floor.emplace(KeyOf(p.xyz(), cell), p.z);
     if (!added) it->second = std::min(it->second, p.z);
   }
 }
 
+// Local ground of one step: lowest point per xy cell of the maps before and after the step and
+// of the changes. The cell must be wider than the footprint an object hides from every view (a
+// car's width), so that each cell holds some ground.
+Floor StepFloor(const PointCloud& before, const PointCloud& after, const PointCloud& changes, double cell) {
+  Floor floor;
+  if (cell <= 0.0) return floor;
+  Lower(floor, before, cell);
+  Lower(floor, after, cell);
+  Lower(floor, changes, cell);
+  return floor;
+}
+
+bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& cfg) {
+  if (floor.empty()) return true;
+  const auto it = floor.find(KeyOf(p, cfg.object_ground_cell_m));
+  return it == floor.end() || p.z() > it->second + float(cfg.object_ground_height_m);
+}
+
+// The other side of a change: PD (the query's new surfaces) for disappeared clusters, ND strong
+// and weak (the reference's missing surfaces) for appeared ones.
+PointCloud OtherSide(const PointCloud& changes, bool appeared) {
+  std::vector<bool> mask(changes.size());
+  for (std::size_t i = 0; i < changes.size(); ++i) {
+    const PointClass c = changes.cls[i];
+    mask[i] = appeared ? c == PointClass::kNDStrong || c == PointClass::kNDWeak
+                       : c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+  }
+  return changes.select(mask);
+}
+
+// Surfaces the step left unchanged: points of the map after the step that existed before it
+// (not added by the step).
+PointCloud Unchanged(const PointCloud& after, int step) {
+  std::vector<bool> mask(after.size(), true);
+  if (after.session.size() == after.size())
+    for (std::size_t i = 0; i < after.size(); ++i) mask[i] = int(after.session[i]) < step;
+  return after.select(mask);
+}
+
+// Per change point of `idx`: `other` has a point above ground within `radius`. Only map points in the xy cells
+// (object_twin_radius_m wide) around the change points are hashed.
+std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uint32_t>& idx, const PointCloud& other,
+                           const Floor& floor, const MapConfig& cfg, double r) {
+  std::vector<bool> out(changes.size(), false);
+  if (r <= 0.0 || idx.empty()) return out;
+  std::unordered_map<CellKey, bool, CellKeyHash> near;
+  for (auto i : idx) {
+    const CellKey k = KeyOf(changes.points[i].xyz(), r);
+    for (std::int64_t dx = -1; dx <= 1; ++dx)
+      for (std::int64_t dy = -1; dy <= 1; ++dy) near[{k.x + dx, k.y + dy}] = true;
+  }
+  PointCloud nearby;
+  for (const auto& p : other.points)
+    if (near.count(KeyOf(p.xyz(), r)) && AboveGround(p.xyz(), floor, cfg)) nearby.push_back(p.x, p.y, p.z);
+  const std::vector<bool> hit = WithinRadius(changes.select(idx), nearby, r);
+  for (std::size_t j = 0; j < idx.size(); ++j) out[idx[j]] = hit[j];
+  return out;
+}
+
+// Indices of the change points of one group (disappeared: strong ND; appeared: PD) above ground.
+std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared, const Floor& floor,
+                                       const MapConfig& cfg) {
+  std::vector<std::uint32_t> idx;
+  for (std::size_t i = 0; i < changes.size(); ++i) {
+    const PointClass c = changes.cls[i];
+    const bool pd = c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+    if (appeared ? !pd : c != PointClass::kNDStrong) continue;
+    if (AboveGround(changes.points[i].xyz(), floor, cfg)) idx.push_back(std::uint32_t(i));
+  }
+  return idx;
+}
+
+std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
+                                                const MapConfig& cfg) {
+  std::vector<std::vector<std::uint32_t>> out;
+  if (idx.size() < std::size_t(cfg.object_min_points)) return out;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr pc(new pcl::PointCloud<pcl::PointXYZ>);
+  pc->reserve(idx.size());
+  for (auto i : idx) pc->push_back(pcl::PointXYZ(changes.points[i].x, changes.points[i].y, changes.points[i].z));
+  pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
+  tree->setInputCloud(pc);
+  std::vector<pcl::PointIndices> clusters;
+  pcl::EuclideanClusterExtraction<pcl::PointXYZ> ec;
+  ec.setClusterTolerance(cfg.object_tolerance_m);
+  ec.setMinClusterSize(cfg.object_min_points);
+  ec.setMaxClusterSize(cfg.object_max_points);
+  ec.setSearchMethod(tree);
+  ec.setInputCloud(pc);
+  ec.extract(clusters);
+  for (const auto& cl : clusters) {
+    out.emplace_back();
+    for (int j : cl.indices) out.back().push_back(idx[std::size_t(j)]);
+  }
+  return out;
+}
+
+// Centroid, axis-aligned box, class votes and see-through share.
+void Describe(MapObject& o) {
+  std::map<PointClass, std::size_t> votes;
+  o.lo = o.hi = o.cloud.points[0].xyz().cast<double>();
+  std::size_t seen_through = 0;
+  for (std::size_t i = 0; i < o.cloud.size(); ++i) {
+    const Eigen::Vector3d p = o.cloud.points[i].xyz().cast<double>();
+    o.centroid += p;
+    o.lo = o.lo.cwiseMin(p);
+    o.hi = o.hi.cwiseMax(p);
+    ++votes[o.cloud.cls[i]];
+    if (o.cloud.cls[i] == PointClass::kNDStrong || o.cloud.cls[i] == PointClass::kPDWeak) ++seen_through;
+  }
+  o.points = o.cloud.size();
+  o.centroid /= double(o.points);
+  o.observed_fraction = double(seen_through) / double(o.points);
+  std::size_t best = 0;
+  for (const auto& [c, n] : votes)
+    if (n > best) best = n, o.cls = c;
+}
+
+// Oriented box: yaw of the main horizontal axis (2x2 covariance of x, y), extents along it, its
+// normal and z.
+void OrientedBox(MapObject& o) {
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (const auto& p : o.cloud.points) {
+    const Eigen::Vector2d d(double(p.x) - o.centroid.x(), double(p.y) - o.centroid.y());
+    cov += d * d.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
+  const Eigen::Vector2d major = es.eigenvectors().col(1);
+  o.yaw_rad = std::atan2(major.y(), major.x());
+  const Eigen::Vector2d minor(-major.y(), major.x());
+  double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
+  for (const auto& p : o.cloud.points) {
+    const Eigen::Vector2d d(double(p.x) - o.centroid.x(), double(p.y) - o.centroid.y());
+    a0 = std::min(a0, d.dot(major)), a1 = std::max(a1, d.dot(major));
+    b0 = std::min(b0, d.dot(minor)), b1 = std::max(b1, d.dot(minor));
+  }
+  const Eigen::Vector2d c = o.centroid.head<2>() + major * (a0 + a1) / 2 + minor * (b0 + b1) / 2;
+  o.box_center = Eigen::Vector3d(c.x(), c.y(), (o.lo.z() + o.hi.z()) / 2);
+  o.size = Eigen::Vector3d(a1 - a0, b1 - b0, o.hi.z() - o.lo.z());
+}
+
+// Principal spreads (std along the 3D principal axes, ascending) and the smallest axis.
+struct Spread3 {
+  Eigen::Vector3d sigma, normal;
+};
+Spread3 Spread(const MapObject& o) {
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& p : o.cloud.points) {
+    const Eigen::Vector3d d = p.xyz().cast<double>() - o.centroid;
+    cov += d * d.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov / double(o.points));
+  return {es.eigenvalues().cwiseMax(0.0).cwiseSqrt(), es.eigenvectors().col(0)};
+}
+
+// Clearance of the cluster above the local ground: the smallest height of a point above the
+// floor of its own cell (not the lowest cell under the box: slopes and curbs across a long
+// cluster would count as clearance). Sets ground_z to the floor under that point.
+double Clearance(MapObject& o, const Floor& floor, double cell) {
+  double best = 1e300;
+  o.ground_z = o.lo.z();
+  for (const auto& p : o.cloud.points) {
+    const auto it = floor.find(KeyOf(p.xyz(), cell));
+    if (it == floor.end() || double(p.z - it->second) >= best) continue;
+    best = double(p.z - it->second);
+    o.ground_z = double(it->second);
+  }
+  return best == 1e300 ? 0.0 : best;
+}
+
+// Segment p-q against an axis-aligned box grown by `margin` (slab test).
+bool SegmentHitsBox(const Eigen::Vector3d& p, const Eigen::Vector3d& q, Eigen::Vector3d lo, Eigen::Vector3d hi,
+                    double margin) {
+  lo.array() -= margin;
+  hi.array() += margin;
+  double t0 = 0.0, t1 = 1.0;
+  const Eigen::Vector3d d = q - p;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(d[k]) < 1e-12) {
+      if (p[k] < lo[k] || p[k] > hi[k]) return false;
+      continue;
+    }
+    double a = (lo[k] - p[k]) / d[k], b = (hi[k] - p[k]) / d[k];
+    if (a > b) std::swap(a, b);
+    t0 = std::max(t0, a), t1 = std::min(t1, b);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+const Eigen::Vector3d* Nearest(const std::vector<Eigen::Vector3d>& sensors, const Eigen::Vector3d& x) {
+  const Eigen::Vector3d* best = nullptr;
+  for (const auto& s : sensors)
+    if (!best || (s - x).squaredNorm() < (*best - x).squaredNorm()) best = &s;
+  return best;
+}
+
+// Step context for the rules: sensor positions and the step's accepted disappeared objects.
+struct StepContext {
+  std::vector<Eigen::Vector3d> reference_sensors;  // map keyframes as of the reference session
+  std::vector<Eigen::Vector3d> all_sensors;        // every map keyframe
+  std::vector<const MapObject*> disappeared;       // accepted strong-ND objects of the step
+};
+
+// Coverage rule (step 3 above) for an appeared cluster: its space was observed free by the
+// reference (majority of weak PD), or the reference's view of it was blocked by an object the
+// step removed: the segment from the nearest reference sensor to the centroid crosses the box of
+// a disappeared object (grown by the cluster tolerance).
+bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
+  if (o.change == "disappeared" || o.observed_fraction >= cfg.object_min_observed_fraction) return true;
+  const Eigen::Vector3d* s = Nearest(ctx.reference_sensors, o.centroid);
+  if (!s) return false;
+  for (const MapObject* d : ctx.disappeared)
+    if (SegmentHitsBox(*s, o.centroid, d->lo, d->hi, cfg.object_tolerance_m)) return true;
+  return false;
+}
+
+// Geometric rules (step 4 above); "" = an object. A ghost is the same surface in both sessions,
+// displaced by the residual misalignment beyond LD's neighbour radius, so it is both an ND and a
+// PD: most of the cluster has an above-ground change of the other side within
+// object_twin_radius_m (a removed car leaves only ground there; a misaligned pole leaves its
+// displaced copy a few decimetres away). A fragment is a piece of a surface the step left
+// unchanged: most of its points lie within the cluster tolerance of unchanged above-ground map
+// points, so clustered with them it would be one object that did not change (a strip of a pole
+// or trunk seen through by grazing rays); a removed or new object is surrounded by free space
+// and ground. The sensor samples a surface at range r every
+// r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
+// edge, one or two scan rows wide) spans fewer than object_min_samples samples across its middle
+// principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread). A cluster whose top is
+// below object_min_height_m above the local ground is a ground bump (kerb, misregistered
+// ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
+// vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
+// kiosks, trees) stand on the ground: a cluster whose lowest point is more than
+// object_max_clearance_m above the ground of its cell floats, a piece of a permanent surface
+// (canopy, facade above an occluder) whose lower part both sessions saw the same. Clusters whose
+// longest horizontal edge is below object_min_length_m are smaller than the objects the map
+// tracks: at a pedestrian's footprint they are most likely residues of moving actors that HD
+// removal missed in one session.
+std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
+  if (!Covered(o, ctx, cfg)) return "coverage";
+  if (o.twin_fraction >= cfg.object_twin_max_fraction) return "ghost";
+  if (o.attached_fraction >= cfg.object_max_attached_fraction) return "fragment";
+  if (o.height_above_ground < cfg.object_min_height_m) return "low";
+  if (cfg.object_max_clearance_m > 0.0 && o.clearance_m > cfg.object_max_clearance_m) return "floating";
+  const double sample = std::max(cfg.output_voxel_m, o.range_m * cfg.object_sensor_step_deg * kDegToRad);
+  if (width_m < cfg.object_min_samples * sample) return "sliver";
+  if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
+    return "flat";
+  if (o.size.x() < cfg.object_min_length_m) return "small";
+  if (cfg.object_max_extent_m > 0.0 && o.size.x() > cfg.object_max_extent_m) return "extent";
+  return "";
+}
+
+// Confidence in [0, 1]: geometric mean of the see-through evidence (observed fraction; a revealed
+// cluster counts half) and of how far width and height clear their minimum (1 at kFullMargin
+// times it).
+double Confidence(const MapObject& o, const MapConfig& cfg, double width_m, double min_width_m) {
+  const double evidence = o.change == "appeared" && o.observed_fraction < cfg.object_min_observed_fraction
+                              ? kRevealedEvidence : o.observed_fraction;
+  auto margin = [](double v, double min) { return min > 0.0 ? std::clamp(v / (kFullMargin * min), 0.0, 1.0) : 1.0; };
+  return std::cbrt(evidence * margin(width_m, min_width_m) * margin(o.height_above_ground, cfg.object_min_height_m));
+}
+
+
+// Per change point: it has a twin (other side within object_twin_radius_m) / an unchanged
+// surface within the cluster tolerance.
+struct Masks {
+  std::vector<bool> twin, attached;
+};
+
+double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& sel) {
+  const auto n = std::count_if(sel.begin(), sel.end(), [&](std::uint32_t i) { return bool(mask[i]); });
+  return double(n) / double(std::max<std::size_t>(sel.size(), 1));
+}
+
+MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
+                      const SessionRecord& step, const Floor& floor, const Masks& masks,
+                      const StepContext& ctx, const MapConfig& cfg) {
+  MapObject o;
+  o.twin_fraction = Share(masks.twin, sel);
+  o.attached_fraction = Share(masks.attached, sel);
+  o.session = step.order;
+  o.reference = step.reference;
+  o.change = appeared ? "appeared" : "disappeared";
+  o.exists_in = appeared ? step.order : step.reference;
+  o.cloud = changes.select(sel);
+  Describe(o);
+  OrientedBox(o);
+  o.ground_z = o.lo.z();
+  o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor, cfg.object_ground_cell_m);
+  o.height_above_ground = o.hi.z() - o.ground_z;
+  const Eigen::Vector3d* s = Nearest(ctx.all_sensors, o.centroid);
+  o.range_m = s ? (*s - o.centroid).norm() : 0.0;
+  const Spread3 sp = Spread(o);
+  const double width = kUniformExtentPerStd * sp.sigma.y();
+  const double min_width =
+      cfg.object_min_samples * std::max(cfg.output_voxel_m, o.range_m * cfg.object_sensor_step_deg * kDegToRad);
+  o.rejected = Reject(o, ctx, cfg, width, sp);
+  o.confidence = Confidence(o, cfg, width, min_width);
+  return o;
+}
+
+// Share of `part`'s points inside `whole`'s axis-aligned box grown by `margin`.
+double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
+  const Eigen::Vector3d lo = whole.lo.array() - margin, hi = whole.hi.array() + margin;
+  std::size_t n = 0;
+  for (const auto& p : part.cloud.points) {
+    const Eigen::Vector3d q = p.xyz().cast<double>();
+    n += (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() ? 1 : 0;
+  }
+  return double(n) / double(std::max<std::size_t>(part.points, 1));
+}
+
+// Parts of one object split by an occlusion gap wider than the cluster tolerance: an accepted
+// cluster with at least object_merge_inside_fraction of its points inside the box (grown by the
+// tolerance) of a larger accepted cluster of the same change joins it.
+void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
+  if (cfg.object_merge_inside_fraction <= 0.0) return;
+  std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
+  std::deque<MapObject> out;
+  for (auto& o : objects) {
+    MapObject* whole = nullptr;
+    for (auto& w : out)
+      if (w.change == o.change && InsideShare(o, w, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction) {
+        whole = &w;
+        break;
+      }
+    if (!whole) {
+      out.push_back(std::move(o));
+      continue;
+    }
+    whole->cloud.append(o.cloud);
+    whole->centroid.setZero();
+    Describe(*whole);
+    OrientedBox(*whole);
+    whole->height_above_ground = whole->hi.z() - whole->ground_z;
+  }
+  objects.swap(out);
+}
+
+// One step's objects (disappeared first: they can reveal appeared ones) and rejected clusters.
+void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx, std::vector<MapObject>& kept,
+                 std::vector<MapObject>& rejected) {
+  const MapConfig& cfg = store.config();
+  const PointCloud changes = store.StepChanges(step.order);
+  const PointCloud before = store.MapAt(step.reference), after = store.MapAt(step.order);
+  const Floor floor = StepFloor(before, after, changes, cfg.object_ground_cell_m);
+  const PointCloud unchanged = Unchanged(after, step.order);
+  std::deque<MapObject> step_kept;  // pointers in ctx.disappeared stay valid
+  for (const bool appeared : {false, true}) {
+    const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
+    const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
+                      NearMask(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
+    for (const auto& sel : Cluster(changes, idx, cfg)) {
+      MapObject o = BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg);
+      if (!o.rejected.empty()) {
+        rejected.push_back(std::move(o));
+        continue;
+      }
+      step_kept.push_back(std::move(o));
+      if (!appeared) ctx.disappeared.push_back(&step_kept.back());
+    }
+  }
+  MergeParts(step_kept, cfg);
+  for (auto& o : step_kept) kept.push_back(std::move(o));
+}
+
+// Stable ids: objects ordered by step, change and centroid (x, then y).
+void AssignIds(std::vector<MapObject>& objects) {
+  std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) {
+    return std::make_tuple(a.session, a.change, a.centroid.x(), a.centroid.y()) <
+           std::make_tuple(b.session, b.change, b.centroid.x(), b.centroid.y());
+  });
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    objects[k].id = int(k);
+    objects[k].cloud.object.assign(objects[k].cloud.size(), objects[k].id);
+  }
+}
+
+// Largest relative difference of two oriented-box sizes (length, width, height).
+double SizeDifference(const MapObject& a, const MapObject& b) {
+  double d = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double m = std::max(a.size[k], b.size[k]);
+    if (m > 0.0) d = std::max(d, std::abs(a.size[k] - b.size[k]) / m);
+  }
+  return d;
+}
+
+// Moved: a disappeared and an appeared object of the same step whose boxes agree in size within
+// object_moved_size_tol and whose centroids are at least object_moved_min_dist_m apart; best
+// matches first, each object in at most one pair.
+void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
+  std::vector<std::tuple<double, std::size_t, std::size_t>> cand;
+  for (std::size_t i = 0; i < objects.size(); ++i)
+    for (std::size_t j = 0; j < objects.size(); ++j) {
+      const MapObject &d = objects[i], &a = objects[j];
+      if (d.session != a.session || d.change != "disappeared" || a.change != "appeared") continue;
+      const double diff = SizeDifference(d, a);
+      if (diff <= cfg.object_moved_size_tol && (d.centroid - a.centroid).norm() >= cfg.object_moved_min_dist_m)
+        cand.emplace_back(diff, i, j);
+    }
+  std::sort(cand.begin(), cand.end());
+  for (const auto& [diff, i, j] : cand) {
+    if (objects[i].partner >= 0 || objects[j].partner >= 0) continue;
+    objects[i].partner = objects[j].id;
+    objects[j].partner = objects[i].id;
+  }
+  for (auto& o : objects)
+    if (o.partner >= 0) o.change = "moved";
+}
+
 }  // namespace
 
-std::vector<MapObject> Store::Objects() const {
-  const MapConfig& cfg = config();
-  std::vector<MapObject> out;
+std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
+  std::vector<MapObject> out, dropped;
   const auto sessions = Sessions();
+  const auto keyframes = Keyframes();
   for (std::size_t S = 1; S < sessions.size(); ++S) {
-    const PointCloud changes = StepChanges(int(S));
-    // Local ground: lowest point per xy cell of the maps before and after the step and of the
-    // changes; change points just above it are ground patches, not objects.
-    std::vector<bool> ground(changes.size(), false);
-    if (cfg.object_ground_cell_m > 0.0 && !changes.empty()) {
-      Floor floor;
-      Lower(floor, MapAt(int(S) - 1), cfg.object_ground_cell_m);
-      Lower(floor, MapAt(int(S)), cfg.object_ground_cell_m);
-      Lower(floor, changes, cfg.object_ground_cell_m);
-      for (std::size_t i = 0; i < changes.size(); ++i)
-        ground[i] = changes.points[i].z <= floor.at(KeyOf(changes.points[i], cfg.object_ground_cell_m)) +
-                                               float(cfg.object_ground_height_m);
+    StepContext ctx;
+    for (const auto& k : keyframes) {
+      ctx.all_sensors.push_back(k.T_world_sensor.translation());
+      if (k.session <= sessions[S].reference) ctx.reference_sensors.push_back(k.T_world_sensor.translation());
     }
-    for (int group = 0; group < 2; ++group) {  // 0: PD (strong + weak), 1: strong ND
-      std::vector<std::uint32_t> idx;
-      for (std::size_t i = 0; i < changes.size(); ++i) {
-        const PointClass c = changes.cls[i];
-        const bool pd = c == PointClass::kPDStrong || c == PointClass::kPDWeak;
-        if (ground[i]) continue;
-        if ((group == 0 && pd) || (group == 1 && c == PointClass::kNDStrong)) idx.push_back(std::uint32_t(i));
-      }
-      if (idx.size() < std::size_t(cfg.object_min_points)) continue;
-      pcl::PointCloud<pcl::PointXYZ>::Ptr pc(new pcl::PointCloud<pcl::PointXYZ>);
-      pc->reserve(idx.size());
-      for (auto i : idx) pc->push_back(pcl::PointXYZ(changes.points[i].x, changes.points[i].y, changes.points[i].z));
-      pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
-      tree->setInputCloud(pc);
-      std::vector<pcl::PointIndices> clusters;
-      pcl::EuclideanClusterExtraction<pcl::PointXYZ> ec;
-      ec.setClusterTolerance(cfg.object_tolerance_m);
-      ec.setMinClusterSize(cfg.object_min_points);
-      ec.setMaxClusterSize(cfg.object_max_points);
-      ec.setSearchMethod(tree);
-      ec.setInputCloud(pc);
-      ec.extract(clusters);
-      for (const auto& cl : clusters) {
-        MapObject o;
-        o.id = int(out.size());
-        o.session = int(S);
-        o.reference = sessions[S].reference;
-        std::vector<std::uint32_t> sel;
-        for (int j : cl.indices) sel.push_back(idx[std::size_t(j)]);
-        o.cloud = changes.select(sel);
-        o.cloud.object.assign(o.cloud.size(), o.id);
-        o.points = o.cloud.size();
-        std::map<PointClass, std::size_t> votes;
-        o.lo = o.hi = o.cloud.points[0].xyz().cast<double>();
-        for (std::size_t i = 0; i < o.cloud.size(); ++i) {
-          const Eigen::Vector3d p = o.cloud.points[i].xyz().cast<double>();
-          o.centroid += p;
-          o.lo = o.lo.cwiseMin(p);
-          o.hi = o.hi.cwiseMax(p);
-          ++votes[o.cloud.cls[i]];
-        }
-        o.centroid /= double(o.points);
-        const Eigen::Vector3d ext = o.hi - o.lo;
-        if (cfg.object_max_extent_m > 0.0 && std::max(ext.x(), ext.y()) > cfg.object_max_extent_m) continue;
-        std::size_t best = 0;
-        for (const auto& [c, n] : votes)
-          if (n > best) best = n, o.cls = c;
-        out.push_back(std::move(o));
-      }
-    }
+    StepObjects(*this, sessions[S], std::move(ctx), out, dropped);
+  }
+  AssignIds(out);
+  LinkMoved(out, config());
+  if (rejected) {
+    for (std::size_t k = 0; k < dropped.size(); ++k) dropped[k].id = int(k);
+    *rejected = std::move(dropped);
   }
   return out;
 }

@@ -3,6 +3,7 @@
 
 #include "ltmapper/io/io.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -75,7 +76,43 @@ void WriteLabelledCloud(const std::string& path, const PointCloud& cloud) {
   }
 }
 
-void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects) {
+namespace {
+
+constexpr double kRadToDeg = 180.0 / M_PI;
+const char* const kObjectColumns =
+    "id,session,reference,class,change,partner,exists_in,points,confidence,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,"
+    "max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,height_above_ground,clearance,range_m,observed_fraction,twin_fraction,attached_fraction";
+
+void WriteObjectRow(std::ostream& os, const MapObject& o) {
+  os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.change << ','
+     << o.partner << ',' << o.exists_in << ',' << o.points << ',' << o.confidence << ',' << o.centroid.x() << ','
+     << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y() << ',' << o.lo.z() << ','
+     << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << ',' << o.box_center.x() << ',' << o.box_center.y() << ','
+     << o.box_center.z() << ',' << o.yaw_rad * kRadToDeg << ',' << o.size.x() << ',' << o.size.y() << ','
+     << o.size.z() << ',' << o.ground_z << ',' << o.height_above_ground << ',' << o.clearance_m << ',' << o.range_m << ','
+     << o.observed_fraction << ',' << o.twin_fraction << ',' << o.attached_fraction;
+}
+
+std::string Vec(const Eigen::Vector3d& v) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(3) << '[' << v.x() << ", " << v.y() << ", " << v.z() << ']';
+  return os.str();
+}
+
+void WriteObjectJson(std::ostream& os, const MapObject& o) {
+  os << "{\"id\": " << o.id << ", \"session\": " << o.session << ", \"reference\": " << o.reference
+     << ", \"class\": \"" << JsonEscape(ToString(o.cls)) << "\", \"change\": \"" << JsonEscape(o.change)
+     << "\", \"partner\": " << o.partner << ", \"exists_in\": [" << o.exists_in << "], \"points\": " << o.points
+     << ", \"confidence\": " << o.confidence << ", \"centroid\": " << Vec(o.centroid) << ", \"min\": " << Vec(o.lo)
+     << ", \"max\": " << Vec(o.hi) << ", \"box\": {\"center\": " << Vec(o.box_center)
+     << ", \"yaw_deg\": " << o.yaw_rad * kRadToDeg << ", \"size\": " << Vec(o.size) << "}, \"ground_z\": " << o.ground_z
+     << ", \"height_above_ground\": " << o.height_above_ground << ", \"cloud\": \"clouds/object_"
+     << std::setw(4) << std::setfill('0') << o.id << std::setfill(' ') << ".pcd\"}";
+}
+
+}  // namespace
+
+void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects, const std::vector<MapObject>* rejected) {
   io::MakeDirs(dir + "/clouds");
   PointCloud all;
   for (const auto& o : objects) {
@@ -86,24 +123,18 @@ void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects)
   }
   WriteLabelledCloud(dir + "/objects.ply", all);
   io::WriteFileAtomic(dir + "/objects.csv", [&](std::ostream& os) {
-    os << "id,session,reference,class,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n" << std::fixed
-       << std::setprecision(3);
-    for (const auto& o : objects)
-      os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.points << ','
-         << o.centroid.x() << ',' << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y()
-         << ',' << o.lo.z() << ',' << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << '\n';
+    os << kObjectColumns << '\n' << std::fixed << std::setprecision(3);
+    for (const auto& o : objects) WriteObjectRow(os, o), os << '\n';
   });
   io::WriteFileAtomic(dir + "/objects.json", [&](std::ostream& os) {
     os << std::fixed << std::setprecision(3) << "{\"objects\": [";
-    for (std::size_t k = 0; k < objects.size(); ++k) {
-      const auto& o = objects[k];
-      os << (k ? ",\n  " : "\n  ") << "{\"id\": " << o.id << ", \"session\": " << o.session
-         << ", \"reference\": " << o.reference << ", \"class\": \"" << JsonEscape(ToString(o.cls))
-         << "\", \"points\": " << o.points << ", \"centroid\": [" << o.centroid.x() << ", " << o.centroid.y()
-         << ", " << o.centroid.z() << "], \"min\": [" << o.lo.x() << ", " << o.lo.y() << ", " << o.lo.z()
-         << "], \"max\": [" << o.hi.x() << ", " << o.hi.y() << ", " << o.hi.z() << "]}";
-    }
+    for (std::size_t k = 0; k < objects.size(); ++k) os << (k ? ",\n  " : "\n  "), WriteObjectJson(os, objects[k]);
     os << "\n]}\n";
+  });
+  if (!rejected) return;
+  io::WriteFileAtomic(dir + "/rejected.csv", [&](std::ostream& os) {
+    os << kObjectColumns << ",reason\n" << std::fixed << std::setprecision(3);
+    for (const auto& o : *rejected) WriteObjectRow(os, o), os << ',' << o.rejected << '\n';
   });
 }
 

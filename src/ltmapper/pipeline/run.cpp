@@ -136,7 +136,9 @@ void ExportMaps(const RunPaths& p, const map::MapConfig& map_cfg, bool export_ma
   map::WriteLabelledCloud(p.live, store.Live(region));
   map::WriteLabelledCloud(p.meta, store.Meta(region));
   io::StagingDir objects(p.objects, "objects.csv");
-  map::WriteObjects(objects.path(), store.Objects());
+  std::vector<map::MapObject> rejected;
+  const auto objs = store.Objects(&rejected);
+  map::WriteObjects(objects.path(), objs, &rejected);
   objects.Publish();
 }
 
