@@ -4,6 +4,7 @@
 
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/map/map.hpp"
+#include "ltmapper/removert/removert.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -20,6 +21,7 @@ struct MapOptions {
   std::string store, config, out;
   map::PipelineDirs dirs;
   std::string central, session;
+  std::string sensor_session;  // map objects: the session whose scans give the sensor
   std::vector<std::string> sessions;
   std::vector<double> box_min, box_max;
   double voxel = -1.0;
@@ -224,9 +226,17 @@ void Setup(CLI::App& parent) {
   auto* objects = map_cmd->add_subcommand("objects", "Changed objects per step: clusters of strong ND / PD in observed space that pass the geometric rules (clouds + CSV/JSON, rejected.csv)");
   common(objects);
   objects->add_option("--out", o.out, "Output directory")->required();
+  objects->add_option("--session", o.sensor_session,
+                      "A session directory whose scans give the sensor (object_sensor_step_deg: 0)");
   objects->callback([opts] {
     const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
+    auto cfg = LoadMapConfig(o);
+    if (!o.sensor_session.empty()) {
+      const removert::RemovertConfig defaults;
+      const Session session = io::LoadSession(o.sensor_session);
+      const removert::RemovertConfig resolved = removert::WithSensor(defaults, removert::KeyframesOf(session));
+      cfg = map::WithSensorStep(cfg, resolved.sensor_model);
+    }
     const map::Store s = OpenStore(o, cfg);
     std::vector<map::MapObject> rejected;
     const auto objs = s.Objects(&rejected);

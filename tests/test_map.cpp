@@ -206,6 +206,7 @@ struct Scene {
 MapConfig Cfg() {
   MapConfig c;
   c.output_voxel_m = 0;
+  c.object_sensor_step_deg = 0.625;  // a 64-beam sensor over 40 deg (runs derive it from the scans)
   return c;
 }
 

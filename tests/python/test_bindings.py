@@ -210,7 +210,8 @@ def test_stages_store_eval():
     steps = ltmapper.map_integrate(store_path, ltmapper.MapConfig(), truth_aligned, changes, threads=2)
     assert [s["name"] for s in steps] == ["central", "session_01"] and steps[0]["points"] > 0
 
-    st = ltmapper.Store(store_path)
+    # object_sensor_step_deg: the tiny scenario's 16 beams over 40 deg (`ltmapper run` derives it)
+    st = ltmapper.Store(store_path, ltmapper.MapConfig({"object_sensor_step_deg": 2.67}))
     assert st.session_names()[0] == "session_00" and st.latest_session == len(steps) - 1
     assert st.sessions()[0]["anchor"].shape == (4, 4) and st.keyframes()[0]["T_world_sensor"].shape == (4, 4)
     for k in range(st.latest_session + 1):

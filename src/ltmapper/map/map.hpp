@@ -10,6 +10,7 @@
 #pragma once
 
 #include "ltmapper/core/core.hpp"
+#include "ltmapper/geometry/sensor.hpp"
 
 #include <Eigen/Core>
 
@@ -46,7 +47,8 @@ struct MapConfig {
   double object_min_observed_fraction = 0.5;  // appeared: share of weak PD (reference saw the space free)
   double object_min_height_m = 0.5;      // top above the local ground
   double object_max_clearance_m = 1.0;  // lowest point above ground: higher = floating (0 = off)
-  double object_sensor_step_deg = 0.625; // coarser angular sampling step of the sensor
+  double object_sensor_step_deg = 0.0;   // [deg] the sensor's coarser angular sampling step; 0 = from the run's
+                                         // sensor model (WithSensorStep: `ltmapper run`, `map objects --session`)
   double object_min_samples = 3.0;       // sensor samples across the cluster's width and height
   double object_flat_sigma_m = 0.05;     // thickness (std along the smallest axis) of a flat patch
   double object_flat_tilt_deg = 20.0;    // flat patches with a normal this close to vertical are ground
@@ -247,7 +249,7 @@ class Store {
   // and PD above the local ground, kept only in space both sessions observed and when they pass
   // the geometric rules; moved pairs linked. `rejected` (optional) receives the other clusters
   // with the reason.
-  std::vector<MapObject> Objects(std::vector<MapObject>* rejected = nullptr) const;
+  std::vector<MapObject> Objects(std::vector<MapObject>* rejected = nullptr) const;  // needs object_sensor_step_deg > 0
 
   // Schema version, PRAGMA integrity_check, foreign keys, every blob's checksum and decoding,
   // references between rows, and that every stored base equals its deltas' composition counts.
@@ -305,6 +307,9 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
 void WriteLabelledCloud(const std::string& path, const PointCloud& cloud);
 // objects.csv, objects.json, objects.ply (all points with object ids), clouds/object_NNNN.pcd.
 // With `rejected`, also rejected.csv (same columns plus `reason`, no clouds).
+// The config with object_sensor_step_deg taken from the sensor when it is 0: the beam spacing at
+// the horizon (where a vehicle sees objects) or the azimuth step, whichever is coarser.
+MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor);
 void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects,
                   const std::vector<MapObject>* rejected = nullptr);
 // Human-readable `log` table.

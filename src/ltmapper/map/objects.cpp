@@ -470,7 +470,16 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
 
 }  // namespace
 
+MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
+  if (cfg.object_sensor_step_deg <= 0.0)
+    cfg.object_sensor_step_deg = std::max(sensor.SpacingAt(0.0), sensor.azimuth_step_deg);
+  return cfg;
+}
+
 std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
+  if (!(config().object_sensor_step_deg > 0.0))
+    throw Error("map config: object_sensor_step_deg is 0 (take it from the sensor): `ltmapper run` and `ltmapper map "
+                "objects --session DIR` derive it from the scans; elsewhere set it (the sensor's coarser angular step)");
   std::vector<MapObject> out, dropped;
   const auto sessions = Sessions();
   const auto keyframes = Keyframes();

@@ -237,7 +237,10 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   Stage(2, first, markers[2], keys[2], "LT-map", &report, [&] {
     spdlog::info("run [3/3] LT-map: -> {}", p.store);
     BuildStore(p, map_cfg, report, threads);
-    ExportMaps(p, map_cfg, cfg.export_maps);
+    // The object rules' sampling step from the sensor LT-removert used (the central session's).
+    const Session central = io::LoadSession(session_dirs[0]);
+    const removert::RemovertConfig resolved = removert::WithSensor(rem_cfg, removert::KeyframesOf(central));
+    ExportMaps(p, map::WithSensorStep(map_cfg, resolved.sensor_model), cfg.export_maps);
   });
   FillMapFigures(p, map_cfg, cfg.export_maps, &report);
   report.seconds = Since(t_run);
