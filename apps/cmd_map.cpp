@@ -22,6 +22,7 @@ struct MapOptions {
   map::PipelineDirs dirs;
   std::string central, session;
   std::string sensor_session;  // map objects: the session whose scans give the sensor
+  std::vector<std::string> set;  // --set key=value overrides
   std::vector<std::string> sessions;
   std::vector<double> box_min, box_max;
   double voxel = -1.0;
@@ -32,6 +33,7 @@ map::MapConfig LoadMapConfig(const MapOptions& o) {
   if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
   map::MapConfig cfg;
   if (!o.config.empty()) io::LoadConfig(o.config, cfg);
+  for (const auto& kv : o.set) SetField(FieldsOf(cfg), kv);
   if (o.voxel >= 0) cfg.output_voxel_m = o.voxel;
   ValidateConfig(cfg, o.config.empty() ? "map config" : o.config);
   if (!o.common.quiet) spdlog::info("map config:\n{}", ConfigToString(cfg));
@@ -95,6 +97,7 @@ void Setup(CLI::App& parent) {
     AddCommonOptions(*c, o.common);
     c->add_option("--store", o.store, "Map store file (NAME.ltmap)")->required();
     c->add_option("--config", o.config, "params_ltmap.yaml (every key optional)");
+    c->add_option("--set", o.set, "Override a config key, e.g. --set object_sensor_step_deg=1.33 (repeatable)");
   };
   auto dirs = [&o](CLI::App* c) {
     c->add_option("--aligned", o.dirs.aligned, "LT-SLAM output dir (aligned/)")->required();

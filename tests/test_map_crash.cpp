@@ -113,7 +113,13 @@ TEST(MapCli, InitIntegrateLogFsckExport) {
         << sub << "\n" << out;
     EXPECT_GT(io::ReadPcd(f).size(), 0u) << sub;
   }
-  ASSERT_EQ(test::RunCli("map objects --quiet --store " + store + " --out " + tmp / "objects", &out), 0) << out;
+  // No session folder here to read the sensor from: its step is given.
+  EXPECT_NE(test::RunCli("map objects --quiet --store " + store + " --out " + tmp / "objects", &out), 0) << out;
+  EXPECT_NE(out.find("object_sensor_step_deg"), std::string::npos) << out;
+  ASSERT_EQ(test::RunCli("map objects --quiet --store " + store + " --set object_sensor_step_deg=0.625 --out " +
+                             tmp / "objects", &out),
+            0)
+      << out;
   EXPECT_TRUE(fs::exists(tmp / "objects/objects.csv"));
   EXPECT_TRUE(fs::exists(tmp / "objects/objects.json"));
   EXPECT_NE(test::RunCli("map restore --quiet --store " + store + " --session nope --out " + tmp / "x.pcd", &out), 0);
@@ -149,7 +155,7 @@ TEST(MapCli, ReadOnlyStoreCanBeRead) {
     GTEST_SKIP() << "running as root: chmod does not make the store read-only";
   for (const std::string& sub : std::vector<std::string>{"log", "fsck", "export --quiet --out " + tmp / "e.pcd", "live --quiet --out " + tmp / "l.pcd",
                                 "meta --quiet --out " + tmp / "m.pcd", "restore --quiet --session 0 --out " + tmp / "r.pcd",
-                                "objects --quiet --out " + tmp / "objects"}) {
+                                "objects --quiet --set object_sensor_step_deg=0.625 --out " + tmp / "objects"}) {
     EXPECT_EQ(test::RunCli("map " + sub + " --store " + store, &out), 0) << sub << "\n" << out;
     EXPECT_EQ(Listing(ro), std::vector<std::string>{"m.ltmap"}) << sub;
   }
