@@ -22,6 +22,13 @@ cp "$root"/config/*.yaml "$seeds/config/"
 
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:allocator_may_return_null=0}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+
+# The crashes found so far, replayed first as GoogleTest cases (tests/test_io_bad_input.cpp).
+if [ -x "$build/fuzz/fuzz_bad_input_tests" ]; then
+  "$build/fuzz/fuzz_bad_input_tests" --gtest_brief=1 > "$build/fuzz-bad-input-tests.log" 2>&1 ||
+    { tail -30 "$build/fuzz-bad-input-tests.log"; echo "fuzz_bad_input_tests failed" >&2; exit 1; }
+  echo "== fuzz_bad_input_tests passed"
+fi
 rows=()
 status=0
 for h in "${harnesses[@]}"; do

@@ -135,6 +135,24 @@ TEST(BadInput, PcdHeaderSizeAndCountAreCheckedBeforeAnyRead) {
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "cannot hold"});
 }
 
+// fuzz/fuzz_pcd (out-of-memory): a COUNT (or SIZE) token that is not an integer or overflows
+// 64 bits was skipped, so COUNT defaulted to 1 here while PCL's reader took its own value and
+// allocated 12 GB for a 3-point ascii file.
+TEST(BadInput, FuzzPcdUnparsableSizeOrCountIsAnError) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string huge(51, '1');
+  test::WriteText(f, "# .PCD v0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT " + huge +
+                         " 1 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n1 2 3 4\n5 6 7 8\n9 1 2 3\n");
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad COUNT value", "111"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1.5", 1, 16));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad COUNT value '1.5'"});
+  test::WriteText(f, PcdWithFields("4 4 4 four", "1 1 1 1", 1, 16));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad SIZE value 'four'"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1", 1, 16));  // still read
+  EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+}
+
 TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {
   test::TempDir tmp;
   const std::string g = tmp / "ids.g2o";
