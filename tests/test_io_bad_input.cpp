@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <limits>
 
@@ -151,6 +152,47 @@ TEST(BadInput, FuzzPcdUnparsableSizeOrCountIsAnError) {
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad SIZE value 'four'"});
   test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1", 1, 16));  // still read
   EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+}
+
+// fuzz/fuzz_pcd (allocation-size-too-big inside pcl::PCDReader::read): a 212-byte binary PCD with
+// an 8-byte float x went through PCL, which asked for ~100 TB. Binary files whose x y z
+// (intensity) are single values of any type but 8-byte integers are now read here.
+TEST(BadInput, FuzzPcdBinaryWithDoubleXIsReadWithoutPcl) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string header =
+      "# .P- Point Cloud\nFIELDS x y z intensity\nSIZE 8 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 3\n"
+      "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA binary\n";
+  const std::string data(
+      "\x23\x20\x2e\x20\x30\x2e\x37\x0a\x46\x49\x45\x4c\x44\x53\x1a\x00"
+      "\xff\xff\xff\x61\x72\x79\x0a\x39\xff\x78\x20\x79\x20\x7a\x20\x80"
+      "\x00\x00\x00\x00\x36\x00\x00\x00\x00\x00\x00\x3f\x00\x00\x80\x20"
+      "\x31\x0a\x56\x49\x45\x69\x57\x50\x6e\x74\x65\x6e\x4f\x49\xff\xff"
+      "\xff\xff\xff\xbe\xcd",
+      69);
+  test::WriteText(f, header + data);
+  io::CloudReadStats stats;
+  const PointCloud c = io::ReadPcd(f, &stats);
+  EXPECT_EQ(stats.points_in_file, 3u);
+  EXPECT_EQ(c.size() + stats.non_finite_dropped, 3u);
+  // Mixed types, read by value: double x, float y, int16 z, uint8 intensity.
+  std::string g = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 8 4 2 1\nTYPE F F I U\nCOUNT 1 1 1 1\n"
+                  "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA binary\n";
+  for (int k = 0; k < 2; ++k) {
+    const double x = 1.5 + k;
+    const float y = -2.25f;
+    const std::int16_t z = std::int16_t(-7 + k);
+    const std::uint8_t in = std::uint8_t(200 + k);
+    g.append(reinterpret_cast<const char*>(&x), 8).append(reinterpret_cast<const char*>(&y), 4);
+    g.append(reinterpret_cast<const char*>(&z), 2).append(reinterpret_cast<const char*>(&in), 1);
+  }
+  test::WriteText(f, g);
+  const PointCloud m = io::ReadPcd(f);
+  ASSERT_EQ(m.size(), 2u);
+  EXPECT_EQ(m.points[1].x, 2.5f);
+  EXPECT_EQ(m.points[1].y, -2.25f);
+  EXPECT_EQ(m.points[1].z, -6.f);
+  EXPECT_EQ(m.points[1].intensity, 201.f);
 }
 
 TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {

@@ -309,17 +309,32 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
   return cloud;
 }
 
-// x y z (intensity) of an uncompressed binary PCD when each is a single 4-byte float: their
-// offsets in the point record, else nothing (the file goes through PCL).
-std::optional<std::array<FieldAt, 4>> FloatFields(const PcdHeader& h) {
+// PCL datatype of a field's TYPE and SIZE (both checked by CheckFields); 0 when PCL has none.
+std::uint8_t Datatype(char type, long long size) {
+  switch (type) {
+    case 'F': return size == 4 ? pcl::PCLPointField::FLOAT32 : pcl::PCLPointField::FLOAT64;
+    case 'I': return size == 1 ? pcl::PCLPointField::INT8 : size == 2 ? pcl::PCLPointField::INT16
+                     : size == 4 ? pcl::PCLPointField::INT32 : 0;
+    case 'U': return size == 1 ? pcl::PCLPointField::UINT8 : size == 2 ? pcl::PCLPointField::UINT16
+                     : size == 4 ? pcl::PCLPointField::UINT32 : 0;
+    default: return 0;
+  }
+}
+
+// x y z (intensity) of an uncompressed binary PCD when each is a single value of a type read here
+// (any but 8-byte integers): their offsets and datatypes in the point record, else nothing (the
+// file goes through PCL). Not only 4-byte floats: fuzz/fuzz_pcd found a 212-byte binary file with
+// an 8-byte float x that made PCL's reader ask for a 100 TB allocation.
+std::optional<std::array<FieldAt, 4>> BinaryFields(const PcdHeader& h) {
   std::array<FieldAt, 4> at{};
   const char* names[4] = {"x", "y", "z", "intensity"};
   std::size_t offset = 0;
   for (std::size_t i = 0; i < h.fields.size(); ++i) {
     for (int k = 0; k < 4; ++k) {
       if (h.fields[i] != names[k]) continue;
-      if (h.types[i] != 'F' || h.sizes[i] != 4 || h.counts[i] != 1) return std::nullopt;
-      at[std::size_t(k)] = {offset, pcl::PCLPointField::FLOAT32};
+      const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
+      if (!type || h.counts[i] != 1) return std::nullopt;
+      at[std::size_t(k)] = {offset, type};
     }
     offset += std::size_t(h.sizes[i]) * std::size_t(h.counts[i]);
   }
@@ -356,11 +371,11 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
       if (stats) *stats = CloudReadStats{};
       return PointCloud{};
     }
-    // Uncompressed binary float x y z: the header is parsed and the size checked already, so
+    // Uncompressed binary x y z: the header is parsed and the size checked already, so
     // read the records here in one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's
     // loadPCDFile 1.4-1.9 ms; going through PCL's reader and a per-value type switch took ~1.5-2 ms).
     if (h.data == "binary") {
-      if (const auto f = FloatFields(h)) {
+      if (const auto f = BinaryFields(h)) {
         Records rec;
         rec.cols = std::size_t(h.points);
         rec.rows = 1;
