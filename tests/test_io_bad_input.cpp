@@ -154,10 +154,10 @@ TEST(BadInput, FuzzPcdUnparsableSizeOrCountIsAnError) {
   EXPECT_EQ(io::ReadPcd(f).size(), 1u);
 }
 
-// fuzz/fuzz_pcd (allocation-size-too-big inside pcl::PCDReader::read): a 212-byte binary PCD with
-// an 8-byte float x went through PCL, which asked for ~100 TB. Binary files whose x y z
-// (intensity) are single values of any type but 8-byte integers are now read here.
-TEST(BadInput, FuzzPcdBinaryWithDoubleXIsReadWithoutPcl) {
+// fuzz/fuzz_pcd (allocation-size-too-big inside pcl::PCDReader::read): 212-byte binary PCDs with
+// an 8-byte float x, or without z, went through PCL, which asked for ~100 TB. Uncompressed binary
+// files are now always read here (x y z intensity of any type but 8-byte integers).
+TEST(BadInput, FuzzPcdBinaryIsNeverReadThroughPcl) {
   test::TempDir tmp;
   const std::string f = tmp / "f.pcd";
   const std::string header =
@@ -193,6 +193,32 @@ TEST(BadInput, FuzzPcdBinaryWithDoubleXIsReadWithoutPcl) {
   EXPECT_EQ(m.points[1].y, -2.25f);
   EXPECT_EQ(m.points[1].z, -6.f);
   EXPECT_EQ(m.points[1].intensity, 201.f);
+
+  // The second find: no z field (the same header otherwise); PCL's reader again asked for ~100 TB.
+  std::string no_z = header;
+  no_z.replace(no_z.find("FIELDS x y z"), 12, "FIELDS x y r");
+  const std::string data3(
+      "\x23\x20\xda\x20\xce\xb9\x20\x46\x20\x46\x20\x46\x0a\x43\x4f\x55"
+      "\x4e\x54\x20\x51\x20\x30\x20\x30\x20\x30\x0a\xfc\x4f\x49\x4e\x54"
+      "\x53\x20\x33\x0a\x44\x41\x54\x41\x20\x62\x69\x6e\x61\x72\x79\x0a"
+      "\x23\x20\x2e\x20\xce\xb9\x20\x46\x20\x46\x20\x46\x0a\x43\x4f\x55"
+      "\x4e\x54\x20\x31\x20",
+      69);
+  test::WriteText(f, no_z + data3);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no x y z"});
+  // 8-byte integers: an error; a field with COUNT 2: its first value, as PCL reads it.
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 8 4 4\nTYPE I F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                     "POINTS 1\nDATA binary\n" + std::string(16, '\0'));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "unsupported type"});
+  std::string two = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 2 1 1\nWIDTH 1\nHEIGHT 1\n"
+                    "POINTS 1\nDATA binary\n";
+  for (float v : {1.f, 9.f, 2.f, 3.f}) two.append(reinterpret_cast<const char*>(&v), 4);
+  test::WriteText(f, two);
+  const PointCloud t = io::ReadPcd(f);
+  ASSERT_EQ(t.size(), 1u);
+  EXPECT_EQ(t.points[0].x, 1.f);
+  EXPECT_EQ(t.points[0].y, 2.f);
+  EXPECT_EQ(t.points[0].z, 3.f);
 }
 
 TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {

@@ -321,11 +321,11 @@ std::uint8_t Datatype(char type, long long size) {
   }
 }
 
-// x y z (intensity) of an uncompressed binary PCD when each is a single value of a type read here
-// (any but 8-byte integers): their offsets and datatypes in the point record, else nothing (the
-// file goes through PCL). Not only 4-byte floats: fuzz/fuzz_pcd found a 212-byte binary file with
-// an 8-byte float x that made PCL's reader ask for a 100 TB allocation.
-std::optional<std::array<FieldAt, 4>> BinaryFields(const PcdHeader& h) {
+// x y z (intensity) of an uncompressed binary PCD: their offsets and datatypes in the point record
+// (a field with COUNT > 1: its first value, as PCL reads it). Binary files are never handed to
+// PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at all) that made
+// pcl::PCDReader::read ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte integers.
+std::array<FieldAt, 4> BinaryFields(const std::string& path, const PcdHeader& h) {
   std::array<FieldAt, 4> at{};
   const char* names[4] = {"x", "y", "z", "intensity"};
   std::size_t offset = 0;
@@ -333,12 +333,14 @@ std::optional<std::array<FieldAt, 4>> BinaryFields(const PcdHeader& h) {
     for (int k = 0; k < 4; ++k) {
       if (h.fields[i] != names[k]) continue;
       const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
-      if (!type || h.counts[i] != 1) return std::nullopt;
+      if (!type)
+        throw Error(path + ": PCD field '" + h.fields[i] + "' has an unsupported type (" +
+                    std::string(1, h.types[i]) + std::to_string(h.sizes[i]) + ")");
       at[std::size_t(k)] = {offset, type};
     }
     offset += std::size_t(h.sizes[i]) * std::size_t(h.counts[i]);
   }
-  if (!at[0].datatype || !at[1].datatype || !at[2].datatype) return std::nullopt;
+  if (!at[0].datatype || !at[1].datatype || !at[2].datatype) throw Error(path + ": PCD has no x y z fields");
   return at;
 }
 
@@ -371,24 +373,23 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
       if (stats) *stats = CloudReadStats{};
       return PointCloud{};
     }
-    // Uncompressed binary x y z: the header is parsed and the size checked already, so
+    // Uncompressed binary: the header is parsed and the size checked already, so
     // read the records here in one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's
     // loadPCDFile 1.4-1.9 ms; going through PCL's reader and a per-value type switch took ~1.5-2 ms).
-    if (h.data == "binary") {
-      if (const auto f = BinaryFields(h)) {
-        Records rec;
-        rec.cols = std::size_t(h.points);
-        rec.rows = 1;
-        rec.point_step = h.PointStep();
-        rec.row_step = rec.cols * rec.point_step;
-        std::vector<std::uint8_t> bytes(rec.row_step);
-        in.clear();
-        in.seekg(std::streamoff(h.data_offset));
-        if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
-          throw Error(path + ": cannot read the PCD data section");
-        rec.data = bytes.data();
-        return ReadRecords(rec, (*f)[0], (*f)[1], (*f)[2], (*f)[3], stats);
-      }
+    if (h.data == "binary") {  // never through PCL (see BinaryFields)
+      const auto f = BinaryFields(path, h);
+      Records rec;
+      rec.cols = std::size_t(h.points);
+      rec.rows = 1;
+      rec.point_step = h.PointStep();
+      rec.row_step = rec.cols * rec.point_step;
+      std::vector<std::uint8_t> bytes(rec.row_step);
+      in.clear();
+      in.seekg(std::streamoff(h.data_offset));
+      if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
+        throw Error(path + ": cannot read the PCD data section");
+      rec.data = bytes.data();
+      return ReadRecords(rec, f[0], f[1], f[2], f[3], stats);
     }
   }
 
