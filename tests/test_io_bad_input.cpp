@@ -247,6 +247,37 @@ TEST(BadInput, FuzzPcdCompressedWithoutXIsAnError) {
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "no x y z", "'x'"});
 }
 
+// fuzz/fuzz_pcd (SEGV inside pcl::PCDReader::read): an ascii PCD without a POINTS line (PCL sized
+// the data by POINTS, 0, and filled WIDTH*HEIGHT points). Now an error for ascii and
+// binary_compressed data; uncompressed binary (read here) still takes WIDTH*HEIGHT.
+TEST(BadInput, FuzzPcdWithoutPointsLine) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string bytes(
+      "\x0d\x0a\x0d\x0a\x0d\x0a\x0d\x0d\x0a\x0d\x0a\x0d\x0a\x23\x20\x2e"
+      "\x20\x30\x2e\x37\x0d\x0a\x0a\x46\x49\x45\x4c\x44\x53\x20\x78\x20"
+      "\x79\x20\x7a\x20\x69\x6e\x74\x65\x6e\x73\x69\x74\x79\x0a\x53\x49"
+      "\x5a\x45\x20\x34\x20\x34\x20\x0d\x34\x20\x34\x0a\x54\x59\x50\x45"
+      "\x20\x46\x20\x46\x20\x46\x20\x46\x0a\x43\x4f\x55\x4e\x54\x20\x31"
+      "\x20\x31\x20\x31\x20\x31\x0a\x57\x49\x44\x54\x48\x20\x33\xf7\xa9"
+      "\xb6\xba\xa8\x20\x30\x20\x30\x26\x20\x30\xd3\xb0\x31\x20\x30\x20"
+      "\x33\x0a\x44\x41\x54\x41\x20\x61\x73\x63\x69\x69\x0a\x30\x20\x2d"
+      "\x30\x20\x30\x20\x7a\x30\x0a\x30\x2e\x35\x20\x2d\x30\x35\x20\x30"
+      "\xe9\x31\x30\x30\x30\x30\x30\x30\x30\x31\x20\xcb\xcb\xcb\xcb\xcb"
+      "\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\x31\x0a\x31\x20"
+      "\x2d\x30\x2e\x35\x20\xfe\xff\xff\xff\xff\xff\xff\xff\x30\x2e\x32"
+      "\x30\x30\x30\x30\x30\x30\x30\x33\x20\x32\x0a",
+      203);
+  test::WriteText(f, bytes);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no POINTS line", "ascii"});
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+                     "DATA ascii\n1 2 3\n4 5 6\n");
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no POINTS line"});
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                     "DATA binary\n" + std::string(12, '\0'));
+  EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+}
+
 TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {
   test::TempDir tmp;
   const std::string g = tmp / "ids.g2o";

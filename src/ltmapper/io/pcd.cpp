@@ -158,6 +158,11 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   if (h.height != 0 && h.width > std::numeric_limits<long long>::max() / h.height)
     throw Error(path + ": PCD header WIDTH*HEIGHT " + std::to_string(h.width) + "*" + std::to_string(h.height) +
                 " is out of range");
+  // PCL's reader sizes ascii / binary_compressed data by POINTS (0 when absent) but fills WIDTH*HEIGHT
+  // points: without the line it wrote through a null pointer (fuzz/fuzz_pcd). Uncompressed binary
+  // data is read here, where WIDTH*HEIGHT stands in for it.
+  if (h.points < 0 && h.data != "binary" && h.width * h.height > 0)
+    throw Error(path + ": PCD header has no POINTS line (needed with DATA " + h.data + ")");
   if (h.points < 0) h.points = h.width * h.height;
   if (h.points != h.width * h.height)
     throw Error(path + ": PCD header POINTS " + std::to_string(h.points) + " != WIDTH*HEIGHT " +
