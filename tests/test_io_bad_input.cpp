@@ -244,6 +244,8 @@ TEST(BadInput, FuzzPcdCompressedWithoutXIsAnError) {
       "\xcd\xcc\x4c\x3e\x40\x0b\x20\x17\x20\x1f\x01\x00\x40",
       237);
   test::WriteText(f, bytes);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f});  // (its leading "\r\n" lines: see FuzzPcdWhitespaceHeaderLine)
+  test::WriteText(f, bytes.substr(bytes.find('#')));
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "no x y z", "'x'"});
 }
 
@@ -269,6 +271,8 @@ TEST(BadInput, FuzzPcdWithoutPointsLine) {
       "\x30\x30\x30\x30\x30\x30\x30\x33\x20\x32\x0a",
       203);
   test::WriteText(f, bytes);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f});  // (its leading "\r\n" lines: see FuzzPcdWhitespaceHeaderLine)
+  test::WriteText(f, bytes.substr(bytes.find('#')));
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "no POINTS line", "ascii"});
   test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
                      "DATA ascii\n1 2 3\n4 5 6\n");
@@ -276,6 +280,29 @@ TEST(BadInput, FuzzPcdWithoutPointsLine) {
   test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
                      "DATA binary\n" + std::string(12, '\0'));
   EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+}
+
+// fuzz/fuzz_pcd (SEGV inside pcl::PCDReader::read): a header line of only whitespace (" ", "\t",
+// "\r" of a CRLF blank line) before a valid ascii or binary_compressed header. An error naming the
+// line now; uncompressed binary data (read here) still allows it.
+TEST(BadInput, FuzzPcdWhitespaceHeaderLine) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  PointCloud c;
+  c.push_back(1.f, 2.f, 3.f, 4.f);
+  for (auto fmt : {io::PcdFormat::kAscii, io::PcdFormat::kBinaryCompressed, io::PcdFormat::kBinary}) {
+    io::WritePcd(f, c, fmt);
+    const std::string valid = test::ReadText(f);
+    for (const char* blank : {"\r\n", " \n", "\t\n"}) {
+      test::WriteText(f, blank + valid);
+      if (fmt == io::PcdFormat::kBinary)
+        EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+      else
+        test::ExpectError([&] { io::ReadPcd(f); }, {f + ":1:", "only whitespace"});
+    }
+    test::WriteText(f, "\n" + valid);  // an empty line is fine
+    EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+  }
 }
 
 TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {

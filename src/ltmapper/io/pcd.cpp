@@ -43,6 +43,7 @@ struct PcdHeader {
   std::vector<double> viewpoint;  // VIEWPOINT tx ty tz qw qx qy qz (empty when absent)
   std::size_t data_offset = 0; // byte offset of the first data byte
   std::size_t header_lines = 0;
+  std::size_t blank_line = 0;  // first header line of only spaces / tabs / CR (0: none)
   std::size_t PointStep() const {
     std::size_t s = 0;
     for (std::size_t i = 0; i < sizes.size(); ++i) s += std::size_t(sizes[i]) * std::size_t(counts[i]);
@@ -105,10 +106,15 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   std::size_t lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
+    const bool raw_empty = line.empty();
     if (!line.empty() && line.back() == '\r') line.pop_back();
     std::istringstream ss(line);
     std::string key;
-    if (!(ss >> key) || key[0] == '#') continue;
+    if (!(ss >> key)) {
+      if (!raw_empty && !h.blank_line) h.blank_line = lineno;
+      continue;
+    }
+    if (key[0] == '#') continue;
     if (key == "VERSION") continue;
     if (key == "VIEWPOINT") {
       for (double v; ss >> v;) h.viewpoint.push_back(v);
@@ -158,6 +164,10 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   if (h.height != 0 && h.width > std::numeric_limits<long long>::max() / h.height)
     throw Error(path + ": PCD header WIDTH*HEIGHT " + std::to_string(h.width) + "*" + std::to_string(h.height) +
                 " is out of range");
+  // PCL's reader (ascii / binary_compressed data) dereferences null on a header line of only
+  // whitespace (fuzz/fuzz_pcd: one "\r\n" line before a valid header); binary data is read here.
+  if (h.blank_line && h.data != "binary")
+    throw Error(path, h.blank_line, "PCD header line of only whitespace (not readable with DATA " + h.data + ")");
   // PCL's reader sizes ascii / binary_compressed data by POINTS (0 when absent) but fills WIDTH*HEIGHT
   // points: without the line it wrote through a null pointer (fuzz/fuzz_pcd). Uncompressed binary
   // data is read here, where WIDTH*HEIGHT stands in for it.
