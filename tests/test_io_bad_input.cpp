@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <limits>
 
@@ -133,6 +134,175 @@ TEST(BadInput, PcdHeaderSizeAndCountAreCheckedBeforeAnyRead) {
   c.append(8, '\0');
   test::WriteText(f, c);
   test::ExpectError([&] { io::ReadPcd(f); }, {f, "cannot hold"});
+}
+
+// fuzz/fuzz_pcd (out-of-memory): a COUNT (or SIZE) token that is not an integer or overflows
+// 64 bits was skipped, so COUNT defaulted to 1 here while PCL's reader took its own value and
+// allocated 12 GB for a 3-point ascii file.
+TEST(BadInput, FuzzPcdUnparsableSizeOrCountIsAnError) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string huge(51, '1');
+  test::WriteText(f, "# .PCD v0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT " + huge +
+                         " 1 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n1 2 3 4\n5 6 7 8\n9 1 2 3\n");
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad COUNT value", "111"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1.5", 1, 16));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad COUNT value '1.5'"});
+  test::WriteText(f, PcdWithFields("4 4 4 four", "1 1 1 1", 1, 16));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "bad SIZE value 'four'"});
+  test::WriteText(f, PcdWithFields("4 4 4 4", "1 1 1 1", 1, 16));  // still read
+  EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+}
+
+// fuzz/fuzz_pcd (allocation-size-too-big inside pcl::PCDReader::read): 212-byte binary PCDs with
+// an 8-byte float x, or without z, went through PCL, which asked for ~100 TB. Uncompressed binary
+// files are now always read here (x y z intensity of any type but 8-byte integers).
+TEST(BadInput, FuzzPcdBinaryIsNeverReadThroughPcl) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string header =
+      "# .P- Point Cloud\nFIELDS x y z intensity\nSIZE 8 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 3\n"
+      "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA binary\n";
+  const std::string data(
+      "\x23\x20\x2e\x20\x30\x2e\x37\x0a\x46\x49\x45\x4c\x44\x53\x1a\x00"
+      "\xff\xff\xff\x61\x72\x79\x0a\x39\xff\x78\x20\x79\x20\x7a\x20\x80"
+      "\x00\x00\x00\x00\x36\x00\x00\x00\x00\x00\x00\x3f\x00\x00\x80\x20"
+      "\x31\x0a\x56\x49\x45\x69\x57\x50\x6e\x74\x65\x6e\x4f\x49\xff\xff"
+      "\xff\xff\xff\xbe\xcd",
+      69);
+  test::WriteText(f, header + data);
+  io::CloudReadStats stats;
+  const PointCloud c = io::ReadPcd(f, &stats);
+  EXPECT_EQ(stats.points_in_file, 3u);
+  EXPECT_EQ(c.size() + stats.non_finite_dropped, 3u);
+  // Mixed types, read by value: double x, float y, int16 z, uint8 intensity.
+  std::string g = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 8 4 2 1\nTYPE F F I U\nCOUNT 1 1 1 1\n"
+                  "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA binary\n";
+  for (int k = 0; k < 2; ++k) {
+    const double x = 1.5 + k;
+    const float y = -2.25f;
+    const std::int16_t z = std::int16_t(-7 + k);
+    const std::uint8_t in = std::uint8_t(200 + k);
+    g.append(reinterpret_cast<const char*>(&x), 8).append(reinterpret_cast<const char*>(&y), 4);
+    g.append(reinterpret_cast<const char*>(&z), 2).append(reinterpret_cast<const char*>(&in), 1);
+  }
+  test::WriteText(f, g);
+  const PointCloud m = io::ReadPcd(f);
+  ASSERT_EQ(m.size(), 2u);
+  EXPECT_EQ(m.points[1].x, 2.5f);
+  EXPECT_EQ(m.points[1].y, -2.25f);
+  EXPECT_EQ(m.points[1].z, -6.f);
+  EXPECT_EQ(m.points[1].intensity, 201.f);
+
+  // The second find: no z field (the same header otherwise); PCL's reader again asked for ~100 TB.
+  std::string no_z = header;
+  no_z.replace(no_z.find("FIELDS x y z"), 12, "FIELDS x y r");
+  const std::string data3(
+      "\x23\x20\xda\x20\xce\xb9\x20\x46\x20\x46\x20\x46\x0a\x43\x4f\x55"
+      "\x4e\x54\x20\x51\x20\x30\x20\x30\x20\x30\x0a\xfc\x4f\x49\x4e\x54"
+      "\x53\x20\x33\x0a\x44\x41\x54\x41\x20\x62\x69\x6e\x61\x72\x79\x0a"
+      "\x23\x20\x2e\x20\xce\xb9\x20\x46\x20\x46\x20\x46\x0a\x43\x4f\x55"
+      "\x4e\x54\x20\x31\x20",
+      69);
+  test::WriteText(f, no_z + data3);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no x y z"});
+  // 8-byte integers: an error; a field with COUNT 2: its first value, as PCL reads it.
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 8 4 4\nTYPE I F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                     "POINTS 1\nDATA binary\n" + std::string(16, '\0'));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "unsupported type"});
+  std::string two = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 2 1 1\nWIDTH 1\nHEIGHT 1\n"
+                    "POINTS 1\nDATA binary\n";
+  for (float v : {1.f, 9.f, 2.f, 3.f}) two.append(reinterpret_cast<const char*>(&v), 4);
+  test::WriteText(f, two);
+  const PointCloud t = io::ReadPcd(f);
+  ASSERT_EQ(t.size(), 1u);
+  EXPECT_EQ(t.points[0].x, 1.f);
+  EXPECT_EQ(t.points[0].y, 2.f);
+  EXPECT_EQ(t.points[0].z, 3.f);
+}
+
+// fuzz/fuzz_pcd (SEGV inside pcl::PCDReader::read): a binary_compressed PCD whose FIELDS have no x
+// (and a name with NUL bytes). No x y z is now an error before PCL sees the file.
+TEST(BadInput, FuzzPcdCompressedWithoutXIsAnError) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string bytes(
+      "\x0d\x0a\x0d\x0a\x0d\x0a\x0d\x23\x20\x2e\x50\x43\x44\x20\x76\x30"
+      "\x2e\x37\x74\x61\x20\x50\x4f\x49\x4e\x20\x66\x6f\x0a\x56\x45\x52"
+      "\x53\x49\x4f\x4e\x20\x30\x2e\x37\x0a\x46\x49\x45\x4c\x44\x53\x20"
+      "\x32\x20\x79\x20\x7a\x20\x69\x6e\x74\x65\x6e\x00\x00\x00\x00\x00"
+      "\x00\x00\x00\x73\x69\x74\x79\x0a\x53\x49\x5a\x45\x20\x34\x20\x34"
+      "\x20\x34\x20\x34\x0a\x54\x59\x50\x45\x20\x46\x20\x46\x20\x46\x20"
+      "\x46\x0a\x43\x4f\x55\x4e\x54\x20\x31\x20\x31\x20\x31\x20\x31\x0a"
+      "\x57\x49\x44\x54\x48\x20\x33\x0a\x48\x45\x49\x47\x48\x54\x20\x31"
+      "\x0a\x56\x49\x45\x57\x50\x4f\x49\x4e\x54\x20\x30\x20\x30\x20\x30"
+      "\x20\x31\x20\x30\x20\x30\x20\x30\x0a\x50\x4f\x49\x4e\x54\x53\x20"
+      "\x33\x0a\x44\x41\x54\x41\x20\x62\x69\x6e\x61\x72\x79\x5f\x63\x6f"
+      "\x6d\x70\x72\x65\x73\x73\x65\x64\x0a\x2c\x00\x00\x00\x30\x00\x00"
+      "\x00\x01\x00\x00\x60\x00\x03\x3f\x00\x00\x80\x20\x03\x01\x00\x80"
+      "\x20\x02\x00\xbe\x20\x11\x00\xbf\x20\x03\x08\x00\xcd\xcc\xcc\x3d"
+      "\xcd\xcc\x4c\x3e\x40\x0b\x20\x17\x20\x1f\x01\x00\x40",
+      237);
+  test::WriteText(f, bytes);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f});  // (its leading "\r\n" lines: see FuzzPcdWhitespaceHeaderLine)
+  test::WriteText(f, bytes.substr(bytes.find('#')));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no x y z", "'x'"});
+}
+
+// fuzz/fuzz_pcd (SEGV inside pcl::PCDReader::read): an ascii PCD without a POINTS line (PCL sized
+// the data by POINTS, 0, and filled WIDTH*HEIGHT points). Now an error for ascii and
+// binary_compressed data; uncompressed binary (read here) still takes WIDTH*HEIGHT.
+TEST(BadInput, FuzzPcdWithoutPointsLine) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  const std::string bytes(
+      "\x0d\x0a\x0d\x0a\x0d\x0a\x0d\x0d\x0a\x0d\x0a\x0d\x0a\x23\x20\x2e"
+      "\x20\x30\x2e\x37\x0d\x0a\x0a\x46\x49\x45\x4c\x44\x53\x20\x78\x20"
+      "\x79\x20\x7a\x20\x69\x6e\x74\x65\x6e\x73\x69\x74\x79\x0a\x53\x49"
+      "\x5a\x45\x20\x34\x20\x34\x20\x0d\x34\x20\x34\x0a\x54\x59\x50\x45"
+      "\x20\x46\x20\x46\x20\x46\x20\x46\x0a\x43\x4f\x55\x4e\x54\x20\x31"
+      "\x20\x31\x20\x31\x20\x31\x0a\x57\x49\x44\x54\x48\x20\x33\xf7\xa9"
+      "\xb6\xba\xa8\x20\x30\x20\x30\x26\x20\x30\xd3\xb0\x31\x20\x30\x20"
+      "\x33\x0a\x44\x41\x54\x41\x20\x61\x73\x63\x69\x69\x0a\x30\x20\x2d"
+      "\x30\x20\x30\x20\x7a\x30\x0a\x30\x2e\x35\x20\x2d\x30\x35\x20\x30"
+      "\xe9\x31\x30\x30\x30\x30\x30\x30\x30\x31\x20\xcb\xcb\xcb\xcb\xcb"
+      "\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\xcb\x31\x0a\x31\x20"
+      "\x2d\x30\x2e\x35\x20\xfe\xff\xff\xff\xff\xff\xff\xff\x30\x2e\x32"
+      "\x30\x30\x30\x30\x30\x30\x30\x33\x20\x32\x0a",
+      203);
+  test::WriteText(f, bytes);
+  test::ExpectError([&] { io::ReadPcd(f); }, {f});  // (its leading "\r\n" lines: see FuzzPcdWhitespaceHeaderLine)
+  test::WriteText(f, bytes.substr(bytes.find('#')));
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no POINTS line", "ascii"});
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+                     "DATA ascii\n1 2 3\n4 5 6\n");
+  test::ExpectError([&] { io::ReadPcd(f); }, {f, "no POINTS line"});
+  test::WriteText(f, "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                     "DATA binary\n" + std::string(12, '\0'));
+  EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+}
+
+// fuzz/fuzz_pcd (SEGV inside pcl::PCDReader::read): a header line of only whitespace (" ", "\t",
+// "\r" of a CRLF blank line) before a valid ascii or binary_compressed header. An error naming the
+// line now; uncompressed binary data (read here) still allows it.
+TEST(BadInput, FuzzPcdWhitespaceHeaderLine) {
+  test::TempDir tmp;
+  const std::string f = tmp / "f.pcd";
+  PointCloud c;
+  c.push_back(1.f, 2.f, 3.f, 4.f);
+  for (auto fmt : {io::PcdFormat::kAscii, io::PcdFormat::kBinaryCompressed, io::PcdFormat::kBinary}) {
+    io::WritePcd(f, c, fmt);
+    const std::string valid = test::ReadText(f);
+    for (const char* blank : {"\r\n", " \n", "\t\n"}) {
+      test::WriteText(f, blank + valid);
+      if (fmt == io::PcdFormat::kBinary)
+        EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+      else
+        test::ExpectError([&] { io::ReadPcd(f); }, {f + ":1:", "only whitespace"});
+    }
+    test::WriteText(f, "\n" + valid);  // an empty line is fine
+    EXPECT_EQ(io::ReadPcd(f).size(), 1u);
+  }
 }
 
 TEST(BadInput, G2oIdsOutOfIntRangeAreErrors) {

@@ -9,7 +9,9 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
+#include <algorithm>
 #include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -41,6 +43,7 @@ struct PcdHeader {
   std::vector<double> viewpoint;  // VIEWPOINT tx ty tz qw qx qy qz (empty when absent)
   std::size_t data_offset = 0; // byte offset of the first data byte
   std::size_t header_lines = 0;
+  std::size_t blank_line = 0;  // first header line of only spaces / tabs / CR (0: none)
   std::size_t PointStep() const {
     std::size_t s = 0;
     for (std::size_t i = 0; i < sizes.size(); ++i) s += std::size_t(sizes[i]) * std::size_t(counts[i]);
@@ -58,6 +61,23 @@ long long ParseCount(const std::string& path, std::size_t line, const std::strin
   long long v = -1;
   if (!(ss >> v) || v < 0) throw Error(path, line, "bad " + key + " value in PCD header");
   return v;
+}
+
+// Every token of a SIZE / COUNT line: an integer (a token that is not one, or that overflows, is
+// an error: skipping it once made PCL's own reading of the header disagree with this one and
+// allocate 12 GB for a 3-point file; found by fuzz/fuzz_pcd).
+std::vector<long long> ParseInts(const std::string& path, std::size_t line, const std::string& key,
+                                 std::istringstream& ss) {
+  std::vector<long long> out;
+  for (std::string t; ss >> t;) {
+    long long v = 0;
+    const char* end = t.data() + t.size();
+    const auto [ptr, ec] = std::from_chars(t.data(), end, v);
+    if (ec != std::errc() || ptr != end)
+      throw Error(path, line, "bad " + key + " value '" + t.substr(0, 40) + "' in PCD header (expected integers)");
+    out.push_back(v);
+  }
+  return out;
 }
 
 // SIZE, TYPE and COUNT of every field: values the format defines, so the point step is the
@@ -86,10 +106,15 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   std::size_t lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
+    const bool raw_empty = line.empty();
     if (!line.empty() && line.back() == '\r') line.pop_back();
     std::istringstream ss(line);
     std::string key;
-    if (!(ss >> key) || key[0] == '#') continue;
+    if (!(ss >> key)) {
+      if (!raw_empty && !h.blank_line) h.blank_line = lineno;
+      continue;
+    }
+    if (key[0] == '#') continue;
     if (key == "VERSION") continue;
     if (key == "VIEWPOINT") {
       for (double v; ss >> v;) h.viewpoint.push_back(v);
@@ -99,11 +124,11 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
     if (key == "FIELDS" || key == "COLUMNS") {
       for (std::string f; ss >> f;) h.fields.push_back(f);
     } else if (key == "SIZE") {
-      for (long long v; ss >> v;) h.sizes.push_back(v);
+      h.sizes = ParseInts(path, lineno, key, ss);
     } else if (key == "TYPE") {
       for (std::string t; ss >> t;) h.types.push_back(t.empty() ? '?' : t[0]);
     } else if (key == "COUNT") {
-      for (long long v; ss >> v;) h.counts.push_back(v);
+      h.counts = ParseInts(path, lineno, key, ss);
     } else if (key == "WIDTH") {
       h.width = ParseCount(path, lineno, key, ss);
     } else if (key == "HEIGHT") {
@@ -139,6 +164,15 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   if (h.height != 0 && h.width > std::numeric_limits<long long>::max() / h.height)
     throw Error(path + ": PCD header WIDTH*HEIGHT " + std::to_string(h.width) + "*" + std::to_string(h.height) +
                 " is out of range");
+  // PCL's reader (ascii / binary_compressed data) dereferences null on a header line of only
+  // whitespace (fuzz/fuzz_pcd: one "\r\n" line before a valid header); binary data is read here.
+  if (h.blank_line && h.data != "binary")
+    throw Error(path, h.blank_line, "PCD header line of only whitespace (not readable with DATA " + h.data + ")");
+  // PCL's reader sizes ascii / binary_compressed data by POINTS (0 when absent) but fills WIDTH*HEIGHT
+  // points: without the line it wrote through a null pointer (fuzz/fuzz_pcd). Uncompressed binary
+  // data is read here, where WIDTH*HEIGHT stands in for it.
+  if (h.points < 0 && h.data != "binary" && h.width * h.height > 0)
+    throw Error(path + ": PCD header has no POINTS line (needed with DATA " + h.data + ")");
   if (h.points < 0) h.points = h.width * h.height;
   if (h.points != h.width * h.height)
     throw Error(path + ": PCD header POINTS " + std::to_string(h.points) + " != WIDTH*HEIGHT " +
@@ -291,21 +325,38 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
   return cloud;
 }
 
-// x y z (intensity) of an uncompressed binary PCD when each is a single 4-byte float: their
-// offsets in the point record, else nothing (the file goes through PCL).
-std::optional<std::array<FieldAt, 4>> FloatFields(const PcdHeader& h) {
+// PCL datatype of a field's TYPE and SIZE (both checked by CheckFields); 0 when PCL has none.
+std::uint8_t Datatype(char type, long long size) {
+  switch (type) {
+    case 'F': return size == 4 ? pcl::PCLPointField::FLOAT32 : pcl::PCLPointField::FLOAT64;
+    case 'I': return size == 1 ? pcl::PCLPointField::INT8 : size == 2 ? pcl::PCLPointField::INT16
+                     : size == 4 ? pcl::PCLPointField::INT32 : 0;
+    case 'U': return size == 1 ? pcl::PCLPointField::UINT8 : size == 2 ? pcl::PCLPointField::UINT16
+                     : size == 4 ? pcl::PCLPointField::UINT32 : 0;
+    default: return 0;
+  }
+}
+
+// x y z (intensity) of an uncompressed binary PCD: their offsets and datatypes in the point record
+// (a field with COUNT > 1: its first value, as PCL reads it). Binary files are never handed to
+// PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at all) that made
+// pcl::PCDReader::read ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte integers.
+std::array<FieldAt, 4> BinaryFields(const std::string& path, const PcdHeader& h) {
   std::array<FieldAt, 4> at{};
   const char* names[4] = {"x", "y", "z", "intensity"};
   std::size_t offset = 0;
   for (std::size_t i = 0; i < h.fields.size(); ++i) {
     for (int k = 0; k < 4; ++k) {
       if (h.fields[i] != names[k]) continue;
-      if (h.types[i] != 'F' || h.sizes[i] != 4 || h.counts[i] != 1) return std::nullopt;
-      at[std::size_t(k)] = {offset, pcl::PCLPointField::FLOAT32};
+      const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
+      if (!type)
+        throw Error(path + ": PCD field '" + h.fields[i] + "' has an unsupported type (" +
+                    std::string(1, h.types[i]) + std::to_string(h.sizes[i]) + ")");
+      at[std::size_t(k)] = {offset, type};
     }
     offset += std::size_t(h.sizes[i]) * std::size_t(h.counts[i]);
   }
-  if (!at[0].datatype || !at[1].datatype || !at[2].datatype) return std::nullopt;
+  if (!at[0].datatype || !at[1].datatype || !at[2].datatype) throw Error(path + ": PCD has no x y z fields");
   return at;
 }
 
@@ -338,24 +389,28 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
       if (stats) *stats = CloudReadStats{};
       return PointCloud{};
     }
-    // Uncompressed binary float x y z: the header is parsed and the size checked already, so
+    // Uncompressed binary: the header is parsed and the size checked already, so
     // read the records here in one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's
     // loadPCDFile 1.4-1.9 ms; going through PCL's reader and a per-value type switch took ~1.5-2 ms).
-    if (h.data == "binary") {
-      if (const auto f = FloatFields(h)) {
-        Records rec;
-        rec.cols = std::size_t(h.points);
-        rec.rows = 1;
-        rec.point_step = h.PointStep();
-        rec.row_step = rec.cols * rec.point_step;
-        std::vector<std::uint8_t> bytes(rec.row_step);
-        in.clear();
-        in.seekg(std::streamoff(h.data_offset));
-        if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
-          throw Error(path + ": cannot read the PCD data section");
-        rec.data = bytes.data();
-        return ReadRecords(rec, (*f)[0], (*f)[1], (*f)[2], (*f)[3], stats);
-      }
+    // No x y z: an error here, before PCL's reader (fuzz/fuzz_pcd: a binary_compressed file without
+    // x made pcl::PCDReader::read dereference null).
+    for (const char* name : {"x", "y", "z"})
+      if (std::find(h.fields.begin(), h.fields.end(), name) == h.fields.end())
+        throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
+    if (h.data == "binary") {  // never through PCL (see BinaryFields)
+      const auto f = BinaryFields(path, h);
+      Records rec;
+      rec.cols = std::size_t(h.points);
+      rec.rows = 1;
+      rec.point_step = h.PointStep();
+      rec.row_step = rec.cols * rec.point_step;
+      std::vector<std::uint8_t> bytes(rec.row_step);
+      in.clear();
+      in.seekg(std::streamoff(h.data_offset));
+      if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
+        throw Error(path + ": cannot read the PCD data section");
+      rec.data = bytes.data();
+      return ReadRecords(rec, f[0], f[1], f[2], f[3], stats);
     }
   }
 
