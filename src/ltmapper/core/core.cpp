@@ -1,5 +1,9 @@
 #include "ltmapper/core/core.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <unistd.h>
 
 #include <algorithm>
@@ -311,6 +315,16 @@ std::size_t PeakRssBytes() {
     }
   }
   return 0;
+}
+
+void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f) {
+  if (n == 0) return;
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+    });
+  });
 }
 
 }  // namespace ltm

@@ -31,6 +31,12 @@ class Error : public std::runtime_error {
 };
 
 // ---------------------------------------------------------------------------------------------
+// Parallel loops: f(0) .. f(n-1) on `threads` workers (0 = all cores) in a task arena of the
+// call's own (no process-wide thread limit), one index per task (each may be big). Every module
+// uses this one; results must not depend on the order the indices run in.
+void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f);
+
+// ---------------------------------------------------------------------------------------------
 // Point classes, stored per point when a cloud carries labels (PLY field "class").
 enum class PointClass : std::uint8_t {
   kUnknown = 0,

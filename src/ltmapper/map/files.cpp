@@ -23,14 +23,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-template <class F>
-void ParallelFor(int threads, std::size_t n, F f) {
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), n, [&](std::size_t k) { f(k); });
-  });
-}
-
 // A store is built as "<store>.tmp-<pid>" (plus SQLite's -wal / -shm / -journal) and renamed.
 constexpr const char* kTempInfix = ".tmp-";
 constexpr std::size_t kMaxPidDigits = 9;  // pid_max is at most 2^22 (7 digits): longer is no pid
@@ -211,7 +203,7 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
     for (const auto& [key, T] : poses)
       if (key.first == "central") kfs.push_back({key.second, T, {}});
     std::sort(kfs.begin(), kfs.end(), [](const auto& a, const auto& b) { return a.index < b.index; });
-    ParallelFor(threads, kfs.size(), [&](std::size_t k) {
+    ParallelFor(kfs.size(), threads, [&](std::size_t k) {
       kfs[k].cloud = ReadIfExists(pair + "/keyframes/" + io::layout::KeyframeDirName(kfs[k].index) + "/static.pcd");
     });
     spdlog::info("map init: {} central keyframes from {}", kfs.size(), pair);
@@ -274,7 +266,7 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
   const std::vector<int> nidx = ListedKeyframes(poses, "new", pair + "/new_keyframes");
   std::vector<KeyframeDelta> deltas(kidx.size());
   std::vector<KeyframeInput> fresh(nidx.size());
-  ParallelFor(0, kidx.size() + nidx.size(), [&](std::size_t k) {
+  ParallelFor(kidx.size() + nidx.size(), 0, [&](std::size_t k) {
     if (k < kidx.size()) {
       deltas[k] = ReadDelta(pair + "/keyframes/" + io::layout::KeyframeDirName(kidx[k]) + "/", kidx[k]);
     } else {

@@ -165,16 +165,6 @@ class Stmt {
   sqlite3_stmt* st_ = nullptr;
 };
 
-template <class F>
-void ParallelFor(int threads, std::size_t n, F f) {
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t k = r.begin(); k != r.end(); ++k) f(k);
-    });
-  });
-}
-
 PointCloud ToWorld(const QCloud& q, const Pose& T, double res, double istep, const Region& region) {
   PointCloud c = detail::Dequantize(q, res, istep);
   geometry::TransformInPlace(c, T);
@@ -480,7 +470,7 @@ static void InsertKeyframes(Store::Impl& s, Store& store, int session, const std
     const std::size_t n = std::min(kChunk, kfs.size() - c0);
     std::vector<std::string> blobs(n);
     std::vector<std::size_t> points(n);
-    ParallelFor(s.threads, n, [&](std::size_t k) {
+    ParallelFor(n, s.threads, [&](std::size_t k) {
       const KeyframeInput& kf = *kfs[c0 + k];
       const QCloud q = detail::Quantize(kf.cloud, s.cfg.resolution_m, s.cfg.intensity_step, PointClass::kStatic,
                                         std::uint16_t(session), "session " + std::to_string(session) +
@@ -618,7 +608,7 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
       get_deltas.Reset();
     }
     std::vector<Out> out(n);
-    ParallelFor(s.threads, n, [&](std::size_t k) {
+    ParallelFor(n, s.threads, [&](std::size_t k) {
       const Work& w = *items[c0 + k].second;
       const KeyframeRecord& rec = in[k].rec;
       const std::string what = "session '" + session.name + "' map keyframe " + std::to_string(rec.id);
@@ -777,7 +767,7 @@ PointCloud Store::MapAt(int session, const Region& region) const {
     throw Error(s.path + ": no session " + std::to_string(session) + " in the map store");
   const auto blobs = s.LoadBlobs(session, session);
   std::vector<PointCloud> parts(blobs.size());
-  ParallelFor(s.threads, blobs.size(), [&](std::size_t k) {
+  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
     parts[k] = ToWorld(s.Rollback(blobs[k]), blobs[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step,
                        region);
   });
@@ -797,7 +787,7 @@ PointCloud Store::Meta(const Region& region) const {
   const auto blobs = s.LoadBlobs(latest, -1);  // every delta, newest first
   const double carve_units = s.cfg.meta_carve_radius_m / s.cfg.resolution_m;
   std::vector<PointCloud> parts(blobs.size());
-  ParallelFor(s.threads, blobs.size(), [&](std::size_t k) {
+  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
     const auto& b = blobs[k];
     const std::string what = "keyframe " + std::to_string(b.rec.id);
     std::vector<QCloud> deltas;
@@ -836,7 +826,7 @@ PointCloud Store::StepChanges(int session, const Region& region) const {
     throw Error(s.path + ": no session step " + std::to_string(session) + " in the map store");
   const auto blobs = s.LoadBlobs(session, -1, session);
   std::vector<PointCloud> parts(blobs.size());
-  ParallelFor(s.threads, blobs.size(), [&](std::size_t k) {
+  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
     QCloud changes;
     for (const auto& [step, blob] : blobs[k].deltas) {
       for (QPoint p : s.Decode(blob, "keyframe " + std::to_string(blobs[k].rec.id) + " delta")) {
@@ -861,7 +851,7 @@ PointCloud Store::StepChanges(int session, const Region& region) const {
   for (auto& b : s.LoadBlobs(session, session))
     if (b.rec.session == session) created.push_back(std::move(b));
   std::vector<PointCloud> fresh(created.size());
-  ParallelFor(s.threads, created.size(), [&](std::size_t k) {
+  ParallelFor(created.size(), s.threads, [&](std::size_t k) {
     QCloud changes;
     for (const QPoint& p : s.Rollback(created[k]))
       if (p.session == session && p.cls == std::uint8_t(PointClass::kPDWeak)) changes.push_back(p);

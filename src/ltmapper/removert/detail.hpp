@@ -199,7 +199,7 @@ class TileIndex {
 std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf);
 
 // parallel_for over [0, n) inside a task_arena of `threads` (0 = default), grain 1.
-void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f);
+using ltm::ParallelFor;  // core.hpp
 
 // Per point: keyframes see through it at any LD resolution (seen), and whether any keyframe had
 // a return in the window at its pixel at all (observed) (occlusion.cpp).

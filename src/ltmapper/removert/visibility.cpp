@@ -669,17 +669,6 @@ std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
   return cloud;
 }
 
-void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f) {
-  if (n == 0) return;
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-                      });
-  });
-}
-
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
   return geometry::Transform(cloud, T_world_sensor.inverse());
 }
