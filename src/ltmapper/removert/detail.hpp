@@ -185,8 +185,9 @@ class TileIndex {
   }
 
  private:
+  // The same bits as (ix << 32) ^ uint32(iy), shifted as unsigned: a negative ix is no UB.
   static std::int64_t Key(std::int32_t ix, std::int32_t iy) {
-    return (std::int64_t(ix) << 32) ^ std::int64_t(std::uint32_t(iy));
+    return std::int64_t((std::uint64_t(std::int64_t(ix)) << 32) ^ std::uint64_t(std::uint32_t(iy)));
   }
   double tile_m_;
   std::vector<std::uint32_t> order_;
