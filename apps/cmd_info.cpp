@@ -2,8 +2,8 @@
 // stage runs on it. Exit code 1 when the session cannot be loaded at all or every scan is empty.
 #include "command.hpp"
 
-#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
+#include "ltmapper/removert/removert.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -19,17 +19,12 @@ struct InfoArgs {
   bool no_scans = false;
 };
 
-// The sensor as the stages will see it: estimated from up to 8 scans spread over the session.
+// The sensor as the stages will see it (removert::WithSensor: estimated from the session's scans).
 void PrintSensor(const ltm::Session& session) {
-  constexpr std::size_t kScans = 8;
-  std::vector<ltm::PointCloud> scans;
-  const std::size_t n = std::min(kScans, session.keyframes.size());
-  for (std::size_t k = 0; k < n; ++k) {
-    const ltm::Keyframe& kf = session.keyframes[k * session.keyframes.size() / n];
-    scans.push_back(kf.cloud ? *kf.cloud : ltm::io::ReadCloud(kf.cloud_path));
-  }
   try {
-    std::cout << "sensor: " << ltm::geometry::EstimateSensor(scans).Describe() << "\n" << std::flush;
+    const ltm::removert::RemovertConfig defaults;
+    const auto resolved = ltm::removert::WithSensor(defaults, ltm::removert::KeyframesOf(session));
+    std::cout << "sensor: " << resolved.sensor_model.Describe() << "\n" << std::flush;
   } catch (const ltm::Error& e) {
     std::cout << "sensor: not estimated (" << e.what() << ")\n" << std::flush;
   }
