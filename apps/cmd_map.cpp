@@ -27,6 +27,7 @@ struct MapOptions {
   std::vector<double> box_min, box_max;
   double voxel = -1.0;
   bool meta = false, changes = false;
+  std::string from, to, compare;  // map diff
 };
 
 map::MapConfig LoadMapConfig(const MapOptions& o) {
@@ -86,6 +87,33 @@ void Report(const map::IntegrationResult& r, const std::string& name) {
 void WriteCloud(const std::string& out, const PointCloud& cloud, const std::string& what) {
   map::WriteLabelledCloud(out, cloud);
   spdlog::info("map: wrote {} ({} points) to {}", what, cloud.size(), out);
+}
+
+// `map diff`: the clouds in --out (the names of an LT-removert pair folder), and with --compare
+// the agreement with LT-removert's own pair output.
+void RunDiff(const MapOptions& o) {
+  const auto cfg = LoadMapConfig(o);
+  const map::Store s = OpenStore(o, cfg);
+  const map::MapDiff d = map::Diff(s, ResolveSession(s, o.from), ResolveSession(s, o.to), RegionOf(o, cfg));
+  io::StagingDir out(o.out, "nd_strong.pcd");
+  map::WriteLabelledCloud(out.path() + "/pd_strong.pcd", d.pd_strong);
+  map::WriteLabelledCloud(out.path() + "/pd_weak.pcd", d.pd_weak);
+  map::WriteLabelledCloud(out.path() + "/nd_strong.pcd", d.nd);
+  out.Publish();
+  std::cout << "map diff " << o.from << " -> " << o.to << ": PD strong " << d.pd_strong.size() << ", PD weak "
+            << d.pd_weak.size() << ", ND " << d.nd.size() << " points in " << d.seconds << " s -> " << o.out << "\n";
+  if (o.compare.empty()) return;
+  auto read = [&](const char* name) { return io::ReadPcd(o.compare + "/" + name); };
+  PointCloud pd_ref = read("pd_strong.pcd"), pd = d.pd_strong;
+  pd_ref.append(read("pd_weak.pcd"));
+  pd_ref.append(read("pd_unobserved.pcd"));  // new territory enters the map as strong PD
+  pd.append(d.pd_weak);
+  const double r = cfg.nd_match_radius_m;
+  const map::Agreement a_pd = map::Agree(pd, pd_ref, r), a_nd = map::Agree(d.nd, read("nd_strong.pcd"), r);
+  std::cout << "| vs " << o.compare << " | diff points | LT-removert points | precision | recall |\n|---|---|---|---|---|\n"
+            << "| PD | " << a_pd.got << " | " << a_pd.want << " | " << a_pd.precision << " | " << a_pd.recall << " |\n"
+            << "| ND strong | " << a_nd.got << " | " << a_nd.want << " | " << a_nd.precision << " | " << a_nd.recall
+            << " |\n" << std::flush;
 }
 
 void Setup(CLI::App& parent) {
@@ -201,6 +229,18 @@ void Setup(CLI::App& parent) {
       WriteCloud(o.out, s.MapAt(k, r), "map as of session " + std::to_string(k));
     }
   });
+
+  auto* diff = map_cmd->add_subcommand(
+      "diff", "Changes between the map as of two sessions, composed from the stored deltas (virtual LD)");
+  common(diff);
+  region(diff);
+  diff->add_option("--from", o.from, "Earlier state: session name or order")->required();
+  diff->add_option("--to", o.to, "Later state: session name or order")->required();
+  diff->add_option("--out", o.out, "Output directory: pd_strong.pcd, pd_weak.pcd, nd_strong.pcd")->required();
+  diff->add_option("--compare", o.compare,
+                   "An LT-removert pair folder of the same two sessions: print precision / recall against it "
+                   "(points within nd_match_radius_m)");
+  diff->callback([opts] { RunDiff(*opts); });
 
   auto* log = map_cmd->add_subcommand("log", "Sessions, keyframes, points, bytes and changes per step");
   common(log);

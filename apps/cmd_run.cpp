@@ -20,8 +20,8 @@ struct RunArgs {
   std::string slam_config, removert_config, map_config, from;
 };
 
-void Run(const RunArgs& a) {
-  if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
+// The run params from --config and the per-stage overrides (run and add share them).
+ltm::pipeline::RunConfig LoadRunConfig(const RunArgs& a) {
   ltm::pipeline::RunConfig cfg;
   if (!a.config.empty()) ltm::io::LoadConfig(a.config, cfg);
   if (!a.slam_config.empty()) cfg.slam_config = a.slam_config;
@@ -30,7 +30,12 @@ void Run(const RunArgs& a) {
   if (!a.from.empty()) cfg.from_stage = a.from;
   ltm::ValidateConfig(cfg, a.config.empty() ? "run options" : a.config);
   spdlog::info("run config:\n{}", ltm::ConfigToString(cfg));
-  const auto report = ltm::pipeline::RunPipeline(cfg, a.sessions, a.out, a.common.threads);
+  return cfg;
+}
+
+void Run(const RunArgs& a) {
+  if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
+  const auto report = ltm::pipeline::RunPipeline(LoadRunConfig(a), a.sessions, a.out, a.common.threads);
   std::cout << ltm::pipeline::FormatRunReport(report) << std::flush;
 }
 
@@ -48,6 +53,30 @@ LTM_COMMAND(70, [](CLI::App& parent) {
       ->check(CLI::IsMember({"auto", "slam", "removert", "map"}));
   ltm::app::AddCommonOptions(*cmd, a->common);
   cmd->callback([a] { Run(*a); });
+});
+
+void Add(const RunArgs& a) {
+  if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
+  const auto cfg = LoadRunConfig(a);
+  for (const auto& s : a.sessions) {  // one at a time, in the order given
+    const auto report = ltm::pipeline::AddSession(cfg, a.out, s, a.common.threads);
+    std::cout << ltm::pipeline::FormatAddReport(report) << std::flush;
+  }
+}
+
+LTM_COMMAND(75, [](CLI::App& parent) {
+  auto a = std::make_shared<RunArgs>();
+  auto* cmd = parent.add_subcommand(
+      "add", "Add new drives to the map a run built in --map: align, HD removal and changes of the new drive only");
+  cmd->add_option("--map", a->out, "The run's output directory (aligned/, changes/, map.ltmap)")->required();
+  cmd->add_option("sessions", a->sessions, "New session directories, added one at a time in this order")
+      ->required()->expected(1, -1);
+  cmd->add_option("--config", a->config, "Run params YAML (config/params_run.yaml); use the run's own");
+  cmd->add_option("--slam-config", a->slam_config, "LT-SLAM params (overrides the run params)");
+  cmd->add_option("--removert-config", a->removert_config, "LT-removert params");
+  cmd->add_option("--map-config", a->map_config, "LT-map params");
+  ltm::app::AddCommonOptions(*cmd, a->common);
+  cmd->callback([a] { Add(*a); });
 });
 
 struct ReportArgs {

@@ -63,6 +63,9 @@ std::string PosesWorldFile(const std::string& aligned_dir, const std::string& se
 std::string AnchorFile(const std::string& aligned_dir, const std::string& session);
 std::string SessionChangesDir(const std::string& changes_dir, const std::string& session);
 std::string StaticMapFile(const std::string& changes_dir, const std::string& session);  // HD-free map
+// The files of one LT-removert session folder (changes/<session>/, or its staging copy).
+std::string StaticMapIn(const std::string& session_changes_dir);  // static_map.pcd (HD-free)
+std::string HdMapIn(const std::string& session_changes_dir);      // hd_map.pcd (removed points)
 // Pair folder of LT-removert: "pair_<c>_<q>", c and q = positions (2 digits) of the sessions
 // among the manifest's aligned sessions, in manifest order.
 std::string PairDirName(int central, int query);

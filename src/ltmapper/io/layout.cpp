@@ -118,8 +118,10 @@ std::string SessionChangesDir(const std::string& changes_dir, const std::string&
   return Join(changes_dir, session);
 }
 std::string StaticMapFile(const std::string& changes_dir, const std::string& session) {
-  return Join(SessionChangesDir(changes_dir, session), "static_map.pcd");
+  return StaticMapIn(SessionChangesDir(changes_dir, session));
 }
+std::string StaticMapIn(const std::string& session_changes_dir) { return Join(session_changes_dir, "static_map.pcd"); }
+std::string HdMapIn(const std::string& session_changes_dir) { return Join(session_changes_dir, "hd_map.pcd"); }
 std::string PairDirName(int central, int query) {
   char buf[64];
   std::snprintf(buf, sizeof(buf), "pair_%02d_%02d", central, query);

@@ -264,6 +264,26 @@ class Store {
   std::unique_ptr<Impl> impl_;
 };
 
+// ------------------------------------------------------------------------------------- diff
+// What changed between the map as of session `from` and as of session `to` (any two, either
+// order), from the stored deltas alone (the paper's virtual LD): PD = points of the `to` state
+// the `from` state lacks (strong / weak as the step that added them said), ND = points of the
+// `from` state the `to` state lacks (removed as seen through). Weak ND are not changes of the
+// map (they stay in it) and are not stored by default (store_weak_nd), so they are not listed.
+// cls and session set (session = the state the point is in).
+struct MapDiff {
+  PointCloud pd_strong, pd_weak, nd;
+  double seconds = 0.0;
+};
+MapDiff Diff(const Store& store, int from, int to, const Region& region = {});
+// Point-wise agreement of `got` with `want`: precision = share of `got` points with a `want`
+// point within radius_m, recall = share of `want` points with a `got` point within radius_m.
+struct Agreement {
+  std::size_t got = 0, want = 0;
+  double precision = 0.0, recall = 0.0;
+};
+Agreement Agree(const PointCloud& got, const PointCloud& want, double radius_m);
+
 // ------------------------------------------------------------------------------- composition
 // P ⊙ LD = P − ND + PD on float clouds in one keyframe frame: removes every point of `cloud`
 // within `tolerance_m` of an ND point and appends the PD points.

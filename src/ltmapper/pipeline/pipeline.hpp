@@ -60,6 +60,33 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
                       const std::string& out_dir, int threads = 0);
 std::string FormatRunReport(const RunReport& report);
 
+// ------------------------------------------------------------------------------ lifelong add
+struct AddReport {
+  std::string session;            // the new session's name
+  bool already_in_map = false;    // it was integrated before: nothing was done
+  std::string aligned_to;         // the map session its loops tie it to
+  int loops_accepted = 0, registrations = 0;
+  double seconds_slam = 0, seconds_removert = 0, seconds_map = 0, seconds = 0;
+  std::uint64_t store_bytes_before = 0, store_bytes = 0;
+  std::size_t map_points_live = 0, objects = 0;
+  std::size_t peak_rss_bytes = 0;
+};
+// Integrates one more drive into the map a `run` built in `out_dir` (`ltmapper add`):
+//  1. LT-SLAM aligns it to the world frame with the map's sessions held fixed: against the
+//     central session, else the other aligned sessions newest first (loops, anchor, graph as in
+//     the batch); not aligned to any is an error and nothing changes;
+//  2. LT-removert runs HD removal of this session only and LD of its pair (removert::
+//     AddToRemovertStage: the earlier session's maps are read, not recomputed);
+//  3. the run manifest gets the session (last), the store integrates it in one transaction and
+//     live.pcd / meta.pcd / objects/ are exported again; the stage markers then hold the keys
+//     of `run` with the grown session list, so such a run finds nothing to do.
+// The work follows the new session's and its reference's sizes, not the number of sessions.
+// A session already in the store is a no-op; one that an earlier add left in the manifest but
+// not in the store (stopped half-way) is added again from the start.
+AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std::string& session_dir,
+                     int threads = 0);
+std::string FormatAddReport(const AddReport& report);
+
 // Resume markers: a finished stage writes `marker` holding its key (the session directories, the
 // stage's resolved config and the keys of the stages before it); a later run skips the stage
 // only when the marker holds the same key, so a changed parameter or session list reruns it.

@@ -1,4 +1,5 @@
 #include "ltmapper/pipeline/pipeline.hpp"
+#include "ltmapper/pipeline/internal.hpp"
 
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/map/map.hpp"
@@ -16,12 +17,7 @@
 namespace ltm::pipeline {
 namespace fs = std::filesystem;
 
-namespace {
-
-// A stage's output directory holds this file once the stage returned without error; a run that
-// was killed half-way therefore reruns that stage (its own writes are atomic per file).
-constexpr const char* kDoneMarker = "STAGE_DONE";
-const std::vector<std::string> kStages = {"slam", "removert", "map"};
+namespace detail {
 
 double Since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -33,6 +29,7 @@ std::string SessionName(const std::string& dir) {
   return p.filename().string();
 }
 
+namespace {
 template <class Config>
 Config LoadStageConfig(const std::string& path, const std::string& what) {
   Config cfg;
@@ -41,8 +38,88 @@ Config LoadStageConfig(const std::string& path, const std::string& what) {
   spdlog::info("{} config ({}):\n{}", what, path.empty() ? "defaults" : path, ConfigToString(cfg));
   return cfg;
 }
+}  // namespace
 
-std::string Marker(const std::string& dir) { return (fs::path(dir) / kDoneMarker).string(); }
+StageConfigs::StageConfigs(const RunConfig& cfg)
+    : slam(LoadStageConfig<slam::SlamConfig>(cfg.slam_config, "LT-SLAM")),
+      removert(LoadStageConfig<removert::RemovertConfig>(cfg.removert_config, "LT-removert")),
+      map(LoadStageConfig<map::MapConfig>(cfg.map_config, "LT-map")) {}
+
+RunPaths::RunPaths(const std::string& out, const RunConfig& cfg)
+    : aligned(io::layout::AlignedDir(out)), changes(io::layout::ChangesDir(out)),
+      store((fs::path(out) / cfg.store_name).string()), live((fs::path(out) / "live.pcd").string()),
+      meta((fs::path(out) / "meta.pcd").string()), objects(io::layout::ObjectsDir(out)) {}
+
+// A stage's output directory holds this file once the stage returned without error; a run that
+// was killed half-way therefore reruns that stage (its own writes are atomic per file).
+std::vector<std::string> StageMarkers(const RunPaths& p) {
+  return {(fs::path(p.aligned) / "STAGE_DONE").string(), (fs::path(p.changes) / "STAGE_DONE").string(),
+          p.store + ".done"};
+}
+
+// Each stage's key: the output layout version, the sessions, its resolved config, and the keys
+// before it (outputs of a run without a manifest never count as finished).
+std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
+                                   const std::vector<std::string>& session_dirs) {
+  std::vector<std::string> keys(3);
+  keys[0] = "layout: manifest-1\nsessions:\n";
+  for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
+  keys[0] += "slam:\n" + ConfigToString(sc.slam);
+  keys[1] = keys[0] + "removert:\n" + ConfigToString(sc.removert);
+  keys[2] = keys[1] + "map:\n" + ConfigToString(sc.map) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";
+  return keys;
+}
+
+// live.pcd, meta.pcd and objects/ from the store; objects/ is replaced whole (StagingDir), so no
+// object of an earlier run survives. Without export, those of an earlier run are removed.
+// The object rules' sampling step comes from the sensor LT-removert used (the central session's).
+void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps) {
+  if (!export_maps) {
+    for (const auto& f : {p.live, p.meta}) fs::remove(f);
+    if (fs::exists(fs::path(p.objects) / "objects.csv")) fs::remove_all(p.objects);
+    return;
+  }
+  const Session central = io::LoadSession(central_dir);
+  const removert::RemovertConfig resolved = removert::WithSensor(sc.removert, removert::KeyframesOf(central));
+  const map::MapConfig map_cfg = map::WithSensorStep(sc.map, resolved.sensor_model);
+  const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
+  map::Region region;
+  region.voxel_m = map_cfg.output_voxel_m;
+  map::WriteLabelledCloud(p.live, store.Live(region));
+  map::WriteLabelledCloud(p.meta, store.Meta(region));
+  io::StagingDir objects(p.objects, "objects.csv");
+  std::vector<map::MapObject> rejected;
+  const auto objs = store.Objects(&rejected);
+  map::WriteObjects(objects.path(), objs, &rejected);
+  objects.Publish();
+}
+
+MapFigures ReadMapFigures(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps) {
+  MapFigures f;
+  {
+    const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
+    const auto totals = store.Totals();
+    f.store_bytes = totals.file_bytes;
+    f.live = totals.base_points;
+  }
+  if (!export_maps) return f;
+  if (fs::exists(p.live)) f.live = io::ReadPcd(p.live).size();
+  if (fs::exists(p.meta)) f.meta = io::ReadPcd(p.meta).size();
+  const auto csv = fs::path(p.objects) / "objects.csv";
+  if (!fs::exists(csv)) return f;
+  std::ifstream in(csv);
+  std::size_t lines = 0;
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty()) ++lines;
+  f.objects = lines > 0 ? lines - 1 : 0;  // header line
+  return f;
+}
+
+}  // namespace detail
+
+namespace {
+using namespace detail;
+const std::vector<std::string> kStages = {"slam", "removert", "map"};
 
 // Index of the first stage to run: `from_stage` when given, else the first whose marker does
 // not hold its key.
@@ -76,15 +153,6 @@ bool StageDone(const std::string& marker, const std::string& key) {
 }
 
 namespace {
-
-// Stage outputs of one run (io::layout names).
-struct RunPaths {
-  std::string aligned, changes, store, live, meta, objects;
-  explicit RunPaths(const std::string& out, const RunConfig& cfg)
-      : aligned(io::layout::AlignedDir(out)), changes(io::layout::ChangesDir(out)),
-        store((fs::path(out) / cfg.store_name).string()), live((fs::path(out) / "live.pcd").string()),
-        meta((fs::path(out) / "meta.pcd").string()), objects(io::layout::ObjectsDir(out)) {}
-};
 
 // Which sessions LT-SLAM aligned, from its run manifest (never from which files exist).
 void ReadAligned(const std::string& aligned_dir, RunReport* report) {
@@ -120,45 +188,6 @@ void BuildStore(const RunPaths& p, const map::MapConfig& map_cfg, const RunRepor
                  report.aligned[i], r.keyframes_changed, r.keyframes_new, r.pd_strong, r.pd_weak, r.nd_strong,
                  r.nd_weak, r.seconds);
   }
-}
-
-// live.pcd, meta.pcd and objects/ from the store; objects/ is replaced whole (StagingDir), so no
-// object of an earlier run survives. Without export, those of an earlier run are removed.
-void ExportMaps(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps) {
-  if (!export_maps) {
-    for (const auto& f : {p.live, p.meta}) fs::remove(f);
-    if (fs::exists(fs::path(p.objects) / "objects.csv")) fs::remove_all(p.objects);
-    return;
-  }
-  const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
-  map::Region region;
-  region.voxel_m = map_cfg.output_voxel_m;
-  map::WriteLabelledCloud(p.live, store.Live(region));
-  map::WriteLabelledCloud(p.meta, store.Meta(region));
-  io::StagingDir objects(p.objects, "objects.csv");
-  std::vector<map::MapObject> rejected;
-  const auto objs = store.Objects(&rejected);
-  map::WriteObjects(objects.path(), objs, &rejected);
-  objects.Publish();
-}
-
-void FillMapFigures(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps, RunReport* report) {
-  {
-    const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
-    const auto totals = store.Totals();
-    report->store_bytes = totals.file_bytes;
-    report->map_points_live = totals.base_points;
-  }
-  if (!export_maps) return;
-  if (fs::exists(p.live)) report->map_points_live = io::ReadPcd(p.live).size();
-  if (fs::exists(p.meta)) report->map_points_meta = io::ReadPcd(p.meta).size();
-  const auto csv = fs::path(p.objects) / "objects.csv";
-  if (!fs::exists(csv)) return;
-  std::ifstream in(csv);
-  std::size_t lines = 0;
-  for (std::string line; std::getline(in, line);)
-    if (!line.empty()) ++lines;
-  report->objects = lines > 0 ? lines - 1 : 0;  // header line
 }
 
 void WriteRunReport(const std::string& out_dir, const RunReport& report) {
@@ -208,19 +237,13 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   for (const auto& d : session_dirs) report.sessions.push_back(SessionName(d));
   io::MakeWritableDir(out_dir);  // before any stage (and before --from removes a stage's outputs)
   const RunPaths p(out_dir, cfg);
-  const auto slam_cfg = LoadStageConfig<slam::SlamConfig>(cfg.slam_config, "LT-SLAM");
-  const auto rem_cfg = LoadStageConfig<removert::RemovertConfig>(cfg.removert_config, "LT-removert");
-  const auto map_cfg = LoadStageConfig<map::MapConfig>(cfg.map_config, "LT-map");
-  // Each stage's key: the output layout version, the sessions, its resolved config, and the keys
-  // before it (outputs of a run without a manifest never count as finished).
-  std::vector<std::string> keys(3);
-  keys[0] = "layout: manifest-1\nsessions:\n";
-  for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
-  keys[0] += "slam:\n" + ConfigToString(slam_cfg);
-  keys[1] = keys[0] + "removert:\n" + ConfigToString(rem_cfg);
-  keys[2] = keys[1] + "map:\n" + ConfigToString(map_cfg) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";
+  const StageConfigs sc(cfg);
+  const auto& slam_cfg = sc.slam;
+  const auto& rem_cfg = sc.removert;
+  const auto& map_cfg = sc.map;
+  const std::vector<std::string> keys = StageKeys(cfg, sc, session_dirs);
   // A marker lies in its stage folder (written once the folder is published; a rerun replaces it).
-  const std::vector<std::string> markers = {Marker(p.aligned), Marker(p.changes), p.store + ".done"};
+  const std::vector<std::string> markers = StageMarkers(p);
   const std::size_t first = FirstStage(cfg, markers, keys);
 
   Stage(0, first, markers[0], keys[0], "LT-SLAM", &report, [&] {
@@ -237,12 +260,13 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   Stage(2, first, markers[2], keys[2], "LT-map", &report, [&] {
     spdlog::info("run [3/3] LT-map: -> {}", p.store);
     BuildStore(p, map_cfg, report, threads);
-    // The object rules' sampling step from the sensor LT-removert used (the central session's).
-    const Session central = io::LoadSession(session_dirs[0]);
-    const removert::RemovertConfig resolved = removert::WithSensor(rem_cfg, removert::KeyframesOf(central));
-    ExportMaps(p, map::WithSensorStep(map_cfg, resolved.sensor_model), cfg.export_maps);
+    ExportMaps(p, sc, session_dirs[0], cfg.export_maps);
   });
-  FillMapFigures(p, map_cfg, cfg.export_maps, &report);
+  const MapFigures fig = ReadMapFigures(p, map_cfg, cfg.export_maps);
+  report.store_bytes = fig.store_bytes;
+  report.map_points_live = fig.live;
+  report.map_points_meta = fig.meta;
+  report.objects = fig.objects;
   report.seconds = Since(t_run);
   report.peak_rss_bytes = PeakRssBytes();
   WriteRunReport(out_dir, report);

@@ -319,5 +319,15 @@ StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::s
 // positions are therefore positions among the manifest's aligned sessions, as LT-map reads them.
 StageReport RunRemovertStageOnRun(const RemovertConfig& cfg, const std::string& aligned_dir,
                                   const std::string& out_dir, int threads = 0);
+// Lifelong add: the stage for one more session, into an existing output `changes_dir`.
+// `session_dirs` / `poses_files` are the run's aligned sessions in run order with the new one
+// last (position q). Runs HD removal of the new session only and LD of its pair (central 0 or,
+// with `pairs: consecutive`, q-1), whose HD-free and HD maps are read from changes_dir, never
+// recomputed; the sensor comes from the central's scans as in the batch. Replaces
+// changes_dir/<new>/ (with its own report.json) and changes_dir/pair_<c>_<q>/ whole. With the
+// same poses the files equal those of the batch stage. Cost: one session's HD + one pair's LD.
+StageReport AddToRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
+                               const std::vector<std::string>& poses_files, const std::string& changes_dir,
+                               int threads = 0);
 
 }  // namespace ltm::removert

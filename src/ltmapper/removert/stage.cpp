@@ -102,6 +102,271 @@ std::string JsonStr(const std::string& s) {
   return o + "\"";
 }
 
+// ---- the stage's steps -------------------------------------------------------------------
+
+// A session's keyframes placed with one world pose each (poses file in keyframe order).
+std::vector<WorldKeyframe> LoadWorldKeyframes(const std::string& session_dir, const std::string& poses_file,
+                                              std::string* name) {
+  const Session sess = io::LoadSession(session_dir);
+  const std::vector<Pose> poses = io::ReadKittiPoses(poses_file);
+  if (poses.size() != sess.keyframes.size())
+    throw Error(poses_file, 0,
+                std::to_string(poses.size()) + " poses but session " + session_dir + " has " +
+                    std::to_string(sess.keyframes.size()) + " keyframes (one pose per keyframe, in order)");
+  *name = sess.name.empty() ? fs::path(session_dir).filename().string() : sess.name;
+  std::vector<WorldKeyframe> kfs;
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    WorldKeyframe w;
+    w.index = sess.keyframes[k].index;
+    w.T_world_sensor = poses[k];
+    w.cloud = sess.keyframes[k].cloud;
+    w.cloud_path = sess.keyframes[k].cloud_path;
+    kfs.push_back(std::move(w));
+  }
+  return kfs;
+}
+
+// One session as the stage holds it: its keyframes and, once HD removal ran, its maps.
+struct SessionData {
+  std::string name;
+  std::vector<WorldKeyframe> kfs;
+  PointCloud static_map, hd_map;
+};
+
+// HD removal of session `s`; writes `dir` (static_map.pcd, hd_map.pcd, map.ply).
+HdStats RemoveSessionHd(SessionData& sd, int s, const std::string& dir, const RemovertConfig& cfg, int threads) {
+  spdlog::info("removert: HD removal of {} ({} keyframes)", sd.name, sd.kfs.size());
+  HdResult hd;
+  try {
+    hd = RemoveHd(sd.kfs, cfg, threads);
+  } catch (const Error& e) {  // name the session: an empty scan rejects it, as LT-SLAM does
+    throw Error("removert: session '" + sd.name + "': " + e.what());
+  }
+  const HdStats& st = hd.stats;
+  spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} + {} dilated ({:.2f} %), "
+               "{:.1f} s map + {:.1f} s votes",
+               sd.name, st.map_points, st.candidates, st.reverted, st.removed, st.dilated,
+               st.map_points ? 100.0 * double(st.removed + st.dilated) / double(st.map_points) : 0.0,
+               st.seconds_map, st.seconds_votes);
+  io::MakeDirs(dir);
+  io::WritePcd(io::layout::StaticMapIn(dir), hd.static_map);
+  io::WritePcd(io::layout::HdMapIn(dir), hd.hd_map);
+  if (cfg.write_ply) {
+    const auto ses = std::uint16_t(s);
+    io::WritePly(dir + "/map.ply", {{&hd.static_map, PointClass::kStatic, ses}, {&hd.hd_map, PointClass::kHD, ses}});
+  }
+  sd.static_map = std::move(hd.static_map);
+  sd.hd_map = std::move(hd.hd_map);
+  return st;
+}
+
+// The LD clouds of a pair and its labelled changes.ply.
+void WriteLdClouds(const std::string& dir, const LdResult& ld, const PointCloud& cmap, int c, int q,
+                   const RemovertConfig& cfg) {
+  io::MakeDirs(dir);
+  io::WritePcd(dir + "/pd_strong.pcd", ld.pd_strong);
+  io::WritePcd(dir + "/pd_weak.pcd", ld.pd_weak);
+  io::WritePcd(dir + "/nd_strong.pcd", ld.nd_strong);
+  io::WritePcd(dir + "/nd_weak.pcd", ld.nd_weak);
+  io::WritePcd(dir + "/pd_unobserved.pcd", ld.pd_unobserved);
+  if (!cfg.write_ply) return;
+  std::vector<bool> unchanged(cmap.size());  // central static minus ND
+  for (std::size_t i = 0; i < cmap.size(); ++i) unchanged[i] = !ld.central_nd[i];
+  const auto cs = std::uint16_t(c), qs = std::uint16_t(q);
+  constexpr std::int32_t kNoObject = -1, kNewTerritory = 1;  // object field of changes.ply
+  io::WritePly(dir + "/changes.ply", {{&cmap, PointClass::kStatic, cs, kNoObject, &unchanged},
+                                      {&ld.nd_strong, PointClass::kNDStrong, cs},
+                                      {&ld.nd_weak, PointClass::kNDWeak, cs},
+                                      {&ld.pd_strong, PointClass::kPDStrong, qs},
+                                      {&ld.pd_weak, PointClass::kPDWeak, qs},
+                                      {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory}});
+}
+
+// Which keyframe every output point of a pair belongs to (rule at the top of this file).
+// Buckets: [0, nc) central keyframes, nc + j query keyframe j.
+struct KeyframeAssignment {
+  std::size_t nc = 0;
+  PointCloud pd_strong_kf;  // strong PD + new territory (added to the map like strong PD)
+  std::vector<std::vector<std::uint32_t>> b_static, b_hd, b_nds, b_ndw, b_pds, b_pdw;
+  std::vector<int> new_list;  // query keyframe positions that become new map keyframes
+};
+
+// Query keyframes farther than new_keyframe_dist_m from every central keyframe.
+std::vector<std::uint32_t> FarQueryKeyframes(const std::vector<WorldKeyframe>& ckf,
+                                             const std::vector<WorldKeyframe>& qkf, const RemovertConfig& cfg,
+                                             int threads) {
+  std::vector<float> qd2;
+  Nearest(Positions(qkf), geometry::KdTree(Positions(ckf)), threads, &qd2);
+  std::vector<std::uint32_t> far;
+  const float nk2 = float(cfg.new_keyframe_dist_m * cfg.new_keyframe_dist_m);
+  for (std::size_t j = 0; j < qkf.size(); ++j)
+    if (qd2[j] > nk2) far.push_back(std::uint32_t(j));
+  return far;
+}
+
+// PD owner: the nearest central or new query keyframe; a central one farther than
+// assign_radius_m gives the point to its nearest query keyframe instead.
+std::vector<std::uint32_t> PdOwners(const PointCloud& pd, const std::vector<WorldKeyframe>& ckf,
+                                    const std::vector<WorldKeyframe>& qkf, const std::vector<std::uint32_t>& new_q,
+                                    const RemovertConfig& cfg, int threads) {
+  const std::size_t nc = ckf.size();
+  PointCloud cand = Positions(ckf);
+  for (auto j : new_q) {
+    const Eigen::Vector3d t = qkf[j].T_world_sensor.translation();
+    cand.push_back(float(t.x()), float(t.y()), float(t.z()));
+  }
+  const geometry::KdTree cand_tree(cand), qtree(Positions(qkf));
+  std::vector<float> d2;
+  std::vector<std::uint32_t> owner = Nearest(pd, cand_tree, threads, &d2);
+  const float ar2 = float(cfg.assign_radius_m * cfg.assign_radius_m);
+  for (std::size_t i = 0; i < pd.size(); ++i) {
+    std::uint32_t& o = owner[i];
+    if (o >= nc) {
+      o = std::uint32_t(nc) + new_q[o - nc];
+    } else if (d2[i] > ar2) {
+      std::uint32_t j = 0;
+      float dq = 0.f;
+      qtree.Nearest(pd.points[i].xyz(), &j, &dq);
+      o = std::uint32_t(nc) + j;
+    }
+  }
+  return owner;
+}
+
+KeyframeAssignment AssignKeyframes(const SessionData& c, const SessionData& q, const LdResult& ld,
+                                   const RemovertConfig& cfg, int threads) {
+  KeyframeAssignment a;
+  a.nc = c.kfs.size();
+  a.pd_strong_kf = ld.pd_strong;
+  a.pd_strong_kf.append(ld.pd_unobserved);
+  const std::vector<std::uint32_t> new_q = FarQueryKeyframes(c.kfs, q.kfs, cfg, threads);
+  const geometry::KdTree ctree(Positions(c.kfs));
+  const std::size_t nk = a.nc + q.kfs.size();
+  a.b_static = Buckets(Nearest(c.static_map, ctree, threads), nk);
+  a.b_hd = Buckets(Nearest(c.hd_map, ctree, threads), nk);
+  a.b_nds = Buckets(Nearest(ld.nd_strong, ctree, threads), nk);
+  a.b_ndw = Buckets(Nearest(ld.nd_weak, ctree, threads), nk);
+  a.b_pds = Buckets(PdOwners(a.pd_strong_kf, c.kfs, q.kfs, new_q, cfg, threads), nk);
+  a.b_pdw = Buckets(PdOwners(ld.pd_weak, c.kfs, q.kfs, new_q, cfg, threads), nk);
+  std::vector<int> is_new(q.kfs.size(), 0);
+  for (std::size_t j = 0; j < q.kfs.size(); ++j)
+    if (!a.b_pds[a.nc + j].empty() || !a.b_pdw[a.nc + j].empty()) is_new[j] = 1;
+  for (auto j : new_q) is_new[j] = 1;
+  for (std::size_t j = 0; j < q.kfs.size(); ++j)
+    if (is_new[j]) a.new_list.push_back(int(j));
+  return a;
+}
+
+// keyframes/NNNNNN/ for every central keyframe and new_keyframes/NNNNNN/ for the new ones.
+void WriteKeyframeFolders(const std::string& dir, const SessionData& c, const SessionData& q, int ci, int qi,
+                          const LdResult& ld, const KeyframeAssignment& a, const RemovertConfig& cfg, int threads) {
+  auto pick = [](const PointCloud& cl, const std::vector<std::uint32_t>& idx) { return cl.select(idx); };
+  detail::ParallelFor(a.nc, threads, [&](std::size_t k) {
+    WriteKeyframeDir(dir + "/keyframes/" + Index6(c.kfs[k].index), c.kfs[k].T_world_sensor,
+                     {{"static", pick(c.static_map, a.b_static[k]), PointClass::kStatic, ci},
+                      {"hd", pick(c.hd_map, a.b_hd[k]), PointClass::kHD, ci},
+                      {"pd_strong", pick(a.pd_strong_kf, a.b_pds[k]), PointClass::kPDStrong, qi},
+                      {"pd_weak", pick(ld.pd_weak, a.b_pdw[k]), PointClass::kPDWeak, qi},
+                      {"nd_strong", pick(ld.nd_strong, a.b_nds[k]), PointClass::kNDStrong, ci},
+                      {"nd_weak", pick(ld.nd_weak, a.b_ndw[k]), PointClass::kNDWeak, ci}},
+                     cfg);
+  });
+  detail::ParallelFor(a.new_list.size(), threads, [&](std::size_t t) {
+    const std::size_t j = std::size_t(a.new_list[t]);
+    WriteKeyframeDir(dir + "/new_keyframes/" + Index6(q.kfs[j].index), q.kfs[j].T_world_sensor,
+                     {{"pd_strong", pick(a.pd_strong_kf, a.b_pds[a.nc + j]), PointClass::kPDStrong, qi},
+                      {"pd_weak", pick(ld.pd_weak, a.b_pdw[a.nc + j]), PointClass::kPDWeak, qi}},
+                     cfg);
+  });
+}
+
+// Keyframe list: kind, session, index, point counts, world pose (KITTI 12 numbers).
+void WriteKeyframesCsv(const std::string& dir, const SessionData& c, const SessionData& q, int ci, int qi,
+                       const KeyframeAssignment& a) {
+  io::WriteFileAtomic(dir + "/keyframes.csv", [&](std::ostream& os) {
+    os << "kind,session,index,static,hd,pd_strong,pd_weak,nd_strong,nd_weak,"
+          "r00,r01,r02,tx,r10,r11,r12,ty,r20,r21,r22,tz\n";
+    os << std::setprecision(9);
+    auto row = [&](const char* kind, int ses, const WorldKeyframe& kf, std::initializer_list<std::size_t> counts) {
+      os << kind << ',' << ses << ',' << kf.index;
+      for (std::size_t n : counts) os << ',' << n;
+      const Eigen::Matrix4d M = kf.T_world_sensor.matrix();
+      for (int r = 0; r < 3; ++r)
+        for (int cc = 0; cc < 4; ++cc) os << ',' << M(r, cc);
+      os << '\n';
+    };
+    for (std::size_t k = 0; k < a.nc; ++k)
+      row("central", ci, c.kfs[k],
+          {a.b_static[k].size(), a.b_hd[k].size(), a.b_pds[k].size(), a.b_pdw[k].size(), a.b_nds[k].size(),
+           a.b_ndw[k].size()});
+    for (int j : a.new_list)
+      row("new", qi, q.kfs[std::size_t(j)],
+          {0, 0, a.b_pds[a.nc + std::size_t(j)].size(), a.b_pdw[a.nc + std::size_t(j)].size(), 0, 0});
+  });
+}
+
+// LD of the pair (c, q) written to `dir`; returns its stats and the new keyframes' indices.
+std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const SessionData& q, int ci, int qi,
+                                                const std::string& dir, const RemovertConfig& cfg, int threads) {
+  spdlog::info("removert: LD {} vs {}", c.name, q.name);
+  const LdResult ld = DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads);
+  spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} (unobserved {}) ({:.1f} s)",
+               io::layout::PairDirName(ci, qi), ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
+               ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.seconds);
+  WriteLdClouds(dir, ld, c.static_map, ci, qi, cfg);
+  const KeyframeAssignment a = AssignKeyframes(c, q, ld, cfg, threads);
+  if (cfg.write_keyframes) WriteKeyframeFolders(dir, c, q, ci, qi, ld, a, cfg, threads);
+  WriteKeyframesCsv(dir, c, q, ci, qi, a);
+  std::vector<int> new_idx;
+  for (int j : a.new_list) new_idx.push_back(q.kfs[std::size_t(j)].index);
+  return {ld.stats, new_idx};
+}
+
+// Pairs: (central 0, q) for every query, or consecutive (q-1, q).
+int PairCentral(const RemovertConfig& cfg, int q) { return cfg.pairs == "consecutive" ? q - 1 : 0; }
+
+void WriteHdJson(std::ostream& os, const std::string& name, std::size_t keyframes, const HdStats& h) {
+  os << "{\"name\": " << JsonStr(name) << ", \"keyframes\": " << keyframes << ", \"map_points\": " << h.map_points
+     << ", \"candidates\": " << h.candidates << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed
+     << ", \"dilated\": " << h.dilated << ", \"removed_per_resolution\": [";
+  for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
+    os << (l ? ", " : "") << h.removed_per_resolution[l];
+  os << "], \"seconds_map\": " << h.seconds_map << ", \"seconds_votes\": " << h.seconds_votes << "}";
+}
+
+void WritePairJson(std::ostream& os, int c, int q, const LdStats& l, const std::vector<int>& new_keyframes) {
+  os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << JsonStr(io::layout::PairDirName(c, q))
+     << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak << ", \"pd_strong\": " << l.pd_strong
+     << ", \"pd_weak\": " << l.pd_weak << ", \"pd_unobserved\": " << l.pd_unobserved
+     << ", \"nd_unobserved\": " << l.nd_unobserved << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
+  for (std::size_t j = 0; j < new_keyframes.size(); ++j) os << (j ? ", " : "") << new_keyframes[j];
+  os << "]}";
+}
+
+void WriteStageReport(const std::string& path, const StageReport& rep, const std::vector<std::size_t>& keyframes,
+                      int threads) {
+  io::WriteFileAtomic(path, [&](std::ostream& os) {
+    os << std::setprecision(9) << "{\n  \"stage\": \"removert\",\n  \"sessions\": [\n";
+    for (std::size_t s = 0; s < rep.hd.size(); ++s) {
+      os << "    ";
+      WriteHdJson(os, rep.sessions[s], keyframes[s], rep.hd[s]);
+      os << (s + 1 < rep.hd.size() ? "," : "") << "\n";
+    }
+    os << "  ],\n  \"pairs\": [\n";
+    for (std::size_t p = 0; p < rep.ld.size(); ++p) {
+      os << "    ";
+      WritePairJson(os, rep.pairs[p].first, rep.pairs[p].second, rep.ld[p], rep.new_keyframes[p]);
+      os << (p + 1 < rep.ld.size() ? "," : "") << "\n";
+    }
+    os << "  ],\n  \"seconds\": " << rep.seconds << ",\n  \"peak_rss_bytes\": " << rep.peak_rss_bytes
+       << ",\n  \"threads\": " << threads << "\n}\n";
+  });
+}
+
+double Since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 }  // namespace
 
 StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<std::string>& session_dirs,
@@ -120,249 +385,79 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
   const std::string& out = staging.path();
   StageReport rep;
   const std::size_t ns = session_dirs.size();
-  std::vector<std::vector<WorldKeyframe>> kfs(ns);
+  std::vector<SessionData> sd(ns);
+  std::vector<std::size_t> keyframes(ns);
   for (std::size_t s = 0; s < ns; ++s) {
-    const Session sess = io::LoadSession(session_dirs[s]);
-    const std::vector<Pose> poses = io::ReadKittiPoses(poses_files[s]);
-    if (poses.size() != sess.keyframes.size())
-      throw Error(poses_files[s], 0,
-                  std::to_string(poses.size()) + " poses but session " + session_dirs[s] + " has " +
-                      std::to_string(sess.keyframes.size()) + " keyframes (one pose per keyframe, in order)");
-    rep.sessions.push_back(sess.name.empty() ? fs::path(session_dirs[s]).filename().string() : sess.name);
-    for (std::size_t k = 0; k < poses.size(); ++k) {
-      WorldKeyframe w;
-      w.index = sess.keyframes[k].index;
-      w.T_world_sensor = poses[k];
-      w.cloud = sess.keyframes[k].cloud;
-      w.cloud_path = sess.keyframes[k].cloud_path;
-      kfs[s].push_back(std::move(w));
-    }
+    sd[s].kfs = LoadWorldKeyframes(session_dirs[s], poses_files[s], &sd[s].name);
+    rep.sessions.push_back(sd[s].name);
+    keyframes[s] = sd[s].kfs.size();
   }
   // One sensor for every session (the central session's scans when estimated).
-  const RemovertConfig cfg = WithSensor(user_cfg, kfs[0]);
-
-  // Pairs: (central 0, q) for every query, or consecutive (q-1, q).
-  for (std::size_t q = 1; q < ns; ++q) {
-    const int c = cfg.pairs == "consecutive" ? int(q) - 1 : 0;
-    rep.pairs.emplace_back(c, int(q));
-  }
-
-  // ---- HD removal of one session: its HD-free and HD maps stay in memory while a pair needs them.
-  std::vector<PointCloud> static_maps(ns), hd_maps(ns);
-  auto remove_hd = [&](std::size_t s) {
-    spdlog::info("removert: HD removal of {} ({} keyframes)", rep.sessions[s], kfs[s].size());
-    HdResult hd;
-    try {
-      hd = RemoveHd(kfs[s], cfg, threads);
-    } catch (const Error& e) {  // name the session: an empty scan rejects it, as LT-SLAM does
-      throw Error("removert: session '" + rep.sessions[s] + "': " + e.what());
-    }
-    const HdStats& st = hd.stats;
-    spdlog::info("removert: {}: map {} points, candidates {}, reverted {}, removed {} + {} dilated ({:.2f} %), "
-                 "{:.1f} s map + {:.1f} s votes",
-                 rep.sessions[s], st.map_points, st.candidates, st.reverted, st.removed, st.dilated,
-                 st.map_points ? 100.0 * double(st.removed + st.dilated) / double(st.map_points) : 0.0,
-                 st.seconds_map, st.seconds_votes);
-    const std::string dir = io::layout::SessionChangesDir(out, rep.sessions[s]);
-    io::MakeDirs(dir);
-    io::WritePcd(io::layout::StaticMapFile(out, rep.sessions[s]), hd.static_map);
-    io::WritePcd(dir + "/hd_map.pcd", hd.hd_map);
-    if (cfg.write_ply) {
-      const auto ses = std::uint16_t(s);
-      io::WritePly(dir + "/map.ply", {{&hd.static_map, PointClass::kStatic, ses},
-                                      {&hd.hd_map, PointClass::kHD, ses}});
-    }
-    rep.hd.push_back(st);
-    static_maps[s] = std::move(hd.static_map);
-    hd_maps[s] = std::move(hd.hd_map);
-  };
-
-  // ---- LD of one pair.
-  auto detect_ld = [&](int c, int q) {
-    const std::string pname = io::layout::PairDirName(c, q);
-    spdlog::info("removert: LD {} vs {}", rep.sessions[std::size_t(c)], rep.sessions[std::size_t(q)]);
-    const LdResult ld = DetectLd(static_maps[std::size_t(c)], static_maps[std::size_t(q)],
-                                 kfs[std::size_t(c)], kfs[std::size_t(q)], cfg, threads);
-    spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} "
-                 "(unobserved {}) ({:.1f} s)",
-                 pname, ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
-                 ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.seconds);
-    rep.ld.push_back(ld.stats);
-    const std::string dir = out + "/" + pname;
-    io::MakeDirs(dir);
-    io::WritePcd(dir + "/pd_strong.pcd", ld.pd_strong);
-    io::WritePcd(dir + "/pd_weak.pcd", ld.pd_weak);
-    io::WritePcd(dir + "/nd_strong.pcd", ld.nd_strong);
-    io::WritePcd(dir + "/nd_weak.pcd", ld.nd_weak);
-    io::WritePcd(dir + "/pd_unobserved.pcd", ld.pd_unobserved);
-    // Keyframe clouds: new territory (query points the central never had in view) is added to
-    // the map like strong PD, so LT-map's composition brings it in.
-    PointCloud pd_strong_kf = ld.pd_strong;
-    pd_strong_kf.append(ld.pd_unobserved);
-
-    // Central static minus ND.
-    const PointCloud& cmap = static_maps[std::size_t(c)];
-    if (cfg.write_ply) {
-      std::vector<bool> unchanged(cmap.size());
-      for (std::size_t i = 0; i < cmap.size(); ++i) unchanged[i] = !ld.central_nd[i];
-      const auto cs = std::uint16_t(c), qs = std::uint16_t(q);
-      constexpr std::int32_t kNoObject = -1, kNewTerritory = 1;  // object field of changes.ply
-      io::WritePly(dir + "/changes.ply", {{&cmap, PointClass::kStatic, cs, kNoObject, &unchanged},
-                                          {&ld.nd_strong, PointClass::kNDStrong, cs},
-                                          {&ld.nd_weak, PointClass::kNDWeak, cs},
-                                          {&ld.pd_strong, PointClass::kPDStrong, qs},
-                                          {&ld.pd_weak, PointClass::kPDWeak, qs},
-                                          {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory}});
-    }
-
-    // ---- Keyframe assignment (rule at the top of this file).
-    const auto& ckf = kfs[std::size_t(c)];
-    const auto& qkf = kfs[std::size_t(q)];
-    const std::size_t nc = ckf.size();
-    const geometry::KdTree ctree(Positions(ckf));
-    const geometry::KdTree qtree(Positions(qkf));
-    std::vector<float> qd2;
-    Nearest(Positions(qkf), ctree, threads, &qd2);
-    std::vector<std::uint32_t> new_q;  // query keyframe positions that become new keyframes
-    const float nk2 = float(cfg.new_keyframe_dist_m * cfg.new_keyframe_dist_m);
-    for (std::size_t j = 0; j < qkf.size(); ++j)
-      if (qd2[j] > nk2) new_q.push_back(std::uint32_t(j));
-    PointCloud cand = Positions(ckf);
-    for (auto j : new_q) cand.push_back(float(qkf[j].T_world_sensor.translation().x()),
-                                         float(qkf[j].T_world_sensor.translation().y()),
-                                         float(qkf[j].T_world_sensor.translation().z()));
-    const geometry::KdTree cand_tree(cand);
-    // PD owner: [0, nc) central keyframe, nc + j query keyframe j.
-    auto pd_owner = [&](const PointCloud& pd, std::vector<std::uint32_t>* owner) {
-      std::vector<float> d2;
-      *owner = Nearest(pd, cand_tree, threads, &d2);
-      const float ar2 = float(cfg.assign_radius_m * cfg.assign_radius_m);
-      for (std::size_t i = 0; i < pd.size(); ++i) {
-        std::uint32_t& o = (*owner)[i];
-        if (o >= nc) {
-          o = std::uint32_t(nc) + new_q[o - nc];
-        } else if (d2[i] > ar2) {
-          std::uint32_t j = 0;
-          float dq = 0.f;
-          qtree.Nearest(pd.points[i].xyz(), &j, &dq);
-          o = std::uint32_t(nc) + j;
-        }
-      }
-    };
-    std::vector<std::uint32_t> own_pds, own_pdw;
-    pd_owner(pd_strong_kf, &own_pds);
-    pd_owner(ld.pd_weak, &own_pdw);
-    const std::size_t nk = nc + qkf.size();
-    const auto b_static = Buckets(Nearest(cmap, ctree, threads), nk);
-    const auto b_hd = Buckets(Nearest(hd_maps[std::size_t(c)], ctree, threads), nk);
-    const auto b_nds = Buckets(Nearest(ld.nd_strong, ctree, threads), nk);
-    const auto b_ndw = Buckets(Nearest(ld.nd_weak, ctree, threads), nk);
-    const auto b_pds = Buckets(own_pds, nk);
-    const auto b_pdw = Buckets(own_pdw, nk);
-    std::vector<int> is_new(qkf.size(), 0);
-    for (std::size_t j = 0; j < qkf.size(); ++j)
-      if (!b_pds[nc + j].empty() || !b_pdw[nc + j].empty()) is_new[j] = 1;
-    for (auto j : new_q) is_new[j] = 1;
-    std::vector<int> new_list;
-    for (std::size_t j = 0; j < qkf.size(); ++j)
-      if (is_new[j]) new_list.push_back(int(j));
-
-    auto pick = [](const PointCloud& cl, const std::vector<std::uint32_t>& idx) { return cl.select(idx); };
-    if (cfg.write_keyframes) {
-      detail::ParallelFor(nc, threads, [&](std::size_t k) {
-        WriteKeyframeDir(dir + "/keyframes/" + Index6(ckf[k].index), ckf[k].T_world_sensor,
-                         {{"static", pick(cmap, b_static[k]), PointClass::kStatic, c},
-                          {"hd", pick(hd_maps[std::size_t(c)], b_hd[k]), PointClass::kHD, c},
-                          {"pd_strong", pick(pd_strong_kf, b_pds[k]), PointClass::kPDStrong, q},
-                          {"pd_weak", pick(ld.pd_weak, b_pdw[k]), PointClass::kPDWeak, q},
-                          {"nd_strong", pick(ld.nd_strong, b_nds[k]), PointClass::kNDStrong, c},
-                          {"nd_weak", pick(ld.nd_weak, b_ndw[k]), PointClass::kNDWeak, c}},
-                         cfg);
-      });
-      detail::ParallelFor(new_list.size(), threads, [&](std::size_t t) {
-        const std::size_t j = std::size_t(new_list[t]);
-        WriteKeyframeDir(dir + "/new_keyframes/" + Index6(qkf[j].index), qkf[j].T_world_sensor,
-                         {{"pd_strong", pick(pd_strong_kf, b_pds[nc + j]), PointClass::kPDStrong, q},
-                          {"pd_weak", pick(ld.pd_weak, b_pdw[nc + j]), PointClass::kPDWeak, q}},
-                         cfg);
-      });
-    }
-    // Keyframe list: kind, session, index, point counts, world pose (KITTI 12 numbers).
-    io::WriteFileAtomic(dir + "/keyframes.csv", [&](std::ostream& os) {
-      os << "kind,session,index,static,hd,pd_strong,pd_weak,nd_strong,nd_weak,"
-            "r00,r01,r02,tx,r10,r11,r12,ty,r20,r21,r22,tz\n";
-      os << std::setprecision(9);
-      auto row = [&](const char* kind, int ses, const WorldKeyframe& kf, std::size_t a, std::size_t b,
-                     std::size_t c2, std::size_t d, std::size_t e, std::size_t f) {
-        os << kind << ',' << ses << ',' << kf.index << ',' << a << ',' << b << ',' << c2 << ',' << d
-           << ',' << e << ',' << f;
-        const Eigen::Matrix4d M = kf.T_world_sensor.matrix();
-        for (int r = 0; r < 3; ++r)
-          for (int cc = 0; cc < 4; ++cc) os << ',' << M(r, cc);
-        os << '\n';
-      };
-      for (std::size_t k = 0; k < nc; ++k)
-        row("central", c, ckf[k], b_static[k].size(), b_hd[k].size(), b_pds[k].size(),
-            b_pdw[k].size(), b_nds[k].size(), b_ndw[k].size());
-      for (int j : new_list)
-        row("new", q, qkf[std::size_t(j)], 0, 0, b_pds[nc + std::size_t(j)].size(),
-            b_pdw[nc + std::size_t(j)].size(), 0, 0);
-    });
-    std::vector<int> new_idx;
-    for (int j : new_list) new_idx.push_back(qkf[std::size_t(j)].index);
-    rep.new_keyframes.push_back(new_idx);
-  };
+  const RemovertConfig cfg = WithSensor(user_cfg, sd[0].kfs);
+  for (std::size_t q = 1; q < ns; ++q) rep.pairs.emplace_back(PairCentral(cfg, int(q)), int(q));
 
   // Sessions in order: HD removal of session s, then the pairs whose query is s (their central
   // came earlier). A session's maps are freed as soon as no later pair needs them, so memory
   // holds at most two sessions' maps (central + current query), not all N.
   for (std::size_t s = 0; s < ns; ++s) {
-    remove_hd(s);
-    for (const auto& [c, q] : rep.pairs)
-      if (std::size_t(q) == s) detect_ld(c, q);
+    rep.hd.push_back(RemoveSessionHd(sd[s], int(s), io::layout::SessionChangesDir(out, sd[s].name), cfg, threads));
+    for (const auto& [c, q] : rep.pairs) {
+      if (std::size_t(q) != s) continue;
+      auto [stats, new_idx] = DetectPair(sd[std::size_t(c)], sd[s], c, q, out + "/" + io::layout::PairDirName(c, q),
+                                         cfg, threads);
+      rep.ld.push_back(stats);
+      rep.new_keyframes.push_back(std::move(new_idx));
+    }
     for (std::size_t t = 0; t <= s; ++t) {
       bool needed = false;
       for (const auto& [c, q] : rep.pairs) needed = needed || (std::size_t(c) == t && std::size_t(q) > s);
-      if (!needed) {
-        static_maps[t] = PointCloud();
-        hd_maps[t] = PointCloud();
-      }
+      if (!needed) sd[t].static_map = sd[t].hd_map = PointCloud();
     }
   }
-
-  rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  rep.seconds = Since(t0);
   rep.peak_rss_bytes = PeakRssBytes();
-
-  io::WriteFileAtomic(out + "/report.json", [&](std::ostream& os) {
-    os << std::setprecision(9) << "{\n  \"stage\": \"removert\",\n  \"sessions\": [\n";
-    for (std::size_t s = 0; s < ns; ++s) {
-      const HdStats& h = rep.hd[s];
-      os << "    {\"name\": " << JsonStr(rep.sessions[s]) << ", \"keyframes\": " << kfs[s].size()
-         << ", \"map_points\": " << h.map_points << ", \"candidates\": " << h.candidates
-         << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed << ", \"dilated\": " << h.dilated
-         << ", \"removed_per_resolution\": [";
-      for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
-        os << (l ? ", " : "") << h.removed_per_resolution[l];
-      os << "], \"seconds_map\": " << h.seconds_map << ", \"seconds_votes\": " << h.seconds_votes
-         << "}" << (s + 1 < ns ? "," : "") << "\n";
-    }
-    os << "  ],\n  \"pairs\": [\n";
-    for (std::size_t p = 0; p < rep.pairs.size(); ++p) {
-      const LdStats& l = rep.ld[p];
-      os << "    {\"central\": " << rep.pairs[p].first << ", \"query\": " << rep.pairs[p].second
-         << ", \"dir\": " << JsonStr(io::layout::PairDirName(rep.pairs[p].first, rep.pairs[p].second))
-         << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak
-         << ", \"pd_strong\": " << l.pd_strong << ", \"pd_weak\": " << l.pd_weak
-         << ", \"pd_unobserved\": " << l.pd_unobserved << ", \"nd_unobserved\": " << l.nd_unobserved
-         << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
-      for (std::size_t j = 0; j < rep.new_keyframes[p].size(); ++j)
-        os << (j ? ", " : "") << rep.new_keyframes[p][j];
-      os << "]}" << (p + 1 < rep.pairs.size() ? "," : "") << "\n";
-    }
-    os << "  ],\n  \"seconds\": " << rep.seconds << ",\n  \"peak_rss_bytes\": " << rep.peak_rss_bytes
-       << ",\n  \"threads\": " << threads << "\n}\n";
-  });
+  WriteStageReport(out + "/report.json", rep, keyframes, threads);
   staging.Publish();
+  return rep;
+}
+
+StageReport AddToRemovertStage(const RemovertConfig& user_cfg, const std::vector<std::string>& session_dirs,
+                               const std::vector<std::string>& poses_files, const std::string& changes_dir,
+                               int threads) {
+  user_cfg.Validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  if (session_dirs.size() < 2 || poses_files.size() != session_dirs.size())
+    throw Error("removert add: need the run's sessions and the new one (last), each with a pose file");
+  if (!fs::exists(changes_dir + "/report.json"))
+    throw Error(changes_dir + ": no LT-removert output here (report.json missing): run the batch first");
+  const int qi = int(session_dirs.size()) - 1, ci = PairCentral(user_cfg, qi);
+  SessionData central, c, q;
+  central.kfs = LoadWorldKeyframes(session_dirs[0], poses_files[0], &central.name);
+  const RemovertConfig cfg = WithSensor(user_cfg, central.kfs);  // as the batch: the central's sensor
+  c.kfs = ci == 0 ? std::move(central.kfs) : LoadWorldKeyframes(session_dirs[std::size_t(ci)],
+                                                                poses_files[std::size_t(ci)], &c.name);
+  if (ci == 0) c.name = central.name;
+  q.kfs = LoadWorldKeyframes(session_dirs.back(), poses_files.back(), &q.name);
+  // The earlier session's HD removal is read from its output, never redone.
+  const std::string cdir = io::layout::SessionChangesDir(changes_dir, c.name);
+  c.static_map = io::ReadPcd(io::layout::StaticMapIn(cdir));
+  c.hd_map = io::ReadPcd(io::layout::HdMapIn(cdir));
+
+  io::StagingDir session_out(io::layout::SessionChangesDir(changes_dir, q.name),
+                             fs::path(io::layout::StaticMapIn(".")).filename().string());
+  io::StagingDir pair_out(changes_dir + "/" + io::layout::PairDirName(ci, qi), "keyframes.csv");
+  StageReport rep;
+  rep.sessions = {q.name};
+  rep.hd.push_back(RemoveSessionHd(q, qi, session_out.path(), cfg, threads));
+  auto [stats, new_idx] = DetectPair(c, q, ci, qi, pair_out.path(), cfg, threads);
+  rep.pairs.emplace_back(ci, qi);
+  rep.ld.push_back(stats);
+  rep.new_keyframes.push_back(std::move(new_idx));
+  rep.seconds = Since(t0);
+  rep.peak_rss_bytes = PeakRssBytes();
+  WriteStageReport(session_out.path() + "/report.json", rep, {q.kfs.size()}, threads);
+  session_out.Publish();
+  pair_out.Publish();
   return rep;
 }
 

@@ -220,4 +220,20 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
 SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
                         const std::string& out_dir, int threads = 0);
 
+// ------------------------------------------------------------------------------ lifelong add
+// A session already in the world frame, as the fixed reference that a new session is aligned
+// to: its keyframes carry their world poses (`T_world_sensor`, keyframe order) and its odometry
+// is rebuilt from them with an information far above any loop's, so the new session's loops
+// cannot bend it (it moves by under a thousandth of a loop's pull); its own loops are dropped.
+Session WorldReference(Session session, const std::vector<Pose>& T_world_sensor, const SlamConfig& cfg);
+// Aligns `query` to `reference` (a WorldReference: its frame is the world) with the same
+// retrieval, verification and graph as AlignSessions. Result sessions: {reference, query}; the
+// query's T_world_sensor are world poses. The cost follows the two sessions' sizes only.
+SlamResult AlignToReference(const Session& reference, const Session& query, const SlamConfig& cfg,
+                            int threads = 0);
+// aligned_dir/<folder>/: poses_world.txt, poses_world_tum.txt and anchor.txt when aligned, else
+// NOT_ALIGNED.txt with the reason (docs/FORMATS.md, "LT-SLAM output"). The folder is the
+// session's name, or its staging name.
+void WriteSessionAlignment(const std::string& aligned_dir, const std::string& folder, const SessionAlignment& a);
+
 }  // namespace ltm::slam

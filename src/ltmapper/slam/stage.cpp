@@ -58,27 +58,8 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
                   const SlamConfig& cfg, const std::string& out_dir) {
   io::MakeDirs(out_dir);
   const std::size_t n = sessions.size();
-  // ---- per session
-  for (std::size_t s = 0; s < n; ++s) {
-    const SessionAlignment& a = res.sessions[s];
-    const std::string dir = (fs::path(out_dir) / a.name).string();
-    io::MakeDirs(dir);
-    const std::string kitti = io::layout::PosesWorldFile(out_dir, a.name), tum = dir + "/poses_world_tum.txt",
-                      anchor = io::layout::AnchorFile(out_dir, a.name), na = dir + "/NOT_ALIGNED.txt";
-    if (a.aligned) {
-      io::WriteKittiPoses(kitti, a.T_world_sensor);
-      std::vector<io::StampedPose> st;
-      for (std::size_t k = 0; k < a.T_world_sensor.size(); ++k) {
-        st.push_back({double(k), a.T_world_sensor[k]});
-      }
-      io::WriteTumPoses(tum, st);
-      io::WriteKittiPoses(anchor, {a.anchor});
-    } else {  // out_dir is fresh (StagingDir): no world poses of an earlier run can be left here
-      io::WriteFileAtomic(na, [&](std::ostream& os) {
-        os << "session " << a.name << " is NOT aligned to the world frame: " << a.reason << "\n";
-      });
-    }
-  }
+  // ---- per session (out_dir is fresh (StagingDir): no world poses of an earlier run are left)
+  for (std::size_t s = 0; s < n; ++s) WriteSessionAlignment(out_dir, res.sessions[s].name, res.sessions[s]);
 
   // ---- joint graph: keyframes of aligned sessions in world coordinates. Vertex id = number of
   // keyframes of all earlier aligned sessions + position in the session (no digit tricks).

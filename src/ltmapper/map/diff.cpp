@@ -1,0 +1,70 @@
+// Changes between any two sessions' states of the map by composing the stored deltas (the
+// paper's "virtual LD", Table II): no scan is read, no visibility is computed.
+#include "ltmapper/map/map.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <chrono>
+
+namespace ltm::map {
+
+namespace {
+// A point of one state is "the same" as a point of the other when they lie within this many
+// coordinate quantisation steps: unchanged points are stored once and decode to the same
+// coordinates in both states, so one step is already generous.
+constexpr double kSameSteps = 1.0;
+
+PointCloud Labelled(PointCloud c, const std::vector<bool>& keep, PointClass fallback, int session) {
+  c = c.select(keep);
+  if (c.cls.size() != c.size()) c.cls.assign(c.size(), fallback);
+  for (auto& k : c.cls)
+    if (k != PointClass::kPDStrong && k != PointClass::kPDWeak) k = fallback;
+  c.session.assign(c.size(), std::uint16_t(session));
+  return c;
+}
+}  // namespace
+
+MapDiff Diff(const Store& store, int from, int to, const Region& region) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int n = int(store.Sessions().size());
+  if (from < 0 || to < 0 || from >= n || to >= n)
+    throw Error(store.path() + ": diff between sessions " + std::to_string(from) + " and " + std::to_string(to) +
+                ": the store holds sessions 0.." + std::to_string(n - 1));
+  if (from == to) throw Error("diff: --from and --to name the same session");
+  Region exact = region;
+  exact.voxel_m = 0.0;  // match the stored points themselves; the voxel applies to the outputs
+  const PointCloud a = store.MapAt(from, exact), b = store.MapAt(to, exact);
+  const double tol = kSameSteps * store.config().resolution_m;
+  std::vector<bool> added = WithinRadius(b, a, tol), removed = WithinRadius(a, b, tol);
+  added.flip();
+  removed.flip();
+  MapDiff d;
+  // Added points keep the strength the step that added them gave (strong / weak PD).
+  const PointCloud pd = Labelled(b, added, PointClass::kPDStrong, to);
+  std::vector<bool> weak(pd.size());
+  for (std::size_t i = 0; i < pd.size(); ++i) weak[i] = pd.cls[i] == PointClass::kPDWeak;
+  d.pd_weak = pd.select(weak);
+  weak.flip();
+  d.pd_strong = pd.select(weak);
+  d.nd = Labelled(a, removed, PointClass::kNDStrong, from);
+  if (region.voxel_m > 0.0)
+    for (PointCloud* c : {&d.pd_strong, &d.pd_weak, &d.nd}) *c = geometry::VoxelDownsample(*c, region.voxel_m, 0);
+  d.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return d;
+}
+
+Agreement Agree(const PointCloud& got, const PointCloud& want, double radius_m) {
+  Agreement a;
+  a.got = got.size();
+  a.want = want.size();
+  auto share = [](const std::vector<bool>& m) {
+    std::size_t n = 0;
+    for (bool b : m) n += b;
+    return m.empty() ? 1.0 : double(n) / double(m.size());
+  };
+  a.precision = share(WithinRadius(got, want, radius_m));
+  a.recall = share(WithinRadius(want, got, radius_m));
+  return a;
+}
+
+}  // namespace ltm::map

@@ -1,0 +1,46 @@
+// What `run` and `add` share inside the pipeline module: the run's paths, the stage configs,
+// the resume keys and markers, the map export. Not a public header.
+#pragma once
+
+#include "ltmapper/map/map.hpp"
+#include "ltmapper/pipeline/pipeline.hpp"
+#include "ltmapper/removert/removert.hpp"
+#include "ltmapper/slam/slam.hpp"
+
+#include <chrono>
+#include <string>
+#include <vector>
+
+namespace ltm::pipeline::detail {
+
+double Since(std::chrono::steady_clock::time_point t0);
+std::string SessionName(const std::string& dir);  // a session folder's name (= its output folder)
+
+// Stage outputs of one run (io::layout names).
+struct RunPaths {
+  std::string aligned, changes, store, live, meta, objects;
+  RunPaths(const std::string& out, const RunConfig& cfg);
+};
+
+// The three stages' resolved configs (each loaded, validated and printed once).
+struct StageConfigs {
+  slam::SlamConfig slam;
+  removert::RemovertConfig removert;
+  map::MapConfig map;
+  explicit StageConfigs(const RunConfig& cfg);
+};
+
+// Resume markers of the three stages and their keys for a list of session folders (run order).
+std::vector<std::string> StageMarkers(const RunPaths& p);
+std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
+                                   const std::vector<std::string>& session_dirs);
+
+// live.pcd, meta.pcd and objects/ from the store (objects with the central session's sensor).
+void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps);
+struct MapFigures {
+  std::uint64_t store_bytes = 0;
+  std::size_t live = 0, meta = 0, objects = 0;
+};
+MapFigures ReadMapFigures(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps);
+
+}  // namespace ltm::pipeline::detail
