@@ -45,7 +45,10 @@ geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_d
 class MultiResImage {
  public:
   // keep_returns: Build() also keeps each pixel's nearest return (sensor frame, Returns()).
-  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, bool keep_returns = false);
+  // within_beams: points are judged only within the beams' span (PointBounds; HD removal), else
+  // anywhere in the images' FOV (LD: a change above the top beam is still judged by it).
+  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, bool keep_returns = false,
+                bool within_beams = false);
   // Projects a scan (sensor frame); returns within [min_range, max_range] only. Then each
   // level's min-pooled twin: the min over the (2w+1) x (2w+1) window centred on each pixel
   // (columns wrap around), w = window_px.

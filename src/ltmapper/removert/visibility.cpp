@@ -252,7 +252,7 @@ std::vector<int> MultiResImage::WindowRows(const RemovertConfig& cfg, int rows, 
 }
 
 MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg,
-                             bool keep_returns)
+                             bool keep_returns, bool within_beams)
     : keep_returns_(keep_returns) {
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   up_ = float(cfg.fov_up_deg * kDeg);
@@ -260,7 +260,9 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   window_ = cfg.window_px;
-  PointBounds(cfg);
+  point_up_ = up_;
+  point_down_ = down_;
+  if (within_beams) PointBounds(cfg);
   for (double res : resolutions_deg) {
     Level L;
     L.grid = Grid::Make(cfg, res, res);
@@ -277,8 +279,6 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
 }
 
 void MultiResImage::PointBounds(const RemovertConfig& cfg) {
-  point_up_ = up_;
-  point_down_ = down_;
   const geometry::SensorModel& m = cfg.sensor_model;
   if (!cfg.SensorResolved() || !m.ring_based || m.beams() < 2) return;
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
@@ -746,7 +746,10 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   };
   tbb::enumerable_thread_specific<Scratch> scratch(
       [&] {
-        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f), {}, {}, {}, {}, {}, {}, {}, {}};
+        // HD votes (no occlusion counts) judge points only within the beams' span; LD's occlusion
+        // votes anywhere in the FOV.
+        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f, !count_occluded),
+                   {}, {}, {}, {}, {}, {}, {}, {}};
         if (beams)
           sc.columns = std::make_unique<detail::ColumnImage>(cfg, *options.beams);
         return sc;
