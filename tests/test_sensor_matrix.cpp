@@ -20,9 +20,18 @@ struct Scored {
   geometry::SensorModel sensor;
 };
 
-Scored RunPreset(const std::string& preset) {
+// A sensor of the matrix: a preset, optionally pitched on its mount (the keyframe poses are the
+// tilted sensor's).
+struct Case {
+  const char* preset;
+  double tilt_deg;
+  const char* name;
+};
+
+Scored RunPreset(const std::string& preset, double tilt_deg) {
   sim::SimConfig cfg = sim::TinyConfig();
   cfg.lidar_preset = preset;
+  cfg.tilt_deg = tilt_deg;
   cfg.sessions = 1;
   cfg.keyframes = 30;
   cfg.keyframe_spacing_m = 1.5;
@@ -47,24 +56,30 @@ Scored RunPreset(const std::string& preset) {
   return {eval::EvaluateHd(truth, res.static_map, eval::EvalConfig{}, {}, 2), rc.sensor_model};
 }
 
-class SensorMatrix : public ::testing::TestWithParam<const char*> {};
+class SensorMatrix : public ::testing::TestWithParam<Case> {};
 
 TEST_P(SensorMatrix, DefaultsKeepTheStaticMapAndRemoveMovers) {
-  const std::string preset = GetParam();
-  const Scored s = RunPreset(preset);
+  const std::string preset = GetParam().preset;
+  const Scored s = RunPreset(preset, GetParam().tilt_deg);
   const geometry::SensorModel truth = geometry::SensorPreset(preset);
-  std::printf("%-9s %s | SA %.4f DA %.4f (HD points %zu)\n", preset.c_str(), s.sensor.Describe().c_str(),
+  std::printf("%-14s %s | SA %.4f DA %.4f (HD points %zu)\n", GetParam().name, s.sensor.Describe().c_str(),
               s.hd.sa, s.hd.da, s.hd.dynamic_total);
   ASSERT_TRUE(s.sensor.ring_based);
   EXPECT_EQ(s.sensor.beams(), truth.beams());
   EXPECT_GT(s.hd.dynamic_total, 1000u);
-  // Before the sensor model, 16 and 32 beams lost 40 % of the static map here.
-  EXPECT_GE(s.hd.sa, 0.99);
-  EXPECT_GE(s.hd.da, 0.90);
+  // Before the sensor model, 16 and 32 beams lost 40 % of the static map here; measured now: SA
+  // 0.9996-0.9998, DA 0.9565-0.9863 (vlp16 lowest).
+  EXPECT_GE(s.hd.sa, 0.995);
+  EXPECT_GE(s.hd.da, 0.94);
 }
 
-INSTANTIATE_TEST_SUITE_P(Presets, SensorMatrix, ::testing::Values("vlp16", "hdl32e", "vlp32c", "pandar64"),
-                         [](const auto& info) { return std::string(info.param); });
+// vlp16_tilted10: pitched 10 deg nose down, the ground behind is grazed by the lowest beam (it lost
+// 2-5 % of the static map while points below the lowest beam were judged by the beam above).
+INSTANTIATE_TEST_SUITE_P(Presets, SensorMatrix,
+                         ::testing::Values(Case{"vlp16", 0.0, "vlp16"}, Case{"hdl32e", 0.0, "hdl32e"},
+                                           Case{"vlp32c", 0.0, "vlp32c"}, Case{"pandar64", 0.0, "pandar64"},
+                                           Case{"vlp16", 10.0, "vlp16_tilted10"}),
+                         [](const auto& info) { return std::string(info.param.name); });
 
 }  // namespace
 }  // namespace ltm

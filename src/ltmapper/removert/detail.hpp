@@ -45,29 +45,28 @@ geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_d
 class MultiResImage {
  public:
   // keep_returns: Build() also keeps each pixel's nearest return (sensor frame, Returns()).
-  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, bool keep_returns = false);
+  // within_beams: points are judged only within the beams' span (PointBounds; HD removal), else
+  // anywhere in the images' FOV (LD: a change above the top beam is still judged by it).
+  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, bool keep_returns = false,
+                bool within_beams = false);
   // Projects a scan (sensor frame); returns within [min_range, max_range] only. Then each
   // level's min-pooled twin: the min over the (2w+1) x (2w+1) window centred on each pixel
   // (columns wrap around), w = window_px.
   void Build(const PointCloud& scan);
   int levels() const { return int(levels_.size()); }
-  // Angles of a point (sensor frame). False when outside the vertical FOV or at ~0 range.
-  // Project() and Build() evaluate the same float operations four points at a time (SSE2):
-  // keep them in step.
+  // Angles of a scan return (sensor frame). False when outside the images' vertical FOV or at
+  // ~0 range. Project() and Build() evaluate the same float operations four points at a time
+  // (SSE2): keep them in step.
   bool Angles(const Eigen::Vector3f& p, float* range, float* pitch, float* yaw) const {
-    const float rxy2 = p.x() * p.x() + p.y() * p.y();
-    const float r = std::sqrt(rxy2 + p.z() * p.z());
-    if (!(r > 1e-6f)) return false;
-    const float pt = FastAtan2(p.z(), std::sqrt(rxy2));
-    if (pt > up_ || pt < down_) return false;
-    *range = r;
-    *pitch = pt;
-    *yaw = FastAtan2(p.y(), p.x());
-    return true;
+    return AnglesWithin(p, up_, down_, range, pitch, yaw);
+  }
+  // The same for a point to judge: within the beams' span (PointBounds), else false.
+  bool PointAngles(const Eigen::Vector3f& p, float* range, float* pitch, float* yaw) const {
+    return AnglesWithin(p, point_up_, point_down_, range, pitch, yaw);
   }
   // The points (x[i], y[i], z[i]) (world frame; readable up to n + 3: batches of four) within
   // 3D distance sqrt(radius2) of the sensor position c, moved into the sensor frame
-  // (Rt (p - c)), whose Angles() are valid: returns how many; their input positions go to
+  // (Rt (p - c)), whose PointAngles() are valid: returns how many; their input positions go to
   // idx[0, count) and their Angles() to range / pitch / yaw[0, count) (n long each). Batches of
   // four (SSE2) use the same float operations in the same order as the scalar code (Eigen's
   // products included), so the results are identical.
@@ -107,6 +106,23 @@ class MultiResImage {
   int Cols(int level) const { return GridOf(level).cols; }
 
  private:
+  static bool AnglesWithin(const Eigen::Vector3f& p, float up, float down, float* range, float* pitch, float* yaw) {
+    const float rxy2 = p.x() * p.x() + p.y() * p.y();
+    const float r = std::sqrt(rxy2 + p.z() * p.z());
+    if (!(r > 1e-6f)) return false;
+    const float pt = FastAtan2(p.z(), std::sqrt(rxy2));
+    if (pt > up || pt < down) return false;
+    *range = r;
+    *pitch = pt;
+    *yaw = FastAtan2(p.y(), p.x());
+    return true;
+  }
+  // [rad] The elevations a point may have to be judged (point_up_, point_down_): a ring sensor's
+  // outermost beams widened by their scatter (SensorModel::spread_deg). Beyond them no ray passes
+  // on the far side of a point: the one beam on its near side returning farther (grazing ground
+  // below the lowest beam of a tilted sensor) is no evidence that its place is free. Without
+  // rings (or a resolved sensor) the images' FOV.
+  void PointBounds(const RemovertConfig& cfg);
   static std::vector<int> WindowRows(const RemovertConfig& cfg, int rows, double row_deg);
   struct Level {
     Grid grid;
@@ -122,7 +138,8 @@ class MultiResImage {
   void PoolRows(Level& L) const;     // vertical: scatter rows whole, then the nearest beam above / below
   bool keep_returns_ = false;
   int window_ = 0;
-  float up_ = 0.f, down_ = 0.f;  // [rad]
+  float up_ = 0.f, down_ = 0.f;              // [rad] the images' vertical FOV (scan returns)
+  float point_up_ = 0.f, point_down_ = 0.f;  // [rad] points judged (PointBounds)
   float min_range_ = 0.f, max_range_ = 0.f;
   std::vector<Level> levels_;
 };

@@ -252,7 +252,7 @@ std::vector<int> MultiResImage::WindowRows(const RemovertConfig& cfg, int rows, 
 }
 
 MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg,
-                             bool keep_returns)
+                             bool keep_returns, bool within_beams)
     : keep_returns_(keep_returns) {
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   up_ = float(cfg.fov_up_deg * kDeg);
@@ -260,6 +260,9 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   window_ = cfg.window_px;
+  point_up_ = up_;
+  point_down_ = down_;
+  if (within_beams) PointBounds(cfg);
   for (double res : resolutions_deg) {
     Level L;
     L.grid = Grid::Make(cfg, res, res);
@@ -275,6 +278,14 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
   }
 }
 
+void MultiResImage::PointBounds(const RemovertConfig& cfg) {
+  const geometry::SensorModel& m = cfg.sensor_model;
+  if (!cfg.SensorResolved() || !m.ring_based || m.beams() < 2) return;
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  point_up_ = std::min(up_, float((m.fov_up_deg + m.spread_deg) * kDeg));
+  point_down_ = std::max(down_, float((m.fov_down_deg - m.spread_deg) * kDeg));
+}
+
 std::size_t MultiResImage::Project(const float* x, const float* y, const float* z, std::size_t n,
                                    const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, float radius2,
                                    std::uint32_t* idx, float* range, float* pitch, float* yaw) const {
@@ -284,7 +295,7 @@ std::size_t MultiResImage::Project(const float* x, const float* y, const float* 
   __m128 R[3][3];
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) R[i][j] = _mm_set1_ps(Rt(i, j));
-  const __m128 rad2 = _mm_set1_ps(radius2), up = _mm_set1_ps(up_), down = _mm_set1_ps(down_);
+  const __m128 rad2 = _mm_set1_ps(radius2), up = _mm_set1_ps(point_up_), down = _mm_set1_ps(point_down_);
   alignas(16) float rs[4], ps[4], ys[4];
   for (std::size_t i = 0; i < n; i += 4) {
     const __m128 dx = _mm_sub_ps(_mm_loadu_ps(x + i), cx);
@@ -319,7 +330,7 @@ std::size_t MultiResImage::Project(const float* x, const float* y, const float* 
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector3f d = Eigen::Vector3f(x[i], y[i], z[i]) - c;
     if (d.squaredNorm() > radius2) continue;
-    if (!Angles(Rt * d, &range[m], &pitch[m], &yaw[m])) continue;
+    if (!PointAngles(Rt * d, &range[m], &pitch[m], &yaw[m])) continue;
     idx[m++] = std::uint32_t(i);
   }
 #endif
@@ -735,7 +746,10 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   };
   tbb::enumerable_thread_specific<Scratch> scratch(
       [&] {
-        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f), {}, {}, {}, {}, {}, {}, {}, {}};
+        // HD votes (no occlusion counts) judge points only within the beams' span; LD's occlusion
+        // votes anywhere in the FOV.
+        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f, !count_occluded),
+                   {}, {}, {}, {}, {}, {}, {}, {}};
         if (beams)
           sc.columns = std::make_unique<detail::ColumnImage>(cfg, *options.beams);
         return sc;
