@@ -96,6 +96,7 @@ TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
   RemovertConfig cfg = test::ConfigFor();
   removert::VisibilityOptions opt;
   opt.count_occluded = true;
+  opt.within_beams = false;  // as LD's occlusion test
   opt.normals = &up;
   opt.surface_max_m = 10.0;
   const auto v = removert::CountVisibility(pts, {kf}, {2.0}, cfg, 1, opt);

@@ -85,6 +85,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   vcfg.window_px = cfg.ld_window_px;
   VisibilityOptions opt;
   opt.count_occluded = true;
+  opt.within_beams = false;
   std::vector<Eigen::Vector3f> normals;
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {

@@ -288,6 +288,10 @@ struct VisibilityVotes {
 // it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
 struct VisibilityOptions {
   bool count_occluded = false;
+  // Judge a point only within the beams' span (the outermost beams widened by their scatter):
+  // beyond it only one beam passes near the point and that is no evidence (HD removal, revert).
+  // LD's occlusion test judges anywhere in the images' FOV (a change above the top beam).
+  bool within_beams = true;
   const std::vector<Eigen::Vector3f>* normals = nullptr;
   double surface_max_m = 0.0;  // [m]
   // With normals: the beam test per keyframe (BeamTest; VisibilityVotes::beam_hits).

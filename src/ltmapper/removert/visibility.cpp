@@ -746,9 +746,7 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   };
   tbb::enumerable_thread_specific<Scratch> scratch(
       [&] {
-        // HD votes (no occlusion counts) judge points only within the beams' span; LD's occlusion
-        // votes anywhere in the FOV.
-        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f, !count_occluded),
+        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f, options.within_beams),
                    {}, {}, {}, {}, {}, {}, {}, {}};
         if (beams)
           sc.columns = std::make_unique<detail::ColumnImage>(cfg, *options.beams);
