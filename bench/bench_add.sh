@@ -9,7 +9,7 @@
 # usage: bench/bench_add.sh [--sessions S] [--keyframes K] [--build DIR] [--work DIR] [--batch]
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
-BUILD="$ROOT/build"; WORK=""; S=8; K=80; BATCH=0
+BUILD="$ROOT/build"; WORK=""; S=8; K=150; BATCH=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --sessions) S="$2"; shift 2 ;;
@@ -35,7 +35,11 @@ printf "| add | session | wall s | LT-SLAM s | LT-removert s | LT-map s | store 
 for i in $(seq 2 $((S - 1))); do
   name=$(printf "session_%02d" "$i")
   before=$(stat -c %s "$WORK/inc/map.ltmap")
-  /usr/bin/time -f "%e" -o "$WORK/t_add" "$EXE" add --quiet --map "$WORK/inc" "$SES/$name" > "$WORK/add_$name.md"
+  if ! /usr/bin/time -f "%e" -o "$WORK/t_add" "$EXE" add --quiet --map "$WORK/inc" "$SES/$name" \
+       > "$WORK/add_$name.md" 2> "$WORK/add_$name.err"; then
+    echo "| $((i - 1)) | $name | $(tail -1 "$WORK/t_add") | NOT aligned (no session of the map overlaps it; nothing changed) | | | $before | 0 |"
+    continue
+  fi
   after=$(stat -c %s "$WORK/inc/map.ltmap")
   steps=$(grep -E "^\| LT-" "$WORK/add_$name.md" | awk -F'|' '{gsub(/ /,"",$3); printf "%s | ", $3}')
   echo "| $((i - 1)) | $name | $(cat "$WORK/t_add") | ${steps}$after | $((after - before)) |"

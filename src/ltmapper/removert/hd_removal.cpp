@@ -51,7 +51,10 @@ PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const Re
   // voxelised; the accumulated map is re-voxelised whenever it doubles, so memory stays at
   // about two maps plus one batch of scans. Voxelised clouds are in voxel order, so each
   // concatenation is a list of sorted runs (VoxelDownsampleRuns merges them).
-  const std::size_t batch = std::size_t(std::max(8, 4 * (threads > 0 ? threads : 2)));
+  // The batch size is fixed, not a multiple of the threads: a voxel's centroid is summed in batch
+  // order, so a batch that grew with --threads changed the map's last bits (issue #16: the live
+  // map differed between --threads 16 and 2).
+  constexpr std::size_t batch = 32;
   PointCloud acc;
   std::vector<std::size_t> acc_runs;  // starts of acc's sorted runs
   std::size_t last_size = 0;
