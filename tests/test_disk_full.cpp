@@ -156,15 +156,25 @@ std::map<std::string, std::string> Contents(const std::string& dir) {
   return out;
 }
 
+// The store's digest; a store that does not open (malformed) or fails fsck is a test failure.
+std::uint64_t CheckedDigest(const std::string& copy, const std::string& what) {
+  try {
+    bool ok = false;
+    const std::uint64_t d = DigestOf(copy, &ok);
+    EXPECT_TRUE(ok) << what << " does not pass fsck";
+    return d;
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << what << " does not open: " << e.what();
+    return 0;
+  }
+}
+
 // The digest of the store file alone (copied without its companions), checked by fsck.
 std::uint64_t DigestAlone(const std::string& store, const std::string& scratch) {
   fs::remove_all(scratch);
   fs::create_directories(scratch);
   fs::copy_file(store, scratch + "/alone.ltmap");
-  bool ok = false;
-  const std::uint64_t d = DigestOf(scratch + "/alone.ltmap", &ok);
-  EXPECT_TRUE(ok) << store << " alone does not pass fsck";
-  return d;
+  return CheckedDigest(scratch + "/alone.ltmap", store + " alone");
 }
 
 // The digest of the store with its -wal (as a user who kept both has it), checked by fsck.
@@ -173,10 +183,7 @@ std::uint64_t DigestWithWal(const std::string& store, const std::string& scratch
   fs::create_directories(scratch);
   fs::copy_file(store, scratch + "/m.ltmap");
   if (fs::exists(store + "-wal")) fs::copy_file(store + "-wal", scratch + "/m.ltmap-wal");
-  bool ok = false;
-  const std::uint64_t d = DigestOf(scratch + "/m.ltmap", &ok);
-  EXPECT_TRUE(ok) << store << " (with its -wal) does not pass fsck";
-  return d;
+  return CheckedDigest(scratch + "/m.ltmap", store + " with its -wal");
 }
 
 class DiskFull : public ::testing::Test {
