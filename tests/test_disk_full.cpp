@@ -240,6 +240,13 @@ class DiskFull : public ::testing::Test {
                                                          << r.out;
         ++n_in_wal_;
       }
+      // Run again still out of space: an error again, or success with the store file complete
+      // (it exited 0, nothing left to integrate, with the data still only in -wal).
+      const Result still = RunIn(space, Integrate(store));
+      if (still.rc == 0)
+        EXPECT_EQ(DigestAlone(store, tmp_ / "scratch"), after_) << "run again, still out of space:\n" << still.out;
+      else
+        EXPECT_NE(still.out.find(store), std::string::npos) << still.out;
       const Result again = RunLtm(Integrate(store), -1);
       EXPECT_EQ(again.rc, 0) << "run again with space:\n" << again.out;
     } else {
