@@ -3,13 +3,16 @@
 #pragma once
 
 #include "ltmapper/core/core.hpp"
+#include "ltmapper/io/io.hpp"
 #include "ltmapper/removert/removert.hpp"
 
 #include <Eigen/Geometry>
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace ltm::test {
@@ -104,6 +107,37 @@ inline PointCloud ToWorld(const PointCloud& scan, const Pose& T) {
     p.x = float(w.x()), p.y = float(w.y()), p.z = float(w.z());
   }
   return out;
+}
+
+// A session (SC-LIO-SAM layout in `dir`) driving along y = 0 from x0 for n keyframes, 2 m apart,
+// between two long walls (and a parked car at x = 0 when asked); returns world poses.
+inline std::vector<Pose> WriteStreetSession(const std::string& dir, double x0, int n, bool parked_car) {
+  std::vector<Box> boxes = {MakeBox(-60, 8, 0, 120, 8.3, 4, 1), MakeBox(-60, -8.3, 0, 120, -8, 4, 2)};
+  if (parked_car) boxes.push_back(MakeBox(-2, -6, 0.3, 2, -4, 1.8, 7));
+  Session s;
+  s.name = std::filesystem::path(dir).filename().string();
+  std::vector<Pose> world;
+  const Pose origin = At(x0, 0.0, 0.0, 0.0);  // session frame = first keyframe's ground point
+  for (int k = 0; k < n; ++k) {
+    const Pose T = At(x0 + 2.0 * k, 0.0, 1.8);
+    Keyframe kf;
+    kf.index = k;
+    kf.T_session_sensor = origin.inverse() * T;
+    auto scan = CastScan(T, boxes, Lidar{});
+    scan.object.clear();
+    kf.cloud = std::make_shared<PointCloud>(std::move(scan));
+    s.keyframes.push_back(kf);
+    if (k > 0) {
+      Edge e;
+      e.from = k - 1;
+      e.to = k;
+      e.T_from_to = s.keyframes[std::size_t(k - 1)].T_session_sensor.inverse() * kf.T_session_sensor;
+      s.odometry.push_back(e);
+    }
+    world.push_back(T);
+  }
+  io::WriteSession(dir, s);
+  return world;
 }
 
 }  // namespace ltm::test

@@ -20,36 +20,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A session driving along y = 0 from x0 for n keyframes, 2 m apart; returns world poses.
-std::vector<Pose> WriteStreetSession(const std::string& dir, double x0, int n, bool parked_car) {
-  std::vector<test::Box> boxes = {test::MakeBox(-60, 8, 0, 120, 8.3, 4, 1),
-                                  test::MakeBox(-60, -8.3, 0, 120, -8, 4, 2)};
-  if (parked_car) boxes.push_back(test::MakeBox(-2, -6, 0.3, 2, -4, 1.8, 7));
-  Session s;
-  s.name = fs::path(dir).filename().string();
-  std::vector<Pose> world;
-  const Pose origin = test::At(x0, 0.0, 0.0, 0.0);  // session frame = first keyframe's ground point
-  for (int k = 0; k < n; ++k) {
-    const Pose T = test::At(x0 + 2.0 * k, 0.0, 1.8);
-    Keyframe kf;
-    kf.index = k;
-    kf.T_session_sensor = origin.inverse() * T;
-    auto scan = test::CastScan(T, boxes, test::Lidar{});
-    scan.object.clear();
-    kf.cloud = std::make_shared<PointCloud>(std::move(scan));
-    s.keyframes.push_back(kf);
-    if (k > 0) {
-      Edge e;
-      e.from = k - 1;
-      e.to = k;
-      e.T_from_to = s.keyframes[std::size_t(k - 1)].T_session_sensor.inverse() * kf.T_session_sensor;
-      s.odometry.push_back(e);
-    }
-    world.push_back(T);
-  }
-  io::WriteSession(dir, s);
-  return world;
-}
+using test::WriteStreetSession;
 
 TEST(RemovertStage, WritesFormatsAndPartitions) {
   test::TempDir tmp;

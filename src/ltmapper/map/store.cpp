@@ -239,6 +239,10 @@ struct Store::Impl {
     if (mode != "wal") throw Error(path + ": cannot switch the map store to WAL (journal_mode = " + mode + ")");
     // FULL: a committed integration survives power loss, not only a killed process.
     Exec("PRAGMA synchronous = FULL");
+    // A -wal left by an earlier integration whose checkpoint failed (full disk) goes into the
+    // file now, or this open is the same error: a writer that then had nothing to integrate
+    // exited 0 with that data still only in -wal.
+    Checkpoint();
   }
   // Copies the WAL into the store file and empties it, so the file alone holds every committed
   // integration; a full disk or a reader holding the WAL is an error, not a WAL-only success.
