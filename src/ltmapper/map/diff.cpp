@@ -33,11 +33,25 @@ MapDiff Diff(const Store& store, int from, int to, const Region& region) {
   if (from == to) throw Error("diff: --from and --to name the same session");
   Region exact = region;
   exact.voxel_m = 0.0;  // match the stored points themselves; the voxel applies to the outputs
-  const PointCloud a = store.MapAt(from, exact), b = store.MapAt(to, exact);
+  // Only keyframes with a delta between the two steps can differ; a point never moves between
+  // keyframes, so each keyframe's two states are compared on their own.
+  const auto states = store.ChangedKeyframeStates(from, to, exact);
   const double tol = kSameSteps * store.config().resolution_m;
-  std::vector<bool> added = WithinRadius(b, a, tol), removed = WithinRadius(a, b, tol);
-  added.flip();
-  removed.flip();
+  std::vector<PointCloud> a_parts(states.size()), b_parts(states.size());
+  ParallelFor(states.size(), 0, [&](std::size_t k) {
+    const auto& [a, b] = states[k];
+    std::vector<bool> added = WithinRadius(b, a, tol), removed = WithinRadius(a, b, tol);
+    added.flip();
+    removed.flip();
+    b_parts[k] = b.select(added);
+    a_parts[k] = a.select(removed);
+  });
+  PointCloud a, b;
+  for (std::size_t k = 0; k < states.size(); ++k) {
+    a.append(a_parts[k]);
+    b.append(b_parts[k]);
+  }
+  const std::vector<bool> added(b.size(), true), removed(a.size(), true);
   MapDiff d;
   // Added points keep the strength the step that added them gave (strong / weak PD).
   const PointCloud pd = Labelled(b, added, PointClass::kPDStrong, to);

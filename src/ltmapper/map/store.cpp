@@ -778,6 +778,44 @@ PointCloud Store::MapAt(int session, const Region& region) const {
   return Concat(parts, region, s.threads);
 }
 
+std::vector<std::pair<PointCloud, PointCloud>> Store::ChangedKeyframeStates(int a, int b, const Region& region) const {
+  const Impl& s = *impl_;
+  const int lo = std::min(a, b), hi = std::max(a, b);
+  if (lo < 0 || hi > s.Latest())
+    throw Error(s.path + ": no session " + std::to_string(lo < 0 ? lo : hi) + " in the map store");
+  const auto blobs = s.LoadBlobs(hi, lo);  // keyframes of the `hi` state, deltas above `lo`, newest first
+  std::vector<std::pair<PointCloud, PointCloud>> out(blobs.size());
+  std::vector<char> changed(blobs.size(), 0);
+  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
+    const auto& kb = blobs[k];
+    const bool created_between = kb.rec.session > lo;
+    const bool delta_between = std::any_of(kb.deltas.begin(), kb.deltas.end(), [&](const auto& d) { return d.first <= hi; });
+    if (!created_between && !delta_between) return;  // the same in both states
+    const std::string what = "keyframe " + std::to_string(kb.rec.id);
+    QCloud state = s.Decode(kb.base, what + " base");
+    QCloud at_hi;
+    bool passed_hi = false;
+    for (const auto& [session, blob] : kb.deltas) {  // newest first: roll back to hi, then to lo
+      if (!passed_hi && session <= hi) {
+        at_hi = state;
+        passed_hi = true;
+      }
+      state = detail::ApplyInverse(state, s.Decode(blob, what + " delta " + std::to_string(session)));
+    }
+    if (!passed_hi) at_hi = state;
+    const QCloud at_lo = created_between ? QCloud() : state;
+    auto world = [&](const QCloud& q) {
+      return ToWorld(q, kb.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+    };
+    out[k] = a == lo ? std::make_pair(world(at_lo), world(at_hi)) : std::make_pair(world(at_hi), world(at_lo));
+    changed[k] = 1;
+  });
+  std::vector<std::pair<PointCloud, PointCloud>> kept;
+  for (std::size_t k = 0; k < out.size(); ++k)
+    if (changed[k]) kept.push_back(std::move(out[k]));
+  return kept;
+}
+
 PointCloud Store::Live(const Region& region) const {
   const int latest = LatestSession();
   if (latest < 0) throw Error(impl_->path + ": the map store is empty");
