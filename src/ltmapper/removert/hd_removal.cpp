@@ -110,6 +110,13 @@ PointCloud BodyPoints(const PointCloud& removed, double body_m, int threads) {
   return removed.select(keep);
 }
 
+// A cell's integer coordinates packed into one key, 21 bits per axis: cells 2^21 apart share a
+// key (callers treat a key as a hint, never as the answer).
+std::int64_t PackCell(std::int64_t x, std::int64_t y, std::int64_t z) {
+  constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
+  return (x & kMask) | ((y & kMask) << 21) | ((z & kMask) << 42);
+}
+
 // Per map point: 1 when it is not in `dynamic` and lies within radius_m of a point of `seeds`.
 std::vector<std::uint8_t> GrowMask(const PointCloud& map, const std::vector<bool>& dynamic, const PointCloud& seeds,
                                    double radius_m, int threads) {
@@ -123,10 +130,7 @@ std::vector<std::uint8_t> GrowMask(const PointCloud& map, const std::vector<bool
   // cells 2^21 apart share a key: a wasted kd-tree query, never a wrong answer (the kd-tree decides).
   constexpr double kCellRadii = 4.0;
   const double cell = kCellRadii * radius_m;
-  auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
-    constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
-    return (x & kMask) | ((y & kMask) << 21) | ((z & kMask) << 42);
-  };
+  auto key = PackCell;
   auto index = [&](float v, double off) { return std::int64_t(std::floor((double(v) + off) / cell)); };
   std::unordered_set<std::int64_t> touched;
   for (const PointXYZI& q : seeds.points)
@@ -148,11 +152,9 @@ std::vector<std::uint8_t> GrowMask(const PointCloud& map, const std::vector<bool
   return grow;
 }
 
-// 2D cells of `cell_m` over the map's xy (keys as in GrowMask: 21 bits per axis).
+// 2D cells of `cell_m` over the map's xy (PackCell with z = 0).
 std::int64_t CellKey(float x, float y, double cell_m) {
-  constexpr std::int64_t kMask = (std::int64_t(1) << 21) - 1;
-  const auto ix = std::int64_t(std::floor(double(x) / cell_m)), iy = std::int64_t(std::floor(double(y) / cell_m));
-  return (ix & kMask) | ((iy & kMask) << 21);
+  return PackCell(std::int64_t(std::floor(double(x) / cell_m)), std::int64_t(std::floor(double(y) / cell_m)), 0);
 }
 
 // Per 2D cell of `cell_m`: the lowest map point's z (the local ground, where the ground was seen).
@@ -215,23 +217,16 @@ std::vector<std::uint8_t> GroundwardMask(const PointCloud& map, const std::vecto
   return grow;
 }
 
-}  // namespace
-
-HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
-                         const RemovertConfig& user_cfg, int threads) {
-  user_cfg.Validate();
-  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
-  const auto t0 = std::chrono::steady_clock::now();
+// Removal candidates: points with enough see-through votes at some removal resolution.
+struct Candidates {
+  std::vector<std::uint32_t> index;  // map indices
+  std::vector<double> s_max;         // their strongest removal evidence over the resolutions
+};
+Candidates FindCandidates(const VisibilityVotes& votes, std::size_t n, const RemovertConfig& cfg, HdStats* st) {
   const int n_remove = int(cfg.remove_resolutions_deg.size());
-  const VisibilityVotes votes = CountVisibility(map, keyframes, cfg.remove_resolutions_deg, cfg, threads);
-
-  HdResult res;
-  HdStats& st = res.stats;
-  st.map_points = map.size();
-  st.removed_per_resolution.assign(std::size_t(n_remove), 0);
-  std::vector<std::uint32_t> cand;  // candidate map indices
-  std::vector<double> s_max;        // their strongest removal evidence over the removal resolutions
-  for (std::size_t i = 0; i < map.size(); ++i) {
+  st->removed_per_resolution.assign(std::size_t(n_remove), 0);
+  Candidates c;
+  for (std::size_t i = 0; i < n; ++i) {
     bool is_cand = false;
     double sm = 0;
     for (int l = 0; l < n_remove; ++l) {
@@ -239,64 +234,89 @@ HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>
       sm = std::max(sm, s);
       if (s >= cfg.remove_min_votes && s >= cfg.remove_min_ratio * (s + h)) {
         is_cand = true;
-        ++st.removed_per_resolution[std::size_t(l)];
+        ++st->removed_per_resolution[std::size_t(l)];
       }
     }
     if (!is_cand) continue;
-    cand.push_back(std::uint32_t(i));
-    s_max.push_back(sm);
+    c.index.push_back(std::uint32_t(i));
+    c.s_max.push_back(sm);
   }
-  st.candidates = cand.size();
-  // Revert: only the candidates are projected again, at the coarser resolutions, counting hits
-  // on their surface plane (normals from the map), so grazing ground is observed as a surface.
-  std::vector<bool> dynamic(map.size(), false);
-  std::vector<bool> reverted(cand.size(), false);
-  if (cfg.revert && !cand.empty()) {
-    const PointCloud cpts = map.select(cand);
-    VisibilityOptions opt;
-    std::vector<Eigen::Vector3f> normals;
-    if (cfg.revert_surface_max_m > 0.0) {
-      normals = detail::EstimateNormals(cpts, map, cfg.ld_normal_radius_m, threads);
-      opt.normals = &normals;
-      opt.surface_max_m = cfg.revert_surface_max_m;
+  st->candidates = c.index.size();
+  return c;
+}
+
+// Revert: only the candidates are projected again, at the coarser resolutions, counting hits
+// on their surface plane (normals from the map), so grazing ground is observed as a surface.
+std::vector<bool> Revert(const PointCloud& map, const Candidates& cand, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& cfg, int threads) {
+  std::vector<bool> reverted(cand.index.size(), false);
+  if (!cfg.revert || cand.index.empty()) return reverted;
+  const PointCloud cpts = map.select(cand.index);
+  VisibilityOptions opt;
+  std::vector<Eigen::Vector3f> normals;
+  if (cfg.revert_surface_max_m > 0.0) {
+    normals = detail::EstimateNormals(cpts, map, cfg.ld_normal_radius_m, threads);
+    opt.normals = &normals;
+    opt.surface_max_m = cfg.revert_surface_max_m;
+  }
+  const VisibilityVotes rv = CountVisibility(cpts, keyframes, cfg.revert_resolutions_deg, cfg, threads, opt);
+  for (std::size_t j = 0; j < cand.index.size(); ++j)
+    for (int l = 0; l < rv.levels && !reverted[j]; ++l) {
+      const double h = rv.Hit(l, j);
+      reverted[j] = h >= cfg.revert_min_hits && h >= cfg.revert_hit_ratio * cand.s_max[j];
     }
-    const VisibilityVotes rv = CountVisibility(cpts, keyframes, cfg.revert_resolutions_deg, cfg, threads, opt);
-    for (std::size_t j = 0; j < cand.size(); ++j)
-      for (int l = 0; l < rv.levels && !reverted[j]; ++l) {
-        const double h = rv.Hit(l, j);
-        reverted[j] = h >= cfg.revert_min_hits && h >= cfg.revert_hit_ratio * s_max[j];
-      }
+  return reverted;
+}
+
+// Dilation: the map points next to a removed point go too (a wheel's or a foot's contact with
+// the ground shares its voxels with the ground): one map voxel around every removed point, and
+// hd.dilate_voxels around the points of removed bodies (BodyPoints), not around removed patches
+// of flat ground, and from a body's foot (within dilate_body_m of the ground) down to one map
+// voxel above the ground (GroundwardMask). Decided against the removed set before dilation: no
+// transitive growth. Returns how many points it added to *dynamic.
+std::size_t Dilate(const PointCloud& map, const RemovertConfig& cfg, int threads, std::vector<bool>* dynamic) {
+  const PointCloud removed = map.select(*dynamic);
+  std::vector<std::uint8_t> grow = GrowMask(map, *dynamic, removed, std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m, threads);
+  if (cfg.dilate_voxels > 1.0) {
+    const PointCloud bodies = BodyPoints(removed, cfg.dilate_body_m, threads);
+    const std::vector<std::uint8_t> body = GrowMask(map, *dynamic, bodies, cfg.DilateM(), threads);
+    const std::vector<std::uint8_t> down =
+        GroundwardMask(map, *dynamic, bodies, cfg.DilateM(), cfg.dilate_body_m, cfg.map_voxel_m, threads);
+    for (std::size_t i = 0; i < grow.size(); ++i) grow[i] |= body[i] | down[i];
   }
-  for (std::size_t j = 0; j < cand.size(); ++j) {
+  std::size_t added = 0;
+  for (std::size_t i = 0; i < map.size(); ++i)
+    if (grow[i]) {
+      (*dynamic)[i] = true;
+      ++added;
+    }
+  return added;
+}
+
+}  // namespace
+
+HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& user_cfg, int threads) {
+  user_cfg.Validate();
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
+  const auto t0 = std::chrono::steady_clock::now();
+  const VisibilityVotes votes = CountVisibility(map, keyframes, cfg.remove_resolutions_deg, cfg, threads);
+
+  HdResult res;
+  HdStats& st = res.stats;
+  st.map_points = map.size();
+  const Candidates cand = FindCandidates(votes, map.size(), cfg, &st);
+  const std::vector<bool> reverted = Revert(map, cand, keyframes, cfg, threads);
+  std::vector<bool> dynamic(map.size(), false);
+  for (std::size_t j = 0; j < cand.index.size(); ++j) {
     if (reverted[j]) {
       ++st.reverted;
     } else {
-      dynamic[cand[j]] = true;
+      dynamic[cand.index[j]] = true;
       ++st.removed;
     }
   }
-  // Dilation: the map points next to a removed point go too (a wheel's or a foot's contact with
-  // the ground shares its voxels with the ground): one map voxel around every removed point, and
-  // hd.dilate_voxels around the points of removed bodies (BodyPoints), not around removed patches
-  // of flat ground. Decided against the removed set before dilation: no transitive growth.
-  if (st.removed > 0 && cfg.dilate_voxels > 0.0) {
-    const PointCloud removed = map.select(dynamic);
-    std::vector<std::uint8_t> grow = GrowMask(map, dynamic, removed, std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m, threads);
-    if (cfg.dilate_voxels > 1.0) {
-      const PointCloud bodies = BodyPoints(removed, cfg.dilate_body_m, threads);
-      const std::vector<std::uint8_t> body = GrowMask(map, dynamic, bodies, cfg.DilateM(), threads);
-      // From a body's foot (within dilate_body_m of the ground) down to one map voxel above the
-      // ground (GroundwardMask).
-      const std::vector<std::uint8_t> down =
-          GroundwardMask(map, dynamic, bodies, cfg.DilateM(), cfg.dilate_body_m, cfg.map_voxel_m, threads);
-      for (std::size_t i = 0; i < grow.size(); ++i) grow[i] |= body[i] | down[i];
-    }
-    for (std::size_t i = 0; i < map.size(); ++i)
-      if (grow[i]) {
-        dynamic[i] = true;
-        ++st.dilated;
-      }
-  }
+  if (st.removed > 0 && cfg.dilate_voxels > 0.0) st.dilated = Dilate(map, cfg, threads, &dynamic);
   std::vector<bool> keep(dynamic.size());
   for (std::size_t i = 0; i < dynamic.size(); ++i) keep[i] = !dynamic[i];
   res.static_map = map.select(keep);
