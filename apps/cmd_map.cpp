@@ -94,7 +94,8 @@ void WriteCloud(const std::string& out, const PointCloud& cloud, const std::stri
 void RunDiff(const MapOptions& o) {
   const auto cfg = LoadMapConfig(o);
   const map::Store s = OpenStore(o, cfg);
-  const map::MapDiff d = map::Diff(s, ResolveSession(s, o.from), ResolveSession(s, o.to), RegionOf(o, cfg));
+  const map::MapDiff d =
+      map::Diff(s, ResolveSession(s, o.from), ResolveSession(s, o.to), RegionOf(o, cfg), o.common.threads);
   io::StagingDir out(o.out, "nd_strong.pcd");
   map::WriteLabelledCloud(out.path() + "/pd_strong.pcd", d.pd_strong);
   map::WriteLabelledCloud(out.path() + "/pd_weak.pcd", d.pd_weak);
@@ -103,17 +104,29 @@ void RunDiff(const MapOptions& o) {
   std::cout << "map diff " << o.from << " -> " << o.to << ": PD strong " << d.pd_strong.size() << ", PD weak "
             << d.pd_weak.size() << ", ND " << d.nd.size() << " points in " << d.seconds << " s -> " << o.out << "\n";
   if (o.compare.empty()) return;
-  auto read = [&](const char* name) { return io::ReadPcd(o.compare + "/" + name); };
-  PointCloud pd_ref = read("pd_strong.pcd"), pd = d.pd_strong;
-  pd_ref.append(read("pd_weak.pcd"));
-  pd_ref.append(read("pd_unobserved.pcd"));  // new territory enters the map as strong PD
-  pd.append(d.pd_weak);
-  const double r = cfg.nd_match_radius_m;
-  const map::Agreement a_pd = map::Agree(pd, pd_ref, r), a_nd = map::Agree(d.nd, read("nd_strong.pcd"), r);
+  const map::PairAgreement ag = map::CompareWithLdPair(d, o.compare, cfg.nd_match_radius_m);
+  const map::Agreement &a_pd = ag.pd, &a_nd = ag.nd;
   std::cout << "| vs " << o.compare << " | diff points | LT-removert points | precision | recall |\n|---|---|---|---|---|\n"
             << "| PD | " << a_pd.got << " | " << a_pd.want << " | " << a_pd.precision << " | " << a_pd.recall << " |\n"
             << "| ND strong | " << a_nd.got << " | " << a_nd.want << " | " << a_nd.precision << " | " << a_nd.recall
             << " |\n" << std::flush;
+}
+
+// `map diff` options (RunDiff).
+template <class Common, class RegionOpts>
+void SetupDiff(CLI::App& map_cmd, const std::shared_ptr<MapOptions>& opts, Common& common, RegionOpts& region) {
+  MapOptions& o = *opts;
+  auto* diff = map_cmd.add_subcommand(
+      "diff", "Changes between the map as of two sessions, composed from the stored deltas (virtual LD)");
+  common(diff);
+  region(diff);
+  diff->add_option("--from", o.from, "Earlier state: session name or order")->required();
+  diff->add_option("--to", o.to, "Later state: session name or order")->required();
+  diff->add_option("--out", o.out, "Output directory: pd_strong.pcd, pd_weak.pcd, nd_strong.pcd")->required();
+  diff->add_option("--compare", o.compare,
+                   "An LT-removert pair folder of the same two sessions: print precision / recall against it "
+                   "(points within nd_match_radius_m)");
+  diff->callback([opts] { RunDiff(*opts); });
 }
 
 void Setup(CLI::App& parent) {
@@ -230,17 +243,7 @@ void Setup(CLI::App& parent) {
     }
   });
 
-  auto* diff = map_cmd->add_subcommand(
-      "diff", "Changes between the map as of two sessions, composed from the stored deltas (virtual LD)");
-  common(diff);
-  region(diff);
-  diff->add_option("--from", o.from, "Earlier state: session name or order")->required();
-  diff->add_option("--to", o.to, "Later state: session name or order")->required();
-  diff->add_option("--out", o.out, "Output directory: pd_strong.pcd, pd_weak.pcd, nd_strong.pcd")->required();
-  diff->add_option("--compare", o.compare,
-                   "An LT-removert pair folder of the same two sessions: print precision / recall against it "
-                   "(points within nd_match_radius_m)");
-  diff->callback([opts] { RunDiff(*opts); });
+  SetupDiff(*map_cmd, opts, common, region);
 
   auto* log = map_cmd->add_subcommand("log", "Sessions, keyframes, points, bytes and changes per step");
   common(log);

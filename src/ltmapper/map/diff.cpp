@@ -3,6 +3,7 @@
 #include "ltmapper/map/map.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
 
 #include <chrono>
 
@@ -14,8 +15,7 @@ namespace {
 // coordinates in both states, so one step is already generous.
 constexpr double kSameSteps = 1.0;
 
-PointCloud Labelled(PointCloud c, const std::vector<bool>& keep, PointClass fallback, int session) {
-  c = c.select(keep);
+PointCloud Labelled(PointCloud c, PointClass fallback, int session) {
   if (c.cls.size() != c.size()) c.cls.assign(c.size(), fallback);
   for (auto& k : c.cls)
     if (k != PointClass::kPDStrong && k != PointClass::kPDWeak) k = fallback;
@@ -24,7 +24,7 @@ PointCloud Labelled(PointCloud c, const std::vector<bool>& keep, PointClass fall
 }
 }  // namespace
 
-MapDiff Diff(const Store& store, int from, int to, const Region& region) {
+MapDiff Diff(const Store& store, int from, int to, const Region& region, int threads) {
   const auto t0 = std::chrono::steady_clock::now();
   const int n = int(store.Sessions().size());
   if (from < 0 || to < 0 || from >= n || to >= n)
@@ -38,7 +38,7 @@ MapDiff Diff(const Store& store, int from, int to, const Region& region) {
   const auto states = store.ChangedKeyframeStates(from, to, exact);
   const double tol = kSameSteps * store.config().resolution_m;
   std::vector<PointCloud> a_parts(states.size()), b_parts(states.size());
-  ParallelFor(states.size(), 0, [&](std::size_t k) {
+  ParallelFor(states.size(), threads, [&](std::size_t k) {
     const auto& [a, b] = states[k];
     std::vector<bool> added = WithinRadius(b, a, tol), removed = WithinRadius(a, b, tol);
     added.flip();
@@ -51,18 +51,17 @@ MapDiff Diff(const Store& store, int from, int to, const Region& region) {
     a.append(a_parts[k]);
     b.append(b_parts[k]);
   }
-  const std::vector<bool> added(b.size(), true), removed(a.size(), true);
   MapDiff d;
   // Added points keep the strength the step that added them gave (strong / weak PD).
-  const PointCloud pd = Labelled(b, added, PointClass::kPDStrong, to);
+  const PointCloud pd = Labelled(std::move(b), PointClass::kPDStrong, to);
   std::vector<bool> weak(pd.size());
   for (std::size_t i = 0; i < pd.size(); ++i) weak[i] = pd.cls[i] == PointClass::kPDWeak;
   d.pd_weak = pd.select(weak);
   weak.flip();
   d.pd_strong = pd.select(weak);
-  d.nd = Labelled(a, removed, PointClass::kNDStrong, from);
+  d.nd = Labelled(std::move(a), PointClass::kNDStrong, from);
   if (region.voxel_m > 0.0)
-    for (PointCloud* c : {&d.pd_strong, &d.pd_weak, &d.nd}) *c = geometry::VoxelDownsample(*c, region.voxel_m, 0);
+    for (PointCloud* c : {&d.pd_strong, &d.pd_weak, &d.nd}) *c = geometry::VoxelDownsample(*c, region.voxel_m, threads);
   d.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return d;
 }
@@ -79,6 +78,15 @@ Agreement Agree(const PointCloud& got, const PointCloud& want, double radius_m) 
   a.precision = share(WithinRadius(got, want, radius_m));
   a.recall = share(WithinRadius(want, got, radius_m));
   return a;
+}
+
+PairAgreement CompareWithLdPair(const MapDiff& d, const std::string& pair_dir, double radius_m) {
+  auto read = [&](const char* name) { return io::ReadPcd(pair_dir + "/" + name); };
+  PointCloud pd_ref = read("pd_strong.pcd"), pd = d.pd_strong;
+  pd_ref.append(read("pd_weak.pcd"));
+  pd_ref.append(read("pd_unobserved.pcd"));  // new territory enters the map as strong PD
+  pd.append(d.pd_weak);
+  return {Agree(pd, pd_ref, radius_m), Agree(d.nd, read("nd_strong.pcd"), radius_m)};
 }
 
 }  // namespace ltm::map

@@ -279,7 +279,7 @@ struct MapDiff {
   PointCloud pd_strong, pd_weak, nd;
   double seconds = 0.0;
 };
-MapDiff Diff(const Store& store, int from, int to, const Region& region = {});
+MapDiff Diff(const Store& store, int from, int to, const Region& region = {}, int threads = 0);
 // Point-wise agreement of `got` with `want`: precision = share of `got` points with a `want`
 // point within radius_m, recall = share of `want` points with a `got` point within radius_m.
 struct Agreement {
@@ -287,6 +287,13 @@ struct Agreement {
   double precision = 0.0, recall = 0.0;
 };
 Agreement Agree(const PointCloud& got, const PointCloud& want, double radius_m);
+// A diff against an LT-removert pair folder of the same two sessions: PD (strong + weak) against
+// the pair's pd_strong + pd_weak + pd_unobserved (new territory enters the map as strong PD), ND
+// against its nd_strong.
+struct PairAgreement {
+  Agreement pd, nd;
+};
+PairAgreement CompareWithLdPair(const MapDiff& diff, const std::string& pair_dir, double radius_m);
 
 // ------------------------------------------------------------------------------- composition
 // P ⊙ LD = P − ND + PD on float clouds in one keyframe frame: removes every point of `cloud`
