@@ -54,14 +54,10 @@ double YawDeg(const Pose& T) {
   return std::atan2(T.linear()(1, 0), T.linear()(0, 0)) * 180.0 / M_PI;
 }
 
-void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
-                  const SlamConfig& cfg, const std::string& out_dir) {
-  io::MakeDirs(out_dir);
+// joint.g2o: every aligned session's keyframes in world coordinates and the accepted loops.
+void WriteJointGraph(const std::vector<Session>& sessions, const SlamResult& res, const std::string& out_dir) {
   const std::size_t n = sessions.size();
-  // ---- per session (out_dir is fresh (StagingDir): no world poses of an earlier run are left)
-  for (std::size_t s = 0; s < n; ++s) WriteSessionAlignment(out_dir, res.sessions[s].name, res.sessions[s]);
-
-  // ---- joint graph: keyframes of aligned sessions in world coordinates. Vertex id = number of
+  // Vertex id = number of
   // keyframes of all earlier aligned sessions + position in the session (no digit tricks).
   io::G2oGraph graph;
   std::vector<int> offset(n, -1);
@@ -93,7 +89,10 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
   }
   io::WriteG2o((fs::path(out_dir) / "joint.g2o").string(), graph);
 
-  // ---- loops table
+}
+
+// loops.csv: every candidate loop with its registration and outcome.
+void WriteLoopsCsv(const std::vector<Session>& sessions, const SlamResult& res, const std::string& out_dir) {
   io::WriteFileAtomic((fs::path(out_dir) / "loops.csv").string(), [&](std::ostream& os) {
     os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,inlier_ratio,inlier_rms_m,accepted,"
           "residual_t_m,residual_r_deg,tx,ty,tz,qx,qy,qz,qw,status\n";
@@ -113,7 +112,12 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
     }
   });
 
-  // ---- report
+}
+
+// report.json: per-session alignment, solver and timing figures.
+void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res, const std::string& out_dir, const SlamConfig& cfg) {
+  const std::size_t n = sessions.size();
+
   io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) {
     os << std::setprecision(6) << "{\n  \"central\": " << JsonString(res.sessions[0].name)
        << ",\n  \"all_aligned\": ";
@@ -143,6 +147,11 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
        << "},\n  \"robust_loss\": " << JsonString(cfg.robust_loss)
        << ",\n  \"peak_rss_bytes\": " << PeakRssBytes() << "\n}\n";
   });
+}
+
+// report.md: the same for a reader.
+void WriteReportMd(const std::vector<Session>& sessions, const SlamResult& res, const std::string& out_dir) {
+  const std::size_t n = sessions.size();
   io::WriteFileAtomic((fs::path(out_dir) / "report.md").string(), [&](std::ostream& os) {
     os << std::fixed << std::setprecision(2) << "# LT-SLAM report\n\nCentral session: `"
        << res.sessions[0].name << "` (world frame).\n\n"
@@ -168,6 +177,19 @@ void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
        << res.registrations << " GICP), optimisation " << res.time_optimisation_s << " s, total "
        << res.time_total_s << " s.\n";
   });
+}
+
+void WriteOutputs(const std::vector<Session>& sessions, const SlamResult& res,
+                  const SlamConfig& cfg, const std::string& out_dir) {
+  io::MakeDirs(out_dir);
+  const std::size_t n = sessions.size();
+  // ---- per session (out_dir is fresh (StagingDir): no world poses of an earlier run are left)
+  for (std::size_t s = 0; s < n; ++s) WriteSessionAlignment(out_dir, res.sessions[s].name, res.sessions[s]);
+
+  WriteJointGraph(sessions, res, out_dir);
+  WriteLoopsCsv(sessions, res, out_dir);
+  WriteReportJson(sessions, res, out_dir, cfg);
+  WriteReportMd(sessions, res, out_dir);
 }
 void WriteManifest(const std::vector<Session>& sessions, const std::vector<std::string>& session_dirs,
                    const SlamResult& res, const SlamConfig& cfg, const std::string& out_dir) {
