@@ -489,6 +489,25 @@ TEST(Restore, AsymmetricDirectedMeans) {
   const auto r = EvaluateRestore(a, b, EvalConfig{});
   EXPECT_EQ(r.np_valid, 1u);
   EXPECT_NEAR(r.mean, 0.5, 1e-6);
+  EXPECT_TRUE(std::isnan(r.same_class_a));  // unlabelled maps: no class agreement
+}
+
+// Class agreement of two labelled maps (live maps of two runs): B = A with a quarter of its
+// points given another class and a tenth moved 1 m away.
+TEST(Restore, SameClassShareBothWays) {
+  PointCloud a = Grid(20, 20, 0, 0, 0, 0.2, 0.2, 1.0);
+  a.cls.assign(a.size(), PointClass::kStatic);
+  PointCloud b = a;
+  for (std::size_t i = 0; i < b.size(); i += 4) b.cls[i] = PointClass::kPDStrong;
+  for (std::size_t i = 1; i < b.size(); i += 10) b.points[i].z += 1.0f;  // odd i: kept class
+  // Points 0.5 m apart: with a 0.3 m radius a point only sees its own copy.
+  const auto r = EvaluateRestore(a, b, EvalConfig{});
+  EXPECT_NEAR(r.same_class_a, 1.0 - 0.25 - 0.1, 1e-9);
+  EXPECT_NEAR(r.same_class_b, 1.0 - 0.25 - 0.1, 1e-9);
+  EXPECT_DOUBLE_EQ(SameClassFraction(a, a, 0.3), 1.0);
+  PointCloud unlabelled = a;
+  unlabelled.cls.clear();
+  EXPECT_THROW(SameClassFraction(a, unlabelled, 0.3), Error);
 }
 
 }  // namespace

@@ -235,19 +235,6 @@ TEST_F(Rerun, SameOutWithMoreFewerOrOtherSessionsEqualsFreshOut) {
 }
 
 // ------------------------------------------------------------------------- lifelong add
-// Fraction of `want`'s points with a point of `got` of the same class within `radius_m`.
-double SameClassFraction(const PointCloud& want, const PointCloud& got, float radius_m) {
-  const geometry::KdTree tree(got);
-  std::size_t same = 0;
-  for (std::size_t i = 0; i < want.size(); ++i)
-    for (const auto& [j, d2] : tree.Radius(want.points[i].xyz(), radius_m))
-      if (got.cls[j] == want.cls[i]) {
-        ++same;
-        break;
-      }
-  return want.empty() ? 0.0 : double(same) / double(want.size());
-}
-
 // ATE RMSE [m] of each session's world poses in `aligned_dir` against the simulator's truth.
 std::map<std::string, double> AteBySession(const std::string& sim_dir, const std::string& aligned_dir) {
   std::vector<std::string> missing;
@@ -289,8 +276,8 @@ TEST_F(Rerun, AddingASessionEqualsTheBatchRun) {
   const PointCloud batch = LiveMap(fresh3_), added = LiveMap(out);
   ASSERT_GT(batch.size(), 1000u);
   constexpr float kMapVoxel = 0.3f;  // removert.yaml's map_voxel_m
-  EXPECT_GE(SameClassFraction(batch, added, kMapVoxel), 0.99);
-  EXPECT_GE(SameClassFraction(added, batch, kMapVoxel), 0.99);
+  EXPECT_GE(eval::SameClassFraction(batch, added, kMapVoxel), 0.99);
+  EXPECT_GE(eval::SameClassFraction(added, batch, kMapVoxel), 0.99);
   std::string mlog;
   ASSERT_EQ(test::RunCli("map log --store " + out + "/map.ltmap", &mlog), 0) << mlog;
   EXPECT_NE(mlog.find("session_02"), std::string::npos) << mlog;

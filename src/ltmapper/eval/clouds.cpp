@@ -428,6 +428,26 @@ PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud
 }
 
 // -------------------------------------------------------------------------------- restore
+double SameClassFraction(const PointCloud& want, const PointCloud& got, double radius_m, int threads) {
+  if (want.cls.size() != want.size() || got.cls.size() != got.size())
+    throw Error("same-class share: both maps need a class per point");
+  if (want.empty()) return 0.0;
+  const geometry::KdTree tree(got);
+  std::vector<char> same(want.size(), 0);
+  auto arena = MakeArena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, want.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i)
+        for (const auto& [j, d2] : tree.Radius(want.points[i].xyz(), float(radius_m)))
+          if (got.cls[j] == want.cls[i]) {
+            same[i] = 1;
+            break;
+          }
+    });
+  });
+  return double(std::count(same.begin(), same.end(), char(1))) / double(want.size());
+}
+
 RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
                               int threads) {
   cfg.Validate();
@@ -439,6 +459,12 @@ RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const Ev
   r.np_above.assign(r.thresholds.size(), 0);
   r.points_a = a.size();
   r.points_b = b.size();
+  r.same_class_m = cfg.same_class_m;
+  const auto labelled = [](const PointCloud& c) { return !c.empty() && c.cls.size() == c.size(); };
+  if (cfg.same_class_m > 0.0 && labelled(a) && labelled(b)) {
+    r.same_class_a = SameClassFraction(a, b, cfg.same_class_m, threads);
+    r.same_class_b = SameClassFraction(b, a, cfg.same_class_m, threads);
+  }
 
   const CellMap ca = Bucket(a, cfg.patch_m), cb = Bucket(b, cfg.patch_m);
   r.patches_a = ca.size();

@@ -55,6 +55,9 @@ struct EvalConfig {
   std::string chamfer = "mean";            // mean: (d(A->B) + d(B->A)) / 2 of mean NN distances [m];
                                            // fan_squared: sum of the two mean squared NN distances [m^2]
   std::vector<double> chamfer_thresholds = {1.0, 2.0, 3.0};  // count patches with CD > each
+  double same_class_m = 0.3;               // [m] "same class" radius when both maps carry classes (one
+                                           // LT-removert map voxel): share of each map's points with a
+                                           // point of the other map of the same class this close; 0 = off
   // Changed objects (clusters of LT-map vs the simulator's LD objects).
   double obj_match_dist_m = 0.2;           // [m] a point matches when the other set has a point this close
   double obj_voxel_m = 0.1;                // [m] truth and cluster points voxel-downsampled to this
@@ -84,6 +87,7 @@ struct EvalConfig {
     v("restore.min_points", patch_min_points, "", 1, 100000000);
     v("restore.chamfer", chamfer, {"mean", "fan_squared"});
     v("restore.thresholds", chamfer_thresholds, "m|m^2", 0.0, 1e6);
+    v("restore.same_class_m", same_class_m, "m", 0.0, 100.0);
     v("objects.match_dist_m", obj_match_dist_m, "m", 1e-4, 10.0);
     v("objects.voxel_m", obj_voxel_m, "m", 0.0, 10.0);
     v("objects.min_iou", obj_min_iou, "", 0.0, 1.0);
@@ -271,6 +275,10 @@ struct RestoreResult {
   double max = kNaN, mean = kNaN, variance = kNaN;  // over valid patches (population variance)
   std::vector<double> thresholds;
   std::vector<std::size_t> np_above;       // valid patches with CD > thresholds[k]
+  // Class agreement (both maps labelled, same_class_m > 0; else NaN): the share of A's points with
+  // a B point of the same class within same_class_m, and the reverse.
+  double same_class_m = 0.0;
+  double same_class_a = kNaN, same_class_b = kNaN;
 };
 // Both maps in the same frame. Patches are the cells floor(p / patch_m) of one grid anchored at
 // the origin. In a valid patch, d(A->B) is the mean over A's points of the distance to the
@@ -278,6 +286,9 @@ struct RestoreResult {
 // of the two directed means of squared distances [m^2] ("fan_squared", Fan et al. 2017).
 RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const EvalConfig& cfg,
                               int threads = 0);
+// Share of `want`'s points with a point of `got` of the same class within radius_m (0 when want
+// is empty). Both clouds must carry classes (cls), else ltm::Error.
+double SameClassFraction(const PointCloud& want, const PointCloud& got, double radius_m, int threads = 0);
 
 // ---------------------------------------------------------------------------- truth mapping
 // Places the simulator's truth (true world frame) into the method's estimated world.

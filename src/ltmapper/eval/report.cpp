@@ -144,7 +144,10 @@ void WriteRestore(json::Writer& w, const RestoreResult& r) {
       .Int("np_valid", (long long)r.np_valid)
       .Number("max", r.max)
       .Number("mean", r.mean)
-      .Number("variance", r.variance);
+      .Number("variance", r.variance)
+      .Number("same_class_m", r.same_class_m)
+      .Number("same_class_a", r.same_class_a)
+      .Number("same_class_b", r.same_class_b);
   w.BeginArray("np_above");
   for (std::size_t k = 0; k < r.thresholds.size(); ++k)
     w.BeginObject().Number("threshold", r.thresholds[k]).Int("patches", (long long)r.np_above[k]).EndObject();
@@ -388,6 +391,9 @@ void MdRestore(std::ostringstream& md, const RestoreResult& r) {
   md << Header(head) << Row(cells) << "\nPoints A/B: " << r.points_a << " / " << r.points_b
      << "; occupied patches A/B/both: " << r.patches_a << " / " << r.patches_b << " / " << r.patches_both
      << ".\n\n";
+  if (!std::isnan(r.same_class_a))
+    md << "Same class within " << Fmt(r.same_class_m, 2) << " m: " << Fmt(100.0 * r.same_class_a, 2)
+       << " % of A's points, " << Fmt(100.0 * r.same_class_b, 2) << " % of B's.\n\n";
 }
 
 void MdStorage(std::ostringstream& md, const StorageResult& s) {

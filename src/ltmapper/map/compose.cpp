@@ -121,6 +121,23 @@ QCloud MakeDelta(const QCloud& latest, const QCloud& target, const KeySet& chang
   return delta;
 }
 
+QCloud Unmatched(const QCloud& cloud, const QCloud& other) {
+  KeySet keys(other.size());
+  for (const QPoint& p : other) keys.Insert(Key(p));
+  static constexpr int kStep[7][3] = {{0, 0, 0}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  QCloud out;
+  for (const QPoint& p : cloud) {
+    bool near = false;
+    for (const auto& d : kStep) {
+      QPoint q = p;
+      q.x += d[0], q.y += d[1], q.z += d[2];
+      if ((near = keys.Contains(Key(q)))) break;
+    }
+    if (!near) out.push_back(p);
+  }
+  return out;
+}
+
 std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double radius_units) {
   auto get = [](const QCloud& c) {
     return [&c](std::size_t k) { return Eigen::Vector3d(c[k].x, c[k].y, c[k].z); };

@@ -75,6 +75,9 @@ QCloud ApplyInverse(const QCloud& state, const QCloud& delta);
 // latest are added; `info` points are appended with kInfoNDWeak. Shared keys keep latest's points.
 QCloud MakeDelta(const QCloud& latest, const QCloud& target, const KeySet& change_keys,
                  const QCloud& info);
+// Points of `cloud` with no point of `other` within one grid step (the same cell or one of its
+// six face neighbours: the integer offsets of length <= 1).
+QCloud Unmatched(const QCloud& cloud, const QCloud& other);
 // Mask of `cloud` points within `radius_units` (grid units) of any `query` point.
 std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double radius_units);
 

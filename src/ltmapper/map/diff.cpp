@@ -10,11 +10,6 @@
 namespace ltm::map {
 
 namespace {
-// A point of one state is "the same" as a point of the other when they lie within this many
-// coordinate quantisation steps: unchanged points are stored once and decode to the same
-// coordinates in both states, so one step is already generous.
-constexpr double kSameSteps = 1.0;
-
 PointCloud Labelled(PointCloud c, PointClass fallback, int session) {
   if (c.cls.size() != c.size()) c.cls.assign(c.size(), fallback);
   for (auto& k : c.cls)
@@ -34,22 +29,11 @@ MapDiff Diff(const Store& store, int from, int to, const Region& region, int thr
   Region exact = region;
   exact.voxel_m = 0.0;  // match the stored points themselves; the voxel applies to the outputs
   // Only keyframes with a delta between the two steps can differ; a point never moves between
-  // keyframes, so each keyframe's two states are compared on their own.
-  const auto states = store.ChangedKeyframeStates(from, to, exact);
-  const double tol = kSameSteps * store.config().resolution_m;
-  std::vector<PointCloud> a_parts(states.size()), b_parts(states.size());
-  ParallelFor(states.size(), threads, [&](std::size_t k) {
-    const auto& [a, b] = states[k];
-    std::vector<bool> added = WithinRadius(b, a, tol), removed = WithinRadius(a, b, tol);
-    added.flip();
-    removed.flip();
-    b_parts[k] = b.select(added);
-    a_parts[k] = a.select(removed);
-  });
+  // keyframes, so each keyframe's two states are compared on their own, on the store's grid.
   PointCloud a, b;
-  for (std::size_t k = 0; k < states.size(); ++k) {
-    a.append(a_parts[k]);
-    b.append(b_parts[k]);
+  for (auto& [removed, added] : store.KeyframeChanges(from, to, exact)) {
+    a.append(removed);
+    b.append(added);
   }
   MapDiff d;
   // Added points keep the strength the step that added them gave (strong / weak PD).

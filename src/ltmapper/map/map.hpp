@@ -238,10 +238,11 @@ class Store {
   // The map as of `session` in the world frame (restore by chained inverse deltas).
   PointCloud MapAt(int session, const Region& region = {}) const;
   PointCloud Live(const Region& region = {}) const;  // latest state, all PD
-  // The keyframes whose content differs between the states as of sessions `a` and `b` (a delta
-  // between them, or created between them), each as (state at a, state at b) in the world frame;
-  // every other keyframe is the same in both and is neither decoded nor returned (map::Diff).
-  std::vector<std::pair<PointCloud, PointCloud>> ChangedKeyframeStates(int a, int b, const Region& region = {}) const;
+  // What differs between the states as of sessions `a` and `b`, per keyframe with a delta between
+  // them (or created between them): (points of a's state with no point of b's within one grid
+  // step, the reverse), world frame. Every other keyframe is the same in both and is neither
+  // decoded nor returned (map::Diff).
+  std::vector<std::pair<PointCloud, PointCloud>> KeyframeChanges(int a, int b, const Region& region = {}) const;
   // Meta map: the first state of every keyframe plus strong PD of every later step, minus
   // everything within meta_carve_radius_m of any point a step removed as seen-through (strong ND).
   PointCloud Meta(const Region& region = {}) const;

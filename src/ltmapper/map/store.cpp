@@ -778,7 +778,7 @@ PointCloud Store::MapAt(int session, const Region& region) const {
   return Concat(parts, region, s.threads);
 }
 
-std::vector<std::pair<PointCloud, PointCloud>> Store::ChangedKeyframeStates(int a, int b, const Region& region) const {
+std::vector<std::pair<PointCloud, PointCloud>> Store::KeyframeChanges(int a, int b, const Region& region) const {
   const Impl& s = *impl_;
   const int lo = std::min(a, b), hi = std::max(a, b);
   if (lo < 0 || hi > s.Latest())
@@ -807,7 +807,9 @@ std::vector<std::pair<PointCloud, PointCloud>> Store::ChangedKeyframeStates(int 
     auto world = [&](const QCloud& q) {
       return ToWorld(q, kb.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
     };
-    out[k] = a == lo ? std::make_pair(world(at_lo), world(at_hi)) : std::make_pair(world(at_hi), world(at_lo));
+    const QCloud& at_a = a == lo ? at_lo : at_hi;
+    const QCloud& at_b = a == lo ? at_hi : at_lo;
+    out[k] = {world(detail::Unmatched(at_a, at_b)), world(detail::Unmatched(at_b, at_a))};
     changed[k] = 1;
   });
   std::vector<std::pair<PointCloud, PointCloud>> kept;
