@@ -154,6 +154,8 @@ Grid MakeGrid(const SimConfig& cfg);
 Path MakeRoute(const SimConfig& cfg, const Grid& grid, Rng& rng, double min_length,
                const Path* reference, double min_overlap);
 double RouteOverlap(const Path& a, const Path& b, double tol);
+// The part of a route's centre line its keyframes cover (KeyframePoses' arc lengths).
+Path DrivenPart(const SimConfig& cfg, const Path& centre);
 std::vector<Pose> KeyframePoses(const SimConfig& cfg, const Grid& grid, const Terrain& terrain,
                                 const Path& centre);
 std::vector<HdActor> MakeActors(const SimConfig& cfg, const Path& centre, int session,

@@ -104,6 +104,7 @@ SimConfig TinyConfig() {
   c.ld_wall_reveals = 1;
   c.ld_occluded = 1;
   c.open_lot_fraction = 0.5;
+  c.min_route_overlap = 0.0;  // the query may leave the central's streets: unobserved territory
   return c;
 }
 

@@ -79,7 +79,7 @@ struct SimConfig {
   double ego_speed_mps = 8.0;           // [m/s] sets time per keyframe (HD actors move in time)
   double lane_offset_m = 2.0;           // [m] driving lane centre right of the street centre
   double corner_radius_m = 10.0;        // [m] turns at intersections
-  double min_route_overlap = 0.25;      // share of a query route on streets of session 0
+  double min_route_overlap = 0.25;      // share of a query's keyframed path on streets session 0 drove
   double origin_offset_m = 100.0;       // [m] |x|,|y| of T_world_session up to this
   double origin_offset_z_m = 2.0;       // [m] |z| of T_world_session up to this
   // --- odometry drift (random walk), written poses only ---

@@ -209,19 +209,36 @@ double RouteOverlap(const Path& a, const Path& b, double tol) {
   return double(near) / double(total);
 }
 
+namespace {
+// Arc length of the first keyframe along a driving lane.
+double DriveStart(const Path& lane) { return std::min(30.0, 0.1 * lane.length()); }
+}  // namespace
+
+Path DrivenPart(const SimConfig& cfg, const Path& centre) {
+  const double s0 = DriveStart(centre.Offset(cfg.lane_offset_m));
+  const double s1 = s0 + (cfg.keyframes - 1) * cfg.keyframe_spacing_m;
+  Path d;
+  for (std::size_t i = 0; i < centre.p.size(); ++i)
+    if (centre.s[i] >= s0 && centre.s[i] <= s1) d.p.push_back(centre.p[i]);
+  d.Finish();
+  return d;
+}
+
 Path MakeRoute(const SimConfig& cfg, const Grid& grid, Rng& rng, double min_length,
                const Path* reference, double min_overlap) {
   const int n = int(grid.lines.size());
   const int edges = int(std::ceil(min_length / cfg.block_m)) + 1;
   Path best;
   double best_score = -1;
+  const Path driven_reference = reference ? DrivenPart(cfg, *reference) : Path();
   for (int attempt = 0; attempt < 60; ++attempt) {
     Path p;
     for (int e = edges; p.length() < min_length; ++e) {  // corners shorten the path
       p = CentreLine(RandomWalk(n, e, rng), grid, cfg.corner_radius_m);
     }
     if (!reference) return p;
-    const double ov = RouteOverlap(p, *reference, 1.0);
+    // Share of the keyframes' part of the route on the streets session 0 drove.
+    const double ov = RouteOverlap(DrivenPart(cfg, p), driven_reference, 1.0);
     // Overlapping but not the same drive: prefer overlap in [min_overlap, 0.85].
     const double score = ov >= min_overlap && ov <= 0.85 ? 2.0 - std::abs(ov - 0.5) : ov;
     if (score > best_score) {
@@ -240,7 +257,7 @@ std::vector<Pose> KeyframePoses(const SimConfig& cfg, const Grid& grid, const Te
   (void)grid;
   const Path lane = centre.Offset(cfg.lane_offset_m);
   std::vector<Pose> poses;
-  const double start = std::min(30.0, 0.1 * lane.length());
+  const double start = DriveStart(lane);
   for (int k = 0; k < cfg.keyframes; ++k) {
     Eigen::Vector2d t;
     const Eigen::Vector2d p = lane.At(start + k * cfg.keyframe_spacing_m, &t);
