@@ -686,155 +686,202 @@ PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
 
 }  // namespace detail
 
-VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
-                                const std::vector<double>& resolutions_deg,
-                                const RemovertConfig& user_cfg, int threads,
-                                const VisibilityOptions& options) {
-  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
-  const bool count_occluded = options.count_occluded;
+namespace {
+using detail::kHit, detail::kOcc, detail::kSee;
+
+// What one CountVisibility call fixes: the points' tile index, the options and the vote test.
+struct VoteSetup {
+  const detail::TileIndex& index;
+  const VisibilityOptions& options;
+  detail::VoteTest test;
+  std::size_t levels = 0;
+  float radius = 0.f;
+  bool surface = false;  // a sensor-frame plane per point (the surface hit and / or the beam test)
+  bool beams = false;    // the beam test (options.beams)
+  bool SurfaceVotes() const { return surface && test.surface_max > 0.f; }
+};
+
+VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, const VisibilityOptions& options,
+                    std::size_t levels) {
+  VoteSetup s{index, options, {}, levels, float(cfg.submap_radius_m)};
+  s.test.tol_abs = float(cfg.tol_abs_m);
+  s.test.tol_rel = float(cfg.tol_rel);
+  s.test.surface_max = float(options.surface_max_m);
+  s.test.occluded = options.count_occluded ? kOcc : 0;
+  s.beams = options.normals != nullptr && options.beams != nullptr;
+  s.surface = options.normals != nullptr && (s.test.surface_max > 0.f || s.beams);
+  return s;
+}
+
+// One worker's state: a keyframe's range images (reused from keyframe to keyframe) and one
+// tile's projections (valid points: position in the tile, range, pitch, yaw, sensor-frame plane)
+// and votes.
+struct Scratch {
+  Scratch(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, const VoteSetup& s)
+      : img(cfg, resolutions_deg, s.SurfaceVotes(), s.options.within_beams) {
+    if (s.beams) columns = std::make_unique<detail::ColumnImage>(cfg, *s.options.beams);
+  }
+  detail::MultiResImage img;
+  std::unique_ptr<detail::ColumnImage> columns;  // beam test
+  std::vector<std::uint32_t> idx;
+  std::vector<float> range, pitch, yaw, plane;
+  std::size_t valid = 0;                 // projected points of the current tile
+  std::vector<std::uint8_t> votes;       // [level * tile size + position in the tile]
+  std::vector<std::uint8_t> seen_beams;  // [position in the tile]
+};
+
+// The tile's points [b, b + tn) in the keyframe's images (sensor at c, R^T = Rt): sc->valid.
+void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, std::uint32_t b,
+                 std::size_t tn, Scratch* sc) {
+  if (sc->idx.size() < tn) {
+    sc->idx.resize(tn);
+    sc->range.resize(tn + 3);
+    sc->pitch.resize(tn + 3);
+    sc->yaw.resize(tn + 3);
+    if (s.surface) sc->plane.resize(4 * (tn + 3));
+  }
+  const auto& ix = s.index;
+  sc->valid = sc->img.Project(ix.x() + b, ix.y() + b, ix.z() + b, tn, c, Rt, s.radius * s.radius, sc->idx.data(),
+                              sc->range.data(), sc->pitch.data(), sc->yaw.data());
+  for (std::size_t j = sc->valid; j < sc->valid + 3; ++j) sc->range[j] = sc->pitch[j] = sc->yaw[j] = 0.f;  // padding
+}
+
+// Each projected point's plane in the sensor frame: normal n_s = Rt n, offset n_s . (Rt (p - c)),
+// and with the beam test whether the beams saw it.
+void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, std::uint32_t b,
+                  std::size_t tn, Scratch* sc) {
+  if (s.beams) sc->seen_beams.assign(tn, 0);
+  const auto& ix = s.index;
+  for (std::size_t j = 0; j < sc->valid; ++j) {
+    const std::size_t i = b + sc->idx[j];
+    const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
+    const Eigen::Vector3f ns = Rt * (*s.options.normals)[ix.order()[i]];
+    float* pl = &sc->plane[4 * j];
+    pl[0] = ns.x();
+    pl[1] = ns.y();
+    pl[2] = ns.z();
+    pl[3] = ns.dot(ps);
+    if (s.beams) sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl);
+  }
+}
+
+// The tile's votes per level (see / hit / occluded bits) into sc->votes.
+void VoteTile(const VoteSetup& s, std::size_t tn, Scratch* sc) {
+  sc->votes.assign(s.levels * tn, 0);
+  for (std::size_t l = 0; l < s.levels; ++l) {
+    std::uint8_t* vote = sc->votes.data() + l * tn;
+    const int level = int(l);
+    if (s.SurfaceVotes())
+      detail::VoteLevel<true>(sc->img.GridOf(level), sc->img.Pairs(level), s.test, sc->valid, sc->idx.data(),
+                              sc->range.data(), sc->pitch.data(), sc->yaw.data(), sc->plane.data(),
+                              sc->img.Returns(level), vote);
+    else
+      detail::VoteLevel<false>(sc->img.GridOf(level), sc->img.Pairs(level), s.test, sc->valid, sc->idx.data(),
+                               sc->range.data(), sc->pitch.data(), sc->yaw.data(), nullptr, nullptr, vote);
+  }
+}
+
+// Counters in tile order; each keyframe adds at most 1 per point and level, so uint16 with fewer
+// than 65535 keyframes never overflows. A worker adds one tile's votes under the tile's lock:
+// plain adds instead of one atomic per point and level, and workers on different keyframes
+// rarely want the same tile at the same time.
+struct VoteCounts {
+  VoteCounts(const VoteSetup& s, std::size_t n)
+      : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
+        beam_hits(s.beams ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
+
+  void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
+    const std::lock_guard<std::mutex> lock(locks[tile]);
+    if (!beam_hits.empty()) {
+      std::uint16_t* ov = beam_hits.data() + b;
+      for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + sc.seen_beams[i]);
+    }
+    for (std::size_t l = 0; l < levels; ++l) {
+      const std::uint8_t* vote = sc.votes.data() + l * tn;
+      std::uint16_t* sv = see.data() + l * n + b;
+      std::uint16_t* hv = hit.data() + l * n + b;
+      for (std::size_t i = 0; i < tn; ++i) {
+        sv[i] = std::uint16_t(sv[i] + (vote[i] & kSee));
+        hv[i] = std::uint16_t(hv[i] + ((vote[i] & kHit) >> 1));
+      }
+      if (!occ.empty()) {
+        std::uint16_t* ov = occ.data() + l * n + b;
+        for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + ((vote[i] & kOcc) >> 2));
+      }
+    }
+  }
+
+  // The counters in the caller's point order.
+  void ToInputOrder(const std::vector<std::uint32_t>& order, VisibilityVotes* out) const {
+    for (std::size_t i = 0; i < beam_hits.size(); ++i) out->beam_hits[std::size_t(order[i])] = beam_hits[i];
+    for (std::size_t l = 0; l < levels; ++l)
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t orig = std::size_t(order[i]);
+        out->see[l * n + orig] = see[l * n + i];
+        out->hit[l * n + orig] = hit[l * n + i];
+        if (!occ.empty()) out->occ[l * n + orig] = occ[l * n + i];
+      }
+  }
+
+  std::size_t n, levels;
+  std::vector<std::uint16_t> see, hit, occ, beam_hits;
+  std::unique_ptr<std::mutex[]> locks;
+};
+
+void CheckVisibilityInput(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
+                          const VisibilityOptions& options) {
   if (options.normals && options.normals->size() != points.size())
     throw Error("removert: " + std::to_string(options.normals->size()) + " normals for " +
                 std::to_string(points.size()) + " points");
   if (keyframes.size() >= 65535)
     throw Error("removert: " + std::to_string(keyframes.size()) +
                 " keyframes in one session; vote counters hold at most 65534");
+}
+
+VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOptions& options) {
   VisibilityVotes out;
-  out.points = points.size();
-  out.levels = int(resolutions_deg.size());
-  const std::size_t n = points.size();
-  const std::size_t L = resolutions_deg.size();
-  out.see.assign(n * L, 0);
-  out.hit.assign(n * L, 0);
-  if (count_occluded) out.occ.assign(n * L, 0);
-  const bool beams = options.normals != nullptr && options.beams != nullptr;
-  if (beams) out.beam_hits.assign(n, 0);
-  if (n == 0 || L == 0 || keyframes.empty()) return out;
+  out.points = n;
+  out.levels = int(levels);
+  out.see.assign(n * levels, 0);
+  out.hit.assign(n * levels, 0);
+  if (options.count_occluded) out.occ.assign(n * levels, 0);
+  if (options.normals != nullptr && options.beams != nullptr) out.beam_hits.assign(n, 0);
+  return out;
+}
+}  // namespace
+
+VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
+                                const std::vector<double>& resolutions_deg,
+                                const RemovertConfig& user_cfg, int threads,
+                                const VisibilityOptions& options) {
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
+  CheckVisibilityInput(points, keyframes, options);
+  VisibilityVotes out = ZeroVotes(points.size(), resolutions_deg.size(), options);
+  if (points.empty() || resolutions_deg.empty() || keyframes.empty()) return out;
 
   const detail::TileIndex index(points, cfg.tile_m);
-  const auto& order = index.order();
-  // Counters in tile order; each keyframe adds at most 1 per point and level, so uint16 with
-  // fewer than 65535 keyframes never overflows. A worker classifies one tile's points against
-  // its keyframe into its own scratch, then adds the votes under the tile's lock: plain adds
-  // instead of one atomic per point and level, and workers on different keyframes rarely want
-  // the same tile at the same time.
-  std::vector<std::uint16_t> see(n * L, 0), hit(n * L, 0), occ(count_occluded ? n * L : 0, 0);
-  std::vector<std::uint16_t> beam_hits(beams ? n : 0, 0);
-  std::unique_ptr<std::mutex[]> tile_locks(new std::mutex[index.tiles()]);
-  const float radius = float(cfg.submap_radius_m);
-  const float r2 = radius * radius;
-  const float tol_abs = float(cfg.tol_abs_m), tol_rel = float(cfg.tol_rel);
-  // Surface hits: the pixel's nearest return on the point's plane (OnPlane).
-  const float surface_max = float(options.surface_max_m);
-  const bool surface = options.normals != nullptr && (surface_max > 0.f || beams);
-  const int nl = int(L);
-
-  // Per worker: the range images (reused from keyframe to keyframe) and one tile's projections
-  // (valid points: position in the tile, range, pitch, yaw, sensor-frame plane) and votes.
-  using detail::kHit, detail::kOcc, detail::kSee;
-  detail::VoteTest test;
-  test.tol_abs = tol_abs;
-  test.tol_rel = tol_rel;
-  test.surface_max = surface_max;
-  test.occluded = count_occluded ? kOcc : 0;
-  struct Scratch {
-    detail::MultiResImage img;
-    std::vector<std::uint32_t> idx;
-    std::vector<float> range, pitch, yaw, plane;
-    std::vector<std::uint8_t> votes;  // [level * tile size + position in the tile]
-    std::unique_ptr<detail::ColumnImage> columns;  // beam test (options.beams)
-    std::vector<std::uint8_t> seen_beams;          // [position in the tile]
-  };
-  tbb::enumerable_thread_specific<Scratch> scratch(
-      [&] {
-        Scratch sc{detail::MultiResImage(cfg, resolutions_deg, surface && surface_max > 0.f, options.within_beams),
-                   {}, {}, {}, {}, {}, {}, {}, {}};
-        if (beams)
-          sc.columns = std::make_unique<detail::ColumnImage>(cfg, *options.beams);
-        return sc;
-      });
-
+  const VoteSetup setup = MakeSetup(cfg, index, options, resolutions_deg.size());
+  VoteCounts counts(setup, points.size());
+  tbb::enumerable_thread_specific<Scratch> scratch([&] { return Scratch(cfg, resolutions_deg, setup); });
   detail::ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
     const WorldKeyframe& kf = keyframes[k];
     Scratch& sc = scratch.local();
     {
       const auto scan = detail::LoadScan(kf);
       sc.img.Build(*scan);
-      if (beams) sc.columns->Build(*scan);
+      if (setup.beams) sc.columns->Build(*scan);
     }
-    const detail::MultiResImage& img = sc.img;
     const Eigen::Matrix3f Rt = kf.T_world_sensor.linear().transpose().cast<float>();
     const Eigen::Vector3f c = kf.T_world_sensor.translation().cast<float>();
-    index.ForTilesNear(c, radius, [&](std::uint32_t tile, std::uint32_t b, std::uint32_t e) {
-      const std::size_t tn = e - b;
-      if (sc.idx.size() < tn) {
-        sc.idx.resize(tn);
-        sc.range.resize(tn + 3);
-        sc.pitch.resize(tn + 3);
-        sc.yaw.resize(tn + 3);
-        if (surface) sc.plane.resize(4 * (tn + 3));
-      }
-      const std::size_t m = img.Project(index.x() + b, index.y() + b, index.z() + b, tn, c, Rt, r2,
-                                        sc.idx.data(), sc.range.data(), sc.pitch.data(), sc.yaw.data());
-      if (m == 0) return;
-      for (std::size_t j = m; j < m + 3; ++j) sc.range[j] = sc.pitch[j] = sc.yaw[j] = 0.f;  // padding
-      if (beams) sc.seen_beams.assign(tn, 0);
-      if (surface) {
-        // Each point's plane in the sensor frame: normal n_s = Rt n, offset n_s . (Rt (p - c)),
-        // and with options.beams its beam test.
-        for (std::size_t j = 0; j < m; ++j) {
-          const std::size_t i = b + sc.idx[j];
-          const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(index.x()[i], index.y()[i], index.z()[i]) - c);
-          const Eigen::Vector3f ns = Rt * (*options.normals)[order[i]];
-          float* pl = &sc.plane[4 * j];
-          pl[0] = ns.x();
-          pl[1] = ns.y();
-          pl[2] = ns.z();
-          pl[3] = ns.dot(ps);
-          if (beams) sc.seen_beams[sc.idx[j]] = sc.columns->Observed(sc.range[j], sc.pitch[j], sc.yaw[j], ps, pl);
-        }
-      }
-      sc.votes.assign(L * tn, 0);
-      for (int l = 0; l < nl; ++l) {
-        const detail::VoteTest& t = test;
-        std::uint8_t* vote = sc.votes.data() + std::size_t(l) * tn;
-        if (surface && surface_max > 0.f)
-          detail::VoteLevel<true>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
-                                  sc.pitch.data(), sc.yaw.data(), sc.plane.data(), img.Returns(l), vote);
-        else
-          detail::VoteLevel<false>(img.GridOf(l), img.Pairs(l), t, m, sc.idx.data(), sc.range.data(),
-                                   sc.pitch.data(), sc.yaw.data(), nullptr, nullptr, vote);
-      }
-      const std::lock_guard<std::mutex> lock(tile_locks[tile]);
-      if (beams) {
-        std::uint16_t* ov = beam_hits.data() + b;
-        for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + sc.seen_beams[i]);
-      }
-      for (std::size_t l = 0; l < L; ++l) {
-        const std::uint8_t* vote = sc.votes.data() + l * tn;
-        std::uint16_t* sv = see.data() + l * n + b;
-        std::uint16_t* hv = hit.data() + l * n + b;
-        for (std::size_t i = 0; i < tn; ++i) {
-          sv[i] = std::uint16_t(sv[i] + (vote[i] & kSee));
-          hv[i] = std::uint16_t(hv[i] + ((vote[i] & kHit) >> 1));
-        }
-        if (count_occluded) {
-          std::uint16_t* ov = occ.data() + l * n + b;
-          for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + ((vote[i] & kOcc) >> 2));
-        }
-      }
+    index.ForTilesNear(c, setup.radius, [&](std::uint32_t tile, std::uint32_t b, std::uint32_t e) {
+      ProjectTile(setup, c, Rt, b, e - b, &sc);
+      if (sc.valid == 0) return;
+      if (setup.surface) SensorPlanes(setup, c, Rt, b, e - b, &sc);
+      VoteTile(setup, e - b, &sc);
+      counts.Add(tile, b, e - b, sc);
     });
   });
-
-  if (beams)
-    for (std::size_t i = 0; i < n; ++i) out.beam_hits[std::size_t(order[i])] = beam_hits[i];
-  for (std::size_t l = 0; l < L; ++l) {
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::size_t orig = std::size_t(order[i]);
-      out.see[l * n + orig] = see[l * n + i];
-      out.hit[l * n + orig] = hit[l * n + i];
-      if (count_occluded) out.occ[l * n + orig] = occ[l * n + i];
-    }
-  }
+  counts.ToInputOrder(index.order(), &out);
   return out;
 }
 
