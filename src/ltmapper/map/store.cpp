@@ -514,6 +514,199 @@ IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::ve
   return r;
 }
 
+namespace {
+// Work per map keyframe: the removert delta (keyframes owned by the reference session) and / or
+// query points re-expressed in its frame (query keyframes near it).
+struct KeyframeWork {
+  const KeyframeDelta* delta = nullptr;
+  std::vector<std::pair<const KeyframeInput*, Pose>> extra;  // query cloud, T_map_query
+};
+using WorkPlan = std::map<std::size_t, KeyframeWork>;  // by position in the map's keyframes
+
+// One map keyframe's step: the blobs to write and the counts of the delta's points.
+struct KeyframeStep {
+  std::string delta_blob, base_blob;
+  std::size_t added = 0, removed = 0, info = 0, base_points = 0;
+  std::size_t nd_weak_in = 0;  // weak ND points LT-removert reported (stored or not)
+  std::size_t pd_strong = 0, pd_weak = 0, nd_strong = 0, superseded = 0, restored = 0;
+};
+
+// The step the new session takes (the order after the latest); errors when it cannot be one.
+int NewSessionOrder(Store::Impl& s, const SessionMeta& session) {
+  const int latest = s.Latest();
+  if (latest < 0) throw Error(s.path + ": integrate the central session first (map init)");
+  Stmt st(s.db, "SELECT id FROM sessions WHERE name = ?", s.path);
+  st.Bind(1, session.name);
+  if (st.Step()) throw Error(s.path + ": session '" + session.name + "' is already integrated");
+  if (latest + 1 > 65535) throw Error(s.path + ": too many sessions");
+  return latest + 1;
+}
+
+// LT-removert's delta of each reference keyframe goes to that map keyframe.
+void AssignDeltas(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs, int ref, const std::string& reference,
+                  const std::vector<KeyframeDelta>& deltas, WorkPlan* work) {
+  std::map<int, std::size_t> owned;  // reference keyframe index -> position in kfs
+  for (std::size_t k = 0; k < kfs.size(); ++k)
+    if (kfs[k].session == ref) owned[kfs[k].source_index] = k;
+  for (const auto& d : deltas) {
+    const auto it = owned.find(d.keyframe);
+    if (it == owned.end())
+      throw Error(s.path + ": delta for keyframe " + std::to_string(d.keyframe) + " of session '" + reference +
+                  "', which is not a map keyframe");
+    if ((*work)[it->second].delta) throw Error(s.path + ": two deltas for keyframe " + std::to_string(d.keyframe));
+    (*work)[it->second].delta = &d;
+  }
+}
+
+// A query keyframe within new_keyframe_radius_m of a map keyframe adds its cloud to the nearest
+// one; the others become new map keyframes (returned), one per place unless they carry points.
+std::vector<const KeyframeInput*> AssignQueryKeyframes(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs,
+                                                       const std::vector<KeyframeInput>& query, WorkPlan* work) {
+  const double r2 = s.cfg.new_keyframe_radius_m * s.cfg.new_keyframe_radius_m;
+  std::vector<const KeyframeInput*> fresh;
+  std::vector<Eigen::Vector3d> fresh_t;
+  for (const auto& q : query) {
+    const Eigen::Vector3d t = q.T_world_sensor.translation();
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t m = 0;
+    for (std::size_t k = 0; k < kfs.size(); ++k) {
+      const double d2 = (kfs[k].T_world_sensor.translation() - t).squaredNorm();
+      if (d2 < best) best = d2, m = k;
+    }
+    bool near_fresh = false;
+    for (const auto& f : fresh_t) near_fresh |= (f - t).squaredNorm() <= r2;
+    if (best > r2) {
+      if (!near_fresh || !q.cloud.empty()) {  // keep every point: a cloud near a fresh one is its own
+        fresh.push_back(&q);
+        fresh_t.push_back(t);
+      }
+    } else if (!q.cloud.empty()) {
+      (*work)[m].extra.emplace_back(&q, kfs[m].T_world_sensor.inverse() * q.T_world_sensor);
+    }
+  }
+  return fresh;
+}
+
+// The stored blobs of the chunk's map keyframes: base and the deltas after the reference's step.
+std::vector<Store::Impl::KfBlobs> LoadChunk(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs,
+                                            const std::vector<std::size_t>& positions, int ref) {
+  Stmt get_base(s.db, "SELECT data FROM base_clouds WHERE keyframe = ?", s.path);
+  Stmt get_deltas(s.db, "SELECT session, data FROM deltas WHERE keyframe = ? AND session > ? ORDER BY session DESC",
+                  s.path);
+  std::vector<Store::Impl::KfBlobs> in(positions.size());
+  for (std::size_t k = 0; k < positions.size(); ++k) {
+    in[k].rec = kfs[positions[k]];
+    get_base.Bind(1, in[k].rec.id);
+    if (!get_base.Step()) throw Error(s.path + ": keyframe " + std::to_string(in[k].rec.id) + " has no base cloud");
+    in[k].base = get_base.Blob(0);
+    get_base.Reset();
+    get_deltas.Bind(1, in[k].rec.id).Bind(2, ref);
+    while (get_deltas.Step()) in[k].deltas.emplace_back(int(get_deltas.Int(0)), get_deltas.Blob(1));
+    get_deltas.Reset();
+  }
+  return in;
+}
+
+// The keyframe's target state. A reference keyframe: its state at the reference's step minus the
+// strong ND matched within nd_match_radius_m (their keys into change_keys) plus PD (paper eq. 4);
+// then the query points near it (new territory seen again, or PD beyond the assignment radius):
+// a keyframe the reference never had is replaced by what this session saw.
+QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const KeyframeWork& w, int ref, int S,
+                   const QCloud& latest_q, const std::string& what, detail::KeySet* change_keys, QCloud* nd_weak) {
+  auto quant = [&](const PointCloud& c, PointClass cls, const std::string& name) {
+    return detail::Quantize(c, s.cfg.resolution_m, s.cfg.intensity_step, cls, std::uint16_t(S), what + " " + name);
+  };
+  QCloud target;
+  if (in.rec.session == ref) {
+    const QCloud ref_q = in.deltas.empty() ? latest_q : s.Rollback(in);
+    QCloud nd_strong;
+    if (w.delta) {
+      nd_strong = quant(w.delta->nd_strong, PointClass::kNDStrong, "nd_strong");
+      // Weak ND changes nothing in the map (occluded, kept); it is stored only on request.
+      if (s.cfg.store_weak_nd) *nd_weak = quant(w.delta->nd_weak, PointClass::kNDWeak, "nd_weak");
+    }
+    const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, s.cfg.nd_match_radius_m / s.cfg.resolution_m);
+    target.reserve(ref_q.size());
+    for (std::size_t i = 0; i < ref_q.size(); ++i) {
+      if (matched[i])
+        change_keys->Insert(detail::Key(ref_q[i]));
+      else
+        target.push_back(ref_q[i]);
+    }
+    if (w.delta) {
+      for (const QPoint& p : quant(w.delta->pd_strong, PointClass::kPDStrong, "pd_strong")) target.push_back(p);
+      for (const QPoint& p : quant(w.delta->pd_weak, PointClass::kPDWeak, "pd_weak")) target.push_back(p);
+    }
+  }
+  for (const auto& [q, T] : w.extra)
+    for (const QPoint& p : quant(geometry::Transform(q->cloud, T), PointClass::kPDStrong,
+                                 "query keyframe " + std::to_string(q->index)))
+      target.push_back(p);
+  return target;
+}
+
+void CountRoles(const QCloud& delta, int S, KeyframeStep* o) {
+  for (const QPoint& p : delta) {
+    switch (p.role) {
+      case detail::kAdded:
+        ++o->added;
+        if (p.session == S && p.cls == std::uint8_t(PointClass::kPDStrong)) ++o->pd_strong;
+        else if (p.session == S && p.cls == std::uint8_t(PointClass::kPDWeak)) ++o->pd_weak;
+        else ++o->restored;
+        break;
+      case detail::kRemovedChange: ++o->removed, ++o->nd_strong; break;
+      case detail::kRemovedSuperseded: ++o->removed, ++o->superseded; break;
+      default: ++o->info;
+    }
+  }
+}
+
+// The delta from the keyframe's latest state to its target, and the new latest state.
+KeyframeStep StepKeyframe(const Store::Impl& s, const Store::Impl::KfBlobs& in, const KeyframeWork& w, int ref, int S,
+                          const std::string& session_name) {
+  const std::string what = "session '" + session_name + "' map keyframe " + std::to_string(in.rec.id);
+  const QCloud latest_q = s.Decode(in.base, what + " base");
+  detail::KeySet change_keys;
+  QCloud nd_weak;
+  const QCloud target = TargetState(s, in, w, ref, S, latest_q, what, &change_keys, &nd_weak);
+  const QCloud delta = detail::MakeDelta(latest_q, target, change_keys, nd_weak);
+  KeyframeStep o;
+  o.nd_weak_in = w.delta ? w.delta->nd_weak.size() : 0;
+  CountRoles(delta, S, &o);
+  if (delta.empty()) return o;
+  o.delta_blob = s.Encode(delta);
+  if (o.added + o.removed > 0) {
+    const QCloud next = detail::ApplyForward(latest_q, delta);
+    o.base_points = next.size();
+    o.base_blob = s.Encode(next);
+  }
+  return o;
+}
+
+// Writes one keyframe's step (delta row, new base) and adds its counts to r; false when the
+// step changed nothing.
+bool WriteStep(Store::Impl& s, int keyframe_id, int S, const KeyframeStep& o, IntegrationResult& r) {
+  r.nd_weak += o.nd_weak_in;
+  if (o.delta_blob.empty()) return false;
+  Stmt put_delta(s.db, "INSERT INTO deltas(keyframe, session, added, removed, info, data) VALUES(?,?,?,?,?,?)", s.path);
+  put_delta.Bind(1, keyframe_id).Bind(2, S).Bind(3, (long long)o.added).Bind(4, (long long)o.removed);
+  put_delta.Bind(5, (long long)o.info).BindBlob(6, o.delta_blob).Run();
+  r.bytes += o.delta_blob.size();
+  if (!o.base_blob.empty()) {
+    Stmt put_base(s.db, "UPDATE base_clouds SET as_of = ?, points = ?, data = ? WHERE keyframe = ?", s.path);
+    put_base.Bind(1, S).Bind(2, (long long)o.base_points).BindBlob(3, o.base_blob).Bind(4, keyframe_id).Run();
+    r.bytes += o.base_blob.size();
+    ++r.keyframes_changed;
+  }
+  r.pd_strong += o.pd_strong;
+  r.pd_weak += o.pd_weak;
+  r.nd_strong += o.nd_strong;
+  r.superseded += o.superseded;
+  r.restored += o.restored;
+  return true;
+}
+}  // namespace
+
 IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std::string& reference,
                                           const std::vector<KeyframeDelta>& deltas,
                                           const std::vector<KeyframeInput>& query_keyframes) {
@@ -521,184 +714,34 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
   CheckName(session.name);
   Impl& s = *impl_;
   Transaction tx(s);
-  const int latest = s.Latest();
-  if (latest < 0) throw Error(s.path + ": integrate the central session first (map init)");
-  {
-    Stmt st(s.db, "SELECT id FROM sessions WHERE name = ?", s.path);
-    st.Bind(1, session.name);
-    if (st.Step()) throw Error(s.path + ": session '" + session.name + "' is already integrated");
-  }
-  const int ref = SessionOrder(reference);
-  const int S = latest + 1;
-  if (S > 65535) throw Error(s.path + ": too many sessions");
   IntegrationResult r;
-  r.session = S;
+  const int S = r.session = NewSessionOrder(s, session);
+  const int ref = SessionOrder(reference);
   InsertSession(s, S, session, ref);
 
-  // Work per map keyframe: the removert delta (keyframes owned by the reference session) and/or
-  // query points re-expressed in its frame (query keyframes near it); far query keyframes become
-  // new map keyframes.
   const std::vector<KeyframeRecord> kfs = s.Keyframes();
-  std::map<int, std::size_t> owned;  // reference keyframe index -> position in kfs
-  for (std::size_t k = 0; k < kfs.size(); ++k)
-    if (kfs[k].session == ref) owned[kfs[k].source_index] = k;
-  struct Work {
-    const KeyframeDelta* delta = nullptr;
-    std::vector<std::pair<const KeyframeInput*, Pose>> extra;  // query cloud, T_map_query
-  };
-  std::map<std::size_t, Work> work;  // by position in kfs
-  for (const auto& d : deltas) {
-    auto it = owned.find(d.keyframe);
-    if (it == owned.end())
-      throw Error(s.path + ": delta for keyframe " + std::to_string(d.keyframe) + " of session '" + reference +
-                  "', which is not a map keyframe");
-    if (work[it->second].delta) throw Error(s.path + ": two deltas for keyframe " + std::to_string(d.keyframe));
-    work[it->second].delta = &d;
-  }
-  std::vector<Pose> map_poses;
-  for (const auto& k : kfs) map_poses.push_back(k.T_world_sensor);
-  std::vector<const KeyframeInput*> fresh;
-  {
-    const double r2 = s.cfg.new_keyframe_radius_m * s.cfg.new_keyframe_radius_m;
-    std::vector<Eigen::Vector3d> fresh_t;
-    for (const auto& q : query_keyframes) {
-      const Eigen::Vector3d t = q.T_world_sensor.translation();
-      double best = std::numeric_limits<double>::infinity();
-      std::size_t m = 0;
-      for (std::size_t k = 0; k < kfs.size(); ++k) {
-        const double d2 = (map_poses[k].translation() - t).squaredNorm();
-        if (d2 < best) best = d2, m = k;
-      }
-      bool near_fresh = false;
-      for (const auto& f : fresh_t) near_fresh |= (f - t).squaredNorm() <= r2;
-      if (best > r2) {
-        if (!near_fresh || !q.cloud.empty()) {  // keep every point: a cloud near a fresh one is its own
-          fresh.push_back(&q);
-          fresh_t.push_back(t);
-        }
-      } else if (!q.cloud.empty()) {
-        work[m].extra.emplace_back(&q, map_poses[m].inverse() * q.T_world_sensor);
-      }
-    }
-  }
-
-  std::size_t written = 0;
-  const double radius_units = s.cfg.nd_match_radius_m / s.cfg.resolution_m;
-  Stmt get_base(s.db, "SELECT data FROM base_clouds WHERE keyframe = ?", s.path);
-  Stmt get_deltas(s.db, "SELECT session, data FROM deltas WHERE keyframe = ? AND session > ? ORDER BY session DESC",
-                  s.path);
-  Stmt put_delta(s.db, "INSERT INTO deltas(keyframe, session, added, removed, info, data) VALUES(?,?,?,?,?,?)", s.path);
-  Stmt put_base(s.db, "UPDATE base_clouds SET as_of = ?, points = ?, data = ? WHERE keyframe = ?", s.path);
-  constexpr std::size_t kChunk = 64;
-  struct Out {
-    std::string delta_blob, base_blob;
-    std::size_t added = 0, removed = 0, info = 0, base_points = 0;
-    std::size_t nd_weak_in = 0;  // weak ND points LT-removert reported (stored or not)
-    std::size_t pd_strong = 0, pd_weak = 0, nd_strong = 0, superseded = 0, restored = 0;
-  };
-  std::vector<std::pair<std::size_t, const Work*>> items;
+  WorkPlan work;
+  AssignDeltas(s, kfs, ref, reference, deltas, &work);
+  const std::vector<const KeyframeInput*> fresh = AssignQueryKeyframes(s, kfs, query_keyframes, &work);
+  std::vector<std::pair<std::size_t, const KeyframeWork*>> items;
   for (const auto& [k, w] : work) items.emplace_back(k, &w);
+  std::size_t written = 0;
+  constexpr std::size_t kChunk = 64;  // keyframes decoded at once: memory vs parallelism
   for (std::size_t c0 = 0; c0 < items.size(); c0 += kChunk) {
     const std::size_t n = std::min(kChunk, items.size() - c0);
-    std::vector<Impl::KfBlobs> in(n);
+    std::vector<std::size_t> positions(n);
+    for (std::size_t k = 0; k < n; ++k) positions[k] = items[c0 + k].first;
+    const std::vector<Impl::KfBlobs> in = LoadChunk(s, kfs, positions, ref);
+    std::vector<KeyframeStep> steps(n);
+    ParallelFor(n, s.threads,
+                [&](std::size_t k) { steps[k] = StepKeyframe(s, in[k], *items[c0 + k].second, ref, S, session.name); });
     for (std::size_t k = 0; k < n; ++k) {
-      in[k].rec = kfs[items[c0 + k].first];
-      get_base.Bind(1, in[k].rec.id);
-      if (!get_base.Step()) throw Error(s.path + ": keyframe " + std::to_string(in[k].rec.id) + " has no base cloud");
-      in[k].base = get_base.Blob(0);
-      get_base.Reset();
-      get_deltas.Bind(1, in[k].rec.id).Bind(2, ref);
-      while (get_deltas.Step()) in[k].deltas.emplace_back(int(get_deltas.Int(0)), get_deltas.Blob(1));
-      get_deltas.Reset();
-    }
-    std::vector<Out> out(n);
-    ParallelFor(n, s.threads, [&](std::size_t k) {
-      const Work& w = *items[c0 + k].second;
-      const KeyframeRecord& rec = in[k].rec;
-      const std::string what = "session '" + session.name + "' map keyframe " + std::to_string(rec.id);
-      const QCloud latest_q = s.Decode(in[k].base, what + " base");
-      auto quant = [&](const PointCloud& c, PointClass cls, const std::string& name) {
-        return detail::Quantize(c, s.cfg.resolution_m, s.cfg.intensity_step, cls, std::uint16_t(S), what + " " + name);
-      };
-      detail::KeySet change_keys;
-      QCloud target, nd_weak;
-      if (rec.session == ref) {
-        // Target state = reference − ND(strong, matched within the radius) + PD (paper eq. 4).
-        const QCloud ref_q = in[k].deltas.empty() ? latest_q : s.Rollback(in[k]);
-        QCloud nd_strong;
-        if (w.delta) {
-          nd_strong = quant(w.delta->nd_strong, PointClass::kNDStrong, "nd_strong");
-          // Weak ND changes nothing in the map (occluded, kept); it is stored only on request.
-          if (s.cfg.store_weak_nd) nd_weak = quant(w.delta->nd_weak, PointClass::kNDWeak, "nd_weak");
-        }
-        const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, radius_units);
-        target.reserve(ref_q.size());
-        for (std::size_t i = 0; i < ref_q.size(); ++i) {
-          if (matched[i])
-            change_keys.Insert(detail::Key(ref_q[i]));
-          else
-            target.push_back(ref_q[i]);
-        }
-        if (w.delta) {
-          for (const QPoint& p : quant(w.delta->pd_strong, PointClass::kPDStrong, "pd_strong")) target.push_back(p);
-          for (const QPoint& p : quant(w.delta->pd_weak, PointClass::kPDWeak, "pd_weak")) target.push_back(p);
-        }
-      }
-      // Query points near this keyframe (new territory seen again, or PD beyond the assignment
-      // radius): a keyframe the reference never had is replaced by what this session saw.
-      for (const auto& [q, T] : w.extra) {
-        PointCloud local = geometry::Transform(q->cloud, T);
-        for (const QPoint& p : quant(local, PointClass::kPDStrong, "query keyframe " + std::to_string(q->index)))
-          target.push_back(p);
-      }
-      const QCloud delta = detail::MakeDelta(latest_q, target, change_keys, nd_weak);
-      Out& o = out[k];
-      o.nd_weak_in = w.delta ? w.delta->nd_weak.size() : 0;
-      for (const QPoint& p : delta) {
-        switch (p.role) {
-          case detail::kAdded:
-            ++o.added;
-            if (p.session == S && p.cls == std::uint8_t(PointClass::kPDStrong)) ++o.pd_strong;
-            else if (p.session == S && p.cls == std::uint8_t(PointClass::kPDWeak)) ++o.pd_weak;
-            else ++o.restored;
-            break;
-          case detail::kRemovedChange: ++o.removed, ++o.nd_strong; break;
-          case detail::kRemovedSuperseded: ++o.removed, ++o.superseded; break;
-          default: ++o.info;
-        }
-      }
-      if (delta.empty()) return;
-      o.delta_blob = s.Encode(delta);
-      if (o.added + o.removed > 0) {
-        const QCloud next = detail::ApplyForward(latest_q, delta);
-        o.base_points = next.size();
-        o.base_blob = s.Encode(next);
-      }
-    });
-    for (std::size_t k = 0; k < n; ++k) {
-      const Out& o = out[k];
-      r.nd_weak += o.nd_weak_in;
-      if (o.delta_blob.empty()) continue;
-      const int id = in[k].rec.id;
-      put_delta.Bind(1, id).Bind(2, S).Bind(3, (long long)o.added).Bind(4, (long long)o.removed);
-      put_delta.Bind(5, (long long)o.info).BindBlob(6, o.delta_blob).Run();
-      r.bytes += o.delta_blob.size();
-      if (!o.base_blob.empty()) {
-        put_base.Bind(1, S).Bind(2, (long long)o.base_points).BindBlob(3, o.base_blob).Bind(4, id).Run();
-        r.bytes += o.base_blob.size();
-        ++r.keyframes_changed;
-      }
-      r.pd_strong += o.pd_strong;
-      r.pd_weak += o.pd_weak;
-      r.nd_strong += o.nd_strong;
-      r.superseded += o.superseded;
-      r.restored += o.restored;
+      if (!WriteStep(s, in[k].rec.id, S, steps[k], r)) continue;
       ++written;
       if (on_keyframe_written) on_keyframe_written(written);
     }
   }
   InsertKeyframes(s, *this, S, fresh, r, written);
-
   FinishSession(s, r);
   tx.Commit();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
