@@ -52,6 +52,10 @@ if [ "$BATCH" = 1 ]; then
   all=(); for i in $(seq 0 $((S - 1))); do all+=("$SES/$(printf "session_%02d" "$i")"); done
   /usr/bin/time -f "%e" -o "$WORK/t_batch" "$EXE" run --quiet --sessions "${all[@]}" --out "$WORK/batch" > /dev/null
   echo "batch run of $S sessions: $(cat "$WORK/t_batch") s, store $(stat -c %s "$WORK/batch/map.ltmap") bytes"
-  echo "incremental vs batch live map (Chamfer over patches, eval restore):"
-  "$EXE" eval restore --quiet --map-a "$WORK/inc/live.pcd" --map-b "$WORK/batch/live.pcd" | grep -E "^\||^Same class" || true
+  echo "incremental vs batch live map (Chamfer over patches and same class, eval restore):"
+  for m in inc batch; do  # the store's live map with its classes (PLY keeps the class field)
+    "$EXE" map export --quiet --store "$WORK/$m/map.ltmap" --out "$WORK/$m/live_labelled.ply" > /dev/null
+  done
+  "$EXE" eval restore --quiet --map-a "$WORK/inc/live_labelled.ply" --map-b "$WORK/batch/live_labelled.ply" |
+    grep -E "^\||^Same class" || true
 fi

@@ -15,6 +15,8 @@
 #include <limits>
 #include <filesystem>
 #include <map>
+#include <optional>
+#include <set>
 #include <sstream>
 
 namespace ltm::map {
@@ -951,99 +953,121 @@ PointCloud Store::StepChanges(int session, const Region& region) const {
 }
 
 // ===================================================================================== fsck
-FsckReport Store::Fsck() const {
-  const Impl& s = *impl_;
+namespace {
+// Collects an fsck's findings (the first 200 problems are listed).
+struct FsckFindings {
   FsckReport r;
-  auto problem = [&](const std::string& p) {
+  void Problem(const std::string& p) {
     r.ok = false;
     if (r.problems.size() < 200) r.problems.push_back(p);
-  };
+  }
+};
+
+void CheckDatabase(const Store::Impl& s, FsckFindings& f) {
   try {
     const std::string v = s.Info("schema_version");
-    if (!ReadableSchema(v)) problem("schema version " + v);
+    if (!ReadableSchema(v)) f.Problem("schema version " + v);
   } catch (const Error& e) {
-    problem(e.what());
+    f.Problem(e.what());
   }
-  {
-    Stmt st(s.db, "PRAGMA integrity_check", s.path);
-    while (st.Step())
-      if (st.Text(0) != "ok") problem("integrity_check: " + st.Text(0));
-  }
-  {
-    Stmt st(s.db, "PRAGMA foreign_key_check", s.path);
-    while (st.Step()) problem("foreign key violation in table " + st.Text(0) + " row " + std::to_string(st.Int(1)));
-  }
-  const auto sessions = Sessions();
-  r.sessions = sessions.size();
+  Stmt integrity(s.db, "PRAGMA integrity_check", s.path);
+  while (integrity.Step())
+    if (integrity.Text(0) != "ok") f.Problem("integrity_check: " + integrity.Text(0));
+  Stmt keys(s.db, "PRAGMA foreign_key_check", s.path);
+  while (keys.Step()) f.Problem("foreign key violation in table " + keys.Text(0) + " row " + std::to_string(keys.Int(1)));
+}
+
+void CheckSessions(const std::vector<SessionRecord>& sessions, FsckFindings& f) {
   for (std::size_t k = 0; k < sessions.size(); ++k) {
     const auto& ss = sessions[k];
-    if (ss.order != int(k)) problem("session orders are not 0..N-1 (found " + std::to_string(ss.order) + ")");
-    if (k == 0 && ss.reference != -1) problem("central session has a reference");
+    if (ss.order != int(k)) f.Problem("session orders are not 0..N-1 (found " + std::to_string(ss.order) + ")");
+    if (k == 0 && ss.reference != -1) f.Problem("central session has a reference");
     if (k > 0 && (ss.reference < 0 || ss.reference >= ss.order))
-      problem("session " + ss.name + " references session " + std::to_string(ss.reference));
+      f.Problem("session " + ss.name + " references session " + std::to_string(ss.reference));
   }
+}
+
+// Decodes a blob (checksum, sizes) and counts it; the decoded points, or none on a problem.
+std::optional<QCloud> CheckBlob(const Store::Impl& s, const std::string& blob, const std::string& where, FsckFindings& f) {
+  ++f.r.blobs;
+  f.r.bytes += blob.size();
+  try {
+    QCloud q = s.Decode(blob, where);
+    f.r.points += q.size();
+    return q;
+  } catch (const Error& e) {
+    f.Problem(e.what());
+    return std::nullopt;
+  }
+}
+
+// Every delta: its keyframe and step exist, its blob decodes, its role counts match the row.
+// Returns per keyframe the newest step whose delta changed points.
+std::map<int, int> CheckDeltas(const Store::Impl& s, const std::map<int, KeyframeRecord>& kfs, int latest,
+                               FsckFindings& f) {
+  std::map<int, int> last_change;
+  Stmt st(s.db, "SELECT keyframe, session, added, removed, info, data FROM deltas", s.path);
+  while (st.Step()) {
+    const int kf = int(st.Int(0)), ses = int(st.Int(1));
+    const std::string where = "delta (keyframe " + std::to_string(kf) + ", session " + std::to_string(ses) + ")";
+    const auto it = kfs.find(kf);
+    if (it == kfs.end()) f.Problem(where + ": no such keyframe");
+    else if (ses <= it->second.session) f.Problem(where + ": not after the keyframe's creation");
+    if (ses < 1 || ses > latest) f.Problem(where + ": no such session step");
+    if (const auto q = CheckBlob(s, st.Blob(5), where, f)) {
+      std::size_t a = 0, rm = 0, inf = 0;
+      for (const QPoint& p : *q) (p.role == detail::kAdded ? a : p.role == detail::kInfoNDWeak ? inf : rm)++;
+      if (a != std::size_t(st.Int(2)) || rm != std::size_t(st.Int(3)) || inf != std::size_t(st.Int(4)))
+        f.Problem(where + ": point counts differ from the row");
+    }
+    if (st.Int(2) + st.Int(3) > 0) last_change[kf] = std::max(last_change[kf], ses);
+  }
+  return last_change;
+}
+
+// Every base cloud: its keyframe exists, it is as of the keyframe's newest changing delta, its
+// blob decodes to the row's point count; every keyframe has one and an owning session.
+void CheckBases(const Store::Impl& s, const std::map<int, KeyframeRecord>& kfs, int latest,
+                const std::map<int, int>& last_change, FsckFindings& f) {
+  std::set<int> has_base;
+  Stmt st(s.db, "SELECT keyframe, as_of, points, data FROM base_clouds", s.path);
+  while (st.Step()) {
+    const int kf = int(st.Int(0)), as_of = int(st.Int(1));
+    const std::string where = "base cloud of keyframe " + std::to_string(kf);
+    has_base.insert(kf);
+    const auto it = kfs.find(kf);
+    if (it == kfs.end()) f.Problem(where + ": no such keyframe");
+    else if (as_of < it->second.session || as_of > latest) f.Problem(where + ": as_of out of range");
+    const auto lc = last_change.find(kf);
+    if (lc != last_change.end() && lc->second != as_of) f.Problem(where + ": not as of its newest delta");
+    if (const auto q = CheckBlob(s, st.Blob(3), where, f))
+      if (q->size() != std::size_t(st.Int(2))) f.Problem(where + ": point count differs from the row");
+  }
+  for (const auto& [id, k] : kfs) {
+    if (!has_base.count(id)) f.Problem("keyframe " + std::to_string(id) + " has no base cloud");
+    if (k.session < 0 || k.session > latest) f.Problem("keyframe " + std::to_string(id) + " owned by no session");
+  }
+}
+}  // namespace
+
+FsckReport Store::Fsck() const {
+  const Impl& s = *impl_;
+  FsckFindings f;
+  CheckDatabase(s, f);
+  const auto sessions = Sessions();
+  f.r.sessions = sessions.size();
+  CheckSessions(sessions, f);
   const int latest = int(sessions.size()) - 1;
   std::map<int, KeyframeRecord> kfs;
   try {
     for (const auto& k : s.Keyframes()) kfs[k.id] = k;
   } catch (const Error& e) {
-    problem(e.what());
+    f.Problem(e.what());
   }
-  r.keyframes = kfs.size();
-  std::map<int, int> last_change;  // keyframe -> newest session whose delta changed points
-  {
-    Stmt st(s.db, "SELECT keyframe, session, added, removed, info, data FROM deltas", s.path);
-    while (st.Step()) {
-      const int kf = int(st.Int(0)), ses = int(st.Int(1));
-      const std::string where = "delta (keyframe " + std::to_string(kf) + ", session " + std::to_string(ses) + ")";
-      const std::string blob = st.Blob(5);
-      ++r.blobs;
-      r.bytes += blob.size();
-      auto it = kfs.find(kf);
-      if (it == kfs.end()) problem(where + ": no such keyframe");
-      else if (ses <= it->second.session) problem(where + ": not after the keyframe's creation");
-      if (ses < 1 || ses > latest) problem(where + ": no such session step");
-      try {
-        const QCloud q = s.Decode(blob, where);
-        std::size_t a = 0, rm = 0, inf = 0;
-        for (const QPoint& p : q) (p.role == detail::kAdded ? a : p.role == detail::kInfoNDWeak ? inf : rm)++;
-        if (a != std::size_t(st.Int(2)) || rm != std::size_t(st.Int(3)) || inf != std::size_t(st.Int(4)))
-          problem(where + ": point counts differ from the row");
-        r.points += q.size();
-      } catch (const Error& e) {
-        problem(e.what());
-      }
-      if (st.Int(2) + st.Int(3) > 0) last_change[kf] = std::max(last_change[kf], ses);
-    }
-  }
-  std::map<int, bool> has_base;
-  {
-    Stmt st(s.db, "SELECT keyframe, as_of, points, data FROM base_clouds", s.path);
-    while (st.Step()) {
-      const int kf = int(st.Int(0)), as_of = int(st.Int(1));
-      const std::string where = "base cloud of keyframe " + std::to_string(kf);
-      const std::string blob = st.Blob(3);
-      has_base[kf] = true;
-      ++r.blobs;
-      r.bytes += blob.size();
-      auto it = kfs.find(kf);
-      if (it == kfs.end()) problem(where + ": no such keyframe");
-      else if (as_of < it->second.session || as_of > latest) problem(where + ": as_of out of range");
-      if (last_change.count(kf) && last_change[kf] != as_of) problem(where + ": not as of its newest delta");
-      try {
-        const QCloud q = s.Decode(blob, where);
-        if (q.size() != std::size_t(st.Int(2))) problem(where + ": point count differs from the row");
-        r.points += q.size();
-      } catch (const Error& e) {
-        problem(e.what());
-      }
-    }
-  }
-  for (const auto& [id, k] : kfs) {
-    if (!has_base.count(id)) problem("keyframe " + std::to_string(id) + " has no base cloud");
-    if (k.session < 0 || k.session > latest) problem("keyframe " + std::to_string(id) + " owned by no session");
-  }
-  return r;
+  f.r.keyframes = kfs.size();
+  const std::map<int, int> last_change = CheckDeltas(s, kfs, latest, f);
+  CheckBases(s, kfs, latest, last_change, f);
+  return f.r;
 }
 
 std::uint64_t Store::Digest() const {
