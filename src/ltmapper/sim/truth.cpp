@@ -314,6 +314,168 @@ std::size_t DirBytes(const std::string& dir) {
 
 }  // namespace
 
+namespace {
+// A session's truth clouds, voxelised: its static world (no HD) and its LD objects.
+struct SessionTruth {
+  PointCloud static_world, ld_world;
+};
+
+void WriteScenarioFiles(const Simulator& sim, const SimConfig& cfg, const std::string& truth) {
+  SimConfig resolved = cfg;
+  io::SaveConfigFields(truth + "/scenario.yaml", FieldsOf(resolved));
+  WriteObjectsCsv(truth + "/objects.csv", sim.ld_objects());
+  WriteActorsCsv(truth + "/hd_actors.csv", sim.hd_actor_info());
+}
+
+// The labelled scan of keyframe k: written as labels/NNNNNN.ply, its static and LD points added
+// to the session's truth accumulators (world frame).
+void AddScanTruth(const PointCloud& cloud, const Pose& T_world_sensor, const std::string& path, double voxel,
+                  int threads, SessionTruth* acc, SimReport* rep) {
+  auto t0 = Clock::now();
+  io::WritePly(path, cloud);
+  rep->seconds_write += Since(t0);
+  t0 = Clock::now();
+  const PointCloud world = geometry::Transform(cloud, T_world_sensor);
+  std::vector<bool> is_static(world.size()), is_ld(world.size());
+  for (std::size_t i = 0; i < world.size(); ++i) {
+    is_static[i] = world.cls[i] != PointClass::kHD;
+    is_ld[i] = is_static[i] && world.object[i] >= 0;
+    rep->hd_points += !is_static[i];
+    rep->ld_points += is_ld[i];
+  }
+  Append(acc->static_world, geometry::VoxelDownsample(world.select(is_static), voxel, threads));
+  Append(acc->ld_world, geometry::VoxelDownsample(world.select(is_ld), voxel, threads));
+  rep->seconds_truth += Since(t0);
+}
+
+// Casts every keyframe of session s (scans in keyframe order; truth written by a worker thread)
+// into `session` with the drifted odometry.
+SessionTruth CastSession(Simulator& sim, const SimConfig& cfg, int s, const std::string& tdir, int threads,
+                         Session* session, SimReport* rep) {
+  const auto& drifted = sim.T_session_sensor_drifted(s);
+  const auto& world_poses = sim.T_world_sensor(s);
+  SessionTruth acc;
+  Progress progress("sim " + session->name, std::size_t(sim.keyframes(s)));
+  OrderedWorker worker(threads != 1);
+  for (int k = 0; k < sim.keyframes(s); ++k) {
+    const auto t = Clock::now();
+    auto cloud = std::make_shared<const PointCloud>(sim.CastScan(s, k));
+    rep->seconds_cast += Since(t);
+    rep->rays += std::size_t(cfg.beams) * std::size_t(cfg.columns);
+    rep->points += cloud->size();
+    worker.Push([&, cloud, k] {
+      AddScanTruth(*cloud, world_poses[std::size_t(k)], tdir + "/labels/" + Num(k, 6) + ".ply", cfg.truth_voxel_m,
+                   threads, &acc, rep);
+      progress.Tick();
+    });
+    Keyframe kf;
+    kf.index = k;
+    kf.T_session_sensor = drifted[std::size_t(k)];
+    kf.cloud = std::move(cloud);
+    session->keyframes.push_back(std::move(kf));
+    if (k > 0) {
+      Edge e;
+      e.from = k - 1;
+      e.to = k;
+      e.T_from_to = drifted[std::size_t(k - 1)].inverse() * drifted[std::size_t(k)];
+      session->odometry.push_back(e);
+    }
+  }
+  worker.Finish();
+  progress.Done();
+  return acc;
+}
+
+// Session s: its SC-LIO-SAM folder under sessions/ and its truth folder (labelled scans, true
+// poses and origin, static world); returns its voxelised truth clouds.
+SessionTruth SimulateSession(Simulator& sim, const SimConfig& cfg, int s, const std::string& out_dir,
+                             int threads, SimReport* rep) {
+  const std::string name = SessionName(s);
+  const std::string sdir = out_dir + "/sessions/" + name, tdir = out_dir + "/truth/" + name;
+  io::MakeDirs(tdir + "/labels");
+  Session session;
+  session.name = name;
+  session.dir = sdir;
+  SessionTruth acc = CastSession(sim, cfg, s, tdir, threads, &session, rep);
+  auto t = Clock::now();
+  io::WriteSession(sdir, session);
+  WriteScLioSamG2o(sdir + "/singlesession_posegraph.g2o", session);  // replaces io's full-precision file
+  io::WriteKittiPoses(tdir + "/poses_world.txt", sim.T_world_sensor(s));
+  io::WriteKittiPoses(tdir + "/origin.txt", {sim.T_world_session(s)});
+  rep->seconds_write += Since(t);
+  t = Clock::now();
+  SessionTruth out;
+  out.static_world = geometry::VoxelDownsample(acc.static_world, cfg.truth_voxel_m, threads);
+  io::WritePcd(tdir + "/static_world.pcd", out.static_world);
+  io::WritePly(tdir + "/static_world.ply", out.static_world);
+  out.ld_world = geometry::VoxelDownsample(acc.ld_world, cfg.truth_voxel_m, threads);
+  rep->seconds_truth += Since(t);
+  rep->keyframes += std::size_t(sim.keyframes(s));
+  return out;
+}
+
+PointCloud OfClass(const PointCloud& c, PointClass k) {
+  std::vector<bool> keep(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) keep[i] = c.cls[i] == k;
+  return c.select(keep);
+}
+
+// The pair's change clouds per class (objects only, and all) into pdir, with their counts.
+void WritePairClouds(const std::string& pdir, const PointCloud& nd, const PointCloud& pd, const PointCloud& snd,
+                     const PointCloud& spd, PairTruthCounts* counts) {
+  io::MakeDirs(pdir);
+  const PointClass kinds[4] = {PointClass::kPDStrong, PointClass::kPDWeak, PointClass::kNDStrong, PointClass::kNDWeak};
+  const char* names[4] = {"pd_strong", "pd_weak", "nd_strong", "nd_weak"};
+  std::size_t* obj_counts[4] = {&counts->objects_pd_strong, &counts->objects_pd_weak, &counts->objects_nd_strong,
+                                &counts->objects_nd_weak};
+  std::size_t* all_counts[4] = {&counts->pd_strong, &counts->pd_weak, &counts->nd_strong, &counts->nd_weak};
+  PointCloud objects = nd, all;
+  Append(objects, pd);
+  for (int c = 0; c < 4; ++c) {
+    const bool is_pd = c < 2;
+    const PointCloud o = OfClass(is_pd ? pd : nd, kinds[c]);
+    PointCloud a = o;
+    Append(a, OfClass(is_pd ? spd : snd, kinds[c]));
+    io::WritePcd(pdir + "/objects_" + names[c] + ".pcd", o);
+    io::WritePcd(pdir + "/" + names[c] + ".pcd", a);
+    *obj_counts[c] = o.size();
+    *all_counts[c] = a.size();
+    Append(all, a);
+  }
+  io::WritePly(pdir + "/objects_changes.ply", objects);
+  io::WritePly(pdir + "/changes.ply", all);
+}
+
+// Change truth of the pair (central 0, query q): the LD objects that changed, plus every other
+// surface one session has and the other never observed (FORMATS.md).
+PairTruthCounts WritePairTruth(Simulator& sim, const SimConfig& cfg, int q, const std::vector<SessionTruth>& st,
+                               const std::string& truth, int threads) {
+  PairTruthCounts counts;
+  counts.query = q;
+  auto changed = [&](const PointCloud& c, int in, int out) {
+    std::vector<bool> keep(c.size());
+    for (std::size_t i = 0; i < c.size(); ++i) keep[i] = sim.IsPresent(c.object[i], in) && !sim.IsPresent(c.object[i], out);
+    return c.select(keep);
+  };
+  const SessionTruth& central = st[0];
+  const SessionTruth& query = st[std::size_t(q)];
+  // LD objects: present in one session only.
+  PointCloud nd = changed(central.ld_world, 0, q), pd = changed(query.ld_world, q, 0);
+  const auto nd_seen = SeenThrough(sim, q, nd, cfg);  // query saw through: strong ND
+  const auto pd_seen = SeenThrough(sim, 0, pd, cfg);  // central saw the space free: weak PD
+  for (std::size_t i = 0; i < nd.size(); ++i) nd.cls[i] = nd_seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak;
+  for (std::size_t i = 0; i < pd.size(); ++i) pd.cls[i] = pd_seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong;
+  // Surfaces both sessions have (permanent, LD objects present in both) that the other
+  // session never observed: weak ND (central side, kept in the map) and strong PD (query side).
+  PointCloud snd = Unobserved(sim, 0, q, central.static_world, query.static_world, cfg, threads, &counts.rays);
+  PointCloud spd = Unobserved(sim, q, 0, query.static_world, central.static_world, cfg, threads, &counts.rays);
+  snd.cls.assign(snd.size(), PointClass::kNDWeak);
+  spd.cls.assign(spd.size(), PointClass::kPDStrong);
+  WritePairClouds(truth + "/pair_00_" + Num(q, 2), nd, pd, snd, spd, &counts);
+  return counts;
+}
+}  // namespace
+
 SimReport Simulate(const SimConfig& user_cfg, const std::string& out_dir, int threads) {
   const SimConfig cfg = ResolveLidar(user_cfg);
   const auto t_total = Clock::now();
@@ -330,135 +492,11 @@ SimReport Simulate(const SimConfig& user_cfg, const std::string& out_dir, int th
   const std::string truth = out_dir + "/truth";
   io::MakeDirs(out_dir + "/sessions");
   io::MakeDirs(truth);
-  SimConfig resolved = cfg;
-  io::SaveConfigFields(truth + "/scenario.yaml", FieldsOf(resolved));
-  WriteObjectsCsv(truth + "/objects.csv", sim.ld_objects());
-  WriteActorsCsv(truth + "/hd_actors.csv", sim.hd_actor_info());
-
-  const double voxel = cfg.truth_voxel_m;
-  std::vector<PointCloud> ld_world(static_cast<std::size_t>(N)), static_worlds(static_cast<std::size_t>(N));
-  for (int s = 0; s < N; ++s) {
-    const std::string name = SessionName(s);
-    const std::string sdir = out_dir + "/sessions/" + name, tdir = truth + "/" + name;
-    io::MakeDirs(tdir + "/labels");
-    const auto& drifted = sim.T_session_sensor_drifted(s);
-    const auto& world_poses = sim.T_world_sensor(s);
-    Session session;
-    session.name = name;
-    session.dir = sdir;
-    PointCloud static_acc, ld_acc;
-    Progress progress("sim " + name, std::size_t(sim.keyframes(s)));
-    OrderedWorker worker(threads != 1);
-    for (int k = 0; k < sim.keyframes(s); ++k) {
-      t = Clock::now();
-      auto cloud = std::make_shared<const PointCloud>(sim.CastScan(s, k));
-      rep.seconds_cast += Since(t);
-      rep.rays += std::size_t(cfg.beams) * std::size_t(cfg.columns);
-      rep.points += cloud->size();
-      worker.Push([&, cloud, k] {
-        auto t0 = Clock::now();
-        io::WritePly(tdir + "/labels/" + Num(k, 6) + ".ply", *cloud);
-        rep.seconds_write += Since(t0);
-        t0 = Clock::now();
-        const PointCloud world = geometry::Transform(*cloud, world_poses[std::size_t(k)]);
-        std::vector<bool> is_static(world.size()), is_ld(world.size());
-        for (std::size_t i = 0; i < world.size(); ++i) {
-          is_static[i] = world.cls[i] != PointClass::kHD;
-          is_ld[i] = is_static[i] && world.object[i] >= 0;
-          rep.hd_points += !is_static[i];
-          rep.ld_points += is_ld[i];
-        }
-        Append(static_acc, geometry::VoxelDownsample(world.select(is_static), voxel, threads));
-        Append(ld_acc, geometry::VoxelDownsample(world.select(is_ld), voxel, threads));
-        rep.seconds_truth += Since(t0);
-        progress.Tick();
-      });
-      Keyframe kf;
-      kf.index = k;
-      kf.T_session_sensor = drifted[std::size_t(k)];
-      kf.cloud = std::move(cloud);
-      session.keyframes.push_back(std::move(kf));
-      if (k > 0) {
-        Edge e;
-        e.from = k - 1;
-        e.to = k;
-        e.T_from_to = drifted[std::size_t(k - 1)].inverse() * drifted[std::size_t(k)];
-        session.odometry.push_back(e);
-      }
-    }
-    worker.Finish();
-    progress.Done();
-    t = Clock::now();
-    io::WriteSession(sdir, session);
-    WriteScLioSamG2o(sdir + "/singlesession_posegraph.g2o", session);  // replaces io's full-precision file
-    io::WriteKittiPoses(tdir + "/poses_world.txt", world_poses);
-    io::WriteKittiPoses(tdir + "/origin.txt", {sim.T_world_session(s)});
-    rep.seconds_write += Since(t);
-    t = Clock::now();
-    const PointCloud static_world = geometry::VoxelDownsample(static_acc, voxel, threads);
-    io::WritePcd(tdir + "/static_world.pcd", static_world);
-    io::WritePly(tdir + "/static_world.ply", static_world);
-    ld_world[std::size_t(s)] = geometry::VoxelDownsample(ld_acc, voxel, threads);
-    static_worlds[std::size_t(s)] = static_world;
-    rep.seconds_truth += Since(t);
-    rep.keyframes += std::size_t(sim.keyframes(s));
-  }
-
-  // Change truth per pair (central 0, query k): the LD objects that changed (objects_*), plus
-  // every other surface one session has and the other never observed (FORMATS.md).
+  WriteScenarioFiles(sim, cfg, truth);
+  std::vector<SessionTruth> st;
+  for (int s = 0; s < N; ++s) st.push_back(SimulateSession(sim, cfg, s, out_dir, threads, &rep));
   t = Clock::now();
-  for (int q = 1; q < N; ++q) {
-    PairTruthCounts counts;
-    counts.query = q;
-    auto changed = [&](const PointCloud& c, int in, int out) {
-      std::vector<bool> keep(c.size());
-      for (std::size_t i = 0; i < c.size(); ++i) {
-        keep[i] = sim.IsPresent(c.object[i], in) && !sim.IsPresent(c.object[i], out);
-      }
-      return c.select(keep);
-    };
-    // LD objects: present in one session only.
-    PointCloud nd = changed(ld_world[0], 0, q), pd = changed(ld_world[std::size_t(q)], q, 0);
-    const auto nd_seen = SeenThrough(sim, q, nd, cfg);  // query saw through: strong ND
-    const auto pd_seen = SeenThrough(sim, 0, pd, cfg);  // central saw the space free: weak PD
-    for (std::size_t i = 0; i < nd.size(); ++i) nd.cls[i] = nd_seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak;
-    for (std::size_t i = 0; i < pd.size(); ++i) pd.cls[i] = pd_seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong;
-    // Surfaces both sessions have (permanent, LD objects present in both) that the other
-    // session never observed: weak ND (central side, kept in the map) and strong PD (query side).
-    PointCloud snd = Unobserved(sim, 0, q, static_worlds[0], static_worlds[std::size_t(q)], cfg, threads, &counts.rays);
-    PointCloud spd = Unobserved(sim, q, 0, static_worlds[std::size_t(q)], static_worlds[0], cfg, threads, &counts.rays);
-    snd.cls.assign(snd.size(), PointClass::kNDWeak);
-    spd.cls.assign(spd.size(), PointClass::kPDStrong);
-
-    auto of = [](const PointCloud& c, PointClass k) {
-      std::vector<bool> keep(c.size());
-      for (std::size_t i = 0; i < c.size(); ++i) keep[i] = c.cls[i] == k;
-      return c.select(keep);
-    };
-    const std::string pdir = truth + "/pair_00_" + Num(q, 2);
-    io::MakeDirs(pdir);
-    const PointClass kinds[4] = {PointClass::kPDStrong, PointClass::kPDWeak, PointClass::kNDStrong, PointClass::kNDWeak};
-    const char* names[4] = {"pd_strong", "pd_weak", "nd_strong", "nd_weak"};
-    std::size_t* obj_counts[4] = {&counts.objects_pd_strong, &counts.objects_pd_weak, &counts.objects_nd_strong,
-                                  &counts.objects_nd_weak};
-    std::size_t* all_counts[4] = {&counts.pd_strong, &counts.pd_weak, &counts.nd_strong, &counts.nd_weak};
-    PointCloud objects = nd, all;
-    Append(objects, pd);
-    for (int c = 0; c < 4; ++c) {
-      const bool is_pd = c < 2;
-      const PointCloud o = of(is_pd ? pd : nd, kinds[c]);
-      PointCloud a = o;
-      Append(a, of(is_pd ? spd : snd, kinds[c]));
-      io::WritePcd(pdir + "/objects_" + names[c] + ".pcd", o);
-      io::WritePcd(pdir + "/" + names[c] + ".pcd", a);
-      *obj_counts[c] = o.size();
-      *all_counts[c] = a.size();
-      Append(all, a);
-    }
-    io::WritePly(pdir + "/objects_changes.ply", objects);
-    io::WritePly(pdir + "/changes.ply", all);
-    rep.pairs.push_back(counts);
-  }
+  for (int q = 1; q < N; ++q) rep.pairs.push_back(WritePairTruth(sim, cfg, q, st, truth, threads));
   rep.seconds_truth += Since(t);
   rep.rays_per_s = rep.seconds_cast > 0 ? double(rep.rays) / rep.seconds_cast : 0.0;
   rep.bytes_written = DirBytes(out_dir);
