@@ -237,150 +237,200 @@ void AddBuilding(Mesh& m, const Grid& grid, const Terrain& terrain, const Lot& l
   }
 }
 
-// Permanent world and its free slots. Raised blocks between the streets carry sidewalks with
-// poles and trees, parking strips along the curbs, and lots with buildings or open yards.
-Slots BuildStatic(const SimConfig& cfg, const Grid& grid, const Terrain& terrain, Rng& rng, Mesh& m) {
-  Slots slots;
-  const double H = grid.half_extent, r = grid.road_half, sw = grid.sidewalk;
-  // Ground (roads) and raised blocks.
-  AddHeightPatch(m, terrain, -H, H, -H, H, cfg.ground_cell_m, 0.0, kAsphalt);
-  std::vector<double> b = {-H};
-  for (double l : grid.lines) {
-    b.push_back(l - r);
-    b.push_back(l + r);
+// The street-facing side of a raised block: the curb from curb0 along dir (len), inward `in`,
+// with `avail` of depth for lots behind the sidewalk.
+struct Side {
+  Eigen::Vector2d curb0, dir, in;
+  double len, avail;
+  Eigen::Vector2d At(double u, double v) const { return curb0 + dir * u + in * v; }
+};
+
+// A block's extent along one axis, and whether a street lies on each end.
+struct Interval {
+  double lo, hi;
+  bool street_lo, street_hi;
+};
+
+// The permanent world built block by block (the rng is drawn in a fixed order: same seed, same
+// world): sidewalks with poles and trees, parking strips along the curbs, lots with buildings or
+// open yards; the free slots are kept for the LD objects.
+class StaticBuilder {
+ public:
+  StaticBuilder(const SimConfig& cfg, const Grid& grid, const Terrain& terrain, Rng& rng, Mesh& m)
+      : cfg_(cfg), grid_(grid), terrain_(terrain), rng_(rng), m_(m), repetitive_(cfg.scenario == "repetitive") {}
+
+  Slots Build() {
+    const double H = grid_.half_extent;
+    AddHeightPatch(m_, terrain_, -H, H, -H, H, cfg_.ground_cell_m, 0.0, kAsphalt);  // ground (roads)
+    const std::vector<Interval> iv = Blocks();
+    for (const auto& X : iv)
+      for (const auto& Y : iv) Block(X, Y);
+    return std::move(slots_);
   }
-  b.push_back(H);
-  struct Interval {
-    double lo, hi;
-    bool street_lo, street_hi;
-  };
-  std::vector<Interval> iv;
-  for (std::size_t i = 0; i + 1 < b.size(); i += 2) {
-    if (b[i + 1] - b[i] > 2.0) iv.push_back({b[i], b[i + 1], i > 0, i + 2 < b.size()});
+
+ private:
+  // The raised blocks' extents between the streets (one axis; the grid is square).
+  std::vector<Interval> Blocks() const {
+    const double H = grid_.half_extent, r = grid_.road_half;
+    std::vector<double> b = {-H};
+    for (double l : grid_.lines) {
+      b.push_back(l - r);
+      b.push_back(l + r);
+    }
+    b.push_back(H);
+    std::vector<Interval> iv;
+    for (std::size_t i = 0; i + 1 < b.size(); i += 2)
+      if (b[i + 1] - b[i] > 2.0) iv.push_back({b[i], b[i + 1], i > 0, i + 2 < b.size()});
+    return iv;
   }
-  const bool repetitive = cfg.scenario == "repetitive";
-  std::vector<Rect> footprints;
-  for (const auto& X : iv) {
-    for (const auto& Y : iv) {
-      AddHeightPatch(m, terrain, X.lo, X.hi, Y.lo, Y.hi, cfg.ground_cell_m, cfg.curb_m, kConcrete);
-      // Sides facing streets: x-facing first (full length), then y-facing.
-      struct Side {
-        Eigen::Vector2d curb0, dir, in;
-        double len, avail;
-      };
-      std::vector<Side> sides;
-      const double wx = X.hi - X.lo, wy = Y.hi - Y.lo;
-      const double ax = (X.street_lo && X.street_hi ? 0.5 * (wx - 2 * sw) : wx - sw) - 0.5;
-      const double ay = (Y.street_lo && Y.street_hi ? 0.5 * (wy - 2 * sw) : wy - sw) - 0.5;
-      if (X.street_lo) sides.push_back({{X.lo, Y.lo}, {0, 1}, {1, 0}, wy, ax});
-      if (X.street_hi) sides.push_back({{X.hi, Y.lo}, {0, 1}, {-1, 0}, wy, ax});
-      if (Y.street_lo) sides.push_back({{X.lo, Y.lo}, {1, 0}, {0, 1}, wx, ay});
-      if (Y.street_hi) sides.push_back({{X.lo, Y.hi}, {1, 0}, {0, -1}, wx, ay});
-      for (const auto& s : sides) {
-        AddCurb(m, terrain, s.curb0, s.curb0 + s.dir * s.len, cfg.curb_m, cfg.ground_cell_m);
-        auto at = [&](double u, double v) { return Eigen::Vector2d(s.curb0 + s.dir * u + s.in * v); };
-        // Poles and trees on the sidewalk.
-        std::vector<double> poles;
-        for (double u = rng.Uniform(2.0, cfg.pole_spacing_m); u < s.len - 2.0; u += cfg.pole_spacing_m) {
-          const Eigen::Vector2d p = at(u, 0.4);
-          AddPole(m, p, grid.GroundZ(terrain, p.x(), p.y()), -s.in);
-          poles.push_back(u);
-        }
-        for (double u = rng.Uniform(3.0, cfg.tree_spacing_m); u < s.len - 3.0; u += cfg.tree_spacing_m) {
-          bool near_pole = false;
-          for (double pu : poles) near_pole |= std::abs(pu - u) < 2.0;
-          if (near_pole) continue;
-          const Eigen::Vector2d p = at(u, 1.4);
-          if (rng.Bernoulli(cfg.tree_fill)) {
-            AddTree(m, p, grid.GroundZ(terrain, p.x(), p.y()), rng);
-          } else {
-            slots.trees.push_back({p, 0.0});
-          }
-        }
-        // Parking strip on the road next to the curb, clear of the intersections.
-        const double clear = cfg.corner_radius_m + 2.0;
-        const double yaw = std::atan2(s.dir.y(), s.dir.x());
-        for (double u = clear; u + clear < s.len; u += 6.5) {
-          const Eigen::Vector2d p = at(u, -1.25);
-          const double z = terrain.Height(p.x(), p.y());
-          if (rng.Bernoulli(cfg.parking_fill)) {
-            const double kind = rng.Uniform();
-            if (kind < 0.8) {
-              AddCar(m, p, z, yaw, rng.Uniform(4.0, 4.8), rng.Uniform(1.7, 1.9), kPaint);
-            } else if (kind < 0.95) {
-              AddVan(m, p, z, yaw);
-            } else if (u + 6.5 + clear < s.len) {
-              AddTruck(m, at(u + 3.0, -1.25), z, yaw, 9.0);
-              u += 6.5;
-            }
-          } else {
-            slots.park.push_back({p, yaw});
-          }
-        }
-        // Lots along the building line.
-        if (s.avail < 4.0) continue;
-        Lot proto;
-        proto.origin = at(0, sw);
-        proto.dir = s.dir;
-        proto.in = s.in;
-        for (double u = sw; u + 8.0 < s.len - sw;) {
-          const double w = std::min(repetitive ? 16.0 : rng.Uniform(12.0, 24.0), s.len - sw - u);
-          const bool open = rng.Bernoulli(cfg.open_lot_fraction);
-          const double depth = open ? std::min(14.0, s.avail)
-                                    : (repetitive ? std::min(12.0, s.avail) : rng.Uniform(8.0, std::min(16.0, s.avail)));
-          const Eigen::Vector2d p0 = proto.P(u, 0), p1 = proto.P(u + w, depth);
-          const Rect rect{p0.cwiseMin(p1), p0.cwiseMax(p1)};
-          bool overlap = false;
-          for (const auto& f : footprints) overlap |= rect.Overlaps(f);
-          if (overlap) {
-            u += 2.0;
-            continue;
-          }
-          footprints.push_back(rect);
-          if (open) {
-            const double kind = rng.Uniform();
-            if (kind < 0.7) {
-              Lot lot = proto;
-              lot.origin = proto.P(u, 0);
-              lot.width = w;
-              lot.depth = depth;
-              slots.lots.push_back(lot);
-            } else if (kind < 0.9) {  // walled yard with a gate
-              const double gate = rng.Uniform(2.0, w - 6.0), h = rng.Uniform(1.8, 2.6);
-              const Eigen::Vector2d a = proto.P(u + 0.3, 0.2), g0 = proto.P(u + gate, 0.2),
-                                    g1 = proto.P(u + gate + 4.0, 0.2), e = proto.P(u + w - 0.3, 0.2);
-              for (auto [pa, pb] : {std::make_pair(a, g0), std::make_pair(g1, e)}) {
-                const Eigen::Vector2d c = 0.5 * (pa + pb);
-                m.AddBox(c, grid.GroundZ(terrain, c.x(), c.y()) - 0.2, {(pb - pa).norm(), 0.3, h + 0.2},
-                         proto.yaw(), kConcrete);
-              }
-            } else {  // fenced yard
-              AddPanels(m, grid, terrain, proto.P(u + 0.5, 0.3), proto.P(u + w - 0.5, 0.3), 2.5,
-                        0.15, 1.6, 0.05, kMetal);
-            }
-          } else if (repetitive) {
-            const double h = 0.5 * (cfg.building_min_height_m + cfg.building_max_height_m);
-            AddBuilding(m, grid, terrain, proto, u + 1.0, w - 2.0, 1.0, depth - 1.0, h,
-                        {{{u + 0.25 * w, 3.0, 0.8, 3.0, h - 1.0}}, {{u + 0.75 * w, 3.0, 0.8, 3.0, h - 1.0}}});
-          } else {
-            const double setback = rng.Uniform(0.8, 2.5), gap = rng.Uniform(0.0, 2.0);
-            const double h = rng.Uniform(cfg.building_min_height_m, cfg.building_max_height_m);
-            std::vector<std::array<double, 5>> bays;
-            const int nb = rng.Int(4);
-            for (int k = 0; k < nb; ++k) {
-              const double bw = rng.Uniform(2.0, 4.5);
-              const double bu = u + gap + rng.Uniform(0.5 * bw, std::max(0.5 * bw, w - 2 * gap - 0.5 * bw));
-              const double z0 = rng.Uniform(0.0, 4.0);
-              bays.push_back({bu, bw, rng.Uniform(0.3, setback), z0, std::max(z0 + 2.0, h - rng.Uniform(0.0, 3.0))});
-            }
-            AddBuilding(m, grid, terrain, proto, u + gap, w - 2 * gap, setback, depth - setback, h, bays);
-          }
-          u += w + (repetitive ? 4.0 : 0.0);
-        }
+
+  // One raised block: its ground, then each street-facing side (x-facing first, full length).
+  void Block(const Interval& X, const Interval& Y) {
+    const double sw = grid_.sidewalk;
+    AddHeightPatch(m_, terrain_, X.lo, X.hi, Y.lo, Y.hi, cfg_.ground_cell_m, cfg_.curb_m, kConcrete);
+    std::vector<Side> sides;
+    const double wx = X.hi - X.lo, wy = Y.hi - Y.lo;
+    const double ax = (X.street_lo && X.street_hi ? 0.5 * (wx - 2 * sw) : wx - sw) - 0.5;
+    const double ay = (Y.street_lo && Y.street_hi ? 0.5 * (wy - 2 * sw) : wy - sw) - 0.5;
+    if (X.street_lo) sides.push_back({{X.lo, Y.lo}, {0, 1}, {1, 0}, wy, ax});
+    if (X.street_hi) sides.push_back({{X.hi, Y.lo}, {0, 1}, {-1, 0}, wy, ax});
+    if (Y.street_lo) sides.push_back({{X.lo, Y.lo}, {1, 0}, {0, 1}, wx, ay});
+    if (Y.street_hi) sides.push_back({{X.lo, Y.hi}, {1, 0}, {0, -1}, wx, ay});
+    for (const auto& s : sides) {
+      AddCurb(m_, terrain_, s.curb0, s.curb0 + s.dir * s.len, cfg_.curb_m, cfg_.ground_cell_m);
+      Sidewalk(s);
+      ParkingStrip(s);
+      if (s.avail >= 4.0) Lots(s);
+    }
+  }
+
+  // Poles, then trees clear of them (a tree slot left empty is free for LD trees).
+  void Sidewalk(const Side& s) {
+    std::vector<double> poles;
+    for (double u = rng_.Uniform(2.0, cfg_.pole_spacing_m); u < s.len - 2.0; u += cfg_.pole_spacing_m) {
+      const Eigen::Vector2d p = s.At(u, 0.4);
+      AddPole(m_, p, grid_.GroundZ(terrain_, p.x(), p.y()), -s.in);
+      poles.push_back(u);
+    }
+    for (double u = rng_.Uniform(3.0, cfg_.tree_spacing_m); u < s.len - 3.0; u += cfg_.tree_spacing_m) {
+      bool near_pole = false;
+      for (double pu : poles) near_pole |= std::abs(pu - u) < 2.0;
+      if (near_pole) continue;
+      const Eigen::Vector2d p = s.At(u, 1.4);
+      if (rng_.Bernoulli(cfg_.tree_fill))
+        AddTree(m_, p, grid_.GroundZ(terrain_, p.x(), p.y()), rng_);
+      else
+        slots_.trees.push_back({p, 0.0});
+    }
+  }
+
+  // Parking strip on the road next to the curb, clear of the intersections.
+  void ParkingStrip(const Side& s) {
+    const double clear = cfg_.corner_radius_m + 2.0;
+    const double yaw = std::atan2(s.dir.y(), s.dir.x());
+    for (double u = clear; u + clear < s.len; u += 6.5) {
+      const Eigen::Vector2d p = s.At(u, -1.25);
+      const double z = terrain_.Height(p.x(), p.y());
+      if (!rng_.Bernoulli(cfg_.parking_fill)) {
+        slots_.park.push_back({p, yaw});
+        continue;
+      }
+      const double kind = rng_.Uniform();
+      if (kind < 0.8) {
+        AddCar(m_, p, z, yaw, rng_.Uniform(4.0, 4.8), rng_.Uniform(1.7, 1.9), kPaint);
+      } else if (kind < 0.95) {
+        AddVan(m_, p, z, yaw);
+      } else if (u + 6.5 + clear < s.len) {
+        AddTruck(m_, s.At(u + 3.0, -1.25), z, yaw, 9.0);
+        u += 6.5;
       }
     }
   }
-  return slots;
+
+  // Lots along the building line, each open (a yard, walled, fenced) or built.
+  void Lots(const Side& s) {
+    const double sw = grid_.sidewalk;
+    Lot proto;
+    proto.origin = s.At(0, sw);
+    proto.dir = s.dir;
+    proto.in = s.in;
+    for (double u = sw; u + 8.0 < s.len - sw;) {
+      const double w = std::min(repetitive_ ? 16.0 : rng_.Uniform(12.0, 24.0), s.len - sw - u);
+      const bool open = rng_.Bernoulli(cfg_.open_lot_fraction);
+      const double depth = open ? std::min(14.0, s.avail)
+                                : (repetitive_ ? std::min(12.0, s.avail) : rng_.Uniform(8.0, std::min(16.0, s.avail)));
+      const Eigen::Vector2d p0 = proto.P(u, 0), p1 = proto.P(u + w, depth);
+      const Rect rect{p0.cwiseMin(p1), p0.cwiseMax(p1)};
+      bool overlap = false;
+      for (const auto& f : footprints_) overlap |= rect.Overlaps(f);
+      if (overlap) {
+        u += 2.0;
+        continue;
+      }
+      footprints_.push_back(rect);
+      if (open)
+        OpenLot(proto, u, w, depth);
+      else
+        BuiltLot(proto, u, w, depth);
+      u += w + (repetitive_ ? 4.0 : 0.0);
+    }
+  }
+
+  void OpenLot(const Lot& proto, double u, double w, double depth) {
+    const double kind = rng_.Uniform();
+    if (kind < 0.7) {  // free for LD objects
+      Lot lot = proto;
+      lot.origin = proto.P(u, 0);
+      lot.width = w;
+      lot.depth = depth;
+      slots_.lots.push_back(lot);
+    } else if (kind < 0.9) {  // walled yard with a gate
+      const double gate = rng_.Uniform(2.0, w - 6.0), h = rng_.Uniform(1.8, 2.6);
+      const Eigen::Vector2d a = proto.P(u + 0.3, 0.2), g0 = proto.P(u + gate, 0.2), g1 = proto.P(u + gate + 4.0, 0.2),
+                            e = proto.P(u + w - 0.3, 0.2);
+      for (auto [pa, pb] : {std::make_pair(a, g0), std::make_pair(g1, e)}) {
+        const Eigen::Vector2d c = 0.5 * (pa + pb);
+        m_.AddBox(c, grid_.GroundZ(terrain_, c.x(), c.y()) - 0.2, {(pb - pa).norm(), 0.3, h + 0.2}, proto.yaw(),
+                  kConcrete);
+      }
+    } else {  // fenced yard
+      AddPanels(m_, grid_, terrain_, proto.P(u + 0.5, 0.3), proto.P(u + w - 0.5, 0.3), 2.5, 0.15, 1.6, 0.05, kMetal);
+    }
+  }
+
+  void BuiltLot(const Lot& proto, double u, double w, double depth) {
+    if (repetitive_) {
+      const double h = 0.5 * (cfg_.building_min_height_m + cfg_.building_max_height_m);
+      AddBuilding(m_, grid_, terrain_, proto, u + 1.0, w - 2.0, 1.0, depth - 1.0, h,
+                  {{{u + 0.25 * w, 3.0, 0.8, 3.0, h - 1.0}}, {{u + 0.75 * w, 3.0, 0.8, 3.0, h - 1.0}}});
+      return;
+    }
+    const double setback = rng_.Uniform(0.8, 2.5), gap = rng_.Uniform(0.0, 2.0);
+    const double h = rng_.Uniform(cfg_.building_min_height_m, cfg_.building_max_height_m);
+    std::vector<std::array<double, 5>> bays;
+    const int nb = rng_.Int(4);
+    for (int k = 0; k < nb; ++k) {
+      const double bw = rng_.Uniform(2.0, 4.5);
+      const double bu = u + gap + rng_.Uniform(0.5 * bw, std::max(0.5 * bw, w - 2 * gap - 0.5 * bw));
+      const double z0 = rng_.Uniform(0.0, 4.0);
+      bays.push_back({bu, bw, rng_.Uniform(0.3, setback), z0, std::max(z0 + 2.0, h - rng_.Uniform(0.0, 3.0))});
+    }
+    AddBuilding(m_, grid_, terrain_, proto, u + gap, w - 2 * gap, setback, depth - setback, h, bays);
+  }
+
+  const SimConfig& cfg_;
+  const Grid& grid_;
+  const Terrain& terrain_;
+  Rng& rng_;
+  Mesh& m_;
+  const bool repetitive_;
+  Slots slots_;
+  std::vector<Rect> footprints_;
+};
+
+// Permanent world and its free slots.
+Slots BuildStatic(const SimConfig& cfg, const Grid& grid, const Terrain& terrain, Rng& rng, Mesh& m) {
+  return StaticBuilder(cfg, grid, terrain, rng, m).Build();
 }
 
 // ------------------------------------------------------------------------------- LD objects
@@ -415,138 +465,186 @@ std::vector<int> Range(int a, int b) {  // [a, b)
   return r;
 }
 
-std::vector<LdObject> PlaceLd(const SimConfig& cfg, const Grid& grid, const Terrain& terrain,
-                              Slots& slots, const std::vector<Path>& routes, Rng& rng) {
-  std::vector<LdObject> out;
-  const int N = cfg.sessions;
-  if (N < 2) return out;
-  Picker pick{&routes, cfg.ld_route_distance_m, &rng};
-  std::vector<Eigen::Vector2d> pp, tp, lp;
-  for (auto& s : slots.park) pp.push_back(s.c);
-  for (auto& s : slots.trees) tp.push_back(s.c);
-  for (auto& l : slots.lots) lp.push_back(l.P(0.5 * l.width, 0));
-  const auto park_order = pick.Order(pp), tree_order = pick.Order(tp), lot_order = pick.Order(lp);
-  std::size_t park_i = 0, tree_i = 0, lot_i = 0;
-  auto next_lot = [&](double min_w, double min_depth) -> Lot* {
-    for (; lot_i < lot_order.size(); ++lot_i) {
-      Lot& l = slots.lots[lot_order[lot_i]];
+// The LD objects placed kind by kind into the free slots, those near the routes first (the rng
+// is drawn in a fixed order: same seed, same objects).
+class LdPlacer {
+ public:
+  LdPlacer(const SimConfig& cfg, const Grid& grid, const Terrain& terrain, Slots& slots, const std::vector<Path>& routes,
+           Rng& rng)
+      : cfg_(cfg), grid_(grid), terrain_(terrain), slots_(slots), routes_(routes), rng_(rng), N_(cfg.sessions) {
+    const Picker pick{&routes, cfg.ld_route_distance_m, &rng};
+    std::vector<Eigen::Vector2d> pp, tp, lp;
+    for (auto& s : slots.park) pp.push_back(s.c);
+    for (auto& s : slots.trees) tp.push_back(s.c);
+    for (auto& l : slots.lots) lp.push_back(l.P(0.5 * l.width, 0));
+    park_order_ = pick.Order(pp);
+    tree_order_ = pick.Order(tp);
+    lot_order_ = pick.Order(lp);
+  }
+
+  std::vector<LdObject> Place() {
+    ParkedCars();
+    for (int i = 0; i < cfg_.ld_trees_cut && tree_i_ < tree_order_.size(); ++i) {
+      const Slot& s = slots_.trees[tree_order_[tree_i_++]];
+      AddTree(Add("tree", Range(0, ChangeSession()), "open"), s.c, Gz(s.c), rng_);
+    }
+    Fences();
+    Containers();
+    Structures();
+    WallReveals();
+    Occluded();
+    for (auto& o : out_) {
+      const auto bb = o.mesh.Bounds();
+      o.info.box_min = bb.min();
+      o.info.box_max = bb.max();
+      o.info.centroid = bb.center();
+    }
+    return std::move(out_);
+  }
+
+ private:
+  // The next unused lot (route order) at least this wide and deep, or null.
+  Lot* NextLot(double min_w, double min_depth) {
+    for (; lot_i_ < lot_order_.size(); ++lot_i_) {
+      Lot& l = slots_.lots[lot_order_[lot_i_]];
       if (!l.used && l.width >= min_w && l.depth >= min_depth) {
         l.used = true;
-        ++lot_i;
+        ++lot_i_;
         return &l;
       }
     }
     return nullptr;
-  };
-  auto change_session = [&]() { return 1 + rng.Int(N - 1); };  // in [1, N-1]
-  auto add = [&](const std::string& cls, std::vector<int> present, const std::string& placement) -> Mesh& {
+  }
+  int ChangeSession() { return 1 + rng_.Int(N_ - 1); }  // in [1, N-1]
+  Mesh& Add(const std::string& cls, std::vector<int> present, const std::string& placement) {
     LdObject o;
-    o.info.id = int(out.size());
+    o.info.id = int(out_.size());
     o.info.cls = cls;
     o.info.present_in = std::move(present);
     o.info.placement = placement;
-    out.push_back(std::move(o));
-    return out.back().mesh;
-  };
-  auto gz = [&](const Eigen::Vector2d& p) { return grid.GroundZ(terrain, p.x(), p.y()); };
+    out_.push_back(std::move(o));
+    return out_.back().mesh;
+  }
+  double Gz(const Eigen::Vector2d& p) const { return grid_.GroundZ(terrain_, p.x(), p.y()); }
 
-  // Parked cars come and go at random, except that (with 2+ sessions) the first car whose slot
-  // lies near both the central and the last route is new in the last session (a parked car the
-  // live map must show and the meta map must not) and the next such car left after session 0.
-  std::vector<int> forced_new = {N - 1}, forced_gone = {0};
-  std::vector<std::vector<int>*> forced = {&forced_new, &forced_gone};
-  std::size_t forced_i = 0;
-  for (int i = 0; i < cfg.ld_parked_cars && park_i < park_order.size(); ++i) {
-    const Slot& s = slots.park[park_order[park_i++]];
-    std::vector<int> present;
-    do {
-      present.clear();
-      for (int k = 0; k < N; ++k) {
-        if (rng.Bernoulli(0.5)) present.push_back(k);
+  // Parked cars come and go at random, except that the first car whose slot lies near both the
+  // central and the last route is new in the last session (a parked car the live map must show
+  // and the meta map must not) and the next such car left after session 0.
+  void ParkedCars() {
+    std::vector<int> forced_new = {N_ - 1}, forced_gone = {0};
+    std::vector<std::vector<int>*> forced = {&forced_new, &forced_gone};
+    std::size_t forced_i = 0;
+    for (int i = 0; i < cfg_.ld_parked_cars && park_i_ < park_order_.size(); ++i) {
+      const Slot& s = slots_.park[park_order_[park_i_++]];
+      std::vector<int> present;
+      do {
+        present.clear();
+        for (int k = 0; k < N_; ++k)
+          if (rng_.Bernoulli(0.5)) present.push_back(k);
+      } while (present.empty() || int(present.size()) == N_);
+      if (N_ >= 2 && forced_i < forced.size() && routes_[0].Distance(s.c) <= cfg_.ld_route_distance_m &&
+          routes_[std::size_t(N_ - 1)].Distance(s.c) <= cfg_.ld_route_distance_m)
+        present = *forced[forced_i++];
+      AddCar(Add("car", present, "open"), s.c, terrain_.Height(s.c.x(), s.c.y()), s.yaw, rng_.Uniform(4.0, 4.8),
+             rng_.Uniform(1.7, 1.9), kPaint);
+    }
+  }
+
+  void Fences() {
+    for (int i = 0; i < cfg_.ld_fences; ++i) {
+      Lot* l = NextLot(8.0, 3.0);
+      if (!l) break;
+      const int m = ChangeSession();
+      Mesh& mesh = Add("fence", i % 2 == 0 ? Range(m, N_) : Range(0, m), "open");
+      AddPanels(mesh, grid_, terrain_, l->P(1.0, 0.4), l->P(l->width - 1.0, 0.4), 3.4, 0.1, 2.0, 0.05, kMetal);
+    }
+  }
+
+  // A container moved from one lot to another at a change session.
+  void Containers() {
+    for (int i = 0; i < cfg_.ld_containers; ++i) {
+      Lot* a = NextLot(8.0, 6.0);
+      Lot* b = a ? NextLot(8.0, 6.0) : nullptr;
+      if (!b) break;
+      const int m = ChangeSession();
+      for (auto [lot, present] : {std::make_pair(a, Range(0, m)), std::make_pair(b, Range(m, N_))}) {
+        const Eigen::Vector2d c = lot->P(0.5 * lot->width, 4.0);
+        Add("container", present, "open").AddBox(c, Gz(c) - 0.05, {6.06, 2.44, 2.64}, lot->yaw(), kMetal);
       }
-    } while (present.empty() || int(present.size()) == N);
-    if (N >= 2 && forced_i < forced.size() && routes[0].Distance(s.c) <= cfg.ld_route_distance_m &&
-        routes[std::size_t(N - 1)].Distance(s.c) <= cfg.ld_route_distance_m)
-      present = *forced[forced_i++];
-    AddCar(add("car", present, "open"), s.c, terrain.Height(s.c.x(), s.c.y()), s.yaw,
-           rng.Uniform(4.0, 4.8), rng.Uniform(1.7, 1.9), kPaint);
-  }
-  for (int i = 0; i < cfg.ld_trees_cut && tree_i < tree_order.size(); ++i) {
-    const Slot& s = slots.trees[tree_order[tree_i++]];
-    AddTree(add("tree", Range(0, change_session()), "open"), s.c, gz(s.c), rng);
-  }
-  for (int i = 0; i < cfg.ld_fences; ++i) {
-    Lot* l = next_lot(8.0, 3.0);
-    if (!l) break;
-    const int m = change_session();
-    Mesh& mesh = add("fence", i % 2 == 0 ? Range(m, N) : Range(0, m), "open");
-    AddPanels(mesh, grid, terrain, l->P(1.0, 0.4), l->P(l->width - 1.0, 0.4), 3.4, 0.1, 2.0, 0.05, kMetal);
-  }
-  for (int i = 0; i < cfg.ld_containers; ++i) {
-    Lot* a = next_lot(8.0, 6.0);
-    Lot* b = a ? next_lot(8.0, 6.0) : nullptr;
-    if (!b) break;
-    const int m = change_session();
-    for (auto [lot, present] : {std::make_pair(a, Range(0, m)), std::make_pair(b, Range(m, N))}) {
-      const Eigen::Vector2d c = lot->P(0.5 * lot->width, 4.0);
-      add("container", present, "open").AddBox(c, gz(c) - 0.05, {6.06, 2.44, 2.64}, lot->yaw(), kMetal);
     }
   }
-  for (int i = 0; i < cfg.ld_structures; ++i) {
-    Lot* l = next_lot(6.0, 7.0);
-    if (!l) break;
-    const Eigen::Vector2d c = l->P(0.5 * l->width, 5.0);
-    Mesh& mesh = add("structure", Range(change_session(), N), "open");
-    mesh.AddBox(c, gz(c) - 0.05, {3.0, 3.0, 2.85}, l->yaw(), kPaint);
-    mesh.AddBox(c, gz(c) + 2.8, {3.6, 3.6, 0.2}, l->yaw(), kMetal, true);
-  }
-  for (int i = 0; i < cfg.ld_wall_reveals; ++i) {
-    // The central session sees a wall; later sessions see the wall gone and a shed behind it,
-    // in space the central could not observe (strong PD).
-    Lot* l = next_lot(12.0, 12.0);
-    if (!l) break;
-    // Walls closing the lot on all four sides (front on the building line): no ray of the
-    // central session reaches inside.
-    Mesh& wall = add("wall", {0}, "open");
-    const double wd = 11.0, wh = 3.4;
-    const Eigen::Vector2d front = l->P(0.5 * l->width, 0.35), back = l->P(0.5 * l->width, wd);
-    wall.AddBox(front, gz(front) - 0.2, {l->width - 0.6, 0.3, wh}, l->yaw(), kConcrete);
-    wall.AddBox(back, gz(back) - 0.2, {l->width - 0.6, 0.3, wh}, l->yaw(), kConcrete);
-    for (double u : {0.45, l->width - 0.45}) {
-      const Eigen::Vector2d c = l->P(u, 0.5 * (0.35 + wd));
-      wall.AddBox(c, gz(c) - 0.2, {0.3, wd - 0.35, wh}, l->yaw(), kConcrete);
-    }
-    const Eigen::Vector2d sc = l->P(0.5 * l->width, 7.0);
-    add("structure", Range(1, N), "revealed").AddBox(sc, gz(sc) - 0.05, {std::min(8.0, l->width - 3.0), 5.0, 3.35}, l->yaw(), kFacade);
-  }
-  for (int i = 0; i < cfg.ld_occluded; ++i) {
-    // A hoarding goes up around a lot while the object inside disappears: the later sessions
-    // cannot see through the hoarding, so the object's absence is weak ND.
-    Lot* l = next_lot(14.0, 8.0);
-    if (!l) break;
-    const int m = change_session();
-    // The hoarding closes the lot on all four sides, as around a building site.
-    Mesh& h = add("hoarding", Range(m, N), "open");
-    const double hd = std::min(l->depth - 0.5, 8.0);
-    const Eigen::Vector2d q0 = l->P(0.3, 0.3), q1 = l->P(l->width - 0.3, 0.3), q2 = l->P(l->width - 0.3, hd),
-                          q3 = l->P(0.3, hd);
-    for (auto [a, b] : {std::make_pair(q0, q1), std::make_pair(q1, q2), std::make_pair(q2, q3), std::make_pair(q3, q0)}) {
-      AddPanels(h, grid, terrain, a, b, 4.0, 0.0, 3.0, 0.08, kPaint);
-    }
-    const Eigen::Vector2d c = l->P(0.5 * l->width, 4.0);
-    if (i % 2 == 0) {
-      add("container", Range(0, m), "occluded").AddBox(c, gz(c) - 0.05, {6.06, 2.44, 2.4}, l->yaw(), kMetal);
-    } else {
-      AddCar(add("car", Range(0, m), "occluded"), c, gz(c), l->yaw(), 4.5, 1.8, kPaint);
+
+  // Kiosks appearing in open yards.
+  void Structures() {
+    for (int i = 0; i < cfg_.ld_structures; ++i) {
+      Lot* l = NextLot(6.0, 7.0);
+      if (!l) break;
+      const Eigen::Vector2d c = l->P(0.5 * l->width, 5.0);
+      Mesh& mesh = Add("structure", Range(ChangeSession(), N_), "open");
+      mesh.AddBox(c, Gz(c) - 0.05, {3.0, 3.0, 2.85}, l->yaw(), kPaint);
+      mesh.AddBox(c, Gz(c) + 2.8, {3.6, 3.6, 0.2}, l->yaw(), kMetal, true);
     }
   }
-  for (auto& o : out) {
-    const auto bb = o.mesh.Bounds();
-    o.info.box_min = bb.min();
-    o.info.box_max = bb.max();
-    o.info.centroid = bb.center();
+
+  // The central session sees a wall; later sessions see the wall gone and a shed behind it, in
+  // space the central could not observe (strong PD). The walls close the lot on all four sides
+  // (front on the building line): no ray of the central session reaches inside.
+  void WallReveals() {
+    for (int i = 0; i < cfg_.ld_wall_reveals; ++i) {
+      Lot* l = NextLot(12.0, 12.0);
+      if (!l) break;
+      Mesh& wall = Add("wall", {0}, "open");
+      const double wd = 11.0, wh = 3.4;
+      const Eigen::Vector2d front = l->P(0.5 * l->width, 0.35), back = l->P(0.5 * l->width, wd);
+      wall.AddBox(front, Gz(front) - 0.2, {l->width - 0.6, 0.3, wh}, l->yaw(), kConcrete);
+      wall.AddBox(back, Gz(back) - 0.2, {l->width - 0.6, 0.3, wh}, l->yaw(), kConcrete);
+      for (double u : {0.45, l->width - 0.45}) {
+        const Eigen::Vector2d c = l->P(u, 0.5 * (0.35 + wd));
+        wall.AddBox(c, Gz(c) - 0.2, {0.3, wd - 0.35, wh}, l->yaw(), kConcrete);
+      }
+      const Eigen::Vector2d sc = l->P(0.5 * l->width, 7.0);
+      Add("structure", Range(1, N_), "revealed")
+          .AddBox(sc, Gz(sc) - 0.05, {std::min(8.0, l->width - 3.0), 5.0, 3.35}, l->yaw(), kFacade);
+    }
   }
-  return out;
+
+  // A hoarding goes up around a lot (all four sides, as around a building site) while the object
+  // inside disappears: the later sessions cannot see through it, so the absence is weak ND.
+  void Occluded() {
+    for (int i = 0; i < cfg_.ld_occluded; ++i) {
+      Lot* l = NextLot(14.0, 8.0);
+      if (!l) break;
+      const int m = ChangeSession();
+      Mesh& h = Add("hoarding", Range(m, N_), "open");
+      const double hd = std::min(l->depth - 0.5, 8.0);
+      const Eigen::Vector2d q0 = l->P(0.3, 0.3), q1 = l->P(l->width - 0.3, 0.3), q2 = l->P(l->width - 0.3, hd),
+                            q3 = l->P(0.3, hd);
+      for (auto [a, b] : {std::make_pair(q0, q1), std::make_pair(q1, q2), std::make_pair(q2, q3), std::make_pair(q3, q0)})
+        AddPanels(h, grid_, terrain_, a, b, 4.0, 0.0, 3.0, 0.08, kPaint);
+      const Eigen::Vector2d c = l->P(0.5 * l->width, 4.0);
+      if (i % 2 == 0)
+        Add("container", Range(0, m), "occluded").AddBox(c, Gz(c) - 0.05, {6.06, 2.44, 2.4}, l->yaw(), kMetal);
+      else
+        AddCar(Add("car", Range(0, m), "occluded"), c, Gz(c), l->yaw(), 4.5, 1.8, kPaint);
+    }
+  }
+
+  const SimConfig& cfg_;
+  const Grid& grid_;
+  const Terrain& terrain_;
+  Slots& slots_;
+  const std::vector<Path>& routes_;
+  Rng& rng_;
+  const int N_;
+  std::vector<std::size_t> park_order_, tree_order_, lot_order_;
+  std::size_t park_i_ = 0, tree_i_ = 0, lot_i_ = 0;
+  std::vector<LdObject> out_;
+};
+
+std::vector<LdObject> PlaceLd(const SimConfig& cfg, const Grid& grid, const Terrain& terrain,
+                              Slots& slots, const std::vector<Path>& routes, Rng& rng) {
+  if (cfg.sessions < 2) return {};
+  return LdPlacer(cfg, grid, terrain, slots, routes, rng).Place();
 }
 
 }  // namespace
