@@ -319,6 +319,68 @@ std::vector<Pose> Simulator::SweepPoses(int session, int keyframe) const {
   return out;
 }
 
+namespace {
+// One scan's rays before noise: range (-1 = no return), intensity, class and LD object per ray,
+// ray i = beam * columns + column.
+struct ScanRays {
+  explicit ScanRays(std::size_t n) : range(n, -1.f), intensity(n, 0.f), cls(n, PointClass::kUnknown), object(n, -1) {}
+  std::vector<float> range, intensity;
+  std::vector<PointClass> cls;
+  std::vector<std::int32_t> object;
+};
+
+// Embree packet of the beams b0 .. b0 + 15 of column c (lanes past the last beam invalid), fired
+// from `o` with the sensor rotation R.
+void FillPacket(const std::vector<Eigen::Vector3f>& dirs, int B, int C, int b0, int c, const Eigen::Matrix3f& R,
+                const Eigen::Vector3f& o, float tnear, float tfar, int* valid, RTCRayHit16* rh) {
+  for (int l = 0; l < 16; ++l) {
+    const int b = b0 + l;
+    valid[l] = b < B ? -1 : 0;
+    const Eigen::Vector3f d = b < B ? Eigen::Vector3f(R * dirs[std::size_t(b) * C + c]) : Eigen::Vector3f::UnitX();
+    rh->ray.org_x[l] = o.x();
+    rh->ray.org_y[l] = o.y();
+    rh->ray.org_z[l] = o.z();
+    rh->ray.dir_x[l] = d.x();
+    rh->ray.dir_y[l] = d.y();
+    rh->ray.dir_z[l] = d.z();
+    rh->ray.tnear[l] = tnear;
+    rh->ray.tfar[l] = tfar;
+    rh->ray.time[l] = 0.f;
+    rh->ray.mask[l] = 0xFFFFFFFFu;
+    rh->ray.id[l] = unsigned(l);
+    rh->ray.flags[l] = 0;
+    rh->hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+    rh->hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
+  }
+}
+
+// The returns with range noise and dropout from a hash of (seed, session, keyframe, ray), so
+// thread-independent; points in the sensor frame of the ray's firing (raw sweep) or moved into the
+// keyframe frame T (deskewed).
+PointCloud NoisyPoints(const SimConfig& cfg, int session, int keyframe, const ScanRays& rays,
+                       const std::vector<Eigen::Vector3f>& dirs, const std::vector<Pose>& sweep, const Pose& T) {
+  PointCloud cloud;
+  cloud.reserve(rays.range.size());
+  const auto seed = std::uint64_t(cfg.seed);
+  for (std::size_t i = 0; i < rays.range.size(); ++i) {
+    if (rays.range[i] < 0) continue;
+    const std::uint64_t h = detail::Hash(seed, std::uint64_t(session) + 1000, std::uint64_t(keyframe), i);
+    if (detail::ToUnit(h) < cfg.dropout) continue;
+    const double u1 = 1.0 - detail::ToUnit(detail::Mix(h ^ 0x5bd1e995ull)), u2 = detail::ToUnit(detail::Mix(h + 17));
+    const double g = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+    const float rr = float(rays.range[i] + cfg.range_noise_m * g);
+    if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
+    Eigen::Vector3f p = dirs[i] * rr;  // the sensor frame when the ray was fired
+    if (cfg.sweep == "deskewed") p = (T.inverse() * sweep[i % std::size_t(cfg.columns)]).cast<float>() * p;
+    cloud.push_back(p.x(), p.y(), p.z(), rays.intensity[i]);
+    cloud.cls.push_back(rays.cls[i]);
+    cloud.object.push_back(rays.object[i]);
+  }
+  cloud.session.assign(cloud.size(), std::uint16_t(session));
+  return cloud;
+}
+}  // namespace
+
 PointCloud Simulator::CastScan(int session, int keyframe) {
   Impl& I = *impl_;
   I.SetKeyframe(session, keyframe);
@@ -333,13 +395,9 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
           ? RosetteDirections(cfg, std::uint64_t(session) * 1000003u + std::uint64_t(keyframe))
           : std::vector<Eigen::Vector3f>();
   const std::vector<Eigen::Vector3f>& dirs = rosette.empty() ? I.dirs : rosette;
-  const std::size_t n = std::size_t(B) * C;
-  std::vector<float> range(n, -1.f), intensity(n, 0.f);
-  std::vector<PointClass> cls(n, PointClass::kUnknown);
-  std::vector<std::int32_t> object(n, -1);
+  ScanRays rays(std::size_t(B) * C);
   RTCScene top = I.sessions[std::size_t(session)].top;
   const float tnear = float(cfg.min_range_m), tfar = float(cfg.max_range_m);
-
   I.arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, C, 8), [&](const tbb::blocked_range<int>& r) {
       RTCIntersectContext ctx;
@@ -351,60 +409,22 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
         const Eigen::Matrix3f R = sweep[std::size_t(c)].linear().cast<float>();
         const Eigen::Vector3f o = sweep[std::size_t(c)].translation().cast<float>();
         for (int b0 = 0; b0 < B; b0 += 16) {
-          for (int l = 0; l < 16; ++l) {
-            const int b = b0 + l;
-            valid[l] = b < B ? -1 : 0;
-            const Eigen::Vector3f d = b < B ? Eigen::Vector3f(R * dirs[std::size_t(b) * C + c]) : Eigen::Vector3f::UnitX();
-            rh.ray.org_x[l] = o.x();
-            rh.ray.org_y[l] = o.y();
-            rh.ray.org_z[l] = o.z();
-            rh.ray.dir_x[l] = d.x();
-            rh.ray.dir_y[l] = d.y();
-            rh.ray.dir_z[l] = d.z();
-            rh.ray.tnear[l] = tnear;
-            rh.ray.tfar[l] = tfar;
-            rh.ray.time[l] = 0.f;
-            rh.ray.mask[l] = 0xFFFFFFFFu;
-            rh.ray.id[l] = unsigned(l);
-            rh.ray.flags[l] = 0;
-            rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-            rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
-          }
+          FillPacket(dirs, B, C, b0, c, R, o, tnear, tfar, valid, &rh);
           rtcIntersect16(valid, top, &ctx, &rh);
           for (int l = 0; l < 16 && b0 + l < B; ++l) {
             if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
             const std::size_t i = std::size_t(b0 + l) * C + c;
-            range[i] = rh.ray.tfar[l];
+            rays.range[i] = rh.ray.tfar[l];
             const Eigen::Vector3f d(rh.ray.dir_x[l], rh.ray.dir_y[l], rh.ray.dir_z[l]);
-            I.Resolve(session, rh.hit.instID[0][l], rh.hit.primID[l],
-                      {rh.hit.Ng_x[l], rh.hit.Ng_y[l], rh.hit.Ng_z[l]}, d, &cls[i], &object[i], &intensity[i]);
+            I.Resolve(session, rh.hit.instID[0][l], rh.hit.primID[l], {rh.hit.Ng_x[l], rh.hit.Ng_y[l], rh.hit.Ng_z[l]},
+                      d, &rays.cls[i], &rays.object[i], &rays.intensity[i]);
           }
         }
       }
     });
   });
   I.Check("casting a scan");
-
-  // Noise and dropout per ray from a hash of (seed, session, keyframe, ray): thread-independent.
-  PointCloud cloud;
-  cloud.reserve(n);
-  const auto seed = std::uint64_t(cfg.seed);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (range[i] < 0) continue;
-    const std::uint64_t h = detail::Hash(seed, std::uint64_t(session) + 1000, std::uint64_t(keyframe), i);
-    if (detail::ToUnit(h) < cfg.dropout) continue;
-    const double u1 = 1.0 - detail::ToUnit(detail::Mix(h ^ 0x5bd1e995ull)), u2 = detail::ToUnit(detail::Mix(h + 17));
-    const double g = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
-    const float rr = float(range[i] + cfg.range_noise_m * g);
-    if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
-    Eigen::Vector3f p = dirs[i] * rr;  // the sensor frame when the ray was fired
-    if (cfg.sweep == "deskewed") p = (T.inverse() * sweep[i % std::size_t(C)]).cast<float>() * p;
-    cloud.push_back(p.x(), p.y(), p.z(), intensity[i]);
-    cloud.cls.push_back(cls[i]);
-    cloud.object.push_back(object[i]);
-  }
-  cloud.session.assign(cloud.size(), std::uint16_t(session));
-  return cloud;
+  return NoisyPoints(cfg, session, keyframe, rays, dirs, sweep, T);
 }
 
 std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const Eigen::Vector3d& origin,
