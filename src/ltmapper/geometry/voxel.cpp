@@ -160,24 +160,18 @@ PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
   return out;
 }
 
-// A concatenation of voxelised clouds (runs starting at `runs`, ascending, first 0), every
-// point finite, keys from `key`: one centroid per voxel by a k-way merge of the runs, read
-// straight from the points, with no record arrays (the record path holds two 16-byte records per
-// input point). Key ranges, split at keys of the longest run, are merged in parallel. A voxel's
-// points are summed in run order and its arrays come from its first point, as the record path
-// does (std::merge keeps equal keys in run order), so the output is bit-identical to it.
-// False, writing nothing, when a run is out of order.
+// A run of the concatenation: points [b, e).
+struct Span {
+  std::size_t b, e;
+};
+
+// The non-empty runs, or none when a run's keys are out of order.
 template <class KeyFn>
-bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const KeyFn& key, PointCloud* out) {
-  const std::size_t n = cloud.size();
-  runs.push_back(n);
-  struct Span {
-    std::size_t b, e;
-  };
+std::vector<Span> SortedSpans(const PointCloud& cloud, std::vector<std::size_t> runs, const KeyFn& key) {
+  runs.push_back(cloud.size());
   std::vector<Span> spans;
   for (std::size_t r = 0; r + 1 < runs.size(); ++r)
     if (runs[r + 1] > runs[r]) spans.push_back({runs[r], runs[r + 1]});
-  if (spans.empty()) return false;
   std::vector<char> sorted(spans.size(), 1);
   tbb::parallel_for(std::size_t(0), spans.size(), [&](std::size_t r) {
     std::uint64_t prev = key(cloud.points[spans[r].b]);
@@ -188,23 +182,29 @@ bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const Ke
     }
   });
   for (char ok : sorted)
-    if (!ok) return false;
+    if (!ok) return {};
+  return spans;
+}
 
-  // Split keys: evenly spaced keys of the longest run, strictly increasing.
+// Key ranges merged in parallel: split at evenly spaced keys of the longest run (strictly
+// increasing). bound[r * (ranges + 1) + t] is the first point of run r in range t (key >=
+// split[t - 1]); returns the number of ranges.
+template <class KeyFn>
+std::size_t MergeRanges(const PointCloud& cloud, const std::vector<Span>& spans, const KeyFn& key,
+                        std::vector<std::size_t>* bound) {
   const Span longest = *std::max_element(spans.begin(), spans.end(), [](const Span& a, const Span& b) {
     return a.e - a.b < b.e - b.b;
   });
-  const std::size_t ranges = std::max<std::size_t>(1, std::min(kMaxMergeRanges, n / kMergeRangePoints));
+  const std::size_t ranges = std::max<std::size_t>(1, std::min(kMaxMergeRanges, cloud.size() / kMergeRangePoints));
   std::vector<std::uint64_t> split;
   for (std::size_t t = 1; t < ranges; ++t) {
     const std::uint64_t k = key(cloud.points[longest.b + (longest.e - longest.b) * t / ranges]);
     if (split.empty() || k > split.back()) split.push_back(k);
   }
   const std::size_t nr = split.size() + 1;
-  // bound[r * (nr + 1) + t]: first point of run r in range t (key >= split[t - 1]).
-  std::vector<std::size_t> bound(spans.size() * (nr + 1));
+  bound->assign(spans.size() * (nr + 1), 0);
   tbb::parallel_for(std::size_t(0), spans.size(), [&](std::size_t r) {
-    std::size_t* row = &bound[r * (nr + 1)];
+    std::size_t* row = &(*bound)[r * (nr + 1)];
     row[0] = spans[r].b;
     row[nr] = spans[r].e;
     for (std::size_t t = 1; t < nr; ++t) {
@@ -217,50 +217,71 @@ bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const Ke
       row[t] = lo;
     }
   });
+  return nr;
+}
 
-  const bool has_cls = !cloud.cls.empty(), has_session = !cloud.session.empty(), has_object = !cloud.object.empty();
+// K-way merge of the runs' points in key range t (of nr): one centroid per voxel, summed in run
+// order, arrays from the voxel's first point.
+template <class KeyFn>
+PointCloud MergeRange(const PointCloud& cloud, std::size_t runs, const std::vector<std::size_t>& bound,
+                      std::size_t nr, std::size_t t, const KeyFn& key) {
+  struct Head {
+    std::uint64_t key;
+    std::uint32_t run;
+    std::size_t i;
+    bool operator>(const Head& o) const { return key != o.key ? key > o.key : run > o.run; }
+  };
+  std::vector<Head> heap;
+  std::size_t total = 0;
+  for (std::size_t r = 0; r < runs; ++r) {
+    const std::size_t b = bound[r * (nr + 1) + t], e = bound[r * (nr + 1) + t + 1];
+    total += e - b;
+    if (b < e) heap.push_back({key(cloud.points[b]), std::uint32_t(r), b});
+  }
+  const auto later = std::greater<Head>();
+  std::make_heap(heap.begin(), heap.end(), later);
+  auto pop = [&]() {  // the smallest head; its run's next point takes its place
+    std::pop_heap(heap.begin(), heap.end(), later);
+    const Head h = heap.back();
+    const std::size_t next = h.i + 1;
+    if (next < bound[h.run * (nr + 1) + t + 1]) {
+      heap.back() = {key(cloud.points[next]), h.run, next};
+      std::push_heap(heap.begin(), heap.end(), later);
+    } else {
+      heap.pop_back();
+    }
+    return h;
+  };
+  PointCloud part;
+  part.points.reserve(total);
+  while (!heap.empty()) {
+    const Head first = pop();
+    VoxelSum sum;
+    sum.Add(cloud.points[first.i]);
+    while (!heap.empty() && heap.front().key == first.key) sum.Add(cloud.points[pop().i]);
+    part.points.push_back(sum.Mean());
+    if (!cloud.cls.empty()) part.cls.push_back(cloud.cls[first.i]);
+    if (!cloud.session.empty()) part.session.push_back(cloud.session[first.i]);
+    if (!cloud.object.empty()) part.object.push_back(cloud.object[first.i]);
+  }
+  return part;
+}
+
+// A concatenation of voxelised clouds (runs starting at `runs`, ascending, first 0), every
+// point finite, keys from `key`: one centroid per voxel by a k-way merge of the runs, read
+// straight from the points, with no record arrays (the record path holds two 16-byte records per
+// input point). Key ranges, split at keys of the longest run, are merged in parallel. A voxel's
+// points are summed in run order and its arrays come from its first point, as the record path
+// does (std::merge keeps equal keys in run order), so the output is bit-identical to it.
+// False, writing nothing, when a run is out of order.
+template <class KeyFn>
+bool ReduceRuns(const PointCloud& cloud, const std::vector<std::size_t>& runs, const KeyFn& key, PointCloud* out) {
+  const std::vector<Span> spans = SortedSpans(cloud, runs, key);
+  if (spans.empty()) return false;
+  std::vector<std::size_t> bound;
+  const std::size_t nr = MergeRanges(cloud, spans, key, &bound);
   std::vector<PointCloud> parts(nr);
-  tbb::parallel_for(std::size_t(0), nr, [&](std::size_t t) {
-    struct Head {
-      std::uint64_t key;
-      std::uint32_t run;
-      std::size_t i;
-      bool operator>(const Head& o) const { return key != o.key ? key > o.key : run > o.run; }
-    };
-    std::vector<Head> heap;
-    std::size_t total = 0;
-    for (std::size_t r = 0; r < spans.size(); ++r) {
-      const std::size_t b = bound[r * (nr + 1) + t], e = bound[r * (nr + 1) + t + 1];
-      total += e - b;
-      if (b < e) heap.push_back({key(cloud.points[b]), std::uint32_t(r), b});
-    }
-    const auto later = std::greater<Head>();
-    std::make_heap(heap.begin(), heap.end(), later);
-    PointCloud& part = parts[t];
-    part.points.reserve(total);
-    auto pop = [&]() {  // the smallest head; its run's next point takes its place
-      std::pop_heap(heap.begin(), heap.end(), later);
-      const Head h = heap.back();
-      const std::size_t next = h.i + 1;
-      if (next < bound[h.run * (nr + 1) + t + 1]) {
-        heap.back() = {key(cloud.points[next]), h.run, next};
-        std::push_heap(heap.begin(), heap.end(), later);
-      } else {
-        heap.pop_back();
-      }
-      return h;
-    };
-    while (!heap.empty()) {
-      const Head first = pop();
-      VoxelSum sum;
-      sum.Add(cloud.points[first.i]);
-      while (!heap.empty() && heap.front().key == first.key) sum.Add(cloud.points[pop().i]);
-      part.points.push_back(sum.Mean());
-      if (has_cls) part.cls.push_back(cloud.cls[first.i]);
-      if (has_session) part.session.push_back(cloud.session[first.i]);
-      if (has_object) part.object.push_back(cloud.object[first.i]);
-    }
-  });
+  tbb::parallel_for(std::size_t(0), nr, [&](std::size_t t) { parts[t] = MergeRange(cloud, spans.size(), bound, nr, t, key); });
   std::size_t m = 0;
   for (const auto& part : parts) m += part.size();
   out->points.reserve(m);
@@ -271,11 +292,10 @@ bool ReduceRuns(const PointCloud& cloud, std::vector<std::size_t> runs, const Ke
   return true;
 }
 
-// `runs` (may be null): the cloud is a concatenation of voxelised clouds starting there.
-PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, const std::vector<std::size_t>* runs) {
-  const std::size_t n = cloud.size();
+// The voxel index bounds of the cloud's finite points; throws when an index overflows.
+Bounds VoxelBounds(const PointCloud& cloud, double voxel_m) {
   const Bounds b = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, n, kGrain), Bounds{},
+      tbb::blocked_range<std::size_t>(0, cloud.size(), kGrain), Bounds{},
       [&](const tbb::blocked_range<std::size_t>& r, Bounds acc) {
         Index3 k{0, 0, 0};
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
@@ -296,8 +316,25 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, cons
   if (b.overflow)
     throw Error("VoxelDownsample: voxel index overflows int64 (voxel " + std::to_string(voxel_m) +
                 " m too small for the coordinates)");
-  if (b.finite == 0) return PointCloud{};
+  return b;
+}
 
+// Sorted (key, index) records of the finite points -> centroids. `point_index(j)`: the j-th
+// finite point; `fill(rec, i)` sets a record's key.
+template <class Rec, class IndexFn, class FillFn>
+std::vector<Rec> Records(std::size_t m, const IndexFn& point_index, const FillFn& fill) {
+  std::vector<Rec> recs(m);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t j = r.begin(); j != r.end(); ++j) fill(recs[j], point_index(j));
+  });
+  return recs;
+}
+
+// `runs` (may be null): the cloud is a concatenation of voxelised clouds starting there.
+PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, const std::vector<std::size_t>* runs) {
+  const std::size_t n = cloud.size();
+  const Bounds b = VoxelBounds(cloud, voxel_m);
+  if (b.finite == 0) return PointCloud{};
   // Compact list of finite point indices, in input order.
   std::vector<std::uint32_t> finite_idx;
   const bool all_finite = b.finite == n;
@@ -306,11 +343,7 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, cons
     for (std::size_t i = 0; i < n; ++i)
       if (Finite(cloud.points[i])) finite_idx.push_back(std::uint32_t(i));
   }
-  auto point_index = [&](std::size_t j) {
-    return all_finite ? std::uint32_t(j) : finite_idx[j];
-  };
-  const std::size_t m = b.finite;
-
+  auto point_index = [&](std::size_t j) { return all_finite ? std::uint32_t(j) : finite_idx[j]; };
   bool packable = true;
   int width[3];  // bits of each axis' index span: keys as narrow as the cloud allows
   for (int a = 0; a < 3; ++a) {
@@ -319,38 +352,27 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, cons
     width[a] = 0;
     while ((span >> width[a]) != 0) ++width[a];
   }
-  if (packable) {
-    auto packed_key = [&](const PointXYZI& p) {
-      Index3 k{0, 0, 0};
-      VoxelOf(p, voxel_m, &k);
-      return (std::uint64_t(k[0] - b.lo[0]) << (width[1] + width[2])) |
-             (std::uint64_t(k[1] - b.lo[1]) << width[2]) | std::uint64_t(k[2] - b.lo[2]);
-    };
-    PointCloud merged;
-    if (runs && all_finite && ReduceRuns(cloud, *runs, packed_key, &merged)) return merged;
-    std::vector<PackedRec> recs(m);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t j = r.begin(); j != r.end(); ++j) {
-        const std::uint32_t i = point_index(j);
-        recs[j] = {packed_key(cloud.points[i]), i};
-      }
+  if (!packable) {
+    auto recs = Records<WideRec>(b.finite, point_index, [&](WideRec& rec, std::uint32_t i) {
+      rec.idx = i;
+      VoxelOf(cloud.points[i], voxel_m, &rec.key);
     });
-    // One thread radix-sorts; else a parallel comparison sort.
-    if (threads == 1) RadixSort(recs, width[0] + width[1] + width[2]);
-    else tbb::parallel_sort(recs.begin(), recs.end());
+    tbb::parallel_sort(recs.begin(), recs.end());
     return Reduce(cloud, recs);
   }
-  std::vector<WideRec> recs(m);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t j = r.begin(); j != r.end(); ++j) {
-      const std::uint32_t i = point_index(j);
-      recs[j].idx = i;
-      VoxelOf(cloud.points[i], voxel_m, &recs[j].key);
-    }
-  });
-  tbb::parallel_sort(recs.begin(), recs.end());
+  auto packed_key = [&](const PointXYZI& p) {
+    Index3 k{0, 0, 0};
+    VoxelOf(p, voxel_m, &k);
+    return (std::uint64_t(k[0] - b.lo[0]) << (width[1] + width[2])) | (std::uint64_t(k[1] - b.lo[1]) << width[2]) |
+           std::uint64_t(k[2] - b.lo[2]);
+  };
+  PointCloud merged;
+  if (runs && all_finite && ReduceRuns(cloud, *runs, packed_key, &merged)) return merged;
+  auto recs = Records<PackedRec>(b.finite, point_index,
+                                 [&](PackedRec& rec, std::uint32_t i) { rec = {packed_key(cloud.points[i]), i}; });
+  // One thread radix-sorts; else a parallel comparison sort.
+  if (threads == 1) RadixSort(recs, width[0] + width[1] + width[2]);
+  else tbb::parallel_sort(recs.begin(), recs.end());
   return Reduce(cloud, recs);
 }
 
