@@ -87,43 +87,101 @@ Pose AlignRigid(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen
   return T;
 }
 
-TrajResult EvaluateTrajectories(const std::vector<SessionTrajectory>& sessions,
-                                const EvalConfig& cfg) {
-  cfg.Validate();
+namespace {
+void CheckTrajectories(const std::vector<SessionTrajectory>& sessions) {
   if (sessions.empty()) throw Error("trajectory evaluation: no sessions given");
   for (const auto& s : sessions) {
     if (s.truth.size() != s.est.size())
-      throw Error("session " + s.name + ": " + std::to_string(s.truth.size()) +
-                  " true poses but " + std::to_string(s.est.size()) + " estimated poses");
+      throw Error("session " + s.name + ": " + std::to_string(s.truth.size()) + " true poses but " +
+                  std::to_string(s.est.size()) + " estimated poses");
     if (s.truth.empty()) throw Error("session " + s.name + ": no poses");
   }
+}
+
+void AppendPositions(const std::vector<Pose>& poses, std::vector<Eigen::Vector3d>& out) {
+  for (const auto& p : poses) out.push_back(p.translation());
+}
+
+// T_truth_est per session: one rigid transform for all (joint), one each, or identity.
+std::vector<Pose> Alignments(const std::vector<SessionTrajectory>& sessions, const std::string& mode) {
+  std::vector<Pose> align(sessions.size(), Pose::Identity());
+  if (mode == "joint") {
+    std::vector<Eigen::Vector3d> est, truth;
+    for (const auto& s : sessions) {
+      AppendPositions(s.est, est);
+      AppendPositions(s.truth, truth);
+    }
+    std::fill(align.begin(), align.end(), AlignRigid(est, truth));
+  } else if (mode == "per_session") {
+    for (std::size_t k = 0; k < sessions.size(); ++k) {
+      std::vector<Eigen::Vector3d> est, truth;
+      AppendPositions(sessions[k].est, est);
+      AppendPositions(sessions[k].truth, truth);
+      align[k] = AlignRigid(est, truth);
+    }
+  }
+  return align;
+}
+
+// Relative pose errors of the pairs (i, j(i)): j = i + delta keyframes, or the first keyframe at
+// least delta metres of true path after i.
+void RelativeErrors(const SessionTrajectory& s, const EvalConfig& cfg, std::vector<double>* rt,
+                    std::vector<double>* rr) {
+  const std::size_t n = s.truth.size();
+  if (cfg.rpe_unit == "frames") {
+    const auto step = std::size_t(std::max(1.0, std::round(cfg.rpe_delta)));
+    for (std::size_t i = 0; i + step < n; ++i)
+      AddError(s.truth[i].inverse() * s.truth[i + step], s.est[i].inverse() * s.est[i + step], rt, rr);
+    return;
+  }
+  std::vector<double> dist(n, 0.0);  // true path length from keyframe 0
+  for (std::size_t i = 1; i < n; ++i) dist[i] = dist[i - 1] + (s.truth[i].translation() - s.truth[i - 1].translation()).norm();
+  std::size_t j = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    j = std::max(j, i + 1);
+    while (j < n && dist[j] - dist[i] < cfg.rpe_delta) ++j;
+    if (j >= n) break;
+    AddError(s.truth[i].inverse() * s.truth[j], s.est[i].inverse() * s.est[j], rt, rr);
+  }
+}
+
+// Query keyframe vs its nearest central keyframe (true positions, within max_sq): the error of
+// their relative pose.
+ConsistencySessionResult Consistency(const SessionTrajectory& central, const SessionTrajectory& q, double max_sq,
+                                     std::vector<double>* t_all, std::vector<double>* r_all) {
+  ConsistencySessionResult cr;
+  cr.name = q.name;
+  std::vector<double> t, rot;
+  for (std::size_t i = 0; i < q.truth.size(); ++i) {
+    const Eigen::Vector3d p = q.truth[i].translation();
+    std::size_t best = 0;
+    double best_sq = std::numeric_limits<double>::infinity();
+    for (std::size_t c = 0; c < central.truth.size(); ++c) {
+      const double d = (central.truth[c].translation() - p).squaredNorm();
+      if (d < best_sq) best_sq = d, best = c;
+    }
+    if (best_sq > max_sq) {
+      ++cr.skipped;
+      continue;
+    }
+    AddError(central.truth[best].inverse() * q.truth[i], central.est[best].inverse() * q.est[i], &t, &rot);
+  }
+  cr.pairs = t.size();
+  Append(*t_all, t);
+  Append(*r_all, rot);
+  cr.error = MakeErrors(std::move(t), std::move(rot));
+  return cr;
+}
+}  // namespace
+
+TrajResult EvaluateTrajectories(const std::vector<SessionTrajectory>& sessions, const EvalConfig& cfg) {
+  cfg.Validate();
+  CheckTrajectories(sessions);
   TrajResult r;
   r.align = cfg.traj_align;
   r.rpe_unit = cfg.rpe_unit;
   r.rpe_delta = cfg.rpe_delta;
-
-  // ---- alignment T_truth_est per session.
-  std::vector<Pose> align(sessions.size(), Pose::Identity());
-  auto positions = [](const std::vector<Pose>& poses, std::vector<Eigen::Vector3d>& out) {
-    for (const auto& p : poses) out.push_back(p.translation());
-  };
-  if (cfg.traj_align == "joint") {
-    std::vector<Eigen::Vector3d> est, truth;
-    for (const auto& s : sessions) {
-      positions(s.est, est);
-      positions(s.truth, truth);
-    }
-    const Pose T = AlignRigid(est, truth);
-    std::fill(align.begin(), align.end(), T);
-  } else if (cfg.traj_align == "per_session") {
-    for (std::size_t k = 0; k < sessions.size(); ++k) {
-      std::vector<Eigen::Vector3d> est, truth;
-      positions(sessions[k].est, est);
-      positions(sessions[k].truth, truth);
-      align[k] = AlignRigid(est, truth);
-    }
-  }
-
+  const std::vector<Pose> align = Alignments(sessions, cfg.traj_align);
   std::vector<double> ate_t, ate_r, rpe_t, rpe_r;
   for (std::size_t k = 0; k < sessions.size(); ++k) {
     const auto& s = sessions[k];
@@ -131,31 +189,12 @@ TrajResult EvaluateTrajectories(const std::vector<SessionTrajectory>& sessions,
     sr.name = s.name;
     sr.poses = s.truth.size();
     sr.T_truth_est = align[k];
-    std::vector<double> t, rot;
+    std::vector<double> t, rot, rt, rr;
     for (std::size_t i = 0; i < s.truth.size(); ++i) AddError(s.truth[i], align[k] * s.est[i], &t, &rot);
     Append(ate_t, t);
     Append(ate_r, rot);
     sr.ate = MakeErrors(std::move(t), std::move(rot));
-
-    // RPE pairs (i, j(i)).
-    std::vector<double> rt, rr;
-    const std::size_t n = s.truth.size();
-    if (cfg.rpe_unit == "frames") {
-      const auto step = std::size_t(std::max(1.0, std::round(cfg.rpe_delta)));
-      for (std::size_t i = 0; i + step < n; ++i)
-        AddError(s.truth[i].inverse() * s.truth[i + step], s.est[i].inverse() * s.est[i + step], &rt, &rr);
-    } else {
-      std::vector<double> dist(n, 0.0);  // true path length from keyframe 0
-      for (std::size_t i = 1; i < n; ++i)
-        dist[i] = dist[i - 1] + (s.truth[i].translation() - s.truth[i - 1].translation()).norm();
-      std::size_t j = 0;
-      for (std::size_t i = 0; i < n; ++i) {
-        j = std::max(j, i + 1);
-        while (j < n && dist[j] - dist[i] < cfg.rpe_delta) ++j;
-        if (j >= n) break;
-        AddError(s.truth[i].inverse() * s.truth[j], s.est[i].inverse() * s.est[j], &rt, &rr);
-      }
-    }
+    RelativeErrors(s, cfg, &rt, &rr);
     Append(rpe_t, rt);
     Append(rpe_r, rr);
     sr.rpe = MakeErrors(std::move(rt), std::move(rr));
@@ -163,40 +202,11 @@ TrajResult EvaluateTrajectories(const std::vector<SessionTrajectory>& sessions,
   }
   r.ate = MakeErrors(std::move(ate_t), std::move(ate_r));
   r.rpe = MakeErrors(std::move(rpe_t), std::move(rpe_r));
-
-  // ---- inter-session consistency against the central session (index 0).
-  const auto& central = sessions.front();
+  // Inter-session consistency against the central session (index 0).
   std::vector<double> ct_all, cr_all;
   const double max_sq = cfg.consistency_max_dist_m * cfg.consistency_max_dist_m;
-  for (std::size_t k = 1; k < sessions.size(); ++k) {
-    const auto& q = sessions[k];
-    ConsistencySessionResult cr;
-    cr.name = q.name;
-    std::vector<double> t, rot;
-    for (std::size_t i = 0; i < q.truth.size(); ++i) {
-      const Eigen::Vector3d p = q.truth[i].translation();
-      std::size_t best = 0;
-      double best_sq = std::numeric_limits<double>::infinity();
-      for (std::size_t c = 0; c < central.truth.size(); ++c) {
-        const double d = (central.truth[c].translation() - p).squaredNorm();
-        if (d < best_sq) {
-          best_sq = d;
-          best = c;
-        }
-      }
-      if (best_sq > max_sq) {
-        ++cr.skipped;
-        continue;
-      }
-      AddError(central.truth[best].inverse() * q.truth[i], central.est[best].inverse() * q.est[i],
-               &t, &rot);
-    }
-    cr.pairs = t.size();
-    Append(ct_all, t);
-    Append(cr_all, rot);
-    cr.error = MakeErrors(std::move(t), std::move(rot));
-    r.consistency_sessions.push_back(std::move(cr));
-  }
+  for (std::size_t k = 1; k < sessions.size(); ++k)
+    r.consistency_sessions.push_back(Consistency(sessions.front(), sessions[k], max_sq, &ct_all, &cr_all));
   r.consistency = MakeErrors(std::move(ct_all), std::move(cr_all));
   return r;
 }
