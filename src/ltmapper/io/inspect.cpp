@@ -134,11 +134,126 @@ SessionInfo InspectLoaded(const std::string& dir, const SessionLayout& layout, b
   return info;
 }
 
+namespace {
+// SCDs/ against Scans/: descriptors missing (computed later) or without a scan.
+void CheckScds(const fs::path& root, const std::set<int>& scan_ids, SessionInfo& info) {
+  std::error_code ec;
+  const std::string scd_dir = (root / "SCDs").string();
+  if (!fs::is_directory(scd_dir, ec)) return;
+  const auto scds = ListLenient(scd_dir, ".scd", info);
+  info.scds_found = scds.size();
+  std::set<int> scd_ids;
+  for (const auto& s : scds) scd_ids.insert(s.index);
+  std::vector<int> no_scd, no_scan;
+  for (int id : scan_ids)
+    if (!scd_ids.count(id)) no_scd.push_back(id);
+  for (int id : scd_ids)
+    if (!scan_ids.count(id)) no_scan.push_back(id);
+  if (!no_scd.empty()) info.problems.push_back("SCDs/: no descriptor for scans " + IdList(no_scd) + " (they will be computed)");
+  if (!no_scan.empty()) info.problems.push_back("SCDs/: descriptors without a scan: " + IdList(no_scan));
+}
+
+// The g2o's vertices (poses in id order) against the scans, its edges counted as odometry
+// (neighbouring vertices) or loops; optimized_poses.txt beside it checked for the same count.
+std::vector<Pose> G2oPoses(const std::string& g2o_path, const std::string& kitti_path, const std::set<int>& scan_ids,
+                           std::size_t scans, SessionInfo& info) {
+  std::vector<Pose> poses;
+  info.pose_source = "singlesession_posegraph.g2o";
+  try {
+    const G2oGraph g = ReadG2o(g2o_path);
+    std::map<int, Pose> by_id(g.vertices.begin(), g.vertices.end());
+    std::map<int, int> position;
+    for (const auto& [id, T] : by_id) {
+      position[id] = int(poses.size());
+      poses.push_back(T);
+    }
+    info.keyframes = by_id.size();
+    std::vector<int> missing, extra;
+    for (const auto& [id, T] : by_id)
+      if (!scan_ids.count(id)) missing.push_back(id);
+    for (int id : scan_ids)
+      if (!by_id.count(id)) extra.push_back(id);
+    if (!missing.empty()) info.problems.push_back("missing scans: g2o vertices without Scans/ file: " + IdList(missing));
+    if (!extra.empty()) info.problems.push_back("extra scans without poses (no g2o vertex): " + IdList(extra));
+    if (by_id.size() != scans)
+      info.problems.push_back("count mismatch: " + std::to_string(by_id.size()) + " g2o vertices, " +
+                              std::to_string(scans) + " scans");
+    for (const auto& e : g.edges) (std::abs(position[e.from] - position[e.to]) == 1 ? info.odometry_edges : info.loop_edges)++;
+  } catch (const Error& e) {
+    info.problems.push_back(e.what());
+  }
+  std::error_code ec;
+  if (!fs::exists(kitti_path, ec)) return poses;
+  try {
+    const auto kp = ReadKittiPoses(kitti_path);
+    if (kp.size() != info.keyframes)
+      info.problems.push_back("optimized_poses.txt has " + std::to_string(kp.size()) + " poses, the g2o " +
+                              std::to_string(info.keyframes) + " vertices (the g2o is used)");
+  } catch (const Error& e) {
+    info.problems.push_back(std::string(e.what()) + " (not used: the g2o gives the poses)");
+  }
+  return poses;
+}
+
+std::vector<Pose> KittiPoses(const std::string& kitti_path, std::size_t scans, SessionInfo& info) {
+  std::vector<Pose> poses;
+  info.pose_source = "optimized_poses.txt";
+  try {
+    poses = ReadKittiPoses(kitti_path);
+    info.keyframes = poses.size();
+    if (poses.size() != scans)
+      info.problems.push_back("count mismatch: pose count != scan count: " + std::to_string(poses.size()) +
+                              " poses in optimized_poses.txt, " + std::to_string(scans) + " scans in Scans/");
+    if (poses.size() > 1) info.odometry_edges = poses.size() - 1;
+  } catch (const Error& e) {
+    info.problems.push_back(e.what());
+  }
+  return poses;
+}
+
+// An SC-LIO-SAM folder: Scans/ (and SCDs/) with the g2o or optimized_poses.txt.
+SessionInfo InspectScLioSam(const std::string& dir, bool read_scans) {
+  std::error_code ec;
+  const fs::path root(dir);
+  const std::string scans_dir = (root / "Scans").string();
+  if (!fs::is_directory(scans_dir, ec))
+    throw Error(dir + ": missing Scans/ folder (expected Scans/NNNNNN.pcd keyframe scans)");
+  SessionInfo info;
+  info.dir = dir;
+  info.layout = "sc-lio-sam";
+  const auto scans = ListLenient(scans_dir, ".pcd", info);
+  info.scans_found = scans.size();
+  if (scans.empty()) info.problems.push_back(scans_dir + ": no .pcd scans");
+  std::set<int> scan_ids;
+  for (const auto& s : scans) scan_ids.insert(s.index);
+  CheckScds(root, scan_ids, info);
+  const std::string g2o_path = (root / "singlesession_posegraph.g2o").string();
+  const std::string kitti_path = (root / "optimized_poses.txt").string();
+  std::vector<Pose> poses;
+  if (fs::exists(g2o_path, ec)) {
+    poses = G2oPoses(g2o_path, kitti_path, scan_ids, scans.size(), info);
+  } else if (fs::exists(kitti_path, ec)) {
+    poses = KittiPoses(kitti_path, scans.size(), info);
+  } else {
+    info.pose_source = "none";
+    info.problems.push_back("no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
+  }
+  PoseStats(poses, info);
+  if (read_scans) ScanStats(scans, info);
+  try {
+    LoadSession(dir);
+  } catch (const Error& e) {
+    info.load_error = e.what();
+  }
+  return info;
+}
+}  // namespace
+
 SessionInfo InspectSession(const std::string& dir, bool read_scans) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw Error(dir + ": no such session directory");
   const fs::path root(dir);
-  // Scans/ without a pose file is an SC-LIO-SAM session with a problem, listed below.
+  // Scans/ without a pose file is an SC-LIO-SAM session with a problem, listed then.
   if (!fs::is_directory(root / "Scans", ec) || (!fs::exists(root / "singlesession_posegraph.g2o", ec) &&
                                                 !fs::exists(root / "optimized_poses.txt", ec))) {
     try {
@@ -148,104 +263,7 @@ SessionInfo InspectSession(const std::string& dir, bool read_scans) {
       if (!fs::is_directory(root / "Scans", ec)) throw;
     }
   }
-  const std::string scans_dir = (root / "Scans").string();
-  if (!fs::is_directory(scans_dir, ec))
-    throw Error(dir + ": missing Scans/ folder (expected Scans/NNNNNN.pcd keyframe scans)");
-
-  SessionInfo info;
-  info.dir = dir;
-  info.layout = "sc-lio-sam";
-  const auto scans = ListLenient(scans_dir, ".pcd", info);
-  info.scans_found = scans.size();
-  if (scans.empty()) info.problems.push_back(scans_dir + ": no .pcd scans");
-  std::set<int> scan_ids;
-  for (const auto& s : scans) scan_ids.insert(s.index);
-
-  const std::string scd_dir = (root / "SCDs").string();
-  if (fs::is_directory(scd_dir, ec)) {
-    const auto scds = ListLenient(scd_dir, ".scd", info);
-    info.scds_found = scds.size();
-    std::set<int> scd_ids;
-    for (const auto& s : scds) scd_ids.insert(s.index);
-    std::vector<int> no_scd, no_scan;
-    for (int id : scan_ids)
-      if (!scd_ids.count(id)) no_scd.push_back(id);
-    for (int id : scd_ids)
-      if (!scan_ids.count(id)) no_scan.push_back(id);
-    if (!no_scd.empty()) info.problems.push_back("SCDs/: no descriptor for scans " + IdList(no_scd) + " (they will be computed)");
-    if (!no_scan.empty()) info.problems.push_back("SCDs/: descriptors without a scan: " + IdList(no_scan));
-  }
-
-  const std::string g2o_path = (root / "singlesession_posegraph.g2o").string();
-  const std::string kitti_path = (root / "optimized_poses.txt").string();
-  std::vector<Pose> poses;
-  if (fs::exists(g2o_path, ec)) {
-    info.pose_source = "singlesession_posegraph.g2o";
-    try {
-      const G2oGraph g = ReadG2o(g2o_path);
-      std::map<int, Pose> by_id(g.vertices.begin(), g.vertices.end());
-      std::map<int, int> position;
-      for (const auto& [id, T] : by_id) {
-        position[id] = int(poses.size());
-        poses.push_back(T);
-      }
-      info.keyframes = by_id.size();
-      std::vector<int> missing, extra;
-      for (const auto& [id, T] : by_id)
-        if (!scan_ids.count(id)) missing.push_back(id);
-      for (int id : scan_ids)
-        if (!by_id.count(id)) extra.push_back(id);
-      if (!missing.empty())
-        info.problems.push_back("missing scans: g2o vertices without Scans/ file: " + IdList(missing));
-      if (!extra.empty())
-        info.problems.push_back("extra scans without poses (no g2o vertex): " + IdList(extra));
-      if (by_id.size() != scans.size())
-        info.problems.push_back("count mismatch: " + std::to_string(by_id.size()) + " g2o vertices, " +
-                                std::to_string(scans.size()) + " scans");
-      for (const auto& e : g.edges)
-        (std::abs(position[e.from] - position[e.to]) == 1 ? info.odometry_edges : info.loop_edges)++;
-    } catch (const Error& e) {
-      info.problems.push_back(e.what());
-    }
-    if (fs::exists(kitti_path, ec)) {
-      try {
-        const auto kp = ReadKittiPoses(kitti_path);
-        if (kp.size() != info.keyframes)
-          info.problems.push_back("optimized_poses.txt has " + std::to_string(kp.size()) +
-                                  " poses, the g2o " + std::to_string(info.keyframes) +
-                                  " vertices (the g2o is used)");
-      } catch (const Error& e) {
-        info.problems.push_back(std::string(e.what()) + " (not used: the g2o gives the poses)");
-      }
-    }
-  } else if (fs::exists(kitti_path, ec)) {
-    info.pose_source = "optimized_poses.txt";
-    try {
-      poses = ReadKittiPoses(kitti_path);
-      info.keyframes = poses.size();
-      if (poses.size() != scans.size())
-        info.problems.push_back("count mismatch: pose count != scan count: " + std::to_string(poses.size()) +
-                                " poses in optimized_poses.txt, " + std::to_string(scans.size()) +
-                                " scans in Scans/");
-      if (poses.size() > 1) info.odometry_edges = poses.size() - 1;
-    } catch (const Error& e) {
-      info.problems.push_back(e.what());
-    }
-  } else {
-    info.pose_source = "none";
-    info.problems.push_back("no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
-  }
-  PoseStats(poses, info);
-  if (read_scans) ScanStats(scans, info);
-
-  if (info.load_error.empty()) {
-    try {
-      LoadSession(dir);
-    } catch (const Error& e) {
-      info.load_error = e.what();
-    }
-  }
-  return info;
+  return InspectScLioSam(dir, read_scans);
 }
 
 SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses_path,
