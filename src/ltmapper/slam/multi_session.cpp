@@ -265,154 +265,155 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
   }
 }
 
-}  // namespace
-
-SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg,
-                         int threads) {
-  ValidateConfig(cfg, "slam config");
-  ValidateSessionGraphs(sessions);
-  const Stopwatch total;
-  const std::size_t n = sessions.size();
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-  CloudStore store(sessions, cfg);
-
-  // ---- descriptors
-  Stopwatch sw;
-  std::vector<std::vector<ScanContext>> sc(n);
+// Scan Context of every keyframe (read from SCDs/ when present and allowed, else computed from
+// the scan, whose downsampled copy is then kept for registration); returns the number read.
+std::size_t ComputeDescriptors(const std::vector<Session>& sessions, const SlamConfig& cfg, CloudStore& store,
+                               tbb::task_arena& arena, std::vector<std::vector<ScanContext>>* sc) {
   std::size_t read_files = 0;
   std::mutex mu;
-  for (std::size_t s = 0; s < n; ++s) {
+  sc->assign(sessions.size(), {});
+  for (std::size_t s = 0; s < sessions.size(); ++s) {
     const Session& ses = sessions[s];
-    sc[s].resize(ses.keyframes.size());
+    (*sc)[s].resize(ses.keyframes.size());
     Progress progress("scan context " + ses.name, ses.keyframes.size());
     ParallelFor(arena, ses.keyframes.size(), [&](std::size_t k) {
       const std::string scd = ScdPath(ses, ses.keyframes[k]);
       if (cfg.sc_read_files && !scd.empty() && fs::exists(scd)) {
-        sc[s][k] = ScanContextFromMatrix(io::ReadScd(scd, cfg.sc_rings, cfg.sc_sectors));
+        (*sc)[s][k] = ScanContextFromMatrix(io::ReadScd(scd, cfg.sc_rings, cfg.sc_sectors));
         std::lock_guard<std::mutex> lock(mu);
         ++read_files;
       } else {
         const auto raw = store.Raw(int(s), int(k));
-        sc[s][k] = MakeScanContext(*raw, cfg);
-        store.Put(int(s), int(k), *raw);  // the scan is loaded now: keep its downsampled copy
+        (*sc)[s][k] = MakeScanContext(*raw, cfg);
+        store.Put(int(s), int(k), *raw);
       }
       progress.Tick();
     });
     progress.Done();
   }
-  const double t_desc = sw.Seconds();
-  spdlog::info("slam: scan context for {} sessions ({} read from SCDs) in {:.2f} s", n, read_files,
-               t_desc);
+  return read_files;
+}
 
-  // ---- retrieval: for every pair (a < b), each keyframe of b against the ring-key tree of a
-  sw = Stopwatch();
-  std::vector<LoopRecord> loops;
+// For every pair (a < b), each keyframe of b against the ring-key tree of a: the pair's ranked
+// candidates (kept for retries) and its first batch appended to `loops`.
+std::vector<PairCandidates> RetrieveCandidates(const std::vector<Session>& sessions,
+                                               const std::vector<std::vector<ScanContext>>& sc, const SlamConfig& cfg,
+                                               tbb::task_arena& arena, std::vector<LoopRecord>* loops) {
   std::vector<PairCandidates> pairs;
-  for (std::size_t a = 0; a + 1 < n; ++a) {
+  for (std::size_t a = 0; a + 1 < sessions.size(); ++a) {
     RingKeys keys;
     for (const auto& d : sc[a]) keys.keys.push_back(d.ring_key);
-    RingTree tree(static_cast<std::size_t>(cfg.sc_rings), keys,
-                  nanoflann::KDTreeSingleIndexAdaptorParams(10));
-    for (std::size_t b = a + 1; b < n; ++b) {
+    RingTree tree(static_cast<std::size_t>(cfg.sc_rings), keys, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+    for (std::size_t b = a + 1; b < sessions.size(); ++b) {
       pairs.push_back(RetrievePair(sc, tree, int(a), int(b), cfg, arena));
       const std::vector<LoopRecord> batch = NextBatch(pairs.back(), cfg);
       spdlog::info("slam: {} vs {}: {} scan context candidates below the pair's median best "
                    "distance {:.3f}, {} selected",
-                   sessions[a].name, sessions[b].name, pairs.back().ranked.size(),
-                   pairs.back().gate, batch.size());
-      loops.insert(loops.end(), batch.begin(), batch.end());
+                   sessions[a].name, sessions[b].name, pairs.back().ranked.size(), pairs.back().gate, batch.size());
+      loops->insert(loops->end(), batch.begin(), batch.end());
     }
   }
-  const double t_retr = sw.Seconds();
+  return pairs;
+}
 
-  // ---- registration of the Scan Context candidates
-  sw = Stopwatch();
-  Register(loops, store, cfg, arena, "GICP scan context loops", true);
-  int registrations = static_cast<int>(loops.size());
-  double t_reg = sw.Seconds();
+// Radius-search candidates of one refinement round for the aligned pair (a, b): every
+// refine_stride-th keyframe of b without an accepted loop to a, paired with the nearest keyframe
+// of a within refine_radius_m in the world frame (each pair tried once).
+void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loops, std::size_t a, std::size_t b,
+                      const SlamConfig& cfg, std::set<std::pair<NodeKey, NodeKey>>& tried,
+                      std::vector<LoopRecord>* cand) {
+  const auto& Wa = res.sessions[a].T_world_sensor;
+  const auto& Wb = res.sessions[b].T_world_sensor;
+  std::vector<bool> has_loop(Wb.size(), false);
+  for (const auto& l : loops)
+    if (l.accepted && l.a.session == int(a) && l.b.session == int(b)) has_loop[l.b.keyframe] = true;
+  int eligible = 0, added = 0;
+  for (std::size_t j = 0; j < Wb.size() && added < cfg.refine_max_loops_per_pair; ++j) {
+    if (has_loop[j]) continue;
+    if (eligible++ % cfg.refine_stride != 0) continue;
+    int best = -1;
+    double best_d = cfg.refine_radius_m;
+    for (std::size_t i = 0; i < Wa.size(); ++i) {
+      const double d = (Wa[i].translation() - Wb[j].translation()).norm();
+      if (d <= best_d) best_d = d, best = int(i);
+    }
+    if (best < 0) continue;
+    LoopRecord l;
+    l.a = {int(a), best};
+    l.b = {int(b), int(j)};
+    if (!tried.insert({l.a, l.b}).second) continue;
+    l.source = "radius";
+    l.T_a_b = Wa[best].inverse() * Wb[j];
+    l.yaw_deg = Eigen::AngleAxisd(l.T_a_b.linear()).angle() * 180.0 / M_PI;
+    cand->push_back(l);
+    ++added;
+  }
+}
 
-  // ---- back end
-  sw = Stopwatch();
-  SlamResult res = OptimizeSessions(sessions, loops, cfg, threads);
-  double t_opt = sw.Seconds();
-  StageCost retry;
-  RetryUnaligned(sessions, pairs, loops, res, store, cfg, arena, threads, retry);
-  registrations += retry.registrations;
-  t_reg += retry.registration_s;
-  t_opt += retry.optimisation_s;
-
-  // ---- radius-search refinement: query keyframes without a loop look for keyframes of the
-  // other session near them in the world frame, verified by GICP from the current estimate.
+// Radius-search refinement: query keyframes without a loop look for keyframes of the other
+// session near them in the world frame, verified by GICP from the current estimate.
+void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
+            const SlamConfig& cfg, tbb::task_arena& arena, int threads, StageCost& cost) {
+  const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
-    for (std::size_t a = 0; a + 1 < n; ++a) {
-      if (!res.sessions[a].aligned) continue;
-      const auto& Wa = res.sessions[a].T_world_sensor;
-      for (std::size_t b = a + 1; b < n; ++b) {
-        if (!res.sessions[b].aligned) continue;
-        const auto& Wb = res.sessions[b].T_world_sensor;
-        std::vector<bool> has_loop(Wb.size(), false);
-        for (const auto& l : loops) {
-          if (l.accepted && l.a.session == int(a) && l.b.session == int(b)) {
-            has_loop[l.b.keyframe] = true;
-          }
-        }
-        int eligible = 0, added = 0;
-        for (std::size_t j = 0; j < Wb.size() && added < cfg.refine_max_loops_per_pair; ++j) {
-          if (has_loop[j]) continue;
-          if (eligible++ % cfg.refine_stride != 0) continue;
-          int best = -1;
-          double best_d = cfg.refine_radius_m;
-          for (std::size_t i = 0; i < Wa.size(); ++i) {
-            const double d = (Wa[i].translation() - Wb[j].translation()).norm();
-            if (d <= best_d) {
-              best_d = d;
-              best = int(i);
-            }
-          }
-          if (best < 0) continue;
-          LoopRecord l;
-          l.a = {int(a), best};
-          l.b = {int(b), int(j)};
-          if (tried.count({l.a, l.b})) continue;
-          tried.insert({l.a, l.b});
-          l.source = "radius";
-          l.T_a_b = Wa[best].inverse() * Wb[j];
-          l.yaw_deg = Eigen::AngleAxisd(l.T_a_b.linear()).angle() * 180.0 / M_PI;
-          cand.push_back(l);
-          ++added;
-        }
-      }
-    }
+    for (std::size_t a = 0; a + 1 < n; ++a)
+      for (std::size_t b = a + 1; b < n; ++b)
+        if (res.sessions[a].aligned && res.sessions[b].aligned) RadiusCandidates(res, loops, a, b, cfg, tried, &cand);
     if (cand.empty()) break;
-    sw = Stopwatch();
-    Register(cand, store, cfg, arena, "GICP radius loops, round " + std::to_string(round + 1),
-             false);
-    registrations += static_cast<int>(cand.size());
-    t_reg += sw.Seconds();
+    Stopwatch sw;
+    Register(cand, store, cfg, arena, "GICP radius loops, round " + std::to_string(round + 1), false);
+    cost.registrations += static_cast<int>(cand.size());
+    cost.registration_s += sw.Seconds();
     std::size_t ok = 0;
     for (const auto& l : cand) ok += l.verified ? 1 : 0;
-    spdlog::info("slam: refinement round {}: {} radius candidates, {} verified", round + 1,
-                 cand.size(), ok);
+    spdlog::info("slam: refinement round {}: {} radius candidates, {} verified", round + 1, cand.size(), ok);
     loops.insert(loops.end(), cand.begin(), cand.end());
     sw = Stopwatch();
     res = OptimizeSessions(sessions, loops, cfg, threads);
-    t_opt += sw.Seconds();
+    cost.optimisation_s += sw.Seconds();
     if (ok == 0) break;
   }
+}
+}  // namespace
 
+SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg, int threads) {
+  ValidateConfig(cfg, "slam config");
+  ValidateSessionGraphs(sessions);
+  const Stopwatch total;
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  CloudStore store(sessions, cfg);
+  Stopwatch sw;
+  std::vector<std::vector<ScanContext>> sc;
+  const std::size_t read_files = ComputeDescriptors(sessions, cfg, store, arena, &sc);
+  const double t_desc = sw.Seconds();
+  spdlog::info("slam: scan context for {} sessions ({} read from SCDs) in {:.2f} s", sessions.size(), read_files,
+               t_desc);
+  sw = Stopwatch();
+  std::vector<LoopRecord> loops;
+  std::vector<PairCandidates> pairs = RetrieveCandidates(sessions, sc, cfg, arena, &loops);
+  const double t_retr = sw.Seconds();
+  StageCost cost;  // registration of the Scan Context candidates, back end, retries, refinement
+  sw = Stopwatch();
+  Register(loops, store, cfg, arena, "GICP scan context loops", true);
+  cost.registrations = static_cast<int>(loops.size());
+  cost.registration_s = sw.Seconds();
+  sw = Stopwatch();
+  SlamResult res = OptimizeSessions(sessions, loops, cfg, threads);
+  cost.optimisation_s = sw.Seconds();
+  RetryUnaligned(sessions, pairs, loops, res, store, cfg, arena, threads, cost);
+  Refine(sessions, loops, res, store, cfg, arena, threads, cost);
   res.time_descriptors_s = t_desc;
   res.time_retrieval_s = t_retr;
-  res.time_registration_s = t_reg;
-  res.time_optimisation_s = t_opt;
+  res.time_registration_s = cost.registration_s;
+  res.time_optimisation_s = cost.optimisation_s;
   res.time_total_s = total.Seconds();
-  res.registrations = registrations;
-  spdlog::info(
-      "slam: time per phase: descriptors {:.2f} s, retrieval {:.2f} s, registration {:.2f} s "
-      "({} GICP), optimisation {:.2f} s, total {:.2f} s",
-      t_desc, t_retr, t_reg, registrations, t_opt, res.time_total_s);
+  res.registrations = cost.registrations;
+  spdlog::info("slam: time per phase: descriptors {:.2f} s, retrieval {:.2f} s, registration {:.2f} s "
+               "({} GICP), optimisation {:.2f} s, total {:.2f} s",
+               t_desc, t_retr, cost.registration_s, cost.registrations, cost.optimisation_s, res.time_total_s);
   return res;
 }
 

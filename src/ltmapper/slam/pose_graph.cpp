@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -93,85 +94,109 @@ struct SolveStats {
   int iterations = 0;
 };
 
-SolveStats Solve(Graph& g, const std::vector<LoopRecord>& loops, int threads) {
-  const std::size_t n = g.sessions.size();
-  std::vector<std::vector<Block>> nodes(n);
-  std::vector<Block> anchors(n);
-  for (std::size_t s = 0; s < n; ++s) {
-    if (!g.aligned[s]) continue;
-    for (const Pose& T : g.poses[s]) nodes[s].push_back(ToBlock(T));
-    anchors[s] = ToBlock(g.anchors[s]);
-  }
-  ceres::Problem problem;
-  auto* manifold =
-      new ceres::ProductManifold<ceres::EuclideanManifold<3>, ceres::EigenQuaternionManifold>();
-  auto add_block = [&](double* b) {
-    if (!problem.HasParameterBlock(b)) problem.AddParameterBlock(b, 7, manifold);
-  };
-  for (std::size_t s = 0; s < n; ++s) {
-    if (!g.aligned[s]) continue;
-    const Session& ses = g.sessions[s];
-    for (auto& b : nodes[s]) add_block(b.data());
-    // Gauge: a session's frame is only defined up to a rigid motion (its anchor and all its
-    // poses can move together without changing any residual). Fixing its first pose at the
-    // odometry value removes that freedom; the anchor then carries the session's placement.
-    problem.SetParameterBlockConstant(nodes[s][0].data());
-    auto add_edges = [&](const std::vector<Edge>& edges, const char* kind) {
-      for (const Edge& e : edges) {
-        const int a = ses.Find(e.from), b = ses.Find(e.to);
-        const std::string what = "session " + ses.name + " " + kind + " edge " +
-                                 std::to_string(e.from) + "-" + std::to_string(e.to);
-        const Matrix6d info = (g.cfg.use_g2o_information && e.has_information)
-                                  ? e.information
-                                  : DiagInformation(g.cfg.odom_sigma_t_m,
-                                                    g.cfg.odom_sigma_r_deg * kDeg);
-        auto* cost = new ceres::AutoDiffCostFunction<detail::BetweenFactor, 6, 7, 7>(
-            new detail::BetweenFactor(e.T_from_to, SqrtInformation(info, what)));
-        problem.AddResidualBlock(cost, nullptr, nodes[s][a].data(), nodes[s][b].data());
-      }
-    };
-    add_edges(ses.odometry, "odometry");
-    add_edges(ses.loops, "loop");
-  }
-  for (const LoopRecord& l : loops) {
-    if (!l.accepted) continue;
-    const int sa = l.a.session, sb = l.b.session;
-    double* A = anchors[sa].data();
-    double* B = anchors[sb].data();
-    add_block(A);
-    add_block(B);
-    auto* cost = new ceres::AutoDiffCostFunction<detail::AnchorLoopFactor, 6, 7, 7, 7, 7>(
-        new detail::AnchorLoopFactor(l.T_a_b, SqrtInformation(l.information, "inter-session loop")));
-    problem.AddResidualBlock(cost, MakeLoss(g.cfg), A, nodes[sa][l.a.keyframe].data(), B,
-                             nodes[sb][l.b.keyframe].data());
-  }
-  // The central session's anchor is the world frame: constant (the paper gives it a tiny
-  // covariance; constant is the limit). Query anchors are free.
-  if (problem.HasParameterBlock(anchors[0].data())) {
-    problem.SetParameterBlockConstant(anchors[0].data());
+// The Ceres problem over the aligned sessions' poses (blocks of 7: t, q) and their anchors.
+class GraphProblem {
+ public:
+  explicit GraphProblem(const Graph& g)
+      : g_(g),
+        nodes_(g.sessions.size()),
+        anchors_(g.sessions.size()),
+        manifold_(new ceres::ProductManifold<ceres::EuclideanManifold<3>, ceres::EigenQuaternionManifold>()) {
+    for (std::size_t s = 0; s < g.sessions.size(); ++s) {
+      if (!g.aligned[s]) continue;
+      for (const Pose& T : g.poses[s]) nodes_[s].push_back(ToBlock(T));
+      anchors_[s] = ToBlock(g.anchors[s]);
+    }
   }
 
-  ceres::Solver::Options opt;
-  opt.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  opt.max_num_iterations = g.cfg.solver_max_iterations;
-  opt.num_threads = threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
-  opt.minimizer_progress_to_stdout = false;
-  opt.logging_type = ceres::SILENT;
-  ceres::Solver::Summary summary;
-  ceres::Solve(opt, &problem, &summary);
-  SolveStats st;
-  st.usable = summary.IsSolutionUsable();
-  st.initial_cost = summary.initial_cost;
-  st.final_cost = summary.final_cost;
-  st.iterations = static_cast<int>(summary.iterations.size());
-  if (!st.usable) {
-    throw Error("pose graph optimisation failed: " + summary.message);
+  // A session's odometry and own loops. Gauge: a session's frame is only defined up to a rigid
+  // motion (its anchor and all its poses can move together without changing any residual).
+  // Fixing its first pose at the odometry value removes that freedom; the anchor then carries
+  // the session's placement.
+  void AddSession(std::size_t s) {
+    for (auto& b : nodes_[s]) AddBlock(b.data());
+    problem_.SetParameterBlockConstant(nodes_[s][0].data());
+    AddEdges(s, g_.sessions[s].odometry, "odometry");
+    AddEdges(s, g_.sessions[s].loops, "loop");
   }
-  for (std::size_t s = 0; s < n; ++s) {
-    if (!g.aligned[s]) continue;
-    for (std::size_t k = 0; k < nodes[s].size(); ++k) g.poses[s][k] = FromBlock(nodes[s][k]);
-    g.anchors[s] = FromBlock(anchors[s]);
+
+  // An accepted inter-session loop through both sessions' anchors, with the robust loss.
+  void AddLoop(const LoopRecord& l) {
+    const int sa = l.a.session, sb = l.b.session;
+    double* A = anchors_[sa].data();
+    double* B = anchors_[sb].data();
+    AddBlock(A);
+    AddBlock(B);
+    auto* cost = new ceres::AutoDiffCostFunction<detail::AnchorLoopFactor, 6, 7, 7, 7, 7>(
+        new detail::AnchorLoopFactor(l.T_a_b, SqrtInformation(l.information, "inter-session loop")));
+    problem_.AddResidualBlock(cost, MakeLoss(g_.cfg), A, nodes_[sa][l.a.keyframe].data(), B,
+                              nodes_[sb][l.b.keyframe].data());
   }
+
+  // The central session's anchor is the world frame: constant (the paper gives it a tiny
+  // covariance; constant is the limit). Query anchors are free. Throws when unusable.
+  SolveStats Solve(int threads) {
+    if (problem_.HasParameterBlock(anchors_[0].data())) problem_.SetParameterBlockConstant(anchors_[0].data());
+    ceres::Solver::Options opt;
+    opt.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    opt.max_num_iterations = g_.cfg.solver_max_iterations;
+    opt.num_threads = threads > 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
+    opt.minimizer_progress_to_stdout = false;
+    opt.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(opt, &problem_, &summary);
+    SolveStats st;
+    st.usable = summary.IsSolutionUsable();
+    st.initial_cost = summary.initial_cost;
+    st.final_cost = summary.final_cost;
+    st.iterations = static_cast<int>(summary.iterations.size());
+    if (!st.usable) throw Error("pose graph optimisation failed: " + summary.message);
+    return st;
+  }
+
+  void WriteBack(Graph& g) const {
+    for (std::size_t s = 0; s < g.sessions.size(); ++s) {
+      if (!g.aligned[s]) continue;
+      for (std::size_t k = 0; k < nodes_[s].size(); ++k) g.poses[s][k] = FromBlock(nodes_[s][k]);
+      g.anchors[s] = FromBlock(anchors_[s]);
+    }
+  }
+
+ private:
+  void AddBlock(double* b) {
+    if (!problem_.HasParameterBlock(b)) problem_.AddParameterBlock(b, 7, manifold_);
+  }
+
+  void AddEdges(std::size_t s, const std::vector<Edge>& edges, const char* kind) {
+    const Session& ses = g_.sessions[s];
+    for (const Edge& e : edges) {
+      const int a = ses.Find(e.from), b = ses.Find(e.to);
+      const std::string what =
+          "session " + ses.name + " " + kind + " edge " + std::to_string(e.from) + "-" + std::to_string(e.to);
+      const Matrix6d info = (g_.cfg.use_g2o_information && e.has_information)
+                                ? e.information
+                                : DiagInformation(g_.cfg.odom_sigma_t_m, g_.cfg.odom_sigma_r_deg * kDeg);
+      auto* cost = new ceres::AutoDiffCostFunction<detail::BetweenFactor, 6, 7, 7>(
+          new detail::BetweenFactor(e.T_from_to, SqrtInformation(info, what)));
+      problem_.AddResidualBlock(cost, nullptr, nodes_[s][a].data(), nodes_[s][b].data());
+    }
+  }
+
+  const Graph& g_;
+  std::vector<std::vector<Block>> nodes_;
+  std::vector<Block> anchors_;
+  ceres::Manifold* manifold_;  // owned by problem_ once a block uses it
+  ceres::Problem problem_;
+};
+
+SolveStats Solve(Graph& g, const std::vector<LoopRecord>& loops, int threads) {
+  GraphProblem problem(g);
+  for (std::size_t s = 0; s < g.sessions.size(); ++s)
+    if (g.aligned[s]) problem.AddSession(s);
+  for (const LoopRecord& l : loops)
+    if (l.accepted) problem.AddLoop(l);
+  const SolveStats st = problem.Solve(threads);
+  problem.WriteBack(g);
   return st;
 }
 
@@ -237,18 +262,9 @@ Matrix6d LoopInformation(double fitness, const SlamConfig& cfg) {
   return DiagInformation(cfg.loop_sigma_t_m * scale, cfg.loop_sigma_r_deg * kDeg * scale);
 }
 
-SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops,
-                            const SlamConfig& cfg, int threads) {
-  ValidateConfig(cfg, "slam config");
-  ValidateSessionGraphs(sessions);
+namespace {
+void CheckLoops(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops) {
   const std::size_t n = sessions.size();
-  Graph g{sessions, cfg, std::vector<std::vector<Pose>>(n), std::vector<Pose>(n, Pose::Identity()),
-          std::vector<bool>(n, false)};
-  std::vector<std::vector<double>> path(n);
-  for (std::size_t s = 0; s < n; ++s) {
-    for (const Keyframe& kf : sessions[s].keyframes) g.poses[s].push_back(kf.T_session_sensor);
-    path[s] = PathLength(g.poses[s]);
-  }
   for (auto& l : loops) {
     if (l.a.session < 0 || l.b.session < 0 || l.a.session >= int(n) || l.b.session >= int(n) ||
         l.a.session == l.b.session || l.a.keyframe < 0 || l.b.keyframe < 0 ||
@@ -259,111 +275,121 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
     l.accepted = false;
     if (l.verified) l.status = "pending";
   }
+}
 
-  SlamResult res;
-  res.sessions.resize(n);
-  std::vector<std::string> reason(n);
-  g.aligned[0] = true;
+// The anchor of session s a verified loop to an already-anchored session t implies, with the
+// path positions of the loop's keyframes in s and in t.
+struct Implied {
+  std::size_t loop;
+  Pose A;
+  double pos_s, pos_t;
+  int t;
+};
 
-  // ---- 1. Anchor initialisation: the anchor of a query is unknown (any yaw, any offset), so it
-  // is taken from the loops themselves. Each verified loop to an already-anchored session t
-  // implies A_s; the loop whose implied anchor agrees with the most others (within a tolerance
-  // growing with the path between the loops, since odometry drifts) seeds A_s. Sessions reachable
-  // only through other queries are anchored in later passes.
-  for (bool progress = true; progress;) {
-    progress = false;
-    for (std::size_t s = 1; s < n; ++s) {
-      if (g.aligned[s]) continue;
-      struct Implied {
-        std::size_t loop;
-        Pose A;
-        double pos_s, pos_t;  // path position of the loop's keyframes in s and in t
-        int t;
-      };
-      std::vector<Implied> cand;
-      for (std::size_t i = 0; i < loops.size(); ++i) {
-        const LoopRecord& l = loops[i];
-        if (!l.verified) continue;
-        const Pose& z = l.T_a_b;
-        if (l.b.session == int(s) && g.aligned[l.a.session]) {
-          const Pose& xa = g.poses[l.a.session][l.a.keyframe];
-          const Pose& xb = g.poses[s][l.b.keyframe];
-          cand.push_back({i, g.anchors[l.a.session] * xa * z * xb.inverse(),
-                          path[s][l.b.keyframe], path[l.a.session][l.a.keyframe], l.a.session});
-        } else if (l.a.session == int(s) && g.aligned[l.b.session]) {
-          const Pose& xa = g.poses[s][l.a.keyframe];
-          const Pose& xb = g.poses[l.b.session][l.b.keyframe];
-          cand.push_back({i, g.anchors[l.b.session] * xb * z.inverse() * xa.inverse(),
-                          path[s][l.a.keyframe], path[l.b.session][l.b.keyframe], l.b.session});
-        }
-      }
-      if (cand.empty()) {
-        reason[s] = "no verified inter-session loop to an aligned session";
-        continue;
-      }
-      auto consistent = [&](const Implied& x, const Implied& y) {
-        const double travelled =
-            std::abs(x.pos_s - y.pos_s) + (x.t == y.t ? std::abs(x.pos_t - y.pos_t) : 0.0);
-        const double tol_t = cfg.consensus_t_m + cfg.consensus_drift_ratio * travelled;
-        const double tol_r = cfg.consensus_r_deg;
-        return (x.A.translation() - y.A.translation()).norm() <= tol_t &&
-               AngleDeg(x.A.linear().transpose() * y.A.linear()) <= tol_r;
-      };
-      std::size_t best = 0;
-      std::vector<std::size_t> best_inliers;
-      double best_fit = 1e300;
-      for (std::size_t i = 0; i < cand.size(); ++i) {
-        std::vector<std::size_t> in;
-        double fit = 0;
-        for (std::size_t j = 0; j < cand.size(); ++j) {
-          if (consistent(cand[i], cand[j])) {
-            in.push_back(j);
-            fit += loops[cand[j].loop].fitness;
-          }
-        }
-        if (in.size() > best_inliers.size() || (in.size() == best_inliers.size() && fit < best_fit)) {
-          best = i;
-          best_inliers = in;
-          best_fit = fit;
-        }
-      }
-      if (int(best_inliers.size()) < cfg.min_loops) {
-        std::ostringstream os;
-        os << "only " << best_inliers.size() << " mutually consistent verified loop(s) of "
-           << cand.size() << " (need graph.min_loops = " << cfg.min_loops << ")";
-        reason[s] = os.str();
-        continue;
-      }
-      // Ambiguity (repetitive places): the largest group of loops that disagrees with the chosen
-      // anchor is a rival placement. The chosen one must lead it by graph.min_loops loops, the
-      // evidence asked of any placement at all; otherwise wait for more loops (retry).
-      const std::size_t rival = RivalSupport(cand, best, best_inliers, consistent);
-      if (int(best_inliers.size()) < int(rival) + cfg.min_loops) {
-        std::ostringstream os;
-        os << "ambiguous: " << best_inliers.size()
-           << " consistent verified loop(s) against a rival placement with " << rival
-           << " (need a lead of graph.min_loops = " << cfg.min_loops << ")";
-        reason[s] = os.str();
-        continue;
-      }
-      g.aligned[s] = true;
-      g.anchors[s] = cand[best].A;
-      std::vector<bool> in(cand.size(), false);
-      for (std::size_t j : best_inliers) in[j] = true;
-      for (std::size_t j = 0; j < cand.size(); ++j) {
-        LoopRecord& l = loops[cand[j].loop];
-        if (in[j] || !cfg.gate_inconsistent_loops) {
-          l.accepted = true;
-          l.status = "accepted";
-        } else {
-          l.status = "rejected: implied anchor inconsistent with the consensus";
-        }
-      }
-      progress = true;
+std::vector<Implied> ImpliedAnchors(const Graph& g, const std::vector<LoopRecord>& loops,
+                                    const std::vector<std::vector<double>>& path, std::size_t s) {
+  std::vector<Implied> cand;
+  for (std::size_t i = 0; i < loops.size(); ++i) {
+    const LoopRecord& l = loops[i];
+    if (!l.verified) continue;
+    const Pose& z = l.T_a_b;
+    if (l.b.session == int(s) && g.aligned[l.a.session]) {
+      const Pose& xa = g.poses[l.a.session][l.a.keyframe];
+      const Pose& xb = g.poses[s][l.b.keyframe];
+      cand.push_back({i, g.anchors[l.a.session] * xa * z * xb.inverse(), path[s][l.b.keyframe],
+                      path[l.a.session][l.a.keyframe], l.a.session});
+    } else if (l.a.session == int(s) && g.aligned[l.b.session]) {
+      const Pose& xa = g.poses[s][l.a.keyframe];
+      const Pose& xb = g.poses[l.b.session][l.b.keyframe];
+      cand.push_back({i, g.anchors[l.b.session] * xb * z.inverse() * xa.inverse(), path[s][l.a.keyframe],
+                      path[l.b.session][l.b.keyframe], l.b.session});
     }
   }
-  // Loops between two aligned sessions that were not part of any consensus (e.g. query-query
-  // loops once both are anchored) are checked against the initial anchors.
+  return cand;
+}
+
+// The implied anchor that agrees with the most others (within a tolerance growing with the
+// path between the loops, since odometry drifts; ties: the lowest summed fitness) and its group.
+std::size_t Consensus(const std::vector<Implied>& cand, const std::vector<LoopRecord>& loops,
+                      const std::function<bool(const Implied&, const Implied&)>& consistent,
+                      std::vector<std::size_t>* best_inliers) {
+  std::size_t best = 0;
+  double best_fit = 1e300;
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    std::vector<std::size_t> in;
+    double fit = 0;
+    for (std::size_t j = 0; j < cand.size(); ++j) {
+      if (!consistent(cand[i], cand[j])) continue;
+      in.push_back(j);
+      fit += loops[cand[j].loop].fitness;
+    }
+    if (in.size() > best_inliers->size() || (in.size() == best_inliers->size() && fit < best_fit)) {
+      best = i;
+      *best_inliers = in;
+      best_fit = fit;
+    }
+  }
+  return best;
+}
+
+// Anchors query s from its loops to anchored sessions (false with the reason when the evidence
+// is short or ambiguous); its loops in the consensus are accepted, the others gated.
+bool AnchorSession(Graph& g, std::vector<LoopRecord>& loops, const std::vector<std::vector<double>>& path,
+                   std::size_t s, std::string* reason) {
+  const SlamConfig& cfg = g.cfg;
+  const std::vector<Implied> cand = ImpliedAnchors(g, loops, path, s);
+  if (cand.empty()) {
+    *reason = "no verified inter-session loop to an aligned session";
+    return false;
+  }
+  const std::function<bool(const Implied&, const Implied&)> consistent = [&](const Implied& x, const Implied& y) {
+    const double travelled = std::abs(x.pos_s - y.pos_s) + (x.t == y.t ? std::abs(x.pos_t - y.pos_t) : 0.0);
+    const double tol_t = cfg.consensus_t_m + cfg.consensus_drift_ratio * travelled;
+    return (x.A.translation() - y.A.translation()).norm() <= tol_t &&
+           AngleDeg(x.A.linear().transpose() * y.A.linear()) <= cfg.consensus_r_deg;
+  };
+  std::vector<std::size_t> inliers;
+  const std::size_t best = Consensus(cand, loops, consistent, &inliers);
+  std::ostringstream os;
+  if (int(inliers.size()) < cfg.min_loops) {
+    os << "only " << inliers.size() << " mutually consistent verified loop(s) of " << cand.size()
+       << " (need graph.min_loops = " << cfg.min_loops << ")";
+    *reason = os.str();
+    return false;
+  }
+  // Ambiguity (repetitive places): the largest group of loops that disagrees with the chosen
+  // anchor is a rival placement. The chosen one must lead it by graph.min_loops loops, the
+  // evidence asked of any placement at all; otherwise wait for more loops (retry).
+  const std::size_t rival = RivalSupport(cand, best, inliers, consistent);
+  if (int(inliers.size()) < int(rival) + cfg.min_loops) {
+    os << "ambiguous: " << inliers.size() << " consistent verified loop(s) against a rival placement with " << rival
+       << " (need a lead of graph.min_loops = " << cfg.min_loops << ")";
+    *reason = os.str();
+    return false;
+  }
+  g.aligned[s] = true;
+  g.anchors[s] = cand[best].A;
+  std::vector<bool> in(cand.size(), false);
+  for (std::size_t j : inliers) in[j] = true;
+  for (std::size_t j = 0; j < cand.size(); ++j) {
+    LoopRecord& l = loops[cand[j].loop];
+    l.accepted = in[j] || !cfg.gate_inconsistent_loops;
+    l.status = l.accepted ? "accepted" : "rejected: implied anchor inconsistent with the consensus";
+  }
+  return true;
+}
+
+// Anchor initialisation: the anchor of a query is unknown (any yaw, any offset), so it is taken
+// from the loops themselves; sessions reachable only through other queries are anchored in
+// later passes. Loops between two aligned sessions that were not part of any consensus (e.g.
+// query-query loops once both are anchored) are then checked against the initial anchors.
+void InitialiseAnchors(Graph& g, std::vector<LoopRecord>& loops, const std::vector<std::vector<double>>& path,
+                       std::vector<std::string>& reason) {
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (std::size_t s = 1; s < g.sessions.size(); ++s)
+      if (!g.aligned[s] && AnchorSession(g, loops, path, s, &reason[s])) progress = true;
+  }
   for (auto& l : loops) {
     if (!l.verified || l.status != "pending") continue;
     if (!g.aligned[l.a.session] || !g.aligned[l.b.session]) {
@@ -371,79 +397,81 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
       continue;
     }
     LoopResidual(g, l);
-    if (!cfg.gate_inconsistent_loops ||
-        (l.residual_t_m <= cfg.consensus_t_m && l.residual_r_deg <= cfg.consensus_r_deg)) {
+    if (!g.cfg.gate_inconsistent_loops ||
+        (l.residual_t_m <= g.cfg.consensus_t_m && l.residual_r_deg <= g.cfg.consensus_r_deg)) {
       l.accepted = true;
       l.status = "accepted";
     } else {
       l.status = "rejected: inconsistent with the initial anchors";
     }
   }
+}
 
-  // ---- 2. Optimise; prune loops the optimum disagrees with, re-admit gated loops it agrees
-  // with, until the accepted set is stable.
-  SolveStats st;
-  for (int pass = 0; pass < 5; ++pass) {
-    st = Solve(g, loops, threads);
-    bool changed = false;
-    for (auto& l : loops) {
-      if (!l.verified) continue;
-      if (!g.aligned[l.a.session] || !g.aligned[l.b.session]) {
-        if (l.accepted) changed = true;
-        l.accepted = false;
-        l.status = "rejected: session not aligned";
-        continue;
-      }
-      LoopResidual(g, l);
-      const bool fits = l.residual_t_m <= cfg.outlier_t_m && l.residual_r_deg <= cfg.outlier_r_deg;
-      if (l.accepted && !fits) {
-        l.accepted = false;
-        std::ostringstream os;
-        os.precision(3);
-        os << "rejected: outlier after optimisation (residual " << l.residual_t_m << " m, "
-           << l.residual_r_deg << " deg)";
-        l.status = os.str();
-        changed = true;
-      } else if (!l.accepted && fits && cfg.gate_inconsistent_loops) {
-        l.accepted = true;
-        l.status = "accepted";
-        changed = true;
-      }
+// After a solve: loops the optimum disagrees with are pruned, gated loops it agrees with
+// re-admitted; true when the accepted set changed.
+bool PruneLoops(const Graph& g, std::vector<LoopRecord>& loops) {
+  bool changed = false;
+  for (auto& l : loops) {
+    if (!l.verified) continue;
+    if (!g.aligned[l.a.session] || !g.aligned[l.b.session]) {
+      changed |= l.accepted;
+      l.accepted = false;
+      l.status = "rejected: session not aligned";
+      continue;
     }
-    // A query left with too few accepted loops is no longer aligned.
-    for (std::size_t s = 1; s < n; ++s) {
-      if (!g.aligned[s]) continue;
-      int count = 0;
-      for (const auto& l : loops) {
-        if (l.accepted && (l.a.session == int(s) || l.b.session == int(s))) ++count;
-      }
-      if (count < cfg.min_loops) {
-        g.aligned[s] = false;
-        reason[s] = "only " + std::to_string(count) +
-                    " loop(s) left after outlier rejection (need graph.min_loops = " +
-                    std::to_string(cfg.min_loops) + ")";
-        changed = true;
-      }
+    LoopResidual(g, l);
+    const bool fits = l.residual_t_m <= g.cfg.outlier_t_m && l.residual_r_deg <= g.cfg.outlier_r_deg;
+    if (l.accepted && !fits) {
+      l.accepted = false;
+      std::ostringstream os;
+      os.precision(3);
+      os << "rejected: outlier after optimisation (residual " << l.residual_t_m << " m, " << l.residual_r_deg
+         << " deg)";
+      l.status = os.str();
+      changed = true;
+    } else if (!l.accepted && fits && g.cfg.gate_inconsistent_loops) {
+      l.accepted = true;
+      l.status = "accepted";
+      changed = true;
     }
-    if (!changed) break;
   }
+  return changed;
+}
 
+// A query left with too few accepted loops is no longer aligned; true when one was dropped.
+bool DropUnderconstrained(Graph& g, const std::vector<LoopRecord>& loops, std::vector<std::string>& reason) {
+  bool changed = false;
+  for (std::size_t s = 1; s < g.sessions.size(); ++s) {
+    if (!g.aligned[s]) continue;
+    int count = 0;
+    for (const auto& l : loops)
+      if (l.accepted && (l.a.session == int(s) || l.b.session == int(s))) ++count;
+    if (count >= g.cfg.min_loops) continue;
+    g.aligned[s] = false;
+    reason[s] = "only " + std::to_string(count) + " loop(s) left after outlier rejection (need graph.min_loops = " +
+                std::to_string(g.cfg.min_loops) + ")";
+    changed = true;
+  }
+  return changed;
+}
+
+SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, const std::vector<std::string>& reason,
+                      const SolveStats& st) {
+  SlamResult res;
+  res.sessions.resize(g.sessions.size());
   res.solution_usable = st.usable;
   res.initial_cost = st.initial_cost;
   res.final_cost = st.final_cost;
   res.solver_iterations = st.iterations;
-  for (std::size_t s = 0; s < n; ++s) {
+  for (std::size_t s = 0; s < g.sessions.size(); ++s) {
     SessionAlignment& a = res.sessions[s];
-    a.name = sessions[s].name;
+    a.name = g.sessions[s].name;
     a.aligned = g.aligned[s];
     a.reason = g.aligned[s] ? "" : reason[s];
     a.T_session_sensor = g.poses[s];
-    if (a.aligned) {
-      a.anchor = g.anchors[s];
+    a.anchor = a.aligned ? g.anchors[s] : Pose::Identity();
+    if (a.aligned)
       for (const Pose& T : g.poses[s]) a.T_world_sensor.push_back(g.anchors[s] * T);
-    } else {
-      a.anchor = Pose::Identity();
-    }
   }
   for (const auto& l : loops) {
     for (int s : {l.a.session, l.b.session}) {
@@ -456,6 +484,33 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
   }
   res.loops = loops;
   return res;
+}
+}  // namespace
+
+SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops,
+                            const SlamConfig& cfg, int threads) {
+  ValidateConfig(cfg, "slam config");
+  ValidateSessionGraphs(sessions);
+  const std::size_t n = sessions.size();
+  Graph g{sessions, cfg, std::vector<std::vector<Pose>>(n), std::vector<Pose>(n, Pose::Identity()),
+          std::vector<bool>(n, false)};
+  std::vector<std::vector<double>> path(n);
+  for (std::size_t s = 0; s < n; ++s) {
+    for (const Keyframe& kf : sessions[s].keyframes) g.poses[s].push_back(kf.T_session_sensor);
+    path[s] = PathLength(g.poses[s]);
+  }
+  CheckLoops(sessions, loops);
+  std::vector<std::string> reason(n);
+  g.aligned[0] = true;
+  InitialiseAnchors(g, loops, path, reason);
+  // Optimise; prune and re-admit loops until the accepted set is stable.
+  SolveStats st;
+  for (int pass = 0; pass < 5; ++pass) {
+    st = Solve(g, loops, threads);
+    const bool pruned = PruneLoops(g, loops);
+    if (!DropUnderconstrained(g, loops, reason) && !pruned) break;
+  }
+  return MakeResult(g, loops, reason, st);
 }
 
 }  // namespace ltm::slam
