@@ -182,6 +182,51 @@ TEST(Pcd, BinaryWithExtraFieldsOrderAndNaN) {
   EXPECT_FLOAT_EQ(d.points[1].z, -6.75f);
 }
 
+// ltmapper's labelled PCDs (live / meta maps: class U1, session U2, object I4 after x y z
+// intensity) read back with their labels, a NaN point dropped with its labels; the same from an
+// ASCII file (PCL's reader); a class ltmapper does not have is an error naming the point; a
+// field named class of another type is some other tool's and is not read.
+TEST(Pcd, LabelledCloudsReadBackWithTheirLabels) {
+  test::TempDir tmp;
+  auto bytes = [](const void* p, std::size_t n) { return std::string(static_cast<const char*>(p), n); };
+  const std::string head = "VERSION 0.7\nFIELDS x y z intensity class session object\nSIZE 4 4 4 4 1 2 4\n"
+                           "TYPE F F F F U U I\nCOUNT 1 1 1 1 1 1 1\nWIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
+                           "POINTS 3\n";
+  auto record = [&](float x, std::uint8_t cls, std::uint16_t ses, std::int32_t obj) {
+    const float xyzi[4] = {x, 2.f, 3.f, 0.5f};
+    return bytes(xyzi, 16) + bytes(&cls, 1) + bytes(&ses, 2) + bytes(&obj, 4);
+  };
+  const std::uint8_t pd = std::uint8_t(PointClass::kPDStrong), nd = std::uint8_t(PointClass::kNDStrong);
+  test::WriteText(tmp / "l.pcd", head + "DATA binary\n" + record(1.f, pd, 3, 17) + record(std::nanf(""), nd, 4, 18) +
+                                     record(5.f, nd, 5, -1));
+  const PointCloud c = io::ReadPcd(tmp / "l.pcd");
+  ASSERT_EQ(c.size(), 2u);
+  ASSERT_EQ(c.cls.size(), 2u);
+  EXPECT_EQ(c.cls[0], PointClass::kPDStrong);
+  EXPECT_EQ(c.cls[1], PointClass::kNDStrong);
+  EXPECT_EQ(c.session, (std::vector<std::uint16_t>{3, 5}));
+  EXPECT_EQ(c.object, (std::vector<std::int32_t>{17, -1}));
+
+  test::WriteText(tmp / "a.pcd", head + "DATA ascii\n1 2 3 0.5 " + std::to_string(pd) + " 3 17\n4 2 3 0.5 " +
+                                     std::to_string(nd) + " 4 18\n5 2 3 0.5 0 5 -1\n");
+  const PointCloud a = io::ReadPcd(tmp / "a.pcd");
+  ASSERT_EQ(a.cls.size(), 3u);
+  EXPECT_EQ(a.cls[1], PointClass::kNDStrong);
+  EXPECT_EQ(a.object[2], -1);
+
+  test::WriteText(tmp / "bad.pcd", head + "DATA binary\n" + record(1.f, pd, 3, 17) + record(2.f, 200, 4, 18) +
+                                       record(5.f, nd, 5, -1));
+  test::ExpectError([&] { io::ReadPcd(tmp / "bad.pcd"); }, {tmp / "bad.pcd", "point 1", "class"});
+
+  std::string foreign;
+  for (float v : {1.f, 2.f, 3.f, 40.f}) foreign += bytes(&v, 4);
+  test::WriteText(tmp / "f.pcd", "VERSION 0.7\nFIELDS x y z class\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+                                 "WIDTH 1\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n" + foreign);
+  const PointCloud f = io::ReadPcd(tmp / "f.pcd");
+  ASSERT_EQ(f.size(), 1u);
+  EXPECT_TRUE(f.cls.empty());
+}
+
 TEST(KittiBin, RoundTripAndReadCloudDispatch) {
   test::TempDir tmp;
   const PointCloud c = RandomCloud(500, 2);

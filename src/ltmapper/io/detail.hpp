@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,18 @@ std::vector<double> ParseNumbers(const std::string& text, const std::string& fil
 // `v` as an int: throws "<what> <v> is not an integer in int range" naming file:line when it is
 // NaN, fractional or out of range (casting such a double to int is undefined behaviour).
 int IntegerId(double v, const std::string& what, const std::string& file, std::size_t line);
+// A point's integer label (session, object) read as a double from record `index` ("vertex" /
+// "point" `unit`) of `path`: NaN or a value outside T's range is an error naming the file and
+// the record (casting it would be undefined behaviour).
+template <class T>
+T LabelField(double v, const std::string& path, const char* unit, std::size_t index, const char* name) {
+  if (!(v >= double(std::numeric_limits<T>::lowest()) && v <= double(std::numeric_limits<T>::max())))
+    throw Error(path + ": " + unit + " " + std::to_string(index) + " has " + name + " " + std::to_string(v) +
+                " outside its range");
+  return static_cast<T>(v);
+}
+// A point's class read as a double: one of PointClass's values, else an error as above.
+PointClass ClassField(double v, const std::string& path, const char* unit, std::size_t index);
 // Formats a double so that it reads back to the same value (shortest of %.15g / %.17g).
 std::string FormatDouble(double v);
 

@@ -4,6 +4,8 @@
 // token counts). Non-finite points are dropped and counted, never passed on.
 #include "ltmapper/io/io.hpp"
 
+#include "detail.hpp"
+
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_cloud.h>
@@ -280,11 +282,18 @@ struct Records {
   std::size_t rows = 0, cols = 0, row_step = 0, point_step = 0;
 };
 
+// The optional per-point labels ltmapper's labelled clouds carry (class, session, object).
+struct LabelFields {
+  FieldAt cls, session, object;
+  bool Any() const { return cls.datatype || session.datatype || object.datatype; }
+};
+
 // Appends the finite points of `rec` to `cloud` (`value` reads one field value; intensity 0 when
-// absent); returns how many were dropped as non-finite.
+// absent) and, when `kept` is given, each kept point's record number; returns how many were
+// dropped as non-finite.
 template <class Value>
 std::size_t AppendPoints(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, Value value,
-                         PointCloud* cloud) {
+                         PointCloud* cloud, std::vector<std::size_t>* kept) {
   std::size_t dropped = 0;
   for (std::size_t r = 0; r < rec.rows; ++r) {
     const std::uint8_t* row = rec.data + r * rec.row_step;
@@ -299,14 +308,36 @@ std::size_t AppendPoints(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz,
         continue;
       }
       cloud->push_back(float(x), float(y), float(z), float(in));
+      if (kept) kept->push_back(r * rec.cols + c);
     }
   }
   return dropped;
 }
 
+// The labels of the kept records (record numbers `kept`), checked like PLY's (an unknown class,
+// a session or object out of range: an error naming the file and the point).
+void ReadLabels(const Records& rec, const LabelFields& f, const std::vector<std::size_t>& kept, const std::string& path,
+                PointCloud* cloud) {
+  if (f.cls.datatype) cloud->cls.resize(kept.size());
+  if (f.session.datatype) cloud->session.resize(kept.size());
+  if (f.object.datatype) cloud->object.resize(kept.size());
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    const std::size_t n = kept[k];
+    const std::uint8_t* p = rec.data + (n / rec.cols) * rec.row_step + (n % rec.cols) * rec.point_step;
+    if (f.cls.datatype) cloud->cls[k] = detail::ClassField(ReadValue(p + f.cls.offset, f.cls.datatype), path, "point", n);
+    if (f.session.datatype)
+      cloud->session[k] =
+          detail::LabelField<std::uint16_t>(ReadValue(p + f.session.offset, f.session.datatype), path, "point", n, "session");
+    if (f.object.datatype)
+      cloud->object[k] =
+          detail::LabelField<std::int32_t>(ReadValue(p + f.object.offset, f.object.datatype), path, "point", n, "object");
+  }
+}
+
 // The points of `rec`: float fields without the per-value type switch, others through ReadValue;
-// fills `stats` (may be null).
-PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, CloudReadStats* stats) {
+// with their labels when the file has them; fills `stats` (may be null).
+PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, const LabelFields& labels,
+                       const std::string& path, CloudReadStats* stats) {
   PointCloud cloud;
   cloud.reserve(rec.rows * rec.cols);
   auto is_float = [](FieldAt f) { return f.datatype == 0 || f.datatype == pcl::PCLPointField::FLOAT32; };
@@ -315,9 +346,12 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
     std::memcpy(&v, p, 4);
     return v;
   };
+  std::vector<std::size_t> kept;
+  std::vector<std::size_t>* keep = labels.Any() ? &kept : nullptr;
   const std::size_t dropped = is_float(fx) && is_float(fy) && is_float(fz) && is_float(fi)
-                                  ? AppendPoints(rec, fx, fy, fz, fi, read_float, &cloud)
-                                  : AppendPoints(rec, fx, fy, fz, fi, ReadValue, &cloud);
+                                  ? AppendPoints(rec, fx, fy, fz, fi, read_float, &cloud, keep)
+                                  : AppendPoints(rec, fx, fy, fz, fi, ReadValue, &cloud, keep);
+  if (keep) ReadLabels(rec, labels, kept, path, &cloud);
   if (stats) {
     stats->points_in_file = rec.rows * rec.cols;
     stats->non_finite_dropped = dropped;
@@ -337,18 +371,29 @@ std::uint8_t Datatype(char type, long long size) {
   }
 }
 
-// x y z (intensity) of an uncompressed binary PCD: their offsets and datatypes in the point record
-// (a field with COUNT > 1: its first value, as PCL reads it). Binary files are never handed to
-// PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at all) that made
-// pcl::PCDReader::read ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte integers.
-std::array<FieldAt, 4> BinaryFields(const std::string& path, const PcdHeader& h) {
-  std::array<FieldAt, 4> at{};
-  const char* names[4] = {"x", "y", "z", "intensity"};
+// The label fields as ltmapper's labelled PCDs write them (map/output.cpp): class U1, session
+// U2, object I4. A field of that name with another type is some other tool's and is not read.
+constexpr std::uint8_t kLabelTypes[3] = {pcl::PCLPointField::UINT8, pcl::PCLPointField::UINT16,
+                                         pcl::PCLPointField::INT32};
+FieldAt LabelAt(FieldAt f, int label) { return f.datatype == kLabelTypes[label] ? f : FieldAt{}; }
+
+// x y z (intensity, and the labels) of an uncompressed binary PCD: their offsets and datatypes in
+// the point record (a field with COUNT > 1: its first value, as PCL reads it). Binary files are
+// never handed to PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at
+// all) that made pcl::PCDReader::read ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte
+// integers among x y z intensity.
+std::array<FieldAt, 7> BinaryFields(const std::string& path, const PcdHeader& h) {
+  std::array<FieldAt, 7> at{};
+  const char* names[7] = {"x", "y", "z", "intensity", "class", "session", "object"};
   std::size_t offset = 0;
   for (std::size_t i = 0; i < h.fields.size(); ++i) {
-    for (int k = 0; k < 4; ++k) {
+    for (int k = 0; k < 7; ++k) {
       if (h.fields[i] != names[k]) continue;
       const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
+      if (k >= 4) {
+        at[std::size_t(k)] = LabelAt({offset, type}, k - 4);
+        continue;
+      }
       if (!type)
         throw Error(path + ": PCD field '" + h.fields[i] + "' has an unsupported type (" +
                     std::string(1, h.types[i]) + std::to_string(h.sizes[i]) + ")");
@@ -410,7 +455,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
       if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
         throw Error(path + ": cannot read the PCD data section");
       rec.data = bytes.data();
-      return ReadRecords(rec, f[0], f[1], f[2], f[3], stats);
+      return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, path, stats);
     }
   }
 
@@ -435,22 +480,27 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   const pcl::PCLPointField* fy = nullptr;
   const pcl::PCLPointField* fz = nullptr;
   const pcl::PCLPointField* fi = nullptr;
+  const pcl::PCLPointField *fc = nullptr, *fs = nullptr, *fo = nullptr;
   for (const auto& f : blob.fields) {
     if (f.name == "x") fx = &f;
     if (f.name == "y") fy = &f;
     if (f.name == "z") fz = &f;
     if (f.name == "intensity") fi = &f;
+    if (f.name == "class") fc = &f;
+    if (f.name == "session") fs = &f;
+    if (f.name == "object") fo = &f;
   }
   if (!fx || !fy || !fz) throw Error(path + ": PCD has no x y z fields");
-  for (const auto* f : {fx, fy, fz, fi}) {
-    if (!f) continue;
+  for (const auto* f : {fx, fy, fz, fi, fc, fs, fo}) {
+    if (!f || ((f == fc || f == fs || f == fo) && f->datatype != kLabelTypes[f == fc ? 0 : f == fs ? 1 : 2])) continue;
     if (TypeSize(f->datatype) == 0 || f->offset + TypeSize(f->datatype) > blob.point_step)
       throw Error(path + ": PCD field '" + f->name + "' has an unsupported type or offset");
   }
 
   auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
   const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
-  return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), stats);
+  return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), {LabelAt(at(fc), 0), LabelAt(at(fs), 1), LabelAt(at(fo), 2)},
+                     path, stats);
 }
 
 namespace {

@@ -2,6 +2,8 @@
 // intensity, and when the cloud has them uchar class, ushort session, int object.
 #include "ltmapper/io/io.hpp"
 
+#include "detail.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -115,16 +117,6 @@ std::size_t BytesLeft(std::istream& in) {
   const auto end = in.tellg();
   in.seekg(here);
   return here < 0 || end < here ? 0 : std::size_t(end - here);
-}
-
-// A vertex's integer field read as a double: NaN or a value outside T's range is an error
-// naming the file and the vertex (casting it would be undefined behaviour).
-template <class T>
-T IntegerField(double v, const std::string& path, std::size_t vertex, const char* name) {
-  if (!(v >= double(std::numeric_limits<T>::lowest()) && v <= double(std::numeric_limits<T>::max())))
-    throw Error(path + ": vertex " + std::to_string(vertex) + " has " + name + " " + std::to_string(v) +
-                " outside its range");
-  return static_cast<T>(v);
 }
 
 void PutXyzi(std::string& buf, const PointXYZI& p) {
@@ -274,14 +266,11 @@ PointCloud ReadPly(const std::string& path) {
     p.y = float(PlyValue(rec + py->offset, py->type));
     p.z = float(PlyValue(rec + pz->offset, pz->type));
     p.intensity = pi ? float(PlyValue(rec + pi->offset, pi->type)) : 0.f;
-    if (pc) {
-      const double c = PlyValue(rec + pc->offset, pc->type);
-      if (!(c >= 0 && c <= double(PointClass::kNDWeak)))  // NaN fails too
-        throw Error(path + ": vertex " + std::to_string(i) + " has unknown class " + std::to_string(c));
-      cloud.cls[i] = static_cast<PointClass>(int(c));
-    }
-    if (ps) cloud.session[i] = IntegerField<std::uint16_t>(PlyValue(rec + ps->offset, ps->type), path, i, "session");
-    if (po) cloud.object[i] = IntegerField<std::int32_t>(PlyValue(rec + po->offset, po->type), path, i, "object");
+    if (pc) cloud.cls[i] = detail::ClassField(PlyValue(rec + pc->offset, pc->type), path, "vertex", i);
+    if (ps)
+      cloud.session[i] = detail::LabelField<std::uint16_t>(PlyValue(rec + ps->offset, ps->type), path, "vertex", i, "session");
+    if (po)
+      cloud.object[i] = detail::LabelField<std::int32_t>(PlyValue(rec + po->offset, po->type), path, "vertex", i, "object");
   }
   return cloud;
 }

@@ -67,6 +67,12 @@ int IntegerId(double v, const std::string& what, const std::string& file, std::s
   return int(v);
 }
 
+PointClass ClassField(double v, const std::string& path, const char* unit, std::size_t index) {
+  if (!(v >= 0 && v <= double(PointClass::kNDWeak)) || v != std::trunc(v))  // NaN fails too
+    throw Error(path + ": " + unit + " " + std::to_string(index) + " has unknown class " + std::to_string(v));
+  return static_cast<PointClass>(int(v));
+}
+
 std::string FormatDouble(double v) {
   char buf[40];
   std::snprintf(buf, sizeof(buf), "%.15g", v);
