@@ -32,12 +32,14 @@ demo: build
 
 # libFuzzer harnesses (fuzz/) for every reader, built with clang + ASan + UBSan in build-fuzz/
 # (only the io, map, removert, geometry and core libraries and the harnesses), then each run for
-# FUZZ_SECONDS (the acceptance run of issue 21 is FUZZ_SECONDS=300); prints harness / runs / crashes.
+# FUZZ_SECONDS (the acceptance run of issue 21 is FUZZ_SECONDS=300), FUZZ_PARALLEL harnesses at a
+# time (one core each); prints harness / runs / crashes.
 # FUZZ_HARNESSES picks some (e.g. FUZZ_HARNESSES="pcd ply"). Not part of build / test.
 FUZZ_DIR ?= build-fuzz
 FUZZ_SECONDS ?= 60
 FUZZ_HARNESSES ?= pcd ply g2o poses kitti_bin scd config blob
 FUZZ_JOBS ?= 2
+FUZZ_PARALLEL ?= 1
 
 fuzz-build:
 	CC=clang CXX=clang++ cmake -S . -B $(FUZZ_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLTM_FUZZ=ON \
@@ -45,7 +47,7 @@ fuzz-build:
 	cmake --build $(FUZZ_DIR) --target fuzz_all -j $(FUZZ_JOBS)
 
 fuzz: fuzz-build
-	FUZZ_SECONDS=$(FUZZ_SECONDS) bash fuzz/run.sh $(FUZZ_DIR) $(FUZZ_HARNESSES)
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_PARALLEL=$(FUZZ_PARALLEL) bash fuzz/run.sh $(FUZZ_DIR) $(FUZZ_HARNESSES)
 
 # The whole suite under ASan + UBSan (GCC) in build-asan/; the CLI tests run the sanitized
 # ltmapper of that build. No Python bindings (an ASan module needs the runtime preloaded) and no

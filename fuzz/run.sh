@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs the libFuzzer harnesses built in BUILD_DIR (make fuzz-build), each for FUZZ_SECONDS
 # (default 60; issue 21's acceptance run is 300 per harness), with a 1 GB RSS / malloc limit,
-# one after the other, and prints harness / runs / crashes. Exit status 1 when any harness found
+# FUZZ_PARALLEL at a time (default 1), and prints harness / runs / crashes. Exit status 1 when any harness found
 # something; its reproducer is in BUILD_DIR/fuzz-artifacts/HARNESS/ and its log next to it.
 #   usage: fuzz/run.sh BUILD_DIR [HARNESS...]      (default: every harness)
 # The corpus grown by earlier runs is kept in BUILD_DIR/fuzz-corpus/HARNESS; the seeds are
@@ -29,17 +29,10 @@ if [ -x "$build/fuzz/fuzz_io_tests" ]; then
     { tail -30 "$build/fuzz-io-tests.log"; echo "fuzz_io_tests failed" >&2; exit 1; }
   echo "== fuzz_io_tests passed (tests/test_io_bad_input.cpp, tests/test_io_formats.cpp under ASan + UBSan)"
 fi
-rows=()
-status=0
-for h in "${harnesses[@]}"; do
-  bin=$build/fuzz/fuzz_$h
-  [ -x "$bin" ] || { echo "no harness $bin (make fuzz-build)" >&2; exit 2; }
-  corpus=$build/fuzz-corpus/$h
-  art=$build/fuzz-artifacts/$h
-  log=$build/fuzz-artifacts/$h.log
-  mkdir -p "$corpus" "$art"
-  rm -f "$art"/*
-  echo "== fuzz_$h for ${seconds}s (log: $log)"
+# One harness: run it for $seconds, then write its table row to $art.row (rc in $art.rc).
+fuzz_one() {
+  local h=$1 bin=$build/fuzz/fuzz_$1 corpus=$build/fuzz-corpus/$1 art=$build/fuzz-artifacts/$1
+  local log=$build/fuzz-artifacts/$1.log rc runs crashes what=""
   nice -n 10 "$bin" -max_total_time="$seconds" -rss_limit_mb=1024 -malloc_limit_mb=1024 -timeout=30 \
     -print_final_stats=1 -artifact_prefix="$art/" "$corpus" "$seeds/$h" > "$log" 2>&1
   rc=$?
@@ -48,12 +41,33 @@ for h in "${harnesses[@]}"; do
   crashes=$(find "$art" -maxdepth 1 -type f \( -name 'crash-*' -o -name 'leak-*' -o -name 'oom-*' \
             -o -name 'timeout-*' \) | wc -l)
   [ "$rc" -ne 0 ] && [ "$crashes" -eq 0 ] && crashes=1
-  what=""
   if [ "$crashes" -ne 0 ]; then
-    status=1
     what=$(grep -m1 -E 'ERROR: (AddressSanitizer|LeakSanitizer|libFuzzer)|runtime error|terminate called|==ERROR' "$log" | cut -c1-100)
   fi
-  rows+=("$(printf '%-10s %12s %8s  %s' "$h" "${runs:-?}" "$crashes" "$what")")
+  printf '%-10s %12s %8s  %s' "$h" "${runs:-?}" "$crashes" "$what" > "$art.row"
+  echo "$crashes" > "$art.rc"
+}
+
+# FUZZ_PARALLEL harnesses at a time (default 1; one core each).
+parallel=${FUZZ_PARALLEL:-1}
+for h in "${harnesses[@]}"; do
+  [ -x "$build/fuzz/fuzz_$h" ] || { echo "no harness $build/fuzz/fuzz_$h (make fuzz-build)" >&2; exit 2; }
+done
+for h in "${harnesses[@]}"; do
+  art=$build/fuzz-artifacts/$h
+  mkdir -p "$build/fuzz-corpus/$h" "$art"
+  rm -f "$art"/* "$art.row" "$art.rc"
+  while [ "$(jobs -rp | wc -l)" -ge "$parallel" ]; do wait -n; done
+  echo "== fuzz_$h for ${seconds}s (log: $art.log)"
+  fuzz_one "$h" &
+done
+wait
+rows=()
+status=0
+for h in "${harnesses[@]}"; do
+  art=$build/fuzz-artifacts/$h
+  rows+=("$(cat "$art.row")")
+  [ "$(cat "$art.rc")" -ne 0 ] && status=1
 done
 echo
 printf '%-10s %12s %8s  %s\n' harness runs crashes "first report"
