@@ -175,6 +175,17 @@ TEST(MapBlob, RejectsPointsOutsideTheGrid) {
   EXPECT_NO_THROW(EncodeBlob(PointCloud{}, 0.01, 0.01));
 }
 
+// The paper's P ⊙ LD = P − ND + PD on float clouds in one keyframe frame (every point of `cloud`
+// within `tolerance_m` of an ND point removed, the PD points appended): the independent oracle
+// the store's integer-grid composition is checked against.
+PointCloud Compose(const PointCloud& cloud, const PointCloud& nd, const PointCloud& pd, double tolerance_m) {
+  std::vector<bool> keep = WithinRadius(cloud, nd, tolerance_m);
+  keep.flip();
+  PointCloud out = cloud.select(keep);
+  out.append(pd);
+  return out;
+}
+
 TEST(MapCompose, SetDifferenceByNearestNeighbourAndUnion) {
   const PointCloud ground = Grid(0, 0, 0, 20, 20, 0.5f);
   const PointCloud car = Car(3, 3);
@@ -185,12 +196,6 @@ TEST(MapCompose, SetDifferenceByNearestNeighbourAndUnion) {
   EXPECT_EQ(Keys(out), Keys(Cat(ground, wall)));
   // Chaining with the inverse (ND and PD swapped) rolls back.
   EXPECT_EQ(Keys(Compose(out, wall, car, 1e-3)), Keys(Cat(ground, car)));
-}
-
-TEST(MapCompose, FarKeyframes) {
-  const std::vector<Pose> map = {At(0, 0), At(10, 0)};
-  const std::vector<Pose> q = {At(1, 1), At(30, 0), At(32, 0), At(45, 0), At(10, 4)};
-  EXPECT_EQ(FarKeyframes(map, q, 5.0), (std::vector<int>{1, 3}));
 }
 
 // ------------------------------------------------------------------------------------- store

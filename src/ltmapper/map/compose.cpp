@@ -154,35 +154,4 @@ std::vector<bool> WithinRadius(const PointCloud& cloud, const PointCloud& query,
   return detail::WithinRadiusImpl(cloud.size(), get(cloud), query.size(), get(query), radius_m);
 }
 
-PointCloud Compose(const PointCloud& cloud, const PointCloud& nd, const PointCloud& pd, double tolerance_m) {
-  std::vector<bool> keep = WithinRadius(cloud, nd, tolerance_m);
-  keep.flip();
-  PointCloud out = cloud.select(keep);
-  out.append(pd);
-  return out;
-}
-
-std::vector<int> FarKeyframes(const std::vector<Pose>& map_poses, const std::vector<Pose>& query_poses,
-                              double radius_m) {
-  std::vector<Eigen::Vector3d> taken;
-  taken.reserve(map_poses.size());
-  for (const Pose& p : map_poses) taken.push_back(p.translation());
-  std::vector<int> out;
-  const double r2 = radius_m * radius_m;
-  for (std::size_t k = 0; k < query_poses.size(); ++k) {
-    const Eigen::Vector3d t = query_poses[k].translation();
-    bool near = false;
-    for (const Eigen::Vector3d& m : taken)
-      if ((m - t).squaredNorm() <= r2) {
-        near = true;
-        break;
-      }
-    if (!near) {
-      out.push_back(int(k));
-      taken.push_back(t);
-    }
-  }
-  return out;
-}
-
 }  // namespace ltm::map

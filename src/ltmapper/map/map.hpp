@@ -297,16 +297,8 @@ struct PairAgreement {
 PairAgreement CompareWithLdPair(const MapDiff& diff, const std::string& pair_dir, double radius_m);
 
 // ------------------------------------------------------------------------------- composition
-// P ⊙ LD = P − ND + PD on float clouds in one keyframe frame: removes every point of `cloud`
-// within `tolerance_m` of an ND point and appends the PD points.
-PointCloud Compose(const PointCloud& cloud, const PointCloud& nd, const PointCloud& pd,
-                   double tolerance_m);
 // Mask of `cloud` points within `radius_m` of any point of `query` (spatial hash).
 std::vector<bool> WithinRadius(const PointCloud& cloud, const PointCloud& query, double radius_m);
-// Positions (in `query_poses`) of poses farther than `radius_m` from every pose in `map_poses`
-// and from every earlier selected one.
-std::vector<int> FarKeyframes(const std::vector<Pose>& map_poses, const std::vector<Pose>& query_poses,
-                              double radius_m);
 
 // --------------------------------------------------------------------------------------- blobs
 // The store's blob codec on a cloud (cls / session arrays kept when present): coordinates
