@@ -53,7 +53,8 @@ PointCloud ServedCloud(const map::Store& store, Layer layer, int session, const 
   PointCloud out = raw.empty() ? raw : geometry::VoxelDownsample(raw, voxel, cfg.threads);
   while (out.size() > cfg.point_budget && voxel < cfg.max_voxel_m) {
     const double grow = std::sqrt(double(out.size()) / double(cfg.point_budget)) * kVoxelMargin;
-    voxel = std::min(cfg.max_voxel_m, voxel * std::max(grow, kMinVoxelGrowth));
+    // A float32 value: the wire header carries the exact voxel the cloud was filtered with.
+    voxel = double(float(std::min(cfg.max_voxel_m, voxel * std::max(grow, kMinVoxelGrowth))));
     out = geometry::VoxelDownsample(raw, voxel, cfg.threads);
   }
   if (voxel_m) *voxel_m = voxel;
