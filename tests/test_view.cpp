@@ -2,6 +2,7 @@
 // same voxel filter, level of detail, every kind of bad request) and the cloud wire format.
 #include "ltmapper/view/view.hpp"
 
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/viz/viz.hpp"
 
@@ -9,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 
@@ -111,6 +113,9 @@ TEST_F(ViewHandler, CloudOfASessionIsTheStoresRestoreAfterTheSameVoxelFilter) {
   double voxel = 0;
   ExpectSameCloud(DecodeCloud(Get(v, "/api/cloud", {{"layer", "meta"}}).body, &voxel), store.Meta(region));
   ExpectSameCloud(DecodeCloud(Get(v, "/api/cloud", {{"layer", "live"}}).body, &voxel), store.Live(region));
+  const PointCloud changes = DecodeCloud(Get(v, "/api/cloud", {{"layer", "changes"}, {"session", "1"}}).body);
+  ExpectSameCloud(changes, geometry::VoxelDownsample(store.StepChanges(1), 0.2));
+  EXPECT_GT(std::count(changes.cls.begin(), changes.cls.end(), PointClass::kNDStrong), 0);  // the box, removed
   // Session 0 still has the box session 1 removed: more points.
   EXPECT_GT(DecodeCloud(Get(v, "/api/cloud", {{"session", "0"}}).body).size(),
             DecodeCloud(Get(v, "/api/cloud", {{"session", "1"}}).body).size());
@@ -162,6 +167,8 @@ TEST_F(ViewHandler, BadRequestsAreRefusedWithAMessage) {
       {"/api/cloud", {{"session", huge}}, 400, "too long"},
       {"/api/cloud", {}, 400, "session is required"},
       {"/api/cloud", {{"layer", "top"}, {"session", "0"}}, 400, "layer must be"},
+      {"/api/cloud", {{"layer", "changes"}}, 400, "session is required"},
+      {"/api/cloud", {{"layer", "changes"}, {"session", "0"}}, 404, "base"},
       {"/api/cloud", {{"session", "0"}, {"voxel", "0.001"}}, 400, "unknown query parameter 'voxel'"},
       {"/api/info", {{"x", "1"}}, 400, "unknown query parameter"},
       {"/api/tiles", {}, 404, "no endpoint"},

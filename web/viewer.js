@@ -5,6 +5,7 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
 const BACKGROUND = 0x15181d;   // page and canvas background (tests check points are not this)
 const POINT_SIZE_PX = 2;       // on-screen point size [pixels]
+const CHANGE_SIZE_PX = 3;      // the step's changes, drawn over the map [pixels]
 const FLY_SECONDS = 0.8;       // camera flight to a clicked object [s]
 const OBJECT_VIEW_DIST = 3.0;  // camera distance to a clicked object, in box diagonals
 const HEADER_BYTES = 16;       // cloud header: "LTMC", version, count, voxel
@@ -12,8 +13,8 @@ const HEADER_BYTES = 16;       // cloud header: "LTMC", version, count, voxel
 const $ = (id) => document.getElementById(id);
 const state = {
   info: null, layer: 'at', session: 0, classes: new Map(), classVisible: new Map(),
-  cloudGroup: new THREE.Group(), trajGroup: new THREE.Group(), boxGroup: new THREE.Group(),
-  objects: [], selected: -1, loads: 0, t0: performance.now(),
+  showChanges: false, cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(), trajGroup: new THREE.Group(), boxGroup: new THREE.Group(),
+  objects: [], selected: -1, loads: 0,
 };
 // What the browser test reads: frames drawn, the cloud on screen, time to the first frame.
 window.__ltmView = { frames: 0, loaded: 0, points: 0, layer: 'at', session: -1, firstFrameMs: null, error: null };
@@ -23,11 +24,14 @@ renderer.setPixelRatio(1);
 renderer.setClearColor(BACKGROUND);
 $('view').appendChild(renderer.domElement);
 const scene = new THREE.Scene();
-scene.add(state.cloudGroup, state.trajGroup, state.boxGroup);
+scene.add(state.cloudGroup, state.changeGroup, state.trajGroup, state.boxGroup);
 const camera = new THREE.PerspectiveCamera(60, 1, 0.1, 20000);
 camera.up.set(0, 0, 1);  // the map's world frame is z-up
 const controls = new OrbitControls(camera, renderer.domElement);
 controls.addEventListener('change', render);
+// Test hook (web/test/view_test.mjs reads pixels at projected points and the box shown).
+window.__ltmView.debug = { renderer, camera, scene, cloudGroup: state.cloudGroup, changeGroup: state.changeGroup,
+                           boxGroup: state.boxGroup, classes: state.classes };
 
 function render() {
   renderer.render(scene, camera);
@@ -76,24 +80,37 @@ function splitByClass(cloud) {
   return parts;
 }
 
-function showCloud(cloud) {
-  for (const child of [...state.cloudGroup.children]) {
+function clearGroup(group) {
+  for (const child of [...group.children]) {
     child.geometry.dispose();
     child.material.dispose();
-    state.cloudGroup.remove(child);
+    group.remove(child);
   }
+}
+
+// `onTop`: drawn over everything else (the step's changes must not hide behind the map).
+function showCloud(cloud, group, sizePx, onTop = false) {
+  clearGroup(group);
   for (const [c, part] of splitByClass(cloud)) {
     const geom = new THREE.BufferGeometry();
     geom.setAttribute('position', new THREE.BufferAttribute(part.xyz, 3));
     const rgb = (state.classes.get(c) || { rgb: [70, 70, 70] }).rgb;
-    const mat = new THREE.PointsMaterial({ size: POINT_SIZE_PX, sizeAttenuation: false,
-                                           color: new THREE.Color(rgbCss(rgb)) });
+    const mat = new THREE.PointsMaterial({ size: sizePx, sizeAttenuation: false,
+                                           color: new THREE.Color(rgbCss(rgb)), depthTest: !onTop });
     const points = new THREE.Points(geom, mat);
+    points.renderOrder = onTop ? 1 : 0;
     points.userData.cls = c;
     points.visible = state.classVisible.get(c) !== false;
-    state.cloudGroup.add(points);
+    group.add(points);
   }
-  updateLegendCounts(cloud);
+}
+
+// The changes the slider's session step made (PD added, ND removed or kept), over the map.
+async function loadChanges(ticket) {
+  if (!state.showChanges || state.layer !== 'at' || state.session === 0) return clearGroup(state.changeGroup);
+  const buf = await (await fetchOk(`/api/cloud?layer=changes&session=${state.session}`)).arrayBuffer();
+  if (ticket !== state.loads) return;
+  showCloud(decodeCloud(buf), state.changeGroup, CHANGE_SIZE_PX, true);
 }
 
 async function loadCloud() {
@@ -104,15 +121,19 @@ async function loadCloud() {
   const buf = await (await fetchOk(`/api/cloud?${query}`)).arrayBuffer();
   if (ticket !== state.loads) return;  // a newer request replaced this one
   const cloud = decodeCloud(buf);
-  showCloud(cloud);
+  showCloud(cloud, state.cloudGroup, POINT_SIZE_PX);
+  updateLegendCounts(cloud);
+  await loadChanges(ticket);
+  if (ticket !== state.loads) return;
   if (window.__ltmView.loaded === 0) frameAll(cloud);
   render();
   Object.assign(window.__ltmView, { loaded: window.__ltmView.loaded + 1, points: cloud.n, layer: state.layer,
                                     session: state.session });
-  if (window.__ltmView.firstFrameMs === null) window.__ltmView.firstFrameMs = performance.now() - state.t0;
+  // performance.now() counts from the navigation's start: the time a user waits for the map.
+  if (window.__ltmView.firstFrameMs === null) window.__ltmView.firstFrameMs = performance.now();
   setStatus(`${cloud.n.toLocaleString()} points, voxel ${cloud.voxel.toFixed(2)} m, ` +
             `${((performance.now() - t) / 1000).toFixed(2)} s` +
-            `\nfirst frame ${(window.__ltmView.firstFrameMs / 1000).toFixed(2)} s after page load`);
+            `\nfirst frame ${(window.__ltmView.firstFrameMs / 1000).toFixed(2)} s after opening the page`);
 }
 
 function frameAll(cloud) {
@@ -145,6 +166,7 @@ function updatePanel() {
   $('layer-at').classList.toggle('on', state.layer === 'at');
   $('layer-meta').classList.toggle('on', state.layer === 'meta');
   $('session').disabled = state.layer === 'meta';
+  $('changes').disabled = state.layer === 'meta';
 }
 
 function buildLegend() {
@@ -158,7 +180,8 @@ function buildLegend() {
                     `<span class="muted" id="count-${c.id}"></span>`;
     row.querySelector('input').addEventListener('change', (e) => {
       state.classVisible.set(c.id, e.target.checked);
-      for (const p of state.cloudGroup.children) if (p.userData.cls === c.id) p.visible = e.target.checked;
+      for (const p of [...state.cloudGroup.children, ...state.changeGroup.children])
+        if (p.userData.cls === c.id) p.visible = e.target.checked;
       render();
     });
     $('legend').appendChild(row);
@@ -184,6 +207,7 @@ function wireControls() {
   $('session').addEventListener('change', onSessionChange);
   $('layer-at').addEventListener('click', () => { state.layer = 'at'; onSessionChange(); });
   $('layer-meta').addEventListener('click', () => { state.layer = 'meta'; updatePanel(); loadCloud().catch(fail); });
+  $('changes').addEventListener('change', (e) => { state.showChanges = e.target.checked; loadCloud().catch(fail); });
   $('go-live').addEventListener('click', () => {
     state.layer = 'at';
     $('session').value = String(state.info.latest);

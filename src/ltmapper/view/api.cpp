@@ -142,19 +142,27 @@ Response Objects(const ViewConfig& cfg) {
   return Json({{"objects", j["objects"]}, {"source", file}});
 }
 
+Layer ParseLayer(const std::string& name) {
+  if (name == "at") return Layer::kAt;
+  if (name == "live") return Layer::kLive;
+  if (name == "meta") return Layer::kMeta;
+  if (name == "changes") return Layer::kChanges;
+  throw HttpError(400, "layer must be at, live, meta or changes (got '" + name + "')");
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------- clouds
 Response Viewer::Cloud(const Request& req) const {
   CheckParams(req, {"layer", "session"});
   const std::string layer_name = Param(req, "layer", "at");
-  Layer layer = Layer::kAt;
-  if (layer_name == "live") layer = Layer::kLive;
-  else if (layer_name == "meta") layer = Layer::kMeta;
-  else if (layer_name != "at") throw HttpError(400, "layer must be at, live or meta (got '" + layer_name + "')");
+  const Layer layer = ParseLayer(layer_name);
   const map::Store store = OpenStore(impl_->cfg);
-  const int session = layer == Layer::kAt ? ParseSession(store, Param(req, "session", "")) : store.LatestSession();
+  const bool by_session = layer == Layer::kAt || layer == Layer::kChanges;
+  const int session = by_session ? ParseSession(store, Param(req, "session", "")) : store.LatestSession();
   if (session < 0) throw HttpError(404, impl_->cfg.store + ": the store holds no session yet");
+  if (layer == Layer::kChanges && session == 0)
+    throw HttpError(404, "session 0 is the map's base: no step changes (ask for session 1 or later)");
   // The state of the store is part of the key: a new integration changes live and meta.
   const auto sessions = store.Sessions();
   const std::string key = layer_name + "/" + std::to_string(session) + "/" + std::to_string(sessions.size()) + "/" +

@@ -38,6 +38,7 @@ PointCloud Unfiltered(const map::Store& store, Layer layer, int session) {
     case Layer::kAt: return store.MapAt(session);
     case Layer::kLive: return store.Live();
     case Layer::kMeta: return store.Meta();
+    case Layer::kChanges: return store.StepChanges(session);
   }
   throw Error("view: unknown layer");
 }

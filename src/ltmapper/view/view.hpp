@@ -45,12 +45,14 @@ struct Response {
   std::string body;
 };
 
-// Which map a cloud request asks for.
-enum class Layer { kAt, kLive, kMeta };  // map as of a session (rollback), latest, meta map
+// Which cloud a request asks for: the map as of a session (rollback), the latest map, the meta
+// map, or the changes one session step made (Store::StepChanges: PD added, ND removed / kept).
+enum class Layer { kAt, kLive, kMeta, kChanges };
 
 // The cloud served for a layer and session: the store's map voxel-filtered at the first voxel
 // (base_voxel_m, then larger) whose result fits point_budget. Equals
-// store.MapAt(session, Region{voxel_m = *voxel_m}) (Live / Meta likewise).
+// store.MapAt(session, Region{voxel_m = *voxel_m}) (Live / Meta likewise; StepChanges, which
+// takes no voxel, through geometry::VoxelDownsample at *voxel_m).
 PointCloud ServedCloud(const map::Store& store, Layer layer, int session, const ViewConfig& cfg,
                        double* voxel_m);
 
@@ -68,7 +70,7 @@ class Viewer {
   Viewer(const Viewer&) = delete;
   Viewer& operator=(const Viewer&) = delete;
 
-  // GET /api/info | /api/cloud?layer=at|live|meta&session=N | /api/trajectories | /api/objects,
+  // GET /api/info | /api/cloud?layer=at|live|meta|changes&session=N | /api/trajectories | /api/objects,
   // or a static file under web_dir ("/" = index.html). Bad requests -> 4xx with a message; store
   // errors -> 500 with the message. Never throws; safe to call from several threads.
   Response Handle(const Request& req) const;
