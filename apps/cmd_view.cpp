@@ -9,6 +9,7 @@
 
 #include <iostream>
 #include <memory>
+#include <thread>
 
 namespace ltm::app {
 namespace {
@@ -19,17 +20,31 @@ struct ViewOptions {
   std::string host = "127.0.0.1";
   int port = 8080;
   std::string map_config;
-  std::vector<std::string> set;
+  std::vector<std::string> set;  // view config overrides
 };
 
 void RunView(ViewOptions& o) {
   if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
   if (!o.map_config.empty()) io::LoadConfig(o.map_config, o.cfg.map);
-  for (const auto& kv : o.set) SetField(FieldsOf(o.cfg.map), kv);
   ValidateConfig(o.cfg.map, o.map_config.empty() ? "map config" : o.map_config);
+  for (const auto& kv : o.set) SetField(FieldsOf(o.cfg), kv);
+  ValidateConfig(o.cfg, "view config");
+  if (!o.common.quiet) spdlog::info("view config:\n{}", ConfigToString(o.cfg));
   o.cfg.threads = o.common.threads;
   const view::Viewer viewer(o.cfg);
-  view::Serve(viewer, o.host, o.port, [&o](int port) {
+  std::thread warm;
+  struct Join {
+    std::thread& t;
+    ~Join() { if (t.joinable()) t.join(); }
+  } join{warm};
+  view::Serve(viewer, o.host, o.port, [&](int port) {
+    // The page opens on the latest session: its cloud is ready before the address is printed;
+    // the other sessions and the meta map follow in the background (the slider finds them ready).
+    const auto requests = viewer.WarmRequests();
+    if (!requests.empty()) viewer.Handle(requests.front());
+    warm = std::thread([&viewer, requests] {
+      for (std::size_t k = 1; k < requests.size(); ++k) viewer.Handle(requests[k]);
+    });
     std::cout << "ltmapper view: serving " << o.cfg.store << " on http://" << o.host << ":" << port
               << "/ (Ctrl-C to stop)\n" << std::flush;
   });
@@ -45,13 +60,12 @@ void Setup(CLI::App& parent) {
   cmd->add_option("--port", o.port, "TCP port (0 = any free port, printed)")->check(CLI::Range(0, 65535));
   cmd->add_option("--host", o.host, "Address to bind (127.0.0.1: this machine only)");
   cmd->add_option("--web", o.cfg.web_dir, "Folder of the page (index.html, viewer.js, three/)");
-  cmd->add_option("--voxel", o.cfg.base_voxel_m, "Finest voxel of served clouds [m]")->check(CLI::Range(0.001, 100.0));
-  cmd->add_option("--max-voxel", o.cfg.max_voxel_m, "Coarsest voxel level of detail may reach [m]")
-      ->check(CLI::Range(0.001, 1000.0));
-  cmd->add_option("--budget", o.cfg.point_budget, "Most points in one served cloud")
-      ->check(CLI::Range(std::size_t(1000), std::size_t(100000000)));
+  cmd->add_option("--voxel", o.cfg.base_voxel_m, "Finest voxel of served clouds [m] (base_voxel_m, default 0.1)");
+  cmd->add_option("--budget", o.cfg.point_budget, "Most points in one served cloud (point_budget, default 2000000)");
+  cmd->add_option("--set", o.set,
+                  "Override a view config key: base_voxel_m, point_budget, max_voxel_m, cache_clouds, "
+                  "max_query_chars, max_path_chars, max_static_mb (repeatable)");
   cmd->add_option("--config", o.map_config, "params_ltmap.yaml (meta_carve_radius_m for the meta map)");
-  cmd->add_option("--set", o.set, "Override a map config key (repeatable)");
   o.cfg.web_dir = LTM_WEB_DIR;
   cmd->callback([opts] { RunView(*opts); });
 }

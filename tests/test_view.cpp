@@ -143,8 +143,8 @@ TEST_F(ViewHandler, LevelOfDetailGrowsTheVoxelToFitTheBudget) {
   const Viewer v(cfg);
   double voxel = 0;
   const PointCloud got = DecodeCloud(Get(v, "/api/cloud", {{"session", "0"}}).body, &voxel);
-  EXPECT_LE(got.size(), cfg.point_budget);
-  EXPECT_GT(got.size(), cfg.point_budget / 10) << "the voxel grew far more than needed";
+  EXPECT_LE(got.size(), std::size_t(cfg.point_budget));
+  EXPECT_GT(got.size(), std::size_t(cfg.point_budget / 10)) << "the voxel grew far more than needed";
   EXPECT_GT(voxel, cfg.base_voxel_m);
   map::Region region;
   region.voxel_m = voxel;
@@ -228,6 +228,40 @@ TEST_F(ViewHandler, ConstructionNamesTheMissingFile) {
   cfg = Config();
   cfg.store = *dir_ / "secret.txt";
   test::ExpectError([&] { Viewer v(cfg); }, {"secret.txt"});
+  cfg = Config();
+  cfg.point_budget = 10;
+  test::ExpectError([&] { Viewer v(cfg); }, {"view config", "point_budget"});
+  cfg = Config();
+  cfg.max_voxel_m = 0.05;
+  test::ExpectError([&] { Viewer v(cfg); }, {"max_voxel_m"});
+}
+
+// A viewer reading while another process integrates: every request mid-transaction answers at
+// once with the last committed state (WAL readers never block the writer nor see half a step).
+TEST_F(ViewHandler, ReadsDuringAnIntegrationSeeTheLastCommittedState) {
+  test::TempDir tmp;
+  fs::copy_file(Config().store, tmp / "m.ltmap");
+  ViewConfig cfg = Config();
+  cfg.store = tmp / "m.ltmap";
+  const Viewer v(cfg);
+  const std::string before = Get(v, "/api/cloud", {{"layer", "live"}}).body;
+  map::Store writer = map::Store::Open(cfg.store);
+  int checked = 0;
+  writer.on_keyframe_written = [&](std::size_t) {
+    const auto info = nlohmann::json::parse(Get(v, "/api/info").body);
+    EXPECT_EQ(info["latest"], 1) << "a reader saw the step being written";
+    const Response live = Get(v, "/api/cloud", {{"layer", "live"}});
+    EXPECT_EQ(live.status, 200) << live.body;
+    EXPECT_TRUE(live.body == before) << "live changed before the commit";
+    ++checked;
+  };
+  map::KeyframeDelta d;
+  d.keyframe = 2;
+  d.nd_strong = Box(2, 2, 2, 4, 1.5f, 0.125f);
+  writer.IntegrateSession({"drive_c"}, "drive_a", {d}, {});
+  EXPECT_GT(checked, 0);
+  EXPECT_EQ(nlohmann::json::parse(Get(v, "/api/info").body)["latest"], 2);  // committed: seen
+  EXPECT_FALSE(Get(v, "/api/cloud", {{"layer", "live"}}).body == before);   // not the cached cloud
 }
 
 TEST(ViewCloud, WireFormatRoundTripAndTruncation) {

@@ -45,7 +45,7 @@ std::shared_ptr<const std::string> Viewer::Impl::Cached(const std::string& key) 
 void Viewer::Impl::Remember(const std::string& key, std::shared_ptr<const std::string> body) const {
   std::lock_guard<std::mutex> lock(mutex);
   cache.emplace_front(key, std::move(body));
-  while (cache.size() > cfg.cache_clouds) cache.pop_back();
+  while (cache.size() > std::size_t(cfg.cache_clouds)) cache.pop_back();
 }
 
 namespace {
@@ -94,6 +94,7 @@ Response Info(const ViewConfig& cfg) {
                   {"classes", ClassesJson()},
                   {"session_colors", SessionColorsJson()},
                   {"point_budget", cfg.point_budget},
+                  {"max_voxel_m", cfg.max_voxel_m},
                   {"base_voxel_m", cfg.base_voxel_m}};
   return Json(j);
 }
@@ -182,7 +183,7 @@ Response Viewer::Cloud(const Request& req) const {
 
 // ---------------------------------------------------------------------------------- static
 Response Viewer::Static(const Request& req) const {
-  const std::string rel = req.path == "/" ? "index.html" : CheckStaticPath(req.path, impl_->cfg.max_path_chars);
+  const std::string rel = req.path == "/" ? "index.html" : CheckStaticPath(req.path, std::size_t(impl_->cfg.max_path_chars));
   const fs::path file = fs::path(impl_->web_root) / rel;
   std::error_code ec;
   const fs::path real = fs::canonical(file, ec);
@@ -190,7 +191,9 @@ Response Viewer::Static(const Request& req) const {
   const std::string real_s = real.string();
   if (real_s.compare(0, impl_->web_root.size() + 1, impl_->web_root + "/") != 0)
     throw HttpError(403, "'" + req.path + "' is outside the web folder");
-  if (fs::file_size(real) > impl_->cfg.max_static_bytes) throw HttpError(413, "'" + req.path + "' is too large");
+  constexpr std::uintmax_t kMiB = 1u << 20;
+  if (fs::file_size(real) > std::uintmax_t(impl_->cfg.max_static_mb) * kMiB)
+    throw HttpError(413, "'" + req.path + "' is too large");
   std::ifstream in(real, std::ios::binary);
   std::ostringstream ss;
   ss << in.rdbuf();
@@ -203,21 +206,32 @@ Viewer::Viewer(ViewConfig cfg) : impl_(std::make_unique<Impl>()) {
   (void)OpenStore(cfg);  // schema check: a wrong file fails now, not at the first request
   if (!fs::is_regular_file(fs::path(cfg.web_dir) / "index.html"))
     throw Error(cfg.web_dir + ": no index.html (the viewer's web files; built into BUILD/web)");
-  if (cfg.base_voxel_m <= 0 || cfg.max_voxel_m < cfg.base_voxel_m || cfg.point_budget == 0)
-    throw Error("view: --voxel must be > 0 and <= the coarsest voxel, --budget > 0");
+  ValidateConfig(cfg, "view config");
+  if (cfg.max_voxel_m < cfg.base_voxel_m) throw Error("view config: max_voxel_m must be >= base_voxel_m");
   impl_->web_root = fs::canonical(cfg.web_dir).string();
   impl_->cfg = std::move(cfg);
 }
 
 Viewer::~Viewer() = default;
+
+std::vector<Request> Viewer::WarmRequests() const {
+  const int latest = OpenStore(impl_->cfg).LatestSession();
+  std::vector<Request> out;
+  for (int s = latest; s >= 0; --s) out.push_back({"GET", "/api/cloud", {{"layer", "at"}, {"session", std::to_string(s)}}});
+  if (latest >= 0) out.insert(out.begin() + std::min<std::ptrdiff_t>(2, std::ptrdiff_t(out.size())),
+                              Request{"GET", "/api/cloud", {{"layer", "meta"}}});
+  if (out.size() > std::size_t(impl_->cfg.cache_clouds)) out.resize(std::size_t(impl_->cfg.cache_clouds));
+  return out;
+}
 const ViewConfig& Viewer::config() const { return impl_->cfg; }
 
 Response Viewer::Route(const Request& req) const {
   if (req.method != "GET" && req.method != "HEAD") throw HttpError(405, "only GET is served");
-  if (req.path.size() > impl_->cfg.max_path_chars) throw HttpError(414, "request path too long");
+  const std::size_t max_path = std::size_t(impl_->cfg.max_path_chars), max_query = std::size_t(impl_->cfg.max_query_chars);
+  if (req.path.size() > max_path) throw HttpError(414, "request path too long");
   for (const auto& [k, v] : req.query)
-    if (k.size() > impl_->cfg.max_query_chars || v.size() > impl_->cfg.max_query_chars)
-      throw HttpError(400, "query parameter '" + k.substr(0, impl_->cfg.max_query_chars) + "' too long");
+    if (k.size() > max_query || v.size() > max_query)
+      throw HttpError(400, "query parameter '" + k.substr(0, max_query) + "' too long");
   if (req.path == "/api/cloud") return Cloud(req);
   CheckParams(req, {});  // no other endpoint takes parameters
   if (req.path == "/api/info") return Info(impl_->cfg);

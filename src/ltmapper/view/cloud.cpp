@@ -47,13 +47,14 @@ PointCloud Unfiltered(const map::Store& store, Layer layer, int session) {
 
 PointCloud ServedCloud(const map::Store& store, Layer layer, int session, const ViewConfig& cfg,
                        double* voxel_m) {
-  if (cfg.base_voxel_m <= 0 || cfg.max_voxel_m < cfg.base_voxel_m || cfg.point_budget == 0)
-    throw Error("view: base_voxel_m must be > 0 and <= max_voxel_m, point_budget > 0");
+  ValidateConfig(cfg, "view config");
+  if (cfg.max_voxel_m < cfg.base_voxel_m) throw Error("view config: max_voxel_m must be >= base_voxel_m");
+  const std::size_t budget = std::size_t(cfg.point_budget);
   const PointCloud raw = Unfiltered(store, layer, session);
   double voxel = cfg.base_voxel_m;
   PointCloud out = raw.empty() ? raw : geometry::VoxelDownsample(raw, voxel, cfg.threads);
-  while (out.size() > cfg.point_budget && voxel < cfg.max_voxel_m) {
-    const double grow = std::sqrt(double(out.size()) / double(cfg.point_budget)) * kVoxelMargin;
+  while (out.size() > budget && voxel < cfg.max_voxel_m) {
+    const double grow = std::sqrt(double(out.size()) / double(budget)) * kVoxelMargin;
     // A float32 value: the wire header carries the exact voxel the cloud was filtered with.
     voxel = double(float(std::min(cfg.max_voxel_m, voxel * std::max(grow, kMinVoxelGrowth))));
     out = geometry::VoxelDownsample(raw, voxel, cfg.threads);

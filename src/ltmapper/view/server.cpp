@@ -3,6 +3,8 @@
 
 #include <httplib.h>
 
+#include <sys/socket.h>
+
 #include <memory>
 
 namespace ltm::view {
@@ -38,6 +40,13 @@ void Reply(const Viewer& viewer, const httplib::Request& in, httplib::Response& 
 
 void Serve(const Viewer& viewer, const std::string& host, int port, const std::function<void(int)>& on_ready) {
   httplib::Server server;
+  // httplib's default sets SO_REUSEPORT: a second viewer on the same port would then share it,
+  // each request going to either. SO_REUSEADDR alone restarts at once after a stop, and a port
+  // in use is an error.
+  server.set_socket_options([](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
   const auto handler = [&viewer](const httplib::Request& in, httplib::Response& out) { Reply(viewer, in, out); };
   server.Get(".*", handler);
   server.Post(".*", handler);

@@ -13,6 +13,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace ltm::view {
 
@@ -21,16 +22,29 @@ struct ViewConfig {
   std::string run_dir;  // OUT of `ltmapper run` (objects/, aligned/); "" = the store's folder
   std::string web_dir;  // index.html, viewer.js, three/ (the build tree's web/)
   // Level of detail: clouds are voxel-filtered at base_voxel_m, coarser when that gives more
-  // than point_budget points (the voxel grows until the cloud fits).
-  double base_voxel_m = 0.1;               // [m] finest voxel served (the maps' output_voxel_m)
-  std::size_t point_budget = 2000000;      // [points] most points in one cloud response
-  double max_voxel_m = 20.0;               // [m] the coarsest voxel LOD may reach
-  std::size_t cache_clouds = 6;            // clouds kept in memory (slider back and forth)
-  std::size_t max_query_chars = 64;        // longest accepted query value [characters]
-  std::size_t max_path_chars = 256;        // longest accepted request path [characters]
-  std::size_t max_static_bytes = 64u << 20;  // [bytes] largest static file served
-  int threads = 0;                         // restore / voxel threads (0 = all cores)
+  // than point_budget points (the voxel grows until the cloud fits). 2 M points of float32 xyz +
+  // class are 26 MB to send and a few hundred ms for a browser to upload: the demo map opens in
+  // about 2 s and orbits smoothly on a laptop's integrated GPU.
+  double base_voxel_m = 0.1;         // [m] finest voxel served (the maps' output_voxel_m)
+  int point_budget = 2000000;        // [points] most points in one cloud response
+  double max_voxel_m = 20.0;         // [m] the coarsest voxel LOD may reach
+  int cache_clouds = 6;              // clouds kept in memory (slider back and forth)
+  int max_query_chars = 64;          // longest accepted query value [characters]
+  int max_path_chars = 256;          // longest accepted request path [characters]
+  int max_static_mb = 64;            // [MiB] largest static file served
+  int threads = 0;                   // restore / voxel threads (0 = all cores)
   map::MapConfig map;  // meta map carving (meta_carve_radius_m); the encoding comes from the store
+
+  template <class V>
+  void Visit(V& v) {
+    v("base_voxel_m", base_voxel_m, "m", 0.001, 100.0);
+    v("point_budget", point_budget, "points", 1000, 100000000);
+    v("max_voxel_m", max_voxel_m, "m", 0.001, 1000.0);
+    v("cache_clouds", cache_clouds, "", 0, 1000);
+    v("max_query_chars", max_query_chars, "characters", 1, 4096);
+    v("max_path_chars", max_path_chars, "characters", 1, 4096);
+    v("max_static_mb", max_static_mb, "MiB", 1, 4096);
+  }
 };
 
 struct Request {
@@ -74,6 +88,10 @@ class Viewer {
   // or a static file under web_dir ("/" = index.html). Bad requests -> 4xx with a message; store
   // errors -> 500 with the message. Never throws; safe to call from several threads.
   Response Handle(const Request& req) const;
+  // The cloud requests worth answering before a page asks (Handle fills the cache): the latest
+  // session's map (what the page opens on), then the older sessions newest first and the meta
+  // map, as many as cache_clouds holds.
+  std::vector<Request> WarmRequests() const;
   const ViewConfig& config() const;
 
  private:
