@@ -266,6 +266,18 @@ function selectObject(k) {
       `box ${o.box.size.map((v) => v.toFixed(1)).join(' x ')} m at ${o.box.center.map((v) => v.toFixed(1)).join(', ')}`;
   showBox(o);
   flyTo(new THREE.Vector3(...o.box.center), new THREE.Vector3(...o.box.size).length());
+  showStep(o.session);
+}
+
+// The map at the step that found the object, with that step's changes over it: the object in
+// its class colour (PD appeared / ND disappeared).
+function showStep(session) {
+  if (state.layer === 'at' && state.session === session && state.showChanges) return;
+  state.layer = 'at';
+  state.showChanges = true;
+  $('changes').checked = true;
+  $('session').value = String(session);
+  onSessionChange();
 }
 
 function showBox(o) {

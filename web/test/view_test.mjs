@@ -160,9 +160,13 @@ async function clickObject(page, objects) {
   await page.waitForSelector('#object-list div');
   await page.click('#object-list div >> nth=0');
   const o = objects[0];
-  await page.waitForFunction(() => window.__ltmView.debug.boxGroup.children.length === 1, null, { timeout: STEP_TIMEOUT_MS });
+  // The box, and the map at the object's step with that step's changes (the object among them).
+  await page.waitForFunction((n) => window.__ltmView.debug.boxGroup.children.length === 1 &&
+                             window.__ltmView.session === n && window.__ltmView.debug.changeGroup.children.length > 0,
+                             o.session, { timeout: STEP_TIMEOUT_MS });
   const detail = await page.textContent('#object-detail');
   assert.match(detail, new RegExp(`#${o.id} ${o.change} \\(${o.class}\\)`));
+  assert.match(await page.textContent('#session-label'), new RegExp(`Session ${o.session}: `));
   await page.waitForTimeout(1000);  // the camera's flight (0.8 s)
   console.log(`object #${o.id}: ${detail.split('\n')[0]}`);
 }
