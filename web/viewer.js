@@ -9,11 +9,13 @@ const CHANGE_SIZE_PX = 3;      // the step's changes, drawn over the map [pixels
 const FLY_SECONDS = 0.8;       // camera flight to a clicked object [s]
 const OBJECT_VIEW_DIST = 3.0;  // camera distance to a clicked object, in box diagonals
 const HEADER_BYTES = 16;       // cloud header: "LTMC", version, count, voxel
+const CLICK_SLOP_PX = 4;       // a pointer that moved less than this between down and up clicked
+const PICK_PX = 4;             // measure: a click picks points drawn within this many pixels
 
 const $ = (id) => document.getElementById(id);
 const state = {
   info: null, layer: 'at', session: 0, classes: new Map(), classVisible: new Map(),
-  showChanges: false, cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(), trajGroup: new THREE.Group(), boxGroup: new THREE.Group(),
+  showChanges: false, measure: [], measureGroup: new THREE.Group(), cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(), trajGroup: new THREE.Group(), boxGroup: new THREE.Group(),
   objects: [], selected: -1, loads: 0,
 };
 // What the browser test reads: frames drawn, the cloud on screen, time to the first frame.
@@ -24,7 +26,7 @@ renderer.setPixelRatio(1);
 renderer.setClearColor(BACKGROUND);
 $('view').appendChild(renderer.domElement);
 const scene = new THREE.Scene();
-scene.add(state.cloudGroup, state.changeGroup, state.trajGroup, state.boxGroup);
+scene.add(state.cloudGroup, state.changeGroup, state.trajGroup, state.boxGroup, state.measureGroup);
 const camera = new THREE.PerspectiveCamera(60, 1, 0.1, 20000);
 camera.up.set(0, 0, 1);  // the map's world frame is z-up
 const controls = new OrbitControls(camera, renderer.domElement);
@@ -307,6 +309,68 @@ function flyTo(target, diagonal) {
   requestAnimationFrame(step);
 }
 
+// -------------------------------------------------------------------------------- measure
+// With "measure" on, two clicks on map points give their distance (3D, horizontal, height).
+// The map point drawn under the pointer: among the visible points whose projection lies within
+// PICK_PX pixels of it, the one nearest the camera (what the user sees on top).
+function pickPoint(clientX, clientY) {
+  const rect = renderer.domElement.getBoundingClientRect();
+  const px = clientX - rect.left, py = clientY - rect.top;
+  const e = new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse).elements;
+  let best = null, bestDepth = Infinity;
+  for (const pts of state.cloudGroup.children) {
+    if (!pts.visible) continue;
+    const a = pts.geometry.attributes.position.array;
+    for (let i = 0; i < a.length; i += 3) {
+      const x = a[i], y = a[i + 1], z = a[i + 2];
+      const w = e[3] * x + e[7] * y + e[11] * z + e[15];
+      if (w <= 0 || w >= bestDepth) continue;
+      const sx = ((e[0] * x + e[4] * y + e[8] * z + e[12]) / w + 1) / 2 * rect.width;
+      const sy = (1 - (e[1] * x + e[5] * y + e[9] * z + e[13]) / w) / 2 * rect.height;
+      if ((sx - px) ** 2 + (sy - py) ** 2 > PICK_PX * PICK_PX) continue;
+      best = new THREE.Vector3(x, y, z);
+      bestDepth = w;
+    }
+  }
+  return best;
+}
+
+function addMeasurePoint(p) {
+  if (state.measure.length === 2) state.measure = [];
+  state.measure.push(p);
+  clearGroup(state.measureGroup);
+  const geom = new THREE.BufferGeometry().setFromPoints(state.measure);
+  const mat = { color: 0xffffff, depthTest: false };
+  state.measureGroup.add(new THREE.Points(geom, new THREE.PointsMaterial({ ...mat, size: 8, sizeAttenuation: false })));
+  if (state.measure.length === 2) {
+    state.measureGroup.add(new THREE.Line(geom.clone(), new THREE.LineBasicMaterial(mat)));
+    const [a, b] = state.measure;
+    const d = b.clone().sub(a);
+    $('measure-text').textContent = `${d.length().toFixed(2)} m (horizontal ${Math.hypot(d.x, d.y).toFixed(2)} m, ` +
+                                    `height ${d.z.toFixed(2)} m)`;
+  } else {
+    $('measure-text').textContent = 'first point set: click the second';
+  }
+  render();
+}
+
+function wireMeasure() {
+  let down = null;
+  renderer.domElement.addEventListener('pointerdown', (e) => { down = [e.clientX, e.clientY]; });
+  renderer.domElement.addEventListener('pointerup', (e) => {
+    if (!$('measure').checked || !down || Math.hypot(e.clientX - down[0], e.clientY - down[1]) > CLICK_SLOP_PX) return;
+    const p = pickPoint(e.clientX, e.clientY);
+    if (p) addMeasurePoint(p);
+    else $('measure-text').textContent = 'no map point there';
+  });
+  $('measure').addEventListener('change', (e) => {
+    state.measure = [];
+    clearGroup(state.measureGroup);
+    $('measure-text').textContent = e.target.checked ? 'click two map points' : '';
+    render();
+  });
+}
+
 // ------------------------------------------------------------------------------------ main
 function fail(err) {
   window.__ltmView.error = String(err.message || err);
@@ -321,6 +385,7 @@ async function main() {
   state.session = state.info.latest;
   buildLegend();
   wireControls();
+  wireMeasure();
   updatePanel();
   await loadCloud();
   await Promise.all([loadTrajectories(), loadObjects()]);

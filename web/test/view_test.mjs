@@ -98,7 +98,7 @@ function probePixels({ samples, background, group }) {
       r.tried += 1;
       if (c.some((ch, j) => Math.abs(ch - background[j]) > 8)) r.drawn += 1;
       if (c.every((ch, j) => Math.abs(ch - rgb[j]) <= 8)) r.colour += 1;
-      if (r.places.length < 3) r.places.push([x, H - 1 - y, c]);
+      if (r.places.length < 20) r.places.push([x, H - 1 - y, c]);
     }
     out[classes.get(pts.userData.cls).name] = r;
   }
@@ -155,6 +155,29 @@ async function runPage(page, url, info) {
   console.log(`points: session 0 ${points0}, session ${info.latest} ${pointsLatest}`);
 }
 
+// The measure tool: two clicks on drawn map points (outside the panels) give a distance.
+async function measure(page) {
+  await page.check('#measure');
+  const probe = await page.evaluate(probePixels, { samples: SAMPLES_PER_CLASS, background: BACKGROUND, group: 'cloudGroup' });
+  const panels = await page.evaluate(() => [...document.querySelectorAll('.panel')].map((e) => e.getBoundingClientRect().toJSON()));
+  const free = ([x, y]) => !panels.some((r) => x >= r.left - 5 && x <= r.right + 5 && y >= r.top - 5 && y <= r.bottom + 5);
+  const places = Object.values(probe).flatMap((r) => r.places).filter(free);
+  assert.ok(places.length >= 2, `measure: no two map points outside the panels: ${JSON.stringify(places)}`);
+  const a = places[0];
+  const b = places.reduce((far, p) => (Math.hypot(p[0] - a[0], p[1] - a[1]) > Math.hypot(far[0] - a[0], far[1] - a[1]) ? p : far));
+  await page.mouse.click(a[0], a[1]);
+  await page.waitForFunction(() => document.getElementById('measure-text').textContent.startsWith('first'), null,
+                             { timeout: STEP_TIMEOUT_MS }).catch(() => {});
+  await page.mouse.click(b[0], b[1]);
+  await page.waitForFunction(() => / m\)$/.test(document.getElementById('measure-text').textContent), null,
+                             { timeout: STEP_TIMEOUT_MS }).catch(() => {});
+  const text = await page.textContent('#measure-text');
+  assert.match(text, /^\d+\.\d\d m \(horizontal \d+\.\d\d m, height -?\d+\.\d\d m\)$/, `measure: ${text}`);
+  assert.ok(parseFloat(text) > 0, `measure: ${text}`);
+  console.log(`measure: ${text}`);
+  await page.uncheck('#measure');
+}
+
 async function clickObject(page, objects) {
   if (!objects.length) return console.log('no objects in the run: object click not tested');
   await page.waitForSelector('#object-list div');
@@ -190,6 +213,7 @@ async function main() {
     const info = await (await fetch(viewer.url + 'api/info')).json();
     const objects = (await (await fetch(viewer.url + 'api/objects')).json()).objects;
     await runPage(page, viewer.url, info);
+    await measure(page);
     await clickObject(page, objects);
     await page.screenshot({ path: a.screenshot });
     assert.deepEqual(errors, [], 'uncaught errors in the page');
