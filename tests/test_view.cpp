@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <random>
 
 namespace ltm::view {
 namespace {
@@ -191,6 +192,30 @@ TEST_F(ViewHandler, BadRequestsAreRefusedWithAMessage) {
   post.method = "POST";
   post.path = "/api/info";
   EXPECT_EQ(v.Handle(post).status, 405);
+}
+
+// Random paths and queries from awkward pieces: always an answer (200 or 4xx), never a crash and
+// never a 500 (the store is sound; only bad requests here).
+TEST_F(ViewHandler, RandomRequestsAreAnsweredOrRefused) {
+  const Viewer v(Config());
+  const std::vector<std::string> pieces = {"/", "..", ".", "api", "cloud", "info", "three", "index.html", "%2e",
+                                           "\\", std::string(1, '\0'), "link.txt", "~", "?", "\xff", "0", "-1", "99"};
+  const std::vector<std::string> keys = {"layer", "session", "x", ""}, values = {"at", "live", "meta", "changes", "0",
+                                                                                  "1", "01", "+1", " 1", "1.0", ""};
+  std::mt19937 rng(7);
+  const auto pick = [&rng](const std::vector<std::string>& from) { return from[rng() % from.size()]; };
+  for (int k = 0; k < 3000; ++k) {
+    Request r;
+    const int n = 1 + int(rng() % 6);
+    for (int i = 0; i < n; ++i) r.path += pick(pieces);
+    if (rng() % 2) r.path = "/api/cloud";
+    for (int q = int(rng() % 3); q > 0; --q) r.query[pick(keys)] = pick(values);
+    const Response res = v.Handle(r);
+    EXPECT_TRUE(res.status == 200 || (res.status >= 400 && res.status < 500)) << r.path << ": " << res.status << " " << res.body;
+    if (res.status != 200) {
+      EXPECT_FALSE(res.body.empty()) << r.path;
+    }
+  }
 }
 
 TEST_F(ViewHandler, StaticFilesInfoTrajectoriesAndObjects) {
