@@ -15,7 +15,8 @@ const PICK_PX = 4;             // measure: a click picks points drawn within thi
 const $ = (id) => document.getElementById(id);
 const state = {
   info: null, layer: 'at', session: 0, classes: new Map(), classVisible: new Map(),
-  showChanges: false, measure: [], measureGroup: new THREE.Group(), cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(), trajGroup: new THREE.Group(), boxGroup: new THREE.Group(),
+  showChanges: false, measure: [], cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(),
+  trajGroup: new THREE.Group(), boxGroup: new THREE.Group(), measureGroup: new THREE.Group(),
   objects: [], selected: -1, loads: 0,
 };
 // What the browser test reads: frames drawn, the cloud on screen, time to the first frame.
@@ -56,6 +57,25 @@ async function fetchOk(url) {
 }
 
 function setStatus(text) { $('status').textContent = text; }
+// An element with text set as text (names from the store and objects.json are never parsed as HTML).
+function el(tag, { cls = '', text = '', color = null, id = '' } = {}) {
+  const e = document.createElement(tag);
+  if (cls) e.className = cls;
+  if (text) e.textContent = text;
+  if (color) e.style.background = rgbCss(color);
+  if (id) e.id = id;
+  return e;
+}
+// A legend row: checkbox, colour swatch, label, muted note.
+function legendRow(rgb, label, note, noteId = '') {
+  const row = el('label', { cls: 'row' });
+  const box = el('input');
+  box.type = 'checkbox';
+  box.checked = true;
+  row.append(box, el('span', { cls: 'swatch', color: rgb }), el('span', { text: label }),
+             el('span', { cls: 'muted', text: note, id: noteId }));
+  return { row, box };
+}
 function rgbCss(rgb) { return `rgb(${rgb[0]}, ${rgb[1]}, ${rgb[2]})`; }
 
 // ------------------------------------------------------------------------------- the cloud
@@ -172,15 +192,11 @@ function updatePanel() {
 }
 
 function buildLegend() {
-  $('legend').innerHTML = '';
+  $('legend').replaceChildren();
   for (const c of state.info.classes) {
     state.classes.set(c.id, c);
-    const row = document.createElement('label');
-    row.className = 'row';
-    row.innerHTML = `<input type="checkbox" checked data-cls="${c.id}"><span class="swatch" ` +
-                    `style="background:${rgbCss(c.rgb)}"></span><span>${c.name}</span>` +
-                    `<span class="muted" id="count-${c.id}"></span>`;
-    row.querySelector('input').addEventListener('change', (e) => {
+    const { row, box } = legendRow(c.rgb, c.name, '', `count-${c.id}`);
+    box.addEventListener('change', (e) => {
       state.classVisible.set(c.id, e.target.checked);
       for (const p of [...state.cloudGroup.children, ...state.changeGroup.children])
         if (p.userData.cls === c.id) p.visible = e.target.checked;
@@ -226,11 +242,8 @@ async function loadTrajectories() {
     const rgb = state.info.session_colors[s.order % state.info.session_colors.length];
     const line = new THREE.Line(geom, new THREE.LineBasicMaterial({ color: new THREE.Color(rgbCss(rgb)) }));
     state.trajGroup.add(line);
-    const row = document.createElement('label');
-    row.className = 'row';
-    row.innerHTML = `<input type="checkbox" checked><span class="swatch" style="background:${rgbCss(rgb)}"></span>` +
-                    `<span>${s.name}</span><span class="muted">${s.positions.length} poses (${s.source})</span>`;
-    row.querySelector('input').addEventListener('change', (e) => { line.visible = e.target.checked; render(); });
+    const { row, box } = legendRow(rgb, s.name, `${s.positions.length} poses (${s.source})`);
+    box.addEventListener('change', (e) => { line.visible = e.target.checked; render(); });
     $('trajectories').appendChild(row);
   }
   render();
@@ -241,12 +254,12 @@ async function loadObjects() {
   const data = await (await fetchOk('/api/objects')).json();
   state.objects = data.objects;
   const list = $('object-list');
-  if (!data.objects.length) list.innerHTML = '<div class="muted">no objects.json in the run folder</div>';
+  if (!data.objects.length) list.append(el('div', { cls: 'muted', text: 'no objects.json in the run folder' }));
   data.objects.forEach((o, k) => {
-    const row = document.createElement('div');
+    const row = el('div');
     const rgb = (state.classes.get(classId(o.class)) || { rgb: [200, 200, 200] }).rgb;
-    row.innerHTML = `<span class="swatch" style="background:${rgbCss(rgb)}"></span> #${o.id} ${o.change} ` +
-                    `<span class="muted">session ${o.session}, ${o.points} pts</span>`;
+    row.append(el('span', { cls: 'swatch', color: rgb }), ` #${o.id} ${o.change} `,
+               el('span', { cls: 'muted', text: `session ${o.session}, ${o.points} pts` }));
     row.addEventListener('click', () => selectObject(k));
     list.appendChild(row);
   });
