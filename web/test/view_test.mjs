@@ -194,14 +194,8 @@ async function clickObject(page, objects) {
   console.log(`object #${o.id}: ${detail.split('\n')[0]}`);
 }
 
-async function main() {
-  const a = args();
-  const t0 = Date.now();
-  const dir = a.keep || fs.mkdtempSync(path.join(os.tmpdir(), 'ltm_view_test_'));
-  fs.mkdirSync(dir, { recursive: true });
-  const store = a.store || makeStore(a.exe, dir);
-  console.log(`store ${store} ready in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
-  const viewer = await startViewer(a.exe, store);
+// Opens the page on a running viewer and checks it; returns when the screenshot is written.
+async function checkInBrowser(a, viewer) {
   let browser = null;
   try {
     // SwiftShader: WebGL in software, the same on every machine (no GPU needed).
@@ -217,11 +211,28 @@ async function main() {
     await clickObject(page, objects);
     await page.screenshot({ path: a.screenshot });
     assert.deepEqual(errors, [], 'uncaught errors in the page');
-    console.log(`screenshot ${a.screenshot}; browser test passed in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
   } finally {
     if (browser) await browser.close();
-    viewer.proc.kill('SIGTERM');
-    if (!a.keep && !a.store) fs.rmSync(dir, { recursive: true, force: true });
+  }
+}
+
+async function main() {
+  const a = args();
+  const t0 = Date.now();
+  const dir = a.keep || fs.mkdtempSync(path.join(os.tmpdir(), 'ltm_view_test_'));
+  try {
+    fs.mkdirSync(dir, { recursive: true });
+    const store = a.store || makeStore(a.exe, dir);
+    console.log(`store ${store} ready in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+    const viewer = await startViewer(a.exe, store);
+    try {
+      await checkInBrowser(a, viewer);
+    } finally {
+      viewer.proc.kill('SIGTERM');
+    }
+    console.log(`screenshot ${a.screenshot}; browser test passed in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+  } finally {
+    if (!a.keep) fs.rmSync(dir, { recursive: true, force: true });
   }
 }
 
