@@ -10,6 +10,9 @@ find_package(SQLite3 REQUIRED)
 find_package(Threads REQUIRED)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
+# ltmapper view: HTTP server (libcpp-httplib-dev) and JSON (nlohmann-json3-dev).
+pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
+find_package(nlohmann_json 3 REQUIRED)
 
 # Heavy libraries: only the .cpp files of the module that owns them include their headers.
 find_package(PCL 1.13 REQUIRED COMPONENTS common io kdtree search filters features registration segmentation)

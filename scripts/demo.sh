@@ -90,6 +90,16 @@ for f in "$RUN"/changes/pair_*/{nd_weak,nd_strong,pd_weak,pd_strong}.pcd; do [ -
   --color-by session --out "$OUT/renders/05_restored_vs_real.png"
 [ -f "$RUN/objects/objects.ply" ] && "$LTM" render --cloud "$RUN/changes/${NAMES[0]}/static_map.pcd" \
   --cloud "$RUN/objects/objects.ply" --color-by class --out "$OUT/renders/06_objects.png"
+# The 3D viewer: its browser test on this store writes the screenshot (chromium headless).
+VIEW_SHOT="$OUT/renders/07_viewer.png"
+node web/test/view_test.mjs --exe "$LTM" --store "$RUN/map.ltmap" --screenshot "$VIEW_SHOT" | tail -n 4
+cat > "$OUT/eval/60_viewer.md" <<EOF_VIEW
+## 3D viewer
+
+\`$LTM view --store $RUN/map.ltmap\`, then open http://127.0.0.1:8080/ : the map in 3D with a session
+slider (the map as of each session, by the store's rollback), the meta map, each session's changes,
+the trajectories and the changed objects (click: fly to it, its box, change and sessions).
+EOF_VIEW
 
 ITEMS=(--item "$RUN/run_report.md")
 for f in "$OUT"/eval/*.md; do ITEMS+=(--item "$f"); done
@@ -99,6 +109,7 @@ ITEMS+=(--item "$OUT/renders/01_aligned_sessions.png::Aligned sessions (LT-SLAM 
         --item "$OUT/renders/04_meta_map.png::Meta map: strong PD only, seen-through space carved"
         --item "$OUT/renders/05_restored_vs_real.png::Rollback: the first session restored from the latest map (session 0 color) vs its own HD-free map")
 [ -f "$OUT/renders/06_objects.png" ] && ITEMS+=(--item "$OUT/renders/06_objects.png::Objects parsed from strong ND / PD by Euclidean clustering")
+ITEMS+=(--item "$VIEW_SHOT::ltmapper view (the browser test's screenshot): the map at an object's session with that session's changes, the object's box")
 "$LTM" report --out "$OUT/report" --title "ltmapper demo: simulated city block, ${#NAMES[@]} sessions" "${ITEMS[@]}"
 echo
 echo "demo finished in $(( $(date +%s) - T0 )) s. Open $OUT/report.html (or read $OUT/report.md)."

@@ -20,7 +20,14 @@ PACKAGES=(
   libpng-dev             # PNG renders
   libgtest-dev libgmock-dev libbenchmark-dev   # tests and benchmarks
   pybind11-dev python3-dev python3-numpy       # Python bindings (python/, `import ltmapper`)
+  libcpp-httplib-dev nlohmann-json3-dev        # ltmapper view: HTTP server, JSON
+  chromium               # headless browser of the viewer's browser test (tests/browser/)
 )
+# three.js and playwright-core come from the npm registry (web/package-lock.json): Debian's node
+# and npm unless a node with npm is installed already (e.g. NodeSource's, which conflicts with them).
+if ! command -v npm >/dev/null 2>&1; then
+  PACKAGES+=(nodejs npm)
+fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do
@@ -29,8 +36,22 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
+# web/node_modules (three.js for `ltmapper view`, playwright-core for its test): exactly the
+# versions of web/package-lock.json; nothing to do when they are there already.
+install_web() {
+  local web
+  web="$(cd "$(dirname "${BASH_SOURCE[0]}")/../web" && pwd)"
+  if [ -f "$web/node_modules/three/package.json" ] && [ -f "$web/node_modules/playwright-core/package.json" ] &&
+     [ "$web/node_modules/.package-lock.json" -nt "$web/package-lock.json" ]; then
+    return 0
+  fi
+  echo "install-deps: npm ci in $web"
+  (cd "$web" && npm ci --no-audit --no-fund)
+}
+
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages already installed"
+  install_web
   exit 0
 fi
 
@@ -47,3 +68,4 @@ echo "install-deps: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
 "${SUDO[@]}" apt-get update -q
 "${SUDO[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
+install_web

@@ -1,0 +1,312 @@
+// ltmapper view: the request handler without sockets (clouds equal the store's restore after the
+// same voxel filter, level of detail, every kind of bad request) and the cloud wire format.
+#include "ltmapper/view/view.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/viz/viz.hpp"
+
+#include "test_util.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <random>
+
+namespace ltm::view {
+namespace {
+
+namespace fs = std::filesystem;
+
+PointCloud Grid(float x0, float y0, float z, int nx, int ny, float step) {
+  PointCloud c;
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j) c.push_back(x0 + i * step, y0 + j * step, z, 0.5f);
+  return c;
+}
+
+PointCloud Box(float x0, float y0, float w, float d, float h, float step) {
+  PointCloud c;
+  for (float x = x0; x <= x0 + w; x += step)
+    for (float y = y0; y <= y0 + d; y += step)
+      for (float z = 0.25f; z <= h; z += step) c.push_back(x, y, z, 0.8f);
+  return c;
+}
+
+Pose At(double x, double y) {
+  Pose T = Pose::Identity();
+  T.translation() = Eigen::Vector3d(x, y, 0);
+  return T;
+}
+
+// A store of 3 keyframes and 2 sessions (session 1: keyframe 0's box gone, a wall appeared), a
+// web folder, a file outside it and a link from inside to outside.
+class ViewHandler : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = std::make_unique<test::TempDir>();
+    map::MapConfig cfg;
+    fs::create_directories(*dir_ / "run");
+    map::Store s = map::Store::Create(*dir_ / "run/map.ltmap", cfg);
+    std::vector<map::KeyframeInput> base;
+    for (int k = 0; k < 3; ++k) {
+      PointCloud c = Grid(-6, -6, 0, 96, 96, 0.125f);
+      c.append(Box(2, 2, 2, 4, 1.5f, 0.125f));
+      base.push_back({k, At(20.0 * k, 0), c});
+    }
+    s.IntegrateBase({"drive_a"}, base);
+    map::KeyframeDelta d;
+    d.keyframe = 0;
+    d.nd_strong = Box(2, 2, 2, 4, 1.5f, 0.125f);
+    d.pd_strong = Grid(-6, 6.5f, 1.1f, 96, 1, 0.125f);
+    s.IntegrateSession({"drive_b"}, "drive_a", {d}, {});
+    test::WriteText(*dir_ / "web/index.html", "<html>viewer</html>");
+    test::WriteText(*dir_ / "web/three/three.module.js", "export {};");
+    test::WriteText(*dir_ / "secret.txt", "not for the browser");
+    fs::create_symlink(*dir_ / "secret.txt", *dir_ / "web/link.txt");
+  }
+  static void TearDownTestSuite() { dir_.reset(); }
+
+  static ViewConfig Config() {
+    ViewConfig c;
+    c.store = *dir_ / "run/map.ltmap";
+    c.web_dir = *dir_ / "web";
+    c.base_voxel_m = 0.2;
+    return c;
+  }
+  static Response Get(const Viewer& v, const std::string& path, std::map<std::string, std::string> query = {}) {
+    Request r;
+    r.path = path;
+    r.query = std::move(query);
+    return v.Handle(r);
+  }
+  static std::unique_ptr<test::TempDir> dir_;
+};
+std::unique_ptr<test::TempDir> ViewHandler::dir_;
+
+void ExpectSameCloud(const PointCloud& got, const PointCloud& want) {
+  ASSERT_EQ(got.size(), want.size());
+  ASSERT_EQ(want.cls.size(), want.size());
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    ASSERT_EQ(got.points[i].x, want.points[i].x) << i;
+    ASSERT_EQ(got.points[i].y, want.points[i].y) << i;
+    ASSERT_EQ(got.points[i].z, want.points[i].z) << i;
+    ASSERT_EQ(got.cls[i], want.cls[i]) << i;
+  }
+}
+
+TEST_F(ViewHandler, CloudOfASessionIsTheStoresRestoreAfterTheSameVoxelFilter) {
+  const Viewer v(Config());
+  const map::Store store = map::Store::Open(Config().store, {}, map::Store::Access::kReadOnly);
+  map::Region region;
+  region.voxel_m = 0.2;
+  for (const std::string session : {"0", "1", "drive_b"}) {
+    const Response r = Get(v, "/api/cloud", {{"layer", "at"}, {"session", session}});
+    ASSERT_EQ(r.status, 200) << r.body;
+    EXPECT_EQ(r.content_type, "application/octet-stream");
+    double voxel = 0;
+    const PointCloud got = DecodeCloud(r.body, &voxel);
+    EXPECT_FLOAT_EQ(voxel, 0.2);
+    ExpectSameCloud(got, store.MapAt(session == "0" ? 0 : 1, region));
+  }
+  double voxel = 0;
+  ExpectSameCloud(DecodeCloud(Get(v, "/api/cloud", {{"layer", "meta"}}).body, &voxel), store.Meta(region));
+  ExpectSameCloud(DecodeCloud(Get(v, "/api/cloud", {{"layer", "live"}}).body, &voxel), store.Live(region));
+  const PointCloud changes = DecodeCloud(Get(v, "/api/cloud", {{"layer", "changes"}, {"session", "1"}}).body);
+  ExpectSameCloud(changes, geometry::VoxelDownsample(store.StepChanges(1), 0.2));
+  EXPECT_GT(std::count(changes.cls.begin(), changes.cls.end(), PointClass::kNDStrong), 0);  // the box, removed
+  // Session 0 still has the box session 1 removed: more points.
+  EXPECT_GT(DecodeCloud(Get(v, "/api/cloud", {{"session", "0"}}).body).size(),
+            DecodeCloud(Get(v, "/api/cloud", {{"session", "1"}}).body).size());
+}
+
+// The acceptance check of issue #19: the points served for session 0 are `ltmapper map restore`'s.
+TEST_F(ViewHandler, CloudOfSessionZeroEqualsMapRestoreOutput) {
+  const std::string pcd = *dir_ / "restore0.pcd";
+  std::string log;
+  ASSERT_EQ(test::RunCli("map restore --quiet --store " + Config().store + " --session 0 --voxel 0.2 --out " + pcd, &log), 0)
+      << log;
+  const PointCloud want = io::ReadPcd(pcd);
+  const Viewer v(Config());
+  const PointCloud got = DecodeCloud(Get(v, "/api/cloud", {{"session", "0"}}).body);
+  ASSERT_EQ(got.size(), want.size());
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    ASSERT_EQ(got.points[i].x, want.points[i].x) << i;
+    ASSERT_EQ(got.points[i].z, want.points[i].z) << i;
+  }
+}
+
+TEST_F(ViewHandler, LevelOfDetailGrowsTheVoxelToFitTheBudget) {
+  ViewConfig cfg = Config();
+  cfg.point_budget = 2000;
+  const Viewer v(cfg);
+  double voxel = 0;
+  const PointCloud got = DecodeCloud(Get(v, "/api/cloud", {{"session", "0"}}).body, &voxel);
+  EXPECT_LE(got.size(), std::size_t(cfg.point_budget));
+  EXPECT_GT(got.size(), std::size_t(cfg.point_budget / 10)) << "the voxel grew far more than needed";
+  EXPECT_GT(voxel, cfg.base_voxel_m);
+  map::Region region;
+  region.voxel_m = voxel;
+  const map::Store store = map::Store::Open(cfg.store, {}, map::Store::Access::kReadOnly);
+  ExpectSameCloud(got, store.MapAt(0, region));
+  double direct_voxel = 0;
+  ExpectSameCloud(ServedCloud(store, Layer::kAt, 0, cfg, &direct_voxel), got);
+  EXPECT_EQ(direct_voxel, voxel);
+}
+
+TEST_F(ViewHandler, BadRequestsAreRefusedWithAMessage) {
+  const Viewer v(Config());
+  const std::string huge(500, '9');
+  const std::vector<std::tuple<std::string, std::map<std::string, std::string>, int, std::string>> cases = {
+      {"/api/cloud", {{"session", "7"}}, 404, "sessions 0..1"},
+      {"/api/cloud", {{"session", "nobody"}}, 404, "no session named 'nobody'"},
+      {"/api/cloud", {{"session", "-1"}}, 404, "no session"},
+      {"/api/cloud", {{"session", "1e3"}}, 404, "no session"},
+      {"/api/cloud", {{"session", "99999999999"}}, 400, "out of range"},
+      {"/api/cloud", {{"session", huge}}, 400, "too long"},
+      {"/api/cloud", {}, 400, "session is required"},
+      {"/api/cloud", {{"layer", "top"}, {"session", "0"}}, 400, "layer must be"},
+      {"/api/cloud", {{"layer", "changes"}}, 400, "session is required"},
+      {"/api/cloud", {{"layer", "changes"}, {"session", "0"}}, 404, "base"},
+      {"/api/cloud", {{"session", "0"}, {"voxel", "0.001"}}, 400, "unknown query parameter 'voxel'"},
+      {"/api/info", {{"x", "1"}}, 400, "unknown query parameter"},
+      {"/api/tiles", {}, 404, "no endpoint"},
+      {"/../secret.txt", {}, 400, "'..' is not allowed"},
+      {"/three/../../secret.txt", {}, 400, "'..' is not allowed"},
+      {"/.hidden", {}, 400, "not allowed"},
+      {"//etc/passwd", {}, 400, "not allowed"},
+      {"/three/%2e%2e/x", {}, 400, "characters outside"},
+      {"/a\\..\\secret.txt", {}, 400, "characters outside"},
+      {"/link.txt", {}, 403, "outside the web folder"},
+      {"/nothing.js", {}, 404, "no file"},
+      {"/" + std::string(300, 'a'), {}, 414, "too long"},
+  };
+  for (const auto& [path, query, status, message] : cases) {
+    const Response r = Get(v, path, query);
+    EXPECT_EQ(r.status, status) << path << ": " << r.body;
+    EXPECT_NE(r.body.find(message), std::string::npos) << path << ": " << r.body;
+  }
+  Request post;
+  post.method = "POST";
+  post.path = "/api/info";
+  EXPECT_EQ(v.Handle(post).status, 405);
+}
+
+// Random paths and queries from awkward pieces: always an answer (200 or 4xx), never a crash and
+// never a 500 (the store is sound; only bad requests here).
+TEST_F(ViewHandler, RandomRequestsAreAnsweredOrRefused) {
+  const Viewer v(Config());
+  const std::vector<std::string> pieces = {"/", "..", ".", "api", "cloud", "info", "three", "index.html", "%2e",
+                                           "\\", std::string(1, '\0'), "link.txt", "~", "?", "\xff", "0", "-1", "99"};
+  const std::vector<std::string> keys = {"layer", "session", "x", ""}, values = {"at", "live", "meta", "changes", "0",
+                                                                                  "1", "01", "+1", " 1", "1.0", ""};
+  std::mt19937 rng(7);
+  const auto pick = [&rng](const std::vector<std::string>& from) { return from[rng() % from.size()]; };
+  for (int k = 0; k < 3000; ++k) {
+    Request r;
+    const int n = 1 + int(rng() % 6);
+    for (int i = 0; i < n; ++i) r.path += pick(pieces);
+    if (rng() % 2) r.path = "/api/cloud";
+    for (int q = int(rng() % 3); q > 0; --q) r.query[pick(keys)] = pick(values);
+    const Response res = v.Handle(r);
+    EXPECT_TRUE(res.status == 200 || (res.status >= 400 && res.status < 500)) << r.path << ": " << res.status << " " << res.body;
+    if (res.status != 200) {
+      EXPECT_FALSE(res.body.empty()) << r.path;
+    }
+  }
+}
+
+TEST_F(ViewHandler, StaticFilesInfoTrajectoriesAndObjects) {
+  const Viewer v(Config());
+  const Response index = Get(v, "/");
+  EXPECT_EQ(index.status, 200);
+  EXPECT_EQ(index.body, "<html>viewer</html>");
+  EXPECT_EQ(index.content_type, "text/html; charset=utf-8");
+  EXPECT_EQ(Get(v, "/three/three.module.js").content_type, "text/javascript; charset=utf-8");
+  const auto info = nlohmann::json::parse(Get(v, "/api/info").body);
+  EXPECT_EQ(info["latest"], 1);
+  EXPECT_EQ(info["sessions"][1]["name"], "drive_b");
+  const viz::Rgb nd = viz::ClassColor(PointClass::kNDStrong);  // the report's colours
+  EXPECT_EQ(info["classes"][int(PointClass::kNDStrong)]["rgb"], nlohmann::json({nd.r, nd.g, nd.b}));
+  const auto traj = nlohmann::json::parse(Get(v, "/api/trajectories").body);
+  EXPECT_EQ(traj["sessions"][0]["positions"].size(), 3u);  // the store's keyframes (no aligned/)
+  EXPECT_EQ(traj["sessions"][0]["source"], "store");
+  EXPECT_EQ(nlohmann::json::parse(Get(v, "/api/objects").body)["objects"].size(), 0u);
+  test::WriteText(*dir_ / "run/objects/objects.json", R"({"objects": [{"id": 0, "change": "appeared"}]})");
+  EXPECT_EQ(nlohmann::json::parse(Get(v, "/api/objects").body)["objects"][0]["change"], "appeared");
+  test::WriteText(*dir_ / "run/objects/objects.json", "{\"objects\": [");
+  const Response broken = Get(v, "/api/objects");
+  EXPECT_EQ(broken.status, 500);
+  EXPECT_NE(broken.body.find("objects.json"), std::string::npos) << broken.body;
+  fs::remove_all(*dir_ / "run/objects");
+}
+
+TEST_F(ViewHandler, ConstructionNamesTheMissingFile) {
+  ViewConfig cfg = Config();
+  cfg.store = *dir_ / "none.ltmap";
+  test::ExpectError([&] { Viewer v(cfg); }, {"none.ltmap"});
+  cfg = Config();
+  cfg.web_dir = *dir_ / "run";
+  test::ExpectError([&] { Viewer v(cfg); }, {"index.html"});
+  cfg = Config();
+  cfg.store = *dir_ / "secret.txt";
+  test::ExpectError([&] { Viewer v(cfg); }, {"secret.txt"});
+  cfg = Config();
+  cfg.point_budget = 10;
+  test::ExpectError([&] { Viewer v(cfg); }, {"view config", "point_budget"});
+  cfg = Config();
+  cfg.max_voxel_m = 0.05;
+  test::ExpectError([&] { Viewer v(cfg); }, {"max_voxel_m"});
+}
+
+// A viewer reading while another process integrates: every request mid-transaction answers at
+// once with the last committed state (WAL readers never block the writer nor see half a step).
+TEST_F(ViewHandler, ReadsDuringAnIntegrationSeeTheLastCommittedState) {
+  test::TempDir tmp;
+  fs::copy_file(Config().store, tmp / "m.ltmap");
+  ViewConfig cfg = Config();
+  cfg.store = tmp / "m.ltmap";
+  const Viewer v(cfg);
+  const std::string before = Get(v, "/api/cloud", {{"layer", "live"}}).body;
+  map::Store writer = map::Store::Open(cfg.store);
+  int checked = 0;
+  writer.on_keyframe_written = [&](std::size_t) {
+    const auto info = nlohmann::json::parse(Get(v, "/api/info").body);
+    EXPECT_EQ(info["latest"], 1) << "a reader saw the step being written";
+    const Response live = Get(v, "/api/cloud", {{"layer", "live"}});
+    EXPECT_EQ(live.status, 200) << live.body;
+    EXPECT_TRUE(live.body == before) << "live changed before the commit";
+    ++checked;
+  };
+  map::KeyframeDelta d;
+  d.keyframe = 2;
+  d.nd_strong = Box(2, 2, 2, 4, 1.5f, 0.125f);
+  writer.IntegrateSession({"drive_c"}, "drive_a", {d}, {});
+  EXPECT_GT(checked, 0);
+  EXPECT_EQ(nlohmann::json::parse(Get(v, "/api/info").body)["latest"], 2);  // committed: seen
+  EXPECT_FALSE(Get(v, "/api/cloud", {{"layer", "live"}}).body == before);   // not the cached cloud
+}
+
+TEST(ViewCloud, WireFormatRoundTripAndTruncation) {
+  PointCloud c;
+  c.push_back(1.5f, -2.25f, 3.0f);
+  c.push_back(-1e3f, 4e3f, 0.125f);
+  c.cls = {PointClass::kStatic, PointClass::kNDStrong};
+  const std::string bytes = EncodeCloud(c, 0.1);
+  ASSERT_EQ(bytes.size(), 16u + 2 * 13);
+  EXPECT_EQ(bytes.substr(0, 4), "LTMC");
+  float y1 = 0;
+  std::memcpy(&y1, bytes.data() + 16 + 12 + 4, 4);  // second point's y, little endian float32
+  EXPECT_EQ(y1, 4e3f);
+  EXPECT_EQ(std::uint8_t(bytes.back()), std::uint8_t(PointClass::kNDStrong));
+  double voxel = 0;
+  ExpectSameCloud(DecodeCloud(bytes, &voxel), c);
+  EXPECT_FLOAT_EQ(voxel, 0.1);
+  test::ExpectError([&] { DecodeCloud(bytes.substr(0, bytes.size() - 1)); }, {"bytes for 2 points"});
+  test::ExpectError([&] { DecodeCloud("LTMX" + bytes.substr(4)); }, {"header"});
+}
+
+}  // namespace
+}  // namespace ltm::view
