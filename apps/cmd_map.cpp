@@ -112,14 +112,129 @@ void RunDiff(const MapOptions& o) {
             << " |\n" << std::flush;
 }
 
-// `map diff` options (RunDiff).
-template <class Common, class RegionOpts>
-void SetupDiff(CLI::App& map_cmd, const std::shared_ptr<MapOptions>& opts, Common& common, RegionOpts& region) {
+// The `map` subcommands share one options object; Add creates a subcommand with the common
+// options (--store, --config, --set, threads) and, when asked, the pipeline folders or a region.
+struct MapCommands {
+  CLI::App* map_cmd;
+  std::shared_ptr<MapOptions> opts;
+
+  CLI::App* Add(const std::string& name, const std::string& help, bool dirs = false, bool region = false) const {
+    MapOptions& o = *opts;
+    CLI::App* c = map_cmd->add_subcommand(name, help);
+    AddCommonOptions(*c, o.common);
+    c->add_option("--store", o.store, "Map store file (NAME.ltmap)")->required();
+    c->add_option("--config", o.config, "params_ltmap.yaml (every key optional)");
+    c->add_option("--set", o.set, "Override a config key, e.g. --set object_sensor_step_deg=1.33 (repeatable)");
+    if (dirs) {
+      c->add_option("--aligned", o.dirs.aligned, "LT-SLAM output dir (aligned/)")->required();
+      c->add_option("--changes", o.dirs.changes, "LT-removert output dir (changes/)")->required();
+      c->add_option("--sessions", o.dirs.sessions, "Input session dirs root (optional: keyframe numbering)");
+      c->add_option("--central", o.central,
+                    "Central session name (default: the run's first session in aligned/manifest.yaml)");
+    }
+    if (region) {
+      c->add_option("--min", o.box_min, "Box lower corner x y z [m] (world)")->expected(3);
+      c->add_option("--max", o.box_max, "Box upper corner x y z [m] (world)")->expected(3);
+      c->add_option("--voxel", o.voxel, "Output voxel size [m] (overrides output_voxel_m; 0 = all points)");
+    }
+    return c;
+  }
+};
+
+void SetupInit(const MapCommands& m) {
+  auto opts = m.opts;
+  m.Add("init", "Create the store with the central session as base", true)->callback([opts] {
+    const MapOptions& o = *opts;
+    Report(map::InitFromDirs(o.store, LoadMapConfig(o), o.dirs, o.central, o.common.threads), "central");
+  });
+}
+
+// The query sessions `integrate` works on: those named, else every aligned one not in the store.
+std::vector<std::string> SessionsToIntegrate(const MapOptions& o, const map::Store& store) {
+  if (!o.sessions.empty()) return o.sessions;
+  std::vector<std::string> done, todo;
+  for (const auto& s : store.Sessions()) done.push_back(s.name);
+  for (const auto& n : map::AlignedSessions(o.dirs, store.Sessions().at(0).name))
+    if (std::find(done.begin(), done.end(), n) == done.end()) todo.push_back(n);
+  return todo;
+}
+
+void SetupIntegrate(const MapCommands& m) {
+  auto opts = m.opts;
+  auto* integ = m.Add("integrate", "Integrate query sessions (one transaction each); creates the store when missing", true);
+  integ->add_option("--session", opts->sessions, "Query session(s) to integrate (default: all not yet integrated)");
+  integ->callback([opts] {
+    const MapOptions& o = *opts;
+    const auto cfg = LoadMapConfig(o);
+    if (!std::filesystem::exists(o.store)) Report(map::InitFromDirs(o.store, cfg, o.dirs, o.central, o.common.threads), "central");
+    map::Store store = OpenStore(o, cfg, map::Store::Access::kReadWrite);
+    const std::vector<std::string> todo = SessionsToIntegrate(o, store);
+    for (const auto& name : todo) Report(map::IntegrateFromDirs(store, o.dirs, name), name);
+    if (todo.empty()) spdlog::info("map: nothing to integrate");
+  });
+}
+
+// live / meta / restore / export: one cloud of the store written to --out.
+void SetupClouds(const MapCommands& m) {
+  auto opts = m.opts;
   MapOptions& o = *opts;
-  auto* diff = map_cmd.add_subcommand(
-      "diff", "Changes between the map as of two sessions, composed from the stored deltas (virtual LD)");
-  common(diff);
-  region(diff);
+  auto* live = m.Add("live", "Write the live map (latest state, all PD)", false, true);
+  live->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  live->callback([opts] {
+    const auto cfg = LoadMapConfig(*opts);
+    WriteCloud(opts->out, OpenStore(*opts, cfg).Live(RegionOf(*opts, cfg)), "live map");
+  });
+  auto* meta = m.Add("meta", "Write the meta map (strong PD only, seen-through space carved)", false, true);
+  meta->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  meta->callback([opts] {
+    const auto cfg = LoadMapConfig(*opts);
+    WriteCloud(opts->out, OpenStore(*opts, cfg).Meta(RegionOf(*opts, cfg)), "meta map");
+  });
+  auto* restore = m.Add("restore", "Write the map as it was at a session (chained inverse deltas)", false, true);
+  restore->add_option("--session", o.session, "Session name or order")->required();
+  restore->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  restore->callback([opts] {
+    const auto cfg = LoadMapConfig(*opts);
+    const map::Store s = OpenStore(*opts, cfg);
+    const int k = ResolveSession(s, opts->session);
+    WriteCloud(opts->out, s.MapAt(k, RegionOf(*opts, cfg)), "map as of session " + std::to_string(k));
+  });
+}
+
+void RunExport(const MapOptions& o) {
+  const auto cfg = LoadMapConfig(o);
+  const map::Store s = OpenStore(o, cfg);
+  const map::Region r = RegionOf(o, cfg);
+  if (o.meta + o.changes > 1) throw Error("export: --meta and --changes exclude each other");
+  if (o.changes) {
+    if (o.session.empty()) throw Error("export --changes needs --session");
+    WriteCloud(o.out, s.StepChanges(ResolveSession(s, o.session), r), "changes");
+  } else if (o.meta) {
+    WriteCloud(o.out, s.Meta(r), "meta map");
+  } else {
+    const int k = o.session.empty() ? s.LatestSession() : ResolveSession(s, o.session);
+    WriteCloud(o.out, s.MapAt(k, r), "map as of session " + std::to_string(k));
+  }
+}
+
+void SetupExport(const MapCommands& m) {
+  auto opts = m.opts;
+  MapOptions& o = *opts;
+  auto* exp = m.Add("export", "Export the live map (or --session / --meta / --changes) with class and session fields",
+                    false, true);
+  exp->add_option("--session", o.session, "State as of this session (with --changes: that step's changes)");
+  exp->add_flag("--meta", o.meta, "Export the meta map");
+  exp->add_flag("--changes", o.changes, "Export one step's PD / ND points (needs --session)");
+  exp->add_option("--out", o.out, "Output .pcd or .ply")->required();
+  exp->callback([opts] { RunExport(*opts); });
+}
+
+// `map diff` options (RunDiff).
+void SetupDiff(const MapCommands& m) {
+  auto opts = m.opts;
+  MapOptions& o = *opts;
+  auto* diff = m.Add("diff", "Changes between the map as of two sessions, composed from the stored deltas (virtual LD)",
+                     false, true);
   diff->add_option("--from", o.from, "Earlier state: session name or order")->required();
   diff->add_option("--to", o.to, "Later state: session name or order")->required();
   diff->add_option("--out", o.out, "Output directory: pd_strong.pcd, pd_weak.pcd, nd_strong.pcd")->required();
@@ -129,167 +244,63 @@ void SetupDiff(CLI::App& map_cmd, const std::shared_ptr<MapOptions>& opts, Commo
   diff->callback([opts] { RunDiff(*opts); });
 }
 
+void RunFsck(const MapOptions& o) {
+  const map::Store s = OpenStore(o, map::MapConfig());
+  const map::FsckReport r = s.Fsck();
+  for (const auto& p : r.problems) std::cout << "problem: " << p << '\n';
+  std::cout << "fsck " << o.store << ": " << (r.ok ? "ok" : "FAILED") << " (" << r.sessions << " sessions, "
+            << r.keyframes << " keyframes, " << r.blobs << " blobs, " << r.points << " points, " << r.bytes
+            << " blob bytes)" << std::endl;
+  if (!r.ok) throw Error(o.store + ": fsck found " + std::to_string(r.problems.size()) + " problem(s)");
+}
+
+void SetupInspect(const MapCommands& m) {
+  auto opts = m.opts;
+  m.Add("log", "Sessions, keyframes, points, bytes and changes per step")->callback([opts] {
+    map::MapConfig cfg;
+    if (!opts->config.empty()) io::LoadConfig(opts->config, cfg);
+    std::cout << map::FormatLog(OpenStore(*opts, cfg)) << std::flush;
+  });
+  m.Add("fsck", "Verify schema, integrity, every blob's checksum and references")->callback([opts] { RunFsck(*opts); });
+}
+
+void RunObjects(const MapOptions& o) {
+  auto cfg = LoadMapConfig(o);
+  if (!o.sensor_session.empty()) {
+    const removert::RemovertConfig defaults;
+    const Session session = io::LoadSession(o.sensor_session);
+    cfg = map::WithSensorStep(cfg, removert::WithSensor(defaults, removert::KeyframesOf(session)).sensor_model);
+  }
+  const map::Store s = OpenStore(o, cfg);
+  std::vector<map::MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  map::WriteObjects(o.out, objs, &rejected);
+  spdlog::info("map: {} objects written to {} ({} clusters rejected, rejected.csv)", objs.size(), o.out,
+               rejected.size());
+}
+
+void SetupObjects(const MapCommands& m) {
+  auto opts = m.opts;
+  auto* objects = m.Add("objects",
+                        "Changed objects per step: clusters of strong ND / PD in observed space that pass the "
+                        "geometric rules (clouds + CSV/JSON, rejected.csv)");
+  objects->add_option("--out", opts->out, "Output directory")->required();
+  objects->add_option("--session", opts->sensor_session,
+                      "A session directory whose scans give the sensor (object_sensor_step_deg: 0)");
+  objects->callback([opts] { RunObjects(*opts); });
+}
+
 void Setup(CLI::App& parent) {
   auto* map_cmd = parent.add_subcommand("map", "LT-map: delta-map store, live / meta maps, restore, objects");
   map_cmd->require_subcommand(1);
-  auto opts = std::make_shared<MapOptions>();
-  MapOptions& o = *opts;
-  auto common = [&o](CLI::App* c) {
-    AddCommonOptions(*c, o.common);
-    c->add_option("--store", o.store, "Map store file (NAME.ltmap)")->required();
-    c->add_option("--config", o.config, "params_ltmap.yaml (every key optional)");
-    c->add_option("--set", o.set, "Override a config key, e.g. --set object_sensor_step_deg=1.33 (repeatable)");
-  };
-  auto dirs = [&o](CLI::App* c) {
-    c->add_option("--aligned", o.dirs.aligned, "LT-SLAM output dir (aligned/)")->required();
-    c->add_option("--changes", o.dirs.changes, "LT-removert output dir (changes/)")->required();
-    c->add_option("--sessions", o.dirs.sessions, "Input session dirs root (optional: keyframe numbering)");
-    c->add_option("--central", o.central, "Central session name (default: the run's first session in aligned/manifest.yaml)");
-  };
-  auto region = [&o](CLI::App* c) {
-    c->add_option("--min", o.box_min, "Box lower corner x y z [m] (world)")->expected(3);
-    c->add_option("--max", o.box_max, "Box upper corner x y z [m] (world)")->expected(3);
-    c->add_option("--voxel", o.voxel, "Output voxel size [m] (overrides output_voxel_m; 0 = all points)");
-  };
-
-  auto* init = map_cmd->add_subcommand("init", "Create the store with the central session as base");
-  common(init);
-  dirs(init);
-  init->callback([opts] {
-    const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
-    const auto r = map::InitFromDirs(o.store, cfg, o.dirs, o.central, o.common.threads);
-    Report(r, "central");
-  });
-
-  auto* integ = map_cmd->add_subcommand(
-      "integrate", "Integrate query sessions (one transaction each); creates the store when missing");
-  common(integ);
-  dirs(integ);
-  integ->add_option("--session", o.sessions, "Query session(s) to integrate (default: all not yet integrated)");
-  integ->callback([opts] {
-    const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
-    if (!std::filesystem::exists(o.store)) Report(map::InitFromDirs(o.store, cfg, o.dirs, o.central, o.common.threads), "central");
-    map::Store store = OpenStore(o, cfg, map::Store::Access::kReadWrite);
-    std::vector<std::string> todo = o.sessions;
-    if (todo.empty()) {
-      const auto names = map::AlignedSessions(o.dirs, store.Sessions().at(0).name);
-      std::vector<std::string> done;
-      for (const auto& s : store.Sessions()) done.push_back(s.name);
-      for (const auto& n : names)
-        if (std::find(done.begin(), done.end(), n) == done.end()) todo.push_back(n);
-    }
-    for (const auto& name : todo) Report(map::IntegrateFromDirs(store, o.dirs, name), name);
-    if (todo.empty()) spdlog::info("map: nothing to integrate");
-  });
-
-  auto* live = map_cmd->add_subcommand("live", "Write the live map (latest state, all PD)");
-  common(live);
-  region(live);
-  live->add_option("--out", o.out, "Output .pcd or .ply")->required();
-  live->callback([opts] {
-    const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
-    const map::Store s = OpenStore(o, cfg);
-    WriteCloud(o.out, s.Live(RegionOf(o, cfg)), "live map");
-  });
-
-  auto* meta = map_cmd->add_subcommand("meta", "Write the meta map (strong PD only, seen-through space carved)");
-  common(meta);
-  region(meta);
-  meta->add_option("--out", o.out, "Output .pcd or .ply")->required();
-  meta->callback([opts] {
-    const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
-    const map::Store s = OpenStore(o, cfg);
-    WriteCloud(o.out, s.Meta(RegionOf(o, cfg)), "meta map");
-  });
-
-  auto* restore = map_cmd->add_subcommand("restore", "Write the map as it was at a session (chained inverse deltas)");
-  common(restore);
-  region(restore);
-  restore->add_option("--session", o.session, "Session name or order")->required();
-  restore->add_option("--out", o.out, "Output .pcd or .ply")->required();
-  restore->callback([opts] {
-    const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
-    const map::Store s = OpenStore(o, cfg);
-    const int k = ResolveSession(s, o.session);
-    WriteCloud(o.out, s.MapAt(k, RegionOf(o, cfg)), "map as of session " + std::to_string(k));
-  });
-
-  auto* exp = map_cmd->add_subcommand("export", "Export the live map (or --session / --meta / --changes) with class and session fields");
-  common(exp);
-  region(exp);
-  exp->add_option("--session", o.session, "State as of this session (with --changes: that step's changes)");
-  exp->add_flag("--meta", o.meta, "Export the meta map");
-  exp->add_flag("--changes", o.changes, "Export one step's PD / ND points (needs --session)");
-  exp->add_option("--out", o.out, "Output .pcd or .ply")->required();
-  exp->callback([opts] {
-    const MapOptions& o = *opts;
-    const auto cfg = LoadMapConfig(o);
-    const map::Store s = OpenStore(o, cfg);
-    const map::Region r = RegionOf(o, cfg);
-    if (o.meta + o.changes > 1) throw Error("export: --meta and --changes exclude each other");
-    if (o.changes) {
-      if (o.session.empty()) throw Error("export --changes needs --session");
-      WriteCloud(o.out, s.StepChanges(ResolveSession(s, o.session), r), "changes");
-    } else if (o.meta) {
-      WriteCloud(o.out, s.Meta(r), "meta map");
-    } else {
-      const int k = o.session.empty() ? s.LatestSession() : ResolveSession(s, o.session);
-      WriteCloud(o.out, s.MapAt(k, r), "map as of session " + std::to_string(k));
-    }
-  });
-
-  SetupDiff(*map_cmd, opts, common, region);
-
-  auto* log = map_cmd->add_subcommand("log", "Sessions, keyframes, points, bytes and changes per step");
-  common(log);
-  log->callback([opts] {
-    const MapOptions& o = *opts;
-    map::MapConfig cfg;
-    if (!o.config.empty()) io::LoadConfig(o.config, cfg);
-    const map::Store s = OpenStore(o, cfg);
-    std::cout << map::FormatLog(s) << std::flush;
-  });
-
-  auto* fsck = map_cmd->add_subcommand("fsck", "Verify schema, integrity, every blob's checksum and references");
-  common(fsck);
-  fsck->callback([opts] {
-    const MapOptions& o = *opts;
-    map::MapConfig cfg;
-    const map::Store s = OpenStore(o, cfg);
-    const map::FsckReport r = s.Fsck();
-    for (const auto& p : r.problems) std::cout << "problem: " << p << '\n';
-    std::cout << "fsck " << o.store << ": " << (r.ok ? "ok" : "FAILED") << " (" << r.sessions << " sessions, "
-              << r.keyframes << " keyframes, " << r.blobs << " blobs, " << r.points << " points, " << r.bytes
-              << " blob bytes)" << std::endl;
-    if (!r.ok) throw Error(o.store + ": fsck found " + std::to_string(r.problems.size()) + " problem(s)");
-  });
-
-  auto* objects = map_cmd->add_subcommand("objects", "Changed objects per step: clusters of strong ND / PD in observed space that pass the geometric rules (clouds + CSV/JSON, rejected.csv)");
-  common(objects);
-  objects->add_option("--out", o.out, "Output directory")->required();
-  objects->add_option("--session", o.sensor_session,
-                      "A session directory whose scans give the sensor (object_sensor_step_deg: 0)");
-  objects->callback([opts] {
-    const MapOptions& o = *opts;
-    auto cfg = LoadMapConfig(o);
-    if (!o.sensor_session.empty()) {
-      const removert::RemovertConfig defaults;
-      const Session session = io::LoadSession(o.sensor_session);
-      const removert::RemovertConfig resolved = removert::WithSensor(defaults, removert::KeyframesOf(session));
-      cfg = map::WithSensorStep(cfg, resolved.sensor_model);
-    }
-    const map::Store s = OpenStore(o, cfg);
-    std::vector<map::MapObject> rejected;
-    const auto objs = s.Objects(&rejected);
-    map::WriteObjects(o.out, objs, &rejected);
-    spdlog::info("map: {} objects written to {} ({} clusters rejected, rejected.csv)", objs.size(), o.out,
-                 rejected.size());
-  });
+  const MapCommands m{map_cmd, std::make_shared<MapOptions>()};
+  SetupInit(m);
+  SetupIntegrate(m);
+  SetupClouds(m);
+  SetupExport(m);
+  SetupDiff(m);
+  SetupInspect(m);
+  SetupObjects(m);
 }
 
 LTM_COMMAND(60, Setup);
