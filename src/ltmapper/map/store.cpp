@@ -685,28 +685,35 @@ KeyframeStep StepKeyframe(const Store::Impl& s, const Store::Impl::KfBlobs& in, 
   return o;
 }
 
-// Writes one keyframe's step (delta row, new base) and adds its counts to r; false when the
-// step changed nothing.
-bool WriteStep(Store::Impl& s, int keyframe_id, int S, const KeyframeStep& o, IntegrationResult& r) {
-  r.nd_weak += o.nd_weak_in;
-  if (o.delta_blob.empty()) return false;
-  Stmt put_delta(s.db, "INSERT INTO deltas(keyframe, session, added, removed, info, data) VALUES(?,?,?,?,?,?)", s.path);
-  put_delta.Bind(1, keyframe_id).Bind(2, S).Bind(3, (long long)o.added).Bind(4, (long long)o.removed);
-  put_delta.Bind(5, (long long)o.info).BindBlob(6, o.delta_blob).Run();
-  r.bytes += o.delta_blob.size();
-  if (!o.base_blob.empty()) {
-    Stmt put_base(s.db, "UPDATE base_clouds SET as_of = ?, points = ?, data = ? WHERE keyframe = ?", s.path);
-    put_base.Bind(1, S).Bind(2, (long long)o.base_points).BindBlob(3, o.base_blob).Bind(4, keyframe_id).Run();
-    r.bytes += o.base_blob.size();
-    ++r.keyframes_changed;
+// The statements a step's writes use, prepared once per integration.
+struct StepWriter {
+  explicit StepWriter(const Store::Impl& s)
+      : put_delta(s.db, "INSERT INTO deltas(keyframe, session, added, removed, info, data) VALUES(?,?,?,?,?,?)", s.path),
+        put_base(s.db, "UPDATE base_clouds SET as_of = ?, points = ?, data = ? WHERE keyframe = ?", s.path) {}
+
+  // Writes one keyframe's step (delta row, new base) and adds its counts to r; false when the
+  // step changed nothing.
+  bool Write(int keyframe_id, int S, const KeyframeStep& o, IntegrationResult& r) {
+    r.nd_weak += o.nd_weak_in;
+    if (o.delta_blob.empty()) return false;
+    put_delta.Bind(1, keyframe_id).Bind(2, S).Bind(3, (long long)o.added).Bind(4, (long long)o.removed);
+    put_delta.Bind(5, (long long)o.info).BindBlob(6, o.delta_blob).Run();
+    r.bytes += o.delta_blob.size();
+    if (!o.base_blob.empty()) {
+      put_base.Bind(1, S).Bind(2, (long long)o.base_points).BindBlob(3, o.base_blob).Bind(4, keyframe_id).Run();
+      r.bytes += o.base_blob.size();
+      ++r.keyframes_changed;
+    }
+    r.pd_strong += o.pd_strong;
+    r.pd_weak += o.pd_weak;
+    r.nd_strong += o.nd_strong;
+    r.superseded += o.superseded;
+    r.restored += o.restored;
+    return true;
   }
-  r.pd_strong += o.pd_strong;
-  r.pd_weak += o.pd_weak;
-  r.nd_strong += o.nd_strong;
-  r.superseded += o.superseded;
-  r.restored += o.restored;
-  return true;
-}
+
+  Stmt put_delta, put_base;
+};
 }  // namespace
 
 IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std::string& reference,
@@ -728,6 +735,7 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
   std::vector<std::pair<std::size_t, const KeyframeWork*>> items;
   for (const auto& [k, w] : work) items.emplace_back(k, &w);
   std::size_t written = 0;
+  StepWriter writer(s);
   constexpr std::size_t kChunk = 64;  // keyframes decoded at once: memory vs parallelism
   for (std::size_t c0 = 0; c0 < items.size(); c0 += kChunk) {
     const std::size_t n = std::min(kChunk, items.size() - c0);
@@ -738,7 +746,7 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
     ParallelFor(n, s.threads,
                 [&](std::size_t k) { steps[k] = StepKeyframe(s, in[k], *items[c0 + k].second, ref, S, session.name); });
     for (std::size_t k = 0; k < n; ++k) {
-      if (!WriteStep(s, in[k].rec.id, S, steps[k], r)) continue;
+      if (!writer.Write(in[k].rec.id, S, steps[k], r)) continue;
       ++written;
       if (on_keyframe_written) on_keyframe_written(written);
     }
