@@ -4,10 +4,50 @@
 #include "ltmapper/slam/slam.hpp"
 
 #include <chrono>
+#include <memory>
 #include <string>
 #include <vector>
 
+namespace ltm::geometry {
+class KdTree;
+}
+
 namespace ltm::slam {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+// ------------------------------------------------------------------------------ GICP (gicp.cpp)
+// A cloud prepared for GICP: its kd-tree and per-point plane covariances of the k nearest
+// neighbours, each computed on first use (Cov is not thread-safe: one registration per thread).
+class GicpCloud {
+ public:
+  GicpCloud(const PointCloud& cloud, int covariance_neighbours);
+  ~GicpCloud();
+  GicpCloud(GicpCloud&&) noexcept;
+  const PointCloud& cloud() const;
+  const Eigen::Matrix3d& Cov(std::size_t i) const;
+  std::unique_ptr<geometry::KdTree> tree;
+
+ private:
+  int k_ = 0;
+  mutable std::vector<Eigen::Matrix3d> cov_;
+  mutable std::vector<std::uint8_t> has_cov_;
+};
+struct GicpOptions {
+  double max_correspondence_m = 1.0;  // pairs farther apart are not used
+  int max_iterations = 30;            // Gauss-Newton steps at most
+  std::size_t min_pairs = 6;          // fewer pairs than this: not solvable (not converged)
+  double converged_rotation_rad = 1e-5;   // a step below both bounds ends the iterations
+  double converged_translation_m = 1e-5;
+};
+struct GicpResult {
+  Pose T = Pose::Identity();            // T_target_source
+  bool converged = false;
+  int iterations = 0;
+  Matrix6d hessian = Matrix6d::Zero();  // sum J^T W J at the last step (order rx ry rz x y z)
+};
+// GICP of `source` onto `target` from `guess` (T_target_source).
+GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pose& guess, const GicpOptions& opt);
 
 // Throws ltm::Error for sessions without keyframes, edges to missing keyframes, non-finite poses.
 void ValidateSessionGraphs(const std::vector<Session>& sessions);

@@ -1,14 +1,9 @@
-// Loop verification by registration: PCL Generalized-ICP (Segal et al. 2009) between two
-// downsampled clouds, scored by the inlier ratio (source points with a target neighbour within
+// Loop verification by registration: Generalized-ICP (Segal et al. 2009; our Gauss-Newton
+// solver, gicp.cpp) between two downsampled clouds, scored by the inlier ratio (source points with a target neighbour within
 // an inlier radius) and the RMS distance of those inliers, both gates derived from the voxel
 // size and the sensor's range noise (InlierRadius, InlierRmsBound).
 #include "ltmapper/geometry/geometry.hpp"
-#include "ltmapper/slam/slam.hpp"
-
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
-#include <pcl/registration/gicp.h>
+#include "ltmapper/slam/internal.hpp"
 
 #include <cmath>
 #include <sstream>
@@ -16,7 +11,6 @@
 namespace ltm::slam {
 
 namespace {
-using PclCloud = pcl::PointCloud<pcl::PointXYZ>;
 // Half the diagonal of a voxel: a point of a surface lies at most this far (in units of the
 // voxel) from the centroid of its voxel, so a correctly placed source centroid finds a target
 // centroid of the same surface within it.
@@ -29,18 +23,10 @@ constexpr double kAxes = 3.0;
 // The coarse stage's early rejection asks for this fraction of reg_min_overlap: at the coarse
 // voxel, before the fine stage, a true match overlaps at least half as well as at the end.
 constexpr double kCoarseOverlapFraction = 0.5;
-// GICP stops when an update is smaller than this (transformation / rotation / fitness change).
-constexpr double kGicpEpsilon = 1e-8;
-
-pcl::PointCloud<pcl::PointXYZ>::Ptr ToPcl(const PointCloud& cloud) {
-  auto out = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  out->reserve(cloud.size());
-  for (const auto& p : cloud.points) out->push_back(pcl::PointXYZ(p.x, p.y, p.z));
-  out->width = static_cast<std::uint32_t>(out->size());
-  out->height = 1;
-  out->is_dense = true;
-  return out;
-}
+// GICP stops when a Gauss-Newton step rotates less than this and moves less than this: far
+// below the verification's voxel-sized gates.
+constexpr double kConvergedRotationRad = 1e-5;
+constexpr double kConvergedTranslationM = 1e-5;
 }  // namespace
 
 double InlierRadius(double voxel_m, double range_noise_m) {
@@ -63,20 +49,15 @@ struct Inliers {
 };
 
 // Inlier ratio and RMS of `source` under T against a kd-tree of the target.
-Inliers CountInliers(const pcl::KdTreeFLANN<pcl::PointXYZ>& tree, const PointCloud& source,
-                     const Eigen::Matrix4d& T, double radius) {
-  std::vector<int> idx(1);
-  std::vector<float> d2(1);
+Inliers CountInliers(const geometry::KdTree& tree, const PointCloud& source, const Pose& T, double radius) {
   double sum = 0.0;
   std::size_t inside = 0;
   for (const auto& p : source.points) {
-    const Eigen::Vector4d q = T * Eigen::Vector4d(p.x, p.y, p.z, 1.0);
-    if (tree.nearestKSearch(pcl::PointXYZ(float(q.x()), float(q.y()), float(q.z())), 1, idx, d2) <
-            1 ||
-        d2[0] > radius * radius) {
-      continue;
-    }
-    sum += d2[0];
+    const Eigen::Vector3d q = T * p.xyz().cast<double>();
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    if (!tree.Nearest(q.cast<float>(), &j, &d2) || d2 > radius * radius) continue;
+    sum += d2;
     ++inside;
   }
   Inliers in;
@@ -87,39 +68,29 @@ Inliers CountInliers(const pcl::KdTreeFLANN<pcl::PointXYZ>& tree, const PointClo
 }
 
 // One GICP run from `guess` (updated in place); returns whether it converged.
-bool RunGicp(const PclCloud::Ptr& t, const PclCloud::Ptr& s, double max_corr,
-             const SlamConfig& cfg, Eigen::Matrix4f& guess) {
-  pcl::GeneralizedIterativeClosestPoint<pcl::PointXYZ, pcl::PointXYZ> gicp;
-  gicp.setInputTarget(t);
-  gicp.setInputSource(s);
-  gicp.setMaxCorrespondenceDistance(max_corr);
-  gicp.setMaximumIterations(cfg.reg_max_iterations);
-  gicp.setCorrespondenceRandomness(cfg.reg_covariance_neighbours);
-  gicp.setTransformationEpsilon(kGicpEpsilon);
-  gicp.setRotationEpsilon(kGicpEpsilon);
-  gicp.setEuclideanFitnessEpsilon(kGicpEpsilon);
-  gicp.setRANSACIterations(0);
-  gicp.setMaximumOptimizerIterations(cfg.reg_max_iterations);
-  pcl::PointCloud<pcl::PointXYZ> aligned;
-  gicp.align(aligned, guess);
-  guess = gicp.getFinalTransformation();
-  return gicp.hasConverged();
+bool RunGicp(const GicpCloud& t, const GicpCloud& s, double max_corr, const SlamConfig& cfg, Pose& guess) {
+  GicpOptions opt;
+  opt.max_correspondence_m = max_corr;
+  opt.max_iterations = cfg.reg_max_iterations;
+  opt.converged_rotation_rad = kConvergedRotationRad;
+  opt.converged_translation_m = kConvergedTranslationM;
+  const GicpResult g = AlignGicp(t, s, guess, opt);
+  guess = g.T;
+  return g.converged;
 }
 
 // Coarse stage (the initial translation may be metres off); returns an empty string or why the
 // candidate is rejected early (saves the fine stage for wrong places).
 std::string CoarseStage(const PointCloud& target, const PointCloud& source, const SlamConfig& cfg,
-                        Eigen::Matrix4f& guess, double* coarse_overlap) {
+                        Pose& guess, double* coarse_overlap) {
   const std::size_t min_points = static_cast<std::size_t>(cfg.reg_covariance_neighbours) + 1;
   const PointCloud tc = geometry::VoxelDownsample(target, cfg.reg_coarse_voxel_m, 1);
   const PointCloud sc = geometry::VoxelDownsample(source, cfg.reg_coarse_voxel_m, 1);
   if (tc.size() < min_points || sc.size() < min_points) return {};
-  auto tcp = ToPcl(tc);
-  RunGicp(tcp, ToPcl(sc), cfg.reg_coarse_correspondence_m, cfg, guess);
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(tcp);
+  const GicpCloud tcp(tc, cfg.reg_covariance_neighbours);
+  RunGicp(tcp, GicpCloud(sc, cfg.reg_covariance_neighbours), cfg.reg_coarse_correspondence_m, cfg, guess);
   const double radius = InlierRadius(cfg.reg_coarse_voxel_m, cfg.reg_range_noise_m);
-  *coarse_overlap = CountInliers(tree, sc, guess.cast<double>(), radius).ratio;
+  *coarse_overlap = CountInliers(*tcp.tree, sc, guess, radius).ratio;
   const double need = kCoarseOverlapFraction * cfg.reg_min_overlap;
   if (*coarse_overlap >= need) return {};
   std::ostringstream why;
@@ -160,26 +131,21 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
                std::to_string(source.size()) + ")";
     return r;
   }
-  Eigen::Matrix4f guess = T_target_source_init.matrix().cast<float>();
+  Pose guess = T_target_source_init;
   if (cfg.reg_coarse_correspondence_m > 0.0) {
     r.reason = CoarseStage(target, source, cfg, guess, &r.overlap);
     if (!r.reason.empty()) return r;
   }
-  auto tgt = ToPcl(target);
-  r.converged = RunGicp(tgt, ToPcl(source), cfg.reg_max_correspondence_m, cfg, guess);
-
-  const Eigen::Matrix4d M = guess.cast<double>();
+  const GicpCloud tgt(target, cfg.reg_covariance_neighbours);
+  r.converged = RunGicp(tgt, GicpCloud(source, cfg.reg_covariance_neighbours), cfg.reg_max_correspondence_m, cfg, guess);
   r.T_target_source = Pose::Identity();
-  r.T_target_source.linear() =
-      Eigen::Quaterniond(Eigen::Matrix3d(M.block<3, 3>(0, 0))).normalized().toRotationMatrix();
-  r.T_target_source.translation() = M.block<3, 1>(0, 3);
+  r.T_target_source.linear() = Eigen::Quaterniond(guess.linear()).normalized().toRotationMatrix();
+  r.T_target_source.translation() = guess.translation();
 
-  // Inlier ratio and RMS, in double precision with the final pose.
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(tgt);
+  // Inlier ratio and RMS with the final pose.
   r.inlier_radius_m = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
   r.rms_bound_m = InlierRmsBound(cfg.reg_voxel_m, cfg.reg_range_noise_m);
-  const Inliers in = CountInliers(tree, source, r.T_target_source.matrix(), r.inlier_radius_m);
+  const Inliers in = CountInliers(*tgt.tree, source, r.T_target_source, r.inlier_radius_m);
   r.overlap = in.ratio;
   r.inlier_rms_m = in.rms;
   r.fitness = in.ratio > 0.0 ? in.rms * in.rms : 1e9;

@@ -1,0 +1,173 @@
+#!/usr/bin/env python3
+"""The whole pipeline over the scenario matrix (issue 14): for every config/scenarios/*.yaml (or the
+ones given) simulate it, run `ltmapper run` with default parameters (no sensor or resolution key
+set: LT-SLAM poses, LT-removert, LT-map), score every stage against the simulator's truth, and print
+one table, worst HD SA first:
+
+  scenario | sessions aligned | SA %% per session | DA %% per session | inter-session RMSE m / deg |
+  LD PD P/R, ND P/R per pair | changed objects found | HD wall s/kf | run wall s | peak MB of the run
+
+usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [scenario.yaml ...]
+  --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
+  A scenario's sim folder is reused when it is there and its config unchanged (delete --out to redo).
+  Exit status 0 even when a row misses a target: this prints figures, the tests judge.
+"""
+import argparse
+import glob
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def run(cmd, log=None):
+    """Runs `cmd`; returns (user+sys CPU s, peak RSS MB, wall s). Raises with the log's tail on failure."""
+    tfile = log + ".time" if log else "/dev/null"
+    t0 = time.time()
+    with open(log or os.devnull, "w") as out:
+        rc = subprocess.call(["/usr/bin/time", "-f", "%U %S %M", "-o", tfile] + cmd, stdout=out, stderr=subprocess.STDOUT)
+    wall = time.time() - t0
+    if rc != 0:
+        tail = open(log).read()[-2000:] if log else ""
+        raise RuntimeError("failed (%d): %s\n%s" % (rc, " ".join(cmd), tail))
+    if not log:
+        return 0.0, 0.0, wall
+    user, sys_, rss = open(tfile).read().split()[-3:]
+    return float(user) + float(sys_), int(rss) / 1024.0, wall
+
+
+def load(path):
+    with open(path) as f:
+        return json.load(f)
+
+
+def simulate(ltm, yaml, sim, keyframes, seed):
+    """Simulates the scenario (route.keyframes replaced when given) unless the same config is there."""
+    text = open(yaml).read()
+    if keyframes:
+        text, n = re.subn(r"(?m)^(  keyframes:)\s*\d+", r"\g<1> %d" % keyframes, text)
+        if n != 1:
+            raise RuntimeError("%s: no 'route: keyframes:' line to replace" % yaml)
+    cfg = os.path.join(os.path.dirname(sim), "sim_config.yaml")
+    want = text + "\n# seed %s\n" % seed
+    if os.path.exists(os.path.join(sim, "truth", "objects.csv")) and os.path.exists(cfg) and open(cfg).read() == want:
+        return
+    subprocess.call(["rm", "-rf", sim])
+    with open(cfg, "w") as f:
+        f.write(want)
+    cmd = [ltm, "sim", "--config", cfg, "--out", sim, "--quiet"]
+    if seed is not None:
+        cmd += ["--seed", str(seed)]
+    run(cmd, sim + ".log")
+
+
+def hd_wall_per_keyframe(changes):
+    """HD removal wall seconds per keyframe (map + votes, all sessions) from changes/report.json."""
+    rep = load(os.path.join(changes, "report.json"))
+    total_s = sum(s["seconds_map"] + s["seconds_votes"] for s in rep["sessions"])
+    kf = sum(s["keyframes"] for s in rep["sessions"])
+    return total_s / kf if kf else None
+
+
+def evaluate(ltm, sim, out, names):
+    """Every evaluator on one scenario's run; returns the row's figures."""
+    runp, ev = os.path.join(out, "run"), os.path.join(out, "eval")
+    os.makedirs(ev, exist_ok=True)
+    aligned, changes = os.path.join(runp, "aligned"), os.path.join(runp, "changes")
+    row = {"sa": [], "da": [], "ld": [], "aligned": 0}
+    for n in names:
+        if os.path.exists(os.path.join(aligned, n, "poses_world.txt")):
+            row["aligned"] += 1
+    j = os.path.join(ev, "traj.json")
+    run([ltm, "eval", "traj", "--sim", sim, "--aligned", aligned, "--json", j, "--quiet"], j + ".log")
+    c = load(j)["traj"]["consistency"]
+    row["rmse_m"], row["rmse_deg"] = c["trans_m"]["rmse"], c["rot_deg"]["rmse"]
+    for n in names:
+        j = os.path.join(ev, "hd_%s.json" % n)
+        if not os.path.isdir(os.path.join(changes, n)):
+            continue
+        run([ltm, "eval", "hd", "--sim", sim, "--changes", changes, "--session", n, "--aligned", aligned,
+             "--json", j, "--quiet"], j + ".log")
+        h = load(j)["hd"]
+        row["sa"].append(h["sa"])
+        row["da"].append(h["da"])
+    for pdir in sorted(glob.glob(os.path.join(changes, "pair_*"))):
+        pair = os.path.basename(pdir)[len("pair_"):]
+        j = os.path.join(ev, "ld_%s.json" % pair)
+        run([ltm, "eval", "ld", "--sim", sim, "--changes", changes, "--pair", pair, "--aligned", aligned,
+             "--truth-from-scans", "--json", j, "--quiet"], j + ".log")
+        l = load(j)["ld"]
+        row["ld"].append((pair, l["pd"]["precision"], l["pd"]["recall"], l["nd"]["precision"], l["nd"]["recall"]))
+    objects = os.path.join(runp, "objects")
+    row["objects"] = None
+    if os.path.exists(os.path.join(objects, "objects.csv")):
+        j = os.path.join(ev, "objects.json")
+        run([ltm, "eval", "objects", "--sim", sim, "--objects", objects, "--aligned", aligned, "--json", j, "--quiet"],
+            j + ".log")
+        o = load(j)["objects"]
+        row["objects"] = (o["found"], o["truth_objects"], o["precision"])
+    row["hd_s_kf"] = hd_wall_per_keyframe(changes)
+    return row
+
+
+def scenario(ltm, yaml, out_root, keyframes, seed, keep):
+    name = os.path.splitext(os.path.basename(yaml))[0]
+    out = os.path.join(out_root, name)
+    sim = os.path.join(out, "sim")
+    os.makedirs(out, exist_ok=True)
+    simulate(ltm, yaml, sim, keyframes, seed)
+    sessions = sorted(glob.glob(os.path.join(sim, "sessions", "session_*")))
+    names = [os.path.basename(s) for s in sessions]
+    runp = os.path.join(out, "run")
+    subprocess.call(["rm", "-rf", runp])
+    cpu, rss, wall = run([ltm, "run", "--sessions"] + sessions + ["--out", runp], os.path.join(out, "run.log"))
+    row = evaluate(ltm, sim, out, names)
+    row.update(name=name, sessions=len(names), cpu=cpu, rss=rss, wall=wall)
+    if not keep:  # the run's clouds are large; the figures are in eval/
+        subprocess.call(["rm", "-rf", os.path.join(runp, "changes"), os.path.join(runp, "map.ltmap")])
+    return row
+
+
+def fmt(v, scale=1.0, digits=2):
+    return "n/a" if v is None else ("%.*f" % (digits, v * scale))
+
+
+def print_table(rows):
+    print(("| scenario | aligned | SA %% per session | DA %% per session | consistency m / deg | "
+          "LD pair: PD P/R, ND P/R | objects found (precision) | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
+    print("|---|---|---|---|---|---|---|---:|---:|---:|")
+    for r in sorted(rows, key=lambda r: min(r["sa"]) if r["sa"] else -1):
+        ld = "; ".join("%s: %s/%s, %s/%s" % (p, fmt(a), fmt(b), fmt(c), fmt(d)) for p, a, b, c, d in r["ld"])
+        obj = "n/a" if not r["objects"] else "%d/%d (%s)" % (r["objects"][0], r["objects"][1], fmt(r["objects"][2]))
+        print("| %s | %d/%d | %s | %s | %s / %s | %s | %s | %s | %.0f | %.0f |" % (
+            r["name"], r["aligned"], r["sessions"], " ".join(fmt(x, 100) for x in r["sa"]),
+            " ".join(fmt(x, 100) for x in r["da"]), fmt(r["rmse_m"], 1, 3), fmt(r["rmse_deg"], 1, 3), ld or "-", obj,
+            fmt(r["hd_s_kf"], 1, 3), r["wall"], r["rss"]))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--ltmapper", default=os.path.join(ROOT, "build", "apps", "ltmapper"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "out", "scenario_matrix"))
+    ap.add_argument("--keyframes", type=int, default=0, help="route.keyframes of every scenario (0 = the scenario's)")
+    ap.add_argument("--seed", type=int, default=None, help="simulator seed of every scenario (default: the scenario's)")
+    ap.add_argument("--keep", action="store_true", help="keep each run's changes/ and map store")
+    ap.add_argument("scenarios", nargs="*")
+    a = ap.parse_args()
+    yamls = a.scenarios or sorted(glob.glob(os.path.join(ROOT, "config", "scenarios", "*.yaml")))
+    rows = []
+    for y in yamls:
+        try:
+            rows.append(scenario(a.ltmapper, y, a.out, a.keyframes, a.seed, a.keep))
+            print("done %s (%.0f s)" % (rows[-1]["name"], rows[-1]["wall"]), file=sys.stderr, flush=True)
+        except RuntimeError as e:
+            print("scenario %s: %s" % (y, e), file=sys.stderr, flush=True)
+    print_table(rows)
+
+
+if __name__ == "__main__":
+    main()
