@@ -1,7 +1,8 @@
 // LT-SLAM recall on the simulator (issue 15): two sessions of 120 keyframes of the default
 // scenario, which the fixed Scan Context threshold (0.4) and the fixed fitness gate (0.1 m^2)
 // left unaligned, must align with an inter-session consistency under 0.1 m against the truth;
-// no accepted loop may be false.
+// no accepted loop may be false. The global-registration fallback aligns them when Scan Context
+// gives no candidate at all, and places nothing when the query drove another city.
 #include "ltmapper/sim/sim.hpp"
 #include "ltmapper/slam/slam.hpp"
 #include "test_util.hpp"
@@ -70,6 +71,26 @@ double ConsistencyRmse(const SlamResult& r, sim::Simulator& s, int* pairs) {
   }
   return *pairs > 0 ? std::sqrt(sum / *pairs) : std::numeric_limits<double>::infinity();
 }
+
+// Accepted loops farther than kFalseLoopM / kFalseLoopDeg from the truth.
+int FalseLoops(const SlamResult& r, sim::Simulator& s) {
+  int false_loops = 0;
+  for (const LoopRecord& l : r.loops) {
+    if (!l.accepted) continue;
+    const Pose truth = s.T_world_sensor(l.a.session)[l.a.keyframe].inverse() *
+                       s.T_world_sensor(l.b.session)[l.b.keyframe];
+    const Pose err = truth.inverse() * l.T_a_b;
+    false_loops += err.translation().norm() > kFalseLoopM ||
+                   Eigen::AngleAxisd(err.linear()).angle() / kDeg > kFalseLoopDeg;
+  }
+  return false_loops;
+}
+
+int LoopsFrom(const SlamResult& r, const std::string& source, bool accepted) {
+  int n = 0;
+  for (const LoopRecord& l : r.loops) n += l.source == source && (!accepted || l.accepted);
+  return n;
+}
 }  // namespace
 
 TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
@@ -84,15 +105,7 @@ TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
   ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
   int pairs = 0;
   const double rmse = ConsistencyRmse(r, s, &pairs);
-  int false_loops = 0;
-  for (const LoopRecord& l : r.loops) {
-    if (!l.accepted) continue;
-    const Pose truth = s.T_world_sensor(l.a.session)[l.a.keyframe].inverse() *
-                       s.T_world_sensor(l.b.session)[l.b.keyframe];
-    const Pose err = truth.inverse() * l.T_a_b;
-    false_loops += err.translation().norm() > kFalseLoopM ||
-                   Eigen::AngleAxisd(err.linear()).angle() / kDeg > kFalseLoopDeg;
-  }
+  const int false_loops = FalseLoops(r, s);
   std::printf("sim 2 x %d: %d loops accepted (%d false), consistency RMSE %.3f m over %d keyframe "
               "pairs, %d GICP, %.2f s\n",
               kKeyframes, r.sessions[1].loops_accepted, false_loops, rmse, pairs, r.registrations,
@@ -100,4 +113,51 @@ TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
   EXPECT_GT(pairs, 0);
   EXPECT_LT(rmse, kConsistencyM);
   EXPECT_EQ(false_loops, 0);
+}
+
+// Scan Context gives no candidate (no loop budget): only the global fallback can align the
+// query, and must, as accurately; without the fallback the query stays unaligned.
+TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
+  sim::SimConfig sc;
+  sc.sessions = 2;
+  sc.keyframes = kKeyframes;
+  sim::Simulator s(sc, 2);
+  const std::vector<Session> sessions = SimSessions(s);
+  SlamConfig cfg;
+  cfg.sc_max_loops_per_pair = 0;
+  cfg.refine_rounds = 1;
+  const SlamResult r = AlignSessions(sessions, cfg, 2);
+  ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
+  EXPECT_EQ(LoopsFrom(r, "sc", false), 0);
+  EXPECT_GE(LoopsFrom(r, "global", true), cfg.min_loops);
+  int pairs = 0;
+  const double rmse = ConsistencyRmse(r, s, &pairs);
+  std::printf("global fallback, sim 2 x %d: %d global loops accepted, consistency RMSE %.3f m over %d pairs, %.2f s\n",
+              kKeyframes, LoopsFrom(r, "global", true), rmse, pairs, r.time_total_s);
+  EXPECT_LT(rmse, kConsistencyM);
+  EXPECT_EQ(FalseLoops(r, s), 0);
+
+  cfg.global_enabled = false;
+  cfg.refine_rounds = 0;
+  EXPECT_FALSE(AlignSessions(sessions, cfg, 2).sessions[1].aligned);
+}
+
+// A query from another city (another seed's world): no placement survives verification and
+// consensus, so the query is not aligned (zero false alignments).
+TEST(SlamRecall, GlobalRegistrationPlacesNothingInAnotherCity) {
+  sim::SimConfig sc;
+  sc.sessions = 2;
+  sc.keyframes = kKeyframes / 2;
+  sim::Simulator home(sc, 2), other([&] {
+    sim::SimConfig o = sc;
+    o.seed = sc.seed + 1;
+    return o;
+  }(), 2);
+  std::vector<Session> sessions = {SimSessions(home)[0], SimSessions(other)[1]};
+  SlamConfig cfg;
+  cfg.refine_rounds = 0;
+  const SlamResult r = AlignSessions(sessions, cfg, 2);
+  EXPECT_FALSE(r.sessions[1].aligned);
+  EXPECT_GT(LoopsFrom(r, "global", false), 0);  // the fallback ran
+  EXPECT_EQ(LoopsFrom(r, "global", true), 0);
 }

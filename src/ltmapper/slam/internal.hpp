@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,23 @@ GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pos
 void ValidateSessionGraphs(const std::vector<Session>& sessions);
 // Information of an inter-session loop from its registration fitness (paper: adaptive covariance).
 Matrix6d LoopInformation(double fitness, const SlamConfig& cfg);
+
+// ------------------------------------------------------------------- global registration (global.cpp)
+// An aligned session's map in the world frame with FPFH features, for placing submaps of a session
+// Scan Context could not align (the fallback; its placements are loop candidates to verify).
+class GlobalMap {
+ public:
+  GlobalMap(const PointCloud& world_map, const SlamConfig& cfg);
+  ~GlobalMap();
+  std::size_t size() const;  // points at the coarse voxel
+  // T_world_submap of a submap (its own frame) by FPFH + RANSAC, or nothing when no placement
+  // reaches the inlier fraction registration.min_overlap. Not thread-safe (std::rand).
+  std::optional<Pose> Place(const PointCloud& submap) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 class Stopwatch {
  public:

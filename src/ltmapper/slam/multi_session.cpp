@@ -46,6 +46,7 @@ class CloudStore {
       once_.emplace_back(new std::once_flag[s.keyframes.size()]);
     }
   }
+  std::size_t Keyframes(int s) const { return sessions_[std::size_t(s)].keyframes.size(); }
   // Loads a keyframe's raw scan; empty scans are an error.
   std::shared_ptr<const PointCloud> Raw(int s, int k) const {
     const Session& ses = sessions_[s];
@@ -265,6 +266,70 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
   }
 }
 
+// An aligned session's keyframe clouds in the world frame, merged.
+PointCloud WorldMap(const SlamResult& res, int a, CloudStore& store) {
+  PointCloud map;
+  const auto& W = res.sessions[std::size_t(a)].T_world_sensor;
+  for (std::size_t k = 0; k < W.size(); ++k) map.append(geometry::Transform(*store.Get(a, int(k)), W[k]));
+  return map;
+}
+
+// Loop candidates of unaligned session b with aligned session a from global placements of
+// cfg.global_queries evenly spaced keyframe submaps of b in a's map: each placed keyframe is
+// paired with a's keyframe nearest to where it was placed.
+std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, CloudStore& store, const SlamConfig& cfg) {
+  const Stopwatch sw;
+  const GlobalMap map(WorldMap(res, a, store), cfg);
+  const auto& Wa = res.sessions[std::size_t(a)].T_world_sensor;
+  const int n = int(store.Keyframes(b));
+  const int tries = std::min(n, cfg.global_queries);
+  std::vector<LoopRecord> cand;
+  for (int t = 0; t < tries; ++t) {
+    const int j = int((2 * t + 1) * std::int64_t(n) / (2 * tries));  // centres of equal parts
+    const std::optional<Pose> T_world_j = map.Place(store.Submap(b, j));
+    if (!T_world_j) continue;
+    int best = 0;
+    for (std::size_t i = 1; i < Wa.size(); ++i)
+      if ((Wa[i].translation() - T_world_j->translation()).norm() <
+          (Wa[std::size_t(best)].translation() - T_world_j->translation()).norm())
+        best = int(i);
+    LoopRecord l;
+    l.a = {a, best};
+    l.b = {b, j};
+    l.source = "global";
+    l.T_a_b = Wa[std::size_t(best)].inverse() * *T_world_j;
+    l.yaw_deg = Eigen::AngleAxisd(l.T_a_b.linear()).angle() * 180.0 / M_PI;
+    cand.push_back(l);
+  }
+  spdlog::info("slam: global registration of {} in {}'s map ({} points): {} of {} query submaps placed in {:.2f} s",
+               res.sessions[std::size_t(b)].name, res.sessions[std::size_t(a)].name, map.size(), cand.size(), tries,
+               sw.Seconds());
+  return cand;
+}
+
+// Fallback: a session still unaligned after the Scan Context retries is placed by global
+// registration in each aligned session's map (the central first), its placements verified by
+// GICP and the anchor consensus like any loop, until it aligns.
+void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
+                    CloudStore& store, const SlamConfig& cfg, tbb::task_arena& arena, int threads, StageCost& cost) {
+  if (!cfg.global_enabled) return;
+  for (std::size_t b = 1; b < sessions.size(); ++b)
+    for (std::size_t a = 0; a < sessions.size() && !res.sessions[b].aligned; ++a) {
+      if (a == b || !res.sessions[a].aligned) continue;
+      Stopwatch sw;
+      std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), store, cfg);
+      if (a > b)  // loops are stored with a.session < b.session: the placement was of b in a's map
+        for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
+      Register(cand, store, cfg, arena, "GICP global candidates", true);
+      cost.registrations += static_cast<int>(cand.size());
+      cost.registration_s += sw.Seconds();
+      loops.insert(loops.end(), cand.begin(), cand.end());
+      sw = Stopwatch();
+      res = OptimizeSessions(sessions, loops, cfg, threads);
+      cost.optimisation_s += sw.Seconds();
+    }
+}
+
 // Scan Context of every keyframe (read from SCDs/ when present and allowed, else computed from
 // the scan, whose downsampled copy is then kept for registration); returns the number read.
 std::size_t ComputeDescriptors(const std::vector<Session>& sessions, const SlamConfig& cfg, CloudStore& store,
@@ -404,6 +469,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   SlamResult res = OptimizeSessions(sessions, loops, cfg, threads);
   cost.optimisation_s = sw.Seconds();
   RetryUnaligned(sessions, pairs, loops, res, store, cfg, arena, threads, cost);
+  GlobalFallback(sessions, loops, res, store, cfg, arena, threads, cost);
   Refine(sessions, loops, res, store, cfg, arena, threads, cost);
   res.time_descriptors_s = t_desc;
   res.time_retrieval_s = t_retr;

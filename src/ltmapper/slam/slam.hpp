@@ -34,6 +34,9 @@ struct SlamConfig {
   int sc_max_loops_per_pair = 30;     // registrations per session pair and round, lowest first
   int sc_min_gap_keyframes = 1;       // min gap between the query keyframes of selected candidates
   int sc_retry_rounds = 3;            // unaligned sessions: rounds of the next-ranked candidates
+  // --- global registration: fallback for sessions still unaligned after the retries
+  bool global_enabled = true;         // FPFH + RANSAC placements of query submaps in aligned maps
+  int global_queries = 12;            // query keyframes tried per unaligned session and reference
 
   // --- registration (PCL GICP between keyframe submaps)
   double reg_min_range_m = 1.0;       // scan points closer than this are dropped (the vehicle)
@@ -90,6 +93,8 @@ struct SlamConfig {
     v("sc.max_loops_per_pair", sc_max_loops_per_pair, "loops", 0, 1000000);
     v("sc.min_gap_keyframes", sc_min_gap_keyframes, "keyframes", 0, 1000000);
     v("sc.retry_rounds", sc_retry_rounds, "rounds", 0, 100);
+    v("global.enabled", global_enabled);
+    v("global.queries", global_queries, "keyframes", 1, 100000);
     v("registration.min_range_m", reg_min_range_m, "m", 0.0, 100.0);
     v("registration.max_range_m", reg_max_range_m, "m", 1.0, 1000.0);
     v("registration.voxel_m", reg_voxel_m, "m", 0.01, 10.0);
