@@ -93,11 +93,17 @@ int LoopsFrom(const SlamResult& r, const std::string& source, bool accepted) {
 }
 }  // namespace
 
-TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
+// Two sessions of `keyframes` of the default scenario (another world with seed_offset).
+sim::SimConfig TwoSessions(int keyframes, int seed_offset = 0) {
   sim::SimConfig sc;
   sc.sessions = 2;
-  sc.keyframes = kKeyframes;
-  sim::Simulator s(sc, 2);
+  sc.keyframes = keyframes;
+  sc.seed += seed_offset;
+  return sc;
+}
+
+TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
+  sim::Simulator s(TwoSessions(kKeyframes), 2);
   const std::vector<Session> sessions = SimSessions(s);
   SlamConfig cfg;
   cfg.refine_rounds = 1;  // one radius round spreads the loops along the overlap (run time)
@@ -118,10 +124,7 @@ TEST(SlamRecall, TwoShortSessionsOfTheDefaultScenarioAlign) {
 // Scan Context gives no candidate (no loop budget): only the global fallback can align the
 // query, and must, as accurately; without the fallback the query stays unaligned.
 TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
-  sim::SimConfig sc;
-  sc.sessions = 2;
-  sc.keyframes = kKeyframes;
-  sim::Simulator s(sc, 2);
+  sim::Simulator s(TwoSessions(kKeyframes), 2);
   const std::vector<Session> sessions = SimSessions(s);
   SlamConfig cfg;
   cfg.sc_max_loops_per_pair = 0;
@@ -145,14 +148,7 @@ TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
 // A query from another city (another seed's world): no placement survives verification and
 // consensus, so the query is not aligned (zero false alignments).
 TEST(SlamRecall, GlobalRegistrationPlacesNothingInAnotherCity) {
-  sim::SimConfig sc;
-  sc.sessions = 2;
-  sc.keyframes = kKeyframes / 2;
-  sim::Simulator home(sc, 2), other([&] {
-    sim::SimConfig o = sc;
-    o.seed = sc.seed + 1;
-    return o;
-  }(), 2);
+  sim::Simulator home(TwoSessions(kKeyframes / 2), 2), other(TwoSessions(kKeyframes / 2, 1), 2);
   std::vector<Session> sessions = {SimSessions(home)[0], SimSessions(other)[1]};
   SlamConfig cfg;
   cfg.refine_rounds = 0;
