@@ -28,6 +28,7 @@ ap = argparse.ArgumentParser()
 ap.add_argument("sim"); ap.add_argument("aligned")
 ap.add_argument("--max-error-m", type=float, default=1.0)
 ap.add_argument("--max-error-deg", type=float, default=3.0)
+ap.add_argument("--dump", help="write every registered candidate with its error against the truth (CSV)")
 a = ap.parse_args()
 truth = {}
 def T(name):
@@ -40,6 +41,9 @@ def quat_to_R(x, y, z, w):
             [2*(x*z-y*w), 2*(y*z+x*w), 1-2*(x*x+y*y)]]
 
 rows = list(csv.DictReader(open(os.path.join(a.aligned, "loops.csv"))))
+dump = csv.writer(open(a.dump, "w")) if a.dump else None
+if dump:
+    dump.writerow(["pair", "kf_a", "kf_b", "source", "inlier_ratio", "inlier_rms_m", "error_m", "error_deg", "wrong", "accepted", "status"])
 stats = {}
 worst_t = worst_r = 0.0
 for r in rows:
@@ -55,6 +59,9 @@ for r in rows:
     er = math.degrees(math.acos(max(-1.0, min(1.0, (tr - 1) / 2))))
     wrong = et > a.max_error_m or er > a.max_error_deg
     acc = r["accepted"] == "1"
+    if dump:
+        dump.writerow([r["pair"], r["kf_a"], r["kf_b"], r["source"], r["inlier_ratio"], r["inlier_rms_m"],
+                       "%.3f" % et, "%.3f" % er, int(wrong), int(acc), r["status"]])
     s = stats.setdefault(r["source"], [0, 0, 0, 0])  # accepted, accepted wrong, rejected, rejected wrong
     s[0 if acc else 2] += 1
     s[1 if acc else 3] += wrong
