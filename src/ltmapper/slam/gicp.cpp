@@ -1,6 +1,7 @@
 // Generalized-ICP (Segal, Haehnel, Thrun 2009), plane-to-plane, solved by Gauss-Newton on SE(3):
-//   1. Prepare each cloud once: a kd-tree and, per point, the covariance of its k nearest
-//      neighbours with the eigenvalues replaced by (1, 1, eps) (a disc along the local surface),
+//   1. Prepare each cloud once: a kd-tree and, per point, the local plane of its k nearest
+//      neighbours: their covariance with the eigenvalues replaced by (1, 1, eps) (a disc along the
+//      local surface), the normal and the spread along it (for the verification's plane test),
 //      computed the first time the point takes part in a pair (most of the cost: points that
 //      never meet the other cloud need none).
 //   2. Iterate: pair each transformed source point with its nearest target point within the
@@ -41,9 +42,10 @@ Pose ExpTwist(const Vector6d& xi) {
   return T;
 }
 
-Eigen::Matrix3d PlaneCovariance(const geometry::KdTree& tree, const Eigen::Vector3f& p, int k) {
+GicpCloud::Plane LocalPlane(const geometry::KdTree& tree, const Eigen::Vector3f& p, int k) {
+  GicpCloud::Plane plane;
   const auto nn = tree.Knn(p, std::size_t(k));
-  if (nn.size() < kMinPlaneNeighbours) return Eigen::Matrix3d::Identity();
+  if (nn.size() < kMinPlaneNeighbours) return plane;  // isotropic, no normal
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   const PointCloud& c = tree.cloud();
   for (const auto& [i, d2] : nn) mean += c.points[i].xyz().cast<double>();
@@ -56,26 +58,29 @@ Eigen::Matrix3d PlaneCovariance(const geometry::KdTree& tree, const Eigen::Vecto
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
   es.computeDirect(C / double(nn.size()));
   const Eigen::Matrix3d V = es.eigenvectors();  // ascending eigenvalues: column 0 = normal
-  return V * Eigen::Vector3d(kPlaneEpsilon, 1.0, 1.0).asDiagonal() * V.transpose();
+  plane.cov = V * Eigen::Vector3d(kPlaneEpsilon, 1.0, 1.0).asDiagonal() * V.transpose();
+  plane.normal = V.col(0);
+  plane.spread = std::max(0.0, es.eigenvalues()(0));
+  return plane;
 }
 }  // namespace
 
 GicpCloud::GicpCloud(const PointCloud& cloud, int covariance_neighbours)
     : tree(std::make_unique<geometry::KdTree>(cloud)),
       k_(covariance_neighbours),
-      cov_(cloud.size()),
-      has_cov_(cloud.size(), 0) {}
+      planes_(cloud.size()),
+      has_plane_(cloud.size(), 0) {}
 GicpCloud::~GicpCloud() = default;
 GicpCloud::GicpCloud(GicpCloud&&) noexcept = default;
 
 const PointCloud& GicpCloud::cloud() const { return tree->cloud(); }
 
-const Eigen::Matrix3d& GicpCloud::Cov(std::size_t i) const {
-  if (!has_cov_[i]) {
-    cov_[i] = PlaneCovariance(*tree, cloud().points[i].xyz(), k_);
-    has_cov_[i] = 1;
+const GicpCloud::Plane& GicpCloud::PlaneAt(std::size_t i) const {
+  if (!has_plane_[i]) {
+    planes_[i] = LocalPlane(*tree, cloud().points[i].xyz(), k_);
+    has_plane_[i] = 1;
   }
-  return cov_[i];
+  return planes_[i];
 }
 
 namespace {
@@ -99,7 +104,7 @@ NormalEquations Linearise(const GicpCloud& target, const GicpCloud& source, cons
     float d2 = 0.f;
     if (!target.tree->Nearest(q.cast<float>(), &j, &d2) || d2 >= max_d2) continue;
     const Eigen::Vector3d r = tgt.points[j].xyz().cast<double>() - q;
-    const Eigen::Matrix3d W = (target.Cov(j) + R * source.Cov(i) * R.transpose()).inverse();
+    const Eigen::Matrix3d W = (target.PlaneAt(j).cov + R * source.PlaneAt(i).cov * R.transpose()).inverse();
     Eigen::Matrix<double, 3, 6> J;
     J.leftCols<3>() = Skew(q);
     J.rightCols<3>() = -Eigen::Matrix3d::Identity();

@@ -18,21 +18,26 @@ namespace ltm::slam {
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 
 // ------------------------------------------------------------------------------ GICP (gicp.cpp)
-// A cloud prepared for GICP: its kd-tree and per-point plane covariances of the k nearest
-// neighbours, each computed on first use (Cov is not thread-safe: one registration per thread).
+// A cloud prepared for GICP: its kd-tree and per-point local planes of the k nearest
+// neighbours, each computed on first use (PlaneAt is not thread-safe: one registration per thread).
 class GicpCloud {
  public:
+  struct Plane {
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Identity();  // GICP covariance: eigenvalues (eps, 1, 1)
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();   // zero when too few neighbours for a surface
+    double spread = 0.0;  // [m^2] variance of the neighbours along the normal (the surface's roughness)
+  };
   GicpCloud(const PointCloud& cloud, int covariance_neighbours);
   ~GicpCloud();
   GicpCloud(GicpCloud&&) noexcept;
   const PointCloud& cloud() const;
-  const Eigen::Matrix3d& Cov(std::size_t i) const;
+  const Plane& PlaneAt(std::size_t i) const;
   std::unique_ptr<geometry::KdTree> tree;
 
  private:
   int k_ = 0;
-  mutable std::vector<Eigen::Matrix3d> cov_;
-  mutable std::vector<std::uint8_t> has_cov_;
+  mutable std::vector<Plane> planes_;
+  mutable std::vector<std::uint8_t> has_plane_;
 };
 struct GicpOptions {
   double max_correspondence_m = 1.0;  // pairs farther apart are not used

@@ -48,8 +48,9 @@ struct SlamConfig {
   double reg_max_correspondence_m = 1.0;  // fine GICP correspondence distance
   int reg_max_iterations = 30;        // GICP outer iterations
   int reg_covariance_neighbours = 20; // k for GICP point covariances
-  // Verification (see RegisterGicp): inlier radius and RMS bound derive from the voxel and the
-  // sensor's range noise; inlier ratio >= min_overlap and inlier RMS <= bound accept a loop.
+  // Verification (see RegisterGicp): the inlier radius derives from the voxel and the range noise;
+  // inlier ratio >= min_overlap and residuals along the surface normals that the surfaces' own
+  // spread and the range noise explain (no tail beyond 3 sigma) accept a loop.
   double reg_range_noise_m = 0.02;    // std-dev of the sensor's range noise
   double reg_min_overlap = 0.3;       // min inlier ratio (source points with a NN within radius)
   double reg_max_correction_deg = 45.0;  // reject when GICP rotates this far from the initial guess
@@ -155,18 +156,22 @@ struct RegistrationResult {
   double fitness = 1e9;   // mean squared NN distance [m^2] of the inliers (= inlier_rms^2)
   double overlap = 0.0;   // inlier ratio: source points with a target NN within the inlier radius
   double inlier_rms_m = 1e9;  // RMS NN distance of the inliers
-  double inlier_radius_m = 0, rms_bound_m = 0;  // the derived gates (InlierRadius, InlierRmsBound)
+  double inlier_radius_m = 0;   // the derived inlier gate (InlierRadius)
+  double plane_z = 1e9;         // inliers' mean squared residual along the target normals / explained variance
+  double plane_tail = 1.0;      // share of those residuals beyond 3 sigma ...
+  double plane_tail_bound = 0;  // ... and what a Gaussian allows for that many inliers
   bool converged = false;
-  bool accepted = false;  // converged, inlier ratio / inlier RMS / correction within the gates
+  bool accepted = false;  // converged, inlier ratio / plane residuals / correction within the gates
   std::string reason;     // why not accepted
 };
 // GICP of `source` onto `target` (both already downsampled to reg_voxel_m), from
 // `T_target_source_init`: a coarse stage on reg_coarse_voxel_m clouds with a wide correspondence
 // distance (the initial translation may be metres off), then the fine stage. Accepted when the
-// inlier ratio (radius InlierRadius) >= reg_min_overlap and the inlier RMS <= InlierRmsBound.
-// Verification gates derived from the voxel v and the range noise sigma (see registration.cpp).
+// inlier ratio (radius InlierRadius) >= reg_min_overlap, the inliers' residuals along the target's
+// surface normals average no more than the surfaces' spread and the range noise explain, and no
+// more of them lie beyond 3 sigma than a Gaussian allows (registration.cpp).
+// The inlier radius: half a voxel diagonal plus 3 sigma of both clouds' range noise.
 double InlierRadius(double voxel_m, double range_noise_m);
-double InlierRmsBound(double voxel_m, double range_noise_m);
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
                                 const Pose& T_target_source_init, const SlamConfig& cfg);
 
