@@ -38,7 +38,7 @@ struct SlamConfig {
   bool global_enabled = true;         // FPFH + RANSAC placements of query submaps in aligned maps
   int global_queries = 12;            // query keyframes tried per unaligned session and reference
 
-  // --- registration (PCL GICP between keyframe submaps)
+  // --- registration (GICP between keyframe submaps, gicp.cpp)
   double reg_min_range_m = 1.0;       // scan points closer than this are dropped (the vehicle)
   double reg_max_range_m = 60.0;      // scan points farther than this are dropped
   double reg_voxel_m = 0.5;           // voxel of keyframe clouds and submaps
