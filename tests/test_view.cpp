@@ -11,6 +11,8 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <random>
@@ -177,65 +179,88 @@ TEST_F(ViewHandler, CloudOfSessionZeroEqualsMapRestoreOutput) {
 // Tiled level of detail: at every level the tiles together are the whole map filtered at that
 // level's voxel, exactly (no voxel straddles a tile), for the map at a session, live and meta.
 TEST_F(ViewHandler, TilesAtEveryLevelTogetherAreTheWholeFilteredMap) {
+  const auto check = [](const ViewConfig& cfg, std::size_t want_levels) {
+    SCOPED_TRACE("tile_m " + std::to_string(cfg.tile_m) + ", coarse_budget " + std::to_string(cfg.coarse_budget));
+    const Viewer v(cfg);
+    const map::Store store = map::Store::Open(cfg.store, {}, map::Store::Access::kReadOnly);
+    const std::vector<std::pair<std::map<std::string, std::string>, PointCloud>> layers = {
+        {{{"session", "0"}}, store.MapAt(0)}, {{{"session", "drive_b"}}, store.MapAt(1)},
+        {{{"layer", "live"}}, store.Live()}, {{{"layer", "meta"}}, store.Meta()}};
+    for (const auto& [query, raw] : layers) {
+      const Response index_r = Get(v, "/api/tiles", query);
+      ASSERT_EQ(index_r.status, 200) << index_r.body;
+      const auto index = nlohmann::json::parse(index_r.body);
+      EXPECT_DOUBLE_EQ(index["tile_m"].get<double>(), TileCells(cfg) * cfg.base_voxel_m);
+      if (query.count("session") && query.at("session") == "0") {
+        ASSERT_EQ(index["levels"].size(), want_levels);
+      }
+      ASSERT_GE(index["levels"].size(), 4u);
+      for (std::size_t k = 1; k < index["levels"].size(); ++k)
+        EXPECT_EQ(index["levels"][k - 1].get<double>(), 2 * index["levels"][k].get<double>());
+      EXPECT_EQ(index["levels"].back().get<double>(), cfg.base_voxel_m);
+      if (index["levels"].size() > 4u && index["levels"].size() < 7u) {
+        EXPECT_LE(index["coarse_points"].get<std::size_t>(), std::size_t(cfg.coarse_budget));
+      }
+      EXPECT_EQ(index["points"].get<std::size_t>(), raw.size());
+      ASSERT_GE(index["tiles"].size(), 4u);
+      for (int level = 0; level < int(index["levels"].size()); ++level) {
+        auto q = query;
+        q["level"] = std::to_string(level);
+        q["tile"] = "all";
+        double voxel = 0;
+        const PointCloud all = DecodeCloud(Get(v, "/api/tile", q).body, &voxel);
+        const double level_voxel = index["levels"][level].get<double>();
+        EXPECT_FLOAT_EQ(voxel, level_voxel);
+        const PointCloud want = geometry::VoxelDownsample(raw, level_voxel);
+        EXPECT_EQ(Sorted(all), Sorted(want)) << "level " << level;
+        PointCloud joined;
+        std::size_t coarse = 0;
+        for (const auto& t : index["tiles"]) {
+          q["tile"] = t["id"].get<std::string>();
+          EXPECT_EQ(q["tile"], std::to_string(t["ix"].get<int>()) + "_" + std::to_string(t["iy"].get<int>()));
+          const Response r = Get(v, "/api/tile", q);
+          ASSERT_EQ(r.status, 200) << r.body;
+          const PointCloud tile = DecodeCloud(r.body);
+          const double edge = index["tile_m"].get<double>();
+          for (const auto& p : tile.points) {  // inside its tile and its bounds
+            EXPECT_GE(p.x, t["ix"].get<int>() * edge - 1e-3);
+            EXPECT_LE(p.x, (t["ix"].get<int>() + 1) * edge + 1e-3);
+            EXPECT_GE(p.z, t["lo"][2].get<float>() - 1e-3);
+            EXPECT_LE(p.z, t["hi"][2].get<float>() + 1e-3);
+          }
+          if (level == 0) {
+            EXPECT_EQ(tile.size(), t["coarse"].get<std::size_t>());
+          }
+          coarse += t["coarse"].get<std::size_t>();
+          joined.append(tile);
+        }
+        EXPECT_EQ(Sorted(joined), Sorted(want)) << "level " << level;
+        if (level == 0) {
+          EXPECT_EQ(all.size(), coarse);
+          EXPECT_EQ(index["coarse_points"].get<std::size_t>(), coarse);
+        }
+      }
+    }
+    // Coarser levels hold fewer points.
+    const auto n = [&](int level) {
+      return DecodeCloud(Get(v, "/api/tile", {{"session", "0"}, {"tile", "all"}, {"level", std::to_string(level)}}).body).size();
+    };
+    EXPECT_LT(n(0), n(1));
+    EXPECT_LT(n(2), n(3));
+  };
   const ViewConfig cfg = SmallTiles();
   EXPECT_EQ(TileCells(cfg), 40);  // 8 m / 0.2 m, a multiple of 2^3 (level 0 = 1.6 m voxels)
   EXPECT_EQ(LevelVoxel(cfg, 0), 1.6);
   EXPECT_EQ(LevelVoxel(cfg, 3), 0.2);
-  const Viewer v(cfg);
-  const map::Store store = map::Store::Open(cfg.store, {}, map::Store::Access::kReadOnly);
-  const std::vector<std::pair<std::map<std::string, std::string>, PointCloud>> layers = {
-      {{{"session", "0"}}, store.MapAt(0)}, {{{"session", "drive_b"}}, store.MapAt(1)},
-      {{{"layer", "live"}}, store.Live()}, {{{"layer", "meta"}}, store.Meta()}};
-  for (const auto& [query, raw] : layers) {
-    const Response index_r = Get(v, "/api/tiles", query);
-    ASSERT_EQ(index_r.status, 200) << index_r.body;
-    const auto index = nlohmann::json::parse(index_r.body);
-    EXPECT_DOUBLE_EQ(index["tile_m"].get<double>(), 8.0);
-    ASSERT_EQ(index["levels"].size(), 4u);
-    EXPECT_EQ(index["points"].get<std::size_t>(), raw.size());
-    ASSERT_GE(index["tiles"].size(), 6u);
-    for (int level = 0; level < cfg.lod_levels; ++level) {
-      auto q = query;
-      q["level"] = std::to_string(level);
-      q["tile"] = "all";
-      double voxel = 0;
-      const PointCloud all = DecodeCloud(Get(v, "/api/tile", q).body, &voxel);
-      EXPECT_FLOAT_EQ(voxel, LevelVoxel(cfg, level));
-      const PointCloud want = geometry::VoxelDownsample(raw, LevelVoxel(cfg, level));
-      EXPECT_EQ(Sorted(all), Sorted(want)) << "level " << level;
-      PointCloud joined;
-      std::size_t coarse = 0;
-      for (const auto& t : index["tiles"]) {
-        q["tile"] = t["id"].get<std::string>();
-        EXPECT_EQ(q["tile"], std::to_string(t["ix"].get<int>()) + "_" + std::to_string(t["iy"].get<int>()));
-        const Response r = Get(v, "/api/tile", q);
-        ASSERT_EQ(r.status, 200) << r.body;
-        const PointCloud tile = DecodeCloud(r.body);
-        for (const auto& p : tile.points) {  // inside its tile and its bounds
-          EXPECT_GE(p.x, t["ix"].get<int>() * 8.0 - 1e-3);
-          EXPECT_LE(p.x, (t["ix"].get<int>() + 1) * 8.0 + 1e-3);
-          EXPECT_GE(p.z, t["lo"][2].get<float>() - 1e-3);
-          EXPECT_LE(p.z, t["hi"][2].get<float>() + 1e-3);
-        }
-        if (level == 0) {
-          EXPECT_EQ(tile.size(), t["coarse"].get<std::size_t>());
-        }
-        coarse += t["coarse"].get<std::size_t>();
-        joined.append(tile);
-      }
-      EXPECT_EQ(Sorted(joined), Sorted(want)) << "level " << level;
-      if (level == 0) {
-        EXPECT_EQ(all.size(), coarse);
-        EXPECT_EQ(index["coarse_points"].get<std::size_t>(), coarse);
-      }
-    }
-  }
-  // Coarser levels hold fewer points.
-  const auto n = [&](int level) {
-    return DecodeCloud(Get(v, "/api/tile", {{"session", "0"}, {"tile", "all"}, {"level", std::to_string(level)}}).body).size();
-  };
-  EXPECT_LT(n(0), n(1));
-  EXPECT_LT(n(2), n(3));
+  check(cfg, 4);
+  // coarse_budget: coarser levels in front while level 0 holds more points (12.8 m tiles = 64
+  // cells of 0.2 m: voxels up to 12.8 m nest, 3 more levels at most).
+  ViewConfig coarse = cfg;
+  coarse.tile_m = 12.8;
+  coarse.coarse_budget = 5;
+  check(coarse, 7);
+  coarse.coarse_budget = 150;  // 1.6 m: 200 points at session 0; 3.2 m: fewer
+  check(coarse, 5);
 }
 
 // The coverage layer: the points of the keyframes the step created (new territory), as stored.
@@ -294,7 +319,7 @@ TEST_F(ViewHandler, BadRequestsAreRefusedWithAMessage) {
       {"/api/tiles", {{"layer", "coverage"}, {"session", "1"}}, 400, "not tiled"},
       {"/api/tile", {{"session", "0"}, {"level", "0"}}, 400, "tile is required"},
       {"/api/tile", {{"session", "0"}, {"tile", "all"}}, 400, "level is required"},
-      {"/api/tile", {{"session", "0"}, {"tile", "all"}, {"level", "4"}}, 404, "levels are 0..3"},
+      {"/api/tile", {{"session", "0"}, {"tile", "all"}, {"level", "4"}}, 404, "no level 4: the levels of at session 0 are 0..3"},
       {"/api/tile", {{"session", "0"}, {"tile", "all"}, {"level", "-1"}}, 400, "level must be"},
       {"/api/tile", {{"session", "0"}, {"tile", "all"}, {"level", "123"}}, 400, "level must be"},
       {"/api/tile", {{"session", "0"}, {"tile", "0"}, {"level", "0"}}, 400, "tile must be"},
@@ -424,6 +449,36 @@ TEST_F(ViewHandler, ReadsDuringAnIntegrationSeeTheLastCommittedState) {
   EXPECT_GT(checked, 0);
   EXPECT_EQ(nlohmann::json::parse(Get(v, "/api/info").body)["latest"], 2);  // committed: seen
   EXPECT_FALSE(Get(v, "/api/cloud", {{"layer", "live"}}).body == before);   // not the cached cloud
+}
+
+// Not a check: writes a large synthetic store for measuring the viewer (README, "View the map").
+//   LTM_VIEW_BIG_STORE=/tmp/big.ltmap tests/test_view --gtest_also_run_disabled_tests --gtest_filter='*BigStore*'
+// 20 x 20 keyframes 40 m apart (an 800 m square of streets), each a 40 m ground square at 0.25 m
+// and a 10 x 10 x 8 m building's walls at 0.2 m: about 12 M points at 0.1 m.
+TEST(ViewCloud, DISABLED_BigStore) {
+  const char* path = std::getenv("LTM_VIEW_BIG_STORE");
+  ASSERT_NE(path, nullptr) << "set LTM_VIEW_BIG_STORE=FILE.ltmap";
+  fs::remove(path);
+  map::Store s = map::Store::Create(path, map::MapConfig{});
+  std::vector<map::KeyframeInput> base;
+  constexpr int kSide = 20;
+  std::size_t points = 0;
+  for (int k = 0; k < kSide * kSide; ++k) {
+    PointCloud c = Grid(-20, -20, 0, 160, 160, 0.25f);
+    for (int w = 0; w < 4; ++w) {
+      const float x0 = 4, y0 = 4, len = 10;
+      for (float a = 0; a <= len; a += 0.2f)
+        for (float z = 0.2f; z <= 8; z += 0.2f) {
+          const float x = w == 0 ? x0 + a : w == 1 ? x0 + len : w == 2 ? x0 + a : x0;
+          const float y = w == 0 ? y0 : w == 1 ? y0 + a : w == 2 ? y0 + len : y0 + a;
+          c.push_back(x, y, z, 0.5f);
+        }
+    }
+    points += c.size();
+    base.push_back({k, At(40.0 * (k % kSide), 40.0 * (k / kSide)), c});
+  }
+  s.IntegrateBase({"big"}, base);
+  std::printf("%s: %zu keyframes, %zu points\n", path, base.size(), points);
 }
 
 TEST(ViewCloud, WireFormatRoundTripAndTruncation) {

@@ -81,7 +81,7 @@ std::shared_ptr<const TiledCloud> Viewer::Impl::Tiled(const std::string& key,
     promise.set_value(built);
     spdlog::info("view: {}: {} tiles of {:.1f} m, {} points at level 0 ({:.2f} m) in {:.2f} s", key, built->keys.size(),
                  built->tile_edge_m, std::accumulate(built->coarse_counts.begin(), built->coarse_counts.end(), std::size_t(0)),
-                 LevelVoxel(cfg, 0), std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+                 built->levels.front(), std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     std::lock_guard<std::mutex> lock(mutex);
     std::size_t total = 0;
     for (auto it = tiled.begin(); it != tiled.end();) {
@@ -265,14 +265,12 @@ TiledCloud::Key ParseTileId(const std::string& text) {
   return {index(text.substr(0, sep)), index(text.substr(sep + 1))};
 }
 
-int ParseLevel(const std::string& text, const ViewConfig& cfg) {
-  const std::string range = "0.." + std::to_string(cfg.lod_levels - 1);
-  if (text.empty()) throw HttpError(400, "level is required (" + range + ", 0 the coarsest)");
+// A level's syntax (400); whether the layer has it is checked against its tiles (404).
+int ParseLevel(const std::string& text) {
+  if (text.empty()) throw HttpError(400, "level is required (0 the coarsest; /api/tiles lists the levels)");
   if (text.size() > 2 || !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; }))
-    throw HttpError(400, "level must be a number in " + range + " (got '" + text + "')");
-  const int level = std::stoi(text);
-  if (level >= cfg.lod_levels) throw HttpError(404, "no level " + text + ": the levels are " + range);
-  return level;
+    throw HttpError(400, "level must be a number of at most 2 digits (got '" + text + "')");
+  return std::stoi(text);
 }
 
 std::string TileId(const TiledCloud::Key& k) { return std::to_string(k.first) + "_" + std::to_string(k.second); }
@@ -322,7 +320,7 @@ Response Viewer::Tiles(const Request& req) const {
     coarse_total += tiles->coarse_counts[k];
   }
   return Json({{"layer", t.layer_name}, {"session", t.session}, {"tile_m", tiles->tile_edge_m},
-               {"levels", Levels(impl_->cfg)}, {"points", raw_total}, {"coarse_points", coarse_total},
+               {"levels", tiles->levels}, {"points", raw_total}, {"coarse_points", coarse_total},
                {"tiles", list}});
 }
 
@@ -332,11 +330,14 @@ Response Viewer::Tile(const Request& req) const {
   if (tile_text.empty()) throw HttpError(400, "tile is required (all, or IX_IY from /api/tiles)");
   const bool all = tile_text == "all";
   const TiledCloud::Key id = all ? TiledCloud::Key{0, 0} : ParseTileId(tile_text);
-  const int level = ParseLevel(Param(req, "level", ""), impl_->cfg);
+  const int level = ParseLevel(Param(req, "level", ""));
   const map::Store store = OpenStore(impl_->cfg);
   const Target t = ParseTarget(req, store, impl_->cfg.store);
   CheckTiledLayer(t);
   const auto tiles = impl_->Tiled(t.key, [&] { return LayerCloud(store, t.layer, t.session); });
+  if (level >= int(tiles->levels.size()))
+    throw HttpError(404, "no level " + std::to_string(level) + ": the levels of " + t.layer_name + " session " +
+                             std::to_string(t.session) + " are 0.." + std::to_string(tiles->levels.size() - 1));
   if (all) return {200, "application/octet-stream", *tiles->All(level)};
   const std::ptrdiff_t k = tiles->Find(id);
   if (k < 0) throw HttpError(404, "no tile " + tile_text + " in " + t.layer_name + " session " + std::to_string(t.session) +

@@ -50,6 +50,8 @@ struct TiledCloud {
   using Key = std::pair<int, int>;  // (ix, iy)
   ViewConfig cfg;
   double tile_edge_m = 0.0;                       // TileCells * base_voxel_m
+  std::vector<double> levels;                    // voxel per level, [0] the coarsest (LevelVoxel, then
+                                                  // coarser ones in front while over coarse_budget)
   std::vector<Key> keys;                          // ascending
   std::vector<PointCloud> raw;                    // per tile: points and cls (no other arrays)
   std::vector<std::array<float, 6>> bounds;       // per tile: min x, y, z, max x, y, z
@@ -73,7 +75,7 @@ struct TiledCloud {
 
 // Cuts `raw` (cls optional) into tiles and filters every tile at level 0 (cfg.threads workers).
 std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& cfg);
-// One tile at a level: geometry::VoxelDownsample of its points at LevelVoxel(level).
+// One tile at a level: geometry::VoxelDownsample of its points at tiles.levels[level].
 PointCloud TileCloud(const TiledCloud& tiles, std::size_t tile, int level);
 
 }  // namespace ltm::view

@@ -16,6 +16,7 @@ namespace ltm::view {
 namespace {
 
 constexpr double kMaxTileIndex = 1.0e9;  // |ix|, |iy| beyond this do not fit the tile id
+constexpr int kMaxLevels = 16;           // levels of a layer, coarse_budget's included
 
 std::int64_t PackKey(int ix, int iy) { return (std::int64_t(ix) << 32) | std::int64_t(std::uint32_t(iy)); }
 
@@ -43,7 +44,7 @@ std::ptrdiff_t TiledCloud::Find(const Key& key) const {
 
 PointCloud TileCloud(const TiledCloud& tiles, std::size_t tile, int level) {
   const PointCloud& raw = tiles.raw.at(tile);
-  return raw.empty() ? raw : geometry::VoxelDownsample(raw, LevelVoxel(tiles.cfg, level), 1);
+  return raw.empty() ? raw : geometry::VoxelDownsample(raw, tiles.levels.at(std::size_t(level)), 1);
 }
 
 std::shared_ptr<const std::string> TiledCloud::Encoded(std::size_t tile, int level, std::size_t* points) const {
@@ -55,7 +56,7 @@ std::shared_ptr<const std::string> TiledCloud::Encoded(std::size_t tile, int lev
     }
   }
   const PointCloud cloud = TileCloud(*this, tile, level);
-  auto body = std::make_shared<const std::string>(EncodeCloud(cloud, LevelVoxel(cfg, level)));
+  auto body = std::make_shared<const std::string>(EncodeCloud(cloud, levels[std::size_t(level)]));
   std::lock_guard<std::mutex> lock(mutex_);
   encoded_[tile][std::size_t(level)] = body;
   counts_[tile][std::size_t(level)] = cloud.size();
@@ -69,7 +70,7 @@ std::shared_ptr<const std::string> TiledCloud::All(int level) const {
   ParallelFor(keys.size(), cfg.threads, [&](std::size_t t) { parts[t] = TileCloud(*this, t, level); });
   PointCloud all;
   for (const auto& p : parts) all.append(p);
-  return std::make_shared<const std::string>(EncodeCloud(all, LevelVoxel(cfg, level)));
+  return std::make_shared<const std::string>(EncodeCloud(all, levels[std::size_t(level)]));
 }
 
 std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& cfg) {
@@ -122,9 +123,6 @@ std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& 
   key = {};
   t.bounds.resize(t.keys.size());
   t.coarse_counts.resize(t.keys.size());
-  t.encoded_.assign(t.keys.size(), std::vector<std::shared_ptr<const std::string>>(std::size_t(cfg.lod_levels)));
-  t.counts_.assign(t.keys.size(), std::vector<std::size_t>(std::size_t(cfg.lod_levels), 0));
-  std::vector<PointCloud> coarse(t.keys.size());
   ParallelFor(t.keys.size(), cfg.threads, [&](std::size_t s) {
     std::array<float, 6> b{};
     for (int a = 0; a < 3; ++a) b[a] = std::numeric_limits<float>::max(), b[3 + a] = std::numeric_limits<float>::lowest();
@@ -133,14 +131,30 @@ std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& 
       b[3] = std::max(b[3], p.x), b[4] = std::max(b[4], p.y), b[5] = std::max(b[5], p.z);
     }
     t.bounds[s] = b;
-    coarse[s] = TileCloud(t, s, 0);
+  });
+  // Level 0: the coarsest configured voxel, doubled while the whole layer holds more than
+  // coarse_budget points there and the doubled voxel still nests in the tiles' cells.
+  for (int k = 0; k < cfg.lod_levels; ++k) t.levels.push_back(LevelVoxel(cfg, k));
+  std::vector<PointCloud> coarse(t.keys.size());
+  for (int extra = 0;; ++extra) {
+    if (extra > 0) t.levels.insert(t.levels.begin(), 2 * t.levels.front());
+    ParallelFor(t.keys.size(), cfg.threads, [&](std::size_t s) { coarse[s] = TileCloud(t, s, 0); });
+    std::size_t total = 0;
+    for (const auto& c : coarse) total += c.size();
+    const int next_cells = 1 << (cfg.lod_levels + extra);  // base cells per voxel one level coarser
+    if (total <= std::size_t(cfg.coarse_budget) || cells % next_cells != 0 || int(t.levels.size()) >= kMaxLevels) break;
+  }
+  const std::size_t nlevels = t.levels.size();
+  t.encoded_.assign(t.keys.size(), std::vector<std::shared_ptr<const std::string>>(nlevels));
+  t.counts_.assign(t.keys.size(), std::vector<std::size_t>(nlevels, 0));
+  ParallelFor(t.keys.size(), cfg.threads, [&](std::size_t s) {
     t.coarse_counts[s] = coarse[s].size();
     t.counts_[s][0] = coarse[s].size();
-    t.encoded_[s][0] = std::make_shared<const std::string>(EncodeCloud(coarse[s], LevelVoxel(cfg, 0)));
+    t.encoded_[s][0] = std::make_shared<const std::string>(EncodeCloud(coarse[s], t.levels[0]));
   });
   PointCloud all;
   for (const auto& c : coarse) all.append(c);
-  t.coarse = std::make_shared<const std::string>(EncodeCloud(all, LevelVoxel(cfg, 0)));
+  t.coarse = std::make_shared<const std::string>(EncodeCloud(all, t.levels[0]));
   t.bytes = n * (sizeof(PointXYZI) + 1) + 2 * t.coarse->size();
   return out;
 }
