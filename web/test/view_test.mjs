@@ -265,8 +265,8 @@ async function checkInBrowser(a, viewer) {
     await runPage(page, viewer.url, info);
     await measure(page);
     await clickObject(page, objects);
-    await zoomIn(page, info);
     await page.screenshot({ path: a.screenshot });
+    await zoomIn(page, info);
     assert.deepEqual(errors, [], 'uncaught errors in the page');
   } finally {
     if (browser) await browser.close();
