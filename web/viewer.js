@@ -312,7 +312,10 @@ function pumpLod(ticket) {
       if (ticket !== state.loads) return;
       const cloud = decodeCloud(buf);
       tile.counts[level] = cloud.n;
-      if (tile.target === level) showTile(tile, cloud, level);
+      // The plan used an estimate: a tile that turns out larger than the budget allows waits
+      // for the next plan (which knows its count).
+      const drawn = state.tiles.list.reduce((n, t) => n + t.drawn, 0);
+      if (tile.target === level && drawn - tile.drawn + cloud.n <= state.info.point_budget) showTile(tile, cloud, level);
       requestRender();
     }).catch(fail).finally(() => {
       tile.loading = -1;

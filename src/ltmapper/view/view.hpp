@@ -39,7 +39,8 @@ struct ViewConfig {
   // level (voxel doubled) goes in front, as long as its voxel still nests in the tiles (a 13.5 M
   // point map: 1.19 M points at 0.8 m, 0.30 M at 1.6 m; the page's first frame draws level 0).
   int coarse_budget = 500000;        // [points]
-  int cache_mb = 2048;               // [MiB] tiled clouds kept in memory (at least the newest)
+  int cache_mb = 1024;               // [MiB] tiled clouds kept in memory (at least the newest;
+                                     // ~17 bytes a map point + level 0, finer levels not counted)
   int max_query_chars = 64;          // longest accepted query value [characters]
   int max_path_chars = 256;          // longest accepted request path [characters]
   int max_static_mb = 64;            // [MiB] largest static file served
