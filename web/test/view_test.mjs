@@ -8,12 +8,12 @@
 //
 //   node web/test/view_test.mjs --exe build/apps/ltmapper --screenshot build/view_browser.png
 //        [--store OUT/map.ltmap] [--chromium /usr/bin/chromium] [--keep DIR]
-import { chromium } from 'playwright-core';
-import { spawn, execFileSync } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
 import assert from 'node:assert/strict';
+import { launchBrowser, parseArgs, startViewer } from './viewer_process.mjs';
 
 const STEP_TIMEOUT_MS = 20000;        // one page step (load a cloud, fly) at most
 const SAMPLES_PER_CLASS = 200;        // projected points checked per class
@@ -23,16 +23,7 @@ const VIEWPORT = { width: 1280, height: 800 };
 const BACKGROUND = [0x15, 0x18, 0x1d];  // web/viewer.js BACKGROUND
 
 function args() {
-  const a = { exe: '', store: '', screenshot: 'view_browser.png', chromium: '/usr/bin/chromium', keep: '' };
-  const argv = process.argv.slice(2);
-  for (let i = 0; i < argv.length; i += 2) {
-    const key = argv[i].replace(/^--/, '');
-    if (!(key in a) || argv[i + 1] === undefined) throw new Error(`usage: unknown or incomplete option ${argv[i]}`);
-    a[key] = argv[i + 1];
-  }
-  if (!a.exe) throw new Error('--exe PATH_TO_LTMAPPER is required');
-  if (!fs.existsSync(a.chromium)) throw new Error(`${a.chromium}: no chromium (scripts/install-deps.sh installs it)`);
-  return a;
+  return parseArgs({ exe: '', store: '', screenshot: 'view_browser.png', chromium: '/usr/bin/chromium', keep: '' }, ['exe']);
 }
 
 // A small store: 3 simulated drives of 30 keyframes, lighter stage parameters.
@@ -48,23 +39,6 @@ function makeStore(exe, dir) {
   run('run', '--quiet', '--threads', '2', '--slam-config', path.join(dir, 'slam.yaml'), '--removert-config',
       path.join(dir, 'removert.yaml'), '--out', path.join(dir, 'out'), '--sessions', ...sessions);
   return path.join(dir, 'out/map.ltmap');
-}
-
-// Starts `ltmapper view --port 0` and resolves with its URL once it listens.
-function startViewer(exe, store) {
-  const proc = spawn(exe, ['view', '--store', store, '--port', '0', '--threads', '2'], { stdio: ['ignore', 'pipe', 'pipe'] });
-  let log = '';
-  return new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`ltmapper view did not start:\n${log}`)), STEP_TIMEOUT_MS);
-    const onData = (d) => {
-      log += d;
-      const m = log.match(/on (http:\/\/127\.0\.0\.1:\d+\/)/);
-      if (m) { clearTimeout(timer); resolve({ proc, url: m[1], log: () => log }); }
-    };
-    proc.stdout.on('data', onData);
-    proc.stderr.on('data', onData);
-    proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`ltmapper view exited (${code}):\n${log}`)); });
-  });
 }
 
 // Waits until the page has shown `count` clouds (window.__ltmView.loaded) and has no tile
@@ -254,9 +228,7 @@ async function clickObject(page, objects) {
 async function checkInBrowser(a, viewer) {
   let browser = null;
   try {
-    // SwiftShader: WebGL in software, the same on every machine (no GPU needed).
-    browser = await chromium.launch({ executablePath: a.chromium, headless: true,
-                                      args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] });
+    browser = await launchBrowser(a.chromium);
     const page = await browser.newPage({ viewport: VIEWPORT });
     const errors = [];
     page.on('pageerror', (e) => errors.push(String(e)));
@@ -281,7 +253,7 @@ async function main() {
     fs.mkdirSync(dir, { recursive: true });
     const store = a.store || makeStore(a.exe, dir);
     console.log(`store ${store} ready in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
-    const viewer = await startViewer(a.exe, store);
+    const viewer = await startViewer(a.exe, store, { timeoutMs: STEP_TIMEOUT_MS });
     try {
       await checkInBrowser(a, viewer);
     } finally {

@@ -5,36 +5,7 @@
 // (no tile request under way) and the points drawn per level.
 //
 //   node web/test/view_timing.mjs --exe build/apps/ltmapper --store OUT/map.ltmap [--reloads 3]
-import { chromium } from 'playwright-core';
-import { spawn } from 'node:child_process';
-
-function args() {
-  const a = { exe: '', store: '', chromium: '/usr/bin/chromium', reloads: '3', threads: '2' };
-  const argv = process.argv.slice(2);
-  for (let i = 0; i < argv.length; i += 2) {
-    const key = argv[i].replace(/^--/, '');
-    if (!(key in a) || argv[i + 1] === undefined) throw new Error(`usage: unknown or incomplete option ${argv[i]}`);
-    a[key] = argv[i + 1];
-  }
-  if (!a.exe || !a.store) throw new Error('--exe and --store are required');
-  return a;
-}
-
-function startViewer(a) {
-  const t0 = Date.now();
-  const proc = spawn(a.exe, ['view', '--store', a.store, '--port', '0', '--threads', a.threads], { stdio: ['ignore', 'pipe', 'pipe'] });
-  let log = '';
-  return new Promise((resolve, reject) => {
-    const onData = (d) => {
-      log += d;
-      const m = log.match(/on (http:\/\/127\.0\.0\.1:\d+\/)/);
-      if (m) resolve({ proc, url: m[1], readyMs: Date.now() - t0, log: () => log });
-    };
-    proc.stdout.on('data', onData);
-    proc.stderr.on('data', onData);
-    proc.on('exit', (code) => reject(new Error(`ltmapper view exited (${code}):\n${log}`)));
-  });
-}
+import { launchBrowser, parseArgs, startViewer } from './viewer_process.mjs';
 
 async function open(page, url) {
   const t0 = Date.now();
@@ -48,13 +19,12 @@ async function open(page, url) {
 }
 
 async function main() {
-  const a = args();
-  const viewer = await startViewer(a);
+  const a = parseArgs({ exe: '', store: '', chromium: '/usr/bin/chromium', reloads: '3', threads: '2' }, ['exe', 'store']);
+  const viewer = await startViewer(a.exe, a.store, { threads: a.threads });
   console.log(`server listening ${(viewer.readyMs / 1000).toFixed(2)} s after start`);
   try {
     const t0 = Date.now();
-    const browser = await chromium.launch({ executablePath: a.chromium, headless: true,
-                                            args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] });
+    const browser = await launchBrowser(a.chromium);
     const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
     const launchMs = Date.now() - t0;
     const show = (what, r) => console.log(`${what}: first frame ${(r.first / 1000).toFixed(2)} s after navigation; ` +
