@@ -43,7 +43,8 @@ const controls = new OrbitControls(camera, renderer.domElement);
 controls.addEventListener('change', () => { render(); scheduleLod(); });
 // Test hook (web/test/view_test.mjs reads pixels at projected points and the box shown).
 window.__ltmView.debug = { renderer, camera, scene, cloudGroup: state.cloudGroup, changeGroup: state.changeGroup,
-                           coverageGroup: state.coverageGroup, boxGroup: state.boxGroup, classes: state.classes };
+                           coverageGroup: state.coverageGroup, boxGroup: state.boxGroup, classes: state.classes,
+                           controls, tiles: () => state.tiles };
 
 function render() {
   renderer.render(scene, camera);
