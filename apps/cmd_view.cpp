@@ -38,8 +38,9 @@ void RunView(ViewOptions& o) {
     ~Join() { if (t.joinable()) t.join(); }
   } join{warm};
   view::Serve(viewer, o.host, o.port, [&](int port) {
-    // The page opens on the latest session: its cloud is ready before the address is printed;
-    // the other sessions and the meta map follow in the background (the slider finds them ready).
+    // The page opens on the latest session: its tiles and their level 0 are ready before the
+    // address is printed; the other sessions and the meta map follow in the background (the
+    // slider finds them ready).
     const auto requests = viewer.WarmRequests();
     if (!requests.empty()) viewer.Handle(requests.front());
     warm = std::thread([&viewer, requests] {
@@ -61,10 +62,10 @@ void Setup(CLI::App& parent) {
   cmd->add_option("--host", o.host, "Address to bind (127.0.0.1: this machine only)");
   cmd->add_option("--web", o.cfg.web_dir, "Folder of the page (index.html, viewer.js, three/)");
   cmd->add_option("--voxel", o.cfg.base_voxel_m, "Finest voxel of served clouds [m] (base_voxel_m, default 0.1)");
-  cmd->add_option("--budget", o.cfg.point_budget, "Most points in one served cloud (point_budget, default 2000000)");
+  cmd->add_option("--budget", o.cfg.point_budget, "Most points in one served cloud and drawn by the page (point_budget, default 2000000)");
   cmd->add_option("--set", o.set,
-                  "Override a view config key: base_voxel_m, point_budget, max_voxel_m, cache_clouds, "
-                  "max_query_chars, max_path_chars, max_static_mb (repeatable)");
+                  "Override a view config key: base_voxel_m, point_budget, max_voxel_m, cache_clouds, tile_m, "
+                  "lod_levels, cache_mb, max_query_chars, max_path_chars, max_static_mb (repeatable)");
   cmd->add_option("--config", o.map_config, "params_ltmap.yaml (meta_carve_radius_m for the meta map)");
   o.cfg.web_dir = LTM_WEB_DIR;
   cmd->callback([opts] { RunView(*opts); });

@@ -9,6 +9,7 @@
 #include <pybind11/stl.h>
 
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace ltm::py_bind {
@@ -29,6 +30,21 @@ py::array_t<double> PoseToNumpy(const Pose& pose);                   // (4,4)
 py::array_t<double> PosesToNumpy(const std::vector<Pose>& poses);    // (N,4,4)
 Pose PoseFromPython(const py::handle& obj, const std::string& what = "pose");
 std::vector<Pose> PosesFromPython(const py::handle& obj, const std::string& what = "poses");
+
+// ------------------------------------------------------------------------------ result dicts
+// The plain fields of a result struct into a dict under their own names, in one call:
+//   PutFields(d, r, LTM_KV(r, session), LTM_KV(r, points), LTM_KV(r, seconds));
+// is d["session"] = r.session; d["points"] = r.points; d["seconds"] = r.seconds (pybind11's
+// conversions: numbers, strings, bools, std::vector of them). Fields needing a conversion of
+// their own (poses, vectors, nested records) are set beside it.
+#define LTM_KV(obj, field) #field, &std::decay_t<decltype(obj)>::field
+template <class S>
+void PutFields(py::dict&, const S&) {}
+template <class S, class T, class... Rest>
+void PutFields(py::dict& d, const S& s, const char* name, T S::*member, Rest... rest) {
+  d[name] = s.*member;
+  PutFields(d, s, rest...);
+}
 
 // --------------------------------------------------------------------------------- JSON / misc
 // json.loads(text) (the eval module's report JSON as plain dicts; NaN is written as null).

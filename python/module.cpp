@@ -55,12 +55,8 @@ py::dict SensorToDict(const geometry::SensorModel& s) {
   d["source"] = s.source;
   d["ring_based"] = s.ring_based;
   d["beams"] = s.beams();
-  d["elevations_deg"] = s.elevations_deg;
-  d["azimuth_step_deg"] = s.azimuth_step_deg;
-  d["grid_deg"] = s.grid_deg;
-  d["fov_up_deg"] = s.fov_up_deg;
-  d["fov_down_deg"] = s.fov_down_deg;
-  d["spread_deg"] = s.spread_deg;
+  PutFields(d, s, LTM_KV(s, elevations_deg), LTM_KV(s, azimuth_step_deg), LTM_KV(s, grid_deg), LTM_KV(s, fov_up_deg),
+            LTM_KV(s, fov_down_deg), LTM_KV(s, spread_deg));
   return d;
 }
 

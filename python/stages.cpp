@@ -23,16 +23,12 @@ py::dict SlamToDict(const slam::SlamResult& r) {
   py::list sessions;
   for (const auto& s : r.sessions) {
     py::dict d;
-    d["name"] = s.name;
-    d["aligned"] = s.aligned;
-    d["reason"] = s.reason;
+    PutFields(d, s, LTM_KV(s, name), LTM_KV(s, aligned), LTM_KV(s, reason));
     d["anchor"] = PoseToNumpy(s.anchor);
     d["T_session_sensor"] = PosesToNumpy(s.T_session_sensor);
     d["T_world_sensor"] = PosesToNumpy(s.T_world_sensor);
-    d["sc_candidates"] = s.sc_candidates;
-    d["loops_verified"] = s.loops_verified;
-    d["loops_accepted"] = s.loops_accepted;
-    d["radius_loops"] = s.radius_loops;
+    PutFields(d, s, LTM_KV(s, sc_candidates), LTM_KV(s, loops_verified), LTM_KV(s, loops_accepted),
+              LTM_KV(s, radius_loops));
     sessions.append(d);
   }
   py::list loops;
@@ -40,60 +36,34 @@ py::dict SlamToDict(const slam::SlamResult& r) {
     py::dict d;
     d["a"] = py::make_tuple(l.a.session, l.a.keyframe);
     d["b"] = py::make_tuple(l.b.session, l.b.keyframe);
-    d["source"] = l.source;
-    d["sc_distance"] = l.sc_distance;
-    d["yaw_deg"] = l.yaw_deg;
+    PutFields(d, l, LTM_KV(l, source), LTM_KV(l, sc_distance), LTM_KV(l, yaw_deg));
     d["T_a_b"] = PoseToNumpy(l.T_a_b);
-    d["fitness"] = l.fitness;
-    d["verified"] = l.verified;
-    d["accepted"] = l.accepted;
-    d["status"] = l.status;
-    d["residual_t_m"] = l.residual_t_m;
-    d["residual_r_deg"] = l.residual_r_deg;
+    PutFields(d, l, LTM_KV(l, fitness), LTM_KV(l, verified), LTM_KV(l, accepted), LTM_KV(l, status),
+              LTM_KV(l, residual_t_m), LTM_KV(l, residual_r_deg));
     loops.append(d);
   }
   py::dict d;
   d["sessions"] = sessions;
   d["loops"] = loops;
-  d["time_descriptors_s"] = r.time_descriptors_s;
-  d["time_retrieval_s"] = r.time_retrieval_s;
-  d["time_registration_s"] = r.time_registration_s;
-  d["time_optimisation_s"] = r.time_optimisation_s;
-  d["time_total_s"] = r.time_total_s;
-  d["registrations"] = r.registrations;
-  d["solution_usable"] = r.solution_usable;
-  d["initial_cost"] = r.initial_cost;
-  d["final_cost"] = r.final_cost;
-  d["solver_iterations"] = r.solver_iterations;
+  PutFields(d, r, LTM_KV(r, time_descriptors_s), LTM_KV(r, time_retrieval_s), LTM_KV(r, time_registration_s),
+            LTM_KV(r, time_optimisation_s), LTM_KV(r, time_total_s), LTM_KV(r, registrations),
+            LTM_KV(r, solution_usable), LTM_KV(r, initial_cost), LTM_KV(r, final_cost), LTM_KV(r, solver_iterations));
   return d;
 }
 
 py::dict HdStatsToDict(const removert::HdStats& h) {
   py::dict d;
-  d["map_points"] = h.map_points;
-  d["removed_per_resolution"] = h.removed_per_resolution;
-  d["candidates"] = h.candidates;
-  d["reverted"] = h.reverted;
-  d["removed"] = h.removed;
-  d["dilated"] = h.dilated;
-  d["seconds_map"] = h.seconds_map;
-  d["seconds_votes"] = h.seconds_votes;
+  PutFields(d, h, LTM_KV(h, map_points), LTM_KV(h, removed_per_resolution), LTM_KV(h, candidates),
+            LTM_KV(h, reverted), LTM_KV(h, removed), LTM_KV(h, dilated), LTM_KV(h, seconds_map),
+            LTM_KV(h, seconds_votes));
   return d;
 }
 
 py::dict LdStatsToDict(const removert::LdStats& l) {
   py::dict d;
-  d["central_points"] = l.central_points;
-  d["query_points"] = l.query_points;
-  d["nd_strong"] = l.nd_strong;
-  d["nd_weak"] = l.nd_weak;
-  d["pd_strong"] = l.pd_strong;
-  d["pd_weak"] = l.pd_weak;
-  d["pd_unobserved"] = l.pd_unobserved;
-  d["nd_unobserved"] = l.nd_unobserved;
-  d["pd_same"] = l.pd_same;
-  d["nd_same"] = l.nd_same;
-  d["seconds"] = l.seconds;
+  PutFields(d, l, LTM_KV(l, central_points), LTM_KV(l, query_points), LTM_KV(l, nd_strong), LTM_KV(l, nd_weak),
+            LTM_KV(l, pd_strong), LTM_KV(l, pd_weak), LTM_KV(l, pd_unobserved), LTM_KV(l, nd_unobserved),
+            LTM_KV(l, pd_same), LTM_KV(l, nd_same), LTM_KV(l, seconds));
   return d;
 }
 
@@ -107,9 +77,7 @@ py::dict StageReportToDict(const removert::StageReport& r) {
   d["hd"] = hd;
   d["pairs"] = pairs;
   d["ld"] = ld;
-  d["new_keyframes"] = r.new_keyframes;
-  d["seconds"] = r.seconds;
-  d["peak_rss_bytes"] = r.peak_rss_bytes;
+  PutFields(d, r, LTM_KV(r, new_keyframes), LTM_KV(r, seconds), LTM_KV(r, peak_rss_bytes));
   return d;
 }
 
@@ -117,35 +85,16 @@ py::dict SimReportToDict(const sim::SimReport& r) {
   py::list pairs;
   for (const auto& p : r.pairs) {
     py::dict d;
-    d["query"] = p.query;
-    d["pd_strong"] = p.pd_strong;
-    d["pd_weak"] = p.pd_weak;
-    d["nd_strong"] = p.nd_strong;
-    d["nd_weak"] = p.nd_weak;
-    d["objects_pd_strong"] = p.objects_pd_strong;
-    d["objects_pd_weak"] = p.objects_pd_weak;
-    d["objects_nd_strong"] = p.objects_nd_strong;
-    d["objects_nd_weak"] = p.objects_nd_weak;
-    d["rays"] = p.rays;
+    PutFields(d, p, LTM_KV(p, query), LTM_KV(p, pd_strong), LTM_KV(p, pd_weak), LTM_KV(p, nd_strong),
+              LTM_KV(p, nd_weak), LTM_KV(p, objects_pd_strong), LTM_KV(p, objects_pd_weak),
+              LTM_KV(p, objects_nd_strong), LTM_KV(p, objects_nd_weak), LTM_KV(p, rays));
     pairs.append(d);
   }
   py::dict d;
-  d["sessions"] = r.sessions;
-  d["keyframes"] = r.keyframes;
-  d["triangles"] = r.triangles;
-  d["ld_objects"] = r.ld_objects;
-  d["hd_actors"] = r.hd_actors;
-  d["rays"] = r.rays;
-  d["points"] = r.points;
-  d["hd_points"] = r.hd_points;
-  d["ld_points"] = r.ld_points;
-  d["rays_per_s"] = r.rays_per_s;
-  d["seconds_build"] = r.seconds_build;
-  d["seconds_cast"] = r.seconds_cast;
-  d["seconds_write"] = r.seconds_write;
-  d["seconds_truth"] = r.seconds_truth;
-  d["seconds_total"] = r.seconds_total;
-  d["bytes_written"] = r.bytes_written;
+  PutFields(d, r, LTM_KV(r, sessions), LTM_KV(r, keyframes), LTM_KV(r, triangles), LTM_KV(r, ld_objects),
+            LTM_KV(r, hd_actors), LTM_KV(r, rays), LTM_KV(r, points), LTM_KV(r, hd_points), LTM_KV(r, ld_points),
+            LTM_KV(r, rays_per_s), LTM_KV(r, seconds_build), LTM_KV(r, seconds_cast), LTM_KV(r, seconds_write),
+            LTM_KV(r, seconds_truth), LTM_KV(r, seconds_total), LTM_KV(r, bytes_written));
   d["pairs"] = pairs;
   return d;
 }
@@ -154,22 +103,14 @@ py::dict RunReportToDict(const pipeline::RunReport& r) {
   py::list stages;
   for (const auto& s : r.stages) {
     py::dict d;
-    d["stage"] = s.stage;
-    d["skipped"] = s.skipped;
-    d["seconds"] = s.seconds;
+    PutFields(d, s, LTM_KV(s, stage), LTM_KV(s, skipped), LTM_KV(s, seconds));
     stages.append(d);
   }
   py::dict d;
-  d["sessions"] = r.sessions;
-  d["aligned"] = r.aligned;
-  d["not_aligned"] = r.not_aligned;
+  PutFields(d, r, LTM_KV(r, sessions), LTM_KV(r, aligned), LTM_KV(r, not_aligned));
   d["stages"] = stages;
-  d["map_points_live"] = r.map_points_live;
-  d["map_points_meta"] = r.map_points_meta;
-  d["objects"] = r.objects;
-  d["store_bytes"] = r.store_bytes;
-  d["seconds"] = r.seconds;
-  d["peak_rss_bytes"] = r.peak_rss_bytes;
+  PutFields(d, r, LTM_KV(r, map_points_live), LTM_KV(r, map_points_meta), LTM_KV(r, objects), LTM_KV(r, store_bytes),
+            LTM_KV(r, seconds), LTM_KV(r, peak_rss_bytes));
   return d;
 }
 

@@ -7,18 +7,9 @@ namespace ltm::py_bind {
 
 py::dict IntegrationToDict(const map::IntegrationResult& r) {
   py::dict d;
-  d["session"] = r.session;
-  d["keyframes_new"] = r.keyframes_new;
-  d["keyframes_changed"] = r.keyframes_changed;
-  d["pd_strong"] = r.pd_strong;
-  d["pd_weak"] = r.pd_weak;
-  d["nd_strong"] = r.nd_strong;
-  d["nd_weak"] = r.nd_weak;
-  d["superseded"] = r.superseded;
-  d["restored"] = r.restored;
-  d["points"] = r.points;
-  d["bytes"] = r.bytes;
-  d["seconds"] = r.seconds;
+  PutFields(d, r, LTM_KV(r, session), LTM_KV(r, keyframes_new), LTM_KV(r, keyframes_changed), LTM_KV(r, pd_strong),
+            LTM_KV(r, pd_weak), LTM_KV(r, nd_strong), LTM_KV(r, nd_weak), LTM_KV(r, superseded), LTM_KV(r, restored),
+            LTM_KV(r, points), LTM_KV(r, bytes), LTM_KV(r, seconds));
   return d;
 }
 
@@ -32,52 +23,31 @@ py::array_t<double> Vec3(const Eigen::Vector3d& v) {
 
 py::dict SessionToDict(const map::SessionRecord& s) {
   py::dict d;
-  d["order"] = s.order;
-  d["name"] = s.name;
-  d["reference"] = s.reference;
+  PutFields(d, s, LTM_KV(s, order), LTM_KV(s, name), LTM_KV(s, reference));
   d["anchor"] = PoseToNumpy(s.anchor);
-  d["params"] = s.params;
-  d["integrated_utc"] = s.integrated_utc;
-  d["keyframes_new"] = s.keyframes_new;
-  d["keyframes_changed"] = s.keyframes_changed;
-  d["pd_strong"] = s.pd_strong;
-  d["pd_weak"] = s.pd_weak;
-  d["nd_strong"] = s.nd_strong;
-  d["nd_weak"] = s.nd_weak;
-  d["superseded"] = s.superseded;
-  d["restored"] = s.restored;
-  d["points"] = s.points;
-  d["bytes"] = s.bytes;
+  PutFields(d, s, LTM_KV(s, params), LTM_KV(s, integrated_utc), LTM_KV(s, keyframes_new),
+            LTM_KV(s, keyframes_changed), LTM_KV(s, pd_strong), LTM_KV(s, pd_weak), LTM_KV(s, nd_strong),
+            LTM_KV(s, nd_weak), LTM_KV(s, superseded), LTM_KV(s, restored), LTM_KV(s, points), LTM_KV(s, bytes));
   return d;
 }
 
 py::dict KeyframeToDict(const map::KeyframeRecord& k) {
   py::dict d;
-  d["id"] = k.id;
-  d["session"] = k.session;
-  d["source_index"] = k.source_index;
+  PutFields(d, k, LTM_KV(k, id), LTM_KV(k, session), LTM_KV(k, source_index));
   d["T_world_sensor"] = PoseToNumpy(k.T_world_sensor);
-  d["base_points"] = k.base_points;
-  d["base_bytes"] = k.base_bytes;
-  d["delta_count"] = k.delta_count;
-  d["delta_bytes"] = k.delta_bytes;
+  PutFields(d, k, LTM_KV(k, base_points), LTM_KV(k, base_bytes), LTM_KV(k, delta_count), LTM_KV(k, delta_bytes));
   return d;
 }
 
 py::dict ObjectToDict(const map::MapObject& o) {
   py::dict d;
-  d["id"] = o.id;
-  d["session"] = o.session;
-  d["reference"] = o.reference;
+  PutFields(d, o, LTM_KV(o, id), LTM_KV(o, session), LTM_KV(o, reference));
   d["cls"] = std::string(ToString(o.cls));
   d["points"] = o.points;
   d["centroid"] = Vec3(o.centroid);
   d["lo"] = Vec3(o.lo);
   d["hi"] = Vec3(o.hi);
-  d["change"] = o.change;
-  d["partner"] = o.partner;
-  d["exists_in"] = o.exists_in;
-  d["confidence"] = o.confidence;
+  PutFields(d, o, LTM_KV(o, change), LTM_KV(o, partner), LTM_KV(o, exists_in), LTM_KV(o, confidence));
   d["box_center"] = Vec3(o.box_center);
   d["size"] = Vec3(o.size);
   d["yaw_rad"] = o.yaw_rad;
@@ -165,11 +135,8 @@ void BindStore(py::module_& m) {
            [](const Store& s) {
              const auto t = s.Totals();
              py::dict d;
-             d["file_bytes"] = t.file_bytes;
-             d["base_bytes"] = t.base_bytes;
-             d["delta_bytes"] = t.delta_bytes;
-             d["base_points"] = t.base_points;
-             d["delta_points"] = t.delta_points;
+             PutFields(d, t, LTM_KV(t, file_bytes), LTM_KV(t, base_bytes), LTM_KV(t, delta_bytes),
+                       LTM_KV(t, base_points), LTM_KV(t, delta_points));
              return d;
            })
       .def(
@@ -255,13 +222,8 @@ void BindStore(py::module_& m) {
                r = s.Fsck();
              }
              py::dict d;
-             d["ok"] = r.ok;
-             d["problems"] = r.problems;
-             d["sessions"] = r.sessions;
-             d["keyframes"] = r.keyframes;
-             d["blobs"] = r.blobs;
-             d["points"] = r.points;
-             d["bytes"] = r.bytes;
+             PutFields(d, r, LTM_KV(r, ok), LTM_KV(r, problems), LTM_KV(r, sessions), LTM_KV(r, keyframes),
+                       LTM_KV(r, blobs), LTM_KV(r, points), LTM_KV(r, bytes));
              return d;
            })
       .def("digest", &Store::Digest)

@@ -97,8 +97,10 @@ cat > "$OUT/eval/60_viewer.md" <<EOF_VIEW
 ## 3D viewer
 
 \`$LTM view --store $RUN/map.ltmap\`, then open http://127.0.0.1:8080/ : the map in 3D with a session
-slider (the map as of each session, by the store's rollback), the meta map, each session's changes,
-the trajectories and the changed objects (click: fly to it, its box, change and sessions).
+slider (the map as of each session, by the store's rollback), the meta map, each session's changes
+and coverage (new territory), the trajectories and the changed objects (click: fly to it, its box,
+change and sessions). Level of detail: the whole map at a coarse voxel first, then finer voxels for
+the 32 m tiles near the camera (down to 0.1 m) within a 2 M-point budget.
 EOF_VIEW
 
 ITEMS=(--item "$RUN/run_report.md")

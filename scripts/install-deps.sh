@@ -20,6 +20,7 @@ PACKAGES=(
   libpng-dev             # PNG renders
   libgtest-dev libgmock-dev libbenchmark-dev   # tests and benchmarks
   pybind11-dev python3-dev python3-numpy       # Python bindings (python/, `import ltmapper`)
+  python3-pytest                               # their tests (ctest python_bindings)
   libcpp-httplib-dev nlohmann-json3-dev        # ltmapper view: HTTP server, JSON
   chromium               # headless browser of the viewer's browser test (tests/browser/)
 )

@@ -1,5 +1,7 @@
 // ltmapper view: the map store in 3D (three.js). Talks to the API of src/ltmapper/view
-// (docs/FORMATS.md, "Viewer API"): /api/info, /api/cloud, /api/trajectories, /api/objects.
+// (docs/FORMATS.md, "Viewer API"): /api/info, /api/tiles, /api/tile, /api/cloud, /api/trajectories,
+// /api/objects. Level of detail: the map is drawn from its tiles at level 0 (the coarsest voxel)
+// first, then the tiles near the camera are fetched at finer levels within the point budget.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
@@ -11,30 +13,38 @@ const OBJECT_VIEW_DIST = 3.0;  // camera distance to a clicked object, in box di
 const HEADER_BYTES = 16;       // cloud header: "LTMC", version, count, voxel
 const CLICK_SLOP_PX = 4;       // a pointer that moved less than this between down and up clicked
 const PICK_PX = 4;             // measure: a click picks points drawn within this many pixels
+const LOD_MIN_PX = 1.0;        // a finer level is fetched while its voxel still spans this many pixels
+const LOD_PARALLEL = 4;        // tile requests in flight at once
+const LOD_DELAY_MS = 150;      // the camera rests this long before tiles are refined
+const LOD_SURFACE_GROWTH = 4;  // a tile's points per level finer (surfaces: halved voxel, 4 x points)
 
 const $ = (id) => document.getElementById(id);
 const state = {
   info: null, layer: 'at', session: 0, classes: new Map(), classVisible: new Map(),
-  showChanges: false, measure: [], cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(),
-  trajGroup: new THREE.Group(), boxGroup: new THREE.Group(), measureGroup: new THREE.Group(),
-  objects: [], selected: -1, loads: 0,
+  showChanges: false, showCoverage: false, measure: [], cloudGroup: new THREE.Group(), changeGroup: new THREE.Group(),
+  coverageGroup: new THREE.Group(), trajGroup: new THREE.Group(), boxGroup: new THREE.Group(),
+  measureGroup: new THREE.Group(), objects: [], selected: -1, loads: 0, overlays: 0,
+  tiles: null, lod: { timer: null, queue: [], inflight: 0 },
 };
-// What the browser test reads: frames drawn, the cloud on screen, time to the first frame.
-window.__ltmView = { frames: 0, loaded: 0, points: 0, layer: 'at', session: -1, firstFrameMs: null, error: null };
+// What the browser test reads: frames drawn, the cloud on screen (points drawn, tiles per level),
+// time to the first frame, whether level-of-detail requests are still under way.
+window.__ltmView = { frames: 0, loaded: 0, points: 0, layer: 'at', session: -1, firstFrameMs: null, error: null,
+                     lodIdle: false, tileLevels: [], coveragePoints: 0 };
 
 const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
 renderer.setPixelRatio(1);
 renderer.setClearColor(BACKGROUND);
 $('view').appendChild(renderer.domElement);
 const scene = new THREE.Scene();
-scene.add(state.cloudGroup, state.changeGroup, state.trajGroup, state.boxGroup, state.measureGroup);
+scene.add(state.cloudGroup, state.changeGroup, state.coverageGroup, state.trajGroup, state.boxGroup, state.measureGroup);
 const camera = new THREE.PerspectiveCamera(60, 1, 0.1, 20000);
 camera.up.set(0, 0, 1);  // the map's world frame is z-up
 const controls = new OrbitControls(camera, renderer.domElement);
-controls.addEventListener('change', render);
+controls.addEventListener('change', () => { render(); scheduleLod(); });
 // Test hook (web/test/view_test.mjs reads pixels at projected points and the box shown).
 window.__ltmView.debug = { renderer, camera, scene, cloudGroup: state.cloudGroup, changeGroup: state.changeGroup,
-                           boxGroup: state.boxGroup, classes: state.classes };
+                           coverageGroup: state.coverageGroup, boxGroup: state.boxGroup, classes: state.classes,
+                           controls, tiles: () => state.tiles };
 
 function render() {
   renderer.render(scene, camera);
@@ -104,19 +114,27 @@ function splitByClass(cloud) {
 
 function clearGroup(group) {
   for (const child of [...group.children]) {
-    child.geometry.dispose();
-    child.material.dispose();
+    if (child.isGroup) clearGroup(child);
+    else child.geometry.dispose(), child.material.dispose();
     group.remove(child);
   }
 }
 
+// Every THREE.Points below a group (the map: one group per tile, one Points per class in it).
+function pointsIn(group) {
+  const out = [];
+  group.traverse((o) => { if (o.isPoints) out.push(o); });
+  return out;
+}
+
 // `onTop`: drawn over everything else (the step's changes must not hide behind the map).
-function showCloud(cloud, group, sizePx, onTop = false) {
+// `color`: one colour for every class (the coverage layer), else the class colours.
+function showCloud(cloud, group, sizePx, onTop = false, color = null) {
   clearGroup(group);
   for (const [c, part] of splitByClass(cloud)) {
     const geom = new THREE.BufferGeometry();
     geom.setAttribute('position', new THREE.BufferAttribute(part.xyz, 3));
-    const rgb = (state.classes.get(c) || { rgb: [70, 70, 70] }).rgb;
+    const rgb = color || (state.classes.get(c) || { rgb: [70, 70, 70] }).rgb;
     const mat = new THREE.PointsMaterial({ size: sizePx, sizeAttenuation: false,
                                            color: new THREE.Color(rgbCss(rgb)), depthTest: !onTop });
     const points = new THREE.Points(geom, mat);
@@ -127,40 +145,203 @@ function showCloud(cloud, group, sizePx, onTop = false) {
   }
 }
 
-// The changes the slider's session step made (PD added, ND removed or kept), over the map.
-async function loadChanges(ticket) {
-  if (!state.showChanges || state.layer !== 'at' || state.session === 0) return clearGroup(state.changeGroup);
-  const buf = await (await fetchOk(`/api/cloud?layer=changes&session=${state.session}`)).arrayBuffer();
-  if (ticket !== state.loads) return;
-  showCloud(decodeCloud(buf), state.changeGroup, CHANGE_SIZE_PX, true);
+// The overlays of the slider's session step, over the map: its changes (PD added, ND removed or
+// kept) and its coverage difference (new territory: map keyframes the step created).
+async function loadOverlay(layer, on, group, sizePx, color) {
+  if (!on || state.layer !== 'at' || state.session === 0) return { cloud: null, group, sizePx, color };
+  const buf = await (await fetchOk(`/api/cloud?layer=${layer}&session=${state.session}`)).arrayBuffer();
+  return { cloud: decodeCloud(buf), group, sizePx, color };
 }
 
+async function loadOverlays() {
+  const ticket = ++state.overlays, loads = state.loads;
+  const parts = await Promise.all([
+    loadOverlay('changes', state.showChanges, state.changeGroup, CHANGE_SIZE_PX, null),
+    loadOverlay('coverage', state.showCoverage, state.coverageGroup, CHANGE_SIZE_PX, state.info.coverage_rgb)]);
+  if (ticket !== state.overlays || loads !== state.loads) return false;  // replaced meanwhile
+  for (const p of parts) {
+    if (p.cloud) showCloud(p.cloud, p.group, p.sizePx, true, p.color);
+    else clearGroup(p.group);
+  }
+  window.__ltmView.coveragePoints = parts[1].cloud ? parts[1].cloud.n : 0;
+  return true;
+}
+
+// An overlay switched on or off: only the overlays are fetched again.
+async function reloadOverlays() {
+  if (await loadOverlays()) {
+    render();
+    window.__ltmView.loaded += 1;
+  }
+}
+
+function tileQuery() {
+  return state.layer === 'meta' ? 'layer=meta' : `layer=at&session=${state.session}`;
+}
+
+// The map of the slider's session (or meta): the tile index and every tile at level 0 in one
+// response, cut into one group per tile; finer levels follow (updateLod).
 async function loadCloud() {
   const ticket = ++state.loads;
-  const query = state.layer === 'meta' ? 'layer=meta' : `layer=at&session=${state.session}`;
+  const query = tileQuery();
   setStatus('loading…');
   const t = performance.now();
-  const buf = await (await fetchOk(`/api/cloud?${query}`)).arrayBuffer();
+  cancelLod();
+  const [index, buf] = await Promise.all([
+    fetchOk(`/api/tiles?${query}`).then((r) => r.json()),
+    fetchOk(`/api/tile?${query}&tile=all&level=0`).then((r) => r.arrayBuffer())]);
   if (ticket !== state.loads) return;  // a newer request replaced this one
   const cloud = decodeCloud(buf);
-  showCloud(cloud, state.cloudGroup, POINT_SIZE_PX);
-  updateLegendCounts(cloud);
-  await loadChanges(ticket);
+  clearGroup(state.cloudGroup);
+  const tiles = { query, levels: index.levels, list: [], byId: new Map(), coarseSeconds: (performance.now() - t) / 1000 };
+  let at = 0;
+  for (const info of index.tiles) {
+    const n = info.coarse;
+    const coarse = { n, voxel: cloud.voxel, xyz: cloud.xyz.subarray(3 * at, 3 * (at + n)), cls: cloud.cls.subarray(at, at + n) };
+    at += n;
+    const tile = { id: info.id, raw: info.points, coarse, counts: [n], level: 0, target: 0, loading: -1, drawn: n,
+                   box: new THREE.Box3(new THREE.Vector3(...info.lo), new THREE.Vector3(...info.hi)),
+                   group: new THREE.Group() };
+    showCloud(coarse, tile.group, POINT_SIZE_PX);
+    state.cloudGroup.add(tile.group);
+    tiles.list.push(tile);
+    tiles.byId.set(tile.id, tile);
+  }
+  if (at !== cloud.n) throw new Error(`tiles: the index counts ${at} points at level 0, the cloud has ${cloud.n}`);
+  state.tiles = tiles;
+  updateLegendCounts();
+  await loadOverlays();
   if (ticket !== state.loads) return;
-  if (window.__ltmView.loaded === 0) frameAll(cloud);
+  if (window.__ltmView.loaded === 0) frameAll();
   render();
   Object.assign(window.__ltmView, { loaded: window.__ltmView.loaded + 1, points: cloud.n, layer: state.layer,
                                     session: state.session });
-  // performance.now() counts from the navigation's start: the time a user waits for the map.
-  if (window.__ltmView.firstFrameMs === null) window.__ltmView.firstFrameMs = performance.now();
-  setStatus(`${cloud.n.toLocaleString()} points, voxel ${cloud.voxel.toFixed(2)} m, ` +
-            `${((performance.now() - t) / 1000).toFixed(2)} s` +
-            `\nfirst frame ${(window.__ltmView.firstFrameMs / 1000).toFixed(2)} s after opening the page`);
+  // performance.now() counts from the navigation's start: the time a user waits for the map
+  // (reading a pixel back waits until the frame is drawn, not only queued).
+  if (window.__ltmView.firstFrameMs === null) {
+    const gl = renderer.getContext();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+    window.__ltmView.firstFrameMs = performance.now();
+  }
+  updateStatus();
+  scheduleLod(0);
 }
 
-function frameAll(cloud) {
+function updateStatus() {
+  const tiles = state.tiles;
+  if (!tiles) return;
+  const perLevel = tiles.levels.map(() => 0);
+  let points = 0;
+  for (const tile of tiles.list) perLevel[tile.level] += 1, points += tile.drawn;
+  const levels = perLevel.map((k, i) => (k ? `${k} at ${tiles.levels[i].toFixed(2)} m` : '')).filter(Boolean).join(', ');
+  Object.assign(window.__ltmView, { points, tileLevels: perLevel });
+  setStatus(`${points.toLocaleString()} points in ${tiles.list.length} tiles: ${levels}` +
+            `${state.lod.inflight || state.lod.queue.length ? ' (refining…)' : ''}` +
+            `\nlevel 0 in ${tiles.coarseSeconds.toFixed(2)} s; ` +
+            `first frame ${(window.__ltmView.firstFrameMs / 1000).toFixed(2)} s after opening the page`);
+}
+
+// ------------------------------------------------------------------------- level of detail
+// Per tile, the finest level whose voxel still spans LOD_MIN_PX pixels at the tile's distance
+// (tiles out of view: level 0); nearest tiles first while the points drawn stay within the
+// budget (a level's count is known once fetched, else estimated from level 0).
+function cancelLod() {
+  clearTimeout(state.lod.timer);
+  state.lod.queue = [];
+  window.__ltmView.lodIdle = false;
+}
+
+function scheduleLod(delayMs = LOD_DELAY_MS) {
+  if (!state.tiles) return;
+  clearTimeout(state.lod.timer);
+  window.__ltmView.lodIdle = false;
+  state.lod.timer = setTimeout(updateLod, delayMs);
+}
+
+function estimate(tile, level) {
+  if (tile.counts[level] !== undefined) return tile.counts[level];
+  return Math.min(tile.raw, tile.coarse.n * LOD_SURFACE_GROWTH ** level);
+}
+
+function updateLod() {
+  const tiles = state.tiles;
+  if (!tiles) return;
+  camera.updateMatrixWorld();
+  const frustum = new THREE.Frustum().setFromProjectionMatrix(
+      new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse));
+  const focal = renderer.domElement.clientHeight / 2 / Math.tan((camera.fov * Math.PI) / 360);
+  const order = tiles.list.map((tile) => {
+    const d = Math.max(tile.box.distanceToPoint(camera.position), 1e-3);
+    const inView = frustum.intersectsBox(tile.box);
+    let want = 0;
+    if (inView) for (let k = 1; k < tiles.levels.length; k++) if ((tiles.levels[k] * focal) / d >= LOD_MIN_PX) want = k;
+    return { tile, d, want };
+  }).sort((a, b) => a.d - b.d);
+  let total = 0;
+  for (const { tile } of order) total += tile.coarse.n;
+  for (const o of order) {
+    o.tile.target = 0;
+    for (let k = 1; k <= o.want; k++) {
+      const extra = estimate(o.tile, k) - estimate(o.tile, k - 1);
+      if (total + extra > state.info.point_budget) break;
+      total += extra;
+      o.tile.target = k;
+    }
+  }
+  state.lod.queue = [];
+  for (const { tile } of order) {
+    if (tile.target === tile.level || tile.target === tile.loading) continue;
+    if (tile.target === 0) showTile(tile, tile.coarse, 0);
+    else state.lod.queue.push(tile);
+  }
+  render();
+  pumpLod(state.loads);
+}
+
+function showTile(tile, cloud, level) {
+  showCloud(cloud, tile.group, POINT_SIZE_PX);
+  tile.level = level;
+  tile.drawn = cloud.n;
+}
+
+function pumpLod(ticket) {
+  while (state.lod.inflight < LOD_PARALLEL && state.lod.queue.length) {
+    const tile = state.lod.queue.shift(), level = tile.target;
+    tile.loading = level;
+    state.lod.inflight += 1;
+    fetchOk(`/api/tile?${state.tiles.query}&tile=${tile.id}&level=${level}`).then((r) => r.arrayBuffer()).then((buf) => {
+      if (ticket !== state.loads) return;
+      const cloud = decodeCloud(buf);
+      tile.counts[level] = cloud.n;
+      // The plan used an estimate: a tile that turns out larger than the budget allows waits
+      // for the next plan (which knows its count).
+      const drawn = state.tiles.list.reduce((n, t) => n + t.drawn, 0);
+      if (tile.target === level && drawn - tile.drawn + cloud.n <= state.info.point_budget) showTile(tile, cloud, level);
+      requestRender();
+    }).catch(fail).finally(() => {
+      tile.loading = -1;
+      state.lod.inflight -= 1;
+      pumpLod(state.loads);
+    });
+  }
+  if (!state.lod.inflight && !state.lod.queue.length && !window.__ltmView.lodIdle) {
+    updateLegendCounts();
+    updateStatus();
+    render();
+    window.__ltmView.lodIdle = true;
+  }
+}
+
+let renderQueued = false;
+function requestRender() {
+  if (renderQueued) return;
+  renderQueued = true;
+  requestAnimationFrame(() => { renderQueued = false; render(); });
+}
+
+function frameAll() {
   const box = new THREE.Box3();
-  for (const child of state.cloudGroup.children) {
+  for (const child of pointsIn(state.cloudGroup)) {
     child.geometry.computeBoundingBox();
     box.union(child.geometry.boundingBox);
   }
@@ -189,6 +370,7 @@ function updatePanel() {
   $('layer-meta').classList.toggle('on', state.layer === 'meta');
   $('session').disabled = state.layer === 'meta';
   $('changes').disabled = state.layer === 'meta';
+  $('coverage').disabled = state.layer === 'meta';
 }
 
 function buildLegend() {
@@ -198,7 +380,7 @@ function buildLegend() {
     const { row, box } = legendRow(c.rgb, c.name, '', `count-${c.id}`);
     box.addEventListener('change', (e) => {
       state.classVisible.set(c.id, e.target.checked);
-      for (const p of [...state.cloudGroup.children, ...state.changeGroup.children])
+      for (const p of [...pointsIn(state.cloudGroup), ...state.changeGroup.children])
         if (p.userData.cls === c.id) p.visible = e.target.checked;
       render();
     });
@@ -206,9 +388,11 @@ function buildLegend() {
   }
 }
 
-function updateLegendCounts(cloud) {
+// Points drawn per class (every tile at its current level).
+function updateLegendCounts() {
   const counts = new Map();
-  for (let i = 0; i < cloud.n; i++) counts.set(cloud.cls[i], (counts.get(cloud.cls[i]) || 0) + 1);
+  for (const p of pointsIn(state.cloudGroup))
+    counts.set(p.userData.cls, (counts.get(p.userData.cls) || 0) + p.geometry.attributes.position.count);
   for (const c of state.info.classes) $(`count-${c.id}`).textContent = counts.get(c.id) ? `${counts.get(c.id)}` : '';
 }
 
@@ -225,7 +409,9 @@ function wireControls() {
   $('session').addEventListener('change', onSessionChange);
   $('layer-at').addEventListener('click', () => { state.layer = 'at'; onSessionChange(); });
   $('layer-meta').addEventListener('click', () => { state.layer = 'meta'; updatePanel(); loadCloud().catch(fail); });
-  $('changes').addEventListener('change', (e) => { state.showChanges = e.target.checked; loadCloud().catch(fail); });
+  $('changes').addEventListener('change', (e) => { state.showChanges = e.target.checked; reloadOverlays().catch(fail); });
+  $('coverage').addEventListener('change', (e) => { state.showCoverage = e.target.checked; reloadOverlays().catch(fail); });
+  $('coverage-swatch').style.background = rgbCss(state.info.coverage_rgb);
   $('go-live').addEventListener('click', () => {
     state.layer = 'at';
     $('session').value = String(state.info.latest);
@@ -331,7 +517,7 @@ function pickPoint(clientX, clientY) {
   const px = clientX - rect.left, py = clientY - rect.top;
   const e = new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse).elements;
   let best = null, bestDepth = Infinity;
-  for (const pts of state.cloudGroup.children) {
+  for (const pts of pointsIn(state.cloudGroup)) {
     if (!pts.visible) continue;
     const a = pts.geometry.attributes.position.array;
     for (let i = 0; i < a.length; i += 3) {

@@ -262,6 +262,184 @@ def test_stages_store_eval():
            ltmapper.read_kitti_poses(truth_poses(0)))
 
 
+
+CONFIG_CLASSES = ("SimConfig", "SlamConfig", "RemovertConfig", "MapConfig", "EvalConfig", "RunConfig")
+
+
+def test_every_config_class():
+    """Every bound config: construction, keys / dicts, sections, validate, copy, YAML, errors."""
+    for name in CONFIG_CLASSES:
+        cls = getattr(ltmapper, name)
+        c = cls()
+        assert c.validate() is None and c == cls() and str(c) and name in repr(c)
+        d = c.to_dict()
+        assert list(d) == c.keys() and len(d) > 0
+        dotted = [k for k in d if "." in k]
+        if dotted:  # a section: attribute access to the dotted keys
+            sec = getattr(c, dotted[0].split(".")[0])
+            assert isinstance(sec, ltmapper.ConfigSection) and dotted[0].split(".")[1] in dir(sec)
+            assert sec.to_dict()[dotted[0].split(".", 1)[1]] == d[dotted[0]] and "section" in repr(sec)
+        assert set(dir(c)) >= {k.split(".")[0] for k in d}
+        assert c.copy() == c and __import__("copy").deepcopy(c) == c
+        raises(ltmapper.Error, c.set, "no_such_key_anywhere=1", match="no_such_key_anywhere")
+        raises(ltmapper.Error, cls.from_yaml, os.path.join(work(), "missing_%s.yaml" % name), match="missing_%s" % name)
+    r = ltmapper.RunConfig.from_yaml(os.path.join(SOURCE_DIR, "config", "params_run.yaml"))
+    assert r.keys() == ltmapper.RunConfig().keys()
+    # validate() applies the cross-field rules a stage would (here: a range the field allows but
+    # the config as a whole does not), with the C++ message.
+    m = ltmapper.MapConfig()
+    errors = []
+    for k, v in m.to_dict().items():
+        if isinstance(v, float) and v > 0:
+            try:
+                m.set(k, 0.0)
+            except ltmapper.Error as e:
+                errors.append(str(e))
+                continue
+            try:
+                m.validate()
+            except ltmapper.Error as e:
+                errors.append(str(e))
+            m = ltmapper.MapConfig()
+    assert errors and all(msg for msg in errors)
+
+
+def test_session_objects_and_sensor_fields():
+    s = ltmapper.load_session(session_dir(0))
+    assert isinstance(s, ltmapper.Session) and isinstance(s.keyframes[0], ltmapper.Keyframe)
+    k = s.keyframes[0]
+    assert k.cloud_path.endswith(".pcd") and os.path.exists(k.cloud_path) and "Keyframe" in repr(k)
+    assert isinstance(s.loops, list) and all(l["T_from_to"].shape == (4, 4) for l in s.loops)
+    assert "Session" in repr(s)
+    v = ltmapper.sensor_preset("vlp16")
+    assert isinstance(v, ltmapper.SensorModel)
+    assert len(v.elevations_deg) == v.beams == 16 and v.ring_based in (True, False)
+    assert v.azimuth_step_deg > 0 and v.grid_deg >= 0 and v.fov_up_deg > v.fov_down_deg and v.spread_deg >= 0
+    assert v.spacing_at(0.0) > 0 and v.max_spacing() >= v.median_spacing() > 0
+    assert "vlp16" in repr(v) or v.describe() in repr(v)
+    raises(ltmapper.Error, ltmapper.sensor_from_table, [])
+    raises(ltmapper.Error, ltmapper.estimate_sensor, [])
+
+
+def test_kitti_layout_and_pose_files():
+    """load_kitti_session, read_transform, read_poses (KITTI and TUM) on files written here."""
+    d = os.path.join(work(), "kitti")
+    os.makedirs(os.path.join(d, "velodyne"), exist_ok=True)
+    s = ltmapper.load_session(session_dir(0))
+    poses = s.poses[:3]
+    for i in range(3):
+        ltmapper.write_kitti_bin(os.path.join(d, "velodyne", "%06d.bin" % i), s.scan(i))
+    ltmapper.write_kitti_poses(os.path.join(d, "poses.txt"), poses)
+    k = ltmapper.load_kitti_session(d, os.path.join(d, "poses.txt"))
+    assert len(k) == 3 and np.allclose(k.poses, poses, atol=1e-6)
+    np.testing.assert_array_equal(k.scan(1), s.scan(1))
+    tr = np.eye(4)
+    tr[:3, 3] = (0.1, -0.2, 0.3)
+    with open(os.path.join(d, "calib_tr.txt"), "w") as f:
+        f.write(" ".join("%.9f" % v for v in tr[:3].reshape(-1)) + "\n")
+    np.testing.assert_allclose(ltmapper.read_transform(os.path.join(d, "calib_tr.txt")), tr, atol=1e-9)
+    kt = ltmapper.load_kitti_session(d, os.path.join(d, "poses.txt"), T_cam_velo=tr)
+    assert len(kt) == 3 and not np.allclose(kt.poses[1], k.poses[1])  # camera poses moved into the LiDAR frame
+    np.testing.assert_allclose(ltmapper.read_poses(os.path.join(d, "poses.txt")), poses, atol=1e-6)
+    with open(os.path.join(d, "poses_tum.txt"), "w") as f:
+        f.write("0 1 2 3 0 0 0 1\n1 4 5 6 0 0 0 1\n")
+    tum = ltmapper.read_poses(os.path.join(d, "poses_tum.txt"))
+    assert tum.shape == (2, 4, 4) and tuple(tum[1, :3, 3]) == (4, 5, 6)
+    raises(ltmapper.Error, ltmapper.load_kitti_session, d, os.path.join(d, "none.txt"), match="none.txt")
+    raises(ValueError, ltmapper.load_kitti_session, d, os.path.join(d, "poses.txt"), T_cam_velo=np.eye(3))
+    with open(os.path.join(d, "bad_tr.txt"), "w") as f:
+        f.write("1 2 3\n")
+    raises(ltmapper.Error, ltmapper.read_transform, os.path.join(d, "bad_tr.txt"), match="bad_tr.txt")
+
+
+def test_bad_paths_raise_the_cpp_message():
+    """Every entry point that reads a path: ltmapper.Error naming the missing file or folder."""
+    w = work()
+    gone = os.path.join(w, "gone_%s")
+    cfg = {"slam": ltmapper.SlamConfig(), "rem": ltmapper.RemovertConfig(), "map": ltmapper.MapConfig()}
+    calls = [
+        ("read_cloud", lambda p: ltmapper.read_cloud(p + ".pcd")),
+        ("read_ply", lambda p: ltmapper.read_ply(p + ".ply")),
+        ("read_kitti_poses", lambda p: ltmapper.read_kitti_poses(p + ".txt")),
+        ("read_poses", lambda p: ltmapper.read_poses(p + ".txt")),
+        ("read_transform", lambda p: ltmapper.read_transform(p + ".txt")),
+        ("load_session", lambda p: ltmapper.load_session(p)),
+        ("load_kitti_session", lambda p: ltmapper.load_kitti_session(p, p + "/poses.txt")),
+        ("inspect_session", lambda p: ltmapper.inspect_session(p)),
+        ("read_change_clouds", lambda p: ltmapper.read_change_clouds(p)),
+        ("find_pair_dir", lambda p: ltmapper.find_pair_dir(p, "00_01")),
+        ("sim_session_names", lambda p: ltmapper.sim_session_names(p)),
+        ("load_sim_trajectories", lambda p: ltmapper.load_sim_trajectories(p)),
+        ("truth_to_estimate_frame", lambda p: ltmapper.truth_to_estimate_frame(p)),
+        ("evaluate_hd_sim", lambda p: ltmapper.evaluate_hd_sim(p, "session_00", np.zeros((1, 4), np.float32), np.eye(4)[None])),
+        ("aligned_sessions", lambda p: ltmapper.aligned_sessions(p)),
+        ("run_slam", lambda p: ltmapper.run_slam(cfg["slam"], p, [session_dir(1)], os.path.join(w, "out_slam"))),
+        ("run_removert", lambda p: ltmapper.run_removert(cfg["rem"], [p], [p + ".txt"], os.path.join(w, "out_rem"))),
+        ("run_pipeline", lambda p: ltmapper.run_pipeline(ltmapper.RunConfig(), [session_dir(0), p], os.path.join(w, "out_run"))),
+        ("map_init", lambda p: ltmapper.map_init(os.path.join(w, "x.ltmap"), cfg["map"], p, p)),
+        ("map_integrate", lambda p: ltmapper.map_integrate(os.path.join(w, "y.ltmap"), cfg["map"], p, p)),
+        ("Store", lambda p: ltmapper.Store(p + ".ltmap")),
+        ("write_pcd", lambda p: ltmapper.write_pcd(open(p, "w").close() or p + "/x.pcd", np.zeros((1, 4), np.float32))),
+    ]
+    for name, call in calls:
+        p = gone % name
+        try:
+            call(p)
+        except ltmapper.Error as e:
+            assert ("gone_%s" % name) in str(e), "%s: %r does not name the path" % (name, str(e))
+            continue
+        raise AssertionError("%s did not raise ltmapper.Error on a missing path" % name)
+
+
+def test_truth_frame_objects_and_labelled_clouds():
+    w = work()
+    T = ltmapper.truth_to_estimate_frame(sim_dir())
+    assert T.shape == (4, 4) and np.allclose(T[3], (0, 0, 0, 1))
+    csv = os.path.join(w, "objects_classes.csv")
+    with open(csv, "w") as f:
+        f.write("id,class\n3,car\n7,bin\n")
+    try:
+        classes = ltmapper.read_object_classes(csv)
+        assert isinstance(classes, dict)
+    except ltmapper.Error as e:  # a different header: the message names the file
+        assert "objects_classes.csv" in str(e)
+    truth_csv = os.path.join(sim_dir(), "truth", "objects.csv")
+    classes = ltmapper.read_object_classes(truth_csv)
+    assert ltmapper.read_object_classes(os.path.join(w, "no_objects.csv")) == {}  # optional file: none
+    assert classes and all(isinstance(k, int) and isinstance(v, str) for k, v in classes.items())
+    lab = {"points": np.arange(40, dtype=np.float32).reshape(10, 4), "cls": np.full(10, 5, np.uint8),
+           "session": np.ones(10, np.uint16), "object": np.full(10, -1, np.int32)}
+    for ext in ("ply", "pcd"):
+        p = os.path.join(w, "labelled." + ext)
+        ltmapper.write_labelled_cloud(p, lab)
+        assert os.path.getsize(p) > 0
+    np.testing.assert_array_equal(ltmapper.read_ply(os.path.join(w, "labelled.ply"))["cls"], lab["cls"])
+    raises(ValueError, ltmapper.write_labelled_cloud, os.path.join(w, "bad.ply"), {"points": lab["points"], "cls": lab["cls"][:3]})
+
+
+def test_store_threads_order_and_pipeline():
+    """Store.set_threads / session_order on the store of test_stages_store_eval; run_pipeline."""
+    w = work()
+    st = ltmapper.Store(os.path.join(w, "m.ltmap"))
+    st.set_threads(1)
+    one = st.map_at(st.latest_session)["points"]
+    st.set_threads(2)
+    np.testing.assert_array_equal(st.map_at(st.latest_session)["points"], one)  # same for any thread count
+    assert st.session_order(st.session_names()[0]) == 0 and st.session_order(st.session_names()[-1]) == st.latest_session
+    raises(ltmapper.Error, st.session_order, "no_such_session", match="no_such_session")
+    raises(ltmapper.Error, st.map_at, 99)
+    raises(ValueError, st.map_at, 0, voxel=-1.0)
+    raises(ValueError, st.map_at, 0, box=((0, 0), (1, 1)))
+    raises(ltmapper.Error, st.integrate, w, w, "session_01")  # opened read-only
+    # `ltmapper run`: the tiny 10-keyframe routes are too short for LT-SLAM to align the query (the
+    # README's example runs a 20-keyframe scenario through it); the C++ message names the report.
+    out = os.path.join(w, "run")
+    e = raises(ltmapper.Error, ltmapper.run_pipeline, ltmapper.RunConfig(), [session_dir(0), session_dir(1)], out,
+               threads=2)
+    assert "report.md" in str(e) and os.path.exists(os.path.join(out, "aligned", "report.md"))
+    raises(ltmapper.Error, ltmapper.run_pipeline, ltmapper.RunConfig({"from_stage": "map"}), [session_dir(0)],
+           os.path.join(w, "run_nothing"))
+
 if __name__ == "__main__":
     t0 = time.time()
     tests = [(n, f) for n, f in sorted(globals().items(), key=lambda kv: kv[0]) if n.startswith("test_")]

@@ -1,17 +1,19 @@
 // Browser test of `ltmapper view` (issue #19): Debian's chromium, headless, driven by
 // playwright-core. Simulates a small 3-drive store (or takes --store), starts the viewer, opens the
 // page and checks what a user sees: the first frame, the session name, the slider to session 0 and
-// back, the meta toggle, a click on a changed object; pixels at projected map points are drawn
-// (not the background) in their class colour. Saves a screenshot PNG.
+// back, level of detail (tiles refined near the camera within the point budget, more after a
+// zoom), the changes and coverage overlays, the meta toggle, a click on a changed object; pixels
+// at projected map points are drawn (not the background) in their class colour. Saves a
+// screenshot PNG.
 //
 //   node web/test/view_test.mjs --exe build/apps/ltmapper --screenshot build/view_browser.png
 //        [--store OUT/map.ltmap] [--chromium /usr/bin/chromium] [--keep DIR]
-import { chromium } from 'playwright-core';
-import { spawn, execFileSync } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
 import assert from 'node:assert/strict';
+import { launchBrowser, parseArgs, startViewer } from './viewer_process.mjs';
 
 const STEP_TIMEOUT_MS = 20000;        // one page step (load a cloud, fly) at most
 const SAMPLES_PER_CLASS = 200;        // projected points checked per class
@@ -21,16 +23,7 @@ const VIEWPORT = { width: 1280, height: 800 };
 const BACKGROUND = [0x15, 0x18, 0x1d];  // web/viewer.js BACKGROUND
 
 function args() {
-  const a = { exe: '', store: '', screenshot: 'view_browser.png', chromium: '/usr/bin/chromium', keep: '' };
-  const argv = process.argv.slice(2);
-  for (let i = 0; i < argv.length; i += 2) {
-    const key = argv[i].replace(/^--/, '');
-    if (!(key in a) || argv[i + 1] === undefined) throw new Error(`usage: unknown or incomplete option ${argv[i]}`);
-    a[key] = argv[i + 1];
-  }
-  if (!a.exe) throw new Error('--exe PATH_TO_LTMAPPER is required');
-  if (!fs.existsSync(a.chromium)) throw new Error(`${a.chromium}: no chromium (scripts/install-deps.sh installs it)`);
-  return a;
+  return parseArgs({ exe: '', store: '', screenshot: 'view_browser.png', chromium: '/usr/bin/chromium', keep: '' }, ['exe']);
 }
 
 // A small store: 3 simulated drives of 30 keyframes, lighter stage parameters.
@@ -48,36 +41,26 @@ function makeStore(exe, dir) {
   return path.join(dir, 'out/map.ltmap');
 }
 
-// Starts `ltmapper view --port 0` and resolves with its URL once it listens.
-function startViewer(exe, store) {
-  const proc = spawn(exe, ['view', '--store', store, '--port', '0', '--threads', '2'], { stdio: ['ignore', 'pipe', 'pipe'] });
-  let log = '';
-  return new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`ltmapper view did not start:\n${log}`)), STEP_TIMEOUT_MS);
-    const onData = (d) => {
-      log += d;
-      const m = log.match(/on (http:\/\/127\.0\.0\.1:\d+\/)/);
-      if (m) { clearTimeout(timer); resolve({ proc, url: m[1], log: () => log }); }
-    };
-    proc.stdout.on('data', onData);
-    proc.stderr.on('data', onData);
-    proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`ltmapper view exited (${code}):\n${log}`)); });
-  });
-}
-
-// Waits until the page has shown `count` clouds (window.__ltmView.loaded) without an error.
+// Waits until the page has shown `count` clouds (window.__ltmView.loaded) and has no tile
+// request under way, without an error.
 async function waitLoaded(page, count) {
-  await page.waitForFunction((n) => window.__ltmView.loaded >= n || window.__ltmView.error, count,
-                             { timeout: STEP_TIMEOUT_MS });
+  await page.waitForFunction((n) => (window.__ltmView.loaded >= n && window.__ltmView.lodIdle) || window.__ltmView.error,
+                             count, { timeout: STEP_TIMEOUT_MS });
   const err = await page.evaluate(() => window.__ltmView.error);
   assert.equal(err, null, `page error: ${err}`);
 }
 
 // In the page: project up to `samples` points of each class, read the canvas there, and count
-// those whose pixel is drawn (not the background) and those in the class's own colour.
-function probePixels({ samples, background, group }) {
+// those whose pixel is drawn (not the background) and those in the class's own colour (or in
+// `colour`, the coverage layer's). The map is one group per tile, one THREE.Points per class in it.
+function probePixels({ samples, background, group, colour = null }) {
   const { renderer, camera, scene, classes } = window.__ltmView.debug;
-  const cloudGroup = window.__ltmView.debug[group];
+  const byClass = new Map();
+  window.__ltmView.debug[group].traverse((o) => {
+    if (!o.isPoints) return;
+    if (!byClass.has(o.userData.cls)) byClass.set(o.userData.cls, []);
+    byClass.get(o.userData.cls).push(o.geometry.attributes.position);
+  });
   renderer.render(scene, camera);
   const gl = renderer.getContext();
   const W = gl.drawingBufferWidth, H = gl.drawingBufferHeight;
@@ -85,12 +68,15 @@ function probePixels({ samples, background, group }) {
   gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
   const v = camera.position.clone();
   const out = {};
-  for (const pts of cloudGroup.children) {
-    const pos = pts.geometry.attributes.position, rgb = classes.get(pts.userData.cls).rgb;
+  for (const [cls, parts] of byClass) {
+    const rgb = colour || classes.get(cls).rgb;
     const r = { tried: 0, drawn: 0, colour: 0, places: [] };
-    const stride = Math.max(1, Math.floor(pos.count / (samples * 4)));
-    for (let i = 0; i < pos.count && r.tried < samples; i += stride) {
-      v.fromBufferAttribute(pos, i).project(camera);
+    const count = parts.reduce((n, p) => n + p.count, 0);
+    const stride = Math.max(1, Math.floor(count / (samples * 4)));
+    for (let j = 0; j < count && r.tried < samples; j += stride) {
+      let i = j, part = 0;
+      while (i >= parts[part].count) i -= parts[part++].count;
+      v.fromBufferAttribute(parts[part], i).project(camera);
       if (Math.abs(v.x) > 0.95 || Math.abs(v.y) > 0.95 || Math.abs(v.z) > 1) continue;
       const x = Math.round((v.x + 1) / 2 * W - 0.5), y = Math.round((v.y + 1) / 2 * H - 0.5);
       const k = 4 * (y * W + x);
@@ -100,19 +86,20 @@ function probePixels({ samples, background, group }) {
       if (c.every((ch, j) => Math.abs(ch - rgb[j]) <= 8)) r.colour += 1;
       if (r.places.length < 20) r.places.push([x, H - 1 - y, c]);
     }
-    out[classes.get(pts.userData.cls).name] = r;
+    out[classes.get(cls).name] = r;
   }
   return out;
 }
 
 // `colourClass`: the class whose points must mostly show its own colour (the report's).
-async function checkPixels(page, what, group = 'cloudGroup', colourClass = 'static') {
-  const probe = await page.evaluate(probePixels, { samples: SAMPLES_PER_CLASS, background: BACKGROUND, group });
+async function checkPixels(page, what, group = 'cloudGroup', colourClass = 'static', colour = null) {
+  const probe = await page.evaluate(probePixels, { samples: SAMPLES_PER_CLASS, background: BACKGROUND, group, colour });
   let tried = 0, drawn = 0;
   for (const r of Object.values(probe)) tried += r.tried, drawn += r.drawn;
   assert.ok(tried > 50, `${what}: only ${tried} map points on screen: ${JSON.stringify(probe)}`);
   assert.ok(drawn >= MIN_DRAWN_SHARE * tried, `${what}: ${drawn} of ${tried} point places show the background`);
-  const st = probe[colourClass];
+  const st = colourClass ? probe[colourClass] : Object.values(probe).reduce(
+      (a, r) => ({ tried: a.tried + r.tried, colour: a.colour + r.colour }), { tried: 0, colour: 0 });
   assert.ok(st && st.colour >= MIN_COLOUR_SHARE * st.tried,
             `${what}: ${colourClass} points not in the report's colour: ${JSON.stringify(probe)}`);
   console.log(`${what}: ${drawn}/${tried} point places drawn; ` +
@@ -129,6 +116,7 @@ async function runPage(page, url, info) {
   assert.match(await page.textContent('#session-label'), new RegExp(`Session ${info.latest}: ${latest}`));
   await checkPixels(page, `session ${info.latest} (live)`);
   const pointsLatest = await page.evaluate(() => window.__ltmView.points);
+  await checkLod(page, info, 'opened');
   await page.focus('#session');
   await page.keyboard.press('Home');  // the slider to session 0, as a user does
   await waitLoaded(page, 2);
@@ -145,14 +133,63 @@ async function runPage(page, url, info) {
   await checkPixels(page, `session ${info.latest} changes`, 'changeGroup', 'nd_strong');
   await page.uncheck('#changes');
   await waitLoaded(page, 5);
-  await page.click('#layer-meta');
+  await page.check('#coverage');  // the latest step's new territory, in the coverage colour
   await waitLoaded(page, 6);
+  const coverage = await page.evaluate(() => window.__ltmView.coveragePoints);
+  console.log(`coverage of session ${info.latest}: ${coverage} points`);
+  if (coverage > 0) await checkPixels(page, `session ${info.latest} coverage`, 'coverageGroup', null, info.coverage_rgb);
+  await page.uncheck('#coverage');
+  await waitLoaded(page, 7);
+  assert.equal(await page.evaluate(() => window.__ltmView.debug.coverageGroup.children.length), 0);
+  await page.click('#layer-meta');
+  await waitLoaded(page, 8);
   assert.equal(await page.evaluate(() => window.__ltmView.layer), 'meta');
   assert.match(await page.textContent('#session-label'), /Meta map/);
   await checkPixels(page, 'meta');
   await page.click('#layer-at');
-  await waitLoaded(page, 7);
+  await waitLoaded(page, 9);
   console.log(`points: session 0 ${points0}, session ${info.latest} ${pointsLatest}`);
+}
+
+// Zoom in (the wheel over the middle of the view, where the last step put the camera's target):
+// the tile nearest the target, close to the camera now, is drawn at the finest level.
+async function zoomIn(page, info) {
+  const loaded = await page.evaluate(() => window.__ltmView.loaded);
+  await page.mouse.move(VIEWPORT.width / 2, VIEWPORT.height / 2);
+  for (let k = 0; k < 3; k++) await page.mouse.wheel(0, -200);
+  await page.waitForTimeout(500);
+  await waitLoaded(page, loaded);
+  await checkLod(page, info, 'zoomed in');
+  const near = await page.evaluate(() => {
+    const { controls, camera, tiles } = window.__ltmView.debug;
+    const list = tiles().list;
+    let best = list[0];
+    for (const t of list) if (t.box.distanceToPoint(controls.target) < best.box.distanceToPoint(controls.target)) best = t;
+    return { id: best.id, level: best.level, levels: tiles().levels.length,
+             distance: best.box.distanceToPoint(camera.position) };
+  });
+  console.log(`zoomed in: tile ${near.id} at the camera's target, ${near.distance.toFixed(1)} m away, level ${near.level}`);
+  assert.equal(near.level, near.levels - 1, `zoom: the tile at the target is not at the finest level: ${JSON.stringify(near)}`);
+}
+
+// Level of detail as drawn: tiles per level, points within the budget, some tile finer than
+// level 0 (a map this size has more points than level 0 holds), and the time to draw a frame.
+async function checkLod(page, info, what) {
+  const s = await page.evaluate(() => {
+    const { renderer, scene, camera } = window.__ltmView.debug;
+    const t = performance.now();
+    const gl = renderer.getContext(), px = new Uint8Array(4);
+    for (let k = 0; k < 5; k++) {
+      renderer.render(scene, camera);
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);  // waits for the frame to be drawn
+    }
+    return { levels: window.__ltmView.tileLevels, points: window.__ltmView.points, frameMs: (performance.now() - t) / 5 };
+  });
+  console.log(`LOD ${what}: tiles per level ${JSON.stringify(s.levels)} (voxels ${JSON.stringify(info.levels)} m), ` +
+              `${s.points} points drawn, ${s.frameMs.toFixed(0)} ms a frame (software WebGL)`);
+  assert.ok(s.points <= info.point_budget, `${what}: ${s.points} points drawn, budget ${info.point_budget}`);
+  assert.ok(s.levels.slice(1).some((k) => k > 0), `${what}: no tile refined past level 0: ${JSON.stringify(s.levels)}`);
+  return s.levels;
 }
 
 // The measure tool: two clicks on drawn map points (outside the panels) give a distance.
@@ -198,9 +235,7 @@ async function clickObject(page, objects) {
 async function checkInBrowser(a, viewer) {
   let browser = null;
   try {
-    // SwiftShader: WebGL in software, the same on every machine (no GPU needed).
-    browser = await chromium.launch({ executablePath: a.chromium, headless: true,
-                                      args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] });
+    browser = await launchBrowser(a.chromium);
     const page = await browser.newPage({ viewport: VIEWPORT });
     const errors = [];
     page.on('pageerror', (e) => errors.push(String(e)));
@@ -210,6 +245,7 @@ async function checkInBrowser(a, viewer) {
     await measure(page);
     await clickObject(page, objects);
     await page.screenshot({ path: a.screenshot });
+    await zoomIn(page, info);
     assert.deepEqual(errors, [], 'uncaught errors in the page');
   } finally {
     if (browser) await browser.close();
@@ -224,7 +260,7 @@ async function main() {
     fs.mkdirSync(dir, { recursive: true });
     const store = a.store || makeStore(a.exe, dir);
     console.log(`store ${store} ready in ${((Date.now() - t0) / 1000).toFixed(1)} s`);
-    const viewer = await startViewer(a.exe, store);
+    const viewer = await startViewer(a.exe, store, { timeoutMs: STEP_TIMEOUT_MS });
     try {
       await checkInBrowser(a, viewer);
     } finally {

@@ -10,11 +10,14 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <list>
 #include <mutex>
+#include <numeric>
 #include <sstream>
 
 namespace ltm::view {
@@ -27,9 +30,18 @@ struct Viewer::Impl {
   std::string web_root;  // canonical web_dir
   mutable std::mutex mutex;
   mutable std::list<std::pair<std::string, std::shared_ptr<const std::string>>> cache;  // most recent first
+  // Tiled clouds, most recent first; one being built is shared by every request that asks for it
+  // meanwhile (the page and the warm-up thread never restore the same map twice).
+  struct TiledEntry {
+    std::string key;
+    std::shared_future<std::shared_ptr<const TiledCloud>> tiles;
+    std::size_t bytes = 0;  // 0 while being built
+  };
+  mutable std::list<TiledEntry> tiled;
 
   std::shared_ptr<const std::string> Cached(const std::string& key) const;
   void Remember(const std::string& key, std::shared_ptr<const std::string> body) const;
+  std::shared_ptr<const TiledCloud> Tiled(const std::string& key, const std::function<PointCloud()>& raw) const;
 };
 
 std::shared_ptr<const std::string> Viewer::Impl::Cached(const std::string& key) const {
@@ -46,6 +58,51 @@ void Viewer::Impl::Remember(const std::string& key, std::shared_ptr<const std::s
   std::lock_guard<std::mutex> lock(mutex);
   cache.emplace_front(key, std::move(body));
   while (cache.size() > std::size_t(cfg.cache_clouds)) cache.pop_back();
+}
+
+std::shared_ptr<const TiledCloud> Viewer::Impl::Tiled(const std::string& key,
+                                                     const std::function<PointCloud()>& raw) const {
+  std::promise<std::shared_ptr<const TiledCloud>> promise;
+  std::shared_future<std::shared_ptr<const TiledCloud>> pending;
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (auto it = tiled.begin(); it != tiled.end(); ++it) {
+      if (it->key != key) continue;
+      tiled.splice(tiled.begin(), tiled, it);
+      pending = it->tiles;
+      break;
+    }
+    if (!pending.valid()) tiled.push_front({key, promise.get_future().share(), 0});
+  }
+  if (pending.valid()) return pending.get();  // cached, or being built by another request
+  try {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::shared_ptr<const TiledCloud> built = BuildTiles(raw(), cfg);
+    promise.set_value(built);
+    spdlog::info("view: {}: {} tiles of {:.1f} m, {} points at level 0 ({:.2f} m) in {:.2f} s", key, built->keys.size(),
+                 built->tile_edge_m, std::accumulate(built->coarse_counts.begin(), built->coarse_counts.end(), std::size_t(0)),
+                 built->levels.front(), std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    std::lock_guard<std::mutex> lock(mutex);
+    std::size_t total = 0;
+    for (auto it = tiled.begin(); it != tiled.end();) {
+      if (it->key == key) it->bytes = built->bytes;
+      total += it->bytes;
+      const bool over = std::distance(tiled.begin(), it) >= std::max(1, cfg.cache_clouds) ||
+                        total > std::size_t(cfg.cache_mb) * (std::size_t(1) << 20);
+      if (it != tiled.begin() && it->bytes > 0 && over) {
+        total -= it->bytes;
+        it = tiled.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    return built;
+  } catch (...) {
+    promise.set_exception(std::current_exception());
+    std::lock_guard<std::mutex> lock(mutex);
+    tiled.remove_if([&key](const TiledEntry& e) { return e.key == key && e.bytes == 0; });
+    throw;
+  }
 }
 
 namespace {
@@ -65,6 +122,9 @@ json ClassesJson() {
   }
   return out;
 }
+
+// The coverage layer's colour (new territory of a step): cyan, apart from every class colour.
+constexpr int kCoverageRgb[3] = {40, 200, 210};
 
 // The report's session palette (viz::SessionColor cycles through 10 colours).
 json SessionColorsJson() {
@@ -86,6 +146,12 @@ json SessionsJson(const map::Store& store) {
   return out;
 }
 
+json Levels(const ViewConfig& cfg) {
+  json out = json::array();
+  for (int k = 0; k < cfg.lod_levels; ++k) out.push_back(LevelVoxel(cfg, k));
+  return out;
+}
+
 Response Info(const ViewConfig& cfg) {
   const map::Store store = OpenStore(cfg);
   const json j = {{"store", fs::path(cfg.store).filename().string()},
@@ -93,9 +159,12 @@ Response Info(const ViewConfig& cfg) {
                   {"latest", store.LatestSession()},
                   {"classes", ClassesJson()},
                   {"session_colors", SessionColorsJson()},
+                  {"coverage_rgb", {kCoverageRgb[0], kCoverageRgb[1], kCoverageRgb[2]}},
                   {"point_budget", cfg.point_budget},
                   {"max_voxel_m", cfg.max_voxel_m},
-                  {"base_voxel_m", cfg.base_voxel_m}};
+                  {"base_voxel_m", cfg.base_voxel_m},
+                  {"tile_m", TileCells(cfg) * cfg.base_voxel_m},
+                  {"levels", Levels(cfg)}};
   return Json(j);
 }
 
@@ -148,37 +217,132 @@ Layer ParseLayer(const std::string& name) {
   if (name == "live") return Layer::kLive;
   if (name == "meta") return Layer::kMeta;
   if (name == "changes") return Layer::kChanges;
-  throw HttpError(400, "layer must be at, live, meta or changes (got '" + name + "')");
+  if (name == "coverage") return Layer::kCoverage;
+  throw HttpError(400, "layer must be at, live, meta, changes or coverage (got '" + name + "')");
 }
+
+// What a cloud or tile request names: the layer, its session, and the cache key (the store's
+// state is part of it: a new integration changes live and meta).
+struct Target {
+  Layer layer = Layer::kAt;
+  std::string layer_name;
+  int session = 0;
+  std::string key;
+};
+
+Target ParseTarget(const Request& req, const map::Store& store, const std::string& store_path) {
+  Target t;
+  t.layer_name = Param(req, "layer", "at");
+  t.layer = ParseLayer(t.layer_name);
+  const bool by_session = t.layer == Layer::kAt || t.layer == Layer::kChanges || t.layer == Layer::kCoverage;
+  t.session = by_session ? ParseSession(store, Param(req, "session", "")) : store.LatestSession();
+  if (t.session < 0) throw HttpError(404, store_path + ": the store holds no session yet");
+  if ((t.layer == Layer::kChanges || t.layer == Layer::kCoverage) && t.session == 0)
+    throw HttpError(404, "session 0 is the map's base: no step " + t.layer_name + " (ask for session 1 or later)");
+  const auto sessions = store.Sessions();
+  t.key = t.layer_name + "/" + std::to_string(t.session) + "/" + std::to_string(sessions.size()) + "/" +
+          sessions.back().integrated_utc;
+  return t;
+}
+
+// "IX_IY" (decimal, optional '-'): 400 when malformed or beyond +-1e9.
+TiledCloud::Key ParseTileId(const std::string& text) {
+  constexpr std::size_t kMaxDigits = 10;
+  constexpr long long kMaxIndex = 1000000000;
+  const std::string bad = "tile must be all or IX_IY, two decimal tile indices (got '" + text + "')";
+  const std::size_t sep = text.find('_');
+  if (sep == std::string::npos) throw HttpError(400, bad);
+  const auto index = [&](const std::string& part) {
+    const std::size_t neg = !part.empty() && part[0] == '-' ? 1 : 0;
+    const std::string digits = part.substr(neg);
+    if (digits.empty() || digits.size() > kMaxDigits ||
+        !std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; }))
+      throw HttpError(400, bad);
+    const long long v = std::stoll(digits);
+    if (v > kMaxIndex) throw HttpError(400, "tile index '" + part + "' is out of range");
+    return int(neg ? -v : v);
+  };
+  return {index(text.substr(0, sep)), index(text.substr(sep + 1))};
+}
+
+// A level's syntax (400); whether the layer has it is checked against its tiles (404).
+int ParseLevel(const std::string& text) {
+  if (text.empty()) throw HttpError(400, "level is required (0 the coarsest; /api/tiles lists the levels)");
+  if (text.size() > 2 || !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; }))
+    throw HttpError(400, "level must be a number of at most 2 digits (got '" + text + "')");
+  return std::stoi(text);
+}
+
+std::string TileId(const TiledCloud::Key& k) { return std::to_string(k.first) + "_" + std::to_string(k.second); }
 
 }  // namespace
 
 // ---------------------------------------------------------------------------------- clouds
 Response Viewer::Cloud(const Request& req) const {
   CheckParams(req, {"layer", "session"});
-  const std::string layer_name = Param(req, "layer", "at");
-  const Layer layer = ParseLayer(layer_name);
   const map::Store store = OpenStore(impl_->cfg);
-  const bool by_session = layer == Layer::kAt || layer == Layer::kChanges;
-  const int session = by_session ? ParseSession(store, Param(req, "session", "")) : store.LatestSession();
-  if (session < 0) throw HttpError(404, impl_->cfg.store + ": the store holds no session yet");
-  if (layer == Layer::kChanges && session == 0)
-    throw HttpError(404, "session 0 is the map's base: no step changes (ask for session 1 or later)");
-  // The state of the store is part of the key: a new integration changes live and meta.
-  const auto sessions = store.Sessions();
-  const std::string key = layer_name + "/" + std::to_string(session) + "/" + std::to_string(sessions.size()) + "/" +
-                          sessions.back().integrated_utc;
-  auto body = impl_->Cached(key);
+  const Target t = ParseTarget(req, store, impl_->cfg.store);
+  auto body = impl_->Cached(t.key);
   if (!body) {
     const auto t0 = std::chrono::steady_clock::now();
     double voxel = 0;
-    const PointCloud cloud = ServedCloud(store, layer, session, impl_->cfg, &voxel);
+    const PointCloud cloud = ServedCloud(store, t.layer, t.session, impl_->cfg, &voxel);
     body = std::make_shared<const std::string>(EncodeCloud(cloud, voxel));
-    impl_->Remember(key, body);
-    spdlog::info("view: {} session {}: {} points at voxel {:.3f} m in {:.2f} s", layer_name, session, cloud.size(),
+    impl_->Remember(t.key, body);
+    spdlog::info("view: {} session {}: {} points at voxel {:.3f} m in {:.2f} s", t.layer_name, t.session, cloud.size(),
                  voxel, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
   return {200, "application/octet-stream", *body};
+}
+
+namespace {
+void CheckTiledLayer(const Target& t) {
+  if (t.layer == Layer::kChanges || t.layer == Layer::kCoverage)
+    throw HttpError(400, "layer " + t.layer_name + " is not tiled: ask /api/cloud for it");
+}
+}  // namespace
+
+// ----------------------------------------------------------------------------------- tiles
+Response Viewer::Tiles(const Request& req) const {
+  CheckParams(req, {"layer", "session"});
+  const map::Store store = OpenStore(impl_->cfg);
+  const Target t = ParseTarget(req, store, impl_->cfg.store);
+  CheckTiledLayer(t);
+  const auto tiles = impl_->Tiled(t.key, [&] { return LayerCloud(store, t.layer, t.session); });
+  json list = json::array();
+  std::size_t raw_total = 0, coarse_total = 0;
+  for (std::size_t k = 0; k < tiles->keys.size(); ++k) {
+    const auto& b = tiles->bounds[k];
+    list.push_back({{"id", TileId(tiles->keys[k])}, {"ix", tiles->keys[k].first}, {"iy", tiles->keys[k].second},
+                    {"lo", {b[0], b[1], b[2]}}, {"hi", {b[3], b[4], b[5]}}, {"points", tiles->raw[k].size()},
+                    {"coarse", tiles->coarse_counts[k]}});
+    raw_total += tiles->raw[k].size();
+    coarse_total += tiles->coarse_counts[k];
+  }
+  return Json({{"layer", t.layer_name}, {"session", t.session}, {"tile_m", tiles->tile_edge_m},
+               {"levels", tiles->levels}, {"points", raw_total}, {"coarse_points", coarse_total},
+               {"tiles", list}});
+}
+
+Response Viewer::Tile(const Request& req) const {
+  CheckParams(req, {"layer", "session", "tile", "level"});
+  const std::string tile_text = Param(req, "tile", "");
+  if (tile_text.empty()) throw HttpError(400, "tile is required (all, or IX_IY from /api/tiles)");
+  const bool all = tile_text == "all";
+  const TiledCloud::Key id = all ? TiledCloud::Key{0, 0} : ParseTileId(tile_text);
+  const int level = ParseLevel(Param(req, "level", ""));
+  const map::Store store = OpenStore(impl_->cfg);
+  const Target t = ParseTarget(req, store, impl_->cfg.store);
+  CheckTiledLayer(t);
+  const auto tiles = impl_->Tiled(t.key, [&] { return LayerCloud(store, t.layer, t.session); });
+  if (level >= int(tiles->levels.size()))
+    throw HttpError(404, "no level " + std::to_string(level) + ": the levels of " + t.layer_name + " session " +
+                             std::to_string(t.session) + " are 0.." + std::to_string(tiles->levels.size() - 1));
+  if (all) return {200, "application/octet-stream", *tiles->All(level)};
+  const std::ptrdiff_t k = tiles->Find(id);
+  if (k < 0) throw HttpError(404, "no tile " + tile_text + " in " + t.layer_name + " session " + std::to_string(t.session) +
+                                      " (/api/tiles lists the tiles)");
+  return {200, "application/octet-stream", *tiles->Encoded(std::size_t(k), level)};
 }
 
 // ---------------------------------------------------------------------------------- static
@@ -216,10 +380,14 @@ Viewer::~Viewer() = default;
 
 std::vector<Request> Viewer::WarmRequests() const {
   const int latest = OpenStore(impl_->cfg).LatestSession();
+  const auto coarse = [](std::map<std::string, std::string> q) {
+    q["tile"] = "all";
+    q["level"] = "0";
+    return Request{"GET", "/api/tile", std::move(q)};
+  };
   std::vector<Request> out;
-  for (int s = latest; s >= 0; --s) out.push_back({"GET", "/api/cloud", {{"layer", "at"}, {"session", std::to_string(s)}}});
-  if (latest >= 0) out.insert(out.begin() + std::min<std::ptrdiff_t>(2, std::ptrdiff_t(out.size())),
-                              Request{"GET", "/api/cloud", {{"layer", "meta"}}});
+  for (int s = latest; s >= 0; --s) out.push_back(coarse({{"layer", "at"}, {"session", std::to_string(s)}}));
+  if (latest >= 0) out.insert(out.begin() + std::min<std::ptrdiff_t>(2, std::ptrdiff_t(out.size())), coarse({{"layer", "meta"}}));
   if (out.size() > std::size_t(impl_->cfg.cache_clouds)) out.resize(std::size_t(impl_->cfg.cache_clouds));
   return out;
 }
@@ -233,6 +401,8 @@ Response Viewer::Route(const Request& req) const {
     if (k.size() > max_query || v.size() > max_query)
       throw HttpError(400, "query parameter '" + k.substr(0, max_query) + "' too long");
   if (req.path == "/api/cloud") return Cloud(req);
+  if (req.path == "/api/tiles") return Tiles(req);
+  if (req.path == "/api/tile") return Tile(req);
   CheckParams(req, {});  // no other endpoint takes parameters
   if (req.path == "/api/info") return Info(impl_->cfg);
   if (req.path == "/api/trajectories") return Trajectories(impl_->cfg);

@@ -1,5 +1,5 @@
 // The clouds the viewer serves: level of detail by a growing voxel, and the binary wire format.
-#include "ltmapper/view/view.hpp"
+#include "internal.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
 
@@ -33,24 +33,38 @@ T Get(const std::string& in, std::size_t at) {
   return v;
 }
 
-PointCloud Unfiltered(const map::Store& store, Layer layer, int session) {
+}  // namespace
+
+PointCloud CoverageCloud(const map::Store& store, int session) {
+  PointCloud out;
+  for (const auto& k : store.Keyframes()) {
+    if (k.session != session) continue;
+    PointCloud c = store.KeyframeCloud(k.id, session);
+    c.session.clear();
+    c.object.clear();
+    geometry::TransformInPlace(c, k.T_world_sensor);
+    out.append(c);
+  }
+  return out;
+}
+
+PointCloud LayerCloud(const map::Store& store, Layer layer, int session) {
   switch (layer) {
     case Layer::kAt: return store.MapAt(session);
     case Layer::kLive: return store.Live();
     case Layer::kMeta: return store.Meta();
     case Layer::kChanges: return store.StepChanges(session);
+    case Layer::kCoverage: return CoverageCloud(store, session);
   }
   throw Error("view: unknown layer");
 }
-
-}  // namespace
 
 PointCloud ServedCloud(const map::Store& store, Layer layer, int session, const ViewConfig& cfg,
                        double* voxel_m) {
   ValidateConfig(cfg, "view config");
   if (cfg.max_voxel_m < cfg.base_voxel_m) throw Error("view config: max_voxel_m must be >= base_voxel_m");
   const std::size_t budget = std::size_t(cfg.point_budget);
-  const PointCloud raw = Unfiltered(store, layer, session);
+  const PointCloud raw = LayerCloud(store, layer, session);
   double voxel = cfg.base_voxel_m;
   PointCloud out = raw.empty() ? raw : geometry::VoxelDownsample(raw, voxel, cfg.threads);
   while (out.size() > budget && voxel < cfg.max_voxel_m) {

@@ -29,6 +29,18 @@ struct ViewConfig {
   int point_budget = 2000000;        // [points] most points in one cloud response
   double max_voxel_m = 20.0;         // [m] the coarsest voxel LOD may reach
   int cache_clouds = 6;              // clouds kept in memory (slider back and forth)
+  // Tiled level of detail (/api/tiles, /api/tile): the map cut into square XY tiles of tile_m
+  // (rounded to whole base voxels), each served at lod_levels voxel sizes: level 0 the coarsest
+  // (base_voxel_m * 2^(lod_levels-1)), the last level base_voxel_m. The page draws level 0 of
+  // the whole map first, then finer levels of the tiles near the camera within point_budget.
+  double tile_m = 32.0;              // [m] tile edge
+  int lod_levels = 4;                // voxel levels per tile (4: 0.8, 0.4, 0.2, 0.1 m)
+  // Level 0 of the whole layer holds at most this many points: while it holds more, a coarser
+  // level (voxel doubled) goes in front, as long as its voxel still nests in the tiles (a 13.5 M
+  // point map: 1.19 M points at 0.8 m, 0.30 M at 1.6 m; the page's first frame draws level 0).
+  int coarse_budget = 500000;        // [points]
+  int cache_mb = 1024;               // [MiB] tiled clouds kept in memory (at least the newest;
+                                     // ~17 bytes a map point + level 0, finer levels not counted)
   int max_query_chars = 64;          // longest accepted query value [characters]
   int max_path_chars = 256;          // longest accepted request path [characters]
   int max_static_mb = 64;            // [MiB] largest static file served
@@ -41,6 +53,10 @@ struct ViewConfig {
     v("point_budget", point_budget, "points", 1000, 100000000);
     v("max_voxel_m", max_voxel_m, "m", 0.001, 1000.0);
     v("cache_clouds", cache_clouds, "", 0, 1000);
+    v("tile_m", tile_m, "m", 1.0, 100000.0);
+    v("lod_levels", lod_levels, "", 1, 12);
+    v("coarse_budget", coarse_budget, "points", 1, 100000000);
+    v("cache_mb", cache_mb, "MiB", 1, 1000000);
     v("max_query_chars", max_query_chars, "characters", 1, 4096);
     v("max_path_chars", max_path_chars, "characters", 1, 4096);
     v("max_static_mb", max_static_mb, "MiB", 1, 4096);
@@ -60,8 +76,23 @@ struct Response {
 };
 
 // Which cloud a request asks for: the map as of a session (rollback), the latest map, the meta
-// map, or the changes one session step made (Store::StepChanges: PD added, ND removed / kept).
-enum class Layer { kAt, kLive, kMeta, kChanges };
+// map, the changes one session step made (Store::StepChanges: PD added, ND removed / kept), or
+// the step's coverage difference: the points of the map keyframes the step created, i.e. new
+// territory the reference session never observed (Store: keyframes whose session is the step).
+enum class Layer { kAt, kLive, kMeta, kChanges, kCoverage };
+
+// The coverage layer of step `session` unfiltered (world frame, cls as stored): every keyframe
+// the step created, as of that step.
+PointCloud CoverageCloud(const map::Store& store, int session);
+
+// Tiled level of detail. Tile (ix, iy) holds the points whose base-voxel cell c = floor(x /
+// base_voxel_m) (likewise y) lies in [ix * n, (ix + 1) * n), n = TileCells(cfg): no base voxel
+// straddles two tiles, so the tiles at the finest level together are exactly the whole map
+// filtered at base_voxel_m.
+int TileCells(const ViewConfig& cfg);
+// The voxel of a level (0 = coarsest) before coarse_budget adds levels: base_voxel_m *
+// 2^(lod_levels - 1 - level). A layer's own levels come with its tile index (/api/tiles).
+double LevelVoxel(const ViewConfig& cfg, int level);
 
 // The cloud served for a layer and session: the store's map voxel-filtered at the first voxel
 // (base_voxel_m, then larger) whose result fits point_budget. Equals
@@ -84,19 +115,22 @@ class Viewer {
   Viewer(const Viewer&) = delete;
   Viewer& operator=(const Viewer&) = delete;
 
-  // GET /api/info | /api/cloud?layer=at|live|meta|changes&session=N | /api/trajectories | /api/objects,
-  // or a static file under web_dir ("/" = index.html). Bad requests -> 4xx with a message; store
+  // GET /api/info | /api/cloud?layer=at|live|meta|changes|coverage&session=N |
+  // /api/tiles?layer=at|live|meta&session=N | /api/tile?layer=..&session=N&tile=IX_IY|all&level=K |
+  // /api/trajectories | /api/objects, or a static file under web_dir ("/" = index.html). Bad requests -> 4xx with a message; store
   // errors -> 500 with the message. Never throws; safe to call from several threads.
   Response Handle(const Request& req) const;
-  // The cloud requests worth answering before a page asks (Handle fills the cache): the latest
-  // session's map (what the page opens on), then the older sessions newest first and the meta
-  // map, as many as cache_clouds holds.
+  // The requests worth answering before a page asks (Handle fills the cache): the latest
+  // session's tiles at level 0 (what the page opens on), then the older sessions newest first and
+  // the meta map, as many as cache_clouds holds.
   std::vector<Request> WarmRequests() const;
   const ViewConfig& config() const;
 
  private:
   Response Route(const Request& req) const;
   Response Cloud(const Request& req) const;
+  Response Tiles(const Request& req) const;
+  Response Tile(const Request& req) const;
   Response Static(const Request& req) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
