@@ -1,5 +1,7 @@
 // Point-wise cloud metrics: HD removal (SA/DA/AA), LD changes (P/R/F1), restoration (Chamfer).
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/hd.hpp"
+#include "ltmapper/eval/ld.hpp"
+#include "ltmapper/eval/restore.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <tbb/blocked_range.h>

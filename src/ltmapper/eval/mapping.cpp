@@ -1,6 +1,9 @@
 // Truth placement in the estimated world (global rigid or per keyframe) and the live / meta map
 // content check (new and removed objects).
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/livemeta.hpp"
+#include "ltmapper/eval/objects.hpp"
+#include "ltmapper/eval/truth_io.hpp"
+#include "ltmapper/eval/truth_mapping.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 

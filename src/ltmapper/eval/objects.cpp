@@ -1,5 +1,6 @@
 // Changed-object evaluation: LT-map's clusters against the simulator's LD objects by point IoU.
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/objects.hpp"
+#include "ltmapper/eval/truth_io.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 

@@ -1,5 +1,5 @@
 // Report writers: JSON for machines, Markdown for people.
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/report.hpp"
 #include "ltmapper/eval/json.hpp"
 #include "ltmapper/io/io.hpp"
 

@@ -1,5 +1,5 @@
 // Storage and cost: bytes of files / directory trees, wall time and peak memory of a stage.
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/storage.hpp"
 #include "ltmapper/eval/json.hpp"
 
 #include <filesystem>

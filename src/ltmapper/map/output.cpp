@@ -1,5 +1,5 @@
 // Outputs: labelled PCD / PLY clouds, object tables, the `log` text.
-#include "ltmapper/map/map.hpp"
+#include "ltmapper/map/files.hpp"
 
 #include "ltmapper/io/io.hpp"
 

@@ -3,7 +3,7 @@
 // point-wise change truth per (central, query) pair with occlusion-aware strong / weak split.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
-#include "ltmapper/sim/sim.hpp"
+#include "ltmapper/sim/simulator.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

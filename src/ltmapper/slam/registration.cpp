@@ -3,7 +3,7 @@
 // an inlier radius) and the RMS distance of those inliers, both gates derived from the voxel
 // size and the sensor's range noise (InlierRadius, InlierRmsBound).
 #include "ltmapper/geometry/geometry.hpp"
-#include "ltmapper/slam/slam.hpp"
+#include "ltmapper/slam/registration.hpp"
 
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
