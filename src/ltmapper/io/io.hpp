@@ -5,10 +5,11 @@
 // PCL and yaml-cpp are used only inside the .cpp files.
 //
 // This header only gathers the module's parts, one topic each (include the part you need):
-// files.hpp, formats.hpp, session.hpp, yaml.hpp.
+// files.hpp, formats.hpp, session.hpp, yaml.hpp, json.hpp.
 #pragma once
 
 #include "ltmapper/io/files.hpp"
 #include "ltmapper/io/formats.hpp"
 #include "ltmapper/io/session.hpp"
 #include "ltmapper/io/yaml.hpp"
+#include "ltmapper/io/json.hpp"

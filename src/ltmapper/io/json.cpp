@@ -1,10 +1,10 @@
-#include "ltmapper/eval/json.hpp"
+#include "ltmapper/io/json.hpp"
 
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 
-namespace ltm::eval::json {
+namespace ltm::io::json {
 
 const Value* Value::Find(const std::string& key) const {
   if (type != Type::kObject) return nullptr;
@@ -194,39 +194,27 @@ void Writer::Prefix(const std::string& key) {
   }
 }
 
-Writer& Writer::BeginObject(const std::string& key) {
+Writer& Writer::Open(const std::string& key, char bracket, bool object) {
   Prefix(key);
-  out_ += "{";
+  out_ += bracket;
   first_.push_back(true);
-  is_object_.push_back(true);
+  is_object_.push_back(object);
   return *this;
 }
 
-Writer& Writer::EndObject() {
+Writer& Writer::Close(char bracket) {
   const bool empty = first_.back();
   first_.pop_back();
   is_object_.pop_back();
   if (!empty) out_ += "\n" + std::string(2 * first_.size(), ' ');
-  out_ += "}";
+  out_ += bracket;
   return *this;
 }
 
-Writer& Writer::BeginArray(const std::string& key) {
-  Prefix(key);
-  out_ += "[";
-  first_.push_back(true);
-  is_object_.push_back(false);
-  return *this;
-}
-
-Writer& Writer::EndArray() {
-  const bool empty = first_.back();
-  first_.pop_back();
-  is_object_.pop_back();
-  if (!empty) out_ += "\n" + std::string(2 * first_.size(), ' ');
-  out_ += "]";
-  return *this;
-}
+Writer& Writer::BeginObject(const std::string& key) { return Open(key, '{', true); }
+Writer& Writer::EndObject() { return Close('}'); }
+Writer& Writer::BeginArray(const std::string& key) { return Open(key, '[', false); }
+Writer& Writer::EndArray() { return Close(']'); }
 
 Writer& Writer::Number(const std::string& key, double v) {
   Prefix(key);
@@ -258,4 +246,4 @@ Writer& Writer::Bool(const std::string& key, bool v) {
   return *this;
 }
 
-}  // namespace ltm::eval::json
+}  // namespace ltm::io::json

@@ -197,7 +197,7 @@ void WriteRunReport(const std::string& out_dir, const RunReport& report) {
     os << "{\n  \"sessions\": " << report.sessions.size() << ",\n  \"aligned\": " << report.aligned.size()
        << ",\n  \"not_aligned\": " << report.not_aligned.size() << ",\n  \"stages\": {";
     for (std::size_t i = 0; i < report.stages.size(); ++i)
-      os << (i ? ", " : "") << "\"" << report.stages[i].stage << "\": {\"skipped\": "
+      os << (i ? ", " : "") << io::json::Quote(report.stages[i].stage) << ": {\"skipped\": "
          << (report.stages[i].skipped ? "true" : "false") << ", \"seconds\": " << report.stages[i].seconds << "}";
     os << "},\n  \"live_points\": " << report.map_points_live << ",\n  \"meta_points\": " << report.map_points_meta
        << ",\n  \"objects\": " << report.objects << ",\n  \"store_bytes\": " << report.store_bytes

@@ -93,15 +93,6 @@ void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const 
   if (cfg.write_ply) io::WritePly(dir + "/classes.ply", ply);
 }
 
-std::string JsonStr(const std::string& s) {
-  std::string o = "\"";
-  for (char ch : s) {
-    if (ch == '"' || ch == '\\') o += '\\';
-    o += ch;
-  }
-  return o + "\"";
-}
-
 // ---- the stage's steps -------------------------------------------------------------------
 
 // A session's keyframes placed with one world pose each (poses file in keyframe order).
@@ -326,7 +317,7 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
 int PairCentral(const RemovertConfig& cfg, int q) { return cfg.pairs == "consecutive" ? q - 1 : 0; }
 
 void WriteHdJson(std::ostream& os, const std::string& name, std::size_t keyframes, const HdStats& h) {
-  os << "{\"name\": " << JsonStr(name) << ", \"keyframes\": " << keyframes << ", \"map_points\": " << h.map_points
+  os << "{\"name\": " << io::json::Quote(name) << ", \"keyframes\": " << keyframes << ", \"map_points\": " << h.map_points
      << ", \"candidates\": " << h.candidates << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed
      << ", \"dilated\": " << h.dilated << ", \"removed_per_resolution\": [";
   for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
@@ -335,7 +326,7 @@ void WriteHdJson(std::ostream& os, const std::string& name, std::size_t keyframe
 }
 
 void WritePairJson(std::ostream& os, int c, int q, const LdStats& l, const std::vector<int>& new_keyframes) {
-  os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << JsonStr(io::layout::PairDirName(c, q))
+  os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << io::json::Quote(io::layout::PairDirName(c, q))
      << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak << ", \"pd_strong\": " << l.pd_strong
      << ", \"pd_weak\": " << l.pd_weak << ", \"pd_unobserved\": " << l.pd_unobserved
      << ", \"nd_unobserved\": " << l.nd_unobserved << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
