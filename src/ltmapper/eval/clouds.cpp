@@ -2,6 +2,7 @@
 #include "ltmapper/eval/hd.hpp"
 #include "ltmapper/eval/ld.hpp"
 #include "ltmapper/eval/restore.hpp"
+#include "ltmapper/eval/internal.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <tbb/blocked_range.h>
@@ -22,19 +23,12 @@ void EvalConfig::Validate(const std::string& where) const {
   if (std::adjacent_find(ld_bands_m.begin(), ld_bands_m.end(), std::greater_equal<double>()) != ld_bands_m.end())
     throw Error(where + ": ld.bands_m must be strictly increasing");
 }
-namespace {
-
-tbb::task_arena MakeArena(int threads) {
+tbb::task_arena detail::MakeArena(int threads) {
   return threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
 }
 
-double Ratio(std::size_t num, std::size_t den) {
-  return den == 0 ? kNaN : double(num) / double(den);
-}
-
-// Number of points of `queries` with a point of `tree` within `dist` (0 when the tree is empty).
-std::size_t CountMatched(const PointCloud& queries, const geometry::KdTree& tree, double dist,
-                         tbb::task_arena& arena) {
+std::size_t detail::CountMatched(const PointCloud& queries, const geometry::KdTree& tree, double dist,
+                                 tbb::task_arena& arena) {
   if (queries.empty() || tree.size() == 0) return 0;
   const float d2 = float(dist * dist);
   return arena.execute([&] {
@@ -49,6 +43,15 @@ std::size_t CountMatched(const PointCloud& queries, const geometry::KdTree& tree
         },
         [](std::size_t a, std::size_t b) { return a + b; });
   });
+}
+
+namespace {
+
+using detail::CountMatched;
+using detail::MakeArena;
+
+double Ratio(std::size_t num, std::size_t den) {
+  return den == 0 ? kNaN : double(num) / double(den);
 }
 
 PrfStats Prf(const PointCloud& truth, const PointCloud& pred, const geometry::KdTree& truth_tree,

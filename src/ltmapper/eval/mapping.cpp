@@ -3,13 +3,13 @@
 #include "ltmapper/eval/livemeta.hpp"
 #include "ltmapper/eval/objects.hpp"
 #include "ltmapper/eval/truth_io.hpp"
+#include "ltmapper/eval/internal.hpp"
 #include "ltmapper/eval/truth_mapping.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -24,25 +24,8 @@ namespace {
 
 std::string Join(const std::string& a, const std::string& b) { return (fs::path(a) / b).string(); }
 
-tbb::task_arena MakeArena(int threads) { return threads > 0 ? tbb::task_arena(threads) : tbb::task_arena(); }
-
-// Points of `q` with a point of `tree` within `dist`.
-std::size_t CountWithin(const PointCloud& q, const geometry::KdTree& tree, double dist, tbb::task_arena& arena) {
-  if (q.empty() || tree.size() == 0) return 0;
-  const float d2 = float(dist * dist);
-  return arena.execute([&] {
-    return tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, q.size(), 1024), std::size_t(0),
-        [&](const tbb::blocked_range<std::size_t>& r, std::size_t acc) {
-          std::uint32_t idx = 0;
-          float sq = 0.f;
-          for (std::size_t i = r.begin(); i != r.end(); ++i)
-            if (tree.Nearest(q.points[i].xyz(), &idx, &sq) && sq <= d2) ++acc;
-          return acc;
-        },
-        [](std::size_t a, std::size_t b) { return a + b; });
-  });
-}
+using detail::CountMatched;
+using detail::MakeArena;
 
 }  // namespace
 
@@ -227,8 +210,8 @@ LiveMetaResult EvaluateLiveMeta(const std::vector<LiveMetaObject>& truth, const 
     for (const auto& v : t.views) {
       s.points = std::max(s.points, v.size());
       if (v.empty()) continue;
-      const double live_f = double(CountWithin(v, live_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
-      const double meta_f = double(CountWithin(v, meta_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
+      const double live_f = double(CountMatched(v, live_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
+      const double meta_f = double(CountMatched(v, meta_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
       s.live_fraction = std::isnan(s.live_fraction) ? live_f : std::max(s.live_fraction, live_f);
       s.meta_fraction = std::isnan(s.meta_fraction) ? meta_f : std::max(s.meta_fraction, meta_f);
     }

@@ -52,41 +52,38 @@ class Parser {
     return false;
   }
 
+  // A container's items after its opening bracket, up to `close`; `item()` parses one.
+  template <class Item>
+  void Items(char close, Item&& item) {
+    ++pos_;
+    if (Peek() == close) {
+      ++pos_;
+      return;
+    }
+    for (;;) {
+      item();
+      const char n = Peek();
+      ++pos_;
+      if (n == close) break;
+      if (n != ',') Fail(std::string("expected ',' or '") + close + "'");
+    }
+  }
+
   Value ParseValue(int depth) {
     if (depth > 256) Fail("nesting too deep");
     Value v;
     const char c = Peek();
     if (c == '{') {
-      ++pos_;
       v.type = Value::Type::kObject;
-      if (Peek() == '}') {
-        ++pos_;
-        return v;
-      }
-      for (;;) {
+      Items('}', [&] {
         if (Peek() != '"') Fail("expected a string key");
         std::string key = ParseString();
         Expect(':');
         v.obj.emplace_back(std::move(key), ParseValue(depth + 1));
-        const char n = Peek();
-        ++pos_;
-        if (n == '}') break;
-        if (n != ',') Fail("expected ',' or '}'");
-      }
+      });
     } else if (c == '[') {
-      ++pos_;
       v.type = Value::Type::kArray;
-      if (Peek() == ']') {
-        ++pos_;
-        return v;
-      }
-      for (;;) {
-        v.arr.push_back(ParseValue(depth + 1));
-        const char n = Peek();
-        ++pos_;
-        if (n == ']') break;
-        if (n != ',') Fail("expected ',' or ']'");
-      }
+      Items(']', [&] { v.arr.push_back(ParseValue(depth + 1)); });
     } else if (c == '"') {
       v.type = Value::Type::kString;
       v.str = ParseString();

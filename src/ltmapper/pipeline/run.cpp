@@ -263,12 +263,8 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
     ExportMaps(p, sc, session_dirs[0], cfg.export_maps);
   });
   const MapFigures fig = ReadMapFigures(p, map_cfg, cfg.export_maps);
-  report.store_bytes = fig.store_bytes;
-  report.map_points_live = fig.live;
+  FinishReport(report, fig, t_run);
   report.map_points_meta = fig.meta;
-  report.objects = fig.objects;
-  report.seconds = Since(t_run);
-  report.peak_rss_bytes = PeakRssBytes();
   WriteRunReport(out_dir, report);
   return report;
 }

@@ -22,6 +22,8 @@ namespace ltm::removert::detail {
 
 // The keyframe's scan (memory or file).
 std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf);
+// The keyframes' sensor positions (world frame), one point per keyframe, in keyframe order.
+PointCloud Positions(const std::vector<WorldKeyframe>& keyframes);
 
 // parallel_for over [0, n) inside a task_arena of `threads` (0 = default), grain 1.
 using ltm::ParallelFor;  // core.hpp

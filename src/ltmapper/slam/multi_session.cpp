@@ -223,6 +223,27 @@ struct StageCost {
   double registration_s = 0.0, optimisation_s = 0.0;
 };
 
+// A later round's candidates registered (time and count into `cost`); returns how many verified.
+std::size_t RegisterRound(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
+                          const std::string& label, bool coarse, StageCost& cost) {
+  const Stopwatch sw;
+  Register(cand, store, cfg, threads, label, coarse);
+  cost.registrations += static_cast<int>(cand.size());
+  cost.registration_s += sw.Seconds();
+  std::size_t ok = 0;
+  for (const auto& l : cand) ok += l.verified ? 1 : 0;
+  return ok;
+}
+
+// The round's candidates join `loops` and the graph is solved again (time into `cost`).
+void SolveWith(const std::vector<Session>& sessions, const std::vector<LoopRecord>& cand,
+               std::vector<LoopRecord>& loops, SlamResult& res, const SlamConfig& cfg, int threads, StageCost& cost) {
+  loops.insert(loops.end(), cand.begin(), cand.end());
+  const Stopwatch sw;
+  res = OptimizeSessions(sessions, loops, cfg, threads);
+  cost.optimisation_s += sw.Seconds();
+}
+
 // Retry: a query not aligned after the first pass gets the next-ranked Scan Context candidates
 // of every pair linking it to an already aligned session (the central or any aligned query, so
 // chains of sessions align), round after round until it aligns or the candidates run out.
@@ -237,19 +258,12 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
       cand.insert(cand.end(), batch.begin(), batch.end());
     }
     if (cand.empty()) return;
-    Stopwatch sw;
-    Register(cand, store, cfg, threads, "GICP retry, round " + std::to_string(round + 1), true);
-    cost.registrations += static_cast<int>(cand.size());
-    cost.registration_s += sw.Seconds();
-    std::size_t ok = 0;
-    for (const auto& l : cand) ok += l.verified ? 1 : 0;
+    const std::size_t ok =
+        RegisterRound(cand, store, cfg, threads, "GICP retry, round " + std::to_string(round + 1), true, cost);
     spdlog::info("slam: retry round {}: {} scan context candidates for unaligned sessions, {} "
                  "verified",
                  round + 1, cand.size(), ok);
-    loops.insert(loops.end(), cand.begin(), cand.end());
-    sw = Stopwatch();
-    res = OptimizeSessions(sessions, loops, cfg, threads);
-    cost.optimisation_s += sw.Seconds();
+    SolveWith(sessions, cand, loops, res, cfg, threads, cost);
   }
 }
 
@@ -351,17 +365,10 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
       for (std::size_t b = a + 1; b < n; ++b)
         if (res.sessions[a].aligned && res.sessions[b].aligned) RadiusCandidates(res, loops, a, b, cfg, tried, &cand);
     if (cand.empty()) break;
-    Stopwatch sw;
-    Register(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), false);
-    cost.registrations += static_cast<int>(cand.size());
-    cost.registration_s += sw.Seconds();
-    std::size_t ok = 0;
-    for (const auto& l : cand) ok += l.verified ? 1 : 0;
+    const std::size_t ok =
+        RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), false, cost);
     spdlog::info("slam: refinement round {}: {} radius candidates, {} verified", round + 1, cand.size(), ok);
-    loops.insert(loops.end(), cand.begin(), cand.end());
-    sw = Stopwatch();
-    res = OptimizeSessions(sessions, loops, cfg, threads);
-    cost.optimisation_s += sw.Seconds();
+    SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     if (ok == 0) break;
   }
 }
