@@ -13,7 +13,7 @@
 //
 // This header only gathers the module's parts, one topic each (include the part you need):
 // config.hpp, trajectory.hpp, hd.hpp, ld.hpp, restore.hpp, truth_mapping.hpp, livemeta.hpp,
-// objects.hpp, storage.hpp, report.hpp, truth_io.hpp.
+// objects.hpp, storage.hpp, report.hpp, truth_io.hpp, ld_case.hpp.
 #pragma once
 
 #include "ltmapper/eval/config.hpp"
@@ -27,3 +27,4 @@
 #include "ltmapper/eval/storage.hpp"
 #include "ltmapper/eval/report.hpp"
 #include "ltmapper/eval/truth_io.hpp"
+#include "ltmapper/eval/ld_case.hpp"
