@@ -8,8 +8,6 @@
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -45,20 +43,17 @@ PointCloud MapTruthByKeyframes(const PointCloud& truth_world, const std::vector<
   }
   const geometry::KdTree tree(std::move(keyframes));
   PointCloud out = truth_world;
-  tbb::task_arena arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-      std::uint32_t k = 0;
-      float sq = 0.f;
-      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-        auto& p = out.points[i];
-        tree.Nearest(p.xyz(), &k, &sq);
-        const Eigen::Vector3d q = correction[k] * Eigen::Vector3d(p.x, p.y, p.z);
-        p.x = float(q.x());
-        p.y = float(q.y());
-        p.z = float(q.z());
-      }
-    });
+  ParallelForChunks(out.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    std::uint32_t k = 0;
+    float sq = 0.f;
+    for (std::size_t i = begin; i != end; ++i) {
+      auto& p = out.points[i];
+      tree.Nearest(p.xyz(), &k, &sq);
+      const Eigen::Vector3d q = correction[k] * Eigen::Vector3d(p.x, p.y, p.z);
+      p.x = float(q.x());
+      p.y = float(q.y());
+      p.z = float(q.z());
+    }
   });
   return out;
 }
@@ -158,30 +153,27 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
     }
   std::vector<PointCloud> out(changes.size());
   std::mutex out_mutex;
-  auto arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, files.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t k = r.begin(); k != r.end(); ++k) {
-        const PointCloud scan = ReadLabelledScan(files[k]);
-        const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
-        const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
-        const Eigen::Vector3f t = T_true[k].translation().cast<float>();
-        std::vector<PointCloud> part(changes.size());
-        for (std::size_t i = 0; i < scan.size(); ++i) {
-          if (scan.cls[i] != PointClass::kStatic) continue;
-          std::uint32_t j = 0;
-          float d2 = 0.f;
-          if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] < 0) continue;
-          part[std::size_t(label[j])].points.push_back(scan.points[i]);
-        }
-        for (PointCloud& p : part) {
-          geometry::TransformInPlace(p, T_est);
-          p = geometry::VoxelDownsample(p, voxel_m, 1);
-        }
-        const std::lock_guard<std::mutex> lock(out_mutex);
-        for (std::size_t c = 0; c < part.size(); ++c) out[c].append(part[c]);
+  ParallelForChunks(files.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k != end; ++k) {
+      const PointCloud scan = ReadLabelledScan(files[k]);
+      const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
+      const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
+      const Eigen::Vector3f t = T_true[k].translation().cast<float>();
+      std::vector<PointCloud> part(changes.size());
+      for (std::size_t i = 0; i < scan.size(); ++i) {
+        if (scan.cls[i] != PointClass::kStatic) continue;
+        std::uint32_t j = 0;
+        float d2 = 0.f;
+        if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] < 0) continue;
+        part[std::size_t(label[j])].points.push_back(scan.points[i]);
       }
-    });
+      for (PointCloud& p : part) {
+        geometry::TransformInPlace(p, T_est);
+        p = geometry::VoxelDownsample(p, voxel_m, 1);
+      }
+      const std::lock_guard<std::mutex> lock(out_mutex);
+      for (std::size_t c = 0; c < part.size(); ++c) out[c].append(part[c]);
+    }
   });
   for (PointCloud& c : out) {
     c = geometry::VoxelDownsample(c, voxel_m, threads);
