@@ -15,6 +15,19 @@ const Value* Value::Find(const std::string& key) const {
 
 namespace {
 
+// The short escapes: a character and the letter after its backslash. Quote writes the first five
+// (other control characters as \u00XX); the parser reads all of them.
+constexpr char kEscaped[] = {'"', '\\', '\n', '\r', '\t', '/', '\b', '\f'};
+constexpr char kLetter[] = {'"', '\\', 'n', 'r', 't', '/', 'b', 'f'};
+constexpr std::size_t kWritten = 5;
+
+// Index of `c` in `table` (first `n` entries), or -1.
+int Find(const char* table, std::size_t n, char c) {
+  for (std::size_t i = 0; i < n; ++i)
+    if (table[i] == c) return int(i);
+  return -1;
+}
+
 class Parser {
  public:
   Parser(const std::string& text, const std::string& where) : s_(text), where_(where) {}
@@ -117,33 +130,24 @@ class Parser {
       }
       if (pos_ >= s_.size()) break;
       const char e = s_[pos_++];
-      switch (e) {
-        case '"': out += '"'; break;
-        case '\\': out += '\\'; break;
-        case '/': out += '/'; break;
-        case 'b': out += '\b'; break;
-        case 'f': out += '\f'; break;
-        case 'n': out += '\n'; break;
-        case 'r': out += '\r'; break;
-        case 't': out += '\t'; break;
-        case 'u': {
-          if (pos_ + 4 > s_.size()) Fail("short \\u escape");
-          const unsigned cp = unsigned(std::strtoul(s_.substr(pos_, 4).c_str(), nullptr, 16));
-          pos_ += 4;
-          // UTF-8 encode (surrogate pairs are kept as two code units; fine for our keys).
-          if (cp < 0x80) {
-            out += char(cp);
-          } else if (cp < 0x800) {
-            out += char(0xC0 | (cp >> 6));
-            out += char(0x80 | (cp & 0x3F));
-          } else {
-            out += char(0xE0 | (cp >> 12));
-            out += char(0x80 | ((cp >> 6) & 0x3F));
-            out += char(0x80 | (cp & 0x3F));
-          }
-          break;
-        }
-        default: Fail("bad escape");
+      if (const int k = Find(kLetter, sizeof(kLetter), e); k >= 0) {
+        out += kEscaped[k];
+        continue;
+      }
+      if (e != 'u') Fail("bad escape");
+      if (pos_ + 4 > s_.size()) Fail("short \\u escape");
+      const unsigned cp = unsigned(std::strtoul(s_.substr(pos_, 4).c_str(), nullptr, 16));
+      pos_ += 4;
+      // UTF-8 encode (surrogate pairs are kept as two code units; fine for our keys).
+      if (cp < 0x80) {
+        out += char(cp);
+      } else if (cp < 0x800) {
+        out += char(0xC0 | (cp >> 6));
+        out += char(0x80 | (cp & 0x3F));
+      } else {
+        out += char(0xE0 | (cp >> 12));
+        out += char(0x80 | ((cp >> 6) & 0x3F));
+        out += char(0x80 | (cp & 0x3F));
       }
     }
     Fail("unterminated string");
@@ -163,20 +167,15 @@ Value Parse(const std::string& text, const std::string& where) {
 std::string Quote(const std::string& s) {
   std::string out = "\"";
   for (const char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof(buf), "\\u%04x", unsigned(c));
-          out += buf;
-        } else {
-          out += c;
-        }
+    if (const int k = Find(kEscaped, kWritten, c); k >= 0) {
+      out += '\\';
+      out += kLetter[k];
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof(buf), "\\u%04x", unsigned(c));
+      out += buf;
+    } else {
+      out += c;
     }
   }
   return out + "\"";
