@@ -39,9 +39,7 @@ void AddEvalOptions(CLI::App& cmd, EvalOptions& o) {
 
 eval::EvalConfig LoadEvalConfig(const EvalOptions& o) {
   if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
-  eval::EvalConfig cfg;
-  if (!o.config.empty()) io::LoadConfig(o.config, cfg);
-  for (const auto& kv : o.set) SetField(FieldsOf(cfg), kv);
+  auto cfg = LoadParams<eval::EvalConfig>(o.config, o.set);
   cfg.Validate(o.config.empty() ? "eval config" : o.config);
   spdlog::info("eval config{}:\n{}", o.config.empty() ? " (defaults)" : " " + o.config, ConfigToString(cfg));
   return cfg;
@@ -78,16 +76,6 @@ void AddTruthMapping(CLI::App& cmd, std::string& mapping) {
                  "With --aligned: keyframe (default; each truth point moves by the pose correction of the nearest true "
                  "keyframe of the session that observed it) or global (one rigid transform, the joint ATE alignment)")
       ->check(CLI::IsMember({"keyframe", "global"}));
-}
-eval::TruthMapping MakeMapping(const std::string& sim, const std::string& aligned, const std::string& frame,
-                               const std::string& mapping) {
-  eval::TruthMapping m;
-  if (!aligned.empty() && mapping == "keyframe") m = eval::KeyframeTruthMapping(sim, aligned);
-  else if (!aligned.empty()) m = eval::GlobalTruthMapping(eval::TruthToEstimateFrame(sim, aligned), "global: joint ATE alignment (" + aligned + ")");
-  else if (frame == "world") m = eval::GlobalTruthMapping(Pose::Identity(), "none: the output is in the sim's true world frame");
-  else m = eval::GlobalTruthMapping(eval::TruthToEstimateFrame(sim, ""), "global: inverse of the central session's true origin");
-  spdlog::info("truth mapping: {}", m.description);
-  return m;
 }
 // Sim session index of a name ("session_02" -> its position among truth/session_XX).
 std::size_t SessionIndex(const std::string& sim, const std::string& name) {
@@ -246,69 +234,23 @@ void SetupLd(CLI::App& parent) {
     if (!sim_form && (o->truth_dir.empty() || o->pred_dir.empty()))
       Usage("eval ld: give --truth-dir D --pred-dir D, or --sim DIR --changes DIR --pair 00_XX");
     const auto cfg = LoadEvalConfig(*o);
-    eval::Report report;
-    eval::ChangeClouds truth, pred;
-    std::string central_static = o->central_static;
-    std::optional<eval::LdTrajectories> traj;  // keyframe positions in the output frame (LD bands)
+    eval::LdCase ld;
     if (sim_form) {
       const std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
       const std::string pdir = eval::FindPairDir(o->changes, o->pair);
-      report.inputs = {{"truth", tdir}, {"prediction", pdir}};
       int c = -1, q = -1;
       if (std::sscanf(o->pair.c_str(), "%d_%d", &c, &q) != 2 || c < 0 || q < 0)
         Usage("eval ld: --pair must be CC_QQ (sim session indices), got '" + o->pair + "'");
-      const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
-      report.inputs.push_back({"truth mapping", m.description});
-      // Where each session's sensor was, in the output frame (LD distance bands).
-      traj = eval::LdTrajectories{eval::SensorPositions(o->sim, std::size_t(c), m),
-                                  eval::SensorPositions(o->sim, std::size_t(q), m)};
-      // PD points are query static_world points, ND points central ones (docs/FORMATS.md).
-      const eval::ChangeClouds w = eval::ReadChangeClouds(tdir);
-      const int th = o->common.threads;
-      if (o->from_scans) {
-        const double v = cfg.ld_match_dist_m;
-        auto pd = eval::ChangesFromLabelledScans(o->sim, std::size_t(q), {&w.pd_strong, &w.pd_weak}, m, v, th);
-        auto nd = eval::ChangesFromLabelledScans(o->sim, std::size_t(c), {&w.nd_strong, &w.nd_weak}, m, v, th);
-        truth = {std::move(pd[0]), std::move(pd[1]), std::move(nd[0]), std::move(nd[1])};
-        report.inputs.push_back(
-            {"truth built from", fmt::format("labelled scans placed with the method's poses, voxel {} m", v)});
-      } else {
-        truth = {m.Map(w.pd_strong, std::size_t(q), th), m.Map(w.pd_weak, std::size_t(q), th),
-                 m.Map(w.nd_strong, std::size_t(c), th), m.Map(w.nd_weak, std::size_t(c), th)};
-      }
-      pred = eval::ReadChangeClouds(pdir);
-      if (central_static.empty() && o->kept_map.empty()) {
-        // The central session is the pair's first number, indexing the sim's sessions.
-        const auto names = eval::SimSessionNames(o->sim);
-        const std::size_t c = std::size_t(std::stoul(o->pair.substr(0, o->pair.find('_'))));
-        if (c < names.size()) {
-          const std::string f = io::layout::StaticMapFile(o->changes, names[c]);
-          if (fs::exists(f)) central_static = f;
-          else spdlog::warn("{} not found: weak-ND preservation not scored", f);
-        }
-      }
+      const eval::TruthMapping m = eval::ResolveTruthMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+      ld = eval::LoadSimLdCase(o->sim, o->changes, tdir, pdir, c, q, m, o->from_scans,
+                               o->central_static.empty() && o->kept_map.empty(), cfg, o->common.threads);
     } else {
-      report.inputs = {{"truth", o->truth_dir}, {"prediction", o->pred_dir}};
-      truth = eval::ReadChangeClouds(o->truth_dir);
-      if (!o->truth_transform.empty()) truth = eval::TransformChanges(truth, io::ReadTransform(o->truth_transform));
-      pred = eval::ReadChangeClouds(o->pred_dir);
+      ld = eval::LoadLdCase(o->truth_dir, o->pred_dir, o->truth_transform);
     }
-    std::optional<PointCloud> kept;
-    if (!o->kept_map.empty()) {
-      kept = io::ReadCloud(o->kept_map);
-      report.inputs.push_back({"kept map", o->kept_map});
-    } else if (!central_static.empty()) {
-      kept = eval::KeptMapFromChanges(io::ReadCloud(central_static), pred.nd_strong, cfg, o->common.threads);
-      report.inputs.push_back({"kept map", central_static + " minus predicted strong ND"});
-    }
-    report.ld = eval::EvaluateLd(truth, pred, kept ? &*kept : nullptr, cfg, o->common.threads, traj ? &*traj : nullptr);
-    if (!o->errors.empty()) {
-      const eval::LdErrors e = eval::LdErrorClouds(truth, pred, cfg, o->common.threads);
-      io::MakeDirs(o->errors);
-      io::WritePly(Join(o->errors, "false_positives.ply"), e.false_positives);
-      io::WritePly(Join(o->errors, "false_negatives.ply"), e.false_negatives);
-      report.inputs.push_back({"error clouds", o->errors});
-    }
+    eval::Report report;
+    report.inputs = ld.inputs;
+    const std::string central_static = o->central_static.empty() ? ld.central_static : o->central_static;
+    report.ld = eval::ScoreLdCase(ld, o->kept_map, central_static, o->errors, cfg, o->common.threads, &report.inputs);
     Finish(report, *o);
   });
 }
@@ -341,7 +283,7 @@ void SetupRestore(CLI::App& parent) {
       report.inputs = {{"map A", o->map_a}, {"map B", o->map_b}};
     } else {
       const std::string f = Join(Join(Join(o->sim, "truth"), o->session), "static_world.pcd");
-      const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+      const eval::TruthMapping m = eval::ResolveTruthMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
       b = m.Map(io::ReadCloud(f), SessionIndex(o->sim, o->session), o->common.threads);
       report.inputs = {{"map A", o->map_a}, {"map B", f}, {"truth mapping", m.description}};
     }
@@ -412,7 +354,7 @@ void SetupObjects(CLI::App& parent) {
         pairs.push_back(buf);
       }
     }
-    const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+    const eval::TruthMapping m = eval::ResolveTruthMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
     std::vector<eval::ObjectTruth> truth;
     for (const auto& p : pairs) {
       auto t = eval::LoadSimObjectTruth(o->sim, p, m, cfg, o->common.threads);
@@ -450,7 +392,7 @@ void SetupLiveMeta(CLI::App& parent) {
   AddTruthMapping(*cmd, o->truth_mapping);
   cmd->callback([o] {
     const auto cfg = LoadEvalConfig(*o);
-    const eval::TruthMapping m = MakeMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
+    const eval::TruthMapping m = eval::ResolveTruthMapping(o->sim, o->aligned, o->truth_frame, o->truth_mapping);
     std::vector<std::string> classes = o->classes;
     std::string class_list;
     for (const auto& c : classes) class_list += (class_list.empty() ? "" : ", ") + c;

@@ -21,9 +21,7 @@ struct HdArgs {
 
 void RunHd(const HdArgs& a) {
   if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
-  removert::RemovertConfig cfg;
-  if (!a.config.empty()) io::LoadConfig(a.config, cfg);
-  for (const auto& kv : a.set) SetField(FieldsOf(cfg), kv);
+  const auto cfg = LoadParams<removert::RemovertConfig>(a.config, a.set);
   cfg.Validate(a.config.empty() ? "removert config" : a.config);
   const io::SessionLayout layout = io::DetectSessionLayout(a.dir);
   std::string out = a.out;

@@ -32,9 +32,7 @@ struct MapOptions {
 
 map::MapConfig LoadMapConfig(const MapOptions& o) {
   if (o.common.quiet) spdlog::set_level(spdlog::level::warn);
-  map::MapConfig cfg;
-  if (!o.config.empty()) io::LoadConfig(o.config, cfg);
-  for (const auto& kv : o.set) SetField(FieldsOf(cfg), kv);
+  auto cfg = LoadParams<map::MapConfig>(o.config, o.set);
   if (o.voxel >= 0) cfg.output_voxel_m = o.voxel;
   ValidateConfig(cfg, o.config.empty() ? "map config" : o.config);
   if (!o.common.quiet) spdlog::info("map config:\n{}", ConfigToString(cfg));

@@ -28,9 +28,7 @@ void Report(const removert::StageReport& rep, const std::string& out);
 
 void RunRemovert(const RemovertArgs& a) {
   if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
-  removert::RemovertConfig cfg;
-  if (!a.config.empty()) io::LoadConfig(a.config, cfg);
-  for (const auto& kv : a.set) SetField(FieldsOf(cfg), kv);
+  const auto cfg = LoadParams<removert::RemovertConfig>(a.config, a.set);
   cfg.Validate(a.config.empty() ? "removert config" : a.config);
   spdlog::info("removert config:\n{}", ConfigToString(cfg));
 

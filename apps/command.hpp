@@ -3,10 +3,14 @@
 // Commands only parse arguments, convert types and call module pipelines.
 #pragma once
 
+#include "ltmapper/core/core.hpp"
+#include "ltmapper/io/yaml.hpp"
+
 #include <CLI/CLI.hpp>
 
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace ltm::app {
 
@@ -22,6 +26,16 @@ struct CommonOptions {
   bool quiet = false;
 };
 void AddCommonOptions(CLI::App& cmd, CommonOptions& opts);
+
+// A command's params: the defaults, then the params file `path` (when given), then each --set
+// KEY=VALUE in order. The caller validates (some apply further options first).
+template <class Config>
+Config LoadParams(const std::string& path, const std::vector<std::string>& sets) {
+  Config cfg;
+  if (!path.empty()) io::LoadConfig(path, cfg);
+  for (const auto& kv : sets) SetField(FieldsOf(cfg), kv);
+  return cfg;
+}
 
 }  // namespace ltm::app
 

@@ -444,5 +444,18 @@ TEST(Yaml, SectionPartialKeysAndFlatDottedKeys) {
   EXPECT_EQ(d.voxel_m, 0.5);
 }
 
+// io::json: Quote writes the short escapes and \u00XX for the other control characters; Parse
+// reads every string Quote writes back unchanged, and the escapes only readers meet (\/ \b \f).
+TEST(Json, QuoteEscapesControlCharactersAndParseReadsThemBack) {
+  EXPECT_EQ(io::json::Quote("a\"b\\c\nd\re\tf\x01g/h"), "\"a\\\"b\\\\c\\nd\\re\\tf\\u0001g/h\"");
+  std::string all;
+  for (int c = 1; c < 128; ++c) all += char(c);
+  const io::json::Value v = io::json::Parse("{\"k\": " + io::json::Quote(all) + "}", "test");
+  ASSERT_NE(v.Find("k"), nullptr);
+  EXPECT_EQ(v.Find("k")->str, all);
+  EXPECT_EQ(io::json::Parse("\"\\/\\b\\f\"", "test").str, "/\b\f");
+  test::ExpectError([] { io::json::Parse("\"\\x\"", "where"); }, {"where", "bad escape"});
+}
+
 }  // namespace
 }  // namespace ltm

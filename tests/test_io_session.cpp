@@ -216,10 +216,8 @@ TEST(Cli, InfoGoodSessionPrintsCounts) {
   io::WriteSession(tmp / "good", MakeSession(4));
   std::string out;
   EXPECT_EQ(test::RunCli("info " + (tmp / "good"), &out), 0) << out;
-  EXPECT_NE(out.find("keyframes:       4"), std::string::npos) << out;
-  EXPECT_NE(out.find("min 50 / mean 52 / max 53"), std::string::npos) << out;
-  EXPECT_NE(out.find("3 odometry, 1 loops"), std::string::npos) << out;
-  EXPECT_NE(out.find("problems:        none"), std::string::npos) << out;
+  test::ExpectContains(out, {"keyframes:       4", "min 50 / mean 52 / max 53", "3 odometry, 1 loops",
+                             "problems:        none"});
 }
 
 TEST(Cli, InfoBrokenSessionExitsNonZero) {

@@ -235,15 +235,7 @@ TEST(RemovertReal, KittiHeadHdRemoval) {
       "KITTI 00-02 Tr");
   const Session s = io::LoadKittiSession(dir, dir + "/poses_00.txt", &Tr);
   ASSERT_EQ(s.keyframes.size(), 6u);
-  std::vector<removert::WorldKeyframe> kfs;
-  for (const auto& kf : s.keyframes) {
-    removert::WorldKeyframe w;
-    w.index = kf.index;
-    w.T_world_sensor = kf.T_session_sensor;
-    w.cloud_path = kf.cloud_path;
-    w.cloud = kf.cloud;
-    kfs.push_back(w);
-  }
+  const std::vector<removert::WorldKeyframe> kfs = removert::KeyframesOf(s);
   // No sensor key: the HDL-64E's beams are estimated from the scans.
   const removert::RemovertConfig cfg = removert::WithSensor(removert::RemovertConfig{}, kfs);
   std::printf("KITTI 00 head, sensor %s\n", cfg.sensor_model.Describe().c_str());

@@ -31,11 +31,7 @@ std::string Name(const char* prefix, int i) {
   std::snprintf(buf, sizeof(buf), "%s%02d", prefix, i);
   return buf;
 }
-std::string ScanName(int k) {
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%06d", k);
-  return buf;
-}
+std::string ScanName(int k) { return io::layout::KeyframeDirName(k); }  // "000123", as the scans
 
 // One simulated tiny scenario shared by the tests of this file (a few tenths of a second).
 class SimTruth : public ::testing::Test {

@@ -79,21 +79,19 @@ Session DriftedSession(const std::string& name, const std::vector<Pose>& world, 
                        double yaw_drift) {
   Session s;
   s.name = name;
-  Pose est = A.inverse() * world[0];  // first pose exact: the session frame is well defined
+  std::vector<Pose> inc;
+  const std::vector<Pose> est = test::DriftedOdometry(world, A, yaw_drift, &inc);
   for (std::size_t k = 0; k < world.size(); ++k) {
     if (k > 0) {
-      Pose inc = world[k - 1].inverse() * world[k];
-      inc.linear() = Eigen::AngleAxisd(yaw_drift, Eigen::Vector3d::UnitZ()) * inc.linear();
-      est = est * inc;
       Edge e;
       e.from = int(k) - 1;
       e.to = int(k);
-      e.T_from_to = inc;
+      e.T_from_to = inc[k - 1];
       s.odometry.push_back(e);
     }
     Keyframe kf;
     kf.index = int(k);
-    kf.T_session_sensor = est;
+    kf.T_session_sensor = est[k];
     s.keyframes.push_back(kf);
   }
   return s;

@@ -78,6 +78,26 @@ inline std::shared_ptr<PointCloud> SynthScan(const PointCloud& world, const Pose
   return scan;
 }
 
+// Drifted odometry of a drive through the true poses `world`, in the session frame
+// T_world_session: the first pose exact (the session frame is well defined), then the true
+// increments with a yaw error of `yaw_drift` rad each step. T_session_sensor per keyframe; the
+// drifted increments (world.size() - 1) into `increments` when given.
+inline std::vector<Pose> DriftedOdometry(const std::vector<Pose>& world, const Pose& T_world_session, double yaw_drift,
+                                         std::vector<Pose>* increments = nullptr) {
+  std::vector<Pose> out;
+  Pose est = T_world_session.inverse() * world[0];
+  for (std::size_t k = 0; k < world.size(); ++k) {
+    if (k > 0) {
+      Pose inc = world[k - 1].inverse() * world[k];
+      inc.linear() = Eigen::AngleAxisd(yaw_drift, Eigen::Vector3d::UnitZ()) * inc.linear();
+      est = est * inc;
+      if (increments) increments->push_back(inc);
+    }
+    out.push_back(est);
+  }
+  return out;
+}
+
 // A session driving along the road y = 0 from x0 to x1 in the world, keyframes every `spacing`
 // m, sensor 1.8 m above ground. Its own frame is T_world_session (the anchor to recover); its
 // odometry drifts in yaw by `yaw_drift` rad per keyframe.
@@ -90,14 +110,9 @@ inline Session SynthSession(const PointCloud& world, const std::string& name,
   for (double x = x0; x <= x1 + 1e-9; x += spacing) {
     world_poses.push_back(MakePose(x, 0.3 * std::sin(x / 10.0), 1.8, 0.05 * std::sin(x / 17.0)));
   }
-  // Drifted odometry in the session frame: true increments with a yaw error each step.
-  Pose est = T_world_session.inverse() * world_poses[0];
+  const std::vector<Pose> odometry = DriftedOdometry(world_poses, T_world_session, yaw_drift);
   for (std::size_t k = 0; k < world_poses.size(); ++k) {
-    if (k > 0) {
-      Pose inc = world_poses[k - 1].inverse() * world_poses[k];
-      inc.linear() = Eigen::AngleAxisd(yaw_drift, Eigen::Vector3d::UnitZ()) * inc.linear();
-      est = est * inc;
-    }
+    const Pose& est = odometry[k];
     Keyframe kf;
     kf.index = int(k);
     kf.T_session_sensor = est;

@@ -44,6 +44,11 @@ void ExpectError(F&& f, std::initializer_list<std::string> parts) {
   }
 }
 
+// Expects every string of `parts` in `text` (one failure per missing part, showing the text).
+inline void ExpectContains(const std::string& text, std::initializer_list<std::string> parts) {
+  for (const auto& p : parts) EXPECT_NE(text.find(p), std::string::npos) << "'" << p << "' not in: " << text;
+}
+
 // A fresh temporary directory removed at the end of the test.
 class TempDir {
  public:

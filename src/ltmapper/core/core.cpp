@@ -317,13 +317,19 @@ std::size_t PeakRssBytes() {
   return 0;
 }
 
-void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f) {
+void ParallelForChunks(std::size_t n, int threads, std::size_t grain,
+                       const std::function<void(std::size_t begin, std::size_t end)>& f) {
   if (n == 0) return;
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::max<std::size_t>(grain, 1)),
+                      [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
+  });
+}
+
+void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f) {
+  ParallelForChunks(n, threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i != end; ++i) f(i);
   });
 }
 

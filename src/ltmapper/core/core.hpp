@@ -33,8 +33,11 @@ class Error : public std::runtime_error {
 // ---------------------------------------------------------------------------------------------
 // Parallel loops: f(0) .. f(n-1) on `threads` workers (0 = all cores) in a task arena of the
 // call's own (no process-wide thread limit), one index per task (each may be big). Every module
-// uses this one; results must not depend on the order the indices run in.
+// uses these; results must not depend on the order the indices run in. ParallelForChunks calls
+// f(begin, end) on ranges that cover [0, n), each at most `grain` long (small items, or a
+// per-chunk set-up worth sharing).
 void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f);
+void ParallelForChunks(std::size_t n, int threads, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& f);
 
 // ---------------------------------------------------------------------------------------------
 // Point classes, stored per point when a cloud carries labels (PLY field "class").

@@ -1,9 +1,11 @@
 // Point-wise cloud metrics: HD removal (SA/DA/AA), LD changes (P/R/F1), restoration (Chamfer).
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/hd.hpp"
+#include "ltmapper/eval/ld.hpp"
+#include "ltmapper/eval/restore.hpp"
+#include "ltmapper/eval/internal.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
@@ -20,19 +22,12 @@ void EvalConfig::Validate(const std::string& where) const {
   if (std::adjacent_find(ld_bands_m.begin(), ld_bands_m.end(), std::greater_equal<double>()) != ld_bands_m.end())
     throw Error(where + ": ld.bands_m must be strictly increasing");
 }
-namespace {
-
-tbb::task_arena MakeArena(int threads) {
+tbb::task_arena detail::MakeArena(int threads) {
   return threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
 }
 
-double Ratio(std::size_t num, std::size_t den) {
-  return den == 0 ? kNaN : double(num) / double(den);
-}
-
-// Number of points of `queries` with a point of `tree` within `dist` (0 when the tree is empty).
-std::size_t CountMatched(const PointCloud& queries, const geometry::KdTree& tree, double dist,
-                         tbb::task_arena& arena) {
+std::size_t detail::CountMatched(const PointCloud& queries, const geometry::KdTree& tree, double dist,
+                                 tbb::task_arena& arena) {
   if (queries.empty() || tree.size() == 0) return 0;
   const float d2 = float(dist * dist);
   return arena.execute([&] {
@@ -47,6 +42,15 @@ std::size_t CountMatched(const PointCloud& queries, const geometry::KdTree& tree
         },
         [](std::size_t a, std::size_t b) { return a + b; });
   });
+}
+
+namespace {
+
+using detail::CountMatched;
+using detail::MakeArena;
+
+double Ratio(std::size_t num, std::size_t den) {
+  return den == 0 ? kNaN : double(num) / double(den);
 }
 
 PrfStats Prf(const PointCloud& truth, const PointCloud& pred, const geometry::KdTree& truth_tree,
@@ -185,24 +189,18 @@ void HdEvaluator::Add(const PointCloud& truth, const Eigen::Vector3d& sensor) {
   std::vector<std::uint8_t> state(truth.size(), 1), near(truth.size(), 0);
   const geometry::KdTree* ref = impl_->static_ref.get();
   const float near2 = float(impl_->cfg.hd_near_static_m * impl_->cfg.hd_near_static_m);
-  auto arena = MakeArena(impl_->threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, truth.size(), 1024),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        std::uint32_t idx = 0;
-                        float sq = 0.f;
-                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                          const Eigen::Vector3f p = truth.points[i].xyz();
-                          if (max_range > 0.0 && (p - s).norm() > max_range) {
-                            state[i] = 2;
-                            continue;
-                          }
-                          if (impl_->tree.Nearest(p, &idx, &sq) && sq <= d2) state[i] = 0;
-                          if (ref && truth.cls[i] == PointClass::kHD && ref->Nearest(p, &idx, &sq) &&
-                              sq <= near2)
-                            near[i] = 1;
-                        }
-                      });
+  ParallelForChunks(truth.size(), impl_->threads, 1024, [&](std::size_t begin, std::size_t end) {
+    std::uint32_t idx = 0;
+    float sq = 0.f;
+    for (std::size_t i = begin; i != end; ++i) {
+      const Eigen::Vector3f p = truth.points[i].xyz();
+      if (max_range > 0.0 && (p - s).norm() > max_range) {
+        state[i] = 2;
+        continue;
+      }
+      if (impl_->tree.Nearest(p, &idx, &sq) && sq <= d2) state[i] = 0;
+      if (ref && truth.cls[i] == PointClass::kHD && ref->Nearest(p, &idx, &sq) && sq <= near2) near[i] = 1;
+    }
   });
   for (std::size_t i = 0; i < truth.size(); ++i) {
     if (state[i] == 2) {
@@ -280,17 +278,15 @@ HdResult EvaluateHd(const PointCloud& truth, const PointCloud& output, const Eva
 // ------------------------------------------------------------------------------------- LD
 namespace {
 // Distance of each point of `c` to its nearest point of `keyframes` (keyframe positions).
-std::vector<float> DistanceTo(const PointCloud& c, const PointCloud& keyframes, tbb::task_arena& arena) {
+std::vector<float> DistanceTo(const PointCloud& c, const PointCloud& keyframes, int threads) {
   std::vector<float> out(c.size(), std::numeric_limits<float>::infinity());
   if (keyframes.empty()) return out;
   const geometry::KdTree tree(std::make_shared<const PointCloud>(keyframes));
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-      std::uint32_t idx = 0;
-      float sq = 0.f;
-      for (std::size_t i = r.begin(); i != r.end(); ++i)
-        if (tree.Nearest(c.points[i].xyz(), &idx, &sq)) out[i] = std::sqrt(sq);
-    });
+  ParallelForChunks(c.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    std::uint32_t idx = 0;
+    float sq = 0.f;
+    for (std::size_t i = begin; i != end; ++i)
+      if (tree.Nearest(c.points[i].xyz(), &idx, &sq)) out[i] = std::sqrt(sq);
   });
   return out;
 }
@@ -337,10 +333,10 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
   if (trajectories && !cfg.ld_bands_m.empty()) {
     std::vector<double> edges = cfg.ld_bands_m;  // strictly increasing (cfg.Validate)
     edges.push_back(std::numeric_limits<double>::infinity());
-    const auto d_tpd = DistanceTo(truth_pd, trajectories->central, arena);
-    const auto d_ppd = DistanceTo(pred_pd, trajectories->central, arena);
-    const auto d_tnd = DistanceTo(truth_nd, trajectories->query, arena);
-    const auto d_pnd = DistanceTo(pred_nd, trajectories->query, arena);
+    const auto d_tpd = DistanceTo(truth_pd, trajectories->central, threads);
+    const auto d_ppd = DistanceTo(pred_pd, trajectories->central, threads);
+    const auto d_tnd = DistanceTo(truth_nd, trajectories->query, threads);
+    const auto d_pnd = DistanceTo(pred_nd, trajectories->query, threads);
     double lo = 0.0;
     for (const double hi : edges) {
       LdBand b;
@@ -366,17 +362,15 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
 namespace {
 // Points of `c` (labelled `cls`) with (want_matched) / without a point of `tree` within `dist`.
 void AppendUnmatched(const PointCloud& c, PointClass cls, const geometry::KdTree& tree, double dist,
-                     tbb::task_arena& arena, PointCloud* out) {
+                     int threads, PointCloud* out) {
   std::vector<std::uint8_t> miss(c.size(), 1);
   const float d2 = float(dist * dist);
   if (tree.size() > 0) {
-    arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-        std::uint32_t idx = 0;
-        float sq = 0.f;
-        for (std::size_t i = r.begin(); i != r.end(); ++i)
-          miss[i] = tree.Nearest(c.points[i].xyz(), &idx, &sq) && sq <= d2 ? 0 : 1;
-      });
+    ParallelForChunks(c.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      std::uint32_t idx = 0;
+      float sq = 0.f;
+      for (std::size_t i = begin; i != end; ++i)
+        miss[i] = tree.Nearest(c.points[i].xyz(), &idx, &sq) && sq <= d2 ? 0 : 1;
     });
   }
   for (std::size_t i = 0; i < c.size(); ++i)
@@ -389,20 +383,19 @@ void AppendUnmatched(const PointCloud& c, PointClass cls, const geometry::KdTree
 
 LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& pred, const EvalConfig& cfg, int threads) {
   cfg.Validate();
-  auto arena = MakeArena(threads);
   const double d = cfg.ld_match_dist_m;
   auto tree = [](const PointCloud& c) { return geometry::KdTree(std::make_shared<const PointCloud>(c)); };
   const auto t_pd = tree(Concat(truth.pd_strong, truth.pd_weak)), t_nd = tree(Concat(truth.nd_strong, truth.nd_weak));
   const auto p_pd = tree(Concat(pred.pd_strong, pred.pd_weak)), p_nd = tree(Concat(pred.nd_strong, pred.nd_weak));
   LdErrors e;
-  AppendUnmatched(pred.pd_strong, PointClass::kPDStrong, t_pd, d, arena, &e.false_positives);
-  AppendUnmatched(pred.pd_weak, PointClass::kPDWeak, t_pd, d, arena, &e.false_positives);
-  AppendUnmatched(pred.nd_strong, PointClass::kNDStrong, t_nd, d, arena, &e.false_positives);
-  AppendUnmatched(pred.nd_weak, PointClass::kNDWeak, t_nd, d, arena, &e.false_positives);
-  AppendUnmatched(truth.pd_strong, PointClass::kPDStrong, p_pd, d, arena, &e.false_negatives);
-  AppendUnmatched(truth.pd_weak, PointClass::kPDWeak, p_pd, d, arena, &e.false_negatives);
-  AppendUnmatched(truth.nd_strong, PointClass::kNDStrong, p_nd, d, arena, &e.false_negatives);
-  AppendUnmatched(truth.nd_weak, PointClass::kNDWeak, p_nd, d, arena, &e.false_negatives);
+  AppendUnmatched(pred.pd_strong, PointClass::kPDStrong, t_pd, d, threads, &e.false_positives);
+  AppendUnmatched(pred.pd_weak, PointClass::kPDWeak, t_pd, d, threads, &e.false_positives);
+  AppendUnmatched(pred.nd_strong, PointClass::kNDStrong, t_nd, d, threads, &e.false_positives);
+  AppendUnmatched(pred.nd_weak, PointClass::kNDWeak, t_nd, d, threads, &e.false_positives);
+  AppendUnmatched(truth.pd_strong, PointClass::kPDStrong, p_pd, d, threads, &e.false_negatives);
+  AppendUnmatched(truth.pd_weak, PointClass::kPDWeak, p_pd, d, threads, &e.false_negatives);
+  AppendUnmatched(truth.nd_strong, PointClass::kNDStrong, p_nd, d, threads, &e.false_negatives);
+  AppendUnmatched(truth.nd_weak, PointClass::kNDWeak, p_nd, d, threads, &e.false_negatives);
   return e;
 }
 
@@ -413,16 +406,12 @@ PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud
   const geometry::KdTree tree(std::make_shared<const PointCloud>(nd_strong));
   const float eps2 = float(cfg.ld_same_point_m * cfg.ld_same_point_m);
   std::vector<std::uint8_t> keep(central_static.size(), 1);
-  auto arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, central_static.size(), 1024),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        std::uint32_t idx = 0;
-                        float sq = 0.f;
-                        for (std::size_t i = r.begin(); i != r.end(); ++i)
-                          if (tree.Nearest(central_static.points[i].xyz(), &idx, &sq) && sq <= eps2)
-                            keep[i] = 0;
-                      });
+  ParallelForChunks(central_static.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+    std::uint32_t idx = 0;
+    float sq = 0.f;
+    for (std::size_t i = begin; i != end; ++i)
+      if (tree.Nearest(central_static.points[i].xyz(), &idx, &sq) && sq <= eps2)
+        keep[i] = 0;
   });
   return central_static.select(std::vector<bool>(keep.begin(), keep.end()));
 }
@@ -434,16 +423,13 @@ double SameClassFraction(const PointCloud& want, const PointCloud& got, double r
   if (want.empty()) return 0.0;
   const geometry::KdTree tree(got);
   std::vector<char> same(want.size(), 0);
-  auto arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, want.size()), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t i = r.begin(); i != r.end(); ++i)
-        for (const auto& [j, d2] : tree.Radius(want.points[i].xyz(), float(radius_m)))
-          if (got.cls[j] == want.cls[i]) {
-            same[i] = 1;
-            break;
-          }
-    });
+  ParallelForChunks(want.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i != end; ++i)
+      for (const auto& [j, d2] : tree.Radius(want.points[i].xyz(), float(radius_m)))
+        if (got.cls[j] == want.cls[i]) {
+          same[i] = 1;
+          break;
+        }
   });
   return double(std::count(same.begin(), same.end(), char(1))) / double(want.size());
 }
@@ -483,20 +469,17 @@ RestoreResult EvaluateRestore(const PointCloud& a, const PointCloud& b, const Ev
 
   const bool squared = cfg.chamfer == "fan_squared";
   std::vector<double> cd(valid.size(), 0.0);
-  auto arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), valid.size(), [&](std::size_t k) {
-      PointCloud pa = a.select(ca.at(valid[k]));
-      PointCloud pb = b.select(cb.at(valid[k]));
-      pa.cls.clear(), pa.session.clear(), pa.object.clear();
-      pb.cls.clear(), pb.session.clear(), pb.object.clear();
-      const auto sa = std::make_shared<const PointCloud>(std::move(pa));
-      const auto sb = std::make_shared<const PointCloud>(std::move(pb));
-      const geometry::KdTree ta(sa), tb(sb);
-      const double ab = DirectedMean(*sa, tb, squared);
-      const double ba = DirectedMean(*sb, ta, squared);
-      cd[k] = squared ? ab + ba : 0.5 * (ab + ba);
-    });
+  ParallelFor(valid.size(), threads, [&](std::size_t k) {
+    PointCloud pa = a.select(ca.at(valid[k]));
+    PointCloud pb = b.select(cb.at(valid[k]));
+    pa.cls.clear(), pa.session.clear(), pa.object.clear();
+    pb.cls.clear(), pb.session.clear(), pb.object.clear();
+    const auto sa = std::make_shared<const PointCloud>(std::move(pa));
+    const auto sb = std::make_shared<const PointCloud>(std::move(pb));
+    const geometry::KdTree ta(sa), tb(sb);
+    const double ab = DirectedMean(*sa, tb, squared);
+    const double ba = DirectedMean(*sb, ta, squared);
+    cd[k] = squared ? ab + ba : 0.5 * (ab + ba);
   });
   double sum = 0.0, mx = 0.0;
   for (double v : cd) {

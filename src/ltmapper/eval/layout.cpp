@@ -1,6 +1,6 @@
 // Finding eval inputs in the documented layouts (docs/FORMATS.md): the simulator's truth/,
 // LT-SLAM's aligned/ and LT-removert's changes/.
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/truth_io.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 

@@ -1,12 +1,13 @@
 // Truth placement in the estimated world (global rigid or per keyframe) and the live / meta map
 // content check (new and removed objects).
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/livemeta.hpp"
+#include "ltmapper/eval/objects.hpp"
+#include "ltmapper/eval/truth_io.hpp"
+#include "ltmapper/eval/internal.hpp"
+#include "ltmapper/eval/truth_mapping.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -21,25 +22,8 @@ namespace {
 
 std::string Join(const std::string& a, const std::string& b) { return (fs::path(a) / b).string(); }
 
-tbb::task_arena MakeArena(int threads) { return threads > 0 ? tbb::task_arena(threads) : tbb::task_arena(); }
-
-// Points of `q` with a point of `tree` within `dist`.
-std::size_t CountWithin(const PointCloud& q, const geometry::KdTree& tree, double dist, tbb::task_arena& arena) {
-  if (q.empty() || tree.size() == 0) return 0;
-  const float d2 = float(dist * dist);
-  return arena.execute([&] {
-    return tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, q.size(), 1024), std::size_t(0),
-        [&](const tbb::blocked_range<std::size_t>& r, std::size_t acc) {
-          std::uint32_t idx = 0;
-          float sq = 0.f;
-          for (std::size_t i = r.begin(); i != r.end(); ++i)
-            if (tree.Nearest(q.points[i].xyz(), &idx, &sq) && sq <= d2) ++acc;
-          return acc;
-        },
-        [](std::size_t a, std::size_t b) { return a + b; });
-  });
-}
+using detail::CountMatched;
+using detail::MakeArena;
 
 }  // namespace
 
@@ -59,20 +43,17 @@ PointCloud MapTruthByKeyframes(const PointCloud& truth_world, const std::vector<
   }
   const geometry::KdTree tree(std::move(keyframes));
   PointCloud out = truth_world;
-  tbb::task_arena arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-      std::uint32_t k = 0;
-      float sq = 0.f;
-      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-        auto& p = out.points[i];
-        tree.Nearest(p.xyz(), &k, &sq);
-        const Eigen::Vector3d q = correction[k] * Eigen::Vector3d(p.x, p.y, p.z);
-        p.x = float(q.x());
-        p.y = float(q.y());
-        p.z = float(q.z());
-      }
-    });
+  ParallelForChunks(out.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    std::uint32_t k = 0;
+    float sq = 0.f;
+    for (std::size_t i = begin; i != end; ++i) {
+      auto& p = out.points[i];
+      tree.Nearest(p.xyz(), &k, &sq);
+      const Eigen::Vector3d q = correction[k] * Eigen::Vector3d(p.x, p.y, p.z);
+      p.x = float(q.x());
+      p.y = float(q.y());
+      p.z = float(q.z());
+    }
   });
   return out;
 }
@@ -172,30 +153,27 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
     }
   std::vector<PointCloud> out(changes.size());
   std::mutex out_mutex;
-  auto arena = MakeArena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, files.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t k = r.begin(); k != r.end(); ++k) {
-        const PointCloud scan = ReadLabelledScan(files[k]);
-        const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
-        const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
-        const Eigen::Vector3f t = T_true[k].translation().cast<float>();
-        std::vector<PointCloud> part(changes.size());
-        for (std::size_t i = 0; i < scan.size(); ++i) {
-          if (scan.cls[i] != PointClass::kStatic) continue;
-          std::uint32_t j = 0;
-          float d2 = 0.f;
-          if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] < 0) continue;
-          part[std::size_t(label[j])].points.push_back(scan.points[i]);
-        }
-        for (PointCloud& p : part) {
-          geometry::TransformInPlace(p, T_est);
-          p = geometry::VoxelDownsample(p, voxel_m, 1);
-        }
-        const std::lock_guard<std::mutex> lock(out_mutex);
-        for (std::size_t c = 0; c < part.size(); ++c) out[c].append(part[c]);
+  ParallelForChunks(files.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k != end; ++k) {
+      const PointCloud scan = ReadLabelledScan(files[k]);
+      const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
+      const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
+      const Eigen::Vector3f t = T_true[k].translation().cast<float>();
+      std::vector<PointCloud> part(changes.size());
+      for (std::size_t i = 0; i < scan.size(); ++i) {
+        if (scan.cls[i] != PointClass::kStatic) continue;
+        std::uint32_t j = 0;
+        float d2 = 0.f;
+        if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] < 0) continue;
+        part[std::size_t(label[j])].points.push_back(scan.points[i]);
       }
-    });
+      for (PointCloud& p : part) {
+        geometry::TransformInPlace(p, T_est);
+        p = geometry::VoxelDownsample(p, voxel_m, 1);
+      }
+      const std::lock_guard<std::mutex> lock(out_mutex);
+      for (std::size_t c = 0; c < part.size(); ++c) out[c].append(part[c]);
+    }
   });
   for (PointCloud& c : out) {
     c = geometry::VoxelDownsample(c, voxel_m, threads);
@@ -224,8 +202,8 @@ LiveMetaResult EvaluateLiveMeta(const std::vector<LiveMetaObject>& truth, const 
     for (const auto& v : t.views) {
       s.points = std::max(s.points, v.size());
       if (v.empty()) continue;
-      const double live_f = double(CountWithin(v, live_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
-      const double meta_f = double(CountWithin(v, meta_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
+      const double live_f = double(CountMatched(v, live_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
+      const double meta_f = double(CountMatched(v, meta_tree, cfg.ld_match_dist_m, arena)) / double(v.size());
       s.live_fraction = std::isnan(s.live_fraction) ? live_f : std::max(s.live_fraction, live_f);
       s.meta_fraction = std::isnan(s.meta_fraction) ? meta_f : std::max(s.meta_fraction, meta_f);
     }

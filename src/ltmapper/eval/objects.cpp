@@ -1,11 +1,8 @@
 // Changed-object evaluation: LT-map's clusters against the simulator's LD objects by point IoU.
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/objects.hpp"
+#include "ltmapper/eval/truth_io.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cctype>
@@ -201,48 +198,44 @@ void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const st
 
 void ScoreTruth(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
                 const std::vector<std::size_t>& used, const Prepared& tp, const Prepared& cp, const EvalConfig& cfg,
-                tbb::task_arena& arena) {
+                int threads) {
   r.objects.resize(truth.size());
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) {
-      const ObjectTruth& t = truth[i];
-      ObjectScore& s = r.objects[i];
-      s.pair = t.pair;
-      s.id = t.id;
-      s.cls = t.cls;
-      s.placement = t.placement;
-      s.session = t.session;
-      s.points = tp.cloud[i].size();
-      s.change_points = t.change_points;
-      s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1)) &&
-                 (t.change_points < 0 || t.change_points >= long(cfg.obj_min_change_points));
-      for (const std::size_t k : used) {
-        const double iou = PairIou(t, i, tp, clusters[k], k, cp, cfg);
-        if (iou > s.best_iou) s.best_iou = iou, s.best_cluster = clusters[k].id, s.cluster_points = cp.cloud[k].size();
-      }
-      s.found = s.scored && s.best_iou >= cfg.obj_min_iou;
-    });
+  ParallelFor(truth.size(), threads, [&](std::size_t i) {
+    const ObjectTruth& t = truth[i];
+    ObjectScore& s = r.objects[i];
+    s.pair = t.pair;
+    s.id = t.id;
+    s.cls = t.cls;
+    s.placement = t.placement;
+    s.session = t.session;
+    s.points = tp.cloud[i].size();
+    s.change_points = t.change_points;
+    s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1)) &&
+               (t.change_points < 0 || t.change_points >= long(cfg.obj_min_change_points));
+    for (const std::size_t k : used) {
+      const double iou = PairIou(t, i, tp, clusters[k], k, cp, cfg);
+      if (iou > s.best_iou) s.best_iou = iou, s.best_cluster = clusters[k].id, s.cluster_points = cp.cloud[k].size();
+    }
+    s.found = s.scored && s.best_iou >= cfg.obj_min_iou;
   });
 }
 
 void ScoreClusters(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,
                    const std::vector<std::size_t>& used, const Prepared& tp, const Prepared& cp, const EvalConfig& cfg,
-                   tbb::task_arena& arena) {
+                   int threads) {
   r.cluster_scores.resize(used.size());
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), used.size(), [&](std::size_t u) {
-      const std::size_t k = used[u];
-      ClusterScore& s = r.cluster_scores[u];
-      s.pair = clusters[k].pair;
-      s.change = clusters[k].change;
-      s.id = clusters[k].id;
-      s.points = cp.cloud[k].size();
-      for (std::size_t i = 0; i < truth.size(); ++i) {
-        const double iou = PairIou(truth[i], i, tp, clusters[k], k, cp, cfg);
-        if (iou > s.best_iou) s.best_iou = iou, s.best_truth = truth[i].id;
-      }
-      s.true_object = s.best_iou >= cfg.obj_min_iou;
-    });
+  ParallelFor(used.size(), threads, [&](std::size_t u) {
+    const std::size_t k = used[u];
+    ClusterScore& s = r.cluster_scores[u];
+    s.pair = clusters[k].pair;
+    s.change = clusters[k].change;
+    s.id = clusters[k].id;
+    s.points = cp.cloud[k].size();
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      const double iou = PairIou(truth[i], i, tp, clusters[k], k, cp, cfg);
+      if (iou > s.best_iou) s.best_iou = iou, s.best_truth = truth[i].id;
+    }
+    s.true_object = s.best_iou >= cfg.obj_min_iou;
   });
 }
 
@@ -264,13 +257,10 @@ ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::
     if (pairs.count(clusters[k].pair)) used.push_back(k);
   r.clusters = used.size();
   Prepared cp(clusters.size()), tp(truth.size());
-  tbb::task_arena arena = threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), used.size(), [&](std::size_t u) { cp.Set(used[u], clusters[used[u]].cloud, cfg.obj_voxel_m); });
-    tbb::parallel_for(std::size_t(0), truth.size(), [&](std::size_t i) { tp.Set(i, truth[i].cloud, cfg.obj_voxel_m); });
-  });
-  ScoreTruth(r, truth, clusters, used, tp, cp, cfg, arena);
-  ScoreClusters(r, truth, clusters, used, tp, cp, cfg, arena);
+  ParallelFor(used.size(), threads, [&](std::size_t u) { cp.Set(used[u], clusters[used[u]].cloud, cfg.obj_voxel_m); });
+  ParallelFor(truth.size(), threads, [&](std::size_t i) { tp.Set(i, truth[i].cloud, cfg.obj_voxel_m); });
+  ScoreTruth(r, truth, clusters, used, tp, cp, cfg, threads);
+  ScoreClusters(r, truth, clusters, used, tp, cp, cfg, threads);
   Summarise(r, truth, pairs);
   return r;
 }
@@ -335,19 +325,16 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
     for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.obj_keyframe_stride)) scans.push_back(k);
     // Per scan: points of each wanted object in the estimate frame; merged in scan order.
     std::vector<std::map<int, PointCloud>> parts(scans.size());
-    tbb::task_arena arena = threads > 0 ? tbb::task_arena(threads) : tbb::task_arena();
-    arena.execute([&] {
-      tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t j) {
-        const std::size_t k = scans[j];
-        const PointCloud scan = ReadLabelledScan(files[k]);
-        if (scan.object.size() != scan.size()) throw Error(files[k], 0, "labelled scan needs an 'object' field");
-        const Pose T = mapping.ScanPose(std::size_t(s), k, poses[k]);
-        for (std::size_t i = 0; i < scan.size(); ++i) {
-          if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
-          const Eigen::Vector3f p = (T * scan.points[i].xyz().cast<double>()).cast<float>();
-          parts[j][scan.object[i]].push_back(p.x(), p.y(), p.z(), scan.points[i].intensity);
-        }
-      });
+    ParallelFor(scans.size(), threads, [&](std::size_t j) {
+      const std::size_t k = scans[j];
+      const PointCloud scan = ReadLabelledScan(files[k]);
+      if (scan.object.size() != scan.size()) throw Error(files[k], 0, "labelled scan needs an 'object' field");
+      const Pose T = mapping.ScanPose(std::size_t(s), k, poses[k]);
+      for (std::size_t i = 0; i < scan.size(); ++i) {
+        if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
+        const Eigen::Vector3f p = (T * scan.points[i].xyz().cast<double>()).cast<float>();
+        parts[j][scan.object[i]].push_back(p.x(), p.y(), p.z(), scan.points[i].intensity);
+      }
     });
     for (auto& m : parts)
       for (auto& [id, c] : m) out[slot[id]].cloud.append(c);

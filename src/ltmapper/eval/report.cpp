@@ -1,6 +1,6 @@
 // Report writers: JSON for machines, Markdown for people.
-#include "ltmapper/eval/eval.hpp"
-#include "ltmapper/eval/json.hpp"
+#include "ltmapper/eval/report.hpp"
+#include "ltmapper/io/json.hpp"
 #include "ltmapper/io/io.hpp"
 
 #include <cmath>
@@ -12,7 +12,7 @@ namespace ltm::eval {
 namespace {
 
 // ------------------------------------------------------------------------------------ JSON
-void WriteStats(json::Writer& w, const std::string& key, const ErrorStats& s) {
+void WriteStats(io::json::Writer& w, const std::string& key, const ErrorStats& s) {
   w.BeginObject(key)
       .Int("n", (long long)s.n)
       .Number("rmse", s.rmse)
@@ -22,14 +22,14 @@ void WriteStats(json::Writer& w, const std::string& key, const ErrorStats& s) {
       .EndObject();
 }
 
-void WritePoseErrors(json::Writer& w, const std::string& key, const PoseErrors& e) {
+void WritePoseErrors(io::json::Writer& w, const std::string& key, const PoseErrors& e) {
   w.BeginObject(key);
   WriteStats(w, "trans_m", e.trans_m);
   WriteStats(w, "rot_deg", e.rot_deg);
   w.EndObject();
 }
 
-void WritePrf(json::Writer& w, const std::string& key, const PrfStats& s) {
+void WritePrf(io::json::Writer& w, const std::string& key, const PrfStats& s) {
   w.BeginObject(key)
       .Int("predicted", (long long)s.predicted)
       .Int("predicted_matched", (long long)s.predicted_matched)
@@ -41,7 +41,7 @@ void WritePrf(json::Writer& w, const std::string& key, const PrfStats& s) {
       .EndObject();
 }
 
-void WriteTraj(json::Writer& w, const TrajResult& t) {
+void WriteTraj(io::json::Writer& w, const TrajResult& t) {
   w.BeginObject("traj").String("align", t.align).String("rpe_unit", t.rpe_unit).Number("rpe_delta", t.rpe_delta);
   WritePoseErrors(w, "ate", t.ate);
   WritePoseErrors(w, "rpe", t.rpe);
@@ -69,7 +69,7 @@ void WriteTraj(json::Writer& w, const TrajResult& t) {
   w.EndArray().EndObject();
 }
 
-void WriteHd(json::Writer& w, const HdResult& h) {
+void WriteHd(io::json::Writer& w, const HdResult& h) {
   w.BeginObject("hd")
       .Number("match_dist_m", h.match_dist_m)
       .Int("output_points", (long long)h.output_points)
@@ -96,7 +96,7 @@ void WriteHd(json::Writer& w, const HdResult& h) {
   w.EndArray().EndObject();
 }
 
-void WriteLd(json::Writer& w, const LdResult& l) {
+void WriteLd(io::json::Writer& w, const LdResult& l) {
   w.BeginObject("ld").Number("match_dist_m", l.match_dist_m);
   WritePrf(w, "pd_strong", l.pd_strong);
   WritePrf(w, "pd_weak", l.pd_weak);
@@ -131,7 +131,7 @@ void WriteLd(json::Writer& w, const LdResult& l) {
   w.EndObject();
 }
 
-void WriteRestore(json::Writer& w, const RestoreResult& r) {
+void WriteRestore(io::json::Writer& w, const RestoreResult& r) {
   w.BeginObject("restore")
       .Number("patch_m", r.patch_m)
       .Int("min_points", r.min_points)
@@ -154,7 +154,7 @@ void WriteRestore(json::Writer& w, const RestoreResult& r) {
   w.EndArray().EndObject();
 }
 
-void WriteStorage(json::Writer& w, const StorageResult& s) {
+void WriteStorage(io::json::Writer& w, const StorageResult& s) {
   w.BeginObject("storage").BeginArray("items");
   for (const auto& it : s.items)
     w.BeginObject()
@@ -169,7 +169,7 @@ void WriteStorage(json::Writer& w, const StorageResult& s) {
   w.EndArray().EndObject();
 }
 
-void WritePrf(json::Writer& w, const ObjectsPrf& p, const char* key = nullptr) {
+void WritePrf(io::json::Writer& w, const ObjectsPrf& p, const char* key = nullptr) {
   (key ? w.BeginObject(key) : w.BeginObject())
       .String("name", p.name)
       .Int("truth_objects", (long long)p.truth_objects)
@@ -182,7 +182,7 @@ void WritePrf(json::Writer& w, const ObjectsPrf& p, const char* key = nullptr) {
       .EndObject();
 }
 
-void WriteClusterScores(json::Writer& w, const ObjectsResult& r) {
+void WriteClusterScores(io::json::Writer& w, const ObjectsResult& r) {
   w.BeginArray("clusters_scored");
   for (const auto& c : r.cluster_scores)
     w.BeginObject()
@@ -197,7 +197,7 @@ void WriteClusterScores(json::Writer& w, const ObjectsResult& r) {
   w.EndArray();
 }
 
-void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
+void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
   w.BeginObject("objects")
       .Number("match_dist_m", r.match_dist_m)
       .Number("voxel_m", r.voxel_m)
@@ -235,7 +235,7 @@ void WriteObjectsResult(json::Writer& w, const ObjectsResult& r) {
   w.EndArray().EndObject();
 }
 
-void WriteLiveMeta(json::Writer& w, const LiveMetaResult& r) {
+void WriteLiveMeta(io::json::Writer& w, const LiveMetaResult& r) {
   w.BeginObject("livemeta")
       .Number("match_dist_m", r.match_dist_m)
       .Number("min_fraction", r.min_fraction)
@@ -468,7 +468,7 @@ void MdLiveMeta(std::ostringstream& md, const LiveMetaResult& r) {
 }  // namespace
 
 std::string ToJson(const Report& report) {
-  json::Writer w;
+  io::json::Writer w;
   w.BeginObject();
   w.BeginObject("inputs");
   for (const auto& [k, v] : report.inputs) w.String(k, v);
@@ -513,13 +513,13 @@ void WriteReport(const Report& report, const std::string& json_path, const std::
 }
 
 std::optional<double> JsonNumber(const std::string& json_text, const std::string& dotted_path) {
-  const json::Value doc = json::Parse(json_text, "json");
-  const json::Value* v = &doc;
+  const io::json::Value doc = io::json::Parse(json_text, "json");
+  const io::json::Value* v = &doc;
   std::size_t start = 0;
   while (v && start <= dotted_path.size()) {
     const std::size_t dot = dotted_path.find('.', start);
     const std::string seg = dotted_path.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
-    if (v->type == json::Value::Type::kArray) {
+    if (v->type == io::json::Value::Type::kArray) {
       char* end = nullptr;
       const unsigned long idx = std::strtoul(seg.c_str(), &end, 10);
       v = (!seg.empty() && *end == '\0' && idx < v->arr.size()) ? &v->arr[idx] : nullptr;
@@ -529,7 +529,7 @@ std::optional<double> JsonNumber(const std::string& json_text, const std::string
     if (dot == std::string::npos) break;
     start = dot + 1;
   }
-  if (!v || v->type != json::Value::Type::kNumber) return std::nullopt;
+  if (!v || v->type != io::json::Value::Type::kNumber) return std::nullopt;
   return v->num;
 }
 

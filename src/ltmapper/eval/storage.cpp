@@ -1,6 +1,6 @@
 // Storage and cost: bytes of files / directory trees, wall time and peak memory of a stage.
-#include "ltmapper/eval/eval.hpp"
-#include "ltmapper/eval/json.hpp"
+#include "ltmapper/eval/storage.hpp"
+#include "ltmapper/io/json.hpp"
 
 #include <filesystem>
 #include <fstream>
@@ -46,15 +46,15 @@ namespace {
 
 // The shallowest numeric field whose key is one of `names` (breadth first, then document
 // order), so a stage's total time wins over per-item times nested below it.
-const json::Value* FindNumber(const json::Value& root, const std::vector<std::string>& names,
+const io::json::Value* FindNumber(const io::json::Value& root, const std::vector<std::string>& names,
                               std::size_t* which) {
-  std::vector<const json::Value*> level = {&root};
+  std::vector<const io::json::Value*> level = {&root};
   while (!level.empty()) {
-    std::vector<const json::Value*> next;
-    for (const json::Value* v : level) {
-      if (v->type == json::Value::Type::kObject) {
+    std::vector<const io::json::Value*> next;
+    for (const io::json::Value* v : level) {
+      if (v->type == io::json::Value::Type::kObject) {
         for (const auto& [k, child] : v->obj) {
-          if (child.type == json::Value::Type::kNumber)
+          if (child.type == io::json::Value::Type::kNumber)
             for (std::size_t i = 0; i < names.size(); ++i)
               if (k == names[i]) {
                 *which = i;
@@ -62,7 +62,7 @@ const json::Value* FindNumber(const json::Value& root, const std::vector<std::st
               }
           next.push_back(&child);
         }
-      } else if (v->type == json::Value::Type::kArray) {
+      } else if (v->type == io::json::Value::Type::kArray) {
         for (const auto& child : v->arr) next.push_back(&child);
       }
     }
@@ -78,7 +78,7 @@ CostItem ReadCostReport(const std::string& path) {
   if (!in) throw Error(path, 0, "cannot open report");
   std::stringstream ss;
   ss << in.rdbuf();
-  const json::Value doc = json::Parse(ss.str(), path);
+  const io::json::Value doc = io::json::Parse(ss.str(), path);
   CostItem c;
   c.label = path;
   std::size_t which = 0;

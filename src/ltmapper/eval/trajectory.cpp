@@ -1,5 +1,5 @@
 // Trajectory metrics: ATE after one rigid alignment, RPE, inter-session consistency.
-#include "ltmapper/eval/eval.hpp"
+#include "ltmapper/eval/trajectory.hpp"
 
 #include <Eigen/SVD>
 

@@ -11,7 +11,6 @@
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
@@ -132,7 +131,7 @@ struct VoxelSum {
 
 // Sorted records -> one centroid per run of equal keys.
 template <class Rec>
-PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
+PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs, int threads) {
   std::vector<std::size_t> starts;
   starts.reserve(recs.size() / 4 + 1);
   for (std::size_t i = 0; i < recs.size(); ++i)
@@ -145,9 +144,8 @@ PointCloud Reduce(const PointCloud& cloud, const std::vector<Rec>& recs) {
   if (!cloud.cls.empty()) out.cls.resize(m);
   if (!cloud.session.empty()) out.session.resize(m);
   if (!cloud.object.empty()) out.object.resize(m);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain / 4),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+  ParallelForChunks(m, threads, kGrain / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v != end; ++v) {
       VoxelSum sum;
       for (std::size_t j = starts[v]; j < starts[v + 1]; ++j) sum.Add(cloud.points[recs[j].idx]);
       out.points[v] = sum.Mean();
@@ -167,13 +165,13 @@ struct Span {
 
 // The non-empty runs, or none when a run's keys are out of order.
 template <class KeyFn>
-std::vector<Span> SortedSpans(const PointCloud& cloud, std::vector<std::size_t> runs, const KeyFn& key) {
+std::vector<Span> SortedSpans(const PointCloud& cloud, std::vector<std::size_t> runs, const KeyFn& key, int threads) {
   runs.push_back(cloud.size());
   std::vector<Span> spans;
   for (std::size_t r = 0; r + 1 < runs.size(); ++r)
     if (runs[r + 1] > runs[r]) spans.push_back({runs[r], runs[r + 1]});
   std::vector<char> sorted(spans.size(), 1);
-  tbb::parallel_for(std::size_t(0), spans.size(), [&](std::size_t r) {
+  ParallelFor(spans.size(), threads, [&](std::size_t r) {
     std::uint64_t prev = key(cloud.points[spans[r].b]);
     for (std::size_t i = spans[r].b + 1; i < spans[r].e && sorted[r]; ++i) {
       const std::uint64_t k = key(cloud.points[i]);
@@ -191,7 +189,7 @@ std::vector<Span> SortedSpans(const PointCloud& cloud, std::vector<std::size_t> 
 // split[t - 1]); returns the number of ranges.
 template <class KeyFn>
 std::size_t MergeRanges(const PointCloud& cloud, const std::vector<Span>& spans, const KeyFn& key,
-                        std::vector<std::size_t>* bound) {
+                        std::vector<std::size_t>* bound, int threads) {
   const Span longest = *std::max_element(spans.begin(), spans.end(), [](const Span& a, const Span& b) {
     return a.e - a.b < b.e - b.b;
   });
@@ -203,7 +201,7 @@ std::size_t MergeRanges(const PointCloud& cloud, const std::vector<Span>& spans,
   }
   const std::size_t nr = split.size() + 1;
   bound->assign(spans.size() * (nr + 1), 0);
-  tbb::parallel_for(std::size_t(0), spans.size(), [&](std::size_t r) {
+  ParallelFor(spans.size(), threads, [&](std::size_t r) {
     std::size_t* row = &(*bound)[r * (nr + 1)];
     row[0] = spans[r].b;
     row[nr] = spans[r].e;
@@ -275,13 +273,14 @@ PointCloud MergeRange(const PointCloud& cloud, std::size_t runs, const std::vect
 // does (std::merge keeps equal keys in run order), so the output is bit-identical to it.
 // False, writing nothing, when a run is out of order.
 template <class KeyFn>
-bool ReduceRuns(const PointCloud& cloud, const std::vector<std::size_t>& runs, const KeyFn& key, PointCloud* out) {
-  const std::vector<Span> spans = SortedSpans(cloud, runs, key);
+bool ReduceRuns(const PointCloud& cloud, const std::vector<std::size_t>& runs, const KeyFn& key, PointCloud* out,
+                int threads) {
+  const std::vector<Span> spans = SortedSpans(cloud, runs, key, threads);
   if (spans.empty()) return false;
   std::vector<std::size_t> bound;
-  const std::size_t nr = MergeRanges(cloud, spans, key, &bound);
+  const std::size_t nr = MergeRanges(cloud, spans, key, &bound, threads);
   std::vector<PointCloud> parts(nr);
-  tbb::parallel_for(std::size_t(0), nr, [&](std::size_t t) { parts[t] = MergeRange(cloud, spans.size(), bound, nr, t, key); });
+  ParallelFor(nr, threads, [&](std::size_t t) { parts[t] = MergeRange(cloud, spans.size(), bound, nr, t, key); });
   std::size_t m = 0;
   for (const auto& part : parts) m += part.size();
   out->points.reserve(m);
@@ -322,10 +321,10 @@ Bounds VoxelBounds(const PointCloud& cloud, double voxel_m) {
 // Sorted (key, index) records of the finite points -> centroids. `point_index(j)`: the j-th
 // finite point; `fill(rec, i)` sets a record's key.
 template <class Rec, class IndexFn, class FillFn>
-std::vector<Rec> Records(std::size_t m, const IndexFn& point_index, const FillFn& fill) {
+std::vector<Rec> Records(std::size_t m, const IndexFn& point_index, const FillFn& fill, int threads) {
   std::vector<Rec> recs(m);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t j = r.begin(); j != r.end(); ++j) fill(recs[j], point_index(j));
+  ParallelForChunks(m, threads, kGrain, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t j = begin; j != end; ++j) fill(recs[j], point_index(j));
   });
   return recs;
 }
@@ -356,9 +355,9 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, cons
     auto recs = Records<WideRec>(b.finite, point_index, [&](WideRec& rec, std::uint32_t i) {
       rec.idx = i;
       VoxelOf(cloud.points[i], voxel_m, &rec.key);
-    });
+    }, threads);
     tbb::parallel_sort(recs.begin(), recs.end());
-    return Reduce(cloud, recs);
+    return Reduce(cloud, recs, threads);
   }
   auto packed_key = [&](const PointXYZI& p) {
     Index3 k{0, 0, 0};
@@ -367,13 +366,13 @@ PointCloud Downsample(const PointCloud& cloud, double voxel_m, int threads, cons
            std::uint64_t(k[2] - b.lo[2]);
   };
   PointCloud merged;
-  if (runs && all_finite && ReduceRuns(cloud, *runs, packed_key, &merged)) return merged;
+  if (runs && all_finite && ReduceRuns(cloud, *runs, packed_key, &merged, threads)) return merged;
   auto recs = Records<PackedRec>(b.finite, point_index,
-                                 [&](PackedRec& rec, std::uint32_t i) { rec = {packed_key(cloud.points[i]), i}; });
+                                 [&](PackedRec& rec, std::uint32_t i) { rec = {packed_key(cloud.points[i]), i}; }, threads);
   // One thread radix-sorts; else a parallel comparison sort.
   if (threads == 1) RadixSort(recs, width[0] + width[1] + width[2]);
   else tbb::parallel_sort(recs.begin(), recs.end());
-  return Reduce(cloud, recs);
+  return Reduce(cloud, recs, threads);
 }
 
 PointCloud Run(const PointCloud& cloud, double voxel_m, int threads, const std::vector<std::size_t>* runs) {
@@ -385,6 +384,8 @@ PointCloud Run(const PointCloud& cloud, double voxel_m, int threads, const std::
   if (cloud.size() > std::numeric_limits<std::uint32_t>::max())
     throw Error("VoxelDownsample: more than 2^32 points");
   if (cloud.empty()) return PointCloud{};
+  // The arena bounds what is no loop (the bounds' parallel_reduce, parallel_sort); the loops
+  // take `threads` themselves (ltm::ParallelFor).
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   PointCloud out;
   arena.execute([&] { out = Downsample(cloud, voxel_m, threads, runs); });

@@ -1,7 +1,7 @@
 // Atomic file writes: write a temporary file in the destination directory, then rename it over
 // the destination (rename within one file system is atomic on POSIX), so readers never see a
 // partial file and a crash or an exception leaves the previous file (or none) in place.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
 
 #include <unistd.h>
 

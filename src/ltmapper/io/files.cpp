@@ -1,6 +1,6 @@
 // Indexed file listing: scan files are named by an integer index ("000123.pcd" = 123) and
 // sorted by that value, so "2.pcd" comes before "10.pcd" whatever the zero padding.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
 
 #include <algorithm>
 #include <cctype>

@@ -1,7 +1,8 @@
 // g2o pose graphs: VERTEX_SE3:QUAT id x y z qx qy qz qw and
 // EDGE_SE3:QUAT a b x y z qx qy qz qw [21 values: upper triangle of the 6x6 information, row-major,
 // order x y z rx ry rz]. SC-LIO-SAM writes 6 decimals and no information values.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/formats.hpp"
 #include "detail.hpp"
 
 #include <fstream>

@@ -1,6 +1,7 @@
 // `ltmapper info`: what a session holds and what is wrong with it. Unlike LoadSession this goes
 // on after a problem, so a user sees every problem at once.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/session.hpp"
 
 #include <tbb/parallel_for.h>
 

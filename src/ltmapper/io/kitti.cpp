@@ -1,5 +1,6 @@
 // KITTI velodyne .bin clouds (float32 x y z reflectance, little endian) and ReadCloud dispatch.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/formats.hpp"
 
 #include <cmath>
 #include <cstring>

@@ -1,6 +1,6 @@
 // A run's output layout: stage folders published whole (StagingDir), the file names of the
 // stages' outputs (layout::), and the run manifest LT-SLAM writes (docs/FORMATS.md).
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
 
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>

@@ -2,7 +2,8 @@
 // truncated or inconsistent files, so the header is parsed here first and the data size checked
 // against it (binary: exact byte count; binary_compressed: the two size words; ascii: line and
 // token counts). Non-finite points are dropped and counted, never passed on.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/formats.hpp"
 
 #include "detail.hpp"
 

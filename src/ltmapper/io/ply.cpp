@@ -1,6 +1,7 @@
 // PLY, binary little endian, with per-point scalar fields CloudCompare shows: float x y z
 // intensity, and when the cloud has them uchar class, ushort session, int object.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/formats.hpp"
 
 #include "detail.hpp"
 

@@ -1,6 +1,7 @@
 // Trajectory files: KITTI (12 numbers per line, row-major [R|t]), TUM (stamp t q), and single
 // rigid transforms (3x4 / 4x4 text, KITTI calib "Tr:" lines).
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/formats.hpp"
 #include "detail.hpp"
 
 #include <Eigen/SVD>

@@ -1,5 +1,6 @@
 // Scan Context descriptors as SC-LIO-SAM saves them: `rows` lines of `cols` numbers.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/formats.hpp"
 #include "detail.hpp"
 
 #include <fstream>

@@ -8,7 +8,8 @@
 //  * optimized_poses.txt: line i is the pose of the i-th scan in index order; counts must agree.
 //    Odometry edges are derived from consecutive poses (has_information = false).
 //  * KITTI: line i of the poses file is the pose of velodyne/i.bin (the file may be longer).
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/session.hpp"
 
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>

@@ -2,7 +2,8 @@
 // flattened to dotted keys ("lidar: {beams: 64}" is the key "lidar.beams"); a flat dotted key is
 // accepted too. Unknown keys, wrong types and out-of-range values are errors naming file:line
 // and key. Keys absent from the file (or a whole absent section) keep their defaults.
-#include "ltmapper/io/io.hpp"
+#include "ltmapper/io/files.hpp"
+#include "ltmapper/io/yaml.hpp"
 #include "detail.hpp"
 
 #include <yaml-cpp/yaml.h>

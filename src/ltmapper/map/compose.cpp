@@ -53,50 +53,39 @@ std::vector<bool> WithinRadiusImpl(std::size_t nc, GetC getc, std::size_t nq, Ge
 
 bool IsRemoved(std::uint8_t role) { return role == kRemovedChange || role == kRemovedSuperseded; }
 
-}  // namespace
-
-QCloud ApplyForward(const QCloud& state, const QCloud& delta) {
-  KeySet removed(delta.size());
-  std::size_t added = 0;
+// `state` without the points of the delta's `leaving` roles, plus those of its `entering` roles
+// (as state points, role kAdded): the one rule of both directions of a step.
+template <class Leaving, class Entering>
+QCloud Apply(const QCloud& state, const QCloud& delta, Leaving leaving, Entering entering) {
+  KeySet gone(delta.size());
+  std::size_t entered = 0;
   for (const QPoint& p : delta) {
-    if (IsRemoved(p.role)) removed.Insert(Key(p));
-    if (p.role == kAdded) ++added;
+    if (leaving(p.role)) gone.Insert(Key(p));
+    if (entering(p.role)) ++entered;
   }
   QCloud out;
-  out.reserve(state.size() + added);
-  if (removed.size() == 0) {
+  out.reserve(state.size() + entered);
+  if (gone.size() == 0) {
     out = state;
   } else {
     for (const QPoint& p : state)
-      if (!removed.Contains(Key(p))) out.push_back(p);
+      if (!gone.Contains(Key(p))) out.push_back(p);
   }
   for (const QPoint& p : delta)
-    if (p.role == kAdded) out.push_back(p);
-  return out;
-}
-
-QCloud ApplyInverse(const QCloud& state, const QCloud& delta) {
-  KeySet added(delta.size());
-  std::size_t removed = 0;
-  for (const QPoint& p : delta) {
-    if (p.role == kAdded) added.Insert(Key(p));
-    if (IsRemoved(p.role)) ++removed;
-  }
-  QCloud out;
-  out.reserve(state.size() + removed);
-  if (added.size() == 0) {
-    out = state;
-  } else {
-    for (const QPoint& p : state)
-      if (!added.Contains(Key(p))) out.push_back(p);
-  }
-  for (const QPoint& p : delta)
-    if (IsRemoved(p.role)) {
+    if (entering(p.role)) {
       out.push_back(p);
       out.back().role = kAdded;
     }
   return out;
 }
+
+bool IsAdded(std::uint8_t role) { return role == kAdded; }
+
+}  // namespace
+
+QCloud ApplyForward(const QCloud& state, const QCloud& delta) { return Apply(state, delta, IsRemoved, IsAdded); }
+
+QCloud ApplyInverse(const QCloud& state, const QCloud& delta) { return Apply(state, delta, IsAdded, IsRemoved); }
 
 QCloud MakeDelta(const QCloud& latest, const QCloud& target, const KeySet& change_keys, const QCloud& info) {
   KeySet latest_keys(latest.size()), target_keys(target.size());

@@ -1,6 +1,6 @@
 // Changes between any two sessions' states of the map by composing the stored deltas (the
 // paper's "virtual LD", Table II): no scan is read, no visibility is computed.
-#include "ltmapper/map/map.hpp"
+#include "ltmapper/map/diff.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"

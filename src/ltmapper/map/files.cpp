@@ -1,5 +1,5 @@
 // File layer: LT-SLAM and LT-removert outputs (docs/FORMATS.md) -> Store integration.
-#include "ltmapper/map/map.hpp"
+#include "ltmapper/map/files.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"

@@ -1,5 +1,5 @@
 // Outputs: labelled PCD / PLY clouds, object tables, the `log` text.
-#include "ltmapper/map/map.hpp"
+#include "ltmapper/map/files.hpp"
 
 #include "ltmapper/io/io.hpp"
 
@@ -48,15 +48,6 @@ void WriteLabelledPcd(const std::string& path, const PointCloud& cloud) {
   });
 }
 
-std::string JsonEscape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (c == '"' || c == '\\') o += '\\';
-    o += c;
-  }
-  return o;
-}
-
 std::string Bytes(std::size_t b) {
   char buf[32];
   std::snprintf(buf, sizeof(buf), "%.2f MB", double(b) / 1e6);
@@ -101,8 +92,8 @@ std::string Vec(const Eigen::Vector3d& v) {
 
 void WriteObjectJson(std::ostream& os, const MapObject& o) {
   os << "{\"id\": " << o.id << ", \"session\": " << o.session << ", \"reference\": " << o.reference
-     << ", \"class\": \"" << JsonEscape(ToString(o.cls)) << "\", \"change\": \"" << JsonEscape(o.change)
-     << "\", \"partner\": " << o.partner << ", \"exists_in\": [" << o.exists_in << "], \"points\": " << o.points
+     << ", \"class\": " << io::json::Quote(ToString(o.cls)) << ", \"change\": " << io::json::Quote(o.change)
+     << ", \"partner\": " << o.partner << ", \"exists_in\": [" << o.exists_in << "], \"points\": " << o.points
      << ", \"confidence\": " << o.confidence << ", \"centroid\": " << Vec(o.centroid) << ", \"min\": " << Vec(o.lo)
      << ", \"max\": " << Vec(o.hi) << ", \"box\": {\"center\": " << Vec(o.box_center)
      << ", \"yaw_deg\": " << o.yaw_rad * kRadToDeg << ", \"size\": " << Vec(o.size) << "}, \"ground_z\": " << o.ground_z

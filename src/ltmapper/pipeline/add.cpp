@@ -162,12 +162,7 @@ AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std
   MarkGrownRun(cfg, sc, p, m);
   rep.seconds_map = Since(t);
 
-  const MapFigures fig = ReadMapFigures(p, sc.map, cfg.export_maps);
-  rep.store_bytes = fig.store_bytes;
-  rep.map_points_live = fig.live;
-  rep.objects = fig.objects;
-  rep.seconds = Since(t0);
-  rep.peak_rss_bytes = PeakRssBytes();
+  FinishReport(rep, ReadMapFigures(p, sc.map, cfg.export_maps), t0);
   WriteAddReport(out_dir, rep);
   return rep;
 }

@@ -42,5 +42,14 @@ struct MapFigures {
   std::size_t live = 0, meta = 0, objects = 0;
 };
 MapFigures ReadMapFigures(const RunPaths& p, const map::MapConfig& map_cfg, bool export_maps);
+// What a run or add report ends with: the map's figures, the total time since t0, peak memory.
+template <class Report>
+void FinishReport(Report& r, const MapFigures& fig, std::chrono::steady_clock::time_point t0) {
+  r.store_bytes = fig.store_bytes;
+  r.map_points_live = fig.live;
+  r.objects = fig.objects;
+  r.seconds = Since(t0);
+  r.peak_rss_bytes = PeakRssBytes();
+}
 
 }  // namespace ltm::pipeline::detail

@@ -197,7 +197,7 @@ void WriteRunReport(const std::string& out_dir, const RunReport& report) {
     os << "{\n  \"sessions\": " << report.sessions.size() << ",\n  \"aligned\": " << report.aligned.size()
        << ",\n  \"not_aligned\": " << report.not_aligned.size() << ",\n  \"stages\": {";
     for (std::size_t i = 0; i < report.stages.size(); ++i)
-      os << (i ? ", " : "") << "\"" << report.stages[i].stage << "\": {\"skipped\": "
+      os << (i ? ", " : "") << io::json::Quote(report.stages[i].stage) << ": {\"skipped\": "
          << (report.stages[i].skipped ? "true" : "false") << ", \"seconds\": " << report.stages[i].seconds << "}";
     os << "},\n  \"live_points\": " << report.map_points_live << ",\n  \"meta_points\": " << report.map_points_meta
        << ",\n  \"objects\": " << report.objects << ",\n  \"store_bytes\": " << report.store_bytes
@@ -263,12 +263,8 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
     ExportMaps(p, sc, session_dirs[0], cfg.export_maps);
   });
   const MapFigures fig = ReadMapFigures(p, map_cfg, cfg.export_maps);
-  report.store_bytes = fig.store_bytes;
-  report.map_points_live = fig.live;
+  FinishReport(report, fig, t_run);
   report.map_points_meta = fig.meta;
-  report.objects = fig.objects;
-  report.seconds = Since(t_run);
-  report.peak_rss_bytes = PeakRssBytes();
   WriteRunReport(out_dir, report);
   return report;
 }

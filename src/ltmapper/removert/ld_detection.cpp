@@ -14,14 +14,6 @@
 namespace ltm::removert {
 
 namespace {
-PointCloud Positions(const std::vector<WorldKeyframe>& kfs) {
-  PointCloud c;
-  for (const auto& kf : kfs) {
-    const Eigen::Vector3d t = kf.T_world_sensor.translation();
-    c.push_back(float(t.x()), float(t.y()), float(t.z()));
-  }
-  return c;
-}
 
 // mask[i] = points[i] has fewer than k neighbours within r_i in `other`, where r_i = ld_radius_m
 // + ld_radius_rel * (the larger distance from the point to the nearest keyframe of either
@@ -73,6 +65,30 @@ std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, con
   for (std::size_t i = 0; i < m.size(); ++i) mask[i] = m[i] != 0;
   return mask;
 }
+
+// Raw changes split by what the other session saw (SeenThroughBy): the same surface (no change,
+// counted in `same`), not covered (unobserved), else strong or weak. ND (nd = true) is strong
+// when the query saw through it (or weak ND is off); PD is strong when the central did not.
+struct Strength {
+  std::vector<bool> strong, weak, unobserved;
+  std::size_t same = 0;
+};
+Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg) {
+  const std::size_t n = vis.seen.size();
+  Strength s{std::vector<bool>(n), std::vector<bool>(n), std::vector<bool>(n), 0};
+  for (std::size_t i = 0; i < n; ++i) {
+    if (vis.same[i]) {
+      ++s.same;
+      continue;
+    }
+    const bool covered = !cfg.covisible_only || vis.observed[i];
+    s.strong[i] = covered && (nd ? vis.seen[i] || !cfg.weak_nd : !vis.seen[i]);
+    s.weak[i] = covered && !s.strong[i];
+    s.unobserved[i] = !covered;
+  }
+  return s;
+}
+
 }  // namespace
 
 LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
@@ -86,50 +102,26 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   res.stats.central_points = central_map.size();
   res.stats.query_points = query_map.size();
 
-  const PointCloud ckf = Positions(central_keyframes), qkf = Positions(query_keyframes);
+  const PointCloud ckf = detail::Positions(central_keyframes), qkf = detail::Positions(query_keyframes);
   const std::vector<bool> missing = Missing(central_map, query_map, ckf, qkf, cfg, threads);
   const PointCloud nd = central_map.select(missing);
   const PointCloud pd = query_map.select(Missing(query_map, central_map, qkf, ckf, cfg, threads));
 
   // Weak ND preservation: ND the query never saw through stays in the map.
-  {
-    const detail::Visibility vis = detail::SeenThroughBy(nd, central_map, query_keyframes, cfg, threads);
-    std::vector<bool> strong(nd.size()), weak(nd.size()), unobs(nd.size());
-    for (std::size_t i = 0; i < nd.size(); ++i) {
-      if (vis.same[i]) {
-        ++res.stats.nd_same;
-        continue;
-      }
-      const bool covered = !cfg.covisible_only || vis.observed[i];
-      strong[i] = covered && (vis.seen[i] || !cfg.weak_nd);
-      weak[i] = covered && !strong[i];
-      unobs[i] = !covered;
-    }
-    res.nd_strong = nd.select(strong);
-    res.nd_weak = nd.select(weak);
-    res.nd_unobserved = nd.select(unobs);
-    res.central_nd.assign(central_map.size(), false);
-    for (std::size_t i = 0, j = 0; i < central_map.size(); ++i)
-      if (missing[i]) res.central_nd[i] = strong[j] || weak[j], ++j;
-  }
+  const Strength nds = Split(detail::SeenThroughBy(nd, central_map, query_keyframes, cfg, threads), true, cfg);
+  res.stats.nd_same = nds.same;
+  res.nd_strong = nd.select(nds.strong);
+  res.nd_weak = nd.select(nds.weak);
+  res.nd_unobserved = nd.select(nds.unobserved);
+  res.central_nd.assign(central_map.size(), false);
+  for (std::size_t i = 0, j = 0; i < central_map.size(); ++i)
+    if (missing[i]) res.central_nd[i] = nds.strong[j] || nds.weak[j], ++j;
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
-  {
-    const detail::Visibility vis = detail::SeenThroughBy(pd, query_map, central_keyframes, cfg, threads);
-    std::vector<bool> strong(pd.size()), weak(pd.size()), unobs(pd.size());
-    for (std::size_t i = 0; i < pd.size(); ++i) {
-      if (vis.same[i]) {
-        ++res.stats.pd_same;
-        continue;
-      }
-      const bool covered = !cfg.covisible_only || vis.observed[i];
-      weak[i] = covered && vis.seen[i];
-      strong[i] = covered && !vis.seen[i];
-      unobs[i] = !covered;
-    }
-    res.pd_weak = pd.select(weak);
-    res.pd_strong = pd.select(strong);
-    res.pd_unobserved = pd.select(unobs);
-  }
+  const Strength pds = Split(detail::SeenThroughBy(pd, query_map, central_keyframes, cfg, threads), false, cfg);
+  res.stats.pd_same = pds.same;
+  res.pd_weak = pd.select(pds.weak);
+  res.pd_strong = pd.select(pds.strong);
+  res.pd_unobserved = pd.select(pds.unobserved);
   res.stats.nd_strong = res.nd_strong.size();
   res.stats.nd_weak = res.nd_weak.size();
   res.stats.pd_strong = res.pd_strong.size();

@@ -26,6 +26,15 @@ std::vector<WorldKeyframe> KeyframesOf(const Session& session) {
   return out;
 }
 
+PointCloud detail::Positions(const std::vector<WorldKeyframe>& keyframes) {
+  PointCloud c;
+  for (const auto& kf : keyframes) {
+    const Eigen::Vector3d t = kf.T_world_sensor.translation();
+    c.push_back(float(t.x()), float(t.y()), float(t.z()));
+  }
+  return c;
+}
+
 RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes) {
   if (cfg.SensorResolved()) return cfg;
   constexpr std::size_t kEstimateScans = 8;  // enough points for every beam's peak

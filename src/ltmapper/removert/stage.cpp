@@ -31,15 +31,6 @@ namespace fs = std::filesystem;
 
 std::string Index6(int index) { return io::layout::KeyframeDirName(index); }
 
-PointCloud Positions(const std::vector<WorldKeyframe>& kfs) {
-  PointCloud c;
-  for (const auto& kf : kfs) {
-    const Eigen::Vector3d t = kf.T_world_sensor.translation();
-    c.push_back(float(t.x()), float(t.y()), float(t.z()));
-  }
-  return c;
-}
-
 // Nearest keyframe (position index) of every point.
 std::vector<std::uint32_t> Nearest(const PointCloud& pts, const geometry::KdTree& tree, int threads,
                                    std::vector<float>* sq_dist = nullptr) {
@@ -91,15 +82,6 @@ void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const 
     ply.push_back({&local[p], parts[p].cls, std::uint16_t(parts[p].session)});
   }
   if (cfg.write_ply) io::WritePly(dir + "/classes.ply", ply);
-}
-
-std::string JsonStr(const std::string& s) {
-  std::string o = "\"";
-  for (char ch : s) {
-    if (ch == '"' || ch == '\\') o += '\\';
-    o += ch;
-  }
-  return o + "\"";
 }
 
 // ---- the stage's steps -------------------------------------------------------------------
@@ -196,7 +178,7 @@ std::vector<std::uint32_t> FarQueryKeyframes(const std::vector<WorldKeyframe>& c
                                              const std::vector<WorldKeyframe>& qkf, const RemovertConfig& cfg,
                                              int threads) {
   std::vector<float> qd2;
-  Nearest(Positions(qkf), geometry::KdTree(Positions(ckf)), threads, &qd2);
+  Nearest(detail::Positions(qkf), geometry::KdTree(detail::Positions(ckf)), threads, &qd2);
   std::vector<std::uint32_t> far;
   const float nk2 = float(cfg.new_keyframe_dist_m * cfg.new_keyframe_dist_m);
   for (std::size_t j = 0; j < qkf.size(); ++j)
@@ -210,12 +192,12 @@ std::vector<std::uint32_t> PdOwners(const PointCloud& pd, const std::vector<Worl
                                     const std::vector<WorldKeyframe>& qkf, const std::vector<std::uint32_t>& new_q,
                                     const RemovertConfig& cfg, int threads) {
   const std::size_t nc = ckf.size();
-  PointCloud cand = Positions(ckf);
+  PointCloud cand = detail::Positions(ckf);
   for (auto j : new_q) {
     const Eigen::Vector3d t = qkf[j].T_world_sensor.translation();
     cand.push_back(float(t.x()), float(t.y()), float(t.z()));
   }
-  const geometry::KdTree cand_tree(cand), qtree(Positions(qkf));
+  const geometry::KdTree cand_tree(cand), qtree(detail::Positions(qkf));
   std::vector<float> d2;
   std::vector<std::uint32_t> owner = Nearest(pd, cand_tree, threads, &d2);
   const float ar2 = float(cfg.assign_radius_m * cfg.assign_radius_m);
@@ -240,7 +222,7 @@ KeyframeAssignment AssignKeyframes(const SessionData& c, const SessionData& q, c
   a.pd_strong_kf = ld.pd_strong;
   a.pd_strong_kf.append(ld.pd_unobserved);
   const std::vector<std::uint32_t> new_q = FarQueryKeyframes(c.kfs, q.kfs, cfg, threads);
-  const geometry::KdTree ctree(Positions(c.kfs));
+  const geometry::KdTree ctree(detail::Positions(c.kfs));
   const std::size_t nk = a.nc + q.kfs.size();
   a.b_static = Buckets(Nearest(c.static_map, ctree, threads), nk);
   a.b_hd = Buckets(Nearest(c.hd_map, ctree, threads), nk);
@@ -326,7 +308,7 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
 int PairCentral(const RemovertConfig& cfg, int q) { return cfg.pairs == "consecutive" ? q - 1 : 0; }
 
 void WriteHdJson(std::ostream& os, const std::string& name, std::size_t keyframes, const HdStats& h) {
-  os << "{\"name\": " << JsonStr(name) << ", \"keyframes\": " << keyframes << ", \"map_points\": " << h.map_points
+  os << "{\"name\": " << io::json::Quote(name) << ", \"keyframes\": " << keyframes << ", \"map_points\": " << h.map_points
      << ", \"candidates\": " << h.candidates << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed
      << ", \"dilated\": " << h.dilated << ", \"removed_per_resolution\": [";
   for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
@@ -335,7 +317,7 @@ void WriteHdJson(std::ostream& os, const std::string& name, std::size_t keyframe
 }
 
 void WritePairJson(std::ostream& os, int c, int q, const LdStats& l, const std::vector<int>& new_keyframes) {
-  os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << JsonStr(io::layout::PairDirName(c, q))
+  os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << io::json::Quote(io::layout::PairDirName(c, q))
      << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak << ", \"pd_strong\": " << l.pd_strong
      << ", \"pd_weak\": " << l.pd_weak << ", \"pd_unobserved\": " << l.pd_unobserved
      << ", \"nd_unobserved\": " << l.nd_unobserved << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";

@@ -5,8 +5,6 @@
 #include "ltmapper/sim/internal.hpp"
 
 #include <embree3/rtcore.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -44,7 +42,7 @@ void ErrorCallback(void* user, RTCError code, const char* str) {
 struct Simulator::Impl {
   detail::Scenario sc;
   int threads = 0;
-  tbb::task_arena arena;
+  tbb::task_arena arena;  // bounds Embree's BVH builds; the ray loops take `threads` (ParallelForChunks)
   std::string embree_error;
   RTCDevice device = nullptr;
   RTCScene permanent = nullptr, car = nullptr, pedestrian = nullptr;
@@ -398,30 +396,28 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
   ScanRays rays(std::size_t(B) * C);
   RTCScene top = I.sessions[std::size_t(session)].top;
   const float tnear = float(cfg.min_range_m), tfar = float(cfg.max_range_m);
-  I.arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<int>(0, C, 8), [&](const tbb::blocked_range<int>& r) {
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-      alignas(64) int valid[16];
-      RTCRayHit16 rh;
-      for (int c = r.begin(); c < r.end(); ++c) {
-        const Eigen::Matrix3f R = sweep[std::size_t(c)].linear().cast<float>();
-        const Eigen::Vector3f o = sweep[std::size_t(c)].translation().cast<float>();
-        for (int b0 = 0; b0 < B; b0 += 16) {
-          FillPacket(dirs, B, C, b0, c, R, o, tnear, tfar, valid, &rh);
-          rtcIntersect16(valid, top, &ctx, &rh);
-          for (int l = 0; l < 16 && b0 + l < B; ++l) {
-            if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
-            const std::size_t i = std::size_t(b0 + l) * C + c;
-            rays.range[i] = rh.ray.tfar[l];
-            const Eigen::Vector3f d(rh.ray.dir_x[l], rh.ray.dir_y[l], rh.ray.dir_z[l]);
-            I.Resolve(session, rh.hit.instID[0][l], rh.hit.primID[l], {rh.hit.Ng_x[l], rh.hit.Ng_y[l], rh.hit.Ng_z[l]},
-                      d, &rays.cls[i], &rays.object[i], &rays.intensity[i]);
-          }
+  ParallelForChunks(std::size_t(C), I.threads, 8, [&](std::size_t begin, std::size_t end) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    alignas(64) int valid[16];
+    RTCRayHit16 rh;
+    for (int c = int(begin); c < int(end); ++c) {
+      const Eigen::Matrix3f R = sweep[std::size_t(c)].linear().cast<float>();
+      const Eigen::Vector3f o = sweep[std::size_t(c)].translation().cast<float>();
+      for (int b0 = 0; b0 < B; b0 += 16) {
+        FillPacket(dirs, B, C, b0, c, R, o, tnear, tfar, valid, &rh);
+        rtcIntersect16(valid, top, &ctx, &rh);
+        for (int l = 0; l < 16 && b0 + l < B; ++l) {
+          if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
+          const std::size_t i = std::size_t(b0 + l) * C + c;
+          rays.range[i] = rh.ray.tfar[l];
+          const Eigen::Vector3f d(rh.ray.dir_x[l], rh.ray.dir_y[l], rh.ray.dir_z[l]);
+          I.Resolve(session, rh.hit.instID[0][l], rh.hit.primID[l], {rh.hit.Ng_x[l], rh.hit.Ng_y[l], rh.hit.Ng_z[l]},
+                    d, &rays.cls[i], &rays.object[i], &rays.intensity[i]);
         }
       }
-    });
+    }
   });
   I.Check("casting a scan");
   return NoisyPoints(cfg, session, keyframe, rays, dirs, sweep, T);
@@ -434,36 +430,34 @@ std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const Eigen::
   std::vector<RayHit> out(dirs.size());
   RTCScene top = I.sessions[std::size_t(session)].top;
   const float tfar = float(I.sc.cfg.max_range_m);
-  I.arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, dirs.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      for (std::size_t i = r.begin(); i < r.end(); ++i) {
-        RTCRayHit rh;
-        rh.ray.org_x = float(origin.x());
-        rh.ray.org_y = float(origin.y());
-        rh.ray.org_z = float(origin.z());
-        rh.ray.dir_x = dirs[i].x();
-        rh.ray.dir_y = dirs[i].y();
-        rh.ray.dir_z = dirs[i].z();
-        rh.ray.tnear = 0.f;
-        rh.ray.tfar = tfar;
-        rh.ray.time = 0.f;
-        rh.ray.mask = 0xFFFFFFFFu;
-        rh.ray.id = 0;
-        rh.ray.flags = 0;
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-        rtcIntersect1(top, &ctx, &rh);
-        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
-        RayHit& h = out[i];
-        h.hit = true;
-        h.range = rh.ray.tfar;
-        float intensity;
-        I.Resolve(session, rh.hit.instID[0], rh.hit.primID, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, dirs[i],
-                  &h.cls, &h.object, &intensity, &h.cos_incidence);
-      }
-    });
+  ParallelForChunks(dirs.size(), I.threads, 64, [&](std::size_t begin, std::size_t end) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (std::size_t i = begin; i < end; ++i) {
+      RTCRayHit rh;
+      rh.ray.org_x = float(origin.x());
+      rh.ray.org_y = float(origin.y());
+      rh.ray.org_z = float(origin.z());
+      rh.ray.dir_x = dirs[i].x();
+      rh.ray.dir_y = dirs[i].y();
+      rh.ray.dir_z = dirs[i].z();
+      rh.ray.tnear = 0.f;
+      rh.ray.tfar = tfar;
+      rh.ray.time = 0.f;
+      rh.ray.mask = 0xFFFFFFFFu;
+      rh.ray.id = 0;
+      rh.ray.flags = 0;
+      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+      rtcIntersect1(top, &ctx, &rh);
+      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+      RayHit& h = out[i];
+      h.hit = true;
+      h.range = rh.ray.tfar;
+      float intensity;
+      I.Resolve(session, rh.hit.instID[0], rh.hit.primID, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, dirs[i],
+                &h.cls, &h.object, &intensity, &h.cos_incidence);
+    }
   });
   I.Check("casting rays");
   return out;

@@ -1,5 +1,5 @@
 // Config checks and the tiny test scenario.
-#include "ltmapper/sim/sim.hpp"
+#include "ltmapper/sim/config.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
 

@@ -3,11 +3,8 @@
 // point-wise change truth per (central, query) pair with occlusion-aware strong / weak split.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
-#include "ltmapper/sim/sim.hpp"
+#include "ltmapper/sim/simulator.hpp"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
@@ -213,11 +210,8 @@ PointCloud Unobserved(Simulator& sim, int s, int o, const PointCloud& own, const
   const geometry::KdTree tree(other.select(keep_other));
   std::vector<char> observed(pts.size(), 0);
   const float radius = float(cfg.visibility_tolerance_m);
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pts.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t i = r.begin(); i < r.end(); ++i) observed[i] = tree.CountWithin(pts.points[i].xyz(), radius, 1) > 0;
-    });
+  ParallelForChunks(pts.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) observed[i] = tree.CountWithin(pts.points[i].xyz(), radius, 1) > 0;
   });
   *rays += Observe(sim, o, s, pts, cfg, &observed);
   std::vector<bool> un(pts.size());

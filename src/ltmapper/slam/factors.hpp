@@ -70,47 +70,43 @@ Eigen::Matrix<T, 6, 1> Log(const Se3<T>& e) {
   return r;
 }
 
-// Odometry / intra-session loop: r = sqrt_info * Log(z^-1 * x_a^-1 * x_b).
-struct BetweenFactor {
+// A relative-pose measurement z between two poses a and b with its square-root information:
+// r = sqrt_info * Log(z^-1 * a^-1 * b), the residual of both factors below.
+struct RelativePoseResidual {
   Se3<double> z_inv;
   Eigen::Matrix<double, 6, 6> sqrt_info;
-  BetweenFactor(const Eigen::Isometry3d& z, const Eigen::Matrix<double, 6, 6>& sqrt_information)
+  RelativePoseResidual(const Eigen::Isometry3d& z, const Eigen::Matrix<double, 6, 6>& sqrt_information)
       : sqrt_info(sqrt_information) {
     const Eigen::Isometry3d zi = z.inverse();
     z_inv.q = Eigen::Quaterniond(zi.linear()).normalized();
     z_inv.t = zi.translation();
   }
   template <typename T>
-  bool operator()(const T* xa, const T* xb, T* residual) const {
+  bool Residual(const Se3<T>& a, const Se3<T>& b, T* residual) const {
     const Se3<T> zi{z_inv.q.cast<T>(), z_inv.t.cast<T>()};
-    const Se3<T> e = Mul(zi, Mul(Inv(Load(xa)), Load(xb)));
+    const Se3<T> e = Mul(zi, Mul(Inv(a), b));
     Eigen::Map<Eigen::Matrix<T, 6, 1>> out(residual);
     out = sqrt_info.cast<T>() * Log(e);
     return true;
   }
 };
 
+// Odometry / intra-session loop: r = sqrt_info * Log(z^-1 * x_a^-1 * x_b).
+struct BetweenFactor : RelativePoseResidual {
+  using RelativePoseResidual::RelativePoseResidual;
+  template <typename T>
+  bool operator()(const T* xa, const T* xb, T* residual) const {
+    return Residual(Load(xa), Load(xb), residual);
+  }
+};
+
 // Inter-session loop through the anchors (paper eq. 2):
 //   r = sqrt_info * Log( z^-1 * (A_a * x_a)^-1 * (A_b * x_b) ).
-struct AnchorLoopFactor {
-  Se3<double> z_inv;
-  Eigen::Matrix<double, 6, 6> sqrt_info;
-  AnchorLoopFactor(const Eigen::Isometry3d& z, const Eigen::Matrix<double, 6, 6>& sqrt_information)
-      : sqrt_info(sqrt_information) {
-    const Eigen::Isometry3d zi = z.inverse();
-    z_inv.q = Eigen::Quaterniond(zi.linear()).normalized();
-    z_inv.t = zi.translation();
-  }
+struct AnchorLoopFactor : RelativePoseResidual {
+  using RelativePoseResidual::RelativePoseResidual;
   template <typename T>
-  bool operator()(const T* anchor_a, const T* xa, const T* anchor_b, const T* xb,
-                  T* residual) const {
-    const Se3<T> zi{z_inv.q.cast<T>(), z_inv.t.cast<T>()};
-    const Se3<T> wa = Mul(Load(anchor_a), Load(xa));
-    const Se3<T> wb = Mul(Load(anchor_b), Load(xb));
-    const Se3<T> e = Mul(zi, Mul(Inv(wa), wb));
-    Eigen::Map<Eigen::Matrix<T, 6, 1>> out(residual);
-    out = sqrt_info.cast<T>() * Log(e);
-    return true;
+  bool operator()(const T* anchor_a, const T* xa, const T* anchor_b, const T* xb, T* residual) const {
+    return Residual(Mul(Load(anchor_a), Load(xa)), Mul(Load(anchor_b), Load(xb)), residual);
   }
 };
 

@@ -8,8 +8,6 @@
 
 #include <nanoflann.hpp>
 #include <spdlog/spdlog.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -106,16 +104,6 @@ using RingTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, RingKeys>, RingKeys, -1,
                                         std::uint32_t>;
 
-template <class F>
-void ParallelFor(tbb::task_arena& arena, std::size_t n, F&& f) {
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-                      });
-  });
-}
-
 // Scan Context candidates of one query keyframe j of session b against session a: the best of
 // the ring-key neighbours and the others within (1 + sc_close_ratio) x its distance, at most
 // sc_per_query, best first.
@@ -163,9 +151,9 @@ struct PairCandidates {
 };
 
 PairCandidates RetrievePair(const std::vector<std::vector<ScanContext>>& sc, const RingTree& tree,
-                            int a, int b, const SlamConfig& cfg, tbb::task_arena& arena) {
+                            int a, int b, const SlamConfig& cfg, int threads) {
   std::vector<std::vector<LoopRecord>> per_query(sc[b].size());
-  ParallelFor(arena, sc[b].size(), [&](std::size_t j) {
+  ParallelFor(sc[b].size(), threads, [&](std::size_t j) {
     per_query[j] = QueryCandidates(sc[a], tree, sc[b][j], a, b, int(j), cfg);
   });
   PairCandidates p;
@@ -208,12 +196,12 @@ std::vector<LoopRecord> NextBatch(PairCandidates& p, const SlamConfig& cfg) {
 }
 
 void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg_in,
-              tbb::task_arena& arena, const std::string& label, bool coarse) {
+              int threads, const std::string& label, bool coarse) {
   SlamConfig cfg = cfg_in;
   // Radius candidates start from the current estimate: the coarse stage is not needed.
   if (!coarse) cfg.reg_coarse_correspondence_m = 0.0;
   Progress progress(label, cand.size());
-  ParallelFor(arena, cand.size(), [&](std::size_t i) {
+  ParallelFor(cand.size(), threads, [&](std::size_t i) {
     LoopRecord& l = cand[i];
     const PointCloud target = store.Submap(l.a.session, l.a.keyframe);
     const PointCloud source = store.Submap(l.b.session, l.b.keyframe);
@@ -236,12 +224,33 @@ struct StageCost {
   double registration_s = 0.0, optimisation_s = 0.0;
 };
 
+// A later round's candidates registered (time and count into `cost`); returns how many verified.
+std::size_t RegisterRound(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
+                          const std::string& label, bool coarse, StageCost& cost) {
+  const Stopwatch sw;
+  Register(cand, store, cfg, threads, label, coarse);
+  cost.registrations += static_cast<int>(cand.size());
+  cost.registration_s += sw.Seconds();
+  std::size_t ok = 0;
+  for (const auto& l : cand) ok += l.verified ? 1 : 0;
+  return ok;
+}
+
+// The round's candidates join `loops` and the graph is solved again (time into `cost`).
+void SolveWith(const std::vector<Session>& sessions, const std::vector<LoopRecord>& cand,
+               std::vector<LoopRecord>& loops, SlamResult& res, const SlamConfig& cfg, int threads, StageCost& cost) {
+  loops.insert(loops.end(), cand.begin(), cand.end());
+  const Stopwatch sw;
+  res = OptimizeSessions(sessions, loops, cfg, threads);
+  cost.optimisation_s += sw.Seconds();
+}
+
 // Retry: a query not aligned after the first pass gets the next-ranked Scan Context candidates
 // of every pair linking it to an already aligned session (the central or any aligned query, so
 // chains of sessions align), round after round until it aligns or the candidates run out.
 void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandidates>& pairs,
                     std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
-                    const SlamConfig& cfg, tbb::task_arena& arena, int threads, StageCost& cost) {
+                    const SlamConfig& cfg, int threads, StageCost& cost) {
   for (int round = 0; round < cfg.sc_retry_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (PairCandidates& p : pairs) {
@@ -250,19 +259,12 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
       cand.insert(cand.end(), batch.begin(), batch.end());
     }
     if (cand.empty()) return;
-    Stopwatch sw;
-    Register(cand, store, cfg, arena, "GICP retry, round " + std::to_string(round + 1), true);
-    cost.registrations += static_cast<int>(cand.size());
-    cost.registration_s += sw.Seconds();
-    std::size_t ok = 0;
-    for (const auto& l : cand) ok += l.verified ? 1 : 0;
+    const std::size_t ok =
+        RegisterRound(cand, store, cfg, threads, "GICP retry, round " + std::to_string(round + 1), true, cost);
     spdlog::info("slam: retry round {}: {} scan context candidates for unaligned sessions, {} "
                  "verified",
                  round + 1, cand.size(), ok);
-    loops.insert(loops.end(), cand.begin(), cand.end());
-    sw = Stopwatch();
-    res = OptimizeSessions(sessions, loops, cfg, threads);
-    cost.optimisation_s += sw.Seconds();
+    SolveWith(sessions, cand, loops, res, cfg, threads, cost);
   }
 }
 
@@ -311,29 +313,25 @@ std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, Cl
 // registration in each aligned session's map (the central first), its placements verified by
 // GICP and the anchor consensus like any loop, until it aligns.
 void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
-                    CloudStore& store, const SlamConfig& cfg, tbb::task_arena& arena, int threads, StageCost& cost) {
+                    CloudStore& store, const SlamConfig& cfg, int threads, StageCost& cost) {
   if (!cfg.global_enabled) return;
   for (std::size_t b = 1; b < sessions.size(); ++b)
     for (std::size_t a = 0; a < sessions.size() && !res.sessions[b].aligned; ++a) {
       if (a == b || !res.sessions[a].aligned) continue;
-      Stopwatch sw;
+      const Stopwatch sw;
       std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), store, cfg);
+      cost.registration_s += sw.Seconds();  // the placements are registrations too
       if (a > b)  // loops are stored with a.session < b.session: the placement was of b in a's map
         for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
-      Register(cand, store, cfg, arena, "GICP global candidates", true);
-      cost.registrations += static_cast<int>(cand.size());
-      cost.registration_s += sw.Seconds();
-      loops.insert(loops.end(), cand.begin(), cand.end());
-      sw = Stopwatch();
-      res = OptimizeSessions(sessions, loops, cfg, threads);
-      cost.optimisation_s += sw.Seconds();
+      RegisterRound(cand, store, cfg, threads, "GICP global candidates", true, cost);
+      SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     }
 }
 
 // Scan Context of every keyframe (read from SCDs/ when present and allowed, else computed from
 // the scan, whose downsampled copy is then kept for registration); returns the number read.
 std::size_t ComputeDescriptors(const std::vector<Session>& sessions, const SlamConfig& cfg, CloudStore& store,
-                               tbb::task_arena& arena, std::vector<std::vector<ScanContext>>* sc) {
+                               int threads, std::vector<std::vector<ScanContext>>* sc) {
   std::size_t read_files = 0;
   std::mutex mu;
   sc->assign(sessions.size(), {});
@@ -341,7 +339,7 @@ std::size_t ComputeDescriptors(const std::vector<Session>& sessions, const SlamC
     const Session& ses = sessions[s];
     (*sc)[s].resize(ses.keyframes.size());
     Progress progress("scan context " + ses.name, ses.keyframes.size());
-    ParallelFor(arena, ses.keyframes.size(), [&](std::size_t k) {
+    ParallelFor(ses.keyframes.size(), threads, [&](std::size_t k) {
       const std::string scd = ScdPath(ses, ses.keyframes[k]);
       if (cfg.sc_read_files && !scd.empty() && fs::exists(scd)) {
         (*sc)[s][k] = ScanContextFromMatrix(io::ReadScd(scd, cfg.sc_rings, cfg.sc_sectors));
@@ -363,14 +361,14 @@ std::size_t ComputeDescriptors(const std::vector<Session>& sessions, const SlamC
 // candidates (kept for retries) and its first batch appended to `loops`.
 std::vector<PairCandidates> RetrieveCandidates(const std::vector<Session>& sessions,
                                                const std::vector<std::vector<ScanContext>>& sc, const SlamConfig& cfg,
-                                               tbb::task_arena& arena, std::vector<LoopRecord>* loops) {
+                                               int threads, std::vector<LoopRecord>* loops) {
   std::vector<PairCandidates> pairs;
   for (std::size_t a = 0; a + 1 < sessions.size(); ++a) {
     RingKeys keys;
     for (const auto& d : sc[a]) keys.keys.push_back(d.ring_key);
     RingTree tree(static_cast<std::size_t>(cfg.sc_rings), keys, nanoflann::KDTreeSingleIndexAdaptorParams(10));
     for (std::size_t b = a + 1; b < sessions.size(); ++b) {
-      pairs.push_back(RetrievePair(sc, tree, int(a), int(b), cfg, arena));
+      pairs.push_back(RetrievePair(sc, tree, int(a), int(b), cfg, threads));
       const std::vector<LoopRecord> batch = NextBatch(pairs.back(), cfg);
       spdlog::info("slam: {} vs {}: {} scan context candidates below the pair's median best "
                    "distance {:.3f}, {} selected",
@@ -418,7 +416,7 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
 // Radius-search refinement: query keyframes without a loop look for keyframes of the other
 // session near them in the world frame, verified by GICP from the current estimate.
 void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
-            const SlamConfig& cfg, tbb::task_arena& arena, int threads, StageCost& cost) {
+            const SlamConfig& cfg, int threads, StageCost& cost) {
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
@@ -428,17 +426,10 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
       for (std::size_t b = a + 1; b < n; ++b)
         if (res.sessions[a].aligned && res.sessions[b].aligned) RadiusCandidates(res, loops, a, b, cfg, tried, &cand);
     if (cand.empty()) break;
-    Stopwatch sw;
-    Register(cand, store, cfg, arena, "GICP radius loops, round " + std::to_string(round + 1), false);
-    cost.registrations += static_cast<int>(cand.size());
-    cost.registration_s += sw.Seconds();
-    std::size_t ok = 0;
-    for (const auto& l : cand) ok += l.verified ? 1 : 0;
+    const std::size_t ok =
+        RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), false, cost);
     spdlog::info("slam: refinement round {}: {} radius candidates, {} verified", round + 1, cand.size(), ok);
-    loops.insert(loops.end(), cand.begin(), cand.end());
-    sw = Stopwatch();
-    res = OptimizeSessions(sessions, loops, cfg, threads);
-    cost.optimisation_s += sw.Seconds();
+    SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     if (ok == 0) break;
   }
 }
@@ -448,29 +439,28 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   ValidateConfig(cfg, "slam config");
   ValidateSessionGraphs(sessions);
   const Stopwatch total;
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   CloudStore store(sessions, cfg);
   Stopwatch sw;
   std::vector<std::vector<ScanContext>> sc;
-  const std::size_t read_files = ComputeDescriptors(sessions, cfg, store, arena, &sc);
+  const std::size_t read_files = ComputeDescriptors(sessions, cfg, store, threads, &sc);
   const double t_desc = sw.Seconds();
   spdlog::info("slam: scan context for {} sessions ({} read from SCDs) in {:.2f} s", sessions.size(), read_files,
                t_desc);
   sw = Stopwatch();
   std::vector<LoopRecord> loops;
-  std::vector<PairCandidates> pairs = RetrieveCandidates(sessions, sc, cfg, arena, &loops);
+  std::vector<PairCandidates> pairs = RetrieveCandidates(sessions, sc, cfg, threads, &loops);
   const double t_retr = sw.Seconds();
   StageCost cost;  // registration of the Scan Context candidates, back end, retries, refinement
   sw = Stopwatch();
-  Register(loops, store, cfg, arena, "GICP scan context loops", true);
+  Register(loops, store, cfg, threads, "GICP scan context loops", true);
   cost.registrations = static_cast<int>(loops.size());
   cost.registration_s = sw.Seconds();
   sw = Stopwatch();
   SlamResult res = OptimizeSessions(sessions, loops, cfg, threads);
   cost.optimisation_s = sw.Seconds();
-  RetryUnaligned(sessions, pairs, loops, res, store, cfg, arena, threads, cost);
-  GlobalFallback(sessions, loops, res, store, cfg, arena, threads, cost);
-  Refine(sessions, loops, res, store, cfg, arena, threads, cost);
+  RetryUnaligned(sessions, pairs, loops, res, store, cfg, threads, cost);
+  GlobalFallback(sessions, loops, res, store, cfg, threads, cost);
+  Refine(sessions, loops, res, store, cfg, threads, cost);
   res.time_descriptors_s = t_desc;
   res.time_retrieval_s = t_retr;
   res.time_registration_s = cost.registration_s;

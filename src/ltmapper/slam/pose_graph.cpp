@@ -2,7 +2,7 @@
 // graph with anchor nodes and robust inter-session factors, outlier pruning.
 #include "ltmapper/slam/factors.hpp"
 #include "ltmapper/slam/internal.hpp"
-#include "ltmapper/slam/slam.hpp"
+#include "ltmapper/slam/alignment.hpp"
 
 #include <ceres/ceres.h>
 #include <spdlog/spdlog.h>

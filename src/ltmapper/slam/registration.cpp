@@ -14,6 +14,7 @@
 // between a sparse LiDAR's rings, a distance along the surface normal does not.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/slam/internal.hpp"
+#include "ltmapper/slam/registration.hpp"
 
 #include <cmath>
 #include <sstream>

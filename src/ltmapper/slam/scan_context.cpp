@@ -1,6 +1,6 @@
 // Scan Context (Kim & Kim, IROS 2018): a rings x sectors egocentric height descriptor, a
 // rotation-invariant ring key for retrieval, and a column-shift search for the yaw.
-#include "ltmapper/slam/slam.hpp"
+#include "ltmapper/slam/registration.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -19,27 +19,6 @@ namespace ltm::slam {
 namespace {
 namespace fs = std::filesystem;
 
-std::string JsonString(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-          out += buf;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out + "\"";
-}
-
 std::string PoseJson(const Pose& T) {
   std::ostringstream os;
   os << std::setprecision(9) << "[";
@@ -119,17 +98,17 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
   const std::size_t n = sessions.size();
 
   io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) {
-    os << std::setprecision(6) << "{\n  \"central\": " << JsonString(res.sessions[0].name)
+    os << std::setprecision(6) << "{\n  \"central\": " << io::json::Quote(res.sessions[0].name)
        << ",\n  \"all_aligned\": ";
     bool all = true;
     for (const auto& a : res.sessions) all = all && a.aligned;
     os << (all ? "true" : "false") << ",\n  \"sessions\": [\n";
     for (std::size_t s = 0; s < n; ++s) {
       const auto& a = res.sessions[s];
-      os << "    {\"name\": " << JsonString(a.name) << ", \"dir\": " << JsonString(sessions[s].dir)
+      os << "    {\"name\": " << io::json::Quote(a.name) << ", \"dir\": " << io::json::Quote(sessions[s].dir)
          << ", \"keyframes\": " << sessions[s].keyframes.size()
          << ", \"aligned\": " << (a.aligned ? "true" : "false")
-         << ", \"reason\": " << JsonString(a.reason) << ", \"sc_candidates\": " << a.sc_candidates
+         << ", \"reason\": " << io::json::Quote(a.reason) << ", \"sc_candidates\": " << a.sc_candidates
          << ", \"loops_verified\": " << a.loops_verified
          << ", \"loops_accepted\": " << a.loops_accepted
          << ", \"radius_loops_accepted\": " << a.radius_loops
@@ -144,7 +123,7 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
        << ", \"retrieval\": " << res.time_retrieval_s
        << ", \"registration\": " << res.time_registration_s
        << ", \"optimisation\": " << res.time_optimisation_s << ", \"total\": " << res.time_total_s
-       << "},\n  \"robust_loss\": " << JsonString(cfg.robust_loss)
+       << "},\n  \"robust_loss\": " << io::json::Quote(cfg.robust_loss)
        << ",\n  \"peak_rss_bytes\": " << PeakRssBytes() << "\n}\n";
   });
 }

@@ -1,10 +1,10 @@
-#include "ltmapper/eval/json.hpp"
+#include "ltmapper/io/json.hpp"
 
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 
-namespace ltm::eval::json {
+namespace ltm::io::json {
 
 const Value* Value::Find(const std::string& key) const {
   if (type != Type::kObject) return nullptr;
@@ -14,6 +14,19 @@ const Value* Value::Find(const std::string& key) const {
 }
 
 namespace {
+
+// The short escapes: a character and the letter after its backslash. Quote writes the first five
+// (other control characters as \u00XX); the parser reads all of them.
+constexpr char kEscaped[] = {'"', '\\', '\n', '\r', '\t', '/', '\b', '\f'};
+constexpr char kLetter[] = {'"', '\\', 'n', 'r', 't', '/', 'b', 'f'};
+constexpr std::size_t kWritten = 5;
+
+// Index of `c` in `table` (first `n` entries), or -1.
+int Find(const char* table, std::size_t n, char c) {
+  for (std::size_t i = 0; i < n; ++i)
+    if (table[i] == c) return int(i);
+  return -1;
+}
 
 class Parser {
  public:
@@ -52,41 +65,38 @@ class Parser {
     return false;
   }
 
+  // A container's items after its opening bracket, up to `close`; `item()` parses one.
+  template <class Item>
+  void Items(char close, Item&& item) {
+    ++pos_;
+    if (Peek() == close) {
+      ++pos_;
+      return;
+    }
+    for (;;) {
+      item();
+      const char n = Peek();
+      ++pos_;
+      if (n == close) break;
+      if (n != ',') Fail(std::string("expected ',' or '") + close + "'");
+    }
+  }
+
   Value ParseValue(int depth) {
     if (depth > 256) Fail("nesting too deep");
     Value v;
     const char c = Peek();
     if (c == '{') {
-      ++pos_;
       v.type = Value::Type::kObject;
-      if (Peek() == '}') {
-        ++pos_;
-        return v;
-      }
-      for (;;) {
+      Items('}', [&] {
         if (Peek() != '"') Fail("expected a string key");
         std::string key = ParseString();
         Expect(':');
         v.obj.emplace_back(std::move(key), ParseValue(depth + 1));
-        const char n = Peek();
-        ++pos_;
-        if (n == '}') break;
-        if (n != ',') Fail("expected ',' or '}'");
-      }
+      });
     } else if (c == '[') {
-      ++pos_;
       v.type = Value::Type::kArray;
-      if (Peek() == ']') {
-        ++pos_;
-        return v;
-      }
-      for (;;) {
-        v.arr.push_back(ParseValue(depth + 1));
-        const char n = Peek();
-        ++pos_;
-        if (n == ']') break;
-        if (n != ',') Fail("expected ',' or ']'");
-      }
+      Items(']', [&] { v.arr.push_back(ParseValue(depth + 1)); });
     } else if (c == '"') {
       v.type = Value::Type::kString;
       v.str = ParseString();
@@ -120,33 +130,24 @@ class Parser {
       }
       if (pos_ >= s_.size()) break;
       const char e = s_[pos_++];
-      switch (e) {
-        case '"': out += '"'; break;
-        case '\\': out += '\\'; break;
-        case '/': out += '/'; break;
-        case 'b': out += '\b'; break;
-        case 'f': out += '\f'; break;
-        case 'n': out += '\n'; break;
-        case 'r': out += '\r'; break;
-        case 't': out += '\t'; break;
-        case 'u': {
-          if (pos_ + 4 > s_.size()) Fail("short \\u escape");
-          const unsigned cp = unsigned(std::strtoul(s_.substr(pos_, 4).c_str(), nullptr, 16));
-          pos_ += 4;
-          // UTF-8 encode (surrogate pairs are kept as two code units; fine for our keys).
-          if (cp < 0x80) {
-            out += char(cp);
-          } else if (cp < 0x800) {
-            out += char(0xC0 | (cp >> 6));
-            out += char(0x80 | (cp & 0x3F));
-          } else {
-            out += char(0xE0 | (cp >> 12));
-            out += char(0x80 | ((cp >> 6) & 0x3F));
-            out += char(0x80 | (cp & 0x3F));
-          }
-          break;
-        }
-        default: Fail("bad escape");
+      if (const int k = Find(kLetter, sizeof(kLetter), e); k >= 0) {
+        out += kEscaped[k];
+        continue;
+      }
+      if (e != 'u') Fail("bad escape");
+      if (pos_ + 4 > s_.size()) Fail("short \\u escape");
+      const unsigned cp = unsigned(std::strtoul(s_.substr(pos_, 4).c_str(), nullptr, 16));
+      pos_ += 4;
+      // UTF-8 encode (surrogate pairs are kept as two code units; fine for our keys).
+      if (cp < 0x80) {
+        out += char(cp);
+      } else if (cp < 0x800) {
+        out += char(0xC0 | (cp >> 6));
+        out += char(0x80 | (cp & 0x3F));
+      } else {
+        out += char(0xE0 | (cp >> 12));
+        out += char(0x80 | ((cp >> 6) & 0x3F));
+        out += char(0x80 | (cp & 0x3F));
       }
     }
     Fail("unterminated string");
@@ -166,20 +167,15 @@ Value Parse(const std::string& text, const std::string& where) {
 std::string Quote(const std::string& s) {
   std::string out = "\"";
   for (const char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof(buf), "\\u%04x", unsigned(c));
-          out += buf;
-        } else {
-          out += c;
-        }
+    if (const int k = Find(kEscaped, kWritten, c); k >= 0) {
+      out += '\\';
+      out += kLetter[k];
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof(buf), "\\u%04x", unsigned(c));
+      out += buf;
+    } else {
+      out += c;
     }
   }
   return out + "\"";
@@ -194,39 +190,27 @@ void Writer::Prefix(const std::string& key) {
   }
 }
 
-Writer& Writer::BeginObject(const std::string& key) {
+Writer& Writer::Open(const std::string& key, char bracket, bool object) {
   Prefix(key);
-  out_ += "{";
+  out_ += bracket;
   first_.push_back(true);
-  is_object_.push_back(true);
+  is_object_.push_back(object);
   return *this;
 }
 
-Writer& Writer::EndObject() {
+Writer& Writer::Close(char bracket) {
   const bool empty = first_.back();
   first_.pop_back();
   is_object_.pop_back();
   if (!empty) out_ += "\n" + std::string(2 * first_.size(), ' ');
-  out_ += "}";
+  out_ += bracket;
   return *this;
 }
 
-Writer& Writer::BeginArray(const std::string& key) {
-  Prefix(key);
-  out_ += "[";
-  first_.push_back(true);
-  is_object_.push_back(false);
-  return *this;
-}
-
-Writer& Writer::EndArray() {
-  const bool empty = first_.back();
-  first_.pop_back();
-  is_object_.pop_back();
-  if (!empty) out_ += "\n" + std::string(2 * first_.size(), ' ');
-  out_ += "]";
-  return *this;
-}
+Writer& Writer::BeginObject(const std::string& key) { return Open(key, '{', true); }
+Writer& Writer::EndObject() { return Close('}'); }
+Writer& Writer::BeginArray(const std::string& key) { return Open(key, '[', false); }
+Writer& Writer::EndArray() { return Close(']'); }
 
 Writer& Writer::Number(const std::string& key, double v) {
   Prefix(key);
@@ -258,4 +242,4 @@ Writer& Writer::Bool(const std::string& key, bool v) {
   return *this;
 }
 
-}  // namespace ltm::eval::json
+}  // namespace ltm::io::json

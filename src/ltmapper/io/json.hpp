@@ -1,6 +1,6 @@
-// Internal to ltm::eval (not a public header): a small JSON value, parser and writer, enough for
-// our reports and for reading other stages' report.json. No third-party JSON library is a
-// project dependency.
+// ltmapper io: the one JSON writer and reader of the project (stage reports, eval reports, map
+// objects): a small value, parser, pretty writer and the string quoting every hand-laid-out
+// report uses. No third-party JSON library is a project dependency.
 #pragma once
 
 #include "ltmapper/core/core.hpp"
@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-namespace ltm::eval::json {
+namespace ltm::io::json {
 
 struct Value {
   enum class Type { kNull, kBool, kNumber, kString, kArray, kObject };
@@ -45,11 +45,14 @@ class Writer {
 
  private:
   void Prefix(const std::string& key);
+  Writer& Open(const std::string& key, char bracket, bool object);  // a container: { or [
+  Writer& Close(char bracket);
   std::string out_;
   std::vector<bool> first_;  // per open container: no element written yet
   std::vector<bool> is_object_;
 };
 
+// A JSON string literal: quotes, backslash, \n \r \t escaped, other control characters as \u00XX.
 std::string Quote(const std::string& s);
 
-}  // namespace ltm::eval::json
+}  // namespace ltm::io::json

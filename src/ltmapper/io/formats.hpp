@@ -1,0 +1,82 @@
+// ltmapper io: the file formats (PCD, KITTI .bin, PLY, SCD, KITTI / TUM poses, g2o).
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ltm::io {
+
+struct CloudReadStats {
+  std::size_t points_in_file = 0;
+  std::size_t non_finite_dropped = 0;  // NaN / Inf points removed (never propagated)
+};
+// PCD (ascii, binary, binary_compressed) through PCL's reader. Needs fields x y z; intensity
+// optional (0 when absent). Truncated files and headers that disagree with the data are errors.
+PointCloud ReadPcd(const std::string& path, CloudReadStats* stats = nullptr);
+// The sensor pose of a PCD's VIEWPOINT header line (tx ty tz qw qx qy qz; identity when absent):
+// the KTH DynamicMap benchmark stores each scan in the world frame with its sensor pose there.
+Pose ReadPcdViewpoint(const std::string& path);
+enum class PcdFormat { kAscii, kBinary, kBinaryCompressed };
+void WritePcd(const std::string& path, const PointCloud& cloud,
+              PcdFormat format = PcdFormat::kBinary);
+// KITTI velodyne .bin: float32 x y z reflectance, little endian, 16 bytes per point.
+PointCloud ReadKittiBin(const std::string& path, CloudReadStats* stats = nullptr);
+void WriteKittiBin(const std::string& path, const PointCloud& cloud);
+// Reads .pcd or .bin by extension.
+PointCloud ReadCloud(const std::string& path, CloudReadStats* stats = nullptr);
+// Binary little-endian PLY with float x y z intensity and, when present, uchar class,
+// ushort session, int object (CloudCompare shows them as scalar fields).
+void WritePly(const std::string& path, const PointCloud& cloud);
+// One part of a labelled PLY: the points of `cloud` (those with keep[i] when `keep` is given),
+// each with class `cls`, session `session` and object `object`.
+struct PlyPart {
+  const PointCloud* cloud = nullptr;
+  PointClass cls = PointClass::kStatic;
+  std::uint16_t session = 0;
+  std::int32_t object = -1;
+  const std::vector<bool>* keep = nullptr;
+};
+// The same file as WritePly of the parts' labelled concatenation (class, session and object
+// fields), streamed from the parts without building that concatenation.
+void WritePly(const std::string& path, const std::vector<PlyPart>& parts);
+PointCloud ReadPly(const std::string& path);  // reads what WritePly writes
+
+// -------------------------------------------------------------------------- scan context
+// SCDs/NNNNNN.scd: `rows` lines of `cols` space-separated numbers (20 x 60 by default).
+Eigen::MatrixXd ReadScd(const std::string& path, int rows = 20, int cols = 60);
+void WriteScd(const std::string& path, const Eigen::MatrixXd& desc);
+
+// ------------------------------------------------------------------------------------ poses
+// KITTI: 12 numbers per line, row-major 3x4 [R|t].
+std::vector<Pose> ReadKittiPoses(const std::string& path);
+void WriteKittiPoses(const std::string& path, const std::vector<Pose>& poses);
+// TUM: "timestamp tx ty tz qx qy qz qw" per line.
+struct StampedPose {
+  double stamp = 0.0;
+  Pose pose = Pose::Identity();
+};
+std::vector<StampedPose> ReadTumPoses(const std::string& path);
+void WriteTumPoses(const std::string& path, const std::vector<StampedPose>& poses);
+// A 3x4 (12 numbers, row-major) or 4x4 (16 numbers) rigid transform from text; e.g. KITTI's
+// `Tr` or `relative.txt`. A leading "Tr:" label is allowed.
+Pose ReadTransform(const std::string& path);
+Pose ParseTransform(const std::string& text, const std::string& where);
+
+// -------------------------------------------------------------------------------------- g2o
+struct G2oGraph {
+  std::vector<std::pair<int, Pose>> vertices;  // (id, pose) in file order
+  std::vector<Edge> edges;
+};
+// VERTEX_SE3:QUAT id x y z qx qy qz qw / EDGE_SE3:QUAT a b x y z qx qy qz qw [21 info values].
+// Quaternions are normalised; a quaternion whose norm is far from 1 (|n-1| > 1e-3), an unknown
+// tag, a duplicate vertex id or an edge to a missing vertex is an error naming file and line.
+// FIX lines are accepted and ignored.
+G2oGraph ReadG2o(const std::string& path);
+void WriteG2o(const std::string& path, const G2oGraph& graph);
+
+}  // namespace ltm::io

@@ -1,0 +1,113 @@
+// ltmapper map: what enters the store (keyframes, deltas, session metadata) and what the store
+// reports back (session / keyframe records, integration results, regions, fsck, objects).
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ltm::map {
+
+// A keyframe entering the map: its world pose and its HD-free cloud in its own (sensor) frame.
+struct KeyframeInput {
+  int index = 0;  // keyframe index in its session (scan file number)
+  Pose T_world_sensor = Pose::Identity();
+  PointCloud cloud;
+};
+
+// LT-removert's changes at one keyframe of the reference session, in that keyframe's frame.
+struct KeyframeDelta {
+  int keyframe = 0;  // index of the reference session's keyframe
+  PointCloud pd_strong, pd_weak, nd_strong, nd_weak;
+};
+
+struct SessionMeta {
+  SessionMeta(std::string name_ = {}, const Pose& anchor_ = Pose::Identity(), std::string params_ = {})
+      : name(std::move(name_)), anchor(anchor_), params(std::move(params_)) {}
+  std::string name;
+  Pose anchor = Pose::Identity();  // the session's anchor A (paper eq. 3)
+  std::string params;              // free text recorded with the session (resolved config)
+};
+
+// ----------------------------------------------------------------------------------- records
+struct SessionRecord {
+  int order = 0;       // 0 = central
+  std::string name;
+  int reference = -1;  // session the step's changes were detected against (-1 for the base)
+  Pose anchor = Pose::Identity();
+  std::string params, integrated_utc;
+  std::size_t keyframes_new = 0, keyframes_changed = 0;
+  std::size_t pd_strong = 0, pd_weak = 0;  // points added by the step
+  std::size_t nd_strong = 0, nd_weak = 0;  // points removed as seen-through / kept as occluded
+  std::size_t superseded = 0, restored = 0;  // resampled points swapped when reference != previous
+  std::size_t points = 0;  // map points (sum over keyframes) after the step
+  std::size_t bytes = 0;   // blob bytes written by the step
+};
+
+struct KeyframeRecord {
+  int id = 0;
+  int session = 0;       // session (order) that created it
+  int source_index = 0;  // keyframe index in that session
+  Pose T_world_sensor = Pose::Identity();
+  std::size_t base_points = 0, base_bytes = 0;
+  std::size_t delta_count = 0, delta_bytes = 0;
+};
+
+struct IntegrationResult {
+  int session = 0;
+  std::size_t keyframes_new = 0, keyframes_changed = 0;
+  std::size_t pd_strong = 0, pd_weak = 0, nd_strong = 0, nd_weak = 0;
+  std::size_t superseded = 0, restored = 0;
+  std::size_t points = 0, bytes = 0;
+  double seconds = 0.0;
+};
+
+// Part of the map to build: everything, or an axis-aligned world box; optional voxel filter.
+struct Region {
+  bool use_box = false;
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  double voxel_m = 0.0;  // 0 = keep every point
+};
+
+struct FsckReport {
+  bool ok = true;
+  std::vector<std::string> problems;
+  std::size_t sessions = 0, keyframes = 0, blobs = 0, points = 0, bytes = 0;
+};
+
+struct MapObject {
+  int id = 0;         // stable: order of (step, change, centroid x, y) over the store's objects
+  int session = 0;    // step that detected it
+  int reference = 0;  // session it was compared against
+  PointClass cls = PointClass::kUnknown;  // majority class: kPDStrong, kPDWeak or kNDStrong
+  std::string change;  // "appeared" (PD), "disappeared" (strong ND), "moved" (either end of a move)
+  int partner = -1;    // moved: id of the other end (same step), else -1
+  int exists_in = 0;   // session whose scans hold the object (session for PD, reference for ND)
+  std::size_t points = 0;
+  double confidence = 0.0;  // [0, 1] see objects.cpp Confidence()
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();  // axis-aligned box
+  // Oriented box: yaw of the longest horizontal axis, centre, size = length, width, height [m].
+  Eigen::Vector3d box_center = Eigen::Vector3d::Zero(), size = Eigen::Vector3d::Zero();
+  double yaw_rad = 0.0;
+  double ground_z = 0.0, height_above_ground = 0.0;  // local ground under it, top above it [m]
+  double clearance_m = 0.0;           // lowest point above the ground of its cell [m]
+  double range_m = 0.0;               // distance to the nearest map keyframe (sensor position)
+  double observed_fraction = 0.0;     // share of see-through evidence (strong ND / weak PD)
+  double twin_fraction = 0.0;         // share with a change of the other side within the twin radius
+  double attached_fraction = 0.0;     // share with an unchanged surface within the cluster tolerance
+  std::string rejected;               // why it is not an object ("" = an object)
+  PointCloud cloud;  // world frame, cls / session / object set
+};
+// Summary totals for `ltmapper map log`.
+struct StoreTotals {
+  std::size_t file_bytes = 0, base_bytes = 0, delta_bytes = 0;
+  std::size_t base_points = 0, delta_points = 0;
+};
+
+}  // namespace ltm::map

@@ -1,0 +1,94 @@
+// ltmapper map: the Store, one SQLite file NAME.ltmap (schema and rules: README.md here).
+#pragma once
+
+#include "ltmapper/map/config.hpp"
+#include "ltmapper/map/records.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ltm::map {
+
+class Store {
+ public:
+  // Creates a new store file (error when `path` exists). Encoding values come from `cfg`.
+  static Store Create(const std::string& path, const MapConfig& cfg);
+  // kReadOnly: SQLITE_OPEN_READONLY, no journal mode switch, nothing written or created (works on
+  // read-only media and on another user's store); integrating through such a store fails.
+  enum class Access { kReadWrite, kReadOnly };
+  // Opens an existing store; checks the schema version. Integration parameters come from `cfg`,
+  // the encoding (resolution, intensity step) from the store.
+  static Store Open(const std::string& path, const MapConfig& cfg = {}, Access access = Access::kReadWrite);
+  Store(Store&&) noexcept;
+  Store& operator=(Store&&) noexcept;
+  ~Store();
+
+  const std::string& path() const;
+  const MapConfig& config() const;  // encoding fields as stored
+  void set_threads(int threads);    // 0 = all cores
+
+  // The central session: every keyframe becomes a map keyframe. One transaction.
+  IntegrationResult IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes);
+  // A query session's changes against `reference` (an integrated session, usually the central
+  // one): per reference keyframe with a delta, the keyframe's state becomes reference-state − ND
+  // + PD. `query_keyframes` carry this session's points that no reference keyframe owns (LT-
+  // removert's new_keyframes/: PD in new territory; cls array optional, default kPDStrong): one
+  // with no map keyframe within new_keyframe_radius_m becomes a new map keyframe (its cloud is the
+  // base); otherwise its points join the nearest map keyframe's target (a keyframe created by an
+  // earlier query is replaced by what this session saw there). Keyframes without any input keep
+  // their latest state. One transaction (BEGIN IMMEDIATE ... COMMIT): an exception or a kill
+  // leaves the previous state.
+  IntegrationResult IntegrateSession(const SessionMeta& session, const std::string& reference,
+                                     const std::vector<KeyframeDelta>& deltas,
+                                     const std::vector<KeyframeInput>& query_keyframes);
+  // Test hook: called inside the integration transaction after each keyframe is written.
+  std::function<void(std::size_t keyframes_written)> on_keyframe_written;
+
+  std::vector<SessionRecord> Sessions() const;
+  std::vector<KeyframeRecord> Keyframes() const;
+  int SessionOrder(const std::string& name) const;  // throws when unknown
+  int LatestSession() const;                        // -1 when empty
+  StoreTotals Totals() const;
+
+  // One keyframe as of `session` (local frame; cls and session arrays set); empty when the
+  // keyframe did not exist yet.
+  PointCloud KeyframeCloud(int keyframe_id, int session) const;
+  // The map as of `session` in the world frame (restore by chained inverse deltas).
+  PointCloud MapAt(int session, const Region& region = {}) const;
+  PointCloud Live(const Region& region = {}) const;  // latest state, all PD
+  // What differs between the states as of sessions `a` and `b`, per keyframe with a delta between
+  // them (or created between them): (points of a's state with no point of b's within one grid
+  // step, the reverse), world frame. Every other keyframe is the same in both and is neither
+  // decoded nor returned (map::Diff).
+  std::vector<std::pair<PointCloud, PointCloud>> KeyframeChanges(int a, int b, const Region& region = {}) const;
+  // Meta map: the first state of every keyframe plus strong PD of every later step, minus
+  // everything within meta_carve_radius_m of any point a step removed as seen-through (strong ND).
+  PointCloud Meta(const Region& region = {}) const;
+  // The changes of one step in the world frame: PD strong/weak (added), ND strong (removed),
+  // ND weak (kept), plus the weak PD of the keyframes the step created (new territory).
+  // cls set, session = the step.
+  PointCloud StepChanges(int session, const Region& region = {}) const;
+  // Objects a user can act on (objects.cpp): Euclidean clusters (PCL) of each step's strong ND
+  // and PD above the local ground, kept only in space both sessions observed and when they pass
+  // the geometric rules; moved pairs linked. `rejected` (optional) receives the other clusters
+  // with the reason.
+  std::vector<MapObject> Objects(std::vector<MapObject>* rejected = nullptr) const;  // needs object_sensor_step_deg > 0
+
+  // Schema version, PRAGMA integrity_check, foreign keys, every blob's checksum and decoding,
+  // references between rows, and that every stored base equals its deltas' composition counts.
+  FsckReport Fsck() const;
+  // Hash of all logical content (sessions, keyframes, blobs); equal stores give equal digests.
+  std::uint64_t Digest() const;
+
+  struct Impl;  // opaque (SQLite handle); public only so store.cpp helpers can name it
+
+ private:
+  explicit Store(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ltm::map

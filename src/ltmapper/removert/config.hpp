@@ -1,0 +1,178 @@
+// ltmapper removert: RemovertConfig (params_ltremovert.yaml) and the BeamTest of LD "same surface".
+#pragma once
+
+#include "ltmapper/core/core.hpp"
+#include "ltmapper/geometry/sensor.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace ltm::removert {
+
+// Did a scan observe the surface of a point (LD "same surface": the other session has it, only
+// sampled more sparsely)? The exact ray towards the point is not among the beams, so it is
+// judged from the beams around it, in the point's column (col_deg wide, rows of row_deg):
+//  - a return in the point's own cell: on the point's plane (within tol_m + tol_rel * range)
+//    and within the along-ray tolerance of it, tol / cos(incidence) capped at grazing_max_m;
+//  - else the nearest returns above and below its direction (within span_deg): both on the
+//    plane, and the ray towards the point meets the surface between them (the plane through
+//    both returns along the point's surface contour) within that along-ray tolerance: so a
+//    point in a trough behind a crest the lower beam hit, or behind an occluder, is not observed;
+//  - else one of them on the plane at most edge_max_m from the point in range and the other
+//    without a return or beyond the point (the surface's edge, far ground below the sky).
+// The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
+// The defaults are those of RemovertConfig::ld_beam (config keys ld.beam_*).
+struct BeamTest {
+  double col_deg = 0.4;         // [deg] column width (>= the scans' azimuth step)
+  double row_deg = 0.1;         // [deg] row height (well below the beams' elevation spacing)
+  double span_deg = 1.5;        // [deg] how far above / below the point's direction to look for the beams
+  double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface ...
+  double tol_rel = 0.005;       // [-] ... plus this times the range (rotation error between the sessions)
+  double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
+  double edge_max_m = 60.0;     // [m] at a surface's edge (one beam on it, the other without a return or
+                                //     beyond it) the return on it at most this far from the point in range
+};
+
+struct RemovertConfig {
+  // --- sensor and range images
+  std::string sensor = "auto";    // auto: estimated from the scans (geometry::EstimateSensor); a preset
+                                  // name (geometry::SensorPresetNames); table: sensor.elevations_deg
+  std::vector<double> sensor_elevations_deg;  // [deg] per-beam elevations (sensor: table)
+  // Resolved by WithSensor() (not keys): the model, and the range images' vertical FOV (the
+  // outer beams plus one beam spacing). Each image row's vertical window reaches at least one
+  // beam spacing above and below it (SensorModel::SpacingAt), so a map point is always judged
+  // against the beams on both sides of its direction: a single beam above grazing ground that
+  // returns farther is no see-through evidence.
+  geometry::SensorModel sensor_model;
+  double fov_up_deg = 0.0;        // [deg] upper edge of the range images' vertical FOV
+  double fov_down_deg = 0.0;      // [deg] lower edge
+  double min_range_m = 2.0;       // [m] scan returns closer than this are ignored (ego vehicle)
+  double max_range_m = 100.0;     // [m] scan returns farther than this are ignored
+  double submap_radius_m = 60.0;  // [m] a keyframe tests only map points this close to it
+  double tile_m = 10.0;           // [m] edge of the 2D tiles indexing map points for submaps
+  // --- session map
+  double map_voxel_m = 0.1;       // [m] voxel of the session map (union of keyframe scans)
+  // --- see-through test: scan range > point range + tol_abs_m + tol_rel * point range
+  double tol_abs_m = 0.10;        // [m]
+  double tol_rel = 0.01;          // [-]
+  int window_px = 1;              // [pixels] see-through needs the window's nearest return beyond
+  // --- HD removal (remove then revert)
+  std::vector<double> remove_resolutions_deg = {0.4, 0.6, 0.8};  // [deg/pixel] fine to coarse
+  std::vector<double> revert_resolutions_deg = {1.2, 1.6};       // [deg/pixel] coarser
+  bool revert = true;             // false: removal only (ablation)
+  int remove_min_votes = 1;       // [keyframes] see-through votes to become a removal candidate
+  double remove_min_ratio = 0.3;  // [-] and see-through votes / (see-through + hit votes)
+  int revert_min_hits = 5;        // [keyframes] hits at a revert resolution to revert ...
+  double revert_hit_ratio = 4.0;  // [-] ... and hits >= ratio * see-through votes there
+  double revert_surface_max_m = 10.0;  // [m] revert hits include hits on the candidate's surface plane
+                                       // (VisibilityOptions; normals over ld.normal_radius_m) up to this
+                                       // far in range: grazing ground; 0 = plain range hits
+  double dilate_voxels = 1.5;     // [map voxels] map points within one map voxel of a removed HD point, and
+                                  // within this many voxels of a removed body's point (dilate_body_m), are removed
+                                  // too: where a mover touched the ground (wheels, feet) its trace and the ground
+                                  // share voxels and cannot be told apart; 1.5 = the centroids of the neighbouring
+                                  // voxels (one voxel apart, each up to half a voxel off its centre); 0 = off
+  double DilateM() const { return dilate_voxels * map_voxel_m; }  // [m]
+  double dilate_body_m = 0.5;     // [m] a removed body's points: removed points with removed points within this
+                                  // distance and at least half of it above or below them (a car's flank, a
+                                  // pedestrian's legs), not removed patches of flat ground
+  // --- LD detection
+  double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
+  double ld_radius_rel = 0.01;    // [-] ... plus this times the larger of the point's distances to either session's
+                                  // nearest keyframe ... (rotation error grows with viewing distance)
+  double ld_radius_max_m = 1.0;   // [m] ... at most this
+  int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
+  double ld_rim_frac = 0.45;      // [-] a point whose neighbours are all beyond ld.radius_m and to one side of
+                                  // it (centroid of the nearest 16 off it by more than this times r, along
+                                  // their surface) is past the rim of the other session's coverage: a raw
+                                  // change for the beam test (0 = off)
+  std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
+  int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
+  double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
+  bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
+  int ld_window_px = 1;           // [pixels] window half-size of the LD see-through test (0 = the pixel alone)
+  double ld_submap_radius_m = 100.0;  // [m] keyframes this close to a raw change vote on it (far ground
+                                      // is sampled sparsely: use the sensor's max range)
+  double ld_normal_radius_m = 1.0;   // [m] neighbourhood (own map, at most 16 points) for the normals of
+                                      // raw changes; a line-like neighbourhood (far ground rings) takes
+                                      // the normal perpendicular to the line closest to vertical
+  double ld_surface_max_m = 10.0;     // [m] a return on the point's plane at most this far from it in range is
+                                      // a same-surface hit (grazing far ground; an occluder is off the plane)
+  int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through that this many of the other
+                                  // session's keyframes hit on its surface plane (surface hits, see
+                                  // VisibilityOptions) is the same surface, sampled more sparsely:
+                                  // no change (0 = off)
+  std::string ld_same_test = "beams";  // beams: the beam test (ld_beam, BeamTest); pixel: the nearest return of
+                                      // the point's LD-resolution pixel or window on its plane (ld.surface_max_m)
+  BeamTest ld_beam;                    // keys ld.beam_*
+  bool covisible_only = false;    // true: a raw change counts only where the other session had its line
+                                  // of sight at all (a return in the window); else unobserved
+  std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
+  // --- outputs
+  double assign_radius_m = 60.0;       // [m] changes farther from every central keyframe ...
+  double new_keyframe_dist_m = 20.0;   // [m] ... go to query keyframes this far from all central ones
+  double keyframe_voxel_m = 0.0;       // [m] extra voxel for per-keyframe clouds (0 = map voxel)
+  bool write_keyframes = true;         // per keyframe local clouds
+  bool write_ply = true;               // PLY twins with a class field
+
+  template <class V>
+  void Visit(V& v) {
+    v("sensor.model", sensor, SensorChoices());
+    v("sensor.elevations_deg", sensor_elevations_deg, "deg", -89.9, 89.9, true);
+    v("sensor.min_range_m", min_range_m, "m", 0.0, 1000.0);
+    v("sensor.max_range_m", max_range_m, "m", 0.1, 10000.0);
+    v("submap_radius_m", submap_radius_m, "m", 1.0, 10000.0);
+    v("tile_m", tile_m, "m", 0.5, 1000.0);
+    v("map_voxel_m", map_voxel_m, "m", 0.01, 10.0);
+    v("tol_abs_m", tol_abs_m, "m", 0.0, 10.0);
+    v("tol_rel", tol_rel, "", 0.0, 1.0);
+    v("window_px", window_px, "pixels", 0, 10);
+    v("hd.remove_resolutions_deg", remove_resolutions_deg, "deg", 0.01, 10.0);
+    v("hd.revert_resolutions_deg", revert_resolutions_deg, "deg", 0.01, 10.0);
+    v("hd.revert", revert);
+    v("hd.remove_min_votes", remove_min_votes, "keyframes", 1, 65535);
+    v("hd.remove_min_ratio", remove_min_ratio, "", 0.0, 1.0);
+    v("hd.revert_min_hits", revert_min_hits, "keyframes", 1, 65535);
+    v("hd.revert_hit_ratio", revert_hit_ratio, "", 0.0, 1000.0);
+    v("hd.revert_surface_max_m", revert_surface_max_m, "m", 0.0, 100.0);
+    v("hd.dilate_voxels", dilate_voxels, "map voxels", 0.0, 10.0);
+    v("hd.dilate_body_m", dilate_body_m, "m", 0.01, 10.0);
+    v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
+    v("ld.radius_rel", ld_radius_rel, "", 0.0, 1.0);
+    v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);
+    v("ld.min_neighbors", ld_min_neighbors, "points", 1, 1000);
+    v("ld.rim_frac", ld_rim_frac, "", 0.0, 1.0);
+    v("ld.resolutions_deg", ld_resolutions_deg, "deg", 0.01, 10.0);
+    v("ld.min_votes", ld_min_votes, "keyframes", 1, 65535);
+    v("ld.min_ratio", ld_min_ratio, "", 0.0, 1.0);
+    v("ld.weak_nd", weak_nd);
+    v("ld.window_px", ld_window_px, "pixels", 0, 10);
+    v("ld.submap_radius_m", ld_submap_radius_m, "m", 1.0, 10000.0);
+    v("ld.normal_radius_m", ld_normal_radius_m, "m", 0.05, 10.0);
+    v("ld.surface_max_m", ld_surface_max_m, "m", 0.0, 100.0);
+    v("ld.same_min_hits", ld_same_min_hits, "keyframes", 0, 65535);
+    v("ld.same_test", ld_same_test, {"beams", "pixel"});
+    v("ld.beam_col_deg", ld_beam.col_deg, "deg", 0.01, 10.0);
+    v("ld.beam_row_deg", ld_beam.row_deg, "deg", 0.01, 10.0);
+    v("ld.beam_span_deg", ld_beam.span_deg, "deg", 0.01, 30.0);
+    v("ld.beam_tol_m", ld_beam.tol_m, "m", 0.0, 10.0);
+    v("ld.beam_tol_rel", ld_beam.tol_rel, "", 0.0, 1.0);
+    v("ld.beam_grazing_max_m", ld_beam.grazing_max_m, "m", 0.0, 100.0);
+    v("ld.beam_edge_max_m", ld_beam.edge_max_m, "m", 0.0, 1000.0);
+    v("ld.covisible_only", covisible_only);
+    v("ld.pairs", pairs, {"central", "consecutive"});
+    v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);
+    v("out.new_keyframe_dist_m", new_keyframe_dist_m, "m", 0.0, 1e6);
+    v("out.keyframe_voxel_m", keyframe_voxel_m, "m", 0.0, 10.0);
+    v("out.write_keyframes", write_keyframes);
+    v("out.write_ply", write_ply);
+  }
+  // Range checks plus the cross-field rules (non-empty resolution lists, sensor table, ...).
+  void Validate(const std::string& where = "removert config") const;
+  bool SensorResolved() const { return fov_up_deg > fov_down_deg; }
+  // Allowed values of sensor.model: auto, table and the presets.
+  static std::vector<std::string> SensorChoices();
+};
+
+}  // namespace ltm::removert

@@ -1,0 +1,167 @@
+// Private to the removert module (not installed): the range images of one scan (multi-resolution
+// images, the beam columns of the BeamTest) (visibility.cpp, occlusion.cpp).
+#pragma once
+
+#include "ltmapper/removert/config.hpp"
+
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace ltm::removert::detail {
+
+constexpr float kPiF = 3.14159265358979323846f;
+
+// atan2 with |error| < 2e-5 rad (minimax polynomial of atan on [0, 1] plus octant folding).
+// Pixels are >= 0.1 deg = 1.7e-3 rad, so at most ~1 % of points on a pixel border can land in
+// the neighbouring pixel compared with std::atan2: harmless for voting, 5x faster.
+inline float FastAtan2(float y, float x) {
+  const float ax = std::fabs(x), ay = std::fabs(y);
+  const float mx = ax > ay ? ax : ay;
+  const float mn = ax > ay ? ay : ax;
+  if (mx == 0.f) return 0.f;
+  const float a = mn / mx;
+  const float s = a * a;
+  float r = ((((0.0208351f * s - 0.085133f) * s + 0.180141f) * s - 0.3302995f) * s + 0.999866f) * a;
+  if (ay > ax) r = 0.5f * kPiF - r;
+  if (x < 0.f) r = kPiF - r;
+  return y < 0.f ? -r : r;
+}
+
+// The range image of one resolution: square pixels of `pixel_deg`, same pixel rule as
+// geometry::RangeImage (row 0 = top of the FOV, column 0 at azimuth +180 deg, decreasing azimuth).
+geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_deg);
+
+// Range images of one scan at several resolutions, built from one (pitch, yaw) evaluation per
+// point. Min range per pixel, +inf = no return. Build() reuses the buffers, so one image per
+// worker serves all its keyframes.
+class MultiResImage {
+ public:
+  // keep_returns: Build() also keeps each pixel's nearest return (sensor frame, Returns()).
+  // within_beams: points are judged only within the beams' span (PointBounds; HD removal), else
+  // anywhere in the images' FOV (LD: a change above the top beam is still judged by it).
+  MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg, bool keep_returns = false,
+                bool within_beams = false);
+  // Projects a scan (sensor frame); returns within [min_range, max_range] only. Then each
+  // level's min-pooled twin: the min over the (2w+1) x (2w+1) window centred on each pixel
+  // (columns wrap around), w = window_px.
+  void Build(const PointCloud& scan);
+  int levels() const { return int(levels_.size()); }
+  // Angles of a scan return (sensor frame). False when outside the images' vertical FOV or at
+  // ~0 range. Project() and Build() evaluate the same float operations four points at a time
+  // (SSE2): keep them in step.
+  bool Angles(const Eigen::Vector3f& p, float* range, float* pitch, float* yaw) const {
+    return AnglesWithin(p, up_, down_, range, pitch, yaw);
+  }
+  // The same for a point to judge: within the beams' span (PointBounds), else false.
+  bool PointAngles(const Eigen::Vector3f& p, float* range, float* pitch, float* yaw) const {
+    return AnglesWithin(p, point_up_, point_down_, range, pitch, yaw);
+  }
+  // The points (x[i], y[i], z[i]) (world frame; readable up to n + 3: batches of four) within
+  // 3D distance sqrt(radius2) of the sensor position c, moved into the sensor frame
+  // (Rt (p - c)), whose PointAngles() are valid: returns how many; their input positions go to
+  // idx[0, count) and their Angles() to range / pitch / yaw[0, count) (n long each). Batches of
+  // four (SSE2) use the same float operations in the same order as the scalar code (Eigen's
+  // products included), so the results are identical.
+  std::size_t Project(const float* x, const float* y, const float* z, std::size_t n,
+                      const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, float radius2,
+                      std::uint32_t* idx, float* range, float* pitch, float* yaw) const;
+  // One level's pixel rule, small enough for hot loops to keep in registers.
+  struct Grid {
+    int rows = 0, cols = 0;
+    float row_scale = 0.f, col_scale = 0.f;  // pixels per rad
+    float up = 0.f;                          // [rad] top of the FOV
+    // rows x cols pixels of row_deg x col_deg over the config's vertical FOV and 360 deg.
+    static Grid Make(const RemovertConfig& cfg, double row_deg, double col_deg);
+    int Row(float pitch) const {
+      int row = int((up - pitch) * row_scale);
+      if (row >= rows) row = rows - 1;
+      if (row < 0) row = 0;
+      return row;
+    }
+    int Col(float yaw) const {
+      int col = int((kPiF - yaw) * col_scale);
+      if (col >= cols) col -= cols;
+      if (col < 0) col = 0;
+      return col;
+    }
+    std::size_t Pixel(float pitch, float yaw) const {
+      return std::size_t(Row(pitch)) * std::size_t(cols) + std::size_t(Col(yaw));
+    }
+  };
+  const Grid& GridOf(int level) const { return levels_[std::size_t(level)].grid; }
+  std::size_t Pixel(int level, float pitch, float yaw) const { return GridOf(level).Pixel(pitch, yaw); }
+  // (pooled, range) of each pixel side by side: the vote test reads both, from one cache line.
+  const float* Pairs(int level) const { return levels_[std::size_t(level)].pairs.data(); }
+  // Per pixel, the sensor-frame position of its nearest return (only with keep_returns; valid
+  // where the pixel has a return).
+  const Eigen::Vector3f* Returns(int level) const { return levels_[std::size_t(level)].ret.data(); }
+  int Cols(int level) const { return GridOf(level).cols; }
+
+ private:
+  static bool AnglesWithin(const Eigen::Vector3f& p, float up, float down, float* range, float* pitch, float* yaw) {
+    const float rxy2 = p.x() * p.x() + p.y() * p.y();
+    const float r = std::sqrt(rxy2 + p.z() * p.z());
+    if (!(r > 1e-6f)) return false;
+    const float pt = FastAtan2(p.z(), std::sqrt(rxy2));
+    if (pt > up || pt < down) return false;
+    *range = r;
+    *pitch = pt;
+    *yaw = FastAtan2(p.y(), p.x());
+    return true;
+  }
+  // [rad] The elevations a point may have to be judged (point_up_, point_down_): a ring sensor's
+  // outermost beams widened by their scatter (SensorModel::spread_deg). Beyond them no ray passes
+  // on the far side of a point: the one beam on its near side returning farther (grazing ground
+  // below the lowest beam of a tilted sensor) is no evidence that its place is free. Without
+  // rings (or a resolved sensor) the images' FOV.
+  void PointBounds(const RemovertConfig& cfg);
+  static std::vector<int> WindowRows(const RemovertConfig& cfg, int rows, double row_deg);
+  struct Level {
+    Grid grid;
+    std::vector<int> window_rows;  // per row: how far the pool looks for the nearest beam (WindowRows)
+    int scatter_rows = 0;          // rows within the beams' estimated scatter: pooled whole
+    bool both_sides = false;       // no rings: evidence only with a return above and below
+    std::vector<std::uint8_t> sides;
+    std::vector<float> range, pooled, tmp, pairs;
+    std::vector<Eigen::Vector3f> ret;  // keep_returns
+  };
+  void Pool(Level& L) const;         // PoolColumns then PoolRows (or a copy when window_px is 0)
+  void PoolColumns(Level& L) const;  // horizontal min over +-window_px columns into tmp
+  void PoolRows(Level& L) const;     // vertical: scatter rows whole, then the nearest beam above / below
+  bool keep_returns_ = false;
+  int window_ = 0;
+  float up_ = 0.f, down_ = 0.f;              // [rad] the images' vertical FOV (scan returns)
+  float point_up_ = 0.f, point_down_ = 0.f;  // [rad] points judged (PointBounds)
+  float min_range_ = 0.f, max_range_ = 0.f;
+  std::vector<Level> levels_;
+};
+
+// A scan's nearest return per (column, row) cell of BeamTest::col_deg x row_deg, stored column
+// by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
+// the first returns above and below a direction are the two beams around it.
+class ColumnImage {
+ public:
+  ColumnImage(const RemovertConfig& cfg, const BeamTest& test);
+  void Build(const PointCloud& scan);
+  // BeamTest for a point ps (sensor frame; its range, pitch and yaw as MultiResImage::Angles
+  // gives them) on the plane n . x = off (plane[0..3], sensor frame).
+  bool Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
+
+ private:
+  BeamTest test_;
+  MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
+  std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams
+  float down_ = 0.f;          // [rad]
+  float min_range_ = 0.f, max_range_ = 0.f;
+  std::vector<float> range_;          // +inf = no return
+  std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
+};
+
+}  // namespace ltm::removert::detail

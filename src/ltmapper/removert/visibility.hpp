@@ -1,0 +1,49 @@
+// ltmapper removert: visibility votes (see through / hit per point and resolution), the
+// building block of HD removal and of the weak / strong decisions.
+#pragma once
+
+#include "ltmapper/removert/keyframes.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <vector>
+
+namespace ltm::removert {
+
+// For each point (world frame) and each resolution, how many keyframes see through it (scan
+// range > point range + tolerance) and how many hit it (|scan range - point range| <=
+// tolerance), counting keyframes within submap_radius_m of the point. The building block of HD
+// removal and of the weak/strong decisions; exposed for tests and ablations.
+struct VisibilityVotes {
+  std::size_t points = 0;
+  int levels = 0;
+  std::vector<std::uint16_t> see;  // [level * points + i]
+  std::vector<std::uint16_t> hit;
+  std::vector<std::uint16_t> occ;  // occluded (nearer return); only when count_occluded
+  std::vector<std::uint16_t> beam_hits;  // [i] keyframes that observed the point's surface by the BeamTest
+  std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
+  std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
+};
+// Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit
+// when the nearest return of its own pixel lies on the point's surface plane (distance to the
+// plane within the tolerance) and at most surface_max_m from it in range: a surface seen at a
+// grazing angle (far ground) is sampled metres apart in range, so the plain range test misses
+// it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
+struct VisibilityOptions {
+  bool count_occluded = false;
+  // Judge a point only within the beams' span (the outermost beams widened by their scatter):
+  // beyond it only one beam passes near the point and that is no evidence (HD removal, revert).
+  // LD's occlusion test judges anywhere in the images' FOV (a change above the top beam).
+  bool within_beams = true;
+  const std::vector<Eigen::Vector3f>* normals = nullptr;
+  double surface_max_m = 0.0;  // [m]
+  // With normals: the beam test per keyframe (BeamTest; VisibilityVotes::beam_hits).
+  const BeamTest* beams = nullptr;
+};
+VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
+                                const std::vector<double>& resolutions_deg,
+                                const RemovertConfig& cfg, int threads = 0,
+                                const VisibilityOptions& options = {});
+
+}  // namespace ltm::removert

@@ -1,0 +1,82 @@
+// ltmapper slam: inter-session loops, the anchor-node pose graph, the LT-SLAM stage and the
+// lifelong add (aligning one more session to a fixed reference).
+#pragma once
+
+#include "ltmapper/slam/config.hpp"
+
+#include <string>
+#include <vector>
+
+namespace ltm::slam {
+
+struct LoopRecord {
+  NodeKey a, b;                   // a.session < b.session; keyframe = position in the session
+  std::string source = "sc";      // sc | radius | given
+  double sc_distance = -1.0;      // -1 when not from Scan Context
+  double yaw_deg = 0.0;           // Scan Context yaw (initial guess)
+  Pose T_a_b = Pose::Identity();  // measurement z: p_a = T_a_b * p_b
+  double fitness = -1.0;          // GICP fitness [m^2], -1 when not registered
+  double overlap = -1.0;          // inlier ratio, -1 when not registered
+  double inlier_rms_m = -1.0;     // RMS NN distance of the inliers, -1 when not registered
+  bool verified = false;          // passed registration
+  bool accepted = false;          // used in the final graph
+  std::string status;             // accepted / why rejected
+  double residual_t_m = -1.0, residual_r_deg = -1.0;  // final unweighted residual
+  Matrix6d information = Matrix6d::Identity();        // order x y z rx ry rz
+};
+
+struct SessionAlignment {
+  std::string name;
+  bool aligned = false;            // central: always true
+  std::string reason;              // why not aligned
+  Pose anchor = Pose::Identity();  // A = T_world_session (meaningful when aligned)
+  std::vector<Pose> T_session_sensor;  // optimised, in the session's own frame
+  std::vector<Pose> T_world_sensor;    // A * T_session_sensor; empty when not aligned
+  int sc_candidates = 0, loops_verified = 0, loops_accepted = 0, radius_loops = 0;
+};
+
+struct SlamResult {
+  std::vector<SessionAlignment> sessions;
+  std::vector<LoopRecord> loops;
+  double time_descriptors_s = 0, time_retrieval_s = 0, time_registration_s = 0,
+         time_optimisation_s = 0, time_total_s = 0;
+  int registrations = 0;
+  bool solution_usable = true;
+  double initial_cost = 0, final_cost = 0;
+  int solver_iterations = 0;
+};
+
+// Back end alone: anchor initialisation from `loops` (verified ones), consistency gating,
+// Ceres optimisation with the robust loss, outlier pruning, aligned / not-aligned decision.
+// Sessions need keyframe poses and edges only (no clouds). `loops` outcomes are filled in.
+SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops,
+                            const SlamConfig& cfg, int threads = 0);
+
+// Whole LT-SLAM in memory: descriptors, retrieval, registration, graph, radius refinement.
+// Session 0 is the central session. Throws ltm::Error on broken input (empty scans, edges to
+// missing keyframes, no keyframes); sessions that cannot be aligned are reported, not thrown.
+SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg,
+                         int threads = 0);
+
+// The stage from files: loads the session directories (first = central), aligns them and writes
+// out_dir as described in docs/FORMATS.md ("LT-SLAM output").
+SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
+                        const std::string& out_dir, int threads = 0);
+
+// ------------------------------------------------------------------------------ lifelong add
+// A session already in the world frame, as the fixed reference that a new session is aligned
+// to: its keyframes carry their world poses (`T_world_sensor`, keyframe order) and its odometry
+// is rebuilt from them with an information far above any loop's, so the new session's loops
+// cannot bend it (it moves by under a thousandth of a loop's pull); its own loops are dropped.
+Session WorldReference(Session session, const std::vector<Pose>& T_world_sensor, const SlamConfig& cfg);
+// Aligns `query` to `reference` (a WorldReference: its frame is the world) with the same
+// retrieval, verification and graph as AlignSessions. Result sessions: {reference, query}; the
+// query's T_world_sensor are world poses. The cost follows the two sessions' sizes only.
+SlamResult AlignToReference(const Session& reference, const Session& query, const SlamConfig& cfg,
+                            int threads = 0);
+// aligned_dir/<folder>/: poses_world.txt, poses_world_tum.txt and anchor.txt when aligned, else
+// NOT_ALIGNED.txt with the reason (docs/FORMATS.md, "LT-SLAM output"). The folder is the
+// session's name, or its staging name.
+void WriteSessionAlignment(const std::string& aligned_dir, const std::string& folder, const SessionAlignment& a);
+
+}  // namespace ltm::slam
