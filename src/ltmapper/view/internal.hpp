@@ -67,6 +67,8 @@ struct TiledCloud {
   std::shared_ptr<const std::string> All(int level) const;
 
  private:
+  // Fills the encoded cache at level 0 (per tile and `coarse`) and coarse_counts.
+  void CacheLevel0(const std::vector<PointCloud>& level0);
   mutable std::mutex mutex_;
   mutable std::vector<std::vector<std::shared_ptr<const std::string>>> encoded_;  // [tile][level]
   mutable std::vector<std::vector<std::size_t>> counts_;

@@ -73,57 +73,59 @@ std::shared_ptr<const std::string> TiledCloud::All(int level) const {
   return std::make_shared<const std::string>(EncodeCloud(all, levels[std::size_t(level)]));
 }
 
-std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& cfg) {
-  auto out = std::make_shared<TiledCloud>();
-  TiledCloud& t = *out;
-  t.cfg = cfg;
-  const int cells = TileCells(cfg);
-  t.tile_edge_m = cells * cfg.base_voxel_m;
+namespace {
+constexpr std::int64_t kNoTile = std::numeric_limits<std::int64_t>::min();  // not finite: left out
+
+TiledCloud::Key Unpack(std::int64_t k) { return {int(k >> 32), int(std::int32_t(std::uint32_t(k & 0xffffffffu)))}; }
+
+// Tile of every point (kNoTile: not finite, left out as VoxelDownsample would); the same cell
+// index as geometry::VoxelDownsample at the finest level.
+std::vector<std::int64_t> PointTiles(const PointCloud& raw, const ViewConfig& cfg, int cells) {
   const std::size_t n = raw.size();
-  const bool has_cls = raw.cls.size() == n;
-  // Tile of every point (-1: not finite, left out as VoxelDownsample would).
-  constexpr std::int64_t kNone = std::numeric_limits<std::int64_t>::min();
-  std::vector<std::int64_t> key(n, kNone);
+  std::vector<std::int64_t> key(n, kNoTile);
   const std::size_t chunk = 1 << 16;
   ParallelFor((n + chunk - 1) / chunk, cfg.threads, [&](std::size_t c) {
     for (std::size_t i = c * chunk; i < std::min(n, (c + 1) * chunk); ++i) {
       const PointXYZI& p = raw.points[i];
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-      // The same cell index as geometry::VoxelDownsample at the finest level.
       const double cx = std::floor(double(p.x) / cfg.base_voxel_m), cy = std::floor(double(p.y) / cfg.base_voxel_m);
-      const double tx = std::floor(cx / cells), ty = std::floor(cy / cells);
-      if (std::abs(tx) > kMaxTileIndex || std::abs(ty) > kMaxTileIndex)
+      if (std::abs(std::floor(cx / cells)) > kMaxTileIndex || std::abs(std::floor(cy / cells)) > kMaxTileIndex)
         throw Error("view: a point at (" + std::to_string(p.x) + ", " + std::to_string(p.y) + ") is too far out to tile");
       key[i] = PackKey(int(FloorDiv(std::int64_t(cx), cells)), int(FloorDiv(std::int64_t(cy), cells)));
     }
   });
+  return key;
+}
+
+// t.keys (ascending) and t.raw: every tile's points in the map's order, with their class.
+void SplitIntoTiles(const PointCloud& raw, const std::vector<std::int64_t>& key, TiledCloud& t) {
   std::unordered_map<std::int64_t, std::size_t> count;
   for (std::int64_t k : key)
-    if (k != kNone) ++count[k];
+    if (k != kNoTile) ++count[k];
   std::vector<std::int64_t> packed;
   for (const auto& kv : count) packed.push_back(kv.first);
-  const auto unpack = [](std::int64_t k) {
-    return TiledCloud::Key{int(k >> 32), int(std::int32_t(std::uint32_t(k & 0xffffffffu)))};
-  };
-  std::sort(packed.begin(), packed.end(), [&](std::int64_t a, std::int64_t b) { return unpack(a) < unpack(b); });
+  std::sort(packed.begin(), packed.end(), [](std::int64_t a, std::int64_t b) { return Unpack(a) < Unpack(b); });
   std::unordered_map<std::int64_t, std::size_t> slot;
   t.raw.resize(packed.size());
   for (std::size_t s = 0; s < packed.size(); ++s) {
     slot[packed[s]] = s;
-    t.keys.push_back(unpack(packed[s]));
+    t.keys.push_back(Unpack(packed[s]));
     t.raw[s].points.reserve(count[packed[s]]);
     t.raw[s].cls.reserve(count[packed[s]]);
   }
-  for (std::size_t i = 0; i < n; ++i) {
-    if (key[i] == kNone) continue;
+  const bool has_cls = raw.cls.size() == raw.size();
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    if (key[i] == kNoTile) continue;
     PointCloud& c = t.raw[slot[key[i]]];
     c.points.push_back(raw.points[i]);
     c.cls.push_back(has_cls ? raw.cls[i] : PointClass::kUnknown);
   }
-  key = {};
+}
+
+// t.bounds: per tile min x, y, z, max x, y, z.
+void TileBounds(TiledCloud& t) {
   t.bounds.resize(t.keys.size());
-  t.coarse_counts.resize(t.keys.size());
-  ParallelFor(t.keys.size(), cfg.threads, [&](std::size_t s) {
+  ParallelFor(t.keys.size(), t.cfg.threads, [&](std::size_t s) {
     std::array<float, 6> b{};
     for (int a = 0; a < 3; ++a) b[a] = std::numeric_limits<float>::max(), b[3 + a] = std::numeric_limits<float>::lowest();
     for (const auto& p : t.raw[s].points) {
@@ -132,8 +134,13 @@ std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& 
     }
     t.bounds[s] = b;
   });
-  // Level 0: the coarsest configured voxel, doubled while the whole layer holds more than
-  // coarse_budget points there and the doubled voxel still nests in the tiles' cells.
+}
+
+// t.levels and every tile at level 0: the coarsest configured voxel, doubled while the whole
+// layer holds more than coarse_budget points there and the doubled voxel still nests in the
+// tiles' cells.
+std::vector<PointCloud> CoarseLevel(TiledCloud& t, int cells) {
+  const ViewConfig& cfg = t.cfg;
   for (int k = 0; k < cfg.lod_levels; ++k) t.levels.push_back(LevelVoxel(cfg, k));
   std::vector<PointCloud> coarse(t.keys.size());
   for (int extra = 0;; ++extra) {
@@ -144,18 +151,36 @@ std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& 
     const int next_cells = 1 << (cfg.lod_levels + extra);  // base cells per voxel one level coarser
     if (total <= std::size_t(cfg.coarse_budget) || cells % next_cells != 0 || int(t.levels.size()) >= kMaxLevels) break;
   }
-  const std::size_t nlevels = t.levels.size();
-  t.encoded_.assign(t.keys.size(), std::vector<std::shared_ptr<const std::string>>(nlevels));
-  t.counts_.assign(t.keys.size(), std::vector<std::size_t>(nlevels, 0));
-  ParallelFor(t.keys.size(), cfg.threads, [&](std::size_t s) {
-    t.coarse_counts[s] = coarse[s].size();
-    t.counts_[s][0] = coarse[s].size();
-    t.encoded_[s][0] = std::make_shared<const std::string>(EncodeCloud(coarse[s], t.levels[0]));
+  return coarse;
+}
+}  // namespace
+
+// Level 0 encoded per tile and for the whole layer; the finer levels are filled on demand.
+void TiledCloud::CacheLevel0(const std::vector<PointCloud>& level0) {
+  const std::size_t nlevels = levels.size();
+  encoded_.assign(keys.size(), std::vector<std::shared_ptr<const std::string>>(nlevels));
+  counts_.assign(keys.size(), std::vector<std::size_t>(nlevels, 0));
+  coarse_counts.resize(keys.size());
+  ParallelFor(keys.size(), cfg.threads, [&](std::size_t s) {
+    coarse_counts[s] = level0[s].size();
+    counts_[s][0] = level0[s].size();
+    encoded_[s][0] = std::make_shared<const std::string>(EncodeCloud(level0[s], levels[0]));
   });
   PointCloud all;
-  for (const auto& c : coarse) all.append(c);
-  t.coarse = std::make_shared<const std::string>(EncodeCloud(all, t.levels[0]));
-  t.bytes = n * (sizeof(PointXYZI) + 1) + 2 * t.coarse->size();
+  for (const auto& c : level0) all.append(c);
+  coarse = std::make_shared<const std::string>(EncodeCloud(all, levels[0]));
+}
+
+std::shared_ptr<TiledCloud> BuildTiles(const PointCloud& raw, const ViewConfig& cfg) {
+  auto out = std::make_shared<TiledCloud>();
+  TiledCloud& t = *out;
+  t.cfg = cfg;
+  const int cells = TileCells(cfg);
+  t.tile_edge_m = cells * cfg.base_voxel_m;
+  SplitIntoTiles(raw, PointTiles(raw, cfg, cells), t);
+  TileBounds(t);
+  t.CacheLevel0(CoarseLevel(t, cells));
+  t.bytes = raw.size() * (sizeof(PointXYZI) + 1) + 2 * t.coarse->size();
   return out;
 }
 
