@@ -43,8 +43,9 @@ struct GicpOptions {
   double max_correspondence_m = 1.0;  // pairs farther apart are not used
   int max_iterations = 30;            // Gauss-Newton steps at most
   std::size_t min_pairs = 6;          // fewer pairs than this: not solvable (not converged)
-  double converged_rotation_rad = 1e-5;   // a step below both bounds ends the iterations
-  double converged_translation_m = 1e-5;
+  // A step below both bounds ends the iterations: far below the verification's voxel-sized gates.
+  double converged_rotation_rad = 1e-5;   // [rad]
+  double converged_translation_m = 1e-5;  // [m]
 };
 struct GicpResult {
   Pose T = Pose::Identity();            // T_target_source

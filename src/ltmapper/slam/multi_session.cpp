@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -268,6 +269,30 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
   }
 }
 
+// Keyframe of the world poses W nearest to p within max_m (the last of equals), or -1.
+int NearestKeyframe(const std::vector<Pose>& W, const Eigen::Vector3d& p, double max_m) {
+  int best = -1;
+  double best_d = max_m;
+  for (std::size_t i = 0; i < W.size(); ++i) {
+    const double d = (W[i].translation() - p).norm();
+    if (d <= best_d) best_d = d, best = int(i);
+  }
+  return best;
+}
+
+// A loop candidate from a world-frame estimate of keyframe j of session b next to keyframe i of
+// aligned session a: T_a_b = (A_a x_ai)^-1 * T_world_bj, its yaw as the initial guess's.
+LoopRecord WorldLoop(const SlamResult& res, int a, int i, int b, int j, const Pose& T_world_bj,
+                     const std::string& source) {
+  LoopRecord l;
+  l.a = {a, i};
+  l.b = {b, j};
+  l.source = source;
+  l.T_a_b = res.sessions[std::size_t(a)].T_world_sensor[std::size_t(i)].inverse() * T_world_bj;
+  l.yaw_deg = Eigen::AngleAxisd(l.T_a_b.linear()).angle() * 180.0 / M_PI;
+  return l;
+}
+
 // An aligned session's keyframe clouds in the world frame, merged.
 PointCloud WorldMap(const SlamResult& res, int a, CloudStore& store) {
   PointCloud map;
@@ -283,6 +308,7 @@ std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, Cl
   const Stopwatch sw;
   const GlobalMap map(WorldMap(res, a, store), cfg);
   const auto& Wa = res.sessions[std::size_t(a)].T_world_sensor;
+  if (Wa.empty()) return {};
   const int n = int(store.Keyframes(b));
   const int tries = std::min(n, cfg.global_queries);
   std::vector<LoopRecord> cand;
@@ -290,18 +316,8 @@ std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, Cl
     const int j = int((2 * t + 1) * std::int64_t(n) / (2 * tries));  // centres of equal parts
     const std::optional<Pose> T_world_j = map.Place(store.Submap(b, j));
     if (!T_world_j) continue;
-    int best = 0;
-    for (std::size_t i = 1; i < Wa.size(); ++i)
-      if ((Wa[i].translation() - T_world_j->translation()).norm() <
-          (Wa[std::size_t(best)].translation() - T_world_j->translation()).norm())
-        best = int(i);
-    LoopRecord l;
-    l.a = {a, best};
-    l.b = {b, j};
-    l.source = "global";
-    l.T_a_b = Wa[std::size_t(best)].inverse() * *T_world_j;
-    l.yaw_deg = Eigen::AngleAxisd(l.T_a_b.linear()).angle() * 180.0 / M_PI;
-    cand.push_back(l);
+    const int best = NearestKeyframe(Wa, T_world_j->translation(), std::numeric_limits<double>::infinity());
+    cand.push_back(WorldLoop(res, a, best, b, j, *T_world_j, "global"));
   }
   spdlog::info("slam: global registration of {} in {}'s map ({} points): {} of {} query submaps placed in {:.2f} s",
                res.sessions[std::size_t(b)].name, res.sessions[std::size_t(a)].name, map.size(), cand.size(), tries,
@@ -394,20 +410,10 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
   for (std::size_t j = 0; j < Wb.size() && added < cfg.refine_max_loops_per_pair; ++j) {
     if (has_loop[j]) continue;
     if (eligible++ % cfg.refine_stride != 0) continue;
-    int best = -1;
-    double best_d = cfg.refine_radius_m;
-    for (std::size_t i = 0; i < Wa.size(); ++i) {
-      const double d = (Wa[i].translation() - Wb[j].translation()).norm();
-      if (d <= best_d) best_d = d, best = int(i);
-    }
+    const int best = NearestKeyframe(Wa, Wb[j].translation(), cfg.refine_radius_m);
     if (best < 0) continue;
-    LoopRecord l;
-    l.a = {int(a), best};
-    l.b = {int(b), int(j)};
+    const LoopRecord l = WorldLoop(res, int(a), best, int(b), int(j), Wb[j], "radius");
     if (!tried.insert({l.a, l.b}).second) continue;
-    l.source = "radius";
-    l.T_a_b = Wa[best].inverse() * Wb[j];
-    l.yaw_deg = Eigen::AngleAxisd(l.T_a_b.linear()).angle() * 180.0 / M_PI;
     cand->push_back(l);
     ++added;
   }

@@ -35,10 +35,6 @@ constexpr double kGaussianTail = 0.0027;  // P(|x| > 3 sigma), two-sided
 // The coarse stage's early rejection asks for this fraction of reg_min_overlap: at the coarse
 // voxel, before the fine stage, a true match overlaps at least half as well as at the end.
 constexpr double kCoarseOverlapFraction = 0.5;
-// GICP stops when a Gauss-Newton step rotates less than this and moves less than this: far
-// below the verification's voxel-sized gates.
-constexpr double kConvergedRotationRad = 1e-5;
-constexpr double kConvergedTranslationM = 1e-5;
 }  // namespace
 
 double InlierRadius(double voxel_m, double range_noise_m) {
@@ -54,9 +50,11 @@ struct Inliers {
   std::size_t planar = 0;
 };
 
-// Overlap, RMS and plane statistics of `source` under T against the target.
+// Overlap and RMS of `source` under T against the target, and with kPlanes the plane statistics
+// (the coarse stage needs the overlap only: no plane is computed for it).
+enum class Measure { kOverlap, kPlanes };
 Inliers CountInliers(const GicpCloud& target, const GicpCloud& source, const Pose& T, double radius,
-                     double range_noise_m) {
+                     double range_noise_m, Measure measure) {
   const double noise_var = 2.0 * range_noise_m * range_noise_m;  // both clouds
   const double tail_z = kTailSigmas * kTailSigmas;
   double sum = 0.0, z_sum = 0.0;
@@ -70,6 +68,7 @@ Inliers CountInliers(const GicpCloud& target, const GicpCloud& source, const Pos
     if (!target.tree->Nearest(q.cast<float>(), &j, &d2) || d2 > radius * radius) continue;
     sum += d2;
     ++inside;
+    if (measure == Measure::kOverlap) continue;
     const GicpCloud::Plane& pt = target.PlaneAt(j);
     if (pt.normal.isZero()) continue;  // too few neighbours for a surface
     const double e = pt.normal.dot(q - target.cloud().points[j].xyz().cast<double>());
@@ -98,8 +97,6 @@ bool RunGicp(const GicpCloud& t, const GicpCloud& s, double max_corr, const Slam
   GicpOptions opt;
   opt.max_correspondence_m = max_corr;
   opt.max_iterations = cfg.reg_max_iterations;
-  opt.converged_rotation_rad = kConvergedRotationRad;
-  opt.converged_translation_m = kConvergedTranslationM;
   const GicpResult g = AlignGicp(t, s, guess, opt);
   guess = g.T;
   return g.converged;
@@ -116,7 +113,7 @@ std::string CoarseStage(const PointCloud& target, const PointCloud& source, cons
   const GicpCloud tcp(tc, cfg.reg_covariance_neighbours), scp(sc, cfg.reg_covariance_neighbours);
   RunGicp(tcp, scp, cfg.reg_coarse_correspondence_m, cfg, guess);
   const double radius = InlierRadius(cfg.reg_coarse_voxel_m, cfg.reg_range_noise_m);
-  *coarse_overlap = CountInliers(tcp, scp, guess, radius, cfg.reg_range_noise_m).ratio;
+  *coarse_overlap = CountInliers(tcp, scp, guess, radius, cfg.reg_range_noise_m, Measure::kOverlap).ratio;
   const double need = kCoarseOverlapFraction * cfg.reg_min_overlap;
   if (*coarse_overlap >= need) return {};
   std::ostringstream why;
@@ -173,7 +170,8 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
 
   // The gates' measures with the final pose.
   r.inlier_radius_m = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
-  const Inliers in = CountInliers(tgt, src, r.T_target_source, r.inlier_radius_m, cfg.reg_range_noise_m);
+  const Inliers in = CountInliers(tgt, src, r.T_target_source, r.inlier_radius_m, cfg.reg_range_noise_m,
+                                  Measure::kPlanes);
   r.overlap = in.ratio;
   r.inlier_rms_m = in.rms;
   r.plane_z = in.plane_z;
