@@ -19,25 +19,10 @@ import os
 import re
 import subprocess
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def run(cmd, log=None):
-    """Runs `cmd`; returns (user+sys CPU s, peak RSS MB, wall s). Raises with the log's tail on failure."""
-    tfile = log + ".time" if log else "/dev/null"
-    t0 = time.time()
-    with open(log or os.devnull, "w") as out:
-        rc = subprocess.call(["/usr/bin/time", "-f", "%U %S %M", "-o", tfile] + cmd, stdout=out, stderr=subprocess.STDOUT)
-    wall = time.time() - t0
-    if rc != 0:
-        tail = open(log).read()[-2000:] if log else ""
-        raise RuntimeError("failed (%d): %s\n%s" % (rc, " ".join(cmd), tail))
-    if not log:
-        return 0.0, 0.0, wall
-    user, sys_, rss = open(tfile).read().split()[-3:]
-    return float(user) + float(sys_), int(rss) / 1024.0, wall
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+from benchrun import timed  # noqa: E402
 
 
 def load(path):
@@ -62,7 +47,7 @@ def simulate(ltm, yaml, sim, keyframes, seed):
     cmd = [ltm, "sim", "--config", cfg, "--out", sim, "--quiet"]
     if seed is not None:
         cmd += ["--seed", str(seed)]
-    run(cmd, sim + ".log")
+    timed(cmd, sim + ".log")
 
 
 def hd_wall_per_keyframe(changes):
@@ -83,14 +68,14 @@ def evaluate(ltm, sim, out, names):
         if os.path.exists(os.path.join(aligned, n, "poses_world.txt")):
             row["aligned"] += 1
     j = os.path.join(ev, "traj.json")
-    run([ltm, "eval", "traj", "--sim", sim, "--aligned", aligned, "--json", j, "--quiet"], j + ".log")
+    timed([ltm, "eval", "traj", "--sim", sim, "--aligned", aligned, "--json", j, "--quiet"], j + ".log")
     c = load(j)["traj"]["consistency"]
     row["rmse_m"], row["rmse_deg"] = c["trans_m"]["rmse"], c["rot_deg"]["rmse"]
     for n in names:
         j = os.path.join(ev, "hd_%s.json" % n)
         if not os.path.isdir(os.path.join(changes, n)):
             continue
-        run([ltm, "eval", "hd", "--sim", sim, "--changes", changes, "--session", n, "--aligned", aligned,
+        timed([ltm, "eval", "hd", "--sim", sim, "--changes", changes, "--session", n, "--aligned", aligned,
              "--json", j, "--quiet"], j + ".log")
         h = load(j)["hd"]
         row["sa"].append(h["sa"])
@@ -98,7 +83,7 @@ def evaluate(ltm, sim, out, names):
     for pdir in sorted(glob.glob(os.path.join(changes, "pair_*"))):
         pair = os.path.basename(pdir)[len("pair_"):]
         j = os.path.join(ev, "ld_%s.json" % pair)
-        run([ltm, "eval", "ld", "--sim", sim, "--changes", changes, "--pair", pair, "--aligned", aligned,
+        timed([ltm, "eval", "ld", "--sim", sim, "--changes", changes, "--pair", pair, "--aligned", aligned,
              "--truth-from-scans", "--json", j, "--quiet"], j + ".log")
         l = load(j)["ld"]
         row["ld"].append((pair, l["pd"]["precision"], l["pd"]["recall"], l["nd"]["precision"], l["nd"]["recall"]))
@@ -106,7 +91,7 @@ def evaluate(ltm, sim, out, names):
     row["objects"] = None
     if os.path.exists(os.path.join(objects, "objects.csv")):
         j = os.path.join(ev, "objects.json")
-        run([ltm, "eval", "objects", "--sim", sim, "--objects", objects, "--aligned", aligned, "--json", j, "--quiet"],
+        timed([ltm, "eval", "objects", "--sim", sim, "--objects", objects, "--aligned", aligned, "--json", j, "--quiet"],
             j + ".log")
         o = load(j)["objects"]
         row["objects"] = (o["found"], o["truth_objects"], o["precision"])
@@ -124,7 +109,7 @@ def scenario(ltm, yaml, out_root, keyframes, seed, keep):
     names = [os.path.basename(s) for s in sessions]
     runp = os.path.join(out, "run")
     subprocess.call(["rm", "-rf", runp])
-    cpu, rss, wall = run([ltm, "run", "--sessions"] + sessions + ["--out", runp], os.path.join(out, "run.log"))
+    cpu, rss, wall = timed([ltm, "run", "--sessions"] + sessions + ["--out", runp], os.path.join(out, "run.log"))
     row = evaluate(ltm, sim, out, names)
     row.update(name=name, sessions=len(names), cpu=cpu, rss=rss, wall=wall)
     if not keep:  # the run's clouds are large; the figures are in eval/

@@ -18,6 +18,8 @@ import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+from benchrun import timed  # noqa: E402
 CONFIGS = {  # name: (sessions, keyframes, strong drift)
     "2x120": (2, 120, False),
     "3x300": (3, 300, False),
@@ -37,16 +39,6 @@ def sim_yaml(sessions, keyframes, drift, preset, seed):
         if n != 1:
             raise RuntimeError("params_sim.yaml has no '%s:' line" % key.strip())
     return text
-
-
-def timed(cmd, log):
-    with open(log, "w") as out:
-        rc = subprocess.call(["/usr/bin/time", "-f", "%U %S", "-o", log + ".time"] + cmd, stdout=out,
-                             stderr=subprocess.STDOUT)
-    if rc != 0:
-        raise RuntimeError("failed (%d): %s\n%s" % (rc, " ".join(cmd), open(log).read()[-1500:]))
-    u, s = open(log + ".time").read().split()[-2:]
-    return float(u) + float(s)
 
 
 def positions(path):
@@ -83,7 +75,7 @@ def one_run(a, cfg_name, preset, seed):
     names = sorted(os.listdir(os.path.join(sim, "sessions")))
     aligned = os.path.join(out, "aligned")
     subprocess.call(["rm", "-rf", aligned])
-    cpu = timed([a.ltmapper, "slam", "--sessions"] + [os.path.join(sim, "sessions", n) for n in names] +
+    cpu, _, _ = timed([a.ltmapper, "slam", "--sessions"] + [os.path.join(sim, "sessions", n) for n in names] +
                 ["--out", aligned, "--quiet"], os.path.join(out, "slam.log"))
     j, jd = os.path.join(out, "traj.json"), os.path.join(out, "traj_drifted.json")
     timed([a.ltmapper, "eval", "traj", "--sim", sim, "--aligned", aligned, "--json", j, "--quiet"], j + ".log")
