@@ -7,7 +7,6 @@
 //   2. Iterate: pair each transformed source point with its nearest target point within the
 //      correspondence distance, weight the residual by (C_t + R C_s R^T)^-1, take one GN step
 //      (left perturbation exp(xi) * T), stop when the step is below the convergence bounds.
-//   3. The Gauss-Newton Hessian at the optimum is the information of the estimate.
 // Single-threaded on purpose: loop verification runs many registrations in parallel, and a
 // fixed summation order makes the result identical for any thread count.
 #include "ltmapper/geometry/geometry.hpp"
@@ -126,7 +125,6 @@ GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pos
     const Vector6d xi = ne.H.ldlt().solve(-ne.g);
     if (!xi.allFinite()) return res;
     res.T = ExpTwist(xi) * res.T;
-    res.hessian = ne.H;
     if (xi.head<3>().norm() < opt.converged_rotation_rad && xi.tail<3>().norm() < opt.converged_translation_m) {
       res.converged = true;
       ++res.iterations;

@@ -42,7 +42,7 @@ class GicpCloud {
 struct GicpOptions {
   double max_correspondence_m = 1.0;  // pairs farther apart are not used
   int max_iterations = 30;            // Gauss-Newton steps at most
-  std::size_t min_pairs = 6;          // fewer pairs than this: not solvable (not converged)
+  std::size_t min_pairs = 6;          // fewer pairs than the pose's 6 unknowns: not solvable (not converged)
   // A step below both bounds ends the iterations: far below the verification's voxel-sized gates.
   double converged_rotation_rad = 1e-5;   // [rad]
   double converged_translation_m = 1e-5;  // [m]
@@ -51,7 +51,6 @@ struct GicpResult {
   Pose T = Pose::Identity();            // T_target_source
   bool converged = false;
   int iterations = 0;
-  Matrix6d hessian = Matrix6d::Zero();  // sum J^T W J at the last step (order rx ry rz x y z)
 };
 // GICP of `source` onto `target` from `guess` (T_target_source).
 GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pose& guess, const GicpOptions& opt);
