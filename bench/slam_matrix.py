@@ -91,7 +91,11 @@ def one_run(a, cfg_name, preset, seed):
     worst_m = max([cons[n]["trans_m"]["rmse"] or 0.0 for n in done if n in cons] or [float("nan")])
     worst_deg = max([cons[n]["rot_deg"]["rmse"] or 0.0 for n in done if n in cons] or [float("nan")])
     if not a.keep:
-        subprocess.call(["rm", "-rf", os.path.join(sim, "sessions"), os.path.join(sim, "truth", "session_00", "labels")])
+        # Only the true poses are read again: drop the scans and the point-wise truth (~0.4 GB a session).
+        truth = os.path.join(sim, "truth")
+        heavy = [os.path.join(truth, n, "labels") for n in names] + \
+            [os.path.join(truth, d) for d in os.listdir(truth) if d.startswith("pair_")]
+        subprocess.call(["rm", "-rf", os.path.join(sim, "sessions")] + heavy)
     return dict(cfg=cfg_name, sensor=preset, seed=seed, need=len(need), missed=len(need - done), aligned=len(done),
                 queries=len(names) - 1, wrong=len(wrong), false_loops=false_loops, worst_m=worst_m,
                 worst_deg=worst_deg, ate=t["ate"]["trans_m"]["rmse"], ate_in=td["ate"]["trans_m"]["rmse"], cpu=cpu)

@@ -3,11 +3,15 @@
 // KITTI 08 revisit, and a place of another sequence).
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
+#include "ltmapper/slam/internal.hpp"
 #include "ltmapper/slam/slam.hpp"
 #include "test_slam_synth.hpp"
 #include "test_util.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include <cmath>
+#include <random>
 
 using namespace ltm;
 using namespace ltm::slam;
@@ -52,6 +56,50 @@ TEST(SlamRegistration, RejectsDifferentPlaces) {
   PointCloud tiny;
   tiny.push_back(0, 0, 0);
   EXPECT_FALSE(RegisterGicp(a, tiny, Pose::Identity(), cfg).accepted);
+}
+
+// A straight corridor (ground and two walls along x, every 0.2 m, 1 cm noise) seen twice.
+namespace {
+PointCloud Corridor(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> noise(0.f, 0.01f);
+  PointCloud c;
+  for (float x = -30.f; x <= 30.f; x += 0.2f) {
+    for (float y = -5.f; y <= 5.f; y += 0.2f) c.push_back(x, y, noise(rng));
+    for (float z = 0.2f; z <= 6.f; z += 0.2f) {
+      c.push_back(x, -5.f + noise(rng), z);
+      c.push_back(x, 5.f + noise(rng), z);
+    }
+  }
+  return c;
+}
+}  // namespace
+
+TEST(SlamRegistration, LoopInformationFollowsWhatTheSurfacesConstrain) {
+  SlamConfig cfg;
+  const PointCloud a = geometry::VoxelDownsample(Corridor(1), cfg.reg_voxel_m);
+  const PointCloud b = geometry::VoxelDownsample(Corridor(2), cfg.reg_voxel_m);
+  const RegistrationResult r = RegisterGicp(a, b, test::MakePose(0.0, 0.2, 0.1, 0.01), cfg);
+  ASSERT_TRUE(r.accepted) << r.reason;
+  // Walls fix y, the ground z, both the rotations; nothing fixes x (the corridor's axis).
+  EXPECT_LT(r.fisher(0, 0), 1e-3 * r.fisher(1, 1));
+  EXPECT_GT(r.fisher(2, 2), 1e3 * r.fisher(0, 0));
+  // The loop's information: the fitness term where the surfaces constrain, none along the axis.
+  const Matrix6d fit_only = LoopInformation(r.fitness, Matrix6d::Zero(), cfg);
+  const Matrix6d info = LoopInformation(r.fitness, r.fisher, cfg);
+  EXPECT_LT(info(0, 0), 0.2 * fit_only(0, 0));
+  EXPECT_GT(info(1, 1), 0.9 * fit_only(1, 1));
+  EXPECT_GT(info(2, 2), 0.9 * fit_only(2, 2));
+  EXPECT_GT(info(5, 5), 0.9 * fit_only(5, 5));
+  EXPECT_GT(Eigen::SelfAdjointEigenSolver<Matrix6d>(info).eigenvalues().minCoeff(), 0.0);
+  // Where every direction is constrained (the synthetic town), the fitness term rules.
+  const PointCloud w = test::SynthWorld(21);
+  const PointCloud ta = geometry::VoxelDownsample(*test::SynthScan(w, test::MakePose(0, 0, 1.8, 0.1), 40, 1), cfg.reg_voxel_m);
+  const PointCloud tb = geometry::VoxelDownsample(*test::SynthScan(w, test::MakePose(1, 0.4, 1.8, 0.2), 40, 2), cfg.reg_voxel_m);
+  const RegistrationResult t = RegisterGicp(ta, tb, test::MakePose(1, 0.4, 0, 0.1), cfg);
+  ASSERT_TRUE(t.accepted) << t.reason;
+  const Matrix6d town = LoopInformation(t.fitness, t.fisher, cfg), town_fit = LoopInformation(t.fitness, Matrix6d::Zero(), cfg);
+  for (int k = 0; k < 6; ++k) EXPECT_GT(town(k, k), 0.8 * town_fit(k, k)) << k;
 }
 
 TEST(SlamRegistrationReal, GicpPairMatchesReference) {

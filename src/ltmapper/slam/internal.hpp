@@ -32,6 +32,7 @@ class GicpCloud {
   GicpCloud(GicpCloud&&) noexcept;
   const PointCloud& cloud() const;
   const Plane& PlaneAt(std::size_t i) const;
+  int neighbours() const { return k_; }  // k of the local planes
   std::unique_ptr<geometry::KdTree> tree;
 
  private:
@@ -57,8 +58,9 @@ GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pos
 
 // Throws ltm::Error for sessions without keyframes, edges to missing keyframes, non-finite poses.
 void ValidateSessionGraphs(const std::vector<Session>& sessions);
-// Information of an inter-session loop from its registration fitness (paper: adaptive covariance).
-Matrix6d LoopInformation(double fitness, const SlamConfig& cfg);
+// Information of an inter-session loop: the paper's adaptive covariance from the registration
+// fitness plus the registration's own (the inverse of its Fisher information; zero: none).
+Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg);
 
 // ------------------------------------------------------------------- global registration (global.cpp)
 // An aligned session's map in the world frame with FPFH features, for placing submaps of a session

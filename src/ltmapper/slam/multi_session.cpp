@@ -213,7 +213,7 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     l.inlier_rms_m = r.inlier_rms_m;
     l.verified = r.accepted;
     l.status = r.accepted ? "verified" : "rejected: " + r.reason;
-    l.information = LoopInformation(r.fitness, cfg);
+    l.information = LoopInformation(r.fitness, r.accepted ? r.fisher : Matrix6d::Zero(), cfg);
     progress.Tick();
   });
   progress.Done();

@@ -255,11 +255,18 @@ void ValidateSessionGraphs(const std::vector<Session>& sessions) {
   }
 }
 
-Matrix6d LoopInformation(double fitness, const SlamConfig& cfg) {
+Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
   // Paper: the ICP fitness score gives an adaptive covariance. Sigma is the configured value at
   // (or below) the fitness floor and grows with sqrt(fitness / floor) above it.
   const double scale = std::sqrt(std::max(fitness, cfg.reg_fitness_floor) / cfg.reg_fitness_floor);
-  return DiagInformation(cfg.loop_sigma_t_m * scale, cfg.loop_sigma_r_deg * kDeg * scale);
+  const Matrix6d D = DiagInformation(cfg.loop_sigma_t_m * scale, cfg.loop_sigma_r_deg * kDeg * scale);
+  if (fisher.isZero()) return D;
+  // The registration's own uncertainty adds to it: covariance D^-1 + F^-1, whose inverse is
+  // D - D (D + F)^-1 D (Woodbury; defined for a singular F too). Where the surfaces constrain the
+  // pose, F^-1 is far below D^-1 and the fitness term rules; along an unconstrained direction
+  // (a straight street's axis) F is small and so is the loop's information.
+  const Matrix6d info = D - D * (D + fisher).ldlt().solve(D);
+  return 0.5 * (info + info.transpose());
 }
 
 namespace {

@@ -48,7 +48,19 @@ struct Inliers {
   double plane_z = 1e9;  // mean of z = (residual along the target normal)^2 / explained variance
   double tail = 1.0;     // share of the planar inliers with z > kTailSigmas^2
   std::size_t planar = 0;
+  Matrix6d fisher = Matrix6d::Zero();  // sum J^T J / var of the planar inliers (PoseFisher)
 };
+
+// One planar inlier's row of d(residual along the target normal) / d(pose), for a perturbation
+// T exp(delta) on the source side, delta = (translation, rotation) as the pose graph's residuals:
+// T exp(delta) s = T s + R (rho - [s]x omega), so the row is -[m^T, (s x m)^T] with m = R^T n
+// (the normal in the source frame); the sign cancels in J^T J.
+Vector6d PlaneRow(const Eigen::Matrix3d& R, const Eigen::Vector3d& n, const Eigen::Vector3d& s) {
+  const Eigen::Vector3d m = R.transpose() * n;
+  Vector6d row;
+  row << m, s.cross(m);
+  return row;
+}
 
 // Overlap and RMS of `source` under T against the target, and with kPlanes the plane statistics
 // (the coarse stage needs the overlap only: no plane is computed for it).
@@ -72,7 +84,10 @@ Inliers CountInliers(const GicpCloud& target, const GicpCloud& source, const Pos
     const GicpCloud::Plane& pt = target.PlaneAt(j);
     if (pt.normal.isZero()) continue;  // too few neighbours for a surface
     const double e = pt.normal.dot(q - target.cloud().points[j].xyz().cast<double>());
-    const double z = e * e / (pt.spread + source.PlaneAt(i).spread + noise_var);
+    const double var = pt.spread + source.PlaneAt(i).spread + noise_var;
+    const double z = e * e / var;
+    const Vector6d row = PlaneRow(T.linear(), pt.normal, src.points[i].xyz().cast<double>());
+    in.fisher += row * row.transpose() / var;
     z_sum += z;
     tail += z > tail_z;
     ++in.planar;
@@ -80,6 +95,9 @@ Inliers CountInliers(const GicpCloud& target, const GicpCloud& source, const Pos
   if (src.empty()) return in;
   in.ratio = double(inside) / double(src.size());
   if (inside > 0) in.rms = std::sqrt(sum / double(inside));
+  // Neighbouring residuals are not independent: each normal comes from the point's k nearest
+  // neighbours, so about one in k residuals carries new information.
+  in.fisher /= double(source.neighbours());
   if (in.planar > 0) {
     in.plane_z = z_sum / double(in.planar);
     in.tail = double(tail) / double(in.planar);
@@ -177,6 +195,7 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
   r.plane_z = in.plane_z;
   r.plane_tail = in.tail;
   r.plane_tail_bound = TailBound(in.planar);
+  r.fisher = in.fisher;
   r.fitness = in.ratio > 0.0 ? in.rms * in.rms : 1e9;
   r.reason = Verdict(r, T_target_source_init, cfg);
   r.accepted = r.reason.empty();

@@ -37,6 +37,11 @@ struct RegistrationResult {
   double plane_z = 1e9;         // inliers' mean squared residual along the target normals / explained variance
   double plane_tail = 1.0;      // share of those residuals beyond 3 sigma ...
   double plane_tail_bound = 0;  // ... and what a Gaussian allows for that many inliers
+  // Fisher information of the pose from the inliers' residuals along the target normals (each over
+  // its explained variance): sum J^T J / var over k (the plane neighbours: neighbouring residuals
+  // share their normals), in the pose graph's order (x y z rx ry rz, source frame). Small along
+  // directions the surfaces do not constrain (a straight street's axis).
+  Eigen::Matrix<double, 6, 6> fisher = Eigen::Matrix<double, 6, 6>::Zero();
   bool converged = false;
   bool accepted = false;  // converged, inlier ratio / plane residuals / correction within the gates
   std::string reason;     // why not accepted
