@@ -499,6 +499,61 @@ TEST(MapObjects, MovedContainerAndStableIds) {
   }
 }
 
+// Each step's objects are computed once and kept in the store: decoding them gives what computing
+// them gives (every field, every point), a new step computes only itself, and another object
+// config never reads what an earlier one stored.
+void ExpectSameObjects(const std::vector<MapObject>& a, const std::vector<MapObject>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a[k].id, b[k].id);
+    EXPECT_EQ(a[k].session, b[k].session);
+    EXPECT_EQ(a[k].change, b[k].change);
+    EXPECT_EQ(a[k].partner, b[k].partner);
+    EXPECT_EQ(a[k].rejected, b[k].rejected);
+    EXPECT_EQ(a[k].points, b[k].points);
+    EXPECT_EQ(a[k].cls, b[k].cls);
+    EXPECT_EQ(a[k].confidence, b[k].confidence);
+    EXPECT_EQ(a[k].range_m, b[k].range_m);
+    EXPECT_EQ(a[k].size, b[k].size);
+    EXPECT_EQ(a[k].box_center, b[k].box_center);
+    EXPECT_EQ(Keys(a[k].cloud), Keys(b[k].cloud));
+    EXPECT_EQ(a[k].cloud.cls, b[k].cloud.cls);
+    EXPECT_EQ(a[k].cloud.session, b[k].cloud.session);
+    EXPECT_EQ(a[k].cloud.object, b[k].cloud.object);
+  }
+}
+
+TEST(MapObjects, StoredPerStepEqualComputedAndFollowTheConfig) {
+  test::TempDir tmp;
+  const std::string path = tmp / "o.ltmap";
+  const PointCloud ground = Grid(-20, -20, 0, 160, 160, 0.25f), container = Car(8, 8, 2.4f, 6.0f, 2.5f);
+  KeyframeDelta d1, d2;
+  d1.nd_strong = container;                        // the container moved 20 m ...
+  d1.pd_weak = Car(-12, -4, 2.4f, 6.0f, 2.5f);
+  d1.pd_weak.append(Car(-4, -16, 2.f, 4.f, 1.5f)); // ... and a car appeared
+  d2.pd_weak = Car(10, -10, 2.f, 4.f, 1.5f);       // next drive: one more car
+  Store s = Store::Create(path, Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(ground, container)}});
+  s.IntegrateSession({"s1"}, "s0", {d1}, {});
+  s.IntegrateSession({"s2"}, "s0", {d2}, {});
+  std::vector<MapObject> rej_computed, rej_stored;
+  const auto computed = s.Objects(&rej_computed);
+  ASSERT_EQ(computed.size(), 4u);
+  EXPECT_EQ(s.CacheObjects(), 2u);
+  EXPECT_EQ(s.CacheObjects(), 0u);  // nothing left to compute
+  ExpectSameObjects(s.Objects(&rej_stored), computed);
+  ExpectSameObjects(rej_stored, rej_computed);
+  KeyframeDelta d3;
+  d3.pd_weak = Car(-10, 12, 2.f, 4.f, 1.5f);
+  s.IntegrateSession({"s3"}, "s0", {d3}, {});
+  EXPECT_EQ(s.CacheObjects(), 1u);  // the new step only
+  EXPECT_EQ(s.Objects().size(), 5u);
+  EXPECT_TRUE(s.Fsck().ok);
+  MapConfig strict = Cfg();
+  strict.object_min_points = 100000;  // no cluster is this large: nothing stored may be read
+  EXPECT_TRUE(Store::Open(path, strict, Store::Access::kReadOnly).Objects().empty());
+}
+
 TEST(MapStore, ExceptionMidIntegrationLeavesPreviousState) {
   test::TempDir tmp;
   Scene sc;
@@ -619,11 +674,11 @@ TEST(MapStore, SchemaVersion1StoreStillOpensAndIsMarkedCurrentByAWrite) {
   sqlite3_stmt* st = nullptr;
   ASSERT_EQ(sqlite3_prepare_v2(db, "SELECT value FROM schema_info WHERE key = 'schema_version'", -1, &st, nullptr), SQLITE_OK);
   ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
-  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "2");
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "3");
   sqlite3_finalize(st);
   sqlite3_close(db);
-  ExecSql(path, "UPDATE schema_info SET value = '3' WHERE key = 'schema_version'");
-  test::ExpectError([&] { Store::Open(path); }, {path, "schema version 3"});
+  ExecSql(path, "UPDATE schema_info SET value = '4' WHERE key = 'schema_version'");
+  test::ExpectError([&] { Store::Open(path); }, {path, "schema version 4"});
 }
 
 // A committed integration is in the store file itself, not only in its -wal: the file copied
@@ -699,15 +754,17 @@ TEST(MapStore, FsckDetectsCorruptedBlob) {
     Store s = Store::Create(path, Cfg());
     s.IntegrateBase({"s0"}, sc.base);
     s.IntegrateSession({"s1"}, "s0", Step1(), {});
+    EXPECT_EQ(s.CacheObjects(), 1u);
     EXPECT_TRUE(s.Fsck().ok);
   }
-  for (const char* table : {"base_clouds", "deltas"}) {
+  for (const std::string table : {"base_clouds", "deltas", "step_records"}) {
+    const std::string row = table == "step_records" ? "session" : "keyframe";
     test::TempDir t2;
     const std::string copy = t2 / "c.ltmap";
     std::filesystem::copy_file(path, copy);
     sqlite3* db = nullptr;
     ASSERT_EQ(sqlite3_open(copy.c_str(), &db), SQLITE_OK);
-    const std::string sql = std::string("SELECT keyframe, data FROM ") + table + " LIMIT 1";
+    const std::string sql = "SELECT " + row + ", data FROM " + table + " LIMIT 1";
     sqlite3_stmt* st = nullptr;
     ASSERT_EQ(sqlite3_prepare_v2(db, sql.c_str(), -1, &st, nullptr), SQLITE_OK);
     ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
@@ -715,19 +772,22 @@ TEST(MapStore, FsckDetectsCorruptedBlob) {
     std::string blob(static_cast<const char*>(sqlite3_column_blob(st, 1)), std::size_t(sqlite3_column_bytes(st, 1)));
     sqlite3_finalize(st);
     blob[blob.size() / 2] = char(blob[blob.size() / 2] ^ 0x10);
-    const std::string upd = std::string("UPDATE ") + table + " SET data = ? WHERE keyframe = ?";
+    const std::string upd = "UPDATE " + table + " SET data = ? WHERE " + row + " = ?";
     ASSERT_EQ(sqlite3_prepare_v2(db, upd.c_str(), -1, &st, nullptr), SQLITE_OK);
     sqlite3_bind_blob(st, 1, blob.data(), int(blob.size()), SQLITE_TRANSIENT);
     sqlite3_bind_int64(st, 2, kf);
     ASSERT_EQ(sqlite3_step(st), SQLITE_DONE);
     sqlite3_finalize(st);
     sqlite3_close(db);
-    const Store s = Store::Open(copy);
+    const Store s = Store::Open(copy, Cfg());
     const FsckReport r = s.Fsck();
     EXPECT_FALSE(r.ok) << table;
     ASSERT_FALSE(r.problems.empty());
     EXPECT_NE(r.problems[0].find("checksum"), std::string::npos) << r.problems[0];
-    EXPECT_THROW(s.MapAt(0), Error);
+    if (table == "step_records")
+      EXPECT_THROW(s.Objects(), Error);  // a damaged record is an error naming the store, never read as objects
+    else
+      EXPECT_THROW(s.MapAt(0), Error);
   }
 }
 

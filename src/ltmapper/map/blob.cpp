@@ -290,6 +290,39 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
   return q;
 }
 
+namespace {
+constexpr char kPackMagic[4] = {'L', 'T', 'M', 'C'};
+constexpr std::size_t kPackHeader = 4 + 8 + 8;  // magic, raw size, FNV-1a 64 of the payload
+void PutU64(std::string& out, std::uint64_t v) {
+  for (int b = 0; b < 8; ++b) out.push_back(char((v >> (8 * b)) & 0xFF));
+}
+std::uint64_t GetU64(const unsigned char* p) {
+  std::uint64_t v = 0;
+  for (int b = 0; b < 8; ++b) v |= std::uint64_t(p[b]) << (8 * b);
+  return v;
+}
+}  // namespace
+
+std::string PackBytes(const std::string& raw, int zstd_level) {
+  std::string payload(ZSTD_compressBound(raw.size()), '\0');
+  const std::size_t comp = ZSTD_compress(payload.data(), payload.size(), raw.data(), raw.size(), zstd_level);
+  if (ZSTD_isError(comp)) throw Error(std::string("pack: zstd compression failed: ") + ZSTD_getErrorName(comp));
+  payload.resize(comp);
+  std::string out(kPackMagic, sizeof(kPackMagic));
+  PutU64(out, raw.size());
+  PutU64(out, Fnv1a64(payload.data(), payload.size()));
+  return out + payload;
+}
+
+std::string UnpackBytes(const void* data, std::size_t size, const std::string& what) {
+  const auto fail = [&](const std::string& why) { throw Error(what + ": " + why); };
+  const auto* p = static_cast<const unsigned char*>(data);
+  if (size < kPackHeader || std::memcmp(p, kPackMagic, sizeof(kPackMagic)) != 0) fail("not a packed record");
+  const std::uint64_t raw_size = GetU64(p + 4);
+  if (GetU64(p + 12) != Fnv1a64(p + kPackHeader, size - kPackHeader)) fail("checksum mismatch");
+  return Decompress(p + kPackHeader, size - kPackHeader, std::size_t(raw_size), fail);
+}
+
 }  // namespace ltm::map::detail
 
 namespace ltm::map {

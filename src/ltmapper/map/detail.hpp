@@ -64,6 +64,17 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
 constexpr std::uint64_t kFnvOffsetBasis = 14695981039346656037ull;
 std::uint64_t Fnv1a64(const void* data, std::size_t size, std::uint64_t h = kFnvOffsetBasis);
 
+// Bytes compressed (zstd) behind a header with the raw size and an FNV-1a 64 checksum of the
+// payload: the store's derived records (the per-step object cache). Unpack verifies both before
+// it allocates, and throws ltm::Error naming `what`.
+std::string PackBytes(const std::string& raw, int zstd_level);
+std::string UnpackBytes(const void* data, std::size_t size, const std::string& what);
+
+// One step's objects and rejected clusters as bytes (object_codec.cpp), for the store's cache.
+std::string EncodeObjects(const std::vector<MapObject>& kept, const std::vector<MapObject>& rejected);
+void DecodeObjects(const std::string& raw, const std::string& what, std::vector<MapObject>* kept,
+                   std::vector<MapObject>* rejected);
+
 // ---- composition on the grid (exact: stored ND are copies of the points they remove)
 // Forward: drop every state point whose key is a removed key of `delta`, append kAdded points.
 QCloud ApplyForward(const QCloud& state, const QCloud& delta);

@@ -11,6 +11,7 @@
 //  4. Geometry (Reject()): ghosts of misalignment, height above ground, width across the sensor's sampling at the
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
+#include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
 
 #include <pcl/point_cloud.h>
@@ -476,20 +477,57 @@ MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
   return cfg;
 }
 
-std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
-  if (!(config().object_sensor_step_deg > 0.0))
+namespace {
+// What a step's stored objects were made with: the record's layout and every map config value.
+std::string ObjectsKey(const MapConfig& cfg) {
+  MapConfig c = cfg;
+  return "objects 1\n" + FieldsToString(FieldsOf(c));
+}
+
+void RequireSensorStep(const MapConfig& cfg) {
+  if (!(cfg.object_sensor_step_deg > 0.0))
     throw Error("map config: object_sensor_step_deg is 0 (take it from the sensor): `ltmapper run` and `ltmapper map "
                 "objects --session DIR` derive it from the scans; elsewhere set it (the sensor's coarser angular step)");
-  std::vector<MapObject> out, dropped;
-  const auto sessions = Sessions();
+}
+
+// The map keyframes' sensor positions as of the step (a later step's keyframes were not there
+// yet): a step's objects depend on the store up to that step only, so they can be kept.
+StepContext ContextOf(const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
+  StepContext ctx;
+  for (const auto& k : keyframes) {
+    if (k.session > step.order) continue;
+    ctx.all_sensors.push_back(k.T_world_sensor.translation());
+    if (k.session <= step.reference) ctx.reference_sensors.push_back(k.T_world_sensor.translation());
+  }
+  return ctx;
+}
+
+struct StepResult {
+  std::vector<MapObject> kept, rejected;
+};
+StepResult ComputeStep(const Store& store, const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
+  StepResult r;
+  StepObjects(store, step, ContextOf(step, keyframes), r.kept, r.rejected);
+  for (auto& o : r.rejected) o.cloud.clear();  // rows only (rejected.csv)
+  return r;
+}
+}  // namespace
+
+std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
+  RequireSensorStep(config());
+  const std::string key = ObjectsKey(config());
   const auto keyframes = Keyframes();
-  for (std::size_t S = 1; S < sessions.size(); ++S) {
-    StepContext ctx;
-    for (const auto& k : keyframes) {
-      ctx.all_sensors.push_back(k.T_world_sensor.translation());
-      if (k.session <= sessions[S].reference) ctx.reference_sensors.push_back(k.T_world_sensor.translation());
-    }
-    StepObjects(*this, sessions[S], std::move(ctx), out, dropped);
+  std::vector<MapObject> out, dropped;
+  for (const auto& step : Sessions()) {
+    if (step.order == 0) continue;  // the central session changes nothing
+    const std::string record = StepRecord(step.order, key);
+    StepResult r;
+    if (record.empty())
+      r = ComputeStep(*this, step, keyframes);
+    else
+      detail::DecodeObjects(record, path() + ": objects of step " + std::to_string(step.order), &r.kept, &r.rejected);
+    for (auto* list : {&r.kept, &r.rejected})
+      for (auto& o : *list) (list == &r.kept ? out : dropped).push_back(std::move(o));
   }
   AssignIds(out);
   LinkMoved(out, config());
@@ -498,6 +536,20 @@ std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
     *rejected = std::move(dropped);
   }
   return out;
+}
+
+std::size_t Store::CacheObjects() {
+  RequireSensorStep(config());
+  const std::string key = ObjectsKey(config());
+  const auto keyframes = Keyframes();
+  std::size_t computed = 0;
+  for (const auto& step : Sessions()) {
+    if (step.order == 0 || !StepRecord(step.order, key).empty()) continue;
+    const StepResult r = ComputeStep(*this, step, keyframes);
+    PutStepRecord(step.order, key, detail::EncodeObjects(r.kept, r.rejected));
+    ++computed;
+  }
+  return computed;
 }
 
 }  // namespace ltm::map

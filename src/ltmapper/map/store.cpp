@@ -29,7 +29,9 @@ namespace {
 // Schema versions: 2 seeds blob checksums with FNV-1a's offset basis (blob version 2); 1 with a
 // truncated one. Version 1 stores still open (their blobs keep version 1 and verify with the old
 // basis); the first integration into one marks it version 2, since it adds version 2 blobs.
-constexpr int kSchemaVersion = 2;
+// Version 3 adds step_records (derived per-step records: the object cache); older stores read
+// without it (objects are computed) and get the table with their first write.
+constexpr int kSchemaVersion = 3;
 constexpr int kOldestSchemaVersion = 1;
 constexpr int kApplicationId = 0x4C544D50;  // "LTMP"
 
@@ -69,6 +71,14 @@ CREATE TABLE deltas(
   data     BLOB NOT NULL,
   PRIMARY KEY(keyframe, session));
 CREATE INDEX deltas_by_session ON deltas(session);
+)sql";
+// Derived from the rows above and rebuilt from them whenever missing or made with another key
+// (never part of Digest()).
+const char* kStepRecordsTable = R"sql(
+CREATE TABLE IF NOT EXISTS step_records(
+  session INTEGER PRIMARY KEY REFERENCES sessions(id),
+  key     TEXT NOT NULL,                         -- what the record was made with (config text)
+  data    BLOB NOT NULL);                        -- detail::PackBytes
 )sql";
 
 constexpr int kBusyTimeoutMs = 10000;  // how long a statement waits for another connection's lock
@@ -256,6 +266,7 @@ struct Store::Impl {
                   "-wal into the store file (" + (rc == SQLITE_OK ? "incomplete" : sqlite3_errmsg(db)) +
                   "); keep the -wal file next to the store and run the command again");
   }
+  bool HasStepRecords() const;  // false for stores of schema 1-2 never written since
   std::string Info(const std::string& key) const {
     Stmt st(db, "SELECT value FROM schema_info WHERE key = ?", path);
     st.Bind(1, key);
@@ -372,6 +383,7 @@ Store Store::Create(const std::string& path, const MapConfig& cfg) {
   try {
     impl->Exec("PRAGMA application_id = " + std::to_string(kApplicationId));
     impl->Exec(kSchema);
+    impl->Exec(kStepRecordsTable);
     Stmt ins(impl->db, "INSERT INTO schema_info(key, value) VALUES(?, ?)", path);
     char buf[64];
     const std::pair<std::string, std::string> rows[] = {
@@ -419,6 +431,7 @@ class Transaction {
     s_.Exec("BEGIN IMMEDIATE");
     const std::string current = "'" + std::to_string(kSchemaVersion) + "'";
     s_.Exec("UPDATE schema_info SET value = " + current + " WHERE key = 'schema_version' AND value <> " + current);
+    s_.Exec(kStepRecordsTable);
   }
   // COMMIT, then the checkpoint that puts the committed data into the store file itself.
   void Commit() {
@@ -1058,6 +1071,48 @@ void CheckBases(const Store::Impl& s, const std::map<int, KeyframeRecord>& kfs, 
 }
 }  // namespace
 
+bool Store::Impl::HasStepRecords() const {
+  Stmt st(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'step_records'", path);
+  return st.Step();
+}
+
+std::string Store::StepRecord(int session, const std::string& key) const {
+  const Impl& s = *impl_;
+  if (!s.HasStepRecords()) return {};
+  Stmt st(s.db, "SELECT key, data FROM step_records WHERE session = ?", s.path);
+  st.Bind(1, session);
+  if (!st.Step() || st.Text(0) != key) return {};
+  const std::string data = st.Blob(1);
+  return detail::UnpackBytes(data.data(), data.size(),
+                             s.path + ": step record of session " + std::to_string(session));
+}
+
+void Store::PutStepRecord(int session, const std::string& key, const std::string& raw) {
+  Impl& s = *impl_;
+  if (s.read_only) throw Error(s.path + ": opened read-only: cannot write a step record");
+  Transaction tx(s);
+  Stmt st(s.db, "INSERT OR REPLACE INTO step_records(session, key, data) VALUES(?, ?, ?)", s.path);
+  st.Bind(1, session).Bind(2, key).BindBlob(3, detail::PackBytes(raw, s.cfg.zstd_level)).Run();
+  tx.Commit();
+}
+
+namespace {
+void CheckStepRecords(const Store::Impl& s, int latest, FsckFindings& f) {
+  if (!s.HasStepRecords()) return;
+  Stmt st(s.db, "SELECT session, data FROM step_records", s.path);
+  while (st.Step()) {
+    const std::string where = "step record of session " + std::to_string(st.Int(0));
+    if (st.Int(0) < 1 || st.Int(0) > latest) f.Problem(where + ": no such session step");
+    const std::string data = st.Blob(1);
+    try {
+      detail::UnpackBytes(data.data(), data.size(), where);
+    } catch (const Error& e) {
+      f.Problem(e.what());
+    }
+  }
+}
+}  // namespace
+
 FsckReport Store::Fsck() const {
   const Impl& s = *impl_;
   FsckFindings f;
@@ -1075,6 +1130,7 @@ FsckReport Store::Fsck() const {
   f.r.keyframes = kfs.size();
   const std::map<int, int> last_change = CheckDeltas(s, kfs, latest, f);
   CheckBases(s, kfs, latest, last_change, f);
+  CheckStepRecords(s, latest, f);
   return f.r;
 }
 

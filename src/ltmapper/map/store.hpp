@@ -76,7 +76,18 @@ class Store {
   // and PD above the local ground, kept only in space both sessions observed and when they pass
   // the geometric rules; moved pairs linked. `rejected` (optional) receives the other clusters
   // with the reason.
+  // Each step's objects are kept in the store once computed (CacheObjects) and decoded from there
+  // while the object config is the same; a step without them is computed (two map restores).
+  // `rejected` rows carry no clouds.
   std::vector<MapObject> Objects(std::vector<MapObject>* rejected = nullptr) const;  // needs object_sensor_step_deg > 0
+  // Computes and stores the objects of every step that has none for this object config (one
+  // transaction each): after it, Objects() costs the decoding, not the map restores of every step.
+  // Returns how many steps were computed.
+  std::size_t CacheObjects();
+  // Derived per-step records (the object cache): the record of step `session` made with `key`,
+  // empty when there is none or it was made with another key.
+  std::string StepRecord(int session, const std::string& key) const;
+  void PutStepRecord(int session, const std::string& key, const std::string& raw);
 
   // Schema version, PRAGMA integrity_check, foreign keys, every blob's checksum and decoding,
   // references between rows, and that every stored base equals its deltas' composition counts.

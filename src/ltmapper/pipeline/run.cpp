@@ -82,7 +82,10 @@ void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& ce
   const Session central = io::LoadSession(central_dir);
   const removert::RemovertConfig resolved = removert::WithSensor(sc.removert, removert::KeyframesOf(central));
   const map::MapConfig map_cfg = map::WithSensorStep(sc.map, resolved.sensor_model);
-  const map::Store store = map::Store::Open(p.store, map_cfg, map::Store::Access::kReadOnly);
+  map::Store store = map::Store::Open(p.store, map_cfg);
+  // Each step's objects are computed once and kept in the store: an add computes its own step only.
+  const std::size_t computed = store.CacheObjects();
+  spdlog::info("LT-map: objects of {} step(s) computed, the others read from the store", computed);
   map::Region region;
   region.voxel_m = map_cfg.output_voxel_m;
   map::WriteLabelledCloud(p.live, store.Live(region));
