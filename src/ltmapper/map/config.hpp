@@ -33,7 +33,7 @@ struct MapConfig {
   double object_max_clearance_m = 1.0;  // lowest point above ground: higher = floating (0 = off)
   double object_sensor_step_deg = 0.0;   // [deg] the sensor's coarser angular sampling step; 0 = from the run's
                                          // sensor model (WithSensorStep: `ltmapper run`, `map objects --session`)
-  double object_min_samples = 3.0;       // sensor samples across the cluster's width and height
+  double object_min_samples = 3.0;       // rows of sensor samples across the cluster's width (objects.cpp MinWidth)
   double object_flat_sigma_m = 0.05;     // thickness (std along the smallest axis) of a flat patch
   double object_flat_tilt_deg = 20.0;    // flat patches with a normal this close to vertical are ground
   double object_twin_radius_m = 1.0;     // other side's change this close = the same surface, misaligned

@@ -284,8 +284,8 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // or trunk seen through by grazing rays); a removed or new object is surrounded by free space
 // and ground. The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
-// edge, one or two scan rows wide) spans fewer than object_min_samples samples across its middle
-// principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread). A cluster whose top is
+// edge, one or two scan rows wide) spans fewer than object_min_samples rows across its middle
+// principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread; MinWidth). A cluster whose top is
 // below object_min_height_m above the local ground is a ground bump (kerb, misregistered
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
@@ -295,14 +295,25 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // longest horizontal edge is below object_min_length_m are smaller than the objects the map
 // tracks: at a pedestrian's footprint they are most likely residues of moving actors that HD
 // removal missed in one session.
+// The width below which a cluster at `range_m` spans fewer than object_min_samples rows of the
+// sensor's samples (r * object_sensor_step_deg, at least the output voxel). n rows a sample s apart
+// have the width (kUniformExtentPerStd * std) s * sqrt(n^2 - 1): 1.73 s for two rows, 2.83 s for
+// three. The bound lies halfway between n - 1 and n rows, so noise does not decide an n-row
+// cluster (a three-row car at 16 m on a VLP-16 is kept, a two-row rim is not).
+double MinWidth(double range_m, const MapConfig& cfg) {
+  const double sample = std::max(cfg.output_voxel_m, range_m * cfg.object_sensor_step_deg * kDegToRad);
+  const auto rows_width = [](double n) { return std::sqrt(std::max(0.0, n * n - 1.0)); };
+  const double n = cfg.object_min_samples;
+  return sample * 0.5 * (rows_width(std::max(n - 1.0, 1.0)) + rows_width(n));
+}
+
 std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
   if (!Covered(o, ctx, cfg)) return "coverage";
   if (o.twin_fraction >= cfg.object_twin_max_fraction) return "ghost";
   if (o.attached_fraction >= cfg.object_max_attached_fraction) return "fragment";
   if (o.height_above_ground < cfg.object_min_height_m) return "low";
   if (cfg.object_max_clearance_m > 0.0 && o.clearance_m > cfg.object_max_clearance_m) return "floating";
-  const double sample = std::max(cfg.output_voxel_m, o.range_m * cfg.object_sensor_step_deg * kDegToRad);
-  if (width_m < cfg.object_min_samples * sample) return "sliver";
+  if (width_m < MinWidth(o.range_m, cfg)) return "sliver";
   if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
     return "flat";
   if (o.size.x() < cfg.object_min_length_m) return "small";
@@ -352,8 +363,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.range_m = s ? (*s - o.centroid).norm() : 0.0;
   const Spread3 sp = Spread(o);
   const double width = kUniformExtentPerStd * sp.sigma.y();
-  const double min_width =
-      cfg.object_min_samples * std::max(cfg.output_voxel_m, o.range_m * cfg.object_sensor_step_deg * kDegToRad);
+  const double min_width = MinWidth(o.range_m, cfg);
   o.rejected = Reject(o, ctx, cfg, width, sp);
   o.confidence = Confidence(o, cfg, width, min_width);
   return o;
@@ -478,10 +488,14 @@ MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
 }
 
 namespace {
-// What a step's stored objects were made with: the record's layout and every map config value.
+// Version of the rules in this file: bump it with any change to what they decide, so that objects
+// a store keeps from an earlier version are computed again instead of read.
+constexpr int kObjectRulesVersion = 2;
+
+// What a step's stored objects were made with: the rules' version and every map config value.
 std::string ObjectsKey(const MapConfig& cfg) {
   MapConfig c = cfg;
-  return "objects 1\n" + FieldsToString(FieldsOf(c));
+  return "objects rules " + std::to_string(kObjectRulesVersion) + "\n" + FieldsToString(FieldsOf(c));
 }
 
 void RequireSensorStep(const MapConfig& cfg) {
