@@ -290,7 +290,8 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
 // kiosks, trees) stand on the ground: a cluster whose lowest point is more than
-// object_max_clearance_m above the ground of its cell floats, a piece of a permanent surface
+// object_max_clearance_m above the ground of its cell, and that no cluster of the same change
+// holds up (HoldUp), floats, a piece of a permanent surface
 // (canopy, facade above an occluder) whose lower part both sessions saw the same. Clusters whose
 // longest horizontal edge is below object_min_length_m are smaller than the objects the map
 // tracks: at a pedestrian's footprint they are most likely residues of moving actors that HD
@@ -361,12 +362,39 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.height_above_ground = o.hi.z() - o.ground_z;
   const Eigen::Vector3d* s = Nearest(ctx.all_sensors, o.centroid);
   o.range_m = s ? (*s - o.centroid).norm() : 0.0;
+  return o;
+}
+
+// A cluster that floats (clearance above object_max_clearance_m) still stands on the ground when
+// another cluster of the same change holds it up: under its xy box (both grown by the cluster
+// tolerance), topping out between object_max_clearance_m below its bottom and the tolerance above
+// it, and itself standing on the ground. A cut tree's canopy and its trunk are two clusters where
+// the trunk's top was not scanned; the canopy then takes the trunk's clearance (one level: a
+// cluster held up by a floating one still floats).
+void HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
+  const double gap = cfg.object_max_clearance_m, tol = cfg.object_tolerance_m;
+  if (gap <= 0.0) return;
+  std::vector<double> held(group.size());
+  for (std::size_t i = 0; i < group.size(); ++i) {
+    const MapObject& o = group[i];
+    held[i] = o.clearance_m;
+    if (o.clearance_m <= gap) continue;
+    for (const MapObject& b : group) {
+      const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
+                         (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
+      const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - gap;
+      if (&b != &o && under && just_below && b.clearance_m <= gap) held[i] = std::min(held[i], b.clearance_m);
+    }
+  }
+  for (std::size_t i = 0; i < group.size(); ++i) group[i].clearance_m = held[i];
+}
+
+// The rules (Reject) and the confidence of a built cluster.
+void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   const Spread3 sp = Spread(o);
   const double width = kUniformExtentPerStd * sp.sigma.y();
-  const double min_width = MinWidth(o.range_m, cfg);
   o.rejected = Reject(o, ctx, cfg, width, sp);
-  o.confidence = Confidence(o, cfg, width, min_width);
-  return o;
+  o.confidence = Confidence(o, cfg, width, MinWidth(o.range_m, cfg));
 }
 
 // Share of `part`'s points inside `whole`'s axis-aligned box grown by `margin`.
@@ -420,8 +448,12 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearMask(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
-    for (const auto& sel : Cluster(changes, idx, cfg)) {
-      MapObject o = BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg);
+    std::vector<MapObject> group;
+    for (const auto& sel : Cluster(changes, idx, cfg))
+      group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
+    HoldUp(group, cfg);
+    for (MapObject& o : group) {
+      Judge(o, ctx, cfg);
       if (!o.rejected.empty()) {
         rejected.push_back(std::move(o));
         continue;
@@ -490,7 +522,7 @@ MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
 namespace {
 // Version of the rules in this file: bump it with any change to what they decide, so that objects
 // a store keeps from an earlier version are computed again instead of read.
-constexpr int kObjectRulesVersion = 2;
+constexpr int kObjectRulesVersion = 3;
 
 // What a step's stored objects were made with: the rules' version and every map config value.
 std::string ObjectsKey(const MapConfig& cfg) {
