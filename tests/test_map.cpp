@@ -471,6 +471,31 @@ TEST(MapObjects, RulesFromGeometry) {
   EXPECT_EQ(why["coverage"], 1);
 }
 
+// A cut tree whose trunk's top was not scanned: canopy and trunk are two clusters. The trunk
+// stands on the ground and holds the canopy up, so the canopy is an object; alone, it floats.
+TEST(MapObjects, CanopyHeldUpByItsTrunkIsNotFloating) {
+  const PointCloud trunk = Car(-0.25f, -0.25f, 0.5f, 0.5f, 1.25f);  // z 0.25 .. 1.25 m
+  const PointCloud canopy = WithZ(Car(-2, -2, 4, 4, 2.0f), 1.75f);   // z 2.0 .. 3.75 m: 0.75 m above the trunk
+  for (const bool with_trunk : {true, false}) {
+    test::TempDir tmp;
+    KeyframeDelta d;
+    d.nd_strong = with_trunk ? Cat(canopy, trunk) : canopy;
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, d.nd_strong, d, &rejected);
+    std::map<std::string, int> why;
+    for (const auto& r : rejected) ++why[r.rejected];
+    if (with_trunk) {
+      ASSERT_EQ(objs.size(), 1u) << "floating " << why["floating"];
+      EXPECT_EQ(objs[0].points, canopy.size());
+      EXPECT_EQ(objs[0].change, "disappeared");
+      EXPECT_LE(objs[0].clearance_m, 1.0);  // the trunk's
+    } else {
+      EXPECT_TRUE(objs.empty());
+      EXPECT_EQ(why["floating"], 1);
+    }
+  }
+}
+
 TEST(MapObjects, MovedContainerAndStableIds) {
   test::TempDir tmp;
   KeyframeDelta d;
