@@ -150,7 +150,8 @@ std::string FormatLog(const Store& store) {
     snapshot += s.points * 16;  // binary PCD XYZI
   }
   os << "store file: " << Bytes(t.file_bytes) << " (bases " << Bytes(t.base_bytes) << " for " << t.base_points
-     << " points, deltas " << Bytes(t.delta_bytes) << " for " << t.delta_points << " points)\n";
+     << " points, deltas " << Bytes(t.delta_bytes) << " for " << t.delta_points << " points, stored objects of "
+     << t.record_steps << " steps " << Bytes(t.record_bytes) << ")\n";
   os << "full PCD snapshot of every session: " << Bytes(snapshot);
   if (snapshot) os << "; store / snapshots = " << std::fixed << std::setprecision(1) << 100.0 * double(t.file_bytes) / double(snapshot) << " %";
   os << '\n';

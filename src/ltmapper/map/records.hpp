@@ -108,6 +108,7 @@ struct MapObject {
 struct StoreTotals {
   std::size_t file_bytes = 0, base_bytes = 0, delta_bytes = 0;
   std::size_t base_points = 0, delta_points = 0;
+  std::size_t record_steps = 0, record_bytes = 0;  // derived per-step records (stored objects)
 };
 
 }  // namespace ltm::map

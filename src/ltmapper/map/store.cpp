@@ -821,6 +821,12 @@ StoreTotals Store::Totals() const {
   d.Step();
   t.delta_bytes = std::size_t(d.Int(0));
   t.delta_points = std::size_t(d.Int(1));
+  if (s.HasStepRecords()) {
+    Stmt r(s.db, "SELECT count(*), coalesce(sum(length(data)), 0) FROM step_records", s.path);
+    r.Step();
+    t.record_steps = std::size_t(r.Int(0));
+    t.record_bytes = std::size_t(r.Int(1));
+  }
   return t;
 }
 
