@@ -93,7 +93,7 @@ TEST(Objects, EvaluateObjectsFoundFraction) {
 }
 
 // Precision: a cluster with no truth object of its pair at IoU >= min_iou is a false object.
-TEST(Objects, PrecisionRecallF1PerPairAndChange) {
+TEST(Objects, PrecisionRecallF1PerPairChangeAndClass) {
   const auto cfg = Cfg();
   std::vector<ObjectTruth> truth(4);
   truth[0] = {"00_01", 7, "car", "open", 0, Grid(10, 10), {}};             // disappeared, found
@@ -133,12 +133,24 @@ TEST(Objects, PrecisionRecallF1PerPairAndChange) {
   EXPECT_NEAR(r.per_change[0].f1, 0.0, 1e-12);
   EXPECT_NEAR(r.per_change[1].precision, 1.0, 1e-12);
   EXPECT_NEAR(r.per_change[1].recall, 1.0, 1e-12);
+  // Per truth class: clusters count for the class of the truth object they overlap most (the one
+  // on empty ground counts for none).
+  ASSERT_EQ(r.per_class.size(), 2u);
+  EXPECT_EQ(r.per_class[0].name, "class car");
+  EXPECT_EQ(r.per_class[0].truth_objects, 3u);
+  EXPECT_EQ(r.per_class[0].clusters, 2u);
+  EXPECT_NEAR(r.per_class[0].precision, 1.0, 1e-12);
+  EXPECT_NEAR(r.per_class[0].recall, 2.0 / 3.0, 1e-12);
+  EXPECT_EQ(r.per_class[1].name, "class tree");
+  EXPECT_NEAR(r.per_class[1].precision, 0.0, 1e-12);
+  EXPECT_NEAR(r.per_class[1].recall, 0.0, 1e-12);
   Report rep;
   rep.objects = r;
   const std::string json = ToJson(rep);
   EXPECT_NEAR(*JsonNumber(json, "objects.precision"), 0.5, 1e-9);
   EXPECT_NEAR(*JsonNumber(json, "objects.per_pair.0.precision"), 2.0 / 3.0, 1e-9);
   EXPECT_NEAR(*JsonNumber(json, "objects.per_change.1.recall"), 1.0, 1e-9);
+  EXPECT_NEAR(*JsonNumber(json, "objects.per_class.0.recall"), 2.0 / 3.0, 1e-9);
   EXPECT_NE(ToMarkdown(rep).find("| 00_01 | 2 | 1 | 3 | 2 | 0.667 | 0.500 | 0.571 |"), std::string::npos);
 }
 

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <functional>
 #include <memory>
+#include <map>
 #include <set>
 
 namespace fs = std::filesystem;
@@ -194,6 +195,17 @@ void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const st
   for (const std::string ch : {"appeared", "disappeared"})
     r.per_change.push_back(Slice(ch, r, truth, [&](const ObjectTruth& t) { return TruthChange(t) == ch; },
                                  [&](const ClusterScore& c) { return c.change == ch; }));
+  // Per truth class: a cluster counts for the class of the truth object it overlaps most; a
+  // cluster that overlaps none has no class and counts in the other rows only.
+  std::map<int, std::string> class_of;  // LD object id -> class
+  std::set<std::string> classes;
+  for (const auto& t : truth) class_of[t.id] = t.cls, classes.insert(t.cls);
+  for (const auto& cls : classes)
+    r.per_class.push_back(Slice("class " + cls, r, truth, [&](const ObjectTruth& t) { return t.cls == cls; },
+                                [&](const ClusterScore& c) {
+                                  const auto it = class_of.find(c.best_truth);
+                                  return it != class_of.end() && it->second == cls;
+                                }));
 }
 
 void ScoreTruth(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::vector<ObjectCluster>& clusters,

@@ -47,7 +47,7 @@ struct ClusterScore {
 // Precision = true clusters / clusters, recall = found / scored truth objects, F1 their harmonic
 // mean, for one slice (a pair, a change type or everything).
 struct ObjectsPrf {
-  std::string name;                // "00_01", "appeared", "disappeared", "all"
+  std::string name;                // "00_01", "appeared", "disappeared", "class car", "all"
   std::size_t truth_objects = 0, found = 0, clusters = 0, true_clusters = 0;
   double precision = kNaN, recall = kNaN, f1 = kNaN;
 };
@@ -74,6 +74,7 @@ struct ObjectsResult {
   std::vector<ClusterScore> cluster_scores;  // clusters of the scored pairs
   ObjectsPrf all;                            // every scored pair and change type
   std::vector<ObjectsPrf> per_pair, per_change;
+  std::vector<ObjectsPrf> per_class;         // "class car", ...: truth objects of the class, clusters overlapping them most
 };
 // Point IoU of two point sets after voxel-downsampling both to obj_voxel_m (same density, so
 // counts are comparable): a point of A matches when B has a point within obj_match_dist_m and

@@ -214,6 +214,8 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
   for (const auto& p : r.per_pair) WritePrf(w, p);
   w.EndArray().BeginArray("per_change");
   for (const auto& p : r.per_change) WritePrf(w, p);
+  w.EndArray().BeginArray("per_class");
+  for (const auto& p : r.per_class) WritePrf(w, p);
   w.EndArray();
   WriteClusterScores(w, r);
   w.BeginArray("objects");
@@ -422,10 +424,12 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
              std::to_string(r.clusters)})
      << "\nA cluster is a true object when a truth object of its pair reaches IoU >= " << Fmt(r.min_iou, 2)
      << ", else a false object. Precision = true clusters / clusters, recall = found / truth objects; "
-        "change: appeared (PD clusters, objects of the pair's second session), disappeared (ND).\n\n"
+        "change: appeared (PD clusters, objects of the pair's second session), disappeared (ND); class: the truth "
+        "objects of the class, and the clusters that overlap one of them most.\n\n"
      << Header({"slice", "truth objects", "found", "clusters", "true clusters", "precision", "recall", "F1"});
   std::vector<ObjectsPrf> rows = r.per_pair;
   rows.insert(rows.end(), r.per_change.begin(), r.per_change.end());
+  rows.insert(rows.end(), r.per_class.begin(), r.per_class.end());
   rows.push_back(r.all);
   for (const auto& p : rows)
     md << Row({p.name, std::to_string(p.truth_objects), std::to_string(p.found), std::to_string(p.clusters),
