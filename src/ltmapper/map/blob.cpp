@@ -54,6 +54,15 @@ T Get(const unsigned char* p, std::size_t off) {
   return v;
 }
 
+// `header` zero bytes (for the caller's header) followed by the zstd frame of `raw`.
+std::string CompressAfter(std::size_t header, const std::string& raw, int zstd_level, const char* what) {
+  std::string out(header + ZSTD_compressBound(raw.size()), '\0');
+  const std::size_t comp = ZSTD_compress(&out[header], out.size() - header, raw.data(), raw.size(), zstd_level);
+  if (ZSTD_isError(comp)) throw Error(std::string(what) + ": zstd compression failed: " + ZSTD_getErrorName(comp));
+  out.resize(header + comp);
+  return out;
+}
+
 int WidthFor(std::uint64_t span) { return span <= 0xFF ? 1 : span <= 0xFFFF ? 2 : 4; }
 
 // Writes n values (offsets from `origin`) as `w` byte planes: all low bytes, then the next ...
@@ -224,10 +233,8 @@ std::string EncodeQ(const QCloud& q, double resolution_m, double intensity_step,
   PutPlanes(raw, n, 1, 0, [&](std::size_t k) { return std::int32_t(q[k].role); });
   PutPlanes(raw, n, 2, 0, [&](std::size_t k) { return std::int32_t(q[k].session); });
 
-  std::string out(kHeaderSize + ZSTD_compressBound(raw.size()), '\0');
-  const std::size_t comp = ZSTD_compress(&out[kHeaderSize], out.size() - kHeaderSize, raw.data(), raw.size(), zstd_level);
-  if (ZSTD_isError(comp)) throw Error(std::string("blob: zstd compression failed: ") + ZSTD_getErrorName(comp));
-  out.resize(kHeaderSize + comp);
+  std::string out = CompressAfter(kHeaderSize, raw, zstd_level, "blob");
+  const std::size_t comp = out.size() - kHeaderSize;
   std::memcpy(&out[0], kMagic, 4);
   Put<std::uint16_t>(out, 4, kVersion);
   Put<std::uint8_t>(out, 6, std::uint8_t(wxyz));
@@ -293,34 +300,22 @@ QCloud DecodeQ(const void* data, std::size_t size, const std::string& what, doub
 namespace {
 constexpr char kPackMagic[4] = {'L', 'T', 'M', 'C'};
 constexpr std::size_t kPackHeader = 4 + 8 + 8;  // magic, raw size, FNV-1a 64 of the payload
-void PutU64(std::string& out, std::uint64_t v) {
-  for (int b = 0; b < 8; ++b) out.push_back(char((v >> (8 * b)) & 0xFF));
-}
-std::uint64_t GetU64(const unsigned char* p) {
-  std::uint64_t v = 0;
-  for (int b = 0; b < 8; ++b) v |= std::uint64_t(p[b]) << (8 * b);
-  return v;
-}
 }  // namespace
 
 std::string PackBytes(const std::string& raw, int zstd_level) {
-  std::string payload(ZSTD_compressBound(raw.size()), '\0');
-  const std::size_t comp = ZSTD_compress(payload.data(), payload.size(), raw.data(), raw.size(), zstd_level);
-  if (ZSTD_isError(comp)) throw Error(std::string("pack: zstd compression failed: ") + ZSTD_getErrorName(comp));
-  payload.resize(comp);
-  std::string out(kPackMagic, sizeof(kPackMagic));
-  PutU64(out, raw.size());
-  PutU64(out, Fnv1a64(payload.data(), payload.size()));
-  return out + payload;
+  std::string out = CompressAfter(kPackHeader, raw, zstd_level, "pack");
+  std::memcpy(&out[0], kPackMagic, sizeof(kPackMagic));
+  Put<std::uint64_t>(out, 4, raw.size());
+  Put<std::uint64_t>(out, 12, Fnv1a64(out.data() + kPackHeader, out.size() - kPackHeader));
+  return out;
 }
 
 std::string UnpackBytes(const void* data, std::size_t size, const std::string& what) {
   const auto fail = [&](const std::string& why) { throw Error(what + ": " + why); };
   const auto* p = static_cast<const unsigned char*>(data);
   if (size < kPackHeader || std::memcmp(p, kPackMagic, sizeof(kPackMagic)) != 0) fail("not a packed record");
-  const std::uint64_t raw_size = GetU64(p + 4);
-  if (GetU64(p + 12) != Fnv1a64(p + kPackHeader, size - kPackHeader)) fail("checksum mismatch");
-  return Decompress(p + kPackHeader, size - kPackHeader, std::size_t(raw_size), fail);
+  if (Get<std::uint64_t>(p, 12) != Fnv1a64(p + kPackHeader, size - kPackHeader)) fail("checksum mismatch");
+  return Decompress(p + kPackHeader, size - kPackHeader, std::size_t(Get<std::uint64_t>(p, 4)), fail);
 }
 
 }  // namespace ltm::map::detail

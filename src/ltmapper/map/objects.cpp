@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <iterator>
 #include <map>
 #include <tuple>
 #include <unordered_map>
@@ -572,8 +573,8 @@ std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
       r = ComputeStep(*this, step, keyframes);
     else
       detail::DecodeObjects(record, path() + ": objects of step " + std::to_string(step.order), &r.kept, &r.rejected);
-    for (auto* list : {&r.kept, &r.rejected})
-      for (auto& o : *list) (list == &r.kept ? out : dropped).push_back(std::move(o));
+    std::move(r.kept.begin(), r.kept.end(), std::back_inserter(out));
+    std::move(r.rejected.begin(), r.rejected.end(), std::back_inserter(dropped));
   }
   AssignIds(out);
   LinkMoved(out, config());
@@ -590,7 +591,7 @@ std::size_t Store::CacheObjects() {
   const auto keyframes = Keyframes();
   std::size_t computed = 0;
   for (const auto& step : Sessions()) {
-    if (step.order == 0 || !StepRecord(step.order, key).empty()) continue;
+    if (step.order == 0 || HasStepRecord(step.order, key)) continue;
     const StepResult r = ComputeStep(*this, step, keyframes);
     PutStepRecord(step.order, key, detail::EncodeObjects(r.kept, r.rejected));
     ++computed;

@@ -1084,13 +1084,21 @@ bool Store::Impl::HasStepRecords() const {
 
 std::string Store::StepRecord(int session, const std::string& key) const {
   const Impl& s = *impl_;
-  if (!s.HasStepRecords()) return {};
-  Stmt st(s.db, "SELECT key, data FROM step_records WHERE session = ?", s.path);
+  if (!HasStepRecord(session, key)) return {};
+  Stmt st(s.db, "SELECT data FROM step_records WHERE session = ?", s.path);
   st.Bind(1, session);
-  if (!st.Step() || st.Text(0) != key) return {};
-  const std::string data = st.Blob(1);
+  st.Step();
+  const std::string data = st.Blob(0);
   return detail::UnpackBytes(data.data(), data.size(),
                              s.path + ": step record of session " + std::to_string(session));
+}
+
+bool Store::HasStepRecord(int session, const std::string& key) const {
+  const Impl& s = *impl_;
+  if (!s.HasStepRecords()) return false;
+  Stmt st(s.db, "SELECT key FROM step_records WHERE session = ?", s.path);
+  st.Bind(1, session);
+  return st.Step() && st.Text(0) == key;
 }
 
 void Store::PutStepRecord(int session, const std::string& key, const std::string& raw) {
@@ -1111,7 +1119,8 @@ void CheckStepRecords(const Store::Impl& s, int latest, FsckFindings& f) {
     if (st.Int(0) < 1 || st.Int(0) > latest) f.Problem(where + ": no such session step");
     const std::string data = st.Blob(1);
     try {
-      detail::UnpackBytes(data.data(), data.size(), where);
+      std::vector<MapObject> kept, rejected;
+      detail::DecodeObjects(detail::UnpackBytes(data.data(), data.size(), where), where, &kept, &rejected);
     } catch (const Error& e) {
       f.Problem(e.what());
     }

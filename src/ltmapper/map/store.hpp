@@ -87,6 +87,7 @@ class Store {
   // Derived per-step records (the object cache): the record of step `session` made with `key`,
   // empty when there is none or it was made with another key.
   std::string StepRecord(int session, const std::string& key) const;
+  bool HasStepRecord(int session, const std::string& key) const;  // without reading the record
   void PutStepRecord(int session, const std::string& key, const std::string& raw);
 
   // Schema version, PRAGMA integrity_check, foreign keys, every blob's checksum and decoding,
