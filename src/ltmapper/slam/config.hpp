@@ -66,7 +66,8 @@ struct SlamConfig {
 
   // --- radius-search refinement (paper: "radius search loop detection" after the SC loops)
   int refine_rounds = 2;
-  double refine_radius_m = 5.0;       // world-frame search radius around a query keyframe
+  // The search radius is derived: where the sessions' own keyframes stop overlapping by
+  // reg_min_overlap (multi_session.cpp OverlapReach; reported as refine_radius_m).
   int refine_stride = 3;              // try every n-th query keyframe without a loop
   int refine_max_loops_per_pair = 100;
 
@@ -116,7 +117,6 @@ struct SlamConfig {
     v("graph.outlier_t_m", outlier_t_m, "m", 0.0, 1e6);
     v("graph.outlier_r_deg", outlier_r_deg, "deg", 0.0, 360.0);
     v("refine.rounds", refine_rounds, "rounds", 0, 100);
-    v("refine.radius_m", refine_radius_m, "m", 0.0, 1000.0);
     v("refine.stride", refine_stride, "keyframes", 1, 100000);
     v("refine.max_loops_per_pair", refine_max_loops_per_pair, "loops", 0, 1000000);
   }

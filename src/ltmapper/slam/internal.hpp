@@ -55,6 +55,10 @@ struct GicpResult {
 };
 // GICP of `source` onto `target` from `guess` (T_target_source).
 GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pose& guess, const GicpOptions& opt);
+// The inlier ratio of `source` under T_target_source against `target` without registering: the
+// share of source points with a target point within InlierRadius, as the verification counts it.
+double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pose& T_target_source,
+                    const SlamConfig& cfg);
 
 // Throws ltm::Error for sessions without keyframes, edges to missing keyframes, non-finite poses.
 void ValidateSessionGraphs(const std::vector<Session>& sessions);

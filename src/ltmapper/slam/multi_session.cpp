@@ -22,6 +22,9 @@ namespace ltm::slam {
 namespace {
 namespace fs = std::filesystem;
 
+// Keyframes per session whose overlap reach is measured (OverlapReach: their median).
+constexpr int kReachSamples = 16;
+
 std::string KeyframeWhere(const Session& s, const Keyframe& kf) {
   return (kf.cloud_path.empty() ? "session " + s.name : kf.cloud_path) + " (keyframe " +
          std::to_string(kf.index) + ")";
@@ -196,11 +199,10 @@ std::vector<LoopRecord> NextBatch(PairCandidates& p, const SlamConfig& cfg) {
   return batch;
 }
 
-void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg_in,
-              int threads, const std::string& label, bool coarse) {
-  SlamConfig cfg = cfg_in;
-  // Radius candidates start from the current estimate: the coarse stage is not needed.
-  if (!coarse) cfg.reg_coarse_correspondence_m = 0.0;
+// Every candidate goes through the coarse stage, radius ones too: a query that ran far without
+// loops has an estimate metres off where it comes back.
+void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
+              const std::string& label) {
   Progress progress(label, cand.size());
   ParallelFor(cand.size(), threads, [&](std::size_t i) {
     LoopRecord& l = cand[i];
@@ -227,9 +229,9 @@ struct StageCost {
 
 // A later round's candidates registered (time and count into `cost`); returns how many verified.
 std::size_t RegisterRound(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
-                          const std::string& label, bool coarse, StageCost& cost) {
+                          const std::string& label, StageCost& cost) {
   const Stopwatch sw;
-  Register(cand, store, cfg, threads, label, coarse);
+  Register(cand, store, cfg, threads, label);
   cost.registrations += static_cast<int>(cand.size());
   cost.registration_s += sw.Seconds();
   std::size_t ok = 0;
@@ -261,7 +263,7 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
     }
     if (cand.empty()) return;
     const std::size_t ok =
-        RegisterRound(cand, store, cfg, threads, "GICP retry, round " + std::to_string(round + 1), true, cost);
+        RegisterRound(cand, store, cfg, threads, "GICP retry, round " + std::to_string(round + 1), cost);
     spdlog::info("slam: retry round {}: {} scan context candidates for unaligned sessions, {} "
                  "verified",
                  round + 1, cand.size(), ok);
@@ -339,7 +341,7 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
       cost.registration_s += sw.Seconds();  // the placements are registrations too
       if (a > b)  // loops are stored with a.session < b.session: the placement was of b in a's map
         for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
-      RegisterRound(cand, store, cfg, threads, "GICP global candidates", true, cost);
+      RegisterRound(cand, store, cfg, threads, "GICP global candidates", cost);
       SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     }
 }
@@ -395,11 +397,47 @@ std::vector<PairCandidates> RetrieveCandidates(const std::vector<Session>& sessi
   return pairs;
 }
 
+// How far along its own route a keyframe still overlaps keyframe k's submap by
+// registration.min_overlap (at the odometry's relative pose): bisection over the forward offset,
+// as the overlap falls with the distance. A route that ends first gives its last distance.
+double ReachFrom(const Session& ses, int s, int k, CloudStore& store, const SlamConfig& cfg) {
+  const int n = static_cast<int>(ses.keyframes.size());
+  const GicpCloud target(store.Submap(s, k), cfg.reg_covariance_neighbours);
+  const Pose T_session_k = ses.keyframes[k].T_session_sensor;
+  int lo = 0, hi = n - k;  // offset lo overlaps, offset hi does not (or lies past the route's end)
+  while (hi - lo > 1) {
+    const int mid = (lo + hi) / 2;
+    const Pose T_k_mid = T_session_k.inverse() * ses.keyframes[k + mid].T_session_sensor;
+    (OverlapRatio(target, *store.Get(s, k + mid), T_k_mid, cfg) >= cfg.reg_min_overlap ? lo : hi) = mid;
+  }
+  return (ses.keyframes[k + lo].T_session_sensor.translation() - T_session_k.translation()).norm();
+}
+
+// The radius search's radius: the median distance at which the sessions' own keyframes stop
+// overlapping enough to pass verification (ReachFrom at kReachSamples keyframes spread over each
+// session). It follows the sensor's range and the scene's openness, not a fixed number of metres.
+double OverlapReach(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg, int threads) {
+  std::vector<std::pair<int, int>> samples;
+  for (std::size_t s = 0; s < sessions.size(); ++s) {
+    const int n = static_cast<int>(sessions[s].keyframes.size());
+    const int m = std::min(n, kReachSamples);
+    for (int i = 0; i < m; ++i) samples.push_back({int(s), int((long(i) * n) / m)});
+  }
+  std::vector<double> reach(samples.size(), 0.0);
+  ParallelFor(samples.size(), threads, [&](std::size_t i) {
+    const auto [s, k] = samples[i];
+    reach[i] = ReachFrom(sessions[std::size_t(s)], s, k, store, cfg);
+  });
+  if (reach.empty()) return 0.0;
+  std::nth_element(reach.begin(), reach.begin() + long(reach.size() / 2), reach.end());
+  return reach[reach.size() / 2];
+}
+
 // Radius-search candidates of one refinement round for the aligned pair (a, b): every
 // refine_stride-th keyframe of b without an accepted loop to a, paired with the nearest keyframe
-// of a within refine_radius_m in the world frame (each pair tried once).
+// of a within `radius_m` (OverlapReach) in the world frame (each pair tried once).
 void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loops, std::size_t a, std::size_t b,
-                      const SlamConfig& cfg, std::set<std::pair<NodeKey, NodeKey>>& tried,
+                      const SlamConfig& cfg, double radius_m, std::set<std::pair<NodeKey, NodeKey>>& tried,
                       std::vector<LoopRecord>* cand) {
   const auto& Wa = res.sessions[a].T_world_sensor;
   const auto& Wb = res.sessions[b].T_world_sensor;
@@ -410,7 +448,7 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
   for (std::size_t j = 0; j < Wb.size() && added < cfg.refine_max_loops_per_pair; ++j) {
     if (has_loop[j]) continue;
     if (eligible++ % cfg.refine_stride != 0) continue;
-    const int best = NearestKeyframe(Wa, Wb[j].translation(), cfg.refine_radius_m);
+    const int best = NearestKeyframe(Wa, Wb[j].translation(), radius_m);
     if (best < 0) continue;
     const LoopRecord l = WorldLoop(res, int(a), best, int(b), int(j), Wb[j], "radius");
     if (!tried.insert({l.a, l.b}).second) continue;
@@ -426,18 +464,24 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
+  if (cfg.refine_rounds == 0) return;
+  const double radius_m = OverlapReach(sessions, store, cfg, threads);
+  spdlog::info("slam: radius search within {:.1f} m (where the sessions' own keyframes overlap by {})", radius_m,
+               cfg.reg_min_overlap);
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (std::size_t a = 0; a + 1 < n; ++a)
       for (std::size_t b = a + 1; b < n; ++b)
-        if (res.sessions[a].aligned && res.sessions[b].aligned) RadiusCandidates(res, loops, a, b, cfg, tried, &cand);
+        if (res.sessions[a].aligned && res.sessions[b].aligned)
+          RadiusCandidates(res, loops, a, b, cfg, radius_m, tried, &cand);
     if (cand.empty()) break;
     const std::size_t ok =
-        RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), false, cost);
+        RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), cost);
     spdlog::info("slam: refinement round {}: {} radius candidates, {} verified", round + 1, cand.size(), ok);
     SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     if (ok == 0) break;
   }
+  res.refine_radius_m = radius_m;
 }
 }  // namespace
 
@@ -458,7 +502,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   const double t_retr = sw.Seconds();
   StageCost cost;  // registration of the Scan Context candidates, back end, retries, refinement
   sw = Stopwatch();
-  Register(loops, store, cfg, threads, "GICP scan context loops", true);
+  Register(loops, store, cfg, threads, "GICP scan context loops");
   cost.registrations = static_cast<int>(loops.size());
   cost.registration_s = sw.Seconds();
   sw = Stopwatch();

@@ -166,6 +166,19 @@ std::string Verdict(const RegistrationResult& r, const Pose& T_init, const SlamC
 }
 }  // namespace
 
+double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pose& T_target_source,
+                    const SlamConfig& cfg) {
+  if (source.empty()) return 0.0;
+  const double r = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
+  std::size_t inside = 0;
+  for (const auto& p : source.points) {
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    inside += target.tree->Nearest((T_target_source * p.xyz().cast<double>()).cast<float>(), &j, &d2) && d2 <= r * r;
+  }
+  return double(inside) / double(source.size());
+}
+
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
                                 const Pose& T_target_source_init, const SlamConfig& cfg) {
   RegistrationResult r;
