@@ -87,6 +87,14 @@ void WriteCloud(const std::string& out, const PointCloud& cloud, const std::stri
   spdlog::info("map: wrote {} ({} points) to {}", what, cloud.size(), out);
 }
 
+// A map streamed from the store part by part (the region's voxel applied by tiles): memory is a
+// batch of keyframes or a tile, not the map.
+void WriteStreamed(const std::string& out, const map::Region& region, int threads,
+                   const std::function<void(const map::PartSink&)>& parts, const std::string& what) {
+  const std::size_t n = map::WriteLabelledCloudParts(out, region.voxel_m, parts, threads);
+  spdlog::info("map: wrote {} ({} points) to {}", what, n, out);
+}
+
 // `map diff`: the clouds in --out (the names of an LT-removert pair folder), and with --compare
 // the agreement with LT-removert's own pair output.
 void RunDiff(const MapOptions& o) {
@@ -180,13 +188,17 @@ void SetupClouds(const MapCommands& m) {
   live->add_option("--out", o.out, "Output .pcd or .ply")->required();
   live->callback([opts] {
     const auto cfg = LoadMapConfig(*opts);
-    WriteCloud(opts->out, OpenStore(*opts, cfg).Live(RegionOf(*opts, cfg)), "live map");
+    const map::Store s = OpenStore(*opts, cfg);
+    const map::Region r = RegionOf(*opts, cfg);
+    WriteStreamed(opts->out, r, opts->common.threads, [&](const map::PartSink& f) { s.StreamLive(r, f); }, "live map");
   });
   auto* meta = m.Add("meta", "Write the meta map (strong PD only, seen-through space carved)", false, true);
   meta->add_option("--out", o.out, "Output .pcd or .ply")->required();
   meta->callback([opts] {
     const auto cfg = LoadMapConfig(*opts);
-    WriteCloud(opts->out, OpenStore(*opts, cfg).Meta(RegionOf(*opts, cfg)), "meta map");
+    const map::Store s = OpenStore(*opts, cfg);
+    const map::Region r = RegionOf(*opts, cfg);
+    WriteStreamed(opts->out, r, opts->common.threads, [&](const map::PartSink& f) { s.StreamMeta(r, f); }, "meta map");
   });
   auto* restore = m.Add("restore", "Write the map as it was at a session (chained inverse deltas)", false, true);
   restore->add_option("--session", o.session, "Session name or order")->required();
@@ -195,7 +207,9 @@ void SetupClouds(const MapCommands& m) {
     const auto cfg = LoadMapConfig(*opts);
     const map::Store s = OpenStore(*opts, cfg);
     const int k = ResolveSession(s, opts->session);
-    WriteCloud(opts->out, s.MapAt(k, RegionOf(*opts, cfg)), "map as of session " + std::to_string(k));
+    const map::Region r = RegionOf(*opts, cfg);
+    WriteStreamed(opts->out, r, opts->common.threads, [&](const map::PartSink& f) { s.StreamMapAt(k, r, f); },
+                  "map as of session " + std::to_string(k));
   });
 }
 
@@ -208,10 +222,11 @@ void RunExport(const MapOptions& o) {
     if (o.session.empty()) throw Error("export --changes needs --session");
     WriteCloud(o.out, s.StepChanges(ResolveSession(s, o.session), r), "changes");
   } else if (o.meta) {
-    WriteCloud(o.out, s.Meta(r), "meta map");
+    WriteStreamed(o.out, r, o.common.threads, [&](const map::PartSink& f) { s.StreamMeta(r, f); }, "meta map");
   } else {
     const int k = o.session.empty() ? s.LatestSession() : ResolveSession(s, o.session);
-    WriteCloud(o.out, s.MapAt(k, r), "map as of session " + std::to_string(k));
+    WriteStreamed(o.out, r, o.common.threads, [&](const map::PartSink& f) { s.StreamMapAt(k, r, f); },
+                  "map as of session " + std::to_string(k));
   }
 }
 

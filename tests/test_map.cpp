@@ -1,5 +1,6 @@
 // LT-map: blob codec, composition / rollback, live vs meta, new keyframes, transactions, fsck.
 #include "ltmapper/map/map.hpp"
+#include "ltmapper/io/io.hpp"
 
 #include "test_util.hpp"
 
@@ -8,6 +9,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <iterator>
+#include <filesystem>
 #include <map>
 #include <random>
 #include <tuple>
@@ -280,6 +284,44 @@ TEST(MapStore, RestoreEverySessionFromLatest) {
   const PointCloud at1 = s.KeyframeCloud(kfs[0].id, 1);
   EXPECT_EQ(std::count(at1.cls.begin(), at1.cls.end(), PointClass::kPDWeak), long(Car(-4, -4).size()));
   EXPECT_TRUE(s.Fsck().ok);
+}
+
+// A labelled PCD's records (23 bytes each after the header), sorted: the same points in any order.
+std::vector<std::string> SortedRecords(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::size_t data = bytes.find("DATA binary\n") + 12;
+  std::vector<std::string> r;
+  for (std::size_t i = data; i + 23 <= bytes.size(); i += 23) r.push_back(bytes.substr(i, 23));
+  std::sort(r.begin(), r.end());
+  return r;
+}
+
+TEST(MapStore, StreamedMapsEqualWholeOnesAcrossBatchesAndTiles) {
+  // 70 keyframes (more than one streaming batch) from x = -60 to 78 m: several 32 m voxel tiles,
+  // negative ones too, and points of neighbouring keyframes in the same voxels.
+  test::TempDir tmp;
+  std::vector<KeyframeInput> base;
+  for (int k = 0; k < 70; ++k)
+    base.push_back({k, At(-60.0 + 2.0 * k, 0.5 * k - 17.0, 0.1 * k), Cat(Grid(-6, -6, 0, 40, 40, 0.3f), Car(1, 1))});
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, base);
+  s.IntegrateSession({"s1"}, "s0", Step1(), {});
+  for (const double voxel : {0.0, 0.25}) {
+    Region r;
+    r.voxel_m = voxel;
+    WriteLabelledCloud(tmp / "whole_live.pcd", s.Live(r));
+    WriteLabelledCloud(tmp / "whole_meta.pcd", s.Meta(r));
+    const std::size_t live = WriteLabelledCloudParts(tmp / "live.pcd", voxel, [&](const PartSink& f) { s.StreamLive(r, f); });
+    const std::size_t meta = WriteLabelledCloudParts(tmp / "meta.pcd", voxel, [&](const PartSink& f) { s.StreamMeta(r, f); });
+    EXPECT_EQ(SortedRecords(tmp / "live.pcd"), SortedRecords(tmp / "whole_live.pcd")) << "voxel " << voxel;
+    EXPECT_EQ(SortedRecords(tmp / "meta.pcd"), SortedRecords(tmp / "whole_meta.pcd")) << "voxel " << voxel;
+    // The zero-padded counts are read as counts (PCL's reader), and no spilled tile is left.
+    EXPECT_EQ(io::ReadPcd(tmp / "live.pcd").size(), live);
+    EXPECT_EQ(io::ReadPcd(tmp / "meta.pcd").size(), meta);
+    EXPECT_GT(live, voxel > 0 ? 1000u : 100000u);
+    for (const auto& e : std::filesystem::directory_iterator(tmp.str())) EXPECT_EQ(e.path().string().find(".tiles"), std::string::npos) << e.path();
+  }
 }
 
 TEST(MapStore, WeakNdStoredOnlyOnRequest) {

@@ -5,6 +5,7 @@
 #include "ltmapper/map/store.hpp"
 #include "ltmapper/geometry/sensor.hpp"
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,13 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
 // ------------------------------------------------------------------------------------ outputs
 // Writes .pcd (x y z intensity class session object fields) or .ply by extension, atomically.
 void WriteLabelledCloud(const std::string& path, const PointCloud& cloud);
+// The same for a cloud that arrives in parts (`parts(sink)` hands each to sink, e.g. a Store's
+// StreamLive), voxelised at voxel_m (0: every point). A .pcd is written as the parts come; with a
+// voxel they are first spilled into 32 m world tiles (whole voxels) in a folder next to `path`
+// and each tile is voxelised alone: memory is a tile, not the map, and the points are those of
+// VoxelDownsample on the whole (in tile order). A .ply is assembled in memory. Returns the points.
+std::size_t WriteLabelledCloudParts(const std::string& path, double voxel_m,
+                                    const std::function<void(const PartSink&)>& parts, int threads = 0);
 // objects.csv, objects.json, objects.ply (all points with object ids), clouds/object_NNNN.pcd.
 // With `rejected`, also rejected.csv (same columns plus `reason`, no clouds).
 // The config with object_sensor_step_deg taken from the sensor when it is 0: the beam spacing at

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -68,6 +69,9 @@ struct IntegrationResult {
 };
 
 // Part of the map to build: everything, or an axis-aligned world box; optional voxel filter.
+// Receives one part of a streamed map (Store::StreamMapAt and friends).
+using PartSink = std::function<void(PointCloud&&)>;
+
 struct Region {
   bool use_box = false;
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();

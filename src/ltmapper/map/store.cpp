@@ -204,6 +204,21 @@ PointCloud Concat(std::vector<PointCloud>& parts, const Region& region, int thre
 
 }  // namespace
 
+// Keyframe ids [first, last): a range restricts the lookups to those (indexed, no scan of the map).
+struct IdRange {
+  int first = 0, last = std::numeric_limits<int>::max();
+  bool all() const { return first <= 0 && last == std::numeric_limits<int>::max(); }
+  std::string Sql(const char* column) const {
+    return all() ? std::string()
+                 : std::string(" AND ") + column + " >= " + std::to_string(first) + " AND " + column + " < " +
+                       std::to_string(last);
+  }
+};
+
+// Keyframes loaded and decoded at a time when a map is streamed (Impl::StreamParts): enough for
+// every worker to have several, few enough that a batch is a small part of any large map.
+constexpr int kStreamKeyframes = 64;
+
 // ====================================================================================== Impl
 struct Store::Impl {
   sqlite3* db = nullptr;
@@ -311,16 +326,15 @@ struct Store::Impl {
     std::string base;
     std::vector<std::pair<int, std::string>> deltas;  // (session, blob), newest first
   };
-  // `only_keyframe` >= 0 restricts to one keyframe (indexed lookups, no scan of the map).
   std::vector<KfBlobs> LoadBlobs(int max_created_session, int min_delta_session, int only_delta_session = -1,
-                                 int only_keyframe = -1) const {
+                                 IdRange ids = {}) const {
     std::vector<KfBlobs> out;
     std::map<int, std::size_t> pos;
-    const std::string kf_filter = only_keyframe >= 0 ? " AND keyframe = " + std::to_string(only_keyframe) : "";
+    const std::string kf_filter = ids.Sql("keyframe");
     {
       Stmt st(db,
-              "SELECT id, session, source_index, pose FROM keyframes WHERE session <= ?" +
-                  (only_keyframe >= 0 ? " AND id = " + std::to_string(only_keyframe) : std::string()) + " ORDER BY id",
+              "SELECT id, session, source_index, pose FROM keyframes WHERE session <= ?" + ids.Sql("id") +
+                  " ORDER BY id",
               path);
       st.Bind(1, max_created_session);
       while (st.Step()) {
@@ -351,6 +365,21 @@ struct Store::Impl {
       if (it != pos.end()) out[it->second].deltas.emplace_back(int(sd.Int(1)), sd.Blob(2));
     }
     return out;
+  }
+  // Each keyframe's part (`part` of its blobs) in id order, handed to `sink`: kStreamKeyframes
+  // keyframes are loaded and made into parts (in parallel) at a time, so memory is such a batch,
+  // not the map.
+  void StreamParts(int max_created_session, int min_delta_session, const std::function<PointCloud(const KfBlobs&)>& part,
+                   const PartSink& sink) const {
+    Stmt st(db, "SELECT max(id) FROM keyframes", path);
+    st.Step();
+    const int max_id = st.Null(0) ? -1 : int(st.Int(0));
+    for (int first = 0; first <= max_id; first += kStreamKeyframes) {
+      const auto blobs = LoadBlobs(max_created_session, min_delta_session, -1, {first, first + kStreamKeyframes});
+      std::vector<PointCloud> parts(blobs.size());
+      ParallelFor(blobs.size(), threads, [&](std::size_t k) { parts[k] = part(blobs[k]); });
+      for (PointCloud& p : parts) sink(std::move(p));
+    }
   }
   // State as of the oldest session above which deltas were loaded (inverse chain from the base).
   QCloud Rollback(const KfBlobs& b) const {
@@ -832,22 +861,24 @@ StoreTotals Store::Totals() const {
 
 PointCloud Store::KeyframeCloud(int keyframe_id, int session) const {
   const Impl& s = *impl_;
-  const auto blobs = s.LoadBlobs(session, session, -1, keyframe_id);
+  const auto blobs = s.LoadBlobs(session, session, -1, {keyframe_id, keyframe_id + 1});
   if (blobs.empty()) return {};
   return detail::Dequantize(s.Rollback(blobs[0]), s.cfg.resolution_m, s.cfg.intensity_step);
 }
 
-PointCloud Store::MapAt(int session, const Region& region) const {
+void Store::StreamMapAt(int session, const Region& region, const PartSink& sink) const {
   const Impl& s = *impl_;
   if (session < 0 || session > s.Latest())
     throw Error(s.path + ": no session " + std::to_string(session) + " in the map store");
-  const auto blobs = s.LoadBlobs(session, session);
-  std::vector<PointCloud> parts(blobs.size());
-  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
-    parts[k] = ToWorld(s.Rollback(blobs[k]), blobs[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step,
-                       region);
-  });
-  return Concat(parts, region, s.threads);
+  s.StreamParts(session, session, [&](const Impl::KfBlobs& b) {
+    return ToWorld(s.Rollback(b), b.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+  }, sink);
+}
+
+PointCloud Store::MapAt(int session, const Region& region) const {
+  std::vector<PointCloud> parts;
+  StreamMapAt(session, region, [&](PointCloud&& p) { parts.push_back(std::move(p)); });
+  return Concat(parts, region, impl_->threads);
 }
 
 std::vector<std::pair<PointCloud, PointCloud>> Store::KeyframeChanges(int a, int b, const Region& region) const {
@@ -896,15 +927,18 @@ PointCloud Store::Live(const Region& region) const {
   return MapAt(latest, region);
 }
 
-PointCloud Store::Meta(const Region& region) const {
+void Store::StreamLive(const Region& region, const PartSink& sink) const {
+  const int latest = LatestSession();
+  if (latest < 0) throw Error(impl_->path + ": the map store is empty");
+  StreamMapAt(latest, region, sink);
+}
+
+void Store::StreamMeta(const Region& region, const PartSink& sink) const {
   const Impl& s = *impl_;
   const int latest = s.Latest();
   if (latest < 0) throw Error(s.path + ": the map store is empty");
-  const auto blobs = s.LoadBlobs(latest, -1);  // every delta, newest first
   const double carve_units = s.cfg.meta_carve_radius_m / s.cfg.resolution_m;
-  std::vector<PointCloud> parts(blobs.size());
-  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
-    const auto& b = blobs[k];
+  s.StreamParts(latest, -1, [&](const Impl::KfBlobs& b) {  // every delta, newest first
     const std::string what = "keyframe " + std::to_string(b.rec.id);
     std::vector<QCloud> deltas;
     for (const auto& [session, blob] : b.deltas) deltas.push_back(s.Decode(blob, what + " delta"));
@@ -931,9 +965,14 @@ PointCloud Store::Meta(const Region& region) const {
         if (!cut[i]) kept.push_back(state[i]);
       state.swap(kept);
     }
-    parts[k] = ToWorld(state, b.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
-  });
-  return Concat(parts, region, s.threads);
+    return ToWorld(state, b.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+  }, sink);
+}
+
+PointCloud Store::Meta(const Region& region) const {
+  std::vector<PointCloud> parts;
+  StreamMeta(region, [&](PointCloud&& p) { parts.push_back(std::move(p)); });
+  return Concat(parts, region, impl_->threads);
 }
 
 PointCloud Store::StepChanges(int session, const Region& region) const {

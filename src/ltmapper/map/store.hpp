@@ -60,6 +60,12 @@ class Store {
   // The map as of `session` in the world frame (restore by chained inverse deltas).
   PointCloud MapAt(int session, const Region& region = {}) const;
   PointCloud Live(const Region& region = {}) const;  // latest state, all PD
+  // The same maps part by part: sink(part) for each keyframe's part in keyframe order, region box
+  // applied, its voxel not (a voxel spans keyframes: WriteLabelledCloudParts applies it by tiles).
+  // Memory is a batch of keyframes, not the map.
+  void StreamMapAt(int session, const Region& region, const PartSink& sink) const;
+  void StreamLive(const Region& region, const PartSink& sink) const;
+  void StreamMeta(const Region& region, const PartSink& sink) const;
   // What differs between the states as of sessions `a` and `b`, per keyframe with a delta between
   // them (or created between them): (points of a's state with no point of b's within one grid
   // step, the reverse), world frame. Every other keyframe is the same in both and is neither

@@ -88,8 +88,8 @@ void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& ce
   spdlog::info("LT-map: objects of {} step(s) computed, the others read from the store", computed);
   map::Region region;
   region.voxel_m = map_cfg.output_voxel_m;
-  map::WriteLabelledCloud(p.live, store.Live(region));
-  map::WriteLabelledCloud(p.meta, store.Meta(region));
+  map::WriteLabelledCloudParts(p.live, region.voxel_m, [&](const map::PartSink& f) { store.StreamLive(region, f); });
+  map::WriteLabelledCloudParts(p.meta, region.voxel_m, [&](const map::PartSink& f) { store.StreamMeta(region, f); });
   io::StagingDir objects(p.objects, "objects.csv");
   std::vector<map::MapObject> rejected;
   const auto objs = store.Objects(&rejected);
