@@ -127,8 +127,10 @@ def main():
                 try:
                     rows.append(one_run(a, c, p, seed))
                     r = rows[-1]
-                    print("done %s %s seed %d: %d/%d must-align aligned, %d wrong, %.0f s CPU" % (
-                        c, p, seed, r["need"] - r["missed"], r["need"], r["wrong"], r["cpu"]), file=sys.stderr, flush=True)
+                    print("done %s %s seed %d: %d/%d must-align aligned, %d wrong, %d false loops, worst consistency "
+                          "%.3f m / %.3f deg, %.0f s CPU" % (
+                              c, p, seed, r["need"] - r["missed"], r["need"], r["wrong"], r["false_loops"], r["worst_m"],
+                              r["worst_deg"], r["cpu"]), file=sys.stderr, flush=True)
                 except RuntimeError as e:
                     print("run %s %s seed %d: %s" % (c, p, seed, e), file=sys.stderr, flush=True)
     print("| config | sensor | seed | must align: aligned / total | other queries aligned | wrong places | false loops | "

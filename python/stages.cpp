@@ -46,7 +46,7 @@ py::dict SlamToDict(const slam::SlamResult& r) {
   d["sessions"] = sessions;
   d["loops"] = loops;
   PutFields(d, r, LTM_KV(r, time_descriptors_s), LTM_KV(r, time_retrieval_s), LTM_KV(r, time_registration_s),
-            LTM_KV(r, time_optimisation_s), LTM_KV(r, time_total_s), LTM_KV(r, registrations), LTM_KV(r, refine_radius_m),
+            LTM_KV(r, time_optimisation_s), LTM_KV(r, time_total_s), LTM_KV(r, registrations), LTM_KV(r, refine_radius_m), LTM_KV(r, max_translation_m),
             LTM_KV(r, solution_usable), LTM_KV(r, initial_cost), LTM_KV(r, final_cost), LTM_KV(r, solver_iterations));
   return d;
 }

@@ -41,7 +41,8 @@ struct SlamResult {
   double time_descriptors_s = 0, time_retrieval_s = 0, time_registration_s = 0,
          time_optimisation_s = 0, time_total_s = 0;
   int registrations = 0;
-  double refine_radius_m = 0;  // the radius search's radius (OverlapReach), 0 without refinement
+  double refine_radius_m = 0;  // the radius search's radius (OverlapReach)
+  double max_translation_m = 0;  // the registrations' derived translation gate (OverlapReach)
   bool solution_usable = true;
   double initial_cost = 0, final_cost = 0;
   int solver_iterations = 0;

@@ -44,7 +44,9 @@ struct SlamConfig {
   double reg_range_noise_m = 0.02;    // std-dev of the sensor's range noise
   double reg_min_overlap = 0.3;       // min inlier ratio (source points with a NN within radius)
   double reg_max_correction_deg = 45.0;  // reject when GICP rotates this far from the initial guess
-  double reg_max_translation_m = 15.0;   // reject when GICP moves this far from the initial guess
+  // Reject when GICP moves this far from the initial guess. Not a key: AlignSessions derives it
+  // (the farthest distance at which the sessions' own keyframes still overlap by reg_min_overlap).
+  double reg_max_translation_m = 15.0;
   double loop_sigma_t_m = 0.1;        // loop std-dev at fitness <= reg_fitness_floor
   double loop_sigma_r_deg = 0.5;
   double reg_fitness_floor = 0.02;    // [m^2]; sigma grows with sqrt(fitness / floor) above it
@@ -99,7 +101,6 @@ struct SlamConfig {
     v("registration.range_noise_m", reg_range_noise_m, "m", 0.0, 10.0);
     v("registration.min_overlap", reg_min_overlap, "fraction", 0.0, 1.0);
     v("registration.max_correction_deg", reg_max_correction_deg, "deg", 0.0, 180.0);
-    v("registration.max_translation_m", reg_max_translation_m, "m", 0.0, 1000.0);
     v("registration.loop_sigma_t_m", loop_sigma_t_m, "m", 1e-4, 100.0);
     v("registration.loop_sigma_r_deg", loop_sigma_r_deg, "deg", 1e-4, 180.0);
     v("registration.fitness_floor", reg_fitness_floor, "m^2", 1e-6, 100.0);

@@ -413,10 +413,14 @@ double ReachFrom(const Session& ses, int s, int k, CloudStore& store, const Slam
   return (ses.keyframes[k + lo].T_session_sensor.translation() - T_session_k.translation()).norm();
 }
 
-// The radius search's radius: the median distance at which the sessions' own keyframes stop
-// overlapping enough to pass verification (ReachFrom at kReachSamples keyframes spread over each
-// session). It follows the sensor's range and the scene's openness, not a fixed number of metres.
-double OverlapReach(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg, int threads) {
+// How far apart keyframes still overlap enough to pass verification (ReachFrom at kReachSamples
+// keyframes spread over each session): it follows the sensor's range and field of view and the
+// scene's openness, not a fixed number of metres.
+struct Reach {
+  double median_m = 0;    // the radius search's radius
+  double farthest_m = 0;  // no registration moves a candidate farther (registration's translation gate)
+};
+Reach OverlapReach(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg, int threads) {
   std::vector<std::pair<int, int>> samples;
   for (std::size_t s = 0; s < sessions.size(); ++s) {
     const int n = static_cast<int>(sessions[s].keyframes.size());
@@ -428,9 +432,12 @@ double OverlapReach(const std::vector<Session>& sessions, CloudStore& store, con
     const auto [s, k] = samples[i];
     reach[i] = ReachFrom(sessions[std::size_t(s)], s, k, store, cfg);
   });
-  if (reach.empty()) return 0.0;
-  std::nth_element(reach.begin(), reach.begin() + long(reach.size() / 2), reach.end());
-  return reach[reach.size() / 2];
+  Reach r;
+  if (reach.empty()) return r;
+  std::sort(reach.begin(), reach.end());
+  r.median_m = reach[reach.size() / 2];
+  r.farthest_m = reach.back();
+  return r;
 }
 
 // Radius-search candidates of one refinement round for the aligned pair (a, b): every
@@ -460,14 +467,11 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
 // Radius-search refinement: query keyframes without a loop look for keyframes of the other
 // session near them in the world frame, verified by GICP from the current estimate.
 void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
-            const SlamConfig& cfg, int threads, StageCost& cost) {
+            const SlamConfig& cfg, double radius_m, int threads, StageCost& cost) {
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
   if (cfg.refine_rounds == 0) return;
-  const double radius_m = OverlapReach(sessions, store, cfg, threads);
-  spdlog::info("slam: radius search within {:.1f} m (where the sessions' own keyframes overlap by {})", radius_m,
-               cfg.reg_min_overlap);
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (std::size_t a = 0; a + 1 < n; ++a)
@@ -481,21 +485,25 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
     SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     if (ok == 0) break;
   }
-  res.refine_radius_m = radius_m;
 }
 }  // namespace
 
-SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg, int threads) {
-  ValidateConfig(cfg, "slam config");
+SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg_in, int threads) {
+  ValidateConfig(cfg_in, "slam config");
   ValidateSessionGraphs(sessions);
   const Stopwatch total;
-  CloudStore store(sessions, cfg);
+  CloudStore store(sessions, cfg_in);
   Stopwatch sw;
   std::vector<std::vector<ScanContext>> sc;
-  const std::size_t read_files = ComputeDescriptors(sessions, cfg, store, threads, &sc);
+  const std::size_t read_files = ComputeDescriptors(sessions, cfg_in, store, threads, &sc);
   const double t_desc = sw.Seconds();
   spdlog::info("slam: scan context for {} sessions ({} read from SCDs) in {:.2f} s", sessions.size(), read_files,
                t_desc);
+  const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
+  spdlog::info("slam: keyframes overlap by {} up to {:.1f} m apart (median), {:.1f} m at most: the radius search's "
+               "radius and the registrations' translation gate", cfg_in.reg_min_overlap, reach.median_m, reach.farthest_m);
+  SlamConfig cfg = cfg_in;
+  cfg.reg_max_translation_m = reach.farthest_m;
   sw = Stopwatch();
   std::vector<LoopRecord> loops;
   std::vector<PairCandidates> pairs = RetrieveCandidates(sessions, sc, cfg, threads, &loops);
@@ -510,7 +518,9 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   cost.optimisation_s = sw.Seconds();
   RetryUnaligned(sessions, pairs, loops, res, store, cfg, threads, cost);
   GlobalFallback(sessions, loops, res, store, cfg, threads, cost);
-  Refine(sessions, loops, res, store, cfg, threads, cost);
+  Refine(sessions, loops, res, store, cfg, reach.median_m, threads, cost);
+  res.refine_radius_m = reach.median_m;
+  res.max_translation_m = reach.farthest_m;
   res.time_descriptors_s = t_desc;
   res.time_retrieval_s = t_retr;
   res.time_registration_s = cost.registration_s;

@@ -116,6 +116,7 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
          << (s + 1 < n ? "," : "") << "\n";
     }
     os << "  ],\n  \"registrations\": " << res.registrations << ",\n  \"refine_radius_m\": " << res.refine_radius_m
+       << ",\n  \"max_translation_m\": " << res.max_translation_m
        << ",\n  \"solver\": {\"usable\": " << (res.solution_usable ? "true" : "false")
        << ", \"initial_cost\": " << res.initial_cost << ", \"final_cost\": " << res.final_cost
        << ", \"iterations\": " << res.solver_iterations << "},\n"
@@ -151,9 +152,9 @@ void WriteReportMd(const std::vector<Session>& sessions, const SlamResult& res, 
     for (const auto& a : res.sessions) {
       if (!a.aligned) os << "\n**" << a.name << " is not aligned**: " << a.reason << "\n";
     }
-    if (res.refine_radius_m > 0)
-      os << "\nRadius search within " << res.refine_radius_m
-         << " m: where the sessions' own keyframes stop overlapping enough to pass verification.\n";
+    os << "\nKeyframes of one session overlap enough to pass verification up to " << res.refine_radius_m
+       << " m apart (median; the radius search's radius) and " << res.max_translation_m
+       << " m at most (no registration may move a candidate farther).\n";
     os << "\nTime: descriptors " << res.time_descriptors_s << " s, retrieval "
        << res.time_retrieval_s << " s, registration " << res.time_registration_s << " s ("
        << res.registrations << " GICP), optimisation " << res.time_optimisation_s << " s, total "
