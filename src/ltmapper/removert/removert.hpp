@@ -23,7 +23,7 @@
 // O(threads) scans; it still grows with the length of a session (its whole map is in memory).
 //
 // This header only gathers the module's parts, one topic each (include the part you need):
-// config.hpp, keyframes.hpp, hd.hpp, ld.hpp, visibility.hpp, stage.hpp.
+// config.hpp, keyframes.hpp, hd.hpp, ld.hpp, visibility.hpp, stage.hpp, tiles.hpp.
 #pragma once
 
 #include "ltmapper/removert/config.hpp"
@@ -32,3 +32,4 @@
 #include "ltmapper/removert/ld.hpp"
 #include "ltmapper/removert/visibility.hpp"
 #include "ltmapper/removert/stage.hpp"
+#include "ltmapper/removert/tiles.hpp"

@@ -1,0 +1,175 @@
+// HD removal tile by tile (tiles.hpp): the plan, one tile's job and the merge.
+#include "ltmapper/removert/tiles.hpp"
+
+#include "ltmapper/removert/detail.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <utility>
+
+namespace ltm::removert {
+
+double TileReachM(const RemovertConfig& cfg) { return std::max(cfg.max_range_m, cfg.submap_radius_m); }
+
+double TileMarginM(const RemovertConfig& cfg) {
+  const bool surface = cfg.revert && cfg.revert_surface_max_m > 0.0;
+  const double normals = surface ? cfg.ld_normal_radius_m : 0.0;
+  if (cfg.dilate_voxels <= 0.0) return normals;
+  const double near = std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m + normals;
+  if (cfg.dilate_voxels <= 1.0) return near;
+  const double body = cfg.DilateM() + cfg.dilate_body_m + normals;
+  const double ground = 3.0 * cfg.DilateM();
+  return std::max({near, body, ground});
+}
+
+namespace {
+
+// The tile edge in map voxels: tiles.edge_m, or 2 x the reach, rounded to whole voxels.
+std::int64_t EdgeVoxels(const RemovertConfig& cfg) {
+  const double edge_m = cfg.tiles_edge_m > 0.0 ? cfg.tiles_edge_m : 2.0 * TileReachM(cfg);
+  return std::max<std::int64_t>(1, std::int64_t(std::llround(edge_m / cfg.map_voxel_m)));
+}
+
+// The tile's core grown by `grow` voxels on every side.
+detail::VoxelBox BoxOf(const TilePlan& plan, const Tile& t, std::int64_t grow) {
+  const std::int64_t e = plan.edge_voxels;
+  return {t.ix * e - grow, t.iy * e - grow, (t.ix + 1) * e + grow, (t.iy + 1) * e + grow};
+}
+
+// xy distance from (x, y) to a voxel box [m].
+double DistanceTo(const detail::VoxelBox& b, double voxel_m, double x, double y) {
+  const double dx = std::max({double(b.x0) * voxel_m - x, 0.0, x - double(b.x1) * voxel_m});
+  const double dy = std::max({double(b.y0) * voxel_m - y, 0.0, y - double(b.y1) * voxel_m});
+  return std::hypot(dx, dy);
+}
+
+// The plan must be the one of these keyframes and this config (a plan file of another session or
+// other map voxel / tile keys would give another map).
+void CheckPlan(const TilePlan& plan, std::size_t tile, const std::vector<WorldKeyframe>& keyframes,
+               const RemovertConfig& cfg) {
+  if (tile >= plan.tiles.size())
+    throw Error("tiles: tile " + std::to_string(tile) + " of a plan with " + std::to_string(plan.tiles.size()) +
+                " tiles");
+  if (plan.session_keyframes != keyframes.size())
+    throw Error("tiles: the plan is for " + std::to_string(plan.session_keyframes) + " keyframes, the session has " +
+                std::to_string(keyframes.size()));
+  const TilePlan expected = PlanTiles({}, cfg);
+  if (plan.voxel_m != expected.voxel_m || plan.edge_voxels != expected.edge_voxels ||
+      plan.margin_voxels != expected.margin_voxels || plan.reach_m != expected.reach_m)
+    throw Error("tiles: the plan was made with other map_voxel_m / tiles.edge_m / margin keys than this config");
+  for (std::size_t k : plan.tiles[tile].keyframes)
+    if (k >= keyframes.size()) throw Error("tiles: tile " + std::to_string(tile) + " names keyframe " + std::to_string(k));
+}
+
+// The points of `cloud` in voxel order (x, then y, then z voxel index; VoxelDownsample's order).
+PointCloud InVoxelOrder(const PointCloud& cloud, double voxel_m) {
+  std::vector<std::array<std::int64_t, 3>> key(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const PointXYZI& p = cloud.points[i];
+    key[i] = {detail::VoxelIndex(p.x, voxel_m), detail::VoxelIndex(p.y, voxel_m), detail::VoxelIndex(p.z, voxel_m)};
+  }
+  std::vector<std::uint32_t> order(cloud.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  return cloud.select(order);
+}
+
+double Since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg) {
+  cfg.Validate();
+  TilePlan plan;
+  plan.voxel_m = cfg.map_voxel_m;
+  plan.edge_voxels = EdgeVoxels(cfg);
+  plan.margin_voxels = std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;  // + the centroid's voxel
+  plan.reach_m = TileReachM(cfg) + cfg.map_voxel_m;  // + float rounding of world-frame returns
+  plan.session_keyframes = keyframes.size();
+  const double edge_m = plan.EdgeM(), span_m = plan.reach_m + double(plan.margin_voxels) * plan.voxel_m;
+  std::map<std::pair<std::int64_t, std::int64_t>, Tile> tiles;
+  for (std::size_t k = 0; k < keyframes.size(); ++k) {
+    const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
+    const auto lo_x = std::int64_t(std::floor((c.x() - span_m) / edge_m)), hi_x = std::int64_t(std::floor((c.x() + span_m) / edge_m));
+    const auto lo_y = std::int64_t(std::floor((c.y() - span_m) / edge_m)), hi_y = std::int64_t(std::floor((c.y() + span_m) / edge_m));
+    for (std::int64_t ix = lo_x; ix <= hi_x; ++ix)
+      for (std::int64_t iy = lo_y; iy <= hi_y; ++iy) {
+        Tile t{ix, iy, {}};
+        if (DistanceTo(BoxOf(plan, t, plan.margin_voxels), plan.voxel_m, c.x(), c.y()) > plan.reach_m) continue;
+        auto it = tiles.try_emplace({ix, iy}, std::move(t)).first;
+        it->second.keyframes.push_back(k);
+      }
+  }
+  // Only tiles whose core some keyframe reaches can hold map points.
+  for (auto& [key, t] : tiles) {
+    const bool core_reached = std::any_of(t.keyframes.begin(), t.keyframes.end(), [&](std::size_t k) {
+      const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
+      return DistanceTo(BoxOf(plan, t, 0), plan.voxel_m, c.x(), c.y()) <= plan.reach_m;
+    });
+    if (core_reached) plan.tiles.push_back(std::move(t));
+  }
+  return plan;
+}
+
+HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<WorldKeyframe>& keyframes,
+                      const RemovertConfig& user_cfg, int threads) {
+  const RemovertConfig cfg = WithSensor(user_cfg, keyframes);
+  CheckPlan(plan, tile, keyframes, cfg);
+  const Tile& t = plan.tiles[tile];
+  std::vector<WorldKeyframe> kfs;
+  for (std::size_t k : t.keyframes) kfs.push_back(keyframes[k]);
+  const auto t0 = std::chrono::steady_clock::now();
+  const detail::VoxelBox region = BoxOf(plan, t, plan.margin_voxels), core = BoxOf(plan, t, 0);
+  const PointCloud map = detail::BuildMap(kfs, t.keyframes, cfg, threads, &region);
+  const double seconds_map = Since(t0);
+  const detail::HdDecision decision = detail::DecideHd(map, kfs, cfg, threads);
+  std::vector<bool> in_core(map.size());
+  for (std::size_t i = 0; i < map.size(); ++i)
+    in_core[i] = core.Contains(detail::VoxelIndex(map.points[i].x, plan.voxel_m),
+                               detail::VoxelIndex(map.points[i].y, plan.voxel_m));
+  HdResult res = detail::SplitHd(map, decision, &in_core);
+  res.stats.seconds_map = seconds_map;
+  res.stats.seconds_votes = Since(t0) - seconds_map;
+  return res;
+}
+
+HdResult MergeTiles(const std::vector<HdResult>& parts, double voxel_m) {
+  HdResult out;
+  HdStats& st = out.stats;
+  for (const HdResult& p : parts) {
+    out.static_map.append(p.static_map);
+    out.hd_map.append(p.hd_map);
+    const HdStats& s = p.stats;
+    if (st.removed_per_resolution.size() < s.removed_per_resolution.size())
+      st.removed_per_resolution.resize(s.removed_per_resolution.size(), 0);
+    for (std::size_t l = 0; l < s.removed_per_resolution.size(); ++l)
+      st.removed_per_resolution[l] += s.removed_per_resolution[l];
+    st.map_points += s.map_points;
+    st.candidates += s.candidates;
+    st.reverted += s.reverted;
+    st.removed += s.removed;
+    st.dilated += s.dilated;
+    st.seconds_map += s.seconds_map;
+    st.seconds_votes += s.seconds_votes;
+  }
+  out.static_map = InVoxelOrder(out.static_map, voxel_m);
+  out.hd_map = InVoxelOrder(out.hd_map, voxel_m);
+  return out;
+}
+
+HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& user_cfg, int threads) {
+  user_cfg.Validate();
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
+  const TilePlan plan = PlanTiles(keyframes, cfg);
+  std::vector<HdResult> parts;
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) parts.push_back(RemoveHdTile(plan, t, keyframes, cfg, threads));
+  return MergeTiles(parts, cfg.map_voxel_m);
+}
+
+}  // namespace ltm::removert
