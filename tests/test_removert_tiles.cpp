@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <filesystem>
 
 namespace ltm {
 namespace {
@@ -137,6 +138,83 @@ TEST(RemovertTiles, BadTileAndOtherSessionAreErrors) {
   test::ExpectError([&] { removert::RemoveHdTile(plan, 0, kfs, other, 1); }, {"tiles.edge_m"});
   cfg.tiles_edge_m = -1.0;
   EXPECT_THROW(removert::PlanTiles(kfs, cfg), Error);
+}
+
+// The jobs from files (what `ltmapper tiles` and the Dask driver run): the merged files are the
+// whole-session maps' bytes; a done tile is skipped, a tile without tile.json (killed) is rerun,
+// and merging before every tile is done names the missing tile.json.
+TEST(RemovertTileJobs, PlanRunMergeEqualsWholeSessionFiles) {
+  test::TempDir tmp;
+  const std::string session = tmp / "street";
+  test::WriteStreetSession(session, 0.0, 30, true);
+  RemovertConfig cfg = ShortRange();
+  cfg.tiles_edge_m = 20.0;
+  const removert::TilePlan plan = removert::WriteTilePlan(tmp / "plan", session, "", cfg);
+  ASSERT_GE(plan.tiles.size(), 4u);
+  const removert::TilePlanFile read = removert::ReadTilePlan(tmp / "plan");
+  EXPECT_EQ(read.plan.tiles.size(), plan.tiles.size());
+  EXPECT_EQ(read.plan.tiles.back().keyframes, plan.tiles.back().keyframes);
+  EXPECT_EQ(read.cfg.tiles_edge_m, 20.0);
+
+  for (std::size_t t = 0; t + 1 < plan.tiles.size(); ++t) EXPECT_TRUE(removert::RunTileJob(tmp / "plan", t, 2));
+  const std::string last = removert::TilePartDir(tmp / "plan", plan.tiles.size() - 1);
+  test::ExpectError([&] { removert::MergeTileJobs(tmp / "plan", tmp / "out"); }, {last + "/tile.json", "not done"});
+  // A killed job: a part written, no tile.json. The rerun writes the tile whole.
+  test::WriteText(last + "/static_map.pcd", "half");
+  EXPECT_TRUE(removert::RunTileJob(tmp / "plan", plan.tiles.size() - 1, 2));
+  EXPECT_FALSE(removert::RunTileJob(tmp / "plan", 0, 2));        // done: skipped
+  EXPECT_TRUE(removert::RunTileJob(tmp / "plan", 0, 2, true));   // forced
+  const removert::HdStats st = removert::MergeTileJobs(tmp / "plan", tmp / "out");
+
+  const removert::HdResult whole = removert::RemoveHd(removert::LoadWorldKeyframes(session, ""), cfg, 2);
+  EXPECT_EQ(st.map_points, whole.stats.map_points);
+  io::WritePcd(tmp / "whole_static.pcd", whole.static_map);
+  io::WritePcd(tmp / "whole_hd.pcd", whole.hd_map);
+  EXPECT_EQ(test::ReadText(tmp / "whole_static.pcd"), test::ReadText(tmp / "out/static_map.pcd"));
+  EXPECT_EQ(test::ReadText(tmp / "whole_hd.pcd"), test::ReadText(tmp / "out/hd_map.pcd"));
+}
+
+TEST(RemovertTileJobs, BadPlanFilesAreErrorsNamingTheFile) {
+  test::TempDir tmp;
+  const std::string session = tmp / "street";
+  test::WriteStreetSession(session, 0.0, 6, false);
+  RemovertConfig cfg = ShortRange();
+  const std::string plan_dir = tmp / "plan";
+  removert::WriteTilePlan(plan_dir, session, "", cfg);
+  test::ExpectError([&] { removert::ReadTilePlan(tmp / "nowhere"); }, {"nowhere/plan.json"});
+  test::WriteText(plan_dir + "/plan.json", "{\"format\": \"ltmapper tile plan\", \"tiles\": [");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json"});
+  test::WriteText(plan_dir + "/plan.json", "{\"format\": \"something else\"}");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "not a tile plan"});
+  // A plan whose tile numbers do not follow from config.yaml's keys.
+  removert::WriteTilePlan(plan_dir, session, "", cfg);
+  test::WriteText(plan_dir + "/config.yaml", "map_voxel_m: 0.2\n");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "edge_voxels"});
+  test::WriteText(plan_dir + "/config.yaml", "no_such_key: 1\n");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/config.yaml", "no_such_key"});
+  // A folder that is no plan is never replaced.
+  test::WriteText(tmp / "mine/notes.txt", "keep");
+  EXPECT_THROW(removert::WriteTilePlan(tmp / "mine", session, "", cfg), Error);
+  EXPECT_TRUE(std::filesystem::exists(tmp / "mine/notes.txt"));
+}
+
+// The CLI: plan, merge before the run (exit code 1, the missing tile.json named), run, merge.
+TEST(RemovertTileJobs, CliPlanRunMerge) {
+  test::TempDir tmp;
+  const std::string session = tmp / "street";
+  test::WriteStreetSession(session, 0.0, 8, true);
+  const std::string sets = " --set sensor.max_range_m=30 --set submap_radius_m=25 --set tiles.edge_m=30";
+  std::string out;
+  ASSERT_EQ(0, test::RunCli("tiles plan " + session + sets + " --out " + (tmp / "plan"), &out)) << out;
+  EXPECT_NE(out.find("tiles: "), std::string::npos) << out;
+  EXPECT_NE(0, test::RunCli("tiles merge " + (tmp / "plan") + " --out " + (tmp / "out"), &out));
+  EXPECT_NE(out.find("tile_000000/tile.json"), std::string::npos) << out;
+  ASSERT_EQ(0, test::RunCli("tiles run " + (tmp / "plan") + " --threads 2", &out)) << out;
+  ASSERT_EQ(0, test::RunCli("tiles merge " + (tmp / "plan") + " --out " + (tmp / "out"), &out)) << out;
+  ASSERT_EQ(0, test::RunCli("hd " + session + sets + " --out " + (tmp / "whole.pcd"), &out)) << out;
+  EXPECT_EQ(test::ReadText(tmp / "whole.pcd"), test::ReadText(tmp / "out/static_map.pcd"));
+  EXPECT_NE(0, test::RunCli("tiles run " + (tmp / "plan") + " --tile 99", &out));
+  EXPECT_NE(out.find("tile 99 of a plan with"), std::string::npos) << out;
 }
 
 }  // namespace

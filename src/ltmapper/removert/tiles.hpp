@@ -14,6 +14,7 @@
 #include "ltmapper/removert/hd.hpp"
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace ltm::removert {
@@ -52,5 +53,28 @@ HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<
 HdResult MergeTiles(const std::vector<HdResult>& parts, double voxel_m);
 // PlanTiles, every tile in turn (each on `threads`), MergeTiles: RemoveHd with the memory of a tile.
 HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads = 0);
+
+// ---- from files: `ltmapper tiles` and the Dask driver (python/ltmapper_dask.py)
+// A plan folder holds plan.json (session folder, pose file, tiles with their keyframes) and
+// config.yaml (the params). A tile's job writes <plan>/parts/tile_NNNNNN/: static_map.pcd,
+// hd_map.pcd, then tile.json (its stats), each to a temporary name renamed into place. A tile is
+// done exactly when its tile.json exists: a killed job leaves none and is simply run again.
+struct TilePlanFile {
+  std::string session_dir, poses_file;  // poses_file "": the session's own poses
+  RemovertConfig cfg;
+  TilePlan plan;
+};
+// Plans the session's tiles into a fresh `plan_dir` (replaced whole when it holds a plan.json;
+// any other non-empty folder is an error naming it). Returns the plan.
+TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
+                       const RemovertConfig& cfg);
+// ltm::Error naming the file when plan.json or config.yaml is missing or malformed.
+TilePlanFile ReadTilePlan(const std::string& plan_dir);
+std::string TilePartDir(const std::string& plan_dir, std::size_t tile);
+// One tile's job; skipped (false) when its tile.json exists, unless `force`.
+bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads = 0, bool force = false);
+// Every tile's parts merged (MergeTiles) into out_dir: static_map.pcd, hd_map.pcd, report.json.
+// ltm::Error naming the tile.json of the first tile not done.
+HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir);
 
 }  // namespace ltm::removert
