@@ -79,6 +79,17 @@ TEST(RemovertTiles, TiledEqualsWholeSessionBitForBit) {
     EXPECT_EQ(tiled.stats.dilated, whole.stats.dilated) << edge;
     EXPECT_EQ(tiled.stats.removed_per_resolution, whole.stats.removed_per_resolution) << edge;
   }
+  // Tiles computed in any order (as on a cluster), merged in plan order: the same maps.
+  RemovertConfig cfg = removert::WithSensor(base, kfs);
+  cfg.tiles_edge_m = 30.0;
+  const removert::TilePlan plan = removert::PlanTiles(kfs, cfg);
+  std::vector<removert::HdResult> parts(plan.tiles.size());
+  for (std::size_t t = plan.tiles.size(); t-- > 0;) parts[t] = removert::RemoveHdTile(plan, t, kfs, cfg, 2);
+  const removert::HdResult merged = removert::MergeTiles(plan, parts);
+  EXPECT_TRUE(SameBytes(merged.static_map, whole.static_map));
+  EXPECT_TRUE(SameBytes(merged.hd_map, whole.hd_map));
+  std::swap(parts.front(), parts.back());  // a part given for another tile does not pass unnoticed
+  EXPECT_FALSE(SameBytes(removert::MergeTiles(plan, parts).static_map, whole.static_map));
 }
 
 // The margin follows the keys it is derived from (TileMarginM): normals of candidates, dilation

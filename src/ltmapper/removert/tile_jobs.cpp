@@ -178,19 +178,23 @@ bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool
 
 HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
   const TilePlanFile f = ReadTilePlan(plan_dir);
-  std::vector<HdResult> parts(f.plan.tiles.size());
-  for (std::size_t t = 0; t < parts.size(); ++t) {
+  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t)  // every tile done before reading any
+    if (!fs::exists(TileJsonIn(TilePartDir(plan_dir, t))))
+      throw Error(TileJsonIn(TilePartDir(plan_dir, t)), 0, "tile " + std::to_string(t) + " is not done");
+  TileMerger merger(f.plan.voxel_m);
+  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) {
     const std::string dir = TilePartDir(plan_dir, t);
-    if (!fs::exists(TileJsonIn(dir))) throw Error(TileJsonIn(dir), 0, "tile " + std::to_string(t) + " is not done");
-    parts[t].stats = ReadStats(TileJsonIn(dir));
-    parts[t].static_map = io::ReadPcd(io::layout::StaticMapIn(dir));
-    parts[t].hd_map = io::ReadPcd(io::layout::HdMapIn(dir));
+    HdResult part;
+    part.stats = ReadStats(TileJsonIn(dir));
+    part.static_map = io::ReadPcd(io::layout::StaticMapIn(dir));
+    part.hd_map = io::ReadPcd(io::layout::HdMapIn(dir));
+    merger.Add(f.plan.tiles[t], std::move(part));
   }
-  const HdResult merged = MergeTiles(parts, f.cfg.map_voxel_m);
+  const HdResult merged = merger.Finish();
   io::StagingDir staging(out_dir, "report.json");
   io::WritePcd(io::layout::StaticMapIn(staging.path()), merged.static_map);
   io::WritePcd(io::layout::HdMapIn(staging.path()), merged.hd_map);
-  WriteStatsJson(staging.path() + "/report.json", merged.stats, parts.size());
+  WriteStatsJson(staging.path() + "/report.json", merged.stats, f.plan.tiles.size());
   staging.Publish();
   return merged.stats;
 }

@@ -139,12 +139,20 @@ HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<
   return res;
 }
 
-HdResult MergeTiles(const std::vector<HdResult>& parts, double voxel_m) {
-  HdResult out;
-  HdStats& st = out.stats;
-  for (const HdResult& p : parts) {
-    out.static_map.append(p.static_map);
-    out.hd_map.append(p.hd_map);
+void TileMerger::Add(const Tile& tile, HdResult part) {
+  if (started_ && tile.ix < column_) throw Error("tiles: merge the tiles in plan order (by ix)");
+  if (started_ && tile.ix != column_) FlushColumn();
+  started_ = true;
+  column_ = tile.ix;
+  pending_.push_back(std::move(part));
+}
+
+void TileMerger::FlushColumn() {
+  PointCloud static_map, hd_map;
+  HdStats& st = out_.stats;
+  for (HdResult& p : pending_) {
+    static_map.append(p.static_map);
+    hd_map.append(p.hd_map);
     const HdStats& s = p.stats;
     if (st.removed_per_resolution.size() < s.removed_per_resolution.size())
       st.removed_per_resolution.resize(s.removed_per_resolution.size(), 0);
@@ -157,19 +165,33 @@ HdResult MergeTiles(const std::vector<HdResult>& parts, double voxel_m) {
     st.dilated += s.dilated;
     st.seconds_map += s.seconds_map;
     st.seconds_votes += s.seconds_votes;
+    p = HdResult();
   }
-  out.static_map = InVoxelOrder(out.static_map, voxel_m);
-  out.hd_map = InVoxelOrder(out.hd_map, voxel_m);
-  return out;
+  pending_.clear();
+  out_.static_map.append(InVoxelOrder(static_map, voxel_m_));
+  out_.hd_map.append(InVoxelOrder(hd_map, voxel_m_));
+}
+
+HdResult TileMerger::Finish() {
+  FlushColumn();
+  return std::move(out_);
+}
+
+HdResult MergeTiles(const TilePlan& plan, std::vector<HdResult> parts) {
+  if (parts.size() != plan.tiles.size())
+    throw Error("tiles: " + std::to_string(parts.size()) + " results for " + std::to_string(plan.tiles.size()) + " tiles");
+  TileMerger merger(plan.voxel_m);
+  for (std::size_t t = 0; t < parts.size(); ++t) merger.Add(plan.tiles[t], std::move(parts[t]));
+  return merger.Finish();
 }
 
 HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& user_cfg, int threads) {
   user_cfg.Validate();
   const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
   const TilePlan plan = PlanTiles(keyframes, cfg);
-  std::vector<HdResult> parts;
-  for (std::size_t t = 0; t < plan.tiles.size(); ++t) parts.push_back(RemoveHdTile(plan, t, keyframes, cfg, threads));
-  return MergeTiles(parts, cfg.map_voxel_m);
+  TileMerger merger(plan.voxel_m);
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) merger.Add(plan.tiles[t], RemoveHdTile(plan, t, keyframes, cfg, threads));
+  return merger.Finish();
 }
 
 }  // namespace ltm::removert

@@ -49,8 +49,25 @@ TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertCo
 // sensor estimate, as RemoveHd does); the plan must be PlanTiles' for them and `cfg`.
 HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<WorldKeyframe>& keyframes,
                       const RemovertConfig& cfg, int threads = 0);
-// The tiles' results as one: the maps in voxel order (RemoveHd's order), the stats summed.
-HdResult MergeTiles(const std::vector<HdResult>& parts, double voxel_m);
+// The tiles' results as one: the maps in voxel order (RemoveHd's order), the stats summed. Tiles
+// are added in plan order (by ix, then iy); a column of tiles (one ix) holds a contiguous range of
+// x voxels, so each column is sorted alone and appended: memory = the merged maps + one column.
+class TileMerger {
+ public:
+  explicit TileMerger(double voxel_m) : voxel_m_(voxel_m) {}
+  void Add(const Tile& tile, HdResult part);
+  HdResult Finish();
+
+ private:
+  void FlushColumn();
+  double voxel_m_;
+  std::int64_t column_ = 0;
+  bool started_ = false;
+  std::vector<HdResult> pending_;  // the current column's parts
+  HdResult out_;
+};
+// TileMerger over every tile: parts[t] is the result of plan.tiles[t] (computed in any order).
+HdResult MergeTiles(const TilePlan& plan, std::vector<HdResult> parts);
 // PlanTiles, every tile in turn (each on `threads`), MergeTiles: RemoveHd with the memory of a tile.
 HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads = 0);
 
