@@ -94,4 +94,10 @@ HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& key
 // The static and HD maps of the points with (*include)[i] (null: all) and their stats.
 HdResult SplitHd(const PointCloud& map, const HdDecision& decision, const std::vector<bool>* include);
 
+// ---- tiles (tiles.cpp), shared with the tile jobs from files (tile_jobs.cpp)
+// The points of `cloud` in voxel order (x, then y, then z voxel index; VoxelDownsample's order).
+PointCloud InVoxelOrder(const PointCloud& cloud, double voxel_m);
+// Adds a tile's counts and seconds to *sum.
+void AddHdStats(const HdStats& part, HdStats* sum);
+
 }  // namespace ltm::removert::detail

@@ -1,6 +1,8 @@
 // Tile jobs from files (tiles.hpp, "from files"): the plan folder, one tile's parts, the merge.
 #include "ltmapper/removert/tiles.hpp"
 
+#include "ltmapper/removert/detail.hpp"
+
 #include "ltmapper/io/io.hpp"
 
 #include <spdlog/spdlog.h>
@@ -119,6 +121,20 @@ void WriteStatsJson(const std::string& path, const HdStats& st, std::size_t tile
   io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
 }
 
+// One map of every tile (`file_in` of its part folder) into `path`, one column of tiles (same ix:
+// a contiguous range of x voxels) at a time in voxel order: memory = one column's parts.
+void MergeMapFile(const std::string& plan_dir, const TilePlan& plan, std::string (*file_in)(const std::string&),
+                  std::size_t points, const std::string& path) {
+  io::WritePcdPieces(path, points, [&](const auto& write) {
+    for (std::size_t b = 0, e = 0; b < plan.tiles.size(); b = e) {
+      PointCloud column;
+      for (e = b; e < plan.tiles.size() && plan.tiles[e].ix == plan.tiles[b].ix; ++e)
+        column.append(io::ReadPcd(file_in(TilePartDir(plan_dir, e))));
+      write(detail::InVoxelOrder(column, plan.voxel_m));
+    }
+  });
+}
+
 std::string Absolute(const std::string& path) { return path.empty() ? path : fs::absolute(path).lexically_normal().string(); }
 
 }  // namespace
@@ -178,25 +194,19 @@ bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool
 
 HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
   const TilePlanFile f = ReadTilePlan(plan_dir);
-  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t)  // every tile done before reading any
-    if (!fs::exists(TileJsonIn(TilePartDir(plan_dir, t))))
-      throw Error(TileJsonIn(TilePartDir(plan_dir, t)), 0, "tile " + std::to_string(t) + " is not done");
-  TileMerger merger(f.plan.voxel_m);
-  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) {
-    const std::string dir = TilePartDir(plan_dir, t);
-    HdResult part;
-    part.stats = ReadStats(TileJsonIn(dir));
-    part.static_map = io::ReadPcd(io::layout::StaticMapIn(dir));
-    part.hd_map = io::ReadPcd(io::layout::HdMapIn(dir));
-    merger.Add(f.plan.tiles[t], std::move(part));
+  HdStats st;
+  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) {  // every tile done before writing anything
+    const std::string done = TileJsonIn(TilePartDir(plan_dir, t));
+    if (!fs::exists(done)) throw Error(done, 0, "tile " + std::to_string(t) + " is not done");
+    detail::AddHdStats(ReadStats(done), &st);
   }
-  const HdResult merged = merger.Finish();
   io::StagingDir staging(out_dir, "report.json");
-  io::WritePcd(io::layout::StaticMapIn(staging.path()), merged.static_map);
-  io::WritePcd(io::layout::HdMapIn(staging.path()), merged.hd_map);
-  WriteStatsJson(staging.path() + "/report.json", merged.stats, f.plan.tiles.size());
+  const std::size_t hd = st.removed + st.dilated;
+  MergeMapFile(plan_dir, f.plan, io::layout::StaticMapIn, st.map_points - hd, io::layout::StaticMapIn(staging.path()));
+  MergeMapFile(plan_dir, f.plan, io::layout::HdMapIn, hd, io::layout::HdMapIn(staging.path()));
+  WriteStatsJson(staging.path() + "/report.json", st, f.plan.tiles.size());
   staging.Publish();
-  return merged.stats;
+  return st;
 }
 
 }  // namespace ltm::removert

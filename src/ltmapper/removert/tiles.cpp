@@ -65,7 +65,14 @@ void CheckPlan(const TilePlan& plan, std::size_t tile, const std::vector<WorldKe
     if (k >= keyframes.size()) throw Error("tiles: tile " + std::to_string(tile) + " names keyframe " + std::to_string(k));
 }
 
-// The points of `cloud` in voxel order (x, then y, then z voxel index; VoxelDownsample's order).
+double Since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+namespace detail {
+
 PointCloud InVoxelOrder(const PointCloud& cloud, double voxel_m) {
   std::vector<std::array<std::int64_t, 3>> key(cloud.size());
   for (std::size_t i = 0; i < cloud.size(); ++i) {
@@ -78,11 +85,21 @@ PointCloud InVoxelOrder(const PointCloud& cloud, double voxel_m) {
   return cloud.select(order);
 }
 
-double Since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+void AddHdStats(const HdStats& s, HdStats* sum) {
+  if (sum->removed_per_resolution.size() < s.removed_per_resolution.size())
+    sum->removed_per_resolution.resize(s.removed_per_resolution.size(), 0);
+  for (std::size_t l = 0; l < s.removed_per_resolution.size(); ++l)
+    sum->removed_per_resolution[l] += s.removed_per_resolution[l];
+  sum->map_points += s.map_points;
+  sum->candidates += s.candidates;
+  sum->reverted += s.reverted;
+  sum->removed += s.removed;
+  sum->dilated += s.dilated;
+  sum->seconds_map += s.seconds_map;
+  sum->seconds_votes += s.seconds_votes;
 }
 
-}  // namespace
+}  // namespace detail
 
 TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg) {
   cfg.Validate();
@@ -149,27 +166,15 @@ void TileMerger::Add(const Tile& tile, HdResult part) {
 
 void TileMerger::FlushColumn() {
   PointCloud static_map, hd_map;
-  HdStats& st = out_.stats;
   for (HdResult& p : pending_) {
     static_map.append(p.static_map);
     hd_map.append(p.hd_map);
-    const HdStats& s = p.stats;
-    if (st.removed_per_resolution.size() < s.removed_per_resolution.size())
-      st.removed_per_resolution.resize(s.removed_per_resolution.size(), 0);
-    for (std::size_t l = 0; l < s.removed_per_resolution.size(); ++l)
-      st.removed_per_resolution[l] += s.removed_per_resolution[l];
-    st.map_points += s.map_points;
-    st.candidates += s.candidates;
-    st.reverted += s.reverted;
-    st.removed += s.removed;
-    st.dilated += s.dilated;
-    st.seconds_map += s.seconds_map;
-    st.seconds_votes += s.seconds_votes;
+    detail::AddHdStats(p.stats, &out_.stats);
     p = HdResult();
   }
   pending_.clear();
-  out_.static_map.append(InVoxelOrder(static_map, voxel_m_));
-  out_.hd_map.append(InVoxelOrder(hd_map, voxel_m_));
+  out_.static_map.append(detail::InVoxelOrder(static_map, voxel_m_));
+  out_.hd_map.append(detail::InVoxelOrder(hd_map, voxel_m_));
 }
 
 HdResult TileMerger::Finish() {
