@@ -228,5 +228,33 @@ TEST(RemovertTileJobs, CliPlanRunMerge) {
   EXPECT_NE(out.find("tile 99 of a plan with"), std::string::npos) << out;
 }
 
+// The stage with tiles.stage: true writes the same files as without (HD maps and the pair's LD).
+TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
+  test::TempDir tmp;
+  const std::vector<std::vector<Pose>> w = {test::WriteStreetSession(tmp / "s0", -10.0, 12, true),
+                                            test::WriteStreetSession(tmp / "s1", -6.0, 12, false)};
+  std::vector<std::string> poses;
+  for (std::size_t s = 0; s < w.size(); ++s) {
+    poses.push_back(tmp / ("p" + std::to_string(s) + ".txt"));
+    io::WriteKittiPoses(poses.back(), w[s]);
+  }
+  RemovertConfig cfg = ShortRange();
+  cfg.write_keyframes = false;
+  cfg.write_ply = false;
+  cfg.tiles_edge_m = 15.0;
+  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "whole", 2);
+  cfg.tiles_stage = true;
+  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "tiled", 2);
+  std::size_t files = 0;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(tmp / "whole")) {
+    if (e.path().extension() != ".pcd") continue;
+    const std::string rel = std::filesystem::relative(e.path(), tmp / "whole").string();
+    EXPECT_EQ(test::ReadText(e.path().string()), test::ReadText(tmp / ("tiled/" + rel))) << rel;
+    ++files;
+  }
+  EXPECT_GE(files, 6u);  // 2 x (static, hd) + the pair's changes
+  EXPECT_GT(io::ReadPcd(tmp / "tiled/pair_00_01/nd_strong.pcd").size(), 100u);  // the parked car left
+}
+
 }  // namespace
 }  // namespace ltm

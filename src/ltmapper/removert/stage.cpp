@@ -95,10 +95,10 @@ struct SessionData {
 
 // HD removal of session `s`; writes `dir` (static_map.pcd, hd_map.pcd, map.ply).
 HdStats RemoveSessionHd(SessionData& sd, int s, const std::string& dir, const RemovertConfig& cfg, int threads) {
-  spdlog::info("removert: HD removal of {} ({} keyframes)", sd.name, sd.kfs.size());
+  spdlog::info("removert: HD removal of {} ({} keyframes{})", sd.name, sd.kfs.size(), cfg.tiles_stage ? ", tile by tile" : "");
   HdResult hd;
   try {
-    hd = RemoveHd(sd.kfs, cfg, threads);
+    hd = cfg.tiles_stage ? RemoveHdTiled(sd.kfs, cfg, threads) : RemoveHd(sd.kfs, cfg, threads);
   } catch (const Error& e) {  // name the session: an empty scan rejects it, as LT-SLAM does
     throw Error("removert: session '" + sd.name + "': " + e.what());
   }
