@@ -3,7 +3,9 @@
 # --extent metres, keyframes 2 m apart) and runs HD removal of it whole (`ltmapper hd`) and tile
 # by tile (`ltmapper tiles plan` / `run` / `merge`, every tile in one process, one after another).
 # Prints per length: peak RSS (/usr/bin/time -v) and wall seconds per keyframe of both, the tiles,
-# and whether the merged HD-free map is the whole-session map byte for byte.
+# the largest tile (its core's map points and the keyframes it reads: a tile job's memory follows
+# them), the tiles' parts on disk, and whether the merged HD-free map is the whole-session map byte
+# for byte.
 # usage: bench/bench_tiles.sh [--lengths "250 500 1000 2000"] [--extent M] [--threads N] [--build DIR] [--work DIR]
 #        [--set KEY=VALUE]...   (removert keys for both runs, e.g. --set tiles.edge_m=100)
 set -euo pipefail
@@ -22,6 +24,7 @@ while [ $# -gt 0 ]; do
 done
 WORK="${WORK:-$(mktemp -d /tmp/ltm_bench_tiles.XXXXXX)}"
 EXE="$BUILD/apps/ltmapper"
+PYTHON=/usr/bin/python3
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "sessions: world ${EXTENT} m, keyframes 2 m apart, 32 x 512 beams; --threads $THREADS ${SETS[*]:-}"
 
@@ -34,8 +37,8 @@ timed() {
   echo "$((kb / 1024)) $wall"
 }
 
-printf "| keyframes | map points | tiles | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
-printf "|---|---|---|---|---|---|---|---|\n"
+printf "| keyframes | map points | tiles | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
+printf "|---|---|---|---|---|---|---|---|---|---|\n"
 for K in $LENGTHS; do
   dir="$WORK/k$K"
   mkdir -p "$dir"
@@ -51,7 +54,11 @@ for K in $LENGTHS; do
   tiled_s=$(awk "BEGIN { print $plan_s + $run_s + $merge_s }")
   points=$(awk -F': ' '/"map_points"/ {gsub(/,/, "", $2); print $2}' "$dir/merged/report.json")
   tiles=$(awk -F': ' '/"tiles"/ {gsub(/,/, "", $2); print $2; exit}' "$dir/merged/report.json")
+  largest=$(cat "$dir"/plan/parts/tile_*/tile.json | awk -F': ' '/"map_points"/ {v = $2 + 0; if (v > m) m = v} END {print m}')
+  most_kf=$("$PYTHON" -c "import json, sys; print(max(len(t['keyframes']) for t in json.load(open(sys.argv[1]))['tiles']))" "$dir/plan/plan.json")
+  parts_mb=$(du -sm "$dir/plan/parts" | cut -f1)
   equal=$(cmp -s "$dir/whole.pcd" "$dir/merged/static_map.pcd" && echo "bytes equal" || echo "DIFFERENT")
-  printf "| %s | %s | %s | %s | %.4f | %s (run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$tiles" "$whole_mb" \
+  printf "| %s | %s | %s | %s, %s | %s | %s | %.4f | %s (run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$tiles" \
+    "$largest" "$most_kf" "$parts_mb" "$whole_mb" \
     "$(awk "BEGIN { print $whole_s / $K }")" "$tiled_mb" "$run_mb" "$merge_mb" "$(awk "BEGIN { print $tiled_s / $K }")" "$equal"
 done

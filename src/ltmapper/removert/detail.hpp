@@ -95,8 +95,12 @@ HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& key
 HdResult SplitHd(const PointCloud& map, const HdDecision& decision, const std::vector<bool>* include);
 
 // ---- tiles (tiles.cpp), shared with the tile jobs from files (tile_jobs.cpp)
-// The points of `cloud` in voxel order (x, then y, then z voxel index; VoxelDownsample's order).
-PointCloud InVoxelOrder(const PointCloud& cloud, double voxel_m);
+// Clouds each in voxel order (x, then y, then z voxel index; VoxelDownsample's order: a tile's
+// part, a subsequence of its map) merged into one stream in voxel order: emit() gets it in pieces
+// of at most kMergePiece points. Memory: the parts and one piece.
+constexpr std::size_t kMergePiece = 1 << 16;
+void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
+                       const std::function<void(const PointCloud&)>& emit);
 // Adds a tile's counts and seconds to *sum.
 void AddHdStats(const HdStats& part, HdStats* sum);
 

@@ -127,10 +127,10 @@ void MergeMapFile(const std::string& plan_dir, const TilePlan& plan, std::string
                   std::size_t points, const std::string& path) {
   io::WritePcdPieces(path, points, [&](const auto& write) {
     for (std::size_t b = 0, e = 0; b < plan.tiles.size(); b = e) {
-      PointCloud column;
+      std::vector<PointCloud> column;
       for (e = b; e < plan.tiles.size() && plan.tiles[e].ix == plan.tiles[b].ix; ++e)
-        column.append(io::ReadPcd(file_in(TilePartDir(plan_dir, e))));
-      write(detail::InVoxelOrder(column, plan.voxel_m));
+        column.push_back(io::ReadPcd(file_in(TilePartDir(plan_dir, e))));
+      detail::MergeInVoxelOrder(column, plan.voxel_m, write);
     }
   });
 }

@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <functional>
 #include <cmath>
 #include <map>
-#include <numeric>
 #include <utility>
 
 namespace ltm::removert {
@@ -73,16 +73,38 @@ double Since(std::chrono::steady_clock::time_point t0) {
 
 namespace detail {
 
-PointCloud InVoxelOrder(const PointCloud& cloud, double voxel_m) {
-  std::vector<std::array<std::int64_t, 3>> key(cloud.size());
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
-    const PointXYZI& p = cloud.points[i];
-    key[i] = {detail::VoxelIndex(p.x, voxel_m), detail::VoxelIndex(p.y, voxel_m), detail::VoxelIndex(p.z, voxel_m)};
+void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
+                       const std::function<void(const PointCloud&)>& emit) {
+  using Key = std::array<std::int64_t, 3>;
+  auto key = [&](const PointXYZI& p) {
+    return Key{VoxelIndex(p.x, voxel_m), VoxelIndex(p.y, voxel_m), VoxelIndex(p.z, voxel_m)};
+  };
+  struct Head {
+    Key key;
+    std::size_t part, i;
+    bool operator>(const Head& o) const { return key != o.key ? key > o.key : part > o.part; }
+  };
+  std::vector<Head> heap;
+  for (std::size_t r = 0; r < parts.size(); ++r)
+    if (!parts[r].empty()) heap.push_back({key(parts[r].points[0]), r, 0});
+  const auto later = std::greater<Head>();
+  std::make_heap(heap.begin(), heap.end(), later);
+  PointCloud piece;
+  while (!heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), later);
+    Head& h = heap.back();
+    piece.points.push_back(parts[h.part].points[h.i]);
+    if (++h.i < parts[h.part].size()) {
+      h.key = key(parts[h.part].points[h.i]);
+      std::push_heap(heap.begin(), heap.end(), later);
+    } else {
+      heap.pop_back();
+    }
+    if (piece.size() == kMergePiece || heap.empty()) {
+      emit(piece);
+      piece.points.clear();
+    }
   }
-  std::vector<std::uint32_t> order(cloud.size());
-  std::iota(order.begin(), order.end(), 0u);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
-  return cloud.select(order);
 }
 
 void AddHdStats(const HdStats& s, HdStats* sum) {
@@ -165,16 +187,15 @@ void TileMerger::Add(const Tile& tile, HdResult part) {
 }
 
 void TileMerger::FlushColumn() {
-  PointCloud static_map, hd_map;
+  std::vector<PointCloud> static_maps, hd_maps;
   for (HdResult& p : pending_) {
-    static_map.append(p.static_map);
-    hd_map.append(p.hd_map);
+    static_maps.push_back(std::move(p.static_map));
+    hd_maps.push_back(std::move(p.hd_map));
     detail::AddHdStats(p.stats, &out_.stats);
-    p = HdResult();
   }
   pending_.clear();
-  out_.static_map.append(detail::InVoxelOrder(static_map, voxel_m_));
-  out_.hd_map.append(detail::InVoxelOrder(hd_map, voxel_m_));
+  detail::MergeInVoxelOrder(static_maps, voxel_m_, [&](const PointCloud& piece) { out_.static_map.append(piece); });
+  detail::MergeInVoxelOrder(hd_maps, voxel_m_, [&](const PointCloud& piece) { out_.hd_map.append(piece); });
 }
 
 HdResult TileMerger::Finish() {
