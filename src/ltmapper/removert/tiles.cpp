@@ -65,6 +65,19 @@ void CheckPlan(const TilePlan& plan, std::size_t tile, const std::vector<WorldKe
     if (k >= keyframes.size()) throw Error("tiles: tile " + std::to_string(tile) + " names keyframe " + std::to_string(k));
 }
 
+// The keyframes that vote on the box's points: within submap_radius_m of them (+ one voxel for float
+// rounding). The others of the tile (up to sensor.max_range_m away) only add returns to its map;
+// building their range images would be wasted.
+std::vector<WorldKeyframe> Voters(const std::vector<WorldKeyframe>& kfs, const detail::VoxelBox& box, double voxel_m,
+                                  const RemovertConfig& cfg) {
+  std::vector<WorldKeyframe> voters;
+  for (const WorldKeyframe& kf : kfs) {
+    const Eigen::Vector3d c = kf.T_world_sensor.translation();
+    if (DistanceTo(box, voxel_m, c.x(), c.y()) <= cfg.submap_radius_m + voxel_m) voters.push_back(kf);
+  }
+  return voters;
+}
+
 double Since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -167,7 +180,7 @@ HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<
   const detail::VoxelBox region = BoxOf(plan, t, plan.margin_voxels), core = BoxOf(plan, t, 0);
   const PointCloud map = detail::BuildMap(kfs, t.keyframes, cfg, threads, &region);
   const double seconds_map = Since(t0);
-  const detail::HdDecision decision = detail::DecideHd(map, kfs, cfg, threads);
+  const detail::HdDecision decision = detail::DecideHd(map, Voters(kfs, region, plan.voxel_m, cfg), cfg, threads);
   std::vector<bool> in_core(map.size());
   for (std::size_t i = 0; i < map.size(); ++i)
     in_core[i] = core.Contains(detail::VoxelIndex(map.points[i].x, plan.voxel_m),
