@@ -183,6 +183,7 @@ bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool
   }
   const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
   const HdResult res = RemoveHdTile(f.plan, tile, kfs, f.cfg, threads);
+  fs::remove(TileJsonIn(dir));  // forced: not done while its parts are rewritten
   io::MakeDirs(dir);
   io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);
   io::WritePcd(io::layout::HdMapIn(dir), res.hd_map);
