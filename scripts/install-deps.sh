@@ -21,6 +21,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev   # tests and benchmarks
   pybind11-dev python3-dev python3-numpy       # Python bindings (python/, `import ltmapper`)
   python3-pytest                               # their tests (ctest python_bindings)
+  python3-distributed                          # Dask: the tile jobs on a cluster (python/ltmapper_dask.py, ctest tiles_dask)
   libcpp-httplib-dev nlohmann-json3-dev        # ltmapper view: HTTP server, JSON
   chromium               # headless browser of the viewer's browser test (tests/browser/)
 )

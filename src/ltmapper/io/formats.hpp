@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -24,6 +25,11 @@ Pose ReadPcdViewpoint(const std::string& path);
 enum class PcdFormat { kAscii, kBinary, kBinaryCompressed };
 void WritePcd(const std::string& path, const PointCloud& cloud,
               PcdFormat format = PcdFormat::kBinary);
+// A binary PCD of `points` points written in pieces: `pieces(write)` calls write(cloud) for each
+// piece in order; the file is WritePcd's bytes for their concatenation, never held whole. Atomic
+// as WritePcd; ltm::Error naming the file (nothing written) when the pieces hold another count.
+void WritePcdPieces(const std::string& path, std::size_t points,
+                    const std::function<void(const std::function<void(const PointCloud&)>& write)>& pieces);
 // KITTI velodyne .bin: float32 x y z reflectance, little endian, 16 bytes per point.
 PointCloud ReadKittiBin(const std::string& path, CloudReadStats* stats = nullptr);
 void WriteKittiBin(const std::string& path, const PointCloud& cloud);

@@ -520,18 +520,28 @@ void WriteEmptyPcd(const std::string& tmp, PcdFormat format) {
 }
 }  // namespace
 
+void WritePcdPieces(const std::string& path, std::size_t points,
+                    const std::function<void(const std::function<void(const PointCloud&)>& write)>& pieces) {
+  // Streamed from the clouds' own arrays (x y z intensity, 16 bytes a point, as the format
+  // stores them on this little-endian machine): no copy of the cloud, unlike PCL's writer (a
+  // 32-byte-per-point PCL cloud plus the mapped file), so writing a session map costs no memory.
+  static_assert(sizeof(PointXYZI) == 16, "PointXYZI must be four packed floats");
+  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "binary PCD data is little-endian");
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    WritePcdHeader(out, points, "binary");
+    std::size_t written = 0;
+    pieces([&](const PointCloud& cloud) {
+      out.write(reinterpret_cast<const char*>(cloud.points.data()), std::streamsize(cloud.size() * sizeof(PointXYZI)));
+      written += cloud.size();
+    });
+    if (written != points)
+      throw Error(path + ": " + std::to_string(written) + " points written, the header says " + std::to_string(points));
+  });
+}
+
 void WritePcd(const std::string& path, const PointCloud& cloud, PcdFormat format) {
   if (format == PcdFormat::kBinary) {
-    // Streamed from the cloud's own array (x y z intensity, 16 bytes a point, as the format
-    // stores them on this little-endian machine): no copy of the cloud, unlike PCL's writer (a
-    // 32-byte-per-point PCL cloud plus the mapped file), so writing a session map costs no memory.
-    static_assert(sizeof(PointXYZI) == 16, "PointXYZI must be four packed floats");
-    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "binary PCD data is little-endian");
-    WriteFileAtomic(path, [&](std::ostream& out) {
-      WritePcdHeader(out, cloud.size(), "binary");
-      out.write(reinterpret_cast<const char*>(cloud.points.data()),
-                std::streamsize(cloud.size() * sizeof(PointXYZI)));
-    });
+    WritePcdPieces(path, cloud.size(), [&](const auto& write) { write(cloud); });
     return;
   }
   WritePathAtomic(path, [&](const std::string& tmp) {

@@ -115,6 +115,11 @@ struct RemovertConfig {
   double keyframe_voxel_m = 0.0;       // [m] extra voxel for per-keyframe clouds (0 = map voxel)
   bool write_keyframes = true;         // per keyframe local clouds
   bool write_ply = true;               // PLY twins with a class field
+  // --- tiles (tiles.hpp: HD removal tile by tile, memory bounded by the tile)
+  double tiles_edge_m = 0.0;  // [m] edge of the square world tiles; 0 = 2 x the keyframes' reach
+                              //     (TileReachM: max(sensor.max_range_m, submap_radius_m))
+  bool tiles_stage = false;   // true: the stage's HD removal runs tile by tile (RemoveHdTiled): the same
+                              //     files, memory bounded by the tile, more CPU where tiles share keyframes
 
   template <class V>
   void Visit(V& v) {
@@ -167,6 +172,8 @@ struct RemovertConfig {
     v("out.keyframe_voxel_m", keyframe_voxel_m, "m", 0.0, 10.0);
     v("out.write_keyframes", write_keyframes);
     v("out.write_ply", write_ply);
+    v("tiles.edge_m", tiles_edge_m, "m", 0.0, 1e6);
+    v("tiles.stage", tiles_stage);
   }
   // Range checks plus the cross-field rules (non-empty resolution lists, sensor table, ...).
   void Validate(const std::string& where = "removert config") const;

@@ -61,4 +61,47 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);
 
+// ---- the session map and the HD decision (hd_removal.cpp), shared with the tiles (tiles.cpp)
+
+// The map voxel's index along one axis: floor(v / voxel_m), the grid of geometry::VoxelDownsample.
+std::int64_t VoxelIndex(float v, double voxel_m);
+// A box of map voxels in xy, [x0, x1) x [y0, y1) (voxel indices): a tile's core or its core plus margin.
+struct VoxelBox {
+  std::int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  bool Contains(std::int64_t ix, std::int64_t iy) const { return ix >= x0 && ix < x1 && iy >= y0 && iy < y1; }
+};
+// Keyframes per map batch: a batch's scans are voxelised together (one centroid per voxel).
+constexpr std::size_t kMapBatch = 32;
+// The map of keyframes that hold the session positions `slots` (ascending): keyframe slot s is in
+// batch s / kMapBatch, and the batches' maps are merged as a binary tree over batch numbers (the
+// two halves of a node: per-voxel mean of their centroids; a node with one non-empty half is that
+// half, exactly). A voxel's centroid is therefore the same nested mean for any subset of the
+// session's keyframes that holds every keyframe with points in that voxel: a tile's map equals
+// the session map in every voxel inside its box, bit for bit. `clip` (null = none) keeps the
+// scan points whose voxel lies in the box. Memory: one batch of scans and one pending map per
+// tree level (log2 of the batches).
+PointCloud BuildMap(const std::vector<WorldKeyframe>& keyframes, const std::vector<std::size_t>& slots,
+                    const RemovertConfig& cfg, int threads, const VoxelBox* clip);
+// What HD removal decided for every map point.
+struct HdDecision {
+  enum : std::uint8_t { kStatic = 0, kReverted, kRemoved, kDilated };
+  std::vector<std::uint8_t> state;  // per map point
+  int levels = 0;                   // removal resolutions
+  std::vector<bool> candidate_at;   // [point * levels + level]: a removal candidate at that resolution
+};
+HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                    int threads);
+// The static and HD maps of the points with (*include)[i] (null: all) and their stats.
+HdResult SplitHd(const PointCloud& map, const HdDecision& decision, const std::vector<bool>* include);
+
+// ---- tiles (tiles.cpp), shared with the tile jobs from files (tile_jobs.cpp)
+// Clouds each in voxel order (x, then y, then z voxel index; VoxelDownsample's order: a tile's
+// part, a subsequence of its map) merged into one stream in voxel order: emit() gets it in pieces
+// of at most kMergePiece points. Memory: the parts and one piece.
+constexpr std::size_t kMergePiece = 1 << 16;
+void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
+                       const std::function<void(const PointCloud&)>& emit);
+// Adds a tile's counts and seconds to *sum.
+void AddHdStats(const HdStats& part, HdStats* sum);
+
 }  // namespace ltm::removert::detail

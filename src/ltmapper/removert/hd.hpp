@@ -22,7 +22,8 @@ struct HdResult {
   HdStats stats;
 };
 // The session map: union of the keyframe scans in the world frame (range-filtered), voxel
-// downsampled; built in batches so only a few scans are in memory at once.
+// downsampled; built in batches of keyframes merged as a binary tree over the batches, so only a
+// few scans are in memory at once and a tile's map (tiles.hpp) has the same voxels, bit for bit.
 PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                            int threads = 0);
 // HD removal of one session (builds its map first).

@@ -45,47 +45,96 @@ void RemovertConfig::Validate(const std::string& where) const {
   if (ld_resolutions_deg.empty()) fail("ld.resolutions_deg must not be empty");
 }
 
-PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                           int threads) {
-  // Batches of keyframes: each scan is range filtered, moved to the world frame and the batch
-  // voxelised; the accumulated map is re-voxelised whenever it doubles, so memory stays at
-  // about two maps plus one batch of scans. Voxelised clouds are in voxel order, so each
-  // concatenation is a list of sorted runs (VoxelDownsampleRuns merges them).
-  // The batch size is fixed, not a multiple of the threads: a voxel's centroid is summed in batch
-  // order, so a batch that grew with --threads changed the map's last bits (issue #16: the live
-  // map differed between --threads 16 and 2).
-  constexpr std::size_t batch = 32;
-  PointCloud acc;
-  std::vector<std::size_t> acc_runs;  // starts of acc's sorted runs
-  std::size_t last_size = 0;
-  for (std::size_t b = 0; b < keyframes.size(); b += batch) {
-    const std::size_t e = std::min(keyframes.size(), b + batch);
+namespace detail {
+
+std::int64_t VoxelIndex(float v, double voxel_m) { return std::int64_t(std::floor(double(v) / voxel_m)); }
+
+namespace {
+
+// One keyframe's scan for the map: range filtered, in the world frame, clipped to `clip` (when
+// given) and voxelised. Clipping keeps the order of the points, so a voxel inside the box sums
+// the same points in the same order as without it.
+PointCloud ScanForMap(const WorldKeyframe& kf, const RemovertConfig& cfg, const VoxelBox* clip) {
+  const auto scan = LoadScan(kf);
+  PointCloud local = geometry::RangeFilter(*scan, cfg.min_range_m, cfg.max_range_m);
+  local.cls.clear();
+  local.session.clear();
+  local.object.clear();
+  geometry::TransformInPlace(local, kf.T_world_sensor);
+  if (clip) {
+    std::vector<bool> inside(local.size());
+    for (std::size_t i = 0; i < local.size(); ++i)
+      inside[i] = clip->Contains(VoxelIndex(local.points[i].x, cfg.map_voxel_m),
+                                 VoxelIndex(local.points[i].y, cfg.map_voxel_m));
+    local = local.select(inside);
+  }
+  return geometry::VoxelDownsample(local, cfg.map_voxel_m, 1);
+}
+
+// Per-voxel means of two voxelised clouds (a before b).
+PointCloud MeanOfTwo(PointCloud a, const PointCloud& b, double voxel_m, int threads) {
+  const std::size_t split = a.size();
+  a.append(b);
+  return geometry::VoxelDownsampleRuns(a, {0, split}, voxel_m, threads);
+}
+
+// Bit length of x: the level of the lowest common ancestor of two leaves whose ids differ by x.
+int BitLength(std::uint64_t x) {
+  int n = 0;
+  for (; x != 0; x >>= 1) ++n;
+  return n;
+}
+
+}  // namespace
+
+PointCloud BuildMap(const std::vector<WorldKeyframe>& keyframes, const std::vector<std::size_t>& slots,
+                    const RemovertConfig& cfg, int threads, const VoxelBox* clip) {
+  if (slots.size() != keyframes.size()) throw Error("removert: one session slot per keyframe");
+  for (std::size_t k = 1; k < slots.size(); ++k)
+    if (slots[k] <= slots[k - 1]) throw Error("removert: keyframe slots must ascend");
+  // Pending subtrees, bottom to top of the stack; `join` = level of the common ancestor with the
+  // subtree below. A new batch first folds every pending subtree that joins below its own join.
+  struct Pending {
+    PointCloud map;
+    int join;
+  };
+  std::vector<Pending> stack;
+  auto fold = [&] {
+    Pending top = std::move(stack.back());
+    stack.pop_back();
+    stack.back().map = MeanOfTwo(std::move(stack.back().map), top.map, cfg.map_voxel_m, threads);
+  };
+  std::size_t last_batch = 0;
+  for (std::size_t b = 0; b < keyframes.size();) {
+    const std::size_t batch = slots[b] / kMapBatch;
+    std::size_t e = b;
+    while (e < keyframes.size() && slots[e] / kMapBatch == batch) ++e;
     std::vector<PointCloud> parts(e - b);
-    detail::ParallelFor(e - b, threads, [&](std::size_t k) {
-      const WorldKeyframe& kf = keyframes[b + k];
-      const auto scan = detail::LoadScan(kf);
-      PointCloud local = geometry::RangeFilter(*scan, cfg.min_range_m, cfg.max_range_m);
-      local.cls.clear();
-      local.session.clear();
-      local.object.clear();
-      geometry::TransformInPlace(local, kf.T_world_sensor);
-      parts[k] = geometry::VoxelDownsample(local, cfg.map_voxel_m, 1);
-    });
+    ParallelFor(e - b, threads, [&](std::size_t k) { parts[k] = ScanForMap(keyframes[b + k], cfg, clip); });
     PointCloud merged;
     std::vector<std::size_t> part_runs;
     for (auto& p : parts) {
       part_runs.push_back(merged.size());
       merged.append(p);
+      p = PointCloud();
     }
-    acc_runs.push_back(acc.size());
-    acc.append(geometry::VoxelDownsampleRuns(merged, part_runs, cfg.map_voxel_m, threads));
-    if (acc.size() > 2 * std::max<std::size_t>(last_size, 1 << 16)) {
-      acc = geometry::VoxelDownsampleRuns(acc, acc_runs, cfg.map_voxel_m, threads);
-      acc_runs.assign(1, 0);
-      last_size = acc.size();
-    }
+    const int join = stack.empty() ? 0 : BitLength(std::uint64_t(batch ^ last_batch));
+    while (stack.size() >= 2 && stack.back().join < join) fold();
+    stack.push_back({geometry::VoxelDownsampleRuns(merged, part_runs, cfg.map_voxel_m, threads), join});
+    last_batch = batch;
+    b = e;
   }
-  return geometry::VoxelDownsampleRuns(acc, acc_runs, cfg.map_voxel_m, threads);
+  while (stack.size() >= 2) fold();
+  return stack.empty() ? PointCloud{} : std::move(stack.back().map);
+}
+
+}  // namespace detail
+
+PointCloud BuildSessionMap(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                           int threads) {
+  std::vector<std::size_t> slots(keyframes.size());
+  for (std::size_t k = 0; k < slots.size(); ++k) slots[k] = k;
+  return detail::BuildMap(keyframes, slots, cfg, threads, nullptr);
 }
 
 namespace {
@@ -221,27 +270,26 @@ std::vector<std::uint8_t> GroundwardMask(const PointCloud& map, const std::vecto
 struct Candidates {
   std::vector<std::uint32_t> index;  // map indices
   std::vector<double> s_max;         // their strongest removal evidence over the resolutions
+  std::vector<bool> at;              // [candidate * levels + level]: a candidate at that removal resolution
 };
-Candidates FindCandidates(const VisibilityVotes& votes, std::size_t n, const RemovertConfig& cfg, HdStats* st) {
+Candidates FindCandidates(const VisibilityVotes& votes, std::size_t n, const RemovertConfig& cfg) {
   const int n_remove = int(cfg.remove_resolutions_deg.size());
-  st->removed_per_resolution.assign(std::size_t(n_remove), 0);
   Candidates c;
+  std::vector<bool> level_hit(std::size_t(n_remove), false);
   for (std::size_t i = 0; i < n; ++i) {
     bool is_cand = false;
     double sm = 0;
     for (int l = 0; l < n_remove; ++l) {
       const double s = votes.See(l, i), h = votes.Hit(l, i);
       sm = std::max(sm, s);
-      if (s >= cfg.remove_min_votes && s >= cfg.remove_min_ratio * (s + h)) {
-        is_cand = true;
-        ++st->removed_per_resolution[std::size_t(l)];
-      }
+      level_hit[std::size_t(l)] = s >= cfg.remove_min_votes && s >= cfg.remove_min_ratio * (s + h);
+      is_cand = is_cand || level_hit[std::size_t(l)];
     }
     if (!is_cand) continue;
     c.index.push_back(std::uint32_t(i));
     c.s_max.push_back(sm);
+    c.at.insert(c.at.end(), level_hit.begin(), level_hit.end());
   }
-  st->candidates = c.index.size();
   return c;
 }
 
@@ -273,55 +321,84 @@ std::vector<bool> Revert(const PointCloud& map, const Candidates& cand, const st
 // hd.dilate_voxels around the points of removed bodies (BodyPoints), not around removed patches
 // of flat ground, and from a body's foot (within dilate_body_m of the ground) down to one map
 // voxel above the ground (GroundwardMask). Decided against the removed set before dilation: no
-// transitive growth. Returns how many points it added to *dynamic.
-std::size_t Dilate(const PointCloud& map, const RemovertConfig& cfg, int threads, std::vector<bool>* dynamic) {
-  const PointCloud removed = map.select(*dynamic);
-  std::vector<std::uint8_t> grow = GrowMask(map, *dynamic, removed, std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m, threads);
+// transitive growth. The points it adds become HdDecision::kDilated in *state.
+void Dilate(const PointCloud& map, const RemovertConfig& cfg, int threads, const std::vector<bool>& removed_mask,
+            std::vector<std::uint8_t>* state) {
+  const PointCloud removed = map.select(removed_mask);
+  std::vector<std::uint8_t> grow = GrowMask(map, removed_mask, removed, std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m, threads);
   if (cfg.dilate_voxels > 1.0) {
     const PointCloud bodies = BodyPoints(removed, cfg.dilate_body_m, threads);
-    const std::vector<std::uint8_t> body = GrowMask(map, *dynamic, bodies, cfg.DilateM(), threads);
+    const std::vector<std::uint8_t> body = GrowMask(map, removed_mask, bodies, cfg.DilateM(), threads);
     const std::vector<std::uint8_t> down =
-        GroundwardMask(map, *dynamic, bodies, cfg.DilateM(), cfg.dilate_body_m, cfg.map_voxel_m, threads);
+        GroundwardMask(map, removed_mask, bodies, cfg.DilateM(), cfg.dilate_body_m, cfg.map_voxel_m, threads);
     for (std::size_t i = 0; i < grow.size(); ++i) grow[i] |= body[i] | down[i];
   }
-  std::size_t added = 0;
   for (std::size_t i = 0; i < map.size(); ++i)
-    if (grow[i]) {
-      (*dynamic)[i] = true;
-      ++added;
-    }
-  return added;
+    if (grow[i]) (*state)[i] = detail::HdDecision::kDilated;
 }
 
 }  // namespace
 
-HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
-                         const RemovertConfig& user_cfg, int threads) {
+namespace detail {
+
+HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& user_cfg,
+                    int threads) {
   user_cfg.Validate();
   const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
-  const auto t0 = std::chrono::steady_clock::now();
   const VisibilityVotes votes = CountVisibility(map, keyframes, cfg.remove_resolutions_deg, cfg, threads);
-
-  HdResult res;
-  HdStats& st = res.stats;
-  st.map_points = map.size();
-  const Candidates cand = FindCandidates(votes, map.size(), cfg, &st);
+  const Candidates cand = FindCandidates(votes, map.size(), cfg);
   const std::vector<bool> reverted = Revert(map, cand, keyframes, cfg, threads);
+  HdDecision d;
+  d.levels = int(cfg.remove_resolutions_deg.size());
+  d.state.assign(map.size(), HdDecision::kStatic);
+  d.candidate_at.assign(map.size() * std::size_t(d.levels), false);
   std::vector<bool> dynamic(map.size(), false);
   for (std::size_t j = 0; j < cand.index.size(); ++j) {
-    if (reverted[j]) {
-      ++st.reverted;
-    } else {
-      dynamic[cand.index[j]] = true;
-      ++st.removed;
-    }
+    const std::size_t i = cand.index[j];
+    const std::size_t levels = std::size_t(d.levels);
+    for (std::size_t l = 0; l < levels; ++l) d.candidate_at[i * levels + l] = cand.at[j * levels + l];
+    d.state[i] = reverted[j] ? HdDecision::kReverted : HdDecision::kRemoved;
+    dynamic[i] = !reverted[j];
   }
-  if (st.removed > 0 && cfg.dilate_voxels > 0.0) st.dilated = Dilate(map, cfg, threads, &dynamic);
-  std::vector<bool> keep(dynamic.size());
-  for (std::size_t i = 0; i < dynamic.size(); ++i) keep[i] = !dynamic[i];
+  if (cfg.dilate_voxels > 0.0 && std::find(dynamic.begin(), dynamic.end(), true) != dynamic.end())
+    Dilate(map, cfg, threads, dynamic, &d.state);
+  return d;
+}
+
+HdResult SplitHd(const PointCloud& map, const HdDecision& d, const std::vector<bool>* include) {
+  HdResult res;
+  HdStats& st = res.stats;
+  st.removed_per_resolution.assign(std::size_t(d.levels), 0);
+  std::vector<bool> keep(map.size(), false), removed(map.size(), false);
+  for (std::size_t i = 0; i < map.size(); ++i) {
+    if (include && !(*include)[i]) continue;
+    ++st.map_points;
+    bool candidate = false;
+    for (int l = 0; l < d.levels; ++l)
+      if (d.candidate_at[i * std::size_t(d.levels) + std::size_t(l)]) {
+        ++st.removed_per_resolution[std::size_t(l)];
+        candidate = true;
+      }
+    st.candidates += candidate ? 1 : 0;
+    const std::uint8_t s = d.state[i];
+    st.reverted += s == HdDecision::kReverted ? 1 : 0;
+    st.removed += s == HdDecision::kRemoved ? 1 : 0;
+    st.dilated += s == HdDecision::kDilated ? 1 : 0;
+    removed[i] = s == HdDecision::kRemoved || s == HdDecision::kDilated;
+    keep[i] = !removed[i];
+  }
   res.static_map = map.select(keep);
-  res.hd_map = map.select(dynamic);
-  st.seconds_votes = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.hd_map = map.select(removed);
+  return res;
+}
+
+}  // namespace detail
+
+HdResult RemoveHdFromMap(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes,
+                         const RemovertConfig& cfg, int threads) {
+  const auto t0 = std::chrono::steady_clock::now();
+  HdResult res = detail::SplitHd(map, detail::DecideHd(map, keyframes, cfg, threads), nullptr);
+  res.stats.seconds_votes = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
 }
 

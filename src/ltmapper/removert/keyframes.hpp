@@ -21,6 +21,11 @@ struct WorldKeyframe {
 // A session's keyframes placed with its own poses (T_session_sensor as the world frame): HD
 // removal of one drive, e.g. a KTH DynamicMap sequence whose poses are already in its world.
 std::vector<WorldKeyframe> KeyframesOf(const Session& session);
+// A session folder's keyframes (scans read on demand) placed with the world poses of a KITTI pose
+// file (one per keyframe, in order; ltm::Error naming the file otherwise), or with the session's
+// own poses when `poses_file` is empty. `name` (optional): the session's name.
+std::vector<WorldKeyframe> LoadWorldKeyframes(const std::string& session_dir, const std::string& poses_file,
+                                              std::string* name = nullptr);
 
 // The config with its sensor resolved (sensor_model, fov_*_deg): the preset or table, else
 // estimated from up to 8 of the keyframes' scans (spread over the session). A resolved config is

@@ -20,10 +20,11 @@
 // (at most one per worker in memory) and each keyframe only touches the map points within
 // `submap_radius_m` of it (tile index), so memory is the maps of at most two sessions (the
 // central and the current query: a session's maps are freed when no later pair needs them) plus
-// O(threads) scans; it still grows with the length of a session (its whole map is in memory).
+// O(threads) scans; it still grows with the length of a session (its whole map is in memory),
+// unless HD removal runs tile by tile (tiles.hpp: the same maps, memory bounded by the tile).
 //
 // This header only gathers the module's parts, one topic each (include the part you need):
-// config.hpp, keyframes.hpp, hd.hpp, ld.hpp, visibility.hpp, stage.hpp.
+// config.hpp, keyframes.hpp, hd.hpp, ld.hpp, visibility.hpp, stage.hpp, tiles.hpp.
 #pragma once
 
 #include "ltmapper/removert/config.hpp"
@@ -32,3 +33,4 @@
 #include "ltmapper/removert/ld.hpp"
 #include "ltmapper/removert/visibility.hpp"
 #include "ltmapper/removert/stage.hpp"
+#include "ltmapper/removert/tiles.hpp"

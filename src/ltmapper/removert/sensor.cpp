@@ -1,9 +1,12 @@
 // The sensor model of a removert run: resolved once from the config or the scans.
 #include "ltmapper/removert/detail.hpp"
 
+#include "ltmapper/io/io.hpp"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <filesystem>
 
 namespace ltm::removert {
 
@@ -24,6 +27,21 @@ std::vector<WorldKeyframe> KeyframesOf(const Session& session) {
     out.push_back(std::move(w));
   }
   return out;
+}
+
+std::vector<WorldKeyframe> LoadWorldKeyframes(const std::string& session_dir, const std::string& poses_file,
+                                              std::string* name) {
+  const Session sess = io::LoadSession(session_dir);
+  if (name) *name = sess.name.empty() ? std::filesystem::path(session_dir).filename().string() : sess.name;
+  if (poses_file.empty()) return KeyframesOf(sess);
+  const std::vector<Pose> poses = io::ReadKittiPoses(poses_file);
+  if (poses.size() != sess.keyframes.size())
+    throw Error(poses_file, 0,
+                std::to_string(poses.size()) + " poses but session " + session_dir + " has " +
+                    std::to_string(sess.keyframes.size()) + " keyframes (one pose per keyframe, in order)");
+  std::vector<WorldKeyframe> kfs = KeyframesOf(sess);
+  for (std::size_t k = 0; k < poses.size(); ++k) kfs[k].T_world_sensor = poses[k];
+  return kfs;
 }
 
 PointCloud detail::Positions(const std::vector<WorldKeyframe>& keyframes) {

@@ -86,28 +86,6 @@ void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const 
 
 // ---- the stage's steps -------------------------------------------------------------------
 
-// A session's keyframes placed with one world pose each (poses file in keyframe order).
-std::vector<WorldKeyframe> LoadWorldKeyframes(const std::string& session_dir, const std::string& poses_file,
-                                              std::string* name) {
-  const Session sess = io::LoadSession(session_dir);
-  const std::vector<Pose> poses = io::ReadKittiPoses(poses_file);
-  if (poses.size() != sess.keyframes.size())
-    throw Error(poses_file, 0,
-                std::to_string(poses.size()) + " poses but session " + session_dir + " has " +
-                    std::to_string(sess.keyframes.size()) + " keyframes (one pose per keyframe, in order)");
-  *name = sess.name.empty() ? fs::path(session_dir).filename().string() : sess.name;
-  std::vector<WorldKeyframe> kfs;
-  for (std::size_t k = 0; k < poses.size(); ++k) {
-    WorldKeyframe w;
-    w.index = sess.keyframes[k].index;
-    w.T_world_sensor = poses[k];
-    w.cloud = sess.keyframes[k].cloud;
-    w.cloud_path = sess.keyframes[k].cloud_path;
-    kfs.push_back(std::move(w));
-  }
-  return kfs;
-}
-
 // One session as the stage holds it: its keyframes and, once HD removal ran, its maps.
 struct SessionData {
   std::string name;
@@ -117,10 +95,10 @@ struct SessionData {
 
 // HD removal of session `s`; writes `dir` (static_map.pcd, hd_map.pcd, map.ply).
 HdStats RemoveSessionHd(SessionData& sd, int s, const std::string& dir, const RemovertConfig& cfg, int threads) {
-  spdlog::info("removert: HD removal of {} ({} keyframes)", sd.name, sd.kfs.size());
+  spdlog::info("removert: HD removal of {} ({} keyframes{})", sd.name, sd.kfs.size(), cfg.tiles_stage ? ", tile by tile" : "");
   HdResult hd;
   try {
-    hd = RemoveHd(sd.kfs, cfg, threads);
+    hd = cfg.tiles_stage ? RemoveHdTiled(sd.kfs, cfg, threads) : RemoveHd(sd.kfs, cfg, threads);
   } catch (const Error& e) {  // name the session: an empty scan rejects it, as LT-SLAM does
     throw Error("removert: session '" + sd.name + "': " + e.what());
   }

@@ -1,0 +1,90 @@
+// `ltmapper tiles`: HD removal of one session tile by tile (removert/tiles.hpp), memory bounded by
+// the tile. plan -> run (each tile a job: here one after another, or on Dask through
+// python/ltmapper_dask.py) -> merge: the maps of `ltmapper hd`, bit for bit.
+#include "command.hpp"
+
+#include "ltmapper/io/io.hpp"
+#include "ltmapper/removert/removert.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <memory>
+
+namespace ltm::app {
+namespace {
+
+struct TilesArgs {
+  CommonOptions common;
+  std::string session, poses, config, plan, out;
+  std::vector<std::string> set;
+  std::vector<std::size_t> tiles;
+  bool force = false;
+};
+
+void Plan(const TilesArgs& a) {
+  auto cfg = LoadParams<removert::RemovertConfig>(a.config, a.set);
+  cfg.Validate(a.config.empty() ? "removert config" : a.config);
+  const removert::TilePlan plan = removert::WriteTilePlan(a.out, a.session, a.poses, cfg);
+  std::size_t most = 0;
+  for (const auto& t : plan.tiles) most = std::max(most, t.keyframes.size());
+  spdlog::info("tiles: {} tiles of {:.1f} m (margin {:.2f} m, reach {:.1f} m) over {} keyframes, at most {} per tile; plan {}",
+               plan.tiles.size(), plan.EdgeM(), double(plan.margin_voxels) * plan.voxel_m, plan.reach_m,
+               plan.session_keyframes, most, a.out);
+}
+
+void Run(const TilesArgs& a) {
+  std::vector<std::size_t> tiles = a.tiles;
+  if (tiles.empty()) {  // every tile, one after another
+    const std::size_t n = removert::ReadTilePlan(a.plan).plan.tiles.size();
+    for (std::size_t t = 0; t < n; ++t) tiles.push_back(t);
+  }
+  std::size_t ran = 0;
+  for (std::size_t t : tiles) ran += removert::RunTileJob(a.plan, t, a.common.threads, a.force) ? 1 : 0;
+  spdlog::info("tiles: ran {} of {} tiles ({} done before)", ran, tiles.size(), tiles.size() - ran);
+}
+
+void Merge(const TilesArgs& a) {
+  const removert::HdStats st = removert::MergeTileJobs(a.plan, a.out);
+  spdlog::info("tiles: map {} points, removed {} + {} dilated, reverted {}; HD-free map {}", st.map_points, st.removed,
+               st.dilated, st.reverted, io::layout::StaticMapIn(a.out));
+}
+
+void Setup(CLI::App& parent) {
+  auto a = std::make_shared<TilesArgs>();
+  auto* cmd = parent.add_subcommand("tiles", "HD removal of one session tile by tile (memory bounded by the tile): "
+                                             "plan, run the tiles (here or on Dask), merge");
+  cmd->require_subcommand(1);
+  auto* plan = cmd->add_subcommand("plan", "Split the session's world into tiles: PLAN_DIR/plan.json + config.yaml");
+  AddCommonOptions(*plan, a->common);
+  plan->add_option("session-dir", a->session, "Session directory (any layout `ltmapper info` names)")->required()
+      ->check(CLI::ExistingDirectory);
+  plan->add_option("--poses", a->poses, "KITTI world poses, one per keyframe (default: the session's own poses)")
+      ->check(CLI::ExistingFile);
+  plan->add_option("--config", a->config, "params_ltremovert.yaml (every key optional; tiles.edge_m)")
+      ->check(CLI::ExistingFile);
+  plan->add_option("--set", a->set, "Override a config key, e.g. --set tiles.edge_m=50 (repeatable)");
+  plan->add_option("--out", a->out, "Plan directory (replaced whole when it holds a plan.json)")->required();
+  plan->callback([a] { Plan(*a); });
+
+  auto* run = cmd->add_subcommand("run", "Run tile jobs: PLAN_DIR/parts/tile_NNNNNN/ (tiles already done are skipped)");
+  AddCommonOptions(*run, a->common);
+  run->add_option("plan-dir", a->plan, "Plan directory (`ltmapper tiles plan`)")->required()->check(CLI::ExistingDirectory);
+  run->add_option("--tile", a->tiles, "Tile number (repeatable; default: every tile, one after another)");
+  run->add_flag("--force", a->force, "Run the tiles even when they are done");
+  run->callback([a] { Run(*a); });
+
+  auto* merge = cmd->add_subcommand("merge", "Merge the tiles' parts: OUT/static_map.pcd, hd_map.pcd, report.json");
+  AddCommonOptions(*merge, a->common);
+  merge->add_option("plan-dir", a->plan, "Plan directory (every tile done)")->required()->check(CLI::ExistingDirectory);
+  merge->add_option("--out", a->out, "Output directory (replaced whole when it holds a report.json)")->required();
+  merge->callback([a] { Merge(*a); });
+  for (CLI::App* sub : {plan, run, merge})
+    sub->parse_complete_callback([a] {
+      if (a->common.quiet) spdlog::set_level(spdlog::level::warn);
+    });
+}
+
+LTM_COMMAND(46, Setup);
+
+}  // namespace
+}  // namespace ltm::app

@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# Tiles benchmark (issue #18): simulates one session per length on a long route (a world of
+# --extent metres, keyframes 2 m apart) and runs HD removal of it whole (`ltmapper hd`) and tile
+# by tile (`ltmapper tiles plan` / `run` / `merge`, every tile in one process, one after another).
+# Prints per length: peak RSS (/usr/bin/time -v) and wall seconds per keyframe of both, the tiles,
+# the largest tile (its core's map points and the keyframes it reads: a tile job's memory follows
+# them), the tiles' parts on disk, and whether the merged HD-free map is the whole-session map byte
+# for byte.
+# usage: bench/bench_tiles.sh [--lengths "250 500 1000 2000"] [--extent M] [--threads N] [--build DIR] [--work DIR]
+#        [--set KEY=VALUE]...   (removert keys for both runs, e.g. --set tiles.edge_m=100)
+set -euo pipefail
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+BUILD="$ROOT/build"; WORK=""; LENGTHS="250 500 1000 2000"; EXTENT=1000; THREADS=2; SETS=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --lengths) LENGTHS="$2"; shift 2 ;;
+    --extent) EXTENT="$2"; shift 2 ;;
+    --threads) THREADS="$2"; shift 2 ;;
+    --build) BUILD="$2"; shift 2 ;;
+    --work) WORK="$2"; shift 2 ;;
+    --set) SETS+=(--set "$2"); shift 2 ;;
+    *) echo "unknown argument: $1" >&2; exit 2 ;;
+  esac
+done
+WORK="${WORK:-$(mktemp -d /tmp/ltm_bench_tiles.XXXXXX)}"
+EXE="$BUILD/apps/ltmapper"
+PYTHON=/usr/bin/python3
+echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "sessions: world ${EXTENT} m, keyframes 2 m apart, 32 x 512 beams; --threads $THREADS ${SETS[*]:-}"
+
+# Peak RSS [MB] and wall seconds of a command, from /usr/bin/time -v (appended to $WORK/last_time).
+timed() {
+  /usr/bin/time -v -o "$WORK/last_time" "$@" > /dev/null
+  local kb wall
+  kb=$(awk -F': ' '/Maximum resident set size/ {print $2}' "$WORK/last_time")
+  wall=$(awk -F': ' '/Elapsed \(wall clock\)/ {print $2}' "$WORK/last_time" | awk -F: '{ s = 0; for (i = 1; i <= NF; ++i) s = s * 60 + $i; print s }')
+  echo "$((kb / 1024)) $wall"
+}
+
+printf "| keyframes | map points | tiles | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
+printf "|---|---|---|---|---|---|---|---|---|---|\n"
+for K in $LENGTHS; do
+  dir="$WORK/k$K"
+  mkdir -p "$dir"
+  printf "world:\n  extent_m: %s\nroute:\n  sessions: 1\n  keyframes: %s\n  keyframe_spacing_m: 2.0\nlidar:\n  beams: 32\n  columns: 512\n" \
+    "$EXTENT" "$K" > "$dir/sim.yaml"
+  [ -d "$dir/sim/sessions/session_00" ] || "$EXE" sim --config "$dir/sim.yaml" --out "$dir/sim" --quiet --threads "$THREADS"
+  ses="$dir/sim/sessions/session_00"
+  read -r whole_mb whole_s < <(timed "$EXE" hd "$ses" "${SETS[@]}" --out "$dir/whole.pcd" --threads "$THREADS" --quiet)
+  read -r plan_mb plan_s < <(timed "$EXE" tiles plan "$ses" "${SETS[@]}" --out "$dir/plan" --quiet)
+  read -r run_mb run_s < <(timed "$EXE" tiles run "$dir/plan" --threads "$THREADS" --quiet)
+  read -r merge_mb merge_s < <(timed "$EXE" tiles merge "$dir/plan" --out "$dir/merged" --quiet)
+  tiled_mb=$(printf "%s\n%s\n%s\n" "$plan_mb" "$run_mb" "$merge_mb" | sort -n | tail -1)
+  tiled_s=$(awk "BEGIN { print $plan_s + $run_s + $merge_s }")
+  points=$(awk -F': ' '/"map_points"/ {gsub(/,/, "", $2); print $2}' "$dir/merged/report.json")
+  tiles=$(awk -F': ' '/"tiles"/ {gsub(/,/, "", $2); print $2; exit}' "$dir/merged/report.json")
+  largest=$(cat "$dir"/plan/parts/tile_*/tile.json | awk -F': ' '/"map_points"/ {v = $2 + 0; if (v > m) m = v} END {print m}')
+  most_kf=$("$PYTHON" -c "import json, sys; print(max(len(t['keyframes']) for t in json.load(open(sys.argv[1]))['tiles']))" "$dir/plan/plan.json")
+  parts_mb=$(du -sm "$dir/plan/parts" | cut -f1)
+  equal=$(cmp -s "$dir/whole.pcd" "$dir/merged/static_map.pcd" && echo "bytes equal" || echo "DIFFERENT")
+  printf "| %s | %s | %s | %s, %s | %s | %s | %.4f | %s (run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$tiles" \
+    "$largest" "$most_kf" "$parts_mb" "$whole_mb" \
+    "$(awk "BEGIN { print $whole_s / $K }")" "$tiled_mb" "$run_mb" "$merge_mb" "$(awk "BEGIN { print $tiled_s / $K }")" "$equal"
+done

@@ -1,0 +1,213 @@
+// Tile jobs from files (tiles.hpp, "from files"): the plan folder, one tile's parts, the merge.
+#include "ltmapper/removert/tiles.hpp"
+
+#include "ltmapper/removert/detail.hpp"
+
+#include "ltmapper/io/io.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+
+namespace ltm::removert {
+namespace {
+
+namespace fs = std::filesystem;
+namespace json = io::json;
+
+std::string PlanFile(const std::string& plan_dir) { return plan_dir + "/plan.json"; }
+std::string ConfigFile(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
+std::string TileJsonIn(const std::string& part_dir) { return part_dir + "/tile.json"; }
+
+json::Value ReadJson(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path, 0, "cannot open (missing?)");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return json::Parse(ss.str(), path);
+}
+
+// The member `key` of an object, of the given type; ltm::Error naming the file otherwise.
+const json::Value& Member(const json::Value& obj, const std::string& key, json::Value::Type type,
+                          const std::string& path) {
+  const json::Value* v = obj.Find(key);
+  if (!v || v->type != type) throw Error(path, 0, "missing or mistyped key '" + key + "'");
+  return *v;
+}
+// A non-negative integer member.
+std::size_t Count(const json::Value& v, const std::string& what, const std::string& path) {
+  if (v.type != json::Value::Type::kNumber || !(v.num >= 0) || v.num != std::floor(v.num) || v.num > 9e15)
+    throw Error(path, 0, what + " must be a non-negative integer");
+  return std::size_t(v.num);
+}
+std::int64_t Integer(const json::Value& v, const std::string& what, const std::string& path) {
+  if (v.type != json::Value::Type::kNumber || v.num != std::floor(v.num) || std::fabs(v.num) > 9e15)
+    throw Error(path, 0, what + " must be an integer");
+  return std::int64_t(v.num);
+}
+
+void WritePlanJson(const std::string& path, const TilePlanFile& f) {
+  json::Writer w;
+  w.BeginObject().String("format", "ltmapper tile plan").Int("version", 1);
+  w.String("session_dir", f.session_dir).String("poses_file", f.poses_file);
+  w.Int("keyframes", (long long)f.plan.session_keyframes).Number("voxel_m", f.plan.voxel_m);
+  w.Int("edge_voxels", f.plan.edge_voxels).Int("margin_voxels", f.plan.margin_voxels).Number("reach_m", f.plan.reach_m);
+  w.BeginArray("tiles");
+  for (const Tile& t : f.plan.tiles) {
+    w.BeginObject().Int("ix", t.ix).Int("iy", t.iy).BeginArray("keyframes");
+    for (std::size_t k : t.keyframes) w.Number(double(k));
+    w.EndArray().EndObject();
+  }
+  w.EndArray().EndObject();
+  io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
+}
+
+// The tiles of plan.json; the plan's numbers come from the config (PlanTiles) and must agree.
+std::vector<Tile> ReadTiles(const json::Value& doc, const TilePlan& expected, const std::string& path) {
+  using T = json::Value::Type;
+  if (Integer(Member(doc, "edge_voxels", T::kNumber, path), "edge_voxels", path) != expected.edge_voxels ||
+      Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path) != expected.margin_voxels)
+    throw Error(path, 0, "edge_voxels / margin_voxels differ from what config.yaml gives");
+  std::vector<Tile> tiles;
+  const std::size_t n = Count(Member(doc, "keyframes", T::kNumber, path), "keyframes", path);
+  for (const json::Value& jt : Member(doc, "tiles", T::kArray, path).arr) {
+    Tile t;
+    t.ix = Integer(Member(jt, "ix", T::kNumber, path), "ix", path);
+    t.iy = Integer(Member(jt, "iy", T::kNumber, path), "iy", path);
+    for (const json::Value& k : Member(jt, "keyframes", T::kArray, path).arr) {
+      t.keyframes.push_back(Count(k, "a tile's keyframe", path));
+      if (t.keyframes.back() >= n || (t.keyframes.size() > 1 && t.keyframes.back() <= t.keyframes[t.keyframes.size() - 2]))
+        throw Error(path, 0, "a tile's keyframes must ascend below " + std::to_string(n));
+    }
+    tiles.push_back(std::move(t));
+  }
+  return tiles;
+}
+
+void WriteStats(json::Writer& w, const HdStats& st) {
+  w.Int("map_points", (long long)st.map_points).Int("candidates", (long long)st.candidates);
+  w.Int("reverted", (long long)st.reverted).Int("removed", (long long)st.removed).Int("dilated", (long long)st.dilated);
+  w.BeginArray("removed_per_resolution");
+  for (std::size_t c : st.removed_per_resolution) w.Number(double(c));
+  w.EndArray().Number("seconds_map", st.seconds_map).Number("seconds_votes", st.seconds_votes);
+}
+
+HdStats ReadStats(const std::string& path) {
+  using T = json::Value::Type;
+  const json::Value doc = ReadJson(path);
+  auto count = [&](const char* key) { return Count(Member(doc, key, T::kNumber, path), key, path); };
+  HdStats st;
+  st.map_points = count("map_points");
+  st.candidates = count("candidates");
+  st.reverted = count("reverted");
+  st.removed = count("removed");
+  st.dilated = count("dilated");
+  for (const json::Value& c : Member(doc, "removed_per_resolution", T::kArray, path).arr)
+    st.removed_per_resolution.push_back(Count(c, "removed_per_resolution", path));
+  st.seconds_map = Member(doc, "seconds_map", T::kNumber, path).num;
+  st.seconds_votes = Member(doc, "seconds_votes", T::kNumber, path).num;
+  return st;
+}
+
+void WriteStatsJson(const std::string& path, const HdStats& st, std::size_t tiles) {
+  json::Writer w;
+  w.BeginObject().Int("tiles", (long long)tiles);
+  WriteStats(w, st);
+  w.EndObject();
+  io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
+}
+
+// One map of every tile (`file_in` of its part folder) into `path`, one column of tiles (same ix:
+// a contiguous range of x voxels) at a time in voxel order: memory = one column's parts.
+void MergeMapFile(const std::string& plan_dir, const TilePlan& plan, std::string (*file_in)(const std::string&),
+                  std::size_t points, const std::string& path) {
+  io::WritePcdPieces(path, points, [&](const auto& write) {
+    for (std::size_t b = 0, e = 0; b < plan.tiles.size(); b = e) {
+      std::vector<PointCloud> column;
+      for (e = b; e < plan.tiles.size() && plan.tiles[e].ix == plan.tiles[b].ix; ++e)
+        column.push_back(io::ReadPcd(file_in(TilePartDir(plan_dir, e))));
+      detail::MergeInVoxelOrder(column, plan.voxel_m, write);
+    }
+  });
+}
+
+std::string Absolute(const std::string& path) { return path.empty() ? path : fs::absolute(path).lexically_normal().string(); }
+
+}  // namespace
+
+TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
+                       const RemovertConfig& cfg) {
+  cfg.Validate();
+  TilePlanFile f{Absolute(session_dir), Absolute(poses_file), cfg, {}};
+  f.plan = PlanTiles(LoadWorldKeyframes(f.session_dir, f.poses_file), cfg);
+  io::StagingDir staging(plan_dir, "plan.json");
+  io::SaveConfigFields(ConfigFile(staging.path()), FieldsOf(f.cfg));
+  WritePlanJson(PlanFile(staging.path()), f);
+  staging.Publish();
+  return f.plan;
+}
+
+TilePlanFile ReadTilePlan(const std::string& plan_dir) {
+  using T = json::Value::Type;
+  const std::string path = PlanFile(plan_dir);
+  const json::Value doc = ReadJson(path);
+  if (Member(doc, "format", T::kString, path).str != "ltmapper tile plan")
+    throw Error(path, 0, "not a tile plan (format is not 'ltmapper tile plan')");
+  TilePlanFile f;
+  io::LoadConfig(ConfigFile(plan_dir), f.cfg);
+  f.cfg.Validate(ConfigFile(plan_dir));
+  f.session_dir = Member(doc, "session_dir", T::kString, path).str;
+  f.poses_file = Member(doc, "poses_file", T::kString, path).str;
+  f.plan = PlanTiles({}, f.cfg);
+  f.plan.session_keyframes = Count(Member(doc, "keyframes", T::kNumber, path), "keyframes", path);
+  f.plan.tiles = ReadTiles(doc, f.plan, path);
+  return f;
+}
+
+std::string TilePartDir(const std::string& plan_dir, std::size_t tile) {
+  std::ostringstream name;
+  name << plan_dir << "/parts/tile_" << std::setw(6) << std::setfill('0') << tile;
+  return name.str();
+}
+
+bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool force) {
+  const TilePlanFile f = ReadTilePlan(plan_dir);
+  const std::string dir = TilePartDir(plan_dir, tile);
+  if (!force && fs::exists(TileJsonIn(dir))) {
+    spdlog::info("tiles: tile {} is done ({})", tile, TileJsonIn(dir));
+    return false;
+  }
+  const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
+  const HdResult res = RemoveHdTile(f.plan, tile, kfs, f.cfg, threads);
+  fs::remove(TileJsonIn(dir));  // forced: not done while its parts are rewritten
+  io::MakeDirs(dir);
+  io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);
+  io::WritePcd(io::layout::HdMapIn(dir), res.hd_map);
+  WriteStatsJson(TileJsonIn(dir), res.stats, 1);  // last: the tile is done
+  spdlog::info("tiles: tile {} of {}: {} keyframes, {} static + {} HD points", tile, f.plan.tiles.size(),
+               f.plan.tiles[tile].keyframes.size(), res.static_map.size(), res.hd_map.size());
+  return true;
+}
+
+HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
+  const TilePlanFile f = ReadTilePlan(plan_dir);
+  HdStats st;
+  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) {  // every tile done before writing anything
+    const std::string done = TileJsonIn(TilePartDir(plan_dir, t));
+    if (!fs::exists(done)) throw Error(done, 0, "tile " + std::to_string(t) + " is not done");
+    detail::AddHdStats(ReadStats(done), &st);
+  }
+  io::StagingDir staging(out_dir, "report.json");
+  const std::size_t hd = st.removed + st.dilated;
+  MergeMapFile(plan_dir, f.plan, io::layout::StaticMapIn, st.map_points - hd, io::layout::StaticMapIn(staging.path()));
+  MergeMapFile(plan_dir, f.plan, io::layout::HdMapIn, hd, io::layout::HdMapIn(staging.path()));
+  WriteStatsJson(staging.path() + "/report.json", st, f.plan.tiles.size());
+  staging.Publish();
+  return st;
+}
+
+}  // namespace ltm::removert

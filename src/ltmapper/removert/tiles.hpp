@@ -1,0 +1,97 @@
+// ltmapper removert: HD removal tile by tile, with memory bounded by the tile (issue #18).
+//
+// The world's xy plane is cut into square tiles of whole map voxels (tiles.edge_m). A map point
+// belongs to the tile whose core holds its voxel. Its HD decision (hd.hpp) reads only
+//  - the keyframes within TileReachM of it: its voxel holds returns of keyframes within
+//    sensor.max_range_m, and keyframes within submap_radius_m vote on it;
+//  - the map points within TileMarginM of it (per axis in xy): the normals of removal candidates
+//    and the dilation of removed points around it (TileMarginM lists the terms).
+// A tile's job builds the map of the keyframes that reach its core plus margin, clipped to that
+// box (the session map's voxels, bit for bit: detail::BuildMap), decides HD on it and keeps the
+// points of its core. MergeTiles concatenates the cores in voxel order: RemoveHd's maps.
+#pragma once
+
+#include "ltmapper/removert/hd.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace ltm::removert {
+
+struct Tile {
+  std::int64_t ix = 0, iy = 0;         // core: voxels [ix, ix + 1) x [iy, iy + 1) tile edges
+  std::vector<std::size_t> keyframes;  // session positions of the keyframes that reach it, ascending
+};
+struct TilePlan {
+  double voxel_m = 0.0;              // [m] map voxel (map_voxel_m)
+  std::int64_t edge_voxels = 0;      // tile edge [map voxels]
+  std::int64_t margin_voxels = 0;    // margin around the core [map voxels]
+  double reach_m = 0.0;              // [m] keyframes this close (xy) to core + margin belong to the tile
+  std::size_t session_keyframes = 0;
+  std::vector<Tile> tiles;           // by (ix, iy); only tiles whose core some keyframe reaches
+  double EdgeM() const { return double(edge_voxels) * voxel_m; }
+};
+
+// [m] How far (xy) a keyframe can affect a map point: max(sensor.max_range_m, submap_radius_m).
+double TileReachM(const RemovertConfig& cfg);
+// [m] How far (per xy axis) the map points that can change a map point's HD decision lie: the
+// largest of (a) a removed point within one voxel (dilation) plus that point's normal
+// neighbourhood (ld.normal_radius_m, revert surface hits); (b) a removed body's point within
+// hd.dilate_voxels voxels, a body by another removed point within hd.dilate_body_m, plus its
+// normal neighbourhood; (c) the local ground of the groundward dilation: cells of hd.dilate_voxels
+// voxels, the 3 x 3 cells around the point and around a body's foot up to one cell away (3 cells).
+double TileMarginM(const RemovertConfig& cfg);
+// The tiles of a session (keyframes placed in the world) and the keyframes each reads.
+TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg);
+// HD removal of one tile: the static and HD points of its core, stats of its core's points.
+// `keyframes` is the whole session (its scans are read only for the tile's keyframes and for the
+// sensor estimate, as RemoveHd does); the plan must be PlanTiles' for them and `cfg`.
+HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<WorldKeyframe>& keyframes,
+                      const RemovertConfig& cfg, int threads = 0);
+// The tiles' results as one: the maps in voxel order (RemoveHd's order), the stats summed. Tiles
+// are added in plan order (by ix, then iy); a column of tiles (one ix) holds a contiguous range of
+// x voxels, so each column is sorted alone and appended: memory = the merged maps + one column.
+class TileMerger {
+ public:
+  explicit TileMerger(double voxel_m) : voxel_m_(voxel_m) {}
+  void Add(const Tile& tile, HdResult part);
+  HdResult Finish();
+
+ private:
+  void FlushColumn();
+  double voxel_m_;
+  std::int64_t column_ = 0;
+  bool started_ = false;
+  std::vector<HdResult> pending_;  // the current column's parts
+  HdResult out_;
+};
+// TileMerger over every tile: parts[t] is the result of plan.tiles[t] (computed in any order).
+HdResult MergeTiles(const TilePlan& plan, std::vector<HdResult> parts);
+// PlanTiles, every tile in turn (each on `threads`), MergeTiles: RemoveHd with the memory of a tile.
+HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads = 0);
+
+// ---- from files: `ltmapper tiles` and the Dask driver (python/ltmapper_dask.py)
+// A plan folder holds plan.json (session folder, pose file, tiles with their keyframes) and
+// config.yaml (the params). A tile's job writes <plan>/parts/tile_NNNNNN/: static_map.pcd,
+// hd_map.pcd, then tile.json (its stats), each to a temporary name renamed into place. A tile is
+// done exactly when its tile.json exists: a killed job leaves none and is simply run again.
+struct TilePlanFile {
+  std::string session_dir, poses_file;  // poses_file "": the session's own poses
+  RemovertConfig cfg;
+  TilePlan plan;
+};
+// Plans the session's tiles into a fresh `plan_dir` (replaced whole when it holds a plan.json;
+// any other non-empty folder is an error naming it). Returns the plan.
+TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
+                       const RemovertConfig& cfg);
+// ltm::Error naming the file when plan.json or config.yaml is missing or malformed.
+TilePlanFile ReadTilePlan(const std::string& plan_dir);
+std::string TilePartDir(const std::string& plan_dir, std::size_t tile);
+// One tile's job; skipped (false) when its tile.json exists, unless `force`.
+bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads = 0, bool force = false);
+// Every tile's parts merged (MergeTiles) into out_dir: static_map.pcd, hd_map.pcd, report.json.
+// ltm::Error naming the tile.json of the first tile not done.
+HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir);
+
+}  // namespace ltm::removert

@@ -1,0 +1,260 @@
+// LT-removert tile by tile (removert/tiles.hpp): on a street longer than the sensor's reach with
+// movers crossing tile borders, the tiled HD removal gives the whole-session maps bit for bit,
+// for tiles larger and smaller than the sensor range; each tile reads only the keyframes that
+// reach it; plans of other keys and bad tiles are refused.
+#include "test_removert_scene.hpp"
+#include "test_util.hpp"
+
+#include "ltmapper/removert/removert.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+
+namespace ltm {
+namespace {
+
+using removert::RemovertConfig;
+using removert::WorldKeyframe;
+
+// 70 keyframes 2 m apart along y = 0 (x from 0 to 138 m: three map batches), walls and pillars,
+// an oncoming car and pedestrians crossing at tile borders of the small tiles (x = 12, 48, 96).
+std::vector<WorldKeyframe> LongStreet() {
+  std::vector<test::Box> fixed = {test::MakeBox(-30, 8, 0, 170, 8.3, 4, 1), test::MakeBox(-30, -8.3, 0, 170, -8, 4, 2)};
+  for (int x = 5; x < 140; x += 20) fixed.push_back(test::MakeBox(x, 5, 0, x + 0.3, 5.3, 3, 3));
+  fixed.push_back(test::MakeBox(58, -6, 0.3, 62, -4, 1.8, 7));  // parked car
+  std::vector<WorldKeyframe> kfs;
+  for (int k = 0; k < 70; ++k) {
+    std::vector<test::Box> boxes = fixed;
+    const double cx = 150.0 - 3.5 * k;  // oncoming car in the other lane
+    boxes.push_back(test::MakeBox(cx - 2, 2, 0.3, cx + 2, 4, 1.8, 100));
+    for (double px : {12.0, 48.0, 96.0}) {  // pedestrians crossing y = 0 (a tile border too)
+      const double py = -6.0 + 0.5 * (k % 24);
+      boxes.push_back(test::MakeBox(px - 0.25, py - 0.25, 0.05, px + 0.25, py + 0.25, 1.8, 101));
+    }
+    WorldKeyframe kf;
+    kf.index = k;
+    kf.T_world_sensor = test::At(2.0 * k, 0.0, 1.8, 0.01 * k);
+    kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
+    kfs.push_back(kf);
+  }
+  return kfs;
+}
+
+// The scanner's range cut to 30 m and the submaps to 25 m: the street is several reaches long.
+RemovertConfig ShortRange() {
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.max_range_m = 30.0;
+  cfg.submap_radius_m = 25.0;
+  return cfg;
+}
+
+bool SameBytes(const PointCloud& a, const PointCloud& b) {
+  return a.size() == b.size() && std::memcmp(a.points.data(), b.points.data(), a.size() * sizeof(PointXYZI)) == 0;
+}
+
+TEST(RemovertTiles, TiledEqualsWholeSessionBitForBit) {
+  const auto kfs = LongStreet();
+  const RemovertConfig base = ShortRange();
+  const removert::HdResult whole = removert::RemoveHd(kfs, base, 2);
+  ASSERT_GT(whole.hd_map.size(), 100u) << "the movers must be removed for the comparison to mean anything";
+  // The default (2 x reach = 60 m) and 12.34 m: smaller than the range and not a whole number of
+  // voxels (rounded to 12.3 m); the borders cut the pedestrians' paths and the street's axis.
+  for (double edge : {0.0, 12.34}) {
+    RemovertConfig cfg = base;
+    cfg.tiles_edge_m = edge;
+    const removert::TilePlan plan = removert::PlanTiles(kfs, removert::WithSensor(cfg, kfs));
+    const removert::HdResult tiled = removert::RemoveHdTiled(kfs, cfg, 2);
+    std::printf("tiles.edge_m %.2f: %zu tiles, margin %.2f m; static %zu hd %zu (whole: %zu / %zu)\n", plan.EdgeM(),
+                plan.tiles.size(), double(plan.margin_voxels) * plan.voxel_m, tiled.static_map.size(),
+                tiled.hd_map.size(), whole.static_map.size(), whole.hd_map.size());
+    EXPECT_GE(plan.tiles.size(), 4u) << edge;
+    EXPECT_TRUE(SameBytes(tiled.static_map, whole.static_map)) << "edge " << edge;
+    EXPECT_TRUE(SameBytes(tiled.hd_map, whole.hd_map)) << "edge " << edge;
+    EXPECT_EQ(tiled.stats.map_points, whole.stats.map_points) << edge;
+    EXPECT_EQ(tiled.stats.candidates, whole.stats.candidates) << edge;
+    EXPECT_EQ(tiled.stats.reverted, whole.stats.reverted) << edge;
+    EXPECT_EQ(tiled.stats.removed, whole.stats.removed) << edge;
+    EXPECT_EQ(tiled.stats.dilated, whole.stats.dilated) << edge;
+    EXPECT_EQ(tiled.stats.removed_per_resolution, whole.stats.removed_per_resolution) << edge;
+  }
+  // Tiles computed in any order (as on a cluster), merged in plan order: the same maps.
+  RemovertConfig cfg = removert::WithSensor(base, kfs);
+  cfg.tiles_edge_m = 30.0;
+  const removert::TilePlan plan = removert::PlanTiles(kfs, cfg);
+  std::vector<removert::HdResult> parts(plan.tiles.size());
+  for (std::size_t t = plan.tiles.size(); t-- > 0;) parts[t] = removert::RemoveHdTile(plan, t, kfs, cfg, 2);
+  const removert::HdResult merged = removert::MergeTiles(plan, parts);
+  EXPECT_TRUE(SameBytes(merged.static_map, whole.static_map));
+  EXPECT_TRUE(SameBytes(merged.hd_map, whole.hd_map));
+  std::swap(parts.front(), parts.back());  // a part given for another tile does not pass unnoticed
+  EXPECT_FALSE(SameBytes(removert::MergeTiles(plan, parts).static_map, whole.static_map));
+}
+
+// The margin follows the keys it is derived from (TileMarginM): normals of candidates, dilation
+// of removed bodies, the groundward cells; the plan rounds it up to whole voxels plus one.
+TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
+  RemovertConfig cfg;
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(cfg), 0.15 + 0.5 + 1.0);  // dilate 1.5 voxels + body + normals
+  RemovertConfig no_revert = cfg;
+  no_revert.revert = false;
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(no_revert), 0.15 + 0.5);
+  RemovertConfig no_dilation = cfg;
+  no_dilation.dilate_voxels = 0.0;
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(no_dilation), 1.0);
+  RemovertConfig wide = cfg;
+  wide.dilate_voxels = 10.0;  // 1 m: the ground cells (3 x 1 m) reach farthest
+  wide.ld_normal_radius_m = 0.3;
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(wide), 3.0);
+  const removert::TilePlan plan = removert::PlanTiles({}, cfg);
+  EXPECT_EQ(plan.margin_voxels, 18);  // ceil(1.65 / 0.1) + 1
+  EXPECT_EQ(plan.edge_voxels, 2000);  // 2 x max(100, 60) m
+  EXPECT_TRUE(plan.tiles.empty());
+}
+
+TEST(RemovertTiles, EachTileReadsOnlyTheKeyframesThatReachIt) {
+  const auto kfs = LongStreet();
+  RemovertConfig cfg = ShortRange();
+  cfg.tiles_edge_m = 12.0;
+  const removert::TilePlan plan = removert::PlanTiles(kfs, cfg);
+  ASSERT_FALSE(plan.tiles.empty());
+  const double reach = removert::TileReachM(cfg);
+  EXPECT_DOUBLE_EQ(reach, 30.0);
+  std::size_t most = 0;
+  for (const removert::Tile& t : plan.tiles) {
+    most = std::max(most, t.keyframes.size());
+    EXPECT_TRUE(std::is_sorted(t.keyframes.begin(), t.keyframes.end()));
+    // A keyframe of the tile lies within reach + margin + a voxel of the core (xy) ...
+    const double x0 = double(t.ix) * plan.EdgeM(), x1 = x0 + plan.EdgeM();
+    for (std::size_t k : t.keyframes) {
+      const double x = kfs[k].T_world_sensor.translation().x();
+      EXPECT_LE(std::max({x0 - x, 0.0, x - x1}), plan.reach_m + double(plan.margin_voxels) * plan.voxel_m);
+    }
+  }
+  // ... so a tile reads about (edge + 2 reach) / 2 m of keyframes: 38 of 70 here.
+  EXPECT_LT(most, kfs.size() * 6 / 10);
+}
+
+TEST(RemovertTiles, BadTileAndOtherSessionAreErrors) {
+  const auto kfs = LongStreet();
+  RemovertConfig cfg = ShortRange();
+  cfg.tiles_edge_m = 12.0;
+  const removert::TilePlan plan = removert::PlanTiles(kfs, cfg);
+  test::ExpectError([&] { removert::RemoveHdTile(plan, plan.tiles.size(), kfs, cfg, 1); }, {"tile", "of a plan with"});
+  const std::vector<WorldKeyframe> fewer(kfs.begin(), kfs.begin() + 10);
+  test::ExpectError([&] { removert::RemoveHdTile(plan, 0, fewer, cfg, 1); }, {"70 keyframes", "has 10"});
+  RemovertConfig other = cfg;
+  other.tiles_edge_m = 20.0;
+  test::ExpectError([&] { removert::RemoveHdTile(plan, 0, kfs, other, 1); }, {"tiles.edge_m"});
+  cfg.tiles_edge_m = -1.0;
+  EXPECT_THROW(removert::PlanTiles(kfs, cfg), Error);
+}
+
+// The jobs from files (what `ltmapper tiles` and the Dask driver run): the merged files are the
+// whole-session maps' bytes; a done tile is skipped, a tile without tile.json (killed) is rerun,
+// and merging before every tile is done names the missing tile.json.
+TEST(RemovertTileJobs, PlanRunMergeEqualsWholeSessionFiles) {
+  test::TempDir tmp;
+  const std::string session = tmp / "street";
+  test::WriteStreetSession(session, 0.0, 30, true);
+  RemovertConfig cfg = ShortRange();
+  cfg.tiles_edge_m = 20.0;
+  const removert::TilePlan plan = removert::WriteTilePlan(tmp / "plan", session, "", cfg);
+  ASSERT_GE(plan.tiles.size(), 4u);
+  const removert::TilePlanFile read = removert::ReadTilePlan(tmp / "plan");
+  EXPECT_EQ(read.plan.tiles.size(), plan.tiles.size());
+  EXPECT_EQ(read.plan.tiles.back().keyframes, plan.tiles.back().keyframes);
+  EXPECT_EQ(read.cfg.tiles_edge_m, 20.0);
+
+  for (std::size_t t = 0; t + 1 < plan.tiles.size(); ++t) EXPECT_TRUE(removert::RunTileJob(tmp / "plan", t, 2));
+  const std::string last = removert::TilePartDir(tmp / "plan", plan.tiles.size() - 1);
+  test::ExpectError([&] { removert::MergeTileJobs(tmp / "plan", tmp / "out"); }, {last + "/tile.json", "not done"});
+  // A killed job: a part written, no tile.json. The rerun writes the tile whole.
+  test::WriteText(last + "/static_map.pcd", "half");
+  EXPECT_TRUE(removert::RunTileJob(tmp / "plan", plan.tiles.size() - 1, 2));
+  EXPECT_FALSE(removert::RunTileJob(tmp / "plan", 0, 2));        // done: skipped
+  EXPECT_TRUE(removert::RunTileJob(tmp / "plan", 0, 2, true));   // forced
+  const removert::HdStats st = removert::MergeTileJobs(tmp / "plan", tmp / "out");
+
+  const removert::HdResult whole = removert::RemoveHd(removert::LoadWorldKeyframes(session, ""), cfg, 2);
+  EXPECT_EQ(st.map_points, whole.stats.map_points);
+  io::WritePcd(tmp / "whole_static.pcd", whole.static_map);
+  io::WritePcd(tmp / "whole_hd.pcd", whole.hd_map);
+  EXPECT_EQ(test::ReadText(tmp / "whole_static.pcd"), test::ReadText(tmp / "out/static_map.pcd"));
+  EXPECT_EQ(test::ReadText(tmp / "whole_hd.pcd"), test::ReadText(tmp / "out/hd_map.pcd"));
+}
+
+TEST(RemovertTileJobs, BadPlanFilesAreErrorsNamingTheFile) {
+  test::TempDir tmp;
+  const std::string session = tmp / "street";
+  test::WriteStreetSession(session, 0.0, 6, false);
+  RemovertConfig cfg = ShortRange();
+  const std::string plan_dir = tmp / "plan";
+  removert::WriteTilePlan(plan_dir, session, "", cfg);
+  test::ExpectError([&] { removert::ReadTilePlan(tmp / "nowhere"); }, {"nowhere/plan.json"});
+  test::WriteText(plan_dir + "/plan.json", "{\"format\": \"ltmapper tile plan\", \"tiles\": [");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json"});
+  test::WriteText(plan_dir + "/plan.json", "{\"format\": \"something else\"}");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "not a tile plan"});
+  // A plan whose tile numbers do not follow from config.yaml's keys.
+  removert::WriteTilePlan(plan_dir, session, "", cfg);
+  test::WriteText(plan_dir + "/config.yaml", "map_voxel_m: 0.2\n");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "edge_voxels"});
+  test::WriteText(plan_dir + "/config.yaml", "no_such_key: 1\n");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/config.yaml", "no_such_key"});
+  // A folder that is no plan is never replaced.
+  test::WriteText(tmp / "mine/notes.txt", "keep");
+  EXPECT_THROW(removert::WriteTilePlan(tmp / "mine", session, "", cfg), Error);
+  EXPECT_TRUE(std::filesystem::exists(tmp / "mine/notes.txt"));
+}
+
+// The CLI: plan, merge before the run (exit code 1, the missing tile.json named), run, merge.
+TEST(RemovertTileJobs, CliPlanRunMerge) {
+  test::TempDir tmp;
+  const std::string session = tmp / "street";
+  test::WriteStreetSession(session, 0.0, 8, true);
+  const std::string sets = " --set sensor.max_range_m=30 --set submap_radius_m=25 --set tiles.edge_m=30";
+  std::string out;
+  ASSERT_EQ(0, test::RunCli("tiles plan " + session + sets + " --out " + (tmp / "plan"), &out)) << out;
+  EXPECT_NE(out.find("tiles: "), std::string::npos) << out;
+  EXPECT_NE(0, test::RunCli("tiles merge " + (tmp / "plan") + " --out " + (tmp / "out"), &out));
+  EXPECT_NE(out.find("tile_000000/tile.json"), std::string::npos) << out;
+  ASSERT_EQ(0, test::RunCli("tiles run " + (tmp / "plan") + " --threads 2", &out)) << out;
+  ASSERT_EQ(0, test::RunCli("tiles merge " + (tmp / "plan") + " --out " + (tmp / "out"), &out)) << out;
+  ASSERT_EQ(0, test::RunCli("hd " + session + sets + " --out " + (tmp / "whole.pcd"), &out)) << out;
+  EXPECT_EQ(test::ReadText(tmp / "whole.pcd"), test::ReadText(tmp / "out/static_map.pcd"));
+  EXPECT_NE(0, test::RunCli("tiles run " + (tmp / "plan") + " --tile 99", &out));
+  EXPECT_NE(out.find("tile 99 of a plan with"), std::string::npos) << out;
+}
+
+// The stage with tiles.stage: true writes the same files as without (HD maps and the pair's LD).
+TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
+  test::TempDir tmp;
+  const std::vector<std::vector<Pose>> w = {test::WriteStreetSession(tmp / "s0", -10.0, 12, true),
+                                            test::WriteStreetSession(tmp / "s1", -6.0, 12, false)};
+  std::vector<std::string> poses;
+  for (std::size_t s = 0; s < w.size(); ++s) {
+    poses.push_back(tmp / ("p" + std::to_string(s) + ".txt"));
+    io::WriteKittiPoses(poses.back(), w[s]);
+  }
+  RemovertConfig cfg = ShortRange();
+  cfg.write_keyframes = false;
+  cfg.write_ply = false;
+  cfg.tiles_edge_m = 15.0;
+  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "whole", 2);
+  cfg.tiles_stage = true;
+  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "tiled", 2);
+  std::size_t files = 0;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(tmp / "whole")) {
+    if (e.path().extension() != ".pcd") continue;
+    const std::string rel = std::filesystem::relative(e.path(), tmp / "whole").string();
+    EXPECT_EQ(test::ReadText(e.path().string()), test::ReadText(tmp / ("tiled/" + rel))) << rel;
+    ++files;
+  }
+  EXPECT_GE(files, 6u);  // 2 x (static, hd) + the pair's changes
+  EXPECT_GT(io::ReadPcd(tmp / "tiled/pair_00_01/nd_strong.pcd").size(), 100u);  // the parked car left
+}
+
+}  // namespace
+}  // namespace ltm
