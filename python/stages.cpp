@@ -131,6 +131,7 @@ std::vector<removert::WorldKeyframe> WorldKeyframes(const Session& s, const py::
     w.T_world_sensor = p.empty() ? s.keyframes[i].T_session_sensor : p[i];
     w.cloud = s.keyframes[i].cloud;
     w.cloud_path = s.keyframes[i].cloud_path;
+    w.sweep = s.keyframes[i].sweep;
     out.push_back(std::move(w));
   }
   return out;

@@ -97,7 +97,11 @@ TEST(PointCloud, AppendDropsArraysPresentOnOneSideOnly) {
 
 TEST(Session, FindByIndex) {
   Session s;
-  for (int i : {0, 2, 5}) s.keyframes.push_back(Keyframe{i, Pose::Identity(), "", nullptr});
+  for (int i : {0, 2, 5}) {
+    Keyframe kf;
+    kf.index = i;
+    s.keyframes.push_back(kf);
+  }
   EXPECT_EQ(s.Find(2), 1);
   EXPECT_EQ(s.Find(3), -1);
   EXPECT_EQ(s.Find(9), -1);

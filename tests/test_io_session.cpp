@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 #include <random>
 
 namespace fs = std::filesystem;
@@ -350,6 +351,96 @@ TEST(SessionLayouts, UnknownLayoutNamesTheExpectedOnes) {
   } catch (const Error& e) {
     const std::string what = e.what();
     for (const char* name : {"SC-LIO-SAM", "FAST-LIO-SAM", "KITTI", "KTH"}) EXPECT_NE(what.find(name), std::string::npos) << what;
+  }
+}
+
+// The sensor's motion over t seconds at a constant body velocity v and yaw rate w, in the model
+// io::Deskew uses (rotation by t w, translation t v).
+Pose MotionOver(double t, const Eigen::Vector3d& v, double w) {
+  Pose M = Pose::Identity();
+  M.linear() = Eigen::AngleAxisd(t * w, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  M.translation() = t * v;
+  return M;
+}
+
+// A raw sweep (points in the frame of their firing, a per-point `time`) written with times.txt
+// loads deskewed: each point where it lies in the frame of its scan's timestamp. Without the
+// times it is an error naming the scan; a `time` field that is not a float is an error too.
+TEST(Session, RawSweepsAreDeskewedWithTheirTimes) {
+  test::TempDir tmp;
+  const Eigen::Vector3d v(10.0, 0.5, 0.0);  // m/s: 1 m during a 0.1 s sweep
+  const double w = 0.6, dt = 0.1;           // rad/s; seconds between scans
+  Session s;
+  std::vector<std::vector<Eigen::Vector3f>> truth;
+  for (int k = 0; k < 4; ++k) {
+    Keyframe kf;
+    kf.index = k;
+    kf.time_s = 100.0 + k * dt;
+    if (k > 0) kf.T_session_sensor = s.keyframes.back().T_session_sensor * MotionOver(dt, v, w);
+    auto raw = std::make_shared<PointCloud>();
+    truth.emplace_back();
+    for (int j = 0; j < 360; ++j) {  // a ring of points 5-25 m away, fired in turn over the sweep
+      const double a = j * M_PI / 180.0, r = 5.0 + 20.0 * (j % 7) / 6.0, t = dt * j / 360.0;
+      const Eigen::Vector3d q(r * std::cos(a), r * std::sin(a), 0.1 * (j % 5));
+      truth.back().push_back(q.cast<float>());
+      const Eigen::Vector3d p = MotionOver(t, v, w).inverse() * q;  // where the sensor saw it at t
+      raw->push_back(float(p.x()), float(p.y()), float(p.z()), 1.f);
+      raw->time.push_back(float(t));
+    }
+    kf.cloud = raw;
+    s.keyframes.push_back(kf);
+  }
+  io::WriteSession(tmp / "raw", s);
+  ASSERT_TRUE(fs::exists(tmp / "raw/times.txt"));
+  const Session r = io::LoadSession(tmp / "raw");
+  ASSERT_EQ(r.keyframes.size(), 4u);
+  for (std::size_t k = 0; k < 4; ++k) {
+    EXPECT_NEAR(r.keyframes[k].time_s, 100.0 + double(k) * dt, 1e-9);
+    ASSERT_TRUE(r.keyframes[k].sweep.known);
+    EXPECT_LT((r.keyframes[k].sweep.v_mps - v).norm(), 1e-6);
+    EXPECT_NEAR(r.keyframes[k].sweep.w_radps.z(), w, 1e-6);
+    const auto cloud = io::KeyframeCloud(r.keyframes[k]);
+    ASSERT_EQ(cloud->size(), truth[k].size());
+    EXPECT_TRUE(cloud->time.empty());
+    double worst = 0.0, before = 0.0;
+    for (std::size_t i = 0; i < cloud->size(); ++i) {
+      worst = std::max(worst, double((cloud->points[i].xyz() - truth[k][i]).norm()));
+      before = std::max(before, double((s.keyframes[k].cloud->points[i].xyz() - truth[k][i]).norm()));
+    }
+    EXPECT_LT(worst, 1e-4) << "keyframe " << k;
+    EXPECT_GT(before, 0.9);  // the raw sweep was a metre off at its end
+  }
+  // Without times.txt the raw sweep cannot be deskewed: an error naming the scan and the fix.
+  fs::remove(tmp / "raw/times.txt");
+  const Session no_times = io::LoadSession(tmp / "raw");
+  try {
+    io::KeyframeCloud(no_times.keyframes[1]);
+    ADD_FAILURE() << "a raw sweep without times loaded";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("Scans/000001.pcd"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("times.txt"), std::string::npos) << e.what();
+  }
+  // Times that do not increase are an error naming the file and line.
+  {
+    std::ofstream(tmp / "raw/times.txt") << "0.0\n0.1\n0.1\n0.3\n";
+    EXPECT_THROW(io::LoadSession(tmp / "raw"), Error);
+  }
+  // A `time` field of another type than float is refused, naming the file.
+  const std::string bad = tmp / "int_time.pcd";
+  {
+    std::ofstream out(bad, std::ios::binary);
+    out << "VERSION 0.7\nFIELDS x y z time\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+           "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n";
+    const float xyz[3] = {1.f, 2.f, 3.f};
+    const std::uint32_t t = 5;
+    out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+    out.write(reinterpret_cast<const char*>(&t), sizeof(t));
+  }
+  try {
+    io::ReadPcd(bad);
+    ADD_FAILURE() << "an integer time field was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("int_time.pcd"), std::string::npos) << e.what();
   }
 }
 

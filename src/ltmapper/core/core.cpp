@@ -41,6 +41,7 @@ void PointCloud::clear() {
   cls.clear();
   session.clear();
   object.clear();
+  time.clear();
 }
 
 namespace {
@@ -78,6 +79,7 @@ void PointCloud::append(const PointCloud& other) {
   AppendArray(cls, other.cls, before, other.size());
   AppendArray(session, other.session, before, other.size());
   AppendArray(object, other.object, before, other.size());
+  AppendArray(time, other.time, before, other.size());
   points.insert(points.end(), other.points.begin(), other.points.end());
 }
 
@@ -92,6 +94,7 @@ PointCloud PointCloud::select(const std::vector<bool>& mask) const {
   out.cls = Pick(cls, n, keep);
   out.session = Pick(session, n, keep);
   out.object = Pick(object, n, keep);
+  out.time = Pick(time, n, keep);
   return out;
 }
 
@@ -104,6 +107,7 @@ PointCloud PointCloud::select(const std::vector<std::uint32_t>& indices) const {
     if (!cls.empty()) out.cls.push_back(cls[i]);
     if (!session.empty()) out.session.push_back(session[i]);
     if (!object.empty()) out.object.push_back(object[i]);
+    if (!time.empty()) out.time.push_back(time[i]);
   }
   return out;
 }
@@ -117,6 +121,7 @@ void PointCloud::CheckConsistent(const std::string& what) const {
   check(cls.size(), "class");
   check(session.size(), "session");
   check(object.size(), "object");
+  check(time.size(), "time");
 }
 
 int Session::Find(int index) const {

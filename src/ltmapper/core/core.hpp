@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -65,6 +66,8 @@ struct PointCloud {
   std::vector<PointClass> cls;         // optional class per point
   std::vector<std::uint16_t> session;  // optional session index per point
   std::vector<std::int32_t> object;    // optional object id per point (-1 = none)
+  std::vector<float> time;             // optional time per point [s] after the scan's timestamp: a raw
+                                       // sweep's (io deskews it on load with the keyframe's SweepMotion)
 
   std::size_t size() const { return points.size(); }
   bool empty() const { return points.empty(); }
@@ -93,11 +96,23 @@ struct Edge {
   bool has_information = false;                 // false when the file gave none
 };
 
+// The sensor's motion while it swept one scan: constant linear and angular velocity in the sensor
+// frame of the scan's timestamp, derived from the session's poses and keyframe times
+// (io::LoadSession, times.txt). A raw sweep's point fired t seconds after the timestamp is moved
+// into that frame as x' = R(t w) x + t v.
+struct SweepMotion {
+  bool known = false;                          // false: the session has no keyframe times
+  Eigen::Vector3d v_mps = Eigen::Vector3d::Zero();
+  Eigen::Vector3d w_radps = Eigen::Vector3d::Zero();
+};
+
 struct Keyframe {
   int index = 0;                           // integer value of the scan file name
   Pose T_session_sensor = Pose::Identity();  // pose in the session's own odometry frame
   std::string cloud_path;                  // scan file, read on demand
   std::shared_ptr<const PointCloud> cloud; // set when loaded / generated in memory
+  double time_s = std::numeric_limits<double>::quiet_NaN();  // timestamp [s] (times.txt), NaN when unknown
+  SweepMotion sweep;                       // deskews the scan on load when it is a raw sweep
 };
 
 struct Session {

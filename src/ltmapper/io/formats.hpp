@@ -17,12 +17,14 @@ struct CloudReadStats {
   std::size_t non_finite_dropped = 0;  // NaN / Inf points removed (never propagated)
 };
 // PCD (ascii, binary, binary_compressed) through PCL's reader. Needs fields x y z; intensity
-// optional (0 when absent). Truncated files and headers that disagree with the data are errors.
+// optional (0 when absent); a float `time` field (a raw sweep's seconds after the scan's
+// timestamp) fills PointCloud::time. Truncated files and headers that disagree with the data are errors.
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats = nullptr);
 // The sensor pose of a PCD's VIEWPOINT header line (tx ty tz qw qx qy qz; identity when absent):
 // the KTH DynamicMap benchmark stores each scan in the world frame with its sensor pose there.
 Pose ReadPcdViewpoint(const std::string& path);
 enum class PcdFormat { kAscii, kBinary, kBinaryCompressed };
+// x y z intensity, and `time` when the cloud has per-point times (binary only).
 void WritePcd(const std::string& path, const PointCloud& cloud,
               PcdFormat format = PcdFormat::kBinary);
 // A binary PCD of `points` points written in pieces: `pieces(write)` calls write(cloud) for each
@@ -67,6 +69,10 @@ struct StampedPose {
   Pose pose = Pose::Identity();
 };
 std::vector<StampedPose> ReadTumPoses(const std::string& path);
+// times.txt (KITTI's): one timestamp [s] per line, line i the time of scan i; times must increase
+// (ltm::Error naming the file and line otherwise).
+std::vector<double> ReadTimes(const std::string& path);
+void WriteTimes(const std::string& path, const std::vector<double>& times);
 void WriteTumPoses(const std::string& path, const std::vector<StampedPose>& poses);
 // A 3x4 (12 numbers, row-major) or 4x4 (16 numbers) rigid transform from text; e.g. KITTI's
 // `Tr` or `relative.txt`. A leading "Tr:" label is allowed.

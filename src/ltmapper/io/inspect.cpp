@@ -73,17 +73,21 @@ void PoseStats(const std::vector<Pose>& poses, SessionInfo& info) {
   }
 }
 
-// Reads every scan (in parallel): sizes, non-finite counts, empty and unreadable scans.
-void ScanStats(const std::vector<IndexedFile>& scans, SessionInfo& info) {
+// Reads every scan (in parallel): sizes, non-finite counts, empty and unreadable scans, raw sweeps
+// (per-point times: deskewed on load when the session has keyframe times, `timed`, else a problem).
+void ScanStats(const std::vector<IndexedFile>& scans, bool timed, SessionInfo& info) {
   struct Result {
     std::size_t points = 0, non_finite = 0;
+    bool raw = false;
     std::string error;
   };
   std::vector<Result> results(scans.size());
   tbb::parallel_for(std::size_t(0), scans.size(), [&](std::size_t i) {
     try {
       CloudReadStats st;
-      results[i].points = ReadCloud(scans[i].path, &st).size();
+      const PointCloud c = ReadCloud(scans[i].path, &st);
+      results[i].points = c.size();
+      results[i].raw = !c.time.empty();
       results[i].non_finite = st.non_finite_dropped;
     } catch (const std::exception& e) {
       results[i].error = e.what();
@@ -102,11 +106,25 @@ void ScanStats(const std::vector<IndexedFile>& scans, SessionInfo& info) {
     info.points_max = std::max(info.points_max, r.points);
     info.points_total += r.points;
     info.non_finite_points += r.non_finite;
+    info.raw_sweeps += r.raw;
     if (r.points == 0)
       info.problems.push_back("empty scan: " + scans[i].path + " has 0 points" +
                               (r.non_finite ? " (after dropping " + std::to_string(r.non_finite) + " NaN/Inf points)" : ""));
   }
   if (info.scans_read == 0) info.points_min = 0;
+  info.keyframe_times = timed;
+  if (info.raw_sweeps > 0 && !timed) {
+    const std::string p = std::to_string(info.raw_sweeps) +
+                          " raw sweeps (per-point 'time' field) but no keyframe times to deskew them: put times.txt "
+                          "beside the scans (one timestamp [s] per line, line i for scan i) or give TUM poses";
+    info.problems.push_back(p);
+    if (info.load_error.empty()) info.load_error = p;
+  }
+}
+
+bool HasTimesFile(const std::string& dir) {
+  std::error_code ec;
+  return fs::is_regular_file(fs::path(dir) / "times.txt", ec);
 }
 
 }  // namespace
@@ -131,7 +149,7 @@ SessionInfo InspectLoaded(const std::string& dir, const SessionLayout& layout, b
     info.load_error = e.what();
     info.problems.push_back(e.what());
   }
-  if (read_scans) ScanStats(scans, info);
+  if (read_scans) ScanStats(scans, layout.poses_format == "tum" || HasTimesFile(dir), info);
   return info;
 }
 
@@ -240,7 +258,7 @@ SessionInfo InspectScLioSam(const std::string& dir, bool read_scans) {
     info.problems.push_back("no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
   }
   PoseStats(poses, info);
-  if (read_scans) ScanStats(scans, info);
+  if (read_scans) ScanStats(scans, HasTimesFile(dir), info);
   try {
     LoadSession(dir);
   } catch (const Error& e) {
@@ -301,7 +319,7 @@ SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses
   info.keyframes = poses.size();
   if (poses.size() > 1) info.odometry_edges = poses.size() - 1;
   PoseStats(poses, info);
-  if (read_scans) ScanStats(scans, info);
+  if (read_scans) ScanStats(scans, HasTimesFile(dir), info);
   if (info.load_error.empty()) {
     try {
       LoadKittiSession(dir, poses_path, T_cam_velo);
@@ -326,6 +344,10 @@ std::string FormatSessionInfo(const SessionInfo& info) {
                   info.points_total, info.scans_read);
     os << "  points per scan: " << buf << "\n";
     os << "  non-finite:      " << info.non_finite_points << " NaN/Inf points dropped\n";
+    if (info.raw_sweeps > 0)
+      os << "  sweeps:          " << info.raw_sweeps << " raw (per-point time), "
+         << (info.keyframe_times ? "deskewed on load with the keyframe times" : "NOT deskewable: no keyframe times")
+         << "\n";
   } else {
     os << "  points per scan: not read\n";
   }

@@ -335,10 +335,20 @@ void ReadLabels(const Records& rec, const LabelFields& f, const std::vector<std:
   }
 }
 
+// The per-point times of the kept records (a raw sweep's `time` field, seconds).
+void ReadTimes(const Records& rec, FieldAt ft, const std::vector<std::size_t>& kept, PointCloud* cloud) {
+  cloud->time.resize(kept.size());
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    const std::size_t n = kept[k];
+    const std::uint8_t* p = rec.data + (n / rec.cols) * rec.row_step + (n % rec.cols) * rec.point_step;
+    cloud->time[k] = float(ReadValue(p + ft.offset, ft.datatype));
+  }
+}
+
 // The points of `rec`: float fields without the per-value type switch, others through ReadValue;
-// with their labels when the file has them; fills `stats` (may be null).
+// with their labels and times when the file has them; fills `stats` (may be null).
 PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, FieldAt fi, const LabelFields& labels,
-                       const std::string& path, CloudReadStats* stats) {
+                       FieldAt ft, const std::string& path, CloudReadStats* stats) {
   PointCloud cloud;
   cloud.reserve(rec.rows * rec.cols);
   auto is_float = [](FieldAt f) { return f.datatype == 0 || f.datatype == pcl::PCLPointField::FLOAT32; };
@@ -348,11 +358,12 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
     return v;
   };
   std::vector<std::size_t> kept;
-  std::vector<std::size_t>* keep = labels.Any() ? &kept : nullptr;
+  std::vector<std::size_t>* keep = labels.Any() || ft.datatype ? &kept : nullptr;
   const std::size_t dropped = is_float(fx) && is_float(fy) && is_float(fz) && is_float(fi)
                                   ? AppendPoints(rec, fx, fy, fz, fi, read_float, &cloud, keep)
                                   : AppendPoints(rec, fx, fy, fz, fi, ReadValue, &cloud, keep);
-  if (keep) ReadLabels(rec, labels, kept, path, &cloud);
+  if (labels.Any()) ReadLabels(rec, labels, kept, path, &cloud);
+  if (ft.datatype) ReadTimes(rec, ft, kept, &cloud);
   if (stats) {
     stats->points_in_file = rec.rows * rec.cols;
     stats->non_finite_dropped = dropped;
@@ -378,19 +389,31 @@ constexpr std::uint8_t kLabelTypes[3] = {pcl::PCLPointField::UINT8, pcl::PCLPoin
                                          pcl::PCLPointField::INT32};
 FieldAt LabelAt(FieldAt f, int label) { return f.datatype == kLabelTypes[label] ? f : FieldAt{}; }
 
+// A raw sweep's per-point `time` (seconds after the scan's timestamp, as Velodyne / LIO-SAM
+// drivers write it): a float field; another type is an error naming the file.
+FieldAt TimeAt(const std::string& path, FieldAt f) {
+  if (f.datatype && f.datatype != pcl::PCLPointField::FLOAT32 && f.datatype != pcl::PCLPointField::FLOAT64)
+    throw Error(path + ": PCD field 'time' must be a float (F4 or F8: seconds after the scan's timestamp)");
+  return f;
+}
+
 // x y z (intensity, and the labels) of an uncompressed binary PCD: their offsets and datatypes in
 // the point record (a field with COUNT > 1: its first value, as PCL reads it). Binary files are
 // never handed to PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at
 // all) that made pcl::PCDReader::read ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte
 // integers among x y z intensity.
-std::array<FieldAt, 7> BinaryFields(const std::string& path, const PcdHeader& h) {
-  std::array<FieldAt, 7> at{};
-  const char* names[7] = {"x", "y", "z", "intensity", "class", "session", "object"};
+std::array<FieldAt, 8> BinaryFields(const std::string& path, const PcdHeader& h) {
+  std::array<FieldAt, 8> at{};
+  const char* names[8] = {"x", "y", "z", "intensity", "class", "session", "object", "time"};
   std::size_t offset = 0;
   for (std::size_t i = 0; i < h.fields.size(); ++i) {
-    for (int k = 0; k < 7; ++k) {
+    for (int k = 0; k < 8; ++k) {
       if (h.fields[i] != names[k]) continue;
       const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
+      if (k == 7) {
+        at[7] = TimeAt(path, {offset, type});
+        continue;
+      }
       if (k >= 4) {
         at[std::size_t(k)] = LabelAt({offset, type}, k - 4);
         continue;
@@ -456,7 +479,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
       if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
         throw Error(path + ": cannot read the PCD data section");
       rec.data = bytes.data();
-      return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, path, stats);
+      return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
     }
   }
 
@@ -481,7 +504,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   const pcl::PCLPointField* fy = nullptr;
   const pcl::PCLPointField* fz = nullptr;
   const pcl::PCLPointField* fi = nullptr;
-  const pcl::PCLPointField *fc = nullptr, *fs = nullptr, *fo = nullptr;
+  const pcl::PCLPointField *fc = nullptr, *fs = nullptr, *fo = nullptr, *ft = nullptr;
   for (const auto& f : blob.fields) {
     if (f.name == "x") fx = &f;
     if (f.name == "y") fy = &f;
@@ -490,9 +513,10 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
     if (f.name == "class") fc = &f;
     if (f.name == "session") fs = &f;
     if (f.name == "object") fo = &f;
+    if (f.name == "time") ft = &f;
   }
   if (!fx || !fy || !fz) throw Error(path + ": PCD has no x y z fields");
-  for (const auto* f : {fx, fy, fz, fi, fc, fs, fo}) {
+  for (const auto* f : {fx, fy, fz, fi, fc, fs, fo, ft}) {
     if (!f || ((f == fc || f == fs || f == fo) && f->datatype != kLabelTypes[f == fc ? 0 : f == fs ? 1 : 2])) continue;
     if (TypeSize(f->datatype) == 0 || f->offset + TypeSize(f->datatype) > blob.point_step)
       throw Error(path + ": PCD field '" + f->name + "' has an unsupported type or offset");
@@ -501,7 +525,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
   const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
   return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), {LabelAt(at(fc), 0), LabelAt(at(fs), 1), LabelAt(at(fo), 2)},
-                     path, stats);
+                     TimeAt(path, at(ft)), path, stats);
 }
 
 namespace {
@@ -539,7 +563,31 @@ void WritePcdPieces(const std::string& path, std::size_t points,
   });
 }
 
+namespace {
+// A raw sweep: binary x y z intensity time (float32 each, 20 bytes a point).
+void WriteTimedPcd(const std::string& path, const PointCloud& cloud) {
+  cloud.CheckConsistent(path);
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity time\n"
+           "SIZE 4 4 4 4 4\nTYPE F F F F F\nCOUNT 1 1 1 1 1\nWIDTH "
+        << cloud.size() << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << cloud.size() << "\nDATA binary\n";
+    std::vector<float> rec;
+    rec.reserve(5 * cloud.size());
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const PointXYZI& p = cloud.points[i];
+      rec.insert(rec.end(), {p.x, p.y, p.z, p.intensity, cloud.time[i]});
+    }
+    out.write(reinterpret_cast<const char*>(rec.data()), std::streamsize(rec.size() * sizeof(float)));
+  });
+}
+}  // namespace
+
 void WritePcd(const std::string& path, const PointCloud& cloud, PcdFormat format) {
+  if (!cloud.time.empty()) {
+    if (format != PcdFormat::kBinary) throw Error(path + ": a cloud with per-point times is written as binary PCD only");
+    WriteTimedPcd(path, cloud);
+    return;
+  }
   if (format == PcdFormat::kBinary) {
     WritePcdPieces(path, cloud.size(), [&](const auto& write) { write(cloud); });
     return;

@@ -142,6 +142,23 @@ void WriteKittiPoses(const std::string& path, const std::vector<Pose>& poses) {
   });
 }
 
+std::vector<double> ReadTimes(const std::string& path) {
+  std::vector<double> times;
+  ForEachPoseLine(path, 1, "time", "one timestamp in seconds", [&](const std::vector<double>& v, std::size_t lineno) {
+    if (!times.empty() && !(v[0] > times.back()))
+      throw Error(path, lineno, "times must increase (" + detail::FormatDouble(v[0]) + " after " +
+                                    detail::FormatDouble(times.back()) + ")");
+    times.push_back(v[0]);
+  });
+  return times;
+}
+
+void WriteTimes(const std::string& path, const std::vector<double>& times) {
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    for (double t : times) out << detail::FormatDouble(t) << "\n";
+  });
+}
+
 std::vector<StampedPose> ReadTumPoses(const std::string& path) {
   std::vector<StampedPose> poses;
   ForEachPoseLine(path, 8, "TUM", "stamp tx ty tz qx qy qz qw", [&](const std::vector<double>& v, std::size_t lineno) {

@@ -15,8 +15,10 @@
 #include <tbb/parallel_for.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -51,12 +53,49 @@ void DeriveOdometry(Session& s) {
   }
 }
 
+// Each keyframe's sweep motion from its times and poses: the constant velocity of the step to the
+// next keyframe (the last keyframe: of the step before it), in the keyframe's sensor frame.
+void SweepMotions(Session& s) {
+  const std::size_t n = s.keyframes.size();
+  if (n < 2) return;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t a = i + 1 < n ? i : i - 1;
+    const Keyframe &ka = s.keyframes[a], &kb = s.keyframes[a + 1];
+    const double dt = kb.time_s - ka.time_s;
+    if (!(dt > 0.0))
+      throw Error(s.dir + ": keyframe times must increase with the scan index (scan " + std::to_string(ka.index) +
+                  " at " + std::to_string(ka.time_s) + " s, scan " + std::to_string(kb.index) + " at " +
+                  std::to_string(kb.time_s) + " s)");
+    const Pose d = ka.T_session_sensor.inverse() * kb.T_session_sensor;
+    const Eigen::AngleAxisd aa(d.linear());
+    SweepMotion& m = s.keyframes[i].sweep;
+    m.known = true;
+    m.v_mps = d.translation() / dt;
+    m.w_radps = aa.angle() * aa.axis() / dt;
+  }
+}
+
+// times.txt beside the scans (KITTI's rule: line i is the time of scan i), when there is one.
+void ReadTimesFile(Session& s) {
+  const fs::path file = fs::path(s.dir) / "times.txt";
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return;
+  const std::vector<double> t = ReadTimes(file.string());
+  for (auto& kf : s.keyframes) {
+    if (kf.index < 0 || std::size_t(kf.index) >= t.size())
+      throw Error(file.string() + ": " + std::to_string(t.size()) + " times, but scan " + kf.cloud_path +
+                  " needs line " + std::to_string(kf.index + 1));
+    kf.time_s = t[std::size_t(kf.index)];
+  }
+  SweepMotions(s);
+}
+
 void LoadClouds(Session& s) {
   std::atomic<std::size_t> non_finite{0};
   tbb::parallel_for(std::size_t(0), s.keyframes.size(), [&](std::size_t i) {
     auto& kf = s.keyframes[i];
     CloudReadStats st;
-    kf.cloud = std::make_shared<const PointCloud>(ReadCloud(kf.cloud_path, &st));
+    kf.cloud = std::make_shared<const PointCloud>(ReadScan(kf.cloud_path, kf.sweep, &st));
     non_finite += st.non_finite_dropped;
   });
   for (const auto& kf : s.keyframes)
@@ -124,6 +163,7 @@ Session LoadScLioSam(const std::string& dir, const SessionLoadOptions& opt) {
   } else {
     throw Error(dir + ": no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
   }
+  ReadTimesFile(s);
   if (opt.load_clouds) LoadClouds(s);
   return s;
 }
@@ -134,8 +174,12 @@ Session LoadScansWithPoses(const std::string& dir, const SessionLayout& layout, 
   const std::vector<std::string> scans = ListIndexedFiles(layout.scans_dir, layout.scan_ext);
   if (scans.empty()) throw Error(layout.scans_dir + ": no " + layout.scan_ext + " scans");
   std::vector<Pose> poses;
+  std::vector<double> stamps;
   if (layout.poses_format == "tum") {
-    for (const StampedPose& p : ReadTumPoses(layout.poses)) poses.push_back(p.pose);
+    for (const StampedPose& p : ReadTumPoses(layout.poses)) {
+      poses.push_back(p.pose);
+      stamps.push_back(p.stamp);
+    }
   } else {
     poses = ReadKittiPoses(layout.poses);
   }
@@ -150,9 +194,14 @@ Session LoadScansWithPoses(const std::string& dir, const SessionLayout& layout, 
     kf.index = FileIndex(scans[i]);
     kf.cloud_path = scans[i];
     kf.T_session_sensor = poses[i];
+    if (!stamps.empty()) kf.time_s = stamps[i];
     s.keyframes.push_back(std::move(kf));
   }
   DeriveOdometry(s);
+  if (stamps.empty())
+    ReadTimesFile(s);
+  else
+    SweepMotions(s);
   if (opt.load_clouds) LoadClouds(s);
   return s;
 }
@@ -281,9 +330,26 @@ Session LoadKittiSession(const std::string& dir, const std::string& poses_path,
     s.keyframes.push_back(std::move(kf));
   }
   DeriveOdometry(s);
+  ReadTimesFile(s);
   if (opt.load_clouds) LoadClouds(s);
   return s;
 }
+
+namespace {
+// times.txt when every keyframe has a time (line i = scan i: the indices must be 0 .. n-1).
+void WriteTimesOf(const std::string& dir, const Session& session) {
+  std::vector<double> times;
+  for (std::size_t i = 0; i < session.keyframes.size(); ++i) {
+    const Keyframe& kf = session.keyframes[i];
+    if (!std::isfinite(kf.time_s)) return;
+    if (kf.index != int(i))
+      throw Error(dir + ": keyframe times need scan indices 0 .. n-1 (times.txt line i is scan i), not " +
+                  std::to_string(kf.index) + " at position " + std::to_string(i));
+    times.push_back(kf.time_s);
+  }
+  if (!times.empty()) WriteTimes((fs::path(dir) / "times.txt").string(), times);
+}
+}  // namespace
 
 void WriteSession(const std::string& dir, const Session& session,
                   const std::vector<Eigen::MatrixXd>& scds) {
@@ -328,16 +394,52 @@ void WriteSession(const std::string& dir, const Session& session,
   g.edges.insert(g.edges.end(), session.loops.begin(), session.loops.end());
   WriteG2o((root / "singlesession_posegraph.g2o").string(), g);
   WriteKittiPoses((root / "optimized_poses.txt").string(), poses);
+  WriteTimesOf(dir, session);
 }
 
 std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats) {
   if (kf.cloud) {
     if (stats) *stats = CloudReadStats{kf.cloud->size(), 0};
-    return kf.cloud;
+    if (kf.cloud->time.empty()) return kf.cloud;
+    if (!kf.sweep.known)
+      throw Error("keyframe " + std::to_string(kf.index) + ": a raw sweep (per-point times) without a sweep motion");
+    auto copy = std::make_shared<PointCloud>(*kf.cloud);
+    Deskew(*copy, kf.sweep);
+    return copy;
   }
   if (kf.cloud_path.empty())
     throw Error("keyframe " + std::to_string(kf.index) + ": neither a cloud nor a cloud path");
-  return std::make_shared<const PointCloud>(ReadCloud(kf.cloud_path, stats));
+  return std::make_shared<const PointCloud>(ReadScan(kf.cloud_path, kf.sweep, stats));
+}
+
+void Deskew(PointCloud& cloud, const SweepMotion& motion) {
+  const double w = motion.w_radps.norm();
+  const Eigen::Vector3d axis = w > 0.0 ? Eigen::Vector3d(motion.w_radps / w) : Eigen::Vector3d::UnitZ();
+  float last_t = std::numeric_limits<float>::quiet_NaN();
+  Eigen::Matrix3f R = Eigen::Matrix3f::Identity();
+  Eigen::Vector3f d = Eigen::Vector3f::Zero();
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const float t = cloud.time[i];
+    if (t != last_t) {  // a column's points share their time
+      R = Eigen::AngleAxisd(t * w, axis).toRotationMatrix().cast<float>();
+      d = (double(t) * motion.v_mps).cast<float>();
+      last_t = t;
+    }
+    PointXYZI& p = cloud.points[i];
+    const Eigen::Vector3f q = R * p.xyz() + d;
+    p.x = q.x(), p.y = q.y(), p.z = q.z();
+  }
+  cloud.time.clear();
+}
+
+PointCloud ReadScan(const std::string& path, const SweepMotion& motion, CloudReadStats* stats) {
+  PointCloud cloud = ReadCloud(path, stats);
+  if (cloud.time.empty()) return cloud;
+  if (!motion.known)
+    throw Error(path + ": a raw sweep (per-point 'time' field) in a session without keyframe times to deskew it: "
+                "put times.txt beside the scans (one timestamp [s] per line, line i for scan i) or give TUM poses");
+  Deskew(cloud, motion);
+  return cloud;
 }
 
 void RequireScanPoints(const PointCloud& scan, const std::string& where) {

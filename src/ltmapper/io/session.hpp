@@ -49,12 +49,23 @@ Session LoadSession(const std::string& dir, const SessionLoadOptions& opt = {});
 // are camera poses and the LiDAR pose is T_w_velo = Tr^-1 * P * Tr.
 Session LoadKittiSession(const std::string& dir, const std::string& poses_path,
                          const Pose* T_cam_velo = nullptr, const SessionLoadOptions& opt = {});
-// Writes a session in SC-LIO-SAM layout: Scans/NNNNNN.pcd (binary), singlesession_posegraph.g2o,
-// optimized_poses.txt and, when `scds` is non-empty, SCDs/NNNNNN.scd. Clouds come from
+// Writes a session in SC-LIO-SAM layout: Scans/NNNNNN.pcd (binary; with `time` for raw sweeps),
+// singlesession_posegraph.g2o, optimized_poses.txt, times.txt when every keyframe has a time and,
+// when `scds` is non-empty, SCDs/NNNNNN.scd. Clouds come from
 // Keyframe::cloud (must be set).
 void WriteSession(const std::string& dir, const Session& session,
                   const std::vector<Eigen::MatrixXd>& scds = {});
-// Loads the cloud of a keyframe (from memory or its path).
+// Keyframe times and raw sweeps: a session's `times.txt` (line i = scan i, seconds; or the stamps
+// of TUM poses) sets Keyframe::time_s and, with the poses, Keyframe::sweep (the velocity of the
+// step to the next keyframe). A scan with a per-point `time` field is a raw sweep (each point in
+// the sensor frame of its firing, `time` seconds after the scan's timestamp): ReadScan moves its
+// points into the frame of the timestamp with that motion. Without times that is an error naming
+// the scan. KITTI .bin scans carry no time field and are read as they are.
+// Moves each point of a raw sweep into the frame of its scan's timestamp and drops `time`.
+void Deskew(PointCloud& cloud, const SweepMotion& motion);
+// ReadCloud, then Deskew when the scan has per-point times (ltm::Error when `motion` is unknown).
+PointCloud ReadScan(const std::string& path, const SweepMotion& motion, CloudReadStats* stats = nullptr);
+// Loads the cloud of a keyframe (from memory or its path; a raw sweep is deskewed).
 std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats = nullptr);
 // The stages' one check on a keyframe's scan (LT-SLAM registration, LT-removert maps and
 // visibility): a scan without finite points is an error "<where>: empty scan (no finite points)".
@@ -74,6 +85,8 @@ struct SessionInfo {
   std::string pose_source;             // "g2o" or "optimized_poses.txt"
   std::vector<std::string> problems;   // missing / inconsistent files, one line each
   std::size_t scans_read = 0;          // scans read successfully (points_* are over these)
+  std::size_t raw_sweeps = 0;          // scans read with per-point times (raw sweeps, deskewed on load)
+  bool keyframe_times = false;         // times.txt or TUM stamps: raw sweeps can be deskewed
   std::string load_error;              // why LoadSession fails; empty when the session loads
 };
 // Never throws for problems inside the session (they go to `problems`, and `load_error` when

@@ -16,6 +16,7 @@ struct WorldKeyframe {
   Pose T_world_sensor = Pose::Identity();
   std::shared_ptr<const PointCloud> cloud;
   std::string cloud_path;
+  SweepMotion sweep;  // deskews a raw sweep read from cloud_path (io::ReadScan)
 };
 
 // A session's keyframes placed with its own poses (T_session_sensor as the world frame): HD

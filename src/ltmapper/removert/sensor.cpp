@@ -24,6 +24,7 @@ std::vector<WorldKeyframe> KeyframesOf(const Session& session) {
     w.T_world_sensor = kf.T_session_sensor;
     w.cloud = kf.cloud;
     w.cloud_path = kf.cloud_path;
+    w.sweep = kf.sweep;
     out.push_back(std::move(w));
   }
   return out;

@@ -674,7 +674,7 @@ std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
   if (kf.cloud) return kf.cloud;
   if (kf.cloud_path.empty())
     throw Error("removert: keyframe " + std::to_string(kf.index) + " has neither a cloud nor a path");
-  auto cloud = std::make_shared<PointCloud>(io::ReadCloud(kf.cloud_path));
+  auto cloud = std::make_shared<PointCloud>(io::ReadScan(kf.cloud_path, kf.sweep));
   geometry::RemoveNonFinite(*cloud);
   io::RequireScanPoints(*cloud, kf.cloud_path + " (keyframe " + std::to_string(kf.index) + ")");
   return cloud;

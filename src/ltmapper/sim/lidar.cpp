@@ -289,6 +289,9 @@ namespace {
 // The sensor pose `dt` seconds after keyframe k, on the way to keyframe k + 1 (constant velocity
 // between keyframes: linear in translation, slerp in rotation; past the last keyframe the last
 // step's motion continues).
+// Seconds after the keyframe at which column c is fired (the `time` a raw sweep's point carries).
+float ColumnTime(const SimConfig& cfg, int c) { return float(cfg.sweep_s * c / cfg.columns); }
+
 Pose PoseAfter(const std::vector<Pose>& poses, std::size_t k, double dt, double seconds_per_keyframe) {
   if (dt == 0.0 || poses.size() < 2) return poses[k];
   const bool last = k + 1 >= poses.size();
@@ -303,6 +306,27 @@ Pose PoseAfter(const std::vector<Pose>& poses, std::size_t k, double dt, double 
 }
 
 }  // namespace
+
+double Simulator::KeyframeTime(int session, int keyframe) const {
+  impl_->CheckIndex(session, keyframe);
+  return keyframe * impl_->sc.sessions[std::size_t(session)].seconds_per_keyframe;
+}
+
+PointCloud Simulator::TrueDeskewed(int session, int keyframe, const PointCloud& scan) const {
+  if (scan.time.empty()) return scan;
+  const SimConfig& cfg = impl_->sc.cfg;
+  const std::vector<Pose> sweep = SweepPoses(session, keyframe);
+  const Pose T_inv = impl_->sc.sessions[std::size_t(session)].T_world_sensor[std::size_t(keyframe)].inverse();
+  PointCloud out = scan;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const long c = std::lround(double(out.time[i]) / cfg.sweep_s * cfg.columns);
+    const Eigen::Vector3f q = (T_inv * sweep[std::size_t(std::clamp(c, 0L, long(cfg.columns) - 1))]).cast<float>() *
+                              out.points[i].xyz();
+    out.points[i].x = q.x(), out.points[i].y = q.y(), out.points[i].z = q.z();
+  }
+  out.time.clear();
+  return out;
+}
 
 std::vector<Pose> Simulator::SweepPoses(int session, int keyframe) const {
   const Impl& I = *impl_;
@@ -370,6 +394,7 @@ PointCloud NoisyPoints(const SimConfig& cfg, int session, int keyframe, const Sc
     if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
     Eigen::Vector3f p = dirs[i] * rr;  // the sensor frame when the ray was fired
     if (cfg.sweep == "deskewed") p = (T.inverse() * sweep[i % std::size_t(cfg.columns)]).cast<float>() * p;
+    if (cfg.sweep == "distorted") cloud.time.push_back(ColumnTime(cfg, int(i % std::size_t(cfg.columns))));
     cloud.push_back(p.x(), p.y(), p.z(), rays.intensity[i]);
     cloud.cls.push_back(rays.cls[i]);
     cloud.object.push_back(rays.object[i]);

@@ -94,12 +94,19 @@ class Simulator {
   const std::vector<Pose>& T_session_sensor_drifted(int session) const;  // written odometry
 
   // One keyframe scan in the sensor frame with per-point cls (kStatic / kHD), session and
-  // object filled; noise and dropout applied (deterministic per ray). Points ordered beam by
+  // object filled (and `time` for a distorted sweep: each point in the frame of its firing, that
+  // many seconds after the keyframe); noise and dropout applied (deterministic per ray). Points ordered beam by
   // beam (top beam first), column by column within a beam.
   PointCloud CastScan(int session, int keyframe);
   // The world pose each column of a keyframe's scan is fired from (lidar.sweep: all the keyframe
   // pose when instant, else moving on towards the next keyframe during sweep_s).
   std::vector<Pose> SweepPoses(int session, int keyframe) const;
+  // The keyframe's timestamp [s] from the session's start (the moment of its first column).
+  double KeyframeTime(int session, int keyframe) const;
+  // A raw sweep (lidar.sweep: distorted, whose points carry `time`) moved into the keyframe frame
+  // by the true sweep poses, `time` dropped: the truth every stage should see after deskewing.
+  // A scan without times is returned as it is.
+  PointCloud TrueDeskewed(int session, int keyframe, const PointCloud& scan) const;
   // Rays from `origin_world` along unit `dirs_world` in the world of `session` with the HD
   // actors at `keyframe` (noise free, up to max_range). Runs in parallel.
   std::vector<RayHit> CastRays(int session, int keyframe, const Eigen::Vector3d& origin_world,

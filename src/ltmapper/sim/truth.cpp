@@ -358,13 +358,15 @@ SessionTruth CastSession(Simulator& sim, const SimConfig& cfg, int s, const std:
     rep->rays += std::size_t(cfg.beams) * std::size_t(cfg.columns);
     rep->points += cloud->size();
     worker.Push([&, cloud, k] {
-      AddScanTruth(*cloud, world_poses[std::size_t(k)], tdir + "/labels/" + Num(k, 6) + ".ply", cfg.truth_voxel_m,
+      // The labelled truth is where the points are: a raw sweep's moved by its true sweep poses.
+      AddScanTruth(sim.TrueDeskewed(s, k, *cloud), world_poses[std::size_t(k)], tdir + "/labels/" + Num(k, 6) + ".ply", cfg.truth_voxel_m,
                    threads, &acc, rep);
       progress.Tick();
     });
     Keyframe kf;
     kf.index = k;
     kf.T_session_sensor = drifted[std::size_t(k)];
+    kf.time_s = sim.KeyframeTime(s, k);
     kf.cloud = std::move(cloud);
     session->keyframes.push_back(std::move(kf));
     if (k > 0) {
