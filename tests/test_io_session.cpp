@@ -442,6 +442,20 @@ TEST(Session, RawSweepsAreDeskewedWithTheirTimes) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("int_time.pcd"), std::string::npos) << e.what();
   }
+  // Ouster's `t`: uint32 nanoseconds after the scan's timestamp.
+  const std::string ouster = tmp / "ouster.pcd";
+  {
+    std::ofstream out(ouster, std::ios::binary);
+    out << "VERSION 0.7\nFIELDS x y z t\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+           "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n";
+    const float xyz[3] = {1.f, 2.f, 3.f};
+    const std::uint32_t t = 50000000;
+    out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+    out.write(reinterpret_cast<const char*>(&t), sizeof(t));
+  }
+  const PointCloud o = io::ReadPcd(ouster);
+  ASSERT_EQ(o.time.size(), 1u);
+  EXPECT_NEAR(o.time[0], 0.05, 1e-7);
 }
 
 }  // namespace

@@ -337,11 +337,12 @@ void ReadLabels(const Records& rec, const LabelFields& f, const std::vector<std:
 
 // The per-point times of the kept records (a raw sweep's `time` field, seconds).
 void ReadTimes(const Records& rec, FieldAt ft, const std::vector<std::size_t>& kept, PointCloud* cloud) {
+  const double unit = ft.datatype == pcl::PCLPointField::UINT32 ? 1e-9 : 1.0;  // `t`: nanoseconds
   cloud->time.resize(kept.size());
   for (std::size_t k = 0; k < kept.size(); ++k) {
     const std::size_t n = kept[k];
     const std::uint8_t* p = rec.data + (n / rec.cols) * rec.row_step + (n % rec.cols) * rec.point_step;
-    cloud->time[k] = float(ReadValue(p + ft.offset, ft.datatype));
+    cloud->time[k] = float(unit * ReadValue(p + ft.offset, ft.datatype));
   }
 }
 
@@ -389,11 +390,14 @@ constexpr std::uint8_t kLabelTypes[3] = {pcl::PCLPointField::UINT8, pcl::PCLPoin
                                          pcl::PCLPointField::INT32};
 FieldAt LabelAt(FieldAt f, int label) { return f.datatype == kLabelTypes[label] ? f : FieldAt{}; }
 
-// A raw sweep's per-point `time` (seconds after the scan's timestamp, as Velodyne / LIO-SAM
-// drivers write it): a float field; another type is an error naming the file.
-FieldAt TimeAt(const std::string& path, FieldAt f) {
-  if (f.datatype && f.datatype != pcl::PCLPointField::FLOAT32 && f.datatype != pcl::PCLPointField::FLOAT64)
-    throw Error(path + ": PCD field 'time' must be a float (F4 or F8: seconds after the scan's timestamp)");
+// A raw sweep's per-point time after the scan's timestamp: `time` in seconds (float, as Velodyne /
+// LIO-SAM drivers write it; another type is an error naming the file) or `t` in nanoseconds
+// (uint32, as Ouster's driver writes it; a `t` of another type is some other tool's, not read).
+FieldAt TimeAt(const std::string& path, const std::string& name, FieldAt f) {
+  if (!f.datatype) return f;
+  if (name == "t") return f.datatype == pcl::PCLPointField::UINT32 ? f : FieldAt{};
+  if (f.datatype != pcl::PCLPointField::FLOAT32 && f.datatype != pcl::PCLPointField::FLOAT64)
+    throw Error(path + ": PCD field 'time' must be F4 or F8 (seconds after the scan's timestamp)");
   return f;
 }
 
@@ -404,14 +408,16 @@ FieldAt TimeAt(const std::string& path, FieldAt f) {
 // integers among x y z intensity.
 std::array<FieldAt, 8> BinaryFields(const std::string& path, const PcdHeader& h) {
   std::array<FieldAt, 8> at{};
-  const char* names[8] = {"x", "y", "z", "intensity", "class", "session", "object", "time"};
+  const char* names[9] = {"x", "y", "z", "intensity", "class", "session", "object", "time", "t"};
   std::size_t offset = 0;
   for (std::size_t i = 0; i < h.fields.size(); ++i) {
-    for (int k = 0; k < 8; ++k) {
+    for (int k = 0; k < 9; ++k) {
       if (h.fields[i] != names[k]) continue;
       const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
-      if (k == 7) {
-        at[7] = TimeAt(path, {offset, type});
+      if (k >= 7) {
+        const FieldAt f = TimeAt(path, names[k], {offset, type});
+        if (f.datatype && at[7].datatype) throw Error(path + ": PCD has both 'time' and 't' fields");
+        if (f.datatype) at[7] = f;
         continue;
       }
       if (k >= 4) {
@@ -513,7 +519,10 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
     if (f.name == "class") fc = &f;
     if (f.name == "session") fs = &f;
     if (f.name == "object") fo = &f;
-    if (f.name == "time") ft = &f;
+    if ((f.name == "time" || f.name == "t") && TimeAt(path, f.name, {f.offset, f.datatype}).datatype) {
+      if (ft) throw Error(path + ": PCD has both 'time' and 't' fields");
+      ft = &f;
+    }
   }
   if (!fx || !fy || !fz) throw Error(path + ": PCD has no x y z fields");
   for (const auto* f : {fx, fy, fz, fi, fc, fs, fo, ft}) {
@@ -525,7 +534,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
   const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
   return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), {LabelAt(at(fc), 0), LabelAt(at(fs), 1), LabelAt(at(fo), 2)},
-                     TimeAt(path, at(ft)), path, stats);
+                     TimeAt(path, ft ? ft->name : "time", at(ft)), path, stats);
 }
 
 namespace {
