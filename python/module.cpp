@@ -105,7 +105,8 @@ void BindIo(py::module_& m) {
       .def_readonly("cloud_path", &Keyframe::cloud_path)
       .def_property_readonly("pose", [](const Keyframe& k) { return PoseToNumpy(k.T_session_sensor); },
                              "T_session_sensor as a (4,4) array.")
-      .def("scan", &KeyframeScan, "The scan (sensor frame) as an (N,4) float32 array.")
+      .def_readonly("time_s", &Keyframe::time_s, "Timestamp [s] (times.txt or TUM stamps); NaN when unknown.")
+      .def("scan", &KeyframeScan, "The scan (sensor frame, a raw sweep deskewed) as an (N,4) float32 array.")
       .def("__repr__", [](const Keyframe& k) { return "<ltmapper.Keyframe " + std::to_string(k.index) + ">"; });
 
   py::class_<Session>(m, "Session", "A session directory (SC-LIO-SAM layout or KITTI), as io::LoadSession reads it.")

@@ -77,6 +77,9 @@ def test_session():
     assert s.poses.shape == (10, 4, 4) and s.poses.dtype == np.float64
     np.testing.assert_allclose(s.poses[:, 3, :], np.tile([0, 0, 0, 1], (10, 1)))
     np.testing.assert_allclose(s.keyframes[3].pose, s.poses[3])
+    # The simulator writes times.txt: keyframe timestamps increasing with the index.
+    times = [k.time_s for k in s.keyframes]
+    assert times[0] == 0.0 and all(b > a for a, b in zip(times, times[1:]))
     scan = s.scan(0)
     assert scan.dtype == np.float32 and scan.ndim == 2 and scan.shape[1] == 4 and len(scan) > 100
     np.testing.assert_array_equal(scan, s.keyframes[0].scan())
