@@ -57,6 +57,8 @@ struct RemovertConfig {
   double tol_abs_m = 0.10;        // [m]
   double tol_rel = 0.01;          // [-]
   int window_px = 1;              // [pixels] see-through needs the window's nearest return beyond
+  double pose_sigma_deg = 0.3;    // [deg] relative rotation error of the poses between keyframes within
+                                  // submap_radius_m: each HD image's window grows by ceil(it / pixel) columns
   // --- HD removal (remove then revert)
   std::vector<double> remove_resolutions_deg = {0.4, 0.6, 0.8};  // [deg/pixel] fine to coarse
   std::vector<double> revert_resolutions_deg = {1.2, 1.6};       // [deg/pixel] coarser
@@ -133,6 +135,7 @@ struct RemovertConfig {
     v("tol_abs_m", tol_abs_m, "m", 0.0, 10.0);
     v("tol_rel", tol_rel, "", 0.0, 1.0);
     v("window_px", window_px, "pixels", 0, 10);
+    v("pose_sigma_deg", pose_sigma_deg, "deg", 0.0, 10.0);
     v("hd.remove_resolutions_deg", remove_resolutions_deg, "deg", 0.01, 10.0);
     v("hd.revert_resolutions_deg", revert_resolutions_deg, "deg", 0.01, 10.0);
     v("hd.revert", revert);

@@ -83,6 +83,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   RemovertConfig vcfg = cfg;
   vcfg.submap_radius_m = cfg.ld_submap_radius_m;
   vcfg.window_px = cfg.ld_window_px;
+  vcfg.pose_sigma_deg = 0.0;  // LD's own windows (ld.window_px); HD's pose widening is not applied here
   VisibilityOptions opt;
   opt.count_occluded = true;
   opt.within_beams = false;

@@ -267,6 +267,9 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
     Level L;
     L.grid = Grid::Make(cfg, res, res);
     L.window_rows = WindowRows(cfg, L.grid.rows, res);
+    // A point's direction seen from another keyframe is off by the poses' relative rotation: the
+    // window spans it (yaw, the odometry's largest error, moves it along the columns).
+    L.window_cols = cfg.window_px + int(std::ceil(cfg.pose_sigma_deg / res - 1e-6));
     L.scatter_rows = cfg.SensorResolved() ? int(std::lround(cfg.sensor_model.spread_deg / res)) : 0;
     L.both_sides = cfg.SensorResolved() && !cfg.sensor_model.ring_based;
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
@@ -403,7 +406,7 @@ void MultiResImage::Build(const PointCloud& scan) {
 // Separable min filter: along columns (wrapping) into tmp, then along rows into pooled. Min is
 // exact and there are no NaNs, so the evaluation order does not change the result.
 void MultiResImage::Pool(Level& L) const {
-  if (window_ == 0) {
+  if (window_ == 0 && L.window_cols == 0) {
     std::copy(L.range.begin(), L.range.end(), L.pooled.begin());
     return;
   }
@@ -411,9 +414,9 @@ void MultiResImage::Pool(Level& L) const {
   PoolRows(L);
 }
 
-// Horizontal: the min over the window_px columns on each side (wrapping) into L.tmp.
+// Horizontal: the min over the window_cols columns on each side (wrapping) into L.tmp.
 void MultiResImage::PoolColumns(Level& L) const {
-  const int w = window_;
+  const int w = L.window_cols;
   const int rows = L.grid.rows, cols = L.grid.cols;
   for (int r = 0; r < rows; ++r) {
     const float* src = &L.range[std::size_t(r) * cols];
