@@ -145,6 +145,25 @@ TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
   EXPECT_FALSE(AlignSessions(sessions, cfg, 2).sessions[1].aligned);
 }
 
+// Four placements per round cannot give graph.min_loops = 5 consistent loops: a round that verified
+// some is followed by one placing keyframes between the earlier ones, until the query aligns.
+TEST(SlamRecall, GlobalRegistrationPlacesMoreWhileItFindsEvidence) {
+  sim::Simulator s(TwoSessions(kKeyframes), 2);
+  const std::vector<Session> sessions = SimSessions(s);
+  SlamConfig cfg;
+  cfg.sc_max_loops_per_pair = 0;
+  cfg.refine_rounds = 0;
+  cfg.global_queries = 4;
+  cfg.min_loops = 5;
+  const SlamResult r = AlignSessions(sessions, cfg, 2);
+  ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
+  EXPECT_GE(LoopsFrom(r, "global", true), cfg.min_loops);
+  EXPECT_GT(LoopsFrom(r, "global", false), cfg.global_queries);  // more than one round of placements
+  EXPECT_EQ(FalseLoops(r, s), 0);
+  std::printf("global fallback, 4 placements a round: %d placements, %d loops accepted\n",
+              LoopsFrom(r, "global", false), LoopsFrom(r, "global", true));
+}
+
 // A query from another city (another seed's world): no placement survives verification and
 // consensus, so the query is not aligned (zero false alignments).
 TEST(SlamRecall, GlobalRegistrationPlacesNothingInAnotherCity) {

@@ -303,10 +303,20 @@ PointCloud WorldMap(const SlamResult& res, int a, CloudStore& store) {
   return map;
 }
 
+// Where in each of the equal parts of a route round r places its query: 1/2, then 1/4, 3/4, 1/8,
+// ... (van der Corput), so every round tries keyframes between those of the rounds before.
+double PartOffset(int round) {
+  double offset = 0.0, bit = 0.5;
+  for (int r = round + 1; r > 0; r >>= 1, bit *= 0.5)
+    if (r & 1) offset += bit;
+  return offset;
+}
+
 // Loop candidates of unaligned session b with aligned session a from global placements of
-// cfg.global_queries evenly spaced keyframe submaps of b in a's map: each placed keyframe is
-// paired with a's keyframe nearest to where it was placed.
-std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, CloudStore& store, const SlamConfig& cfg) {
+// cfg.global_queries keyframe submaps of b in a's map, one in each equal part of b's route at
+// PartOffset(round): each placed keyframe is paired with a's keyframe nearest to where it was placed.
+std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, CloudStore& store, const SlamConfig& cfg,
+                                         int round) {
   const Stopwatch sw;
   const GlobalMap map(WorldMap(res, a, store), cfg);
   const auto& Wa = res.sessions[std::size_t(a)].T_world_sensor;
@@ -315,7 +325,7 @@ std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, Cl
   const int tries = std::min(n, cfg.global_queries);
   std::vector<LoopRecord> cand;
   for (int t = 0; t < tries; ++t) {
-    const int j = int((2 * t + 1) * std::int64_t(n) / (2 * tries));  // centres of equal parts
+    const int j = std::min(n - 1, int((t + PartOffset(round)) * n / tries));
     const std::optional<Pose> T_world_j = map.Place(store.Submap(b, j));
     if (!T_world_j) continue;
     const int best = NearestKeyframe(Wa, T_world_j->translation(), std::numeric_limits<double>::infinity());
@@ -329,20 +339,26 @@ std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, Cl
 
 // Fallback: a session still unaligned after the Scan Context retries is placed by global
 // registration in each aligned session's map (the central first), its placements verified by
-// GICP and the anchor consensus like any loop, until it aligns.
+// GICP and the anchor consensus like any loop, until it aligns. A round that verified a placement
+// but not enough of them to align is followed by one placing keyframes between the earlier ones
+// (a route seen from a pitched sensor may match in few places); a round that verified none ends it.
 void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
                     CloudStore& store, const SlamConfig& cfg, int threads, StageCost& cost) {
   if (!cfg.global_enabled) return;
   for (std::size_t b = 1; b < sessions.size(); ++b)
     for (std::size_t a = 0; a < sessions.size() && !res.sessions[b].aligned; ++a) {
       if (a == b || !res.sessions[a].aligned) continue;
-      const Stopwatch sw;
-      std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), store, cfg);
-      cost.registration_s += sw.Seconds();  // the placements are registrations too
-      if (a > b)  // loops are stored with a.session < b.session: the placement was of b in a's map
-        for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
-      RegisterRound(cand, store, cfg, threads, "GICP global candidates", cost);
-      SolveWith(sessions, cand, loops, res, cfg, threads, cost);
+      const int rounds = std::max(1, int(store.Keyframes(int(b))) / std::max(1, cfg.global_queries));
+      for (int round = 0; round < rounds && !res.sessions[b].aligned; ++round) {
+        const Stopwatch sw;
+        std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), store, cfg, round);
+        cost.registration_s += sw.Seconds();  // the placements are registrations too
+        if (a > b)  // loops are stored with a.session < b.session: the placement was of b in a's map
+          for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
+        const std::size_t verified = RegisterRound(cand, store, cfg, threads, "GICP global candidates", cost);
+        SolveWith(sessions, cand, loops, res, cfg, threads, cost);
+        if (verified == 0) break;
+      }
     }
 }
 
