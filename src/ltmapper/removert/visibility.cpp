@@ -268,8 +268,11 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
     L.grid = Grid::Make(cfg, res, res);
     L.window_rows = WindowRows(cfg, L.grid.rows, res);
     // A point's direction seen from another keyframe is off by the poses' relative rotation: the
-    // window spans it (yaw, the odometry's largest error, moves it along the columns).
-    L.window_cols = cfg.window_px + int(std::ceil(cfg.pose_sigma_deg / res - 1e-6));
+    // window spans it (yaw, the odometry's largest error, moves it along the columns). Not without
+    // rings: there a wider pool fills the pattern's gaps with returns no ray near the point made
+    // (evidence from nothing), and the grid is already as coarse as the point density.
+    const bool rings = !cfg.SensorResolved() || cfg.sensor_model.ring_based;
+    L.window_cols = cfg.window_px + (rings ? int(std::ceil(cfg.pose_sigma_deg / res - 1e-6)) : 0);
     L.scatter_rows = cfg.SensorResolved() ? int(std::lround(cfg.sensor_model.spread_deg / res)) : 0;
     L.both_sides = cfg.SensorResolved() && !cfg.sensor_model.ring_based;
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
