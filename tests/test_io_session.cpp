@@ -420,10 +420,14 @@ TEST(Session, RawSweepsAreDeskewedWithTheirTimes) {
     EXPECT_NE(std::string(e.what()).find("Scans/000001.pcd"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("times.txt"), std::string::npos) << e.what();
   }
-  // Times that do not increase are an error naming the file and line.
+  // Times that do not increase are ignored (the session loads: its scans might need none), and
+  // the raw sweep then cannot be deskewed.
   {
     std::ofstream(tmp / "raw/times.txt") << "0.0\n0.1\n0.1\n0.3\n";
-    EXPECT_THROW(io::LoadSession(tmp / "raw"), Error);
+    EXPECT_THROW(io::ReadTimes(tmp / "raw/times.txt"), Error);
+    const Session bad_times = io::LoadSession(tmp / "raw");
+    EXPECT_FALSE(bad_times.keyframes[1].sweep.known);
+    EXPECT_THROW(io::KeyframeCloud(bad_times.keyframes[1]), Error);
   }
   // A `time` field of another type than float is refused, naming the file.
   const std::string bad = tmp / "int_time.pcd";

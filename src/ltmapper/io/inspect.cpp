@@ -122,9 +122,17 @@ void ScanStats(const std::vector<IndexedFile>& scans, bool timed, SessionInfo& i
   }
 }
 
+// A times.txt that reads (LoadSession ignores one that does not, with a warning).
 bool HasTimesFile(const std::string& dir) {
   std::error_code ec;
-  return fs::is_regular_file(fs::path(dir) / "times.txt", ec);
+  const fs::path file = fs::path(dir) / "times.txt";
+  if (!fs::is_regular_file(file, ec)) return false;
+  try {
+    ReadTimes(file.string());
+    return true;
+  } catch (const Error&) {
+    return false;
+  }
 }
 
 }  // namespace

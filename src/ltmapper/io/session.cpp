@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <map>
 #include <set>
@@ -88,6 +89,21 @@ void ReadTimesFile(Session& s) {
     kf.time_s = t[std::size_t(kf.index)];
   }
   SweepMotions(s);
+}
+
+// Keyframe times serve only to deskew raw sweeps: times that do not fit the scans are ignored with
+// a warning saying why (a raw sweep then fails naming its scan), never an error for a session
+// whose scans need none.
+void AttachTimes(Session& s, const std::function<void()>& attach) {
+  try {
+    attach();
+  } catch (const Error& e) {
+    spdlog::warn("{}: keyframe times ignored: {}", s.dir, e.what());
+    for (Keyframe& kf : s.keyframes) {
+      kf.time_s = std::numeric_limits<double>::quiet_NaN();
+      kf.sweep = SweepMotion{};
+    }
+  }
 }
 
 void LoadClouds(Session& s) {
@@ -163,7 +179,7 @@ Session LoadScLioSam(const std::string& dir, const SessionLoadOptions& opt) {
   } else {
     throw Error(dir + ": no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
   }
-  ReadTimesFile(s);
+  AttachTimes(s, [&] { ReadTimesFile(s); });
   if (opt.load_clouds) LoadClouds(s);
   return s;
 }
@@ -198,10 +214,7 @@ Session LoadScansWithPoses(const std::string& dir, const SessionLayout& layout, 
     s.keyframes.push_back(std::move(kf));
   }
   DeriveOdometry(s);
-  if (stamps.empty())
-    ReadTimesFile(s);
-  else
-    SweepMotions(s);
+  AttachTimes(s, [&] { stamps.empty() ? ReadTimesFile(s) : SweepMotions(s); });
   if (opt.load_clouds) LoadClouds(s);
   return s;
 }
@@ -330,7 +343,7 @@ Session LoadKittiSession(const std::string& dir, const std::string& poses_path,
     s.keyframes.push_back(std::move(kf));
   }
   DeriveOdometry(s);
-  ReadTimesFile(s);
+  AttachTimes(s, [&] { ReadTimesFile(s); });
   if (opt.load_clouds) LoadClouds(s);
   return s;
 }
