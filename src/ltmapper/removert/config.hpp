@@ -58,7 +58,7 @@ struct RemovertConfig {
   double tol_rel = 0.01;          // [-]
   int window_px = 1;              // [pixels] see-through needs the window's nearest return beyond
   double pose_sigma_deg = 0.3;    // [deg] relative rotation error of the poses between keyframes within
-                                  // submap_radius_m: each HD image's window grows by ceil(it / pixel) columns
+                                  // submap_radius_m: HD's see-through test also reads the window at yaw -+ it
   // --- HD removal (remove then revert)
   std::vector<double> remove_resolutions_deg = {0.4, 0.6, 0.8};  // [deg/pixel] fine to coarse
   std::vector<double> revert_resolutions_deg = {1.2, 1.6};       // [deg/pixel] coarser

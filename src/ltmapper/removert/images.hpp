@@ -126,7 +126,6 @@ class MultiResImage {
   struct Level {
     Grid grid;
     std::vector<int> window_rows;  // per row: how far the pool looks for the nearest beam (WindowRows)
-    int window_cols = 0;           // columns on each side: window_px + ceil(pose_sigma_deg / pixel)
     int scatter_rows = 0;          // rows within the beams' estimated scatter: pooled whole
     bool both_sides = false;       // no rings: evidence only with a return above and below
     std::vector<std::uint8_t> sides;
@@ -134,7 +133,7 @@ class MultiResImage {
     std::vector<Eigen::Vector3f> ret;  // keep_returns
   };
   void Pool(Level& L) const;         // PoolColumns then PoolRows (or a copy when window_px is 0)
-  void PoolColumns(Level& L) const;  // horizontal min over +-window_cols columns into tmp
+  void PoolColumns(Level& L) const;  // horizontal min over +-window_px columns into tmp
   void PoolRows(Level& L) const;     // vertical: scatter rows whole, then the nearest beam above / below
   bool keep_returns_ = false;
   int window_ = 0;

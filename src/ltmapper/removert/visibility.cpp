@@ -127,6 +127,7 @@ struct VoteTest {
   float tol_abs = 0.f, tol_rel = 0.f;
   float surface_max = 0.f;    // [m] cap of the surface-hit range difference
   std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
+  float yaw_sigma = 0.f;      // [rad] the poses' angular uncertainty: the window is also read at yaw -+ it
 };
 // Surface hit: the pixel's nearest return q lies on the point's plane (n . q = off, sensor
 // frame) within the tolerance, at most surface_max from the point in range. Far ground at a
@@ -163,6 +164,18 @@ inline __m128i Pixel4(const MultiResImage::Grid& g, __m128 pitch, __m128 yaw) {
 }
 #endif
 
+#if defined(__SSE2__)
+// The pooled returns (window nearest) of four points' pixels at yaw + dyaw: where a point would be
+// seen from a keyframe whose pose is off by dyaw.
+inline __m128 PooledAt(const MultiResImage::Grid& g, const float* pairs, const float* pitch, const float* yaw,
+                       float dyaw) {
+  alignas(16) std::int32_t pix[4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(pix),
+                  Pixel4(g, _mm_loadu_ps(pitch), _mm_add_ps(_mm_loadu_ps(yaw), _mm_set1_ps(dyaw))));
+  return _mm_setr_ps(pairs[2 * pix[0]], pairs[2 * pix[1]], pairs[2 * pix[2]], pairs[2 * pix[3]]);
+}
+#endif
+
 // Arrays range / pitch / yaw hold m valid points plus 3 entries of padding (0); with kSurface,
 // plane holds 4 floats per point (sensor-frame normal, offset) and returns the image's.
 template <bool kSurface>
@@ -183,8 +196,10 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
                                     reinterpret_cast<const __m64*>(pairs + 2 * pix[1]));
     const __m128 p23 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[2])),
                                     reinterpret_cast<const __m64*>(pairs + 2 * pix[3]));
-    const __m128 s = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
+    __m128 s = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
     const __m128 at = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(3, 1, 3, 1));
+    if (t.yaw_sigma > 0.f) s = _mm_min_ps(s, _mm_min_ps(PooledAt(grid, pairs, pitch + j, yaw + j, -t.yaw_sigma),
+                                                       PooledAt(grid, pairs, pitch + j, yaw + j, t.yaw_sigma)));
     const __m128 r = _mm_loadu_ps(range + j);
     const __m128 tol = _mm_add_ps(tol_abs, _mm_mul_ps(tol_rel, r));
     // See-through: even the nearest return in the window around the point's pixel lies beyond
@@ -221,7 +236,11 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
 #else
   for (std::size_t j = 0; j < m; ++j) {
     const std::size_t pix = grid.Pixel(pitch[j], yaw[j]);
-    const float s = pairs[2 * pix], at = pairs[2 * pix + 1];
+    float s = pairs[2 * pix];
+    const float at = pairs[2 * pix + 1];
+    if (t.yaw_sigma > 0.f)
+      s = std::min({s, pairs[2 * grid.Pixel(pitch[j], yaw[j] - t.yaw_sigma)],
+                    pairs[2 * grid.Pixel(pitch[j], yaw[j] + t.yaw_sigma)]});
     const float r = range[j];
     const float tol = t.tol_abs + t.tol_rel * r;
     if (!std::isfinite(s)) continue;  // no return anywhere in the window: no evidence
@@ -267,12 +286,6 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
     Level L;
     L.grid = Grid::Make(cfg, res, res);
     L.window_rows = WindowRows(cfg, L.grid.rows, res);
-    // A point's direction seen from another keyframe is off by the poses' relative rotation: the
-    // window spans it (yaw, the odometry's largest error, moves it along the columns). Not without
-    // rings: there a wider pool fills the pattern's gaps with returns no ray near the point made
-    // (evidence from nothing), and the grid is already as coarse as the point density.
-    const bool rings = !cfg.SensorResolved() || cfg.sensor_model.ring_based;
-    L.window_cols = cfg.window_px + (rings ? int(std::ceil(cfg.pose_sigma_deg / res - 1e-6)) : 0);
     L.scatter_rows = cfg.SensorResolved() ? int(std::lround(cfg.sensor_model.spread_deg / res)) : 0;
     L.both_sides = cfg.SensorResolved() && !cfg.sensor_model.ring_based;
     L.range.assign(std::size_t(L.grid.rows) * L.grid.cols, std::numeric_limits<float>::infinity());
@@ -409,7 +422,7 @@ void MultiResImage::Build(const PointCloud& scan) {
 // Separable min filter: along columns (wrapping) into tmp, then along rows into pooled. Min is
 // exact and there are no NaNs, so the evaluation order does not change the result.
 void MultiResImage::Pool(Level& L) const {
-  if (window_ == 0 && L.window_cols == 0) {
+  if (window_ == 0) {
     std::copy(L.range.begin(), L.range.end(), L.pooled.begin());
     return;
   }
@@ -417,9 +430,9 @@ void MultiResImage::Pool(Level& L) const {
   PoolRows(L);
 }
 
-// Horizontal: the min over the window_cols columns on each side (wrapping) into L.tmp.
+// Horizontal: the min over the window_px columns on each side (wrapping) into L.tmp.
 void MultiResImage::PoolColumns(Level& L) const {
-  const int w = L.window_cols;
+  const int w = window_;
   const int rows = L.grid.rows, cols = L.grid.cols;
   for (int r = 0; r < rows; ++r) {
     const float* src = &L.range[std::size_t(r) * cols];
@@ -714,6 +727,12 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   s.test.tol_rel = float(cfg.tol_rel);
   s.test.surface_max = float(options.surface_max_m);
   s.test.occluded = options.count_occluded ? kOcc : 0;
+  // A point's direction seen from another keyframe is off by the poses' relative rotation (yaw,
+  // the odometry's largest error, moves it along the columns): the window is read there too. Not
+  // without rings: there a wider reach fills the pattern's gaps with returns no ray near the point
+  // made (evidence from nothing).
+  const bool rings = !cfg.SensorResolved() || cfg.sensor_model.ring_based;
+  s.test.yaw_sigma = rings ? float(cfg.pose_sigma_deg * 3.14159265358979323846 / 180.0) : 0.f;
   s.beams = options.normals != nullptr && options.beams != nullptr;
   s.surface = options.normals != nullptr && (s.test.surface_max > 0.f || s.beams);
   return s;
