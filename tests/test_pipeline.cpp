@@ -231,6 +231,27 @@ TEST_F(Rerun, SameOutWithMoreFewerOrOtherSessionsEqualsFreshOut) {
   ExpectSameFiles(Files(Run({"session_00", "session_01"}, out, "removert_far.yaml")), fresh2);
 }
 
+// A rebuilt ltmapper never takes an older build's outputs as its own: each stage's key holds the
+// hash of the sources it was built from, and a finished run whose markers name other code runs
+// every stage again (and writes what a fresh run writes).
+TEST_F(Rerun, OutputsOfOtherCodeAreRunAgain) {
+  namespace fs = std::filesystem;
+  const std::string out = *root_ / "other_code";
+  fs::copy(fresh3_, out, fs::copy_options::recursive);
+  for (const std::string& m : {out + "/aligned/STAGE_DONE", out + "/changes/STAGE_DONE", out + "/map.ltmap.done"}) {
+    std::string key = test::ReadText(m);
+    const auto at = key.find("code: ");
+    ASSERT_NE(at, std::string::npos) << m << "\n" << key;
+    ASSERT_EQ(key.find_first_not_of("0123456789abcdef", at + 6), at + 6 + 64) << key;  // a SHA-256
+    key.replace(at + 6, 64, std::string(64, '0'));
+    test::WriteText(m, key);
+  }
+  Run({"session_00", "session_01", "session_02"}, out);
+  const std::string report = test::ReadText(out + "/run_report.json");
+  EXPECT_EQ(report.find("\"skipped\": true"), std::string::npos) << report;
+  ExpectSameFiles(Files(out), Files(fresh3_));
+}
+
 // ------------------------------------------------------------------------- lifelong add
 // ATE RMSE [m] of each session's world poses in `aligned_dir` against the simulator's truth.
 std::map<std::string, double> AteBySession(const std::string& sim_dir, const std::string& aligned_dir) {

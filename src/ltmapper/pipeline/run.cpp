@@ -57,12 +57,12 @@ std::vector<std::string> StageMarkers(const RunPaths& p) {
           p.store + ".done"};
 }
 
-// Each stage's key: the output layout version, the sessions, its resolved config, and the keys
-// before it (outputs of a run without a manifest never count as finished).
+// Each stage's key: the output layout version, the code it ran (CodeId), the sessions, its resolved
+// config, and the keys before it (outputs of a run without a manifest never count as finished).
 std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
                                    const std::vector<std::string>& session_dirs) {
   std::vector<std::string> keys(3);
-  keys[0] = "layout: manifest-1\nsessions:\n";
+  keys[0] = std::string("layout: manifest-1\ncode: ") + CodeId() + "\nsessions:\n";
   for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
   keys[0] += "slam:\n" + ConfigToString(sc.slam);
   keys[1] = keys[0] + "removert:\n" + ConfigToString(sc.removert);
