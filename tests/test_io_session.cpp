@@ -354,6 +354,16 @@ TEST(SessionLayouts, UnknownLayoutNamesTheExpectedOnes) {
   }
 }
 
+// A binary PCD of one point (1, 2, 3) with a U4 field `name` holding `value` after x y z.
+void WritePointWithUintField(const std::string& path, const std::string& name, std::uint32_t value) {
+  std::ofstream out(path, std::ios::binary);
+  out << "VERSION 0.7\nFIELDS x y z " << name << "\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+      << "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n";
+  const float xyz[3] = {1.f, 2.f, 3.f};
+  out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+  out.write(reinterpret_cast<const char*>(&value), sizeof(value));
+}
+
 // The sensor's motion over t seconds at a constant body velocity v and yaw rate w, in the model
 // io::Deskew uses (rotation by t w, translation t v).
 Pose MotionOver(double t, const Eigen::Vector3d& v, double w) {
@@ -431,15 +441,7 @@ TEST(Session, RawSweepsAreDeskewedWithTheirTimes) {
   }
   // A `time` field of another type than float is refused, naming the file.
   const std::string bad = tmp / "int_time.pcd";
-  {
-    std::ofstream out(bad, std::ios::binary);
-    out << "VERSION 0.7\nFIELDS x y z time\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
-           "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n";
-    const float xyz[3] = {1.f, 2.f, 3.f};
-    const std::uint32_t t = 5;
-    out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
-    out.write(reinterpret_cast<const char*>(&t), sizeof(t));
-  }
+  WritePointWithUintField(bad, "time", 5);
   try {
     io::ReadPcd(bad);
     ADD_FAILURE() << "an integer time field was read";
@@ -448,15 +450,7 @@ TEST(Session, RawSweepsAreDeskewedWithTheirTimes) {
   }
   // Ouster's `t`: uint32 nanoseconds after the scan's timestamp.
   const std::string ouster = tmp / "ouster.pcd";
-  {
-    std::ofstream out(ouster, std::ios::binary);
-    out << "VERSION 0.7\nFIELDS x y z t\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
-           "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n";
-    const float xyz[3] = {1.f, 2.f, 3.f};
-    const std::uint32_t t = 50000000;
-    out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
-    out.write(reinterpret_cast<const char*>(&t), sizeof(t));
-  }
+  WritePointWithUintField(ouster, "t", 50000000);
   const PointCloud o = io::ReadPcd(ouster);
   ASSERT_EQ(o.time.size(), 1u);
   EXPECT_NEAR(o.time[0], 0.05, 1e-7);

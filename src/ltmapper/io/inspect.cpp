@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <limits>
 #include <map>
 #include <set>
@@ -74,8 +75,8 @@ void PoseStats(const std::vector<Pose>& poses, SessionInfo& info) {
 }
 
 // Reads every scan (in parallel): sizes, non-finite counts, empty and unreadable scans, raw sweeps
-// (per-point times: deskewed on load when the session has keyframe times, `timed`, else a problem).
-void ScanStats(const std::vector<IndexedFile>& scans, bool timed, SessionInfo& info) {
+// (scans with per-point times).
+void ScanStats(const std::vector<IndexedFile>& scans, SessionInfo& info) {
   struct Result {
     std::size_t points = 0, non_finite = 0;
     bool raw = false;
@@ -112,26 +113,18 @@ void ScanStats(const std::vector<IndexedFile>& scans, bool timed, SessionInfo& i
                               (r.non_finite ? " (after dropping " + std::to_string(r.non_finite) + " NaN/Inf points)" : ""));
   }
   if (info.scans_read == 0) info.points_min = 0;
-  info.keyframe_times = timed;
-  if (info.raw_sweeps > 0 && !timed) {
+}
+
+// Whether the loaded session's raw sweeps can be deskewed (LoadSession read keyframe times); raw
+// sweeps that cannot are a problem, and why the stages would fail on them.
+void NoteRawSweeps(const Session* loaded, SessionInfo& info) {
+  info.keyframe_times = loaded && !loaded->keyframes.empty() && loaded->keyframes.front().sweep.known;
+  if (info.raw_sweeps > 0 && !info.keyframe_times) {
     const std::string p = std::to_string(info.raw_sweeps) +
                           " raw sweeps (per-point 'time' field) but no keyframe times to deskew them: put times.txt "
                           "beside the scans (one timestamp [s] per line, line i for scan i) or give TUM poses";
     info.problems.push_back(p);
     if (info.load_error.empty()) info.load_error = p;
-  }
-}
-
-// A times.txt that reads (LoadSession ignores one that does not, with a warning).
-bool HasTimesFile(const std::string& dir) {
-  std::error_code ec;
-  const fs::path file = fs::path(dir) / "times.txt";
-  if (!fs::is_regular_file(file, ec)) return false;
-  try {
-    ReadTimes(file.string());
-    return true;
-  } catch (const Error&) {
-    return false;
   }
 }
 
@@ -145,19 +138,21 @@ SessionInfo InspectLoaded(const std::string& dir, const SessionLayout& layout, b
   info.pose_source = layout.poses.empty() ? "VIEWPOINT of each scan" : layout.poses;
   const auto scans = ListLenient(layout.scans_dir, layout.scan_ext, info);
   info.scans_found = scans.size();
+  std::optional<Session> s;
   try {
-    const Session s = LoadSession(dir);
+    s = LoadSession(dir);
     std::vector<Pose> poses;
-    for (const Keyframe& kf : s.keyframes) poses.push_back(kf.T_session_sensor);
+    for (const Keyframe& kf : s->keyframes) poses.push_back(kf.T_session_sensor);
     info.keyframes = poses.size();
-    info.odometry_edges = s.odometry.size();
-    info.loop_edges = s.loops.size();
+    info.odometry_edges = s->odometry.size();
+    info.loop_edges = s->loops.size();
     PoseStats(poses, info);
   } catch (const Error& e) {
     info.load_error = e.what();
     info.problems.push_back(e.what());
   }
-  if (read_scans) ScanStats(scans, layout.poses_format == "tum" || HasTimesFile(dir), info);
+  if (read_scans) ScanStats(scans, info);
+  NoteRawSweeps(s ? &*s : nullptr, info);
   return info;
 }
 
@@ -266,12 +261,14 @@ SessionInfo InspectScLioSam(const std::string& dir, bool read_scans) {
     info.problems.push_back("no poses: neither singlesession_posegraph.g2o nor optimized_poses.txt");
   }
   PoseStats(poses, info);
-  if (read_scans) ScanStats(scans, HasTimesFile(dir), info);
+  if (read_scans) ScanStats(scans, info);
+  std::optional<Session> s;
   try {
-    LoadSession(dir);
+    s = LoadSession(dir);
   } catch (const Error& e) {
     info.load_error = e.what();
   }
+  NoteRawSweeps(s ? &*s : nullptr, info);
   return info;
 }
 }  // namespace
@@ -327,14 +324,16 @@ SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses
   info.keyframes = poses.size();
   if (poses.size() > 1) info.odometry_edges = poses.size() - 1;
   PoseStats(poses, info);
-  if (read_scans) ScanStats(scans, HasTimesFile(dir), info);
+  if (read_scans) ScanStats(scans, info);
+  std::optional<Session> s;
   if (info.load_error.empty()) {
     try {
-      LoadKittiSession(dir, poses_path, T_cam_velo);
+      s = LoadKittiSession(dir, poses_path, T_cam_velo);
     } catch (const Error& e) {
       info.load_error = e.what();
     }
   }
+  NoteRawSweeps(s ? &*s : nullptr, info);
   return info;
 }
 

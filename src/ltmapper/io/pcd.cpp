@@ -401,6 +401,17 @@ FieldAt TimeAt(const std::string& path, const std::string& name, FieldAt f) {
   return f;
 }
 
+// Field `name` at `f` as the scan's time field when it is one (TimeAt); `*time` holds the one
+// found so far: a file with both `time` and `t` is an error naming it.
+bool TakeTime(const std::string& path, const std::string& name, FieldAt f, FieldAt* time) {
+  if (name != "time" && name != "t") return false;
+  const FieldAt t = TimeAt(path, name, f);
+  if (!t.datatype) return true;
+  if (time->datatype) throw Error(path + ": PCD has both 'time' and 't' fields");
+  *time = t;
+  return true;
+}
+
 // x y z (intensity, and the labels) of an uncompressed binary PCD: their offsets and datatypes in
 // the point record (a field with COUNT > 1: its first value, as PCL reads it). Binary files are
 // never handed to PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at
@@ -414,12 +425,7 @@ std::array<FieldAt, 8> BinaryFields(const std::string& path, const PcdHeader& h)
     for (int k = 0; k < 9; ++k) {
       if (h.fields[i] != names[k]) continue;
       const std::uint8_t type = Datatype(h.types[i], h.sizes[i]);
-      if (k >= 7) {
-        const FieldAt f = TimeAt(path, names[k], {offset, type});
-        if (f.datatype && at[7].datatype) throw Error(path + ": PCD has both 'time' and 't' fields");
-        if (f.datatype) at[7] = f;
-        continue;
-      }
+      if (TakeTime(path, names[k], {offset, type}, &at[7])) continue;
       if (k >= 4) {
         at[std::size_t(k)] = LabelAt({offset, type}, k - 4);
         continue;
@@ -452,43 +458,30 @@ Pose ReadPcdViewpoint(const std::string& path) {
   return T;
 }
 
-PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(path + ": cannot open");
-    const PcdHeader h = ParseHeader(path, in);
-    CheckDataSize(path, in, h);
-    if (h.points == 0) {  // a valid empty scan; PCL would only print a warning
-      if (stats) *stats = CloudReadStats{};
-      return PointCloud{};
-    }
-    // Uncompressed binary: the header is parsed and the size checked already, so
-    // read the records here in one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's
-    // loadPCDFile 1.4-1.9 ms; going through PCL's reader and a per-value type switch took ~1.5-2 ms).
-    // No x y z: an error here, before PCL's reader (fuzz/fuzz_pcd: a binary_compressed file without
-    // x made pcl::PCDReader::read dereference null).
-    for (const char* name : {"x", "y", "z"})
-      if (std::find(h.fields.begin(), h.fields.end(), name) == h.fields.end())
-        throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
-    if (h.data == "binary") {  // never through PCL (see BinaryFields)
-      const auto f = BinaryFields(path, h);
-      Records rec;
-      rec.cols = std::size_t(h.points);
-      rec.rows = 1;
-      rec.point_step = h.PointStep();
-      rec.row_step = rec.cols * rec.point_step;
-      std::vector<std::uint8_t> bytes(rec.row_step);
-      in.clear();
-      in.seekg(std::streamoff(h.data_offset));
-      if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
-        throw Error(path + ": cannot read the PCD data section");
-      rec.data = bytes.data();
-      return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
-    }
-  }
+namespace {
+// An uncompressed binary PCD, its header parsed and its size checked: the records read here in
+// one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's loadPCDFile 1.4-1.9 ms; going
+// through PCL's reader and a per-value type switch took ~1.5-2 ms), never through PCL (see
+// BinaryFields).
+PointCloud ReadBinaryPcd(const std::string& path, std::ifstream& in, const PcdHeader& h, CloudReadStats* stats) {
+  const auto f = BinaryFields(path, h);
+  Records rec;
+  rec.cols = std::size_t(h.points);
+  rec.rows = 1;
+  rec.point_step = h.PointStep();
+  rec.row_step = rec.cols * rec.point_step;
+  std::vector<std::uint8_t> bytes(rec.row_step);
+  in.clear();
+  in.seekg(std::streamoff(h.data_offset));
+  if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
+    throw Error(path + ": cannot read the PCD data section");
+  rec.data = bytes.data();
+  return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
+}
 
+// ascii and binary_compressed PCDs through PCL's reader, every field's type and offset checked
+// against the record before it is read.
+PointCloud ReadPclPcd(const std::string& path, CloudReadStats* stats) {
   pcl::PCLPointCloud2 blob;
   Eigen::Vector4f origin;
   Eigen::Quaternionf orientation;
@@ -511,6 +504,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   const pcl::PCLPointField* fz = nullptr;
   const pcl::PCLPointField* fi = nullptr;
   const pcl::PCLPointField *fc = nullptr, *fs = nullptr, *fo = nullptr, *ft = nullptr;
+  FieldAt time;
   for (const auto& f : blob.fields) {
     if (f.name == "x") fx = &f;
     if (f.name == "y") fy = &f;
@@ -519,10 +513,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
     if (f.name == "class") fc = &f;
     if (f.name == "session") fs = &f;
     if (f.name == "object") fo = &f;
-    if ((f.name == "time" || f.name == "t") && TimeAt(path, f.name, {f.offset, f.datatype}).datatype) {
-      if (ft) throw Error(path + ": PCD has both 'time' and 't' fields");
-      ft = &f;
-    }
+    if (TakeTime(path, f.name, {f.offset, f.datatype}, &time) && time.datatype && !ft) ft = &f;
   }
   if (!fx || !fy || !fz) throw Error(path + ": PCD has no x y z fields");
   for (const auto* f : {fx, fy, fz, fi, fc, fs, fo, ft}) {
@@ -534,15 +525,40 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
   const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
   return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), {LabelAt(at(fc), 0), LabelAt(at(fs), 1), LabelAt(at(fo), 2)},
-                     TimeAt(path, ft ? ft->name : "time", at(ft)), path, stats);
+                     time, path, stats);
+}
+
+}  // namespace
+
+PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path + ": cannot open");
+  const PcdHeader h = ParseHeader(path, in);
+  CheckDataSize(path, in, h);
+  if (h.points == 0) {  // a valid empty scan; PCL would only print a warning
+    if (stats) *stats = CloudReadStats{};
+    return PointCloud{};
+  }
+  // No x y z: an error here, before PCL's reader (fuzz/fuzz_pcd: a binary_compressed file without
+  // x made pcl::PCDReader::read dereference null).
+  for (const char* name : {"x", "y", "z"})
+    if (std::find(h.fields.begin(), h.fields.end(), name) == h.fields.end())
+      throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
+  if (h.data == "binary") return ReadBinaryPcd(path, in, h, stats);
+  in.close();
+  return ReadPclPcd(path, stats);
 }
 
 namespace {
-// The header PCL's PCDWriter writes for x y z intensity floats (the same bytes).
-void WritePcdHeader(std::ostream& out, std::size_t points, const char* data) {
-  out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
-         "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH "
-      << points << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << points << "\nDATA " << data << "\n";
+// The header PCL's PCDWriter writes for x y z intensity floats (the same bytes); with `time`, a
+// raw sweep's fifth float.
+void WritePcdHeader(std::ostream& out, std::size_t points, const char* data, bool time = false) {
+  out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity" << (time ? " time" : "")
+      << "\nSIZE 4 4 4 4" << (time ? " 4" : "") << "\nTYPE F F F F" << (time ? " F" : "") << "\nCOUNT 1 1 1 1"
+      << (time ? " 1" : "") << "\nWIDTH " << points << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << points
+      << "\nDATA " << data << "\n";
 }
 
 // An empty cloud is a valid PCD (POINTS 0), but PCL's writers refuse it: write the header here.
@@ -577,9 +593,7 @@ namespace {
 void WriteTimedPcd(const std::string& path, const PointCloud& cloud) {
   cloud.CheckConsistent(path);
   WriteFileAtomic(path, [&](std::ostream& out) {
-    out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity time\n"
-           "SIZE 4 4 4 4 4\nTYPE F F F F F\nCOUNT 1 1 1 1 1\nWIDTH "
-        << cloud.size() << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << cloud.size() << "\nDATA binary\n";
+    WritePcdHeader(out, cloud.size(), "binary", true);
     std::vector<float> rec;
     rec.reserve(5 * cloud.size());
     for (std::size_t i = 0; i < cloud.size(); ++i) {

@@ -28,6 +28,8 @@ namespace fs = std::filesystem;
 
 namespace ltm::io {
 namespace {
+// Keyframe times beside the scans (KITTI's name and rule: line i is the time of scan i).
+constexpr const char* kTimesFile = "times.txt";
 
 std::string BaseName(const std::string& dir) {
   fs::path p(dir);
@@ -78,7 +80,7 @@ void SweepMotions(Session& s) {
 
 // times.txt beside the scans (KITTI's rule: line i is the time of scan i), when there is one.
 void ReadTimesFile(Session& s) {
-  const fs::path file = fs::path(s.dir) / "times.txt";
+  const fs::path file = fs::path(s.dir) / kTimesFile;
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) return;
   const std::vector<double> t = ReadTimes(file.string());
@@ -360,7 +362,7 @@ void WriteTimesOf(const std::string& dir, const Session& session) {
                   std::to_string(kf.index) + " at position " + std::to_string(i));
     times.push_back(kf.time_s);
   }
-  if (!times.empty()) WriteTimes((fs::path(dir) / "times.txt").string(), times);
+  if (!times.empty()) WriteTimes((fs::path(dir) / kTimesFile).string(), times);
 }
 }  // namespace
 
@@ -410,14 +412,24 @@ void WriteSession(const std::string& dir, const Session& session,
   WriteTimesOf(dir, session);
 }
 
+namespace {
+// A raw sweep (per-point times) deskewed with `motion`; `where` names it in the error when the
+// motion is unknown. A scan without times is left as it is.
+void DeskewRaw(PointCloud& cloud, const SweepMotion& motion, const std::string& where) {
+  if (cloud.time.empty()) return;
+  if (!motion.known)
+    throw Error(where + ": a raw sweep (per-point 'time' field) in a session without keyframe times to deskew it: "
+                "put times.txt beside the scans (one timestamp [s] per line, line i for scan i) or give TUM poses");
+  Deskew(cloud, motion);
+}
+}  // namespace
+
 std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadStats* stats) {
   if (kf.cloud) {
     if (stats) *stats = CloudReadStats{kf.cloud->size(), 0};
     if (kf.cloud->time.empty()) return kf.cloud;
-    if (!kf.sweep.known)
-      throw Error("keyframe " + std::to_string(kf.index) + ": a raw sweep (per-point times) without a sweep motion");
     auto copy = std::make_shared<PointCloud>(*kf.cloud);
-    Deskew(*copy, kf.sweep);
+    DeskewRaw(*copy, kf.sweep, "keyframe " + std::to_string(kf.index));
     return copy;
   }
   if (kf.cloud_path.empty())
@@ -447,11 +459,7 @@ void Deskew(PointCloud& cloud, const SweepMotion& motion) {
 
 PointCloud ReadScan(const std::string& path, const SweepMotion& motion, CloudReadStats* stats) {
   PointCloud cloud = ReadCloud(path, stats);
-  if (cloud.time.empty()) return cloud;
-  if (!motion.known)
-    throw Error(path + ": a raw sweep (per-point 'time' field) in a session without keyframe times to deskew it: "
-                "put times.txt beside the scans (one timestamp [s] per line, line i for scan i) or give TUM poses");
-  Deskew(cloud, motion);
+  DeskewRaw(cloud, motion, path);
   return cloud;
 }
 
