@@ -313,12 +313,12 @@ double PartOffset(int round) {
 }
 
 // Loop candidates of unaligned session b with aligned session a from global placements of
-// cfg.global_queries keyframe submaps of b in a's map, one in each equal part of b's route at
-// PartOffset(round): each placed keyframe is paired with a's keyframe nearest to where it was placed.
-std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, CloudStore& store, const SlamConfig& cfg,
-                                         int round) {
+// cfg.global_queries keyframe submaps of b in a's map (`map`, its features built once for every
+// round), one in each equal part of b's route at PartOffset(round): each placed keyframe is paired
+// with a's keyframe nearest to where it was placed.
+std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, const GlobalMap& map, CloudStore& store,
+                                         const SlamConfig& cfg, int round) {
   const Stopwatch sw;
-  const GlobalMap map(WorldMap(res, a, store), cfg);
   const auto& Wa = res.sessions[std::size_t(a)].T_world_sensor;
   if (Wa.empty()) return {};
   const int n = int(store.Keyframes(b));
@@ -348,10 +348,13 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
   for (std::size_t b = 1; b < sessions.size(); ++b)
     for (std::size_t a = 0; a < sessions.size() && !res.sessions[b].aligned; ++a) {
       if (a == b || !res.sessions[a].aligned) continue;
+      Stopwatch sw;
+      const GlobalMap map(WorldMap(res, int(a), store), cfg);  // a's world map and its features
+      cost.registration_s += sw.Seconds();
       const int rounds = std::max(1, int(store.Keyframes(int(b))) / std::max(1, cfg.global_queries));
       for (int round = 0; round < rounds && !res.sessions[b].aligned; ++round) {
-        const Stopwatch sw;
-        std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), store, cfg, round);
+        sw = Stopwatch();
+        std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), map, store, cfg, round);
         cost.registration_s += sw.Seconds();  // the placements are registrations too
         if (a > b)  // loops are stored with a.session < b.session: the placement was of b in a's map
           for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
@@ -487,7 +490,6 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
-  if (cfg.refine_rounds == 0) return;
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (std::size_t a = 0; a + 1 < n; ++a)

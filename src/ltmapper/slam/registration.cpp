@@ -62,11 +62,22 @@ Vector6d PlaneRow(const Eigen::Matrix3d& R, const Eigen::Vector3d& n, const Eige
   return row;
 }
 
-// Overlap and RMS of `source` under T against the target, and with kPlanes the plane statistics
-// (the coarse stage needs the overlap only: no plane is computed for it).
-enum class Measure { kOverlap, kPlanes };
+// The share of `source` under T with a target point within `radius` (the coarse stage's and
+// OverlapRatio's measure: no plane is computed for it).
+double OverlapWithin(const GicpCloud& target, const PointCloud& source, const Pose& T, double radius) {
+  if (source.empty()) return 0.0;
+  std::size_t inside = 0;
+  for (const auto& p : source.points) {
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    inside += target.tree->Nearest((T * p.xyz().cast<double>()).cast<float>(), &j, &d2) && d2 <= radius * radius;
+  }
+  return double(inside) / double(source.size());
+}
+
+// Overlap, RMS and the plane statistics of `source` under T against the target.
 Inliers CountInliers(const GicpCloud& target, const GicpCloud& source, const Pose& T, double radius,
-                     double range_noise_m, Measure measure) {
+                     double range_noise_m) {
   const double noise_var = 2.0 * range_noise_m * range_noise_m;  // both clouds
   const double tail_z = kTailSigmas * kTailSigmas;
   double sum = 0.0, z_sum = 0.0;
@@ -80,7 +91,6 @@ Inliers CountInliers(const GicpCloud& target, const GicpCloud& source, const Pos
     if (!target.tree->Nearest(q.cast<float>(), &j, &d2) || d2 > radius * radius) continue;
     sum += d2;
     ++inside;
-    if (measure == Measure::kOverlap) continue;
     const GicpCloud::Plane& pt = target.PlaneAt(j);
     if (pt.normal.isZero()) continue;  // too few neighbours for a surface
     const double e = pt.normal.dot(q - target.cloud().points[j].xyz().cast<double>());
@@ -131,7 +141,7 @@ std::string CoarseStage(const PointCloud& target, const PointCloud& source, cons
   const GicpCloud tcp(tc, cfg.reg_covariance_neighbours), scp(sc, cfg.reg_covariance_neighbours);
   RunGicp(tcp, scp, cfg.reg_coarse_correspondence_m, cfg, guess);
   const double radius = InlierRadius(cfg.reg_coarse_voxel_m, cfg.reg_range_noise_m);
-  *coarse_overlap = CountInliers(tcp, scp, guess, radius, cfg.reg_range_noise_m, Measure::kOverlap).ratio;
+  *coarse_overlap = OverlapWithin(tcp, sc, guess, radius);
   const double need = kCoarseOverlapFraction * cfg.reg_min_overlap;
   if (*coarse_overlap >= need) return {};
   std::ostringstream why;
@@ -168,15 +178,7 @@ std::string Verdict(const RegistrationResult& r, const Pose& T_init, const SlamC
 
 double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pose& T_target_source,
                     const SlamConfig& cfg) {
-  if (source.empty()) return 0.0;
-  const double r = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
-  std::size_t inside = 0;
-  for (const auto& p : source.points) {
-    std::uint32_t j = 0;
-    float d2 = 0.f;
-    inside += target.tree->Nearest((T_target_source * p.xyz().cast<double>()).cast<float>(), &j, &d2) && d2 <= r * r;
-  }
-  return double(inside) / double(source.size());
+  return OverlapWithin(target, source, T_target_source, InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m));
 }
 
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
@@ -201,8 +203,7 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
 
   // The gates' measures with the final pose.
   r.inlier_radius_m = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
-  const Inliers in = CountInliers(tgt, src, r.T_target_source, r.inlier_radius_m, cfg.reg_range_noise_m,
-                                  Measure::kPlanes);
+  const Inliers in = CountInliers(tgt, src, r.T_target_source, r.inlier_radius_m, cfg.reg_range_noise_m);
   r.overlap = in.ratio;
   r.inlier_rms_m = in.rms;
   r.plane_z = in.plane_z;
