@@ -11,12 +11,12 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <map>
-#include <set>
 #include <functional>
-#include <iterator>
 #include <iomanip>
+#include <iterator>
+#include <map>
 #include <ostream>
+#include <set>
 #include <sstream>
 
 namespace ltm::map {

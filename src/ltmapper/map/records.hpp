@@ -68,10 +68,10 @@ struct IntegrationResult {
   double seconds = 0.0;
 };
 
-// Part of the map to build: everything, or an axis-aligned world box; optional voxel filter.
 // Receives one part of a streamed map (Store::StreamMapAt and friends).
 using PartSink = std::function<void(PointCloud&&)>;
 
+// Part of the map to build: everything, or an axis-aligned world box; optional voxel filter.
 struct Region {
   bool use_box = false;
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();

@@ -32,7 +32,7 @@ namespace ltm::removert {
 namespace detail {
 
 MultiResImage::Grid MultiResImage::Grid::Make(const RemovertConfig& cfg, double row_deg, double col_deg) {
-  constexpr double kPi = 3.14159265358979323846, kDeg = kPi / 180.0;
+  constexpr double kPi = 3.14159265358979323846, kDeg = kRadPerDeg;
   Grid g;
   g.rows = std::max(1, int(std::ceil((cfg.fov_up_deg - cfg.fov_down_deg) / row_deg - 1e-9)));
   g.cols = std::max(1, int(std::lround(360.0 / col_deg)));
@@ -273,7 +273,7 @@ std::vector<int> MultiResImage::WindowRows(const RemovertConfig& cfg, int rows, 
 MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg,
                              bool keep_returns, bool within_beams)
     : keep_returns_(keep_returns) {
-  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  constexpr double kDeg = kRadPerDeg;
   up_ = float(cfg.fov_up_deg * kDeg);
   down_ = float(cfg.fov_down_deg * kDeg);
   min_range_ = float(cfg.min_range_m);
@@ -300,7 +300,7 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
 void MultiResImage::PointBounds(const RemovertConfig& cfg) {
   const geometry::SensorModel& m = cfg.sensor_model;
   if (!cfg.SensorResolved() || !m.ring_based || m.beams() < 2) return;
-  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  constexpr double kDeg = kRadPerDeg;
   point_up_ = std::min(up_, float((m.fov_up_deg + m.spread_deg) * kDeg));
   point_down_ = std::max(down_, float((m.fov_down_deg - m.spread_deg) * kDeg));
 }
@@ -539,7 +539,7 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     const double spacing = cfg.SensorResolved() ? cfg.sensor_model.SpacingAt(elevation) : 0.0;
     span_[std::size_t(r)] = std::max(1, int(std::lround(std::max(test.span_deg, kSpanSpacings * spacing) / test.row_deg)));
   }
-  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  constexpr double kDeg = kRadPerDeg;
   down_ = float(cfg.fov_down_deg * kDeg);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
@@ -732,7 +732,7 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   // without rings: there a wider reach fills the pattern's gaps with returns no ray near the point
   // made (evidence from nothing).
   const bool rings = !cfg.SensorResolved() || cfg.sensor_model.ring_based;
-  s.test.yaw_sigma = rings ? float(cfg.pose_sigma_deg * 3.14159265358979323846 / 180.0) : 0.f;
+  s.test.yaw_sigma = rings ? float(cfg.pose_sigma_deg * detail::kRadPerDeg) : 0.f;
   s.beams = options.normals != nullptr && options.beams != nullptr;
   s.surface = options.normals != nullptr && (s.test.surface_max > 0.f || s.beams);
   return s;

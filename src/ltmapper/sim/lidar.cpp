@@ -286,12 +286,12 @@ const std::vector<Pose>& Simulator::T_session_sensor_drifted(int s) const {
 
 namespace {
 
+// Seconds after the keyframe at which column c is fired (the `time` a raw sweep's point carries).
+double ColumnTime(const SimConfig& cfg, int c) { return cfg.sweep_s * c / cfg.columns; }
+
 // The sensor pose `dt` seconds after keyframe k, on the way to keyframe k + 1 (constant velocity
 // between keyframes: linear in translation, slerp in rotation; past the last keyframe the last
 // step's motion continues).
-// Seconds after the keyframe at which column c is fired (the `time` a raw sweep's point carries).
-float ColumnTime(const SimConfig& cfg, int c) { return float(cfg.sweep_s * c / cfg.columns); }
-
 Pose PoseAfter(const std::vector<Pose>& poses, std::size_t k, double dt, double seconds_per_keyframe) {
   if (dt == 0.0 || poses.size() < 2) return poses[k];
   const bool last = k + 1 >= poses.size();
@@ -336,7 +336,7 @@ std::vector<Pose> Simulator::SweepPoses(int session, int keyframe) const {
   std::vector<Pose> out(std::size_t(cfg.columns), plan.T_world_sensor[std::size_t(keyframe)]);
   if (cfg.sweep == "instant") return out;
   for (int c = 0; c < cfg.columns; ++c)
-    out[std::size_t(c)] = PoseAfter(plan.T_world_sensor, std::size_t(keyframe), cfg.sweep_s * c / cfg.columns,
+    out[std::size_t(c)] = PoseAfter(plan.T_world_sensor, std::size_t(keyframe), ColumnTime(cfg, c),
                                     plan.seconds_per_keyframe);
   return out;
 }
@@ -394,7 +394,7 @@ PointCloud NoisyPoints(const SimConfig& cfg, int session, int keyframe, const Sc
     if (rr < cfg.min_range_m || rr > cfg.max_range_m) continue;
     Eigen::Vector3f p = dirs[i] * rr;  // the sensor frame when the ray was fired
     if (cfg.sweep == "deskewed") p = (T.inverse() * sweep[i % std::size_t(cfg.columns)]).cast<float>() * p;
-    if (cfg.sweep == "distorted") cloud.time.push_back(ColumnTime(cfg, int(i % std::size_t(cfg.columns))));
+    if (cfg.sweep == "distorted") cloud.time.push_back(float(ColumnTime(cfg, int(i % std::size_t(cfg.columns)))));
     cloud.push_back(p.x(), p.y(), p.z(), rays.intensity[i]);
     cloud.cls.push_back(rays.cls[i]);
     cloud.object.push_back(rays.object[i]);
