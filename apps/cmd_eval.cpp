@@ -142,12 +142,16 @@ void SetupHd(CLI::App& parent) {
   struct Opt : EvalOptions {
     std::string truth_map, output, objects, sim, changes, session, aligned, poses;
     std::string truth_frame = "central";
+    bool single_session = false;
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("hd", "HD removal: point-wise SA / DA / AA (KTH DynamicMap rule)");
   AddEvalOptions(*cmd, *o);
   cmd->add_option("--truth-map", o->truth_map, "Labelled raw map (PLY with 'class', 'object'), frame of the output");
-  cmd->add_option("--output", o->output, "The method's HD-free map (PCD/PLY); default with --changes: <changes>/<session>/static_map.pcd");
+  cmd->add_option("--output", o->output, "The method's HD-free map (PCD/PLY); default with --changes: <changes>/<session>/static_map.pcd "
+                  "minus the residues of movers its pairs found (multi-session cleanup)");
+  cmd->add_flag("--single-session", o->single_session, "With --changes: score <changes>/<session>/static_map.pcd as it is "
+                "(the session's own HD removal, before the multi-session cleanup)");
   cmd->add_option("--objects", o->objects, "objects.csv for per-class rows (default with --sim: truth/objects.csv)");
   cmd->add_option("--sim", o->sim, "Simulator output dir: the raw map is built from truth/<session>/labels");
   cmd->add_option("--changes", o->changes, "LT-removert output dir");
@@ -164,12 +168,18 @@ void SetupHd(CLI::App& parent) {
     if (sim_form && o->output.empty() && o->changes.empty()) Usage("eval hd: give --changes DIR or --output F");
     if (!o->aligned.empty() && !o->poses.empty()) Usage("eval hd: give at most one of --aligned and --poses");
     const auto cfg = LoadEvalConfig(*o);
-    const std::string output = !o->output.empty() ? o->output : io::layout::StaticMapFile(o->changes, o->session);
+    std::string output = o->output;
+    PointCloud out;
+    if (!output.empty())
+      out = io::ReadCloud(output);
+    else if (o->single_session)
+      out = io::ReadCloud(output = io::layout::StaticMapFile(o->changes, o->session));
+    else
+      out = eval::CleanedSessionMap(o->changes, o->session, &output);
     const std::string objects = !o->objects.empty() ? o->objects : sim_form ? Join(Join(o->sim, "truth"), "objects.csv") : "";
     if (!o->objects.empty() && !fs::exists(o->objects)) throw Error(o->objects, 0, "no such file");
     eval::Report report;
     report.inputs.push_back({"output", output});
-    PointCloud out = io::ReadCloud(output);
     spdlog::info("output map: {} points", out.size());
     eval::HdEvaluator ev(std::move(out), cfg, objects.empty() ? std::map<int, std::string>{} : eval::ReadObjectClasses(objects),
                          o->common.threads);

@@ -63,7 +63,8 @@ py::dict LdStatsToDict(const removert::LdStats& l) {
   py::dict d;
   PutFields(d, l, LTM_KV(l, central_points), LTM_KV(l, query_points), LTM_KV(l, nd_strong), LTM_KV(l, nd_weak),
             LTM_KV(l, pd_strong), LTM_KV(l, pd_weak), LTM_KV(l, pd_unobserved), LTM_KV(l, nd_unobserved),
-            LTM_KV(l, pd_same), LTM_KV(l, nd_same), LTM_KV(l, seconds));
+            LTM_KV(l, pd_same), LTM_KV(l, nd_same), LTM_KV(l, nd_residue), LTM_KV(l, pd_residue),
+            LTM_KV(l, seconds));
   return d;
 }
 

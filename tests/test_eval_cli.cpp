@@ -245,6 +245,30 @@ TEST(Cli, TruthAsOutputIsPerfectThroughEveryCommand) {
   // Without --aligned the true poses in the central frame are used: the same answer here.
   ASSERT_EQ(RunCli("eval hd --sim " + f.sim + " --changes " + f.changes + " --session session_00 --json " + (dir / "h0.json"), &out), 0) << out;
   EXPECT_DOUBLE_EQ(*JsonNumber(test::ReadText(dir / "h0.json"), "hd.aa"), 1.0);
+  {  // The multi-session cleanup: the residues a pair lists for session_01 leave its scored map,
+     // unless --single-session.
+    const std::string pair = f.changes + "/pair_session_00_session_01";
+    const PointCloud map1 = io::ReadPcd(f.changes + "/session_01/static_map.pcd");
+    std::vector<std::uint32_t> first(10);
+    for (std::uint32_t i = 0; i < 10; ++i) first[i] = i;
+    io::WritePcd(pair + "/pd_residue.pcd", map1.select(first));
+    io::WritePcd(pair + "/nd_residue.pcd", PointCloud());
+    test::WriteText(f.changes + "/report.json",
+                    "{\"sessions\": [{\"name\": \"session_00\"}, {\"name\": \"session_01\"}], \"pairs\": "
+                    "[{\"central\": 0, \"query\": 1, \"dir\": \"pair_session_00_session_01\"}]}");
+    const std::string base = "eval hd --sim " + f.sim + " --changes " + f.changes + " --session session_01 --aligned " + f.aligned;
+    ASSERT_EQ(RunCli(base + " --json " + (dir / "hc.json"), &out), 0) << out;
+    EXPECT_NE(test::ReadText(dir / "hc.json").find("minus 10 residues"), std::string::npos);
+    EXPECT_DOUBLE_EQ(*JsonNumber(test::ReadText(dir / "hc.json"), "hd.output_points"), double(map1.size() - 10));
+    EXPECT_LT(*JsonNumber(test::ReadText(dir / "hc.json"), "hd.sa"), 1.0);
+    ASSERT_EQ(RunCli(base + " --single-session --json " + (dir / "hs.json"), &out), 0) << out;
+    EXPECT_DOUBLE_EQ(*JsonNumber(test::ReadText(dir / "hs.json"), "hd.sa"), 1.0);
+    // session_00 is the pair's central: its (empty) nd_residue.pcd takes nothing out.
+    ASSERT_EQ(RunCli("eval hd --sim " + f.sim + " --changes " + f.changes + " --session session_00 --json " + (dir / "h0c.json"), &out), 0) << out;
+    EXPECT_DOUBLE_EQ(*JsonNumber(test::ReadText(dir / "h0c.json"), "hd.aa"), 1.0);
+    for (const char* g : {"/pd_residue.pcd", "/nd_residue.pcd"}) fs::remove(pair + g);
+    fs::remove(f.changes + "/report.json");
+  }
 
   ASSERT_EQ(RunCli("eval ld --sim " + f.sim + " --changes " + f.changes + " --pair 00_01 --json " + (dir / "l.json"), &out), 0)
       << out;

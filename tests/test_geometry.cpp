@@ -460,5 +460,32 @@ TEST(RangeImage, RandomPointsLandWithinOnePixelOfTheirDirection) {
   EXPECT_THROW(RangeImage(RangeImageConfig{2.0, -2.0, 0, 900}), Error);
 }
 
+// Euclidean clusters: transitive links closer than the gap, numbered by lowest point index; the
+// longest horizontal edge of the xy-oriented box.
+TEST(Geometry, EuclideanClustersAndHorizontalEdge) {
+  PointCloud c;
+  for (int i = 0; i < 10; ++i) c.push_back(0.3f * float(i), 0.f, 0.f);  // a 2.7 m chain, links of 0.3 m
+  c.push_back(10.f, 10.f, 0.f);                                          // alone
+  for (int i = 0; i < 5; ++i) {                                          // a diagonal chain, 0.4 m links
+    const float t = 0.4f * float(i) / std::sqrt(2.f);
+    c.push_back(20.f + t, 20.f + t, 1.f);
+  }
+  const auto label = geometry::EuclideanClusters(c, 0.5);
+  ASSERT_EQ(label.size(), c.size());
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(label[std::size_t(i)], 0u);
+  EXPECT_EQ(label[10], 1u);
+  for (int i = 11; i < 16; ++i) EXPECT_EQ(label[std::size_t(i)], 2u);
+  const auto fine = geometry::EuclideanClusters(c, 0.35);  // the 0.4 m links break, the 0.3 m ones hold
+  EXPECT_EQ(fine[9], 0u);
+  EXPECT_EQ(fine[11], 2u);
+  EXPECT_EQ(fine[15], 6u);
+  std::vector<std::uint32_t> chain(10), diag{11, 12, 13, 14, 15};
+  for (std::uint32_t i = 0; i < 10; ++i) chain[i] = i;
+  EXPECT_NEAR(geometry::LongestHorizontalEdge(c, chain), 2.7, 1e-5);
+  EXPECT_NEAR(geometry::LongestHorizontalEdge(c, diag), 1.6, 1e-5);  // along the diagonal, not the axes' 1.13
+  EXPECT_EQ(geometry::LongestHorizontalEdge(c, {10}), 0.0);
+  EXPECT_TRUE(geometry::EuclideanClusters(PointCloud(), 0.5).empty());
+}
+
 }  // namespace
 }  // namespace ltm::geometry

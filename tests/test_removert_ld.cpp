@@ -84,9 +84,9 @@ TEST(RemovertLd, NdPdStrongWeak) {
   // central_nd marks exactly the central map points that are in nd_strong / nd_weak.
   ASSERT_EQ(ld.central_nd.size(), s.cmap.size());
   const PointCloud marked = s.cmap.select(ld.central_nd);
-  EXPECT_EQ(marked.size(), ld.nd_strong.size() + ld.nd_weak.size());
+  EXPECT_EQ(marked.size(), ld.nd_strong.size() + ld.nd_weak.size() + ld.nd_residue.size());
   const geometry::KdTree nd_tree(marked);
-  for (const PointCloud* c : {&ld.nd_strong, &ld.nd_weak})
+  for (const PointCloud* c : {&ld.nd_strong, &ld.nd_weak, &ld.nd_residue})
     for (const PointXYZI& p : c->points) {
       std::uint32_t j = 0;
       float d2 = 1.f;
@@ -222,6 +222,51 @@ TEST(RemovertLd, PointsPastTheRimOfTheOtherCoverageAreChanges) {
   std::size_t inside = 0;
   for (const auto& p : nd(shifted, cfg).points) inside += std::fabs(p.x) < 2.f && p.z > 0.8f && p.z < 2.2f;
   EXPECT_EQ(inside, 0u);
+}
+
+// Multi-session cleanup (paper Fig. 3(f)): a pedestrian-sized thing that only one session has, in
+// space the other saw through, is a residue of a mover (HD of its session), not a change; a car
+// stays a change, and so does a small piece beside it (part of the same object, seen apart).
+TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
+  const test::Box ped_c = test::MakeBox(0, 5, 0, 0.6, 5.6, 1.7, 20), ped_q = test::MakeBox(-10, 5, 0, -9.4, 5.6, 1.7, 21);
+  const test::Box car_c = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
+  const test::Box piece_c = test::MakeBox(7.8, -5.5, 0, 8.3, -5.0, 1.0, 22);  // 0.8 m from the car
+  auto cb = Common();
+  for (const auto& b : {ped_c, car_c, piece_c}) cb.push_back(b);
+  auto qb = Common();
+  qb.push_back(ped_q);
+  const auto central = Drive(cb, 0.0, nullptr), query = Drive(qb, 0.7, nullptr);
+  RemovertConfig cfg = test::ConfigFor();
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  std::printf("residues: central %zu, query %zu\n", ld.nd_residue.size(), ld.pd_residue.size());
+  EXPECT_EQ(ld.stats.nd_residue, ld.nd_residue.size());
+  EXPECT_EQ(ld.stats.pd_residue, ld.pd_residue.size());
+
+  // Off: the pedestrians are changes (strong ND, weak PD), as any thing one session has.
+  RemovertConfig off_cfg = cfg;
+  off_cfg.ld_residue_length_m = 0.0;
+  const auto off = removert::DetectLd(cmap, qmap, central, query, off_cfg, 2);
+  EXPECT_TRUE(off.nd_residue.empty());
+  EXPECT_TRUE(off.pd_residue.empty());
+  auto body = [](test::Box b) {  // above the LD radius over the ground under it
+    b.lo.z() = 0.4;
+    return b;
+  };
+  ASSERT_GT(CountIn(cmap, body(ped_c)), 20u);
+  ASSERT_GT(CountIn(qmap, body(ped_q)), 20u);
+  EXPECT_GE(double(CountIn(off.nd_strong, ped_c)), 0.9 * double(CountIn(cmap, body(ped_c))));
+  EXPECT_GE(double(CountIn(off.pd_weak, ped_q)), 0.9 * double(CountIn(qmap, body(ped_q))));
+  // On: all of them residues, none left as a change.
+  EXPECT_EQ(CountIn(ld.nd_residue, ped_c), CountIn(off.nd_strong, ped_c));
+  EXPECT_EQ(CountIn(ld.nd_strong, ped_c), 0u);
+  EXPECT_EQ(CountIn(ld.pd_residue, ped_q), CountIn(off.pd_weak, ped_q));
+  EXPECT_EQ(CountIn(ld.pd_weak, ped_q), 0u);
+  // The car and the piece beside it stay strong ND.
+  EXPECT_GE(double(CountIn(ld.nd_strong, car_c)), 0.9 * double(CountIn(cmap, car_c)));
+  EXPECT_EQ(CountIn(ld.nd_residue, car_c), 0u);
+  EXPECT_GT(CountIn(ld.nd_strong, piece_c), 0u);
+  EXPECT_EQ(CountIn(ld.nd_residue, piece_c), 0u);
 }
 
 }  // namespace

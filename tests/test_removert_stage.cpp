@@ -4,6 +4,7 @@
 #include "test_removert_scene.hpp"
 #include "test_util.hpp"
 
+#include "ltmapper/eval/eval.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/removert/removert.hpp"
@@ -38,8 +39,8 @@ TEST(RemovertStage, WritesFormatsAndPartitions) {
   ASSERT_EQ(rep.pairs.size(), 1u);
   for (const char* f : {"session_00/static_map.pcd", "session_00/hd_map.pcd", "session_01/static_map.pcd",
                         "pair_00_01/pd_strong.pcd", "pair_00_01/pd_weak.pcd", "pair_00_01/nd_strong.pcd",
-                        "pair_00_01/nd_weak.pcd", "pair_00_01/changes.ply", "pair_00_01/keyframes.csv",
-                        "report.json"})
+                        "pair_00_01/nd_weak.pcd", "pair_00_01/nd_residue.pcd", "pair_00_01/pd_residue.pcd",
+                        "pair_00_01/changes.ply", "pair_00_01/keyframes.csv", "report.json"})
     EXPECT_TRUE(fs::exists(out + "/" + f)) << f;
 
   // The parked car is ND strong (the query drove by without it).
@@ -48,7 +49,7 @@ TEST(RemovertStage, WritesFormatsAndPartitions) {
 
   // Per-keyframe static clouds partition the central static map.
   const PointCloud cmap = io::ReadPcd(out + "/session_00/static_map.pcd");
-  std::size_t sum = 0, nd_sum = 0;
+  std::size_t sum = 0, nd_sum = 0, hd_sum = 0;
   for (int k = 0; k < 8; ++k) {
     char name[32];
     std::snprintf(name, sizeof(name), "%06d", k);
@@ -59,11 +60,21 @@ TEST(RemovertStage, WritesFormatsAndPartitions) {
     const PointCloud st = io::ReadPcd(kdir + "/static.pcd");
     sum += st.size();
     nd_sum += io::ReadPcd(kdir + "/nd_strong.pcd").size();
+    hd_sum += io::ReadPcd(kdir + "/hd.pcd").size();
     // Local frame: points lie within the sensor's range of the keyframe origin.
     for (const auto& p : st.points) ASSERT_LT(p.xyz().norm(), float(cfg.max_range_m) + 1.f);
   }
   EXPECT_EQ(sum, cmap.size());
   EXPECT_EQ(nd_sum, nds.size());
+  // The keyframes' HD: the central's own HD and the residues of movers the query saw through.
+  const PointCloud residue = io::ReadPcd(out + "/pair_00_01/nd_residue.pcd");
+  EXPECT_EQ(hd_sum, io::ReadPcd(out + "/session_00/hd_map.pcd").size() + residue.size());
+  // The session's map after the cleanup (eval's default): the static map minus those residues.
+  std::string note;
+  EXPECT_EQ(eval::CleanedSessionMap(out, "session_00", &note).size(), cmap.size() - residue.size());
+  EXPECT_EQ(eval::CleanedSessionMap(out, "session_01", nullptr).size(),
+            io::ReadPcd(out + "/session_01/static_map.pcd").size() -
+                io::ReadPcd(out + "/pair_00_01/pd_residue.pcd").size());
 
   // The query's keyframes beyond 20 m from the central's last keyframe are new keyframes.
   ASSERT_EQ(rep.new_keyframes.size(), 1u);

@@ -43,6 +43,11 @@ Pose TruthToEstimateFrame(const std::string& sim_dir, const std::string& aligned
 // The four change clouds {pd_strong,pd_weak,nd_strong,nd_weak}.pcd of a pair folder.
 ChangeClouds ReadChangeClouds(const std::string& dir);
 ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T);
+// A session's HD-free map after LT-removert's multi-session cleanup (paper Fig. 3(f)): its
+// <changes>/<session>/static_map.pcd minus the residues of movers that the pairs of report.json
+// holding it found (nd_residue.pcd where it is the central, pd_residue.pcd where it is the
+// query). Without report.json (no pairs): the static map. `note` says what was taken out.
+PointCloud CleanedSessionMap(const std::string& changes, const std::string& session, std::string* note);
 // `root/pair_<pair>`; pair "00_01" also finds pair_session_00_session_01 and any pair_*
 // folder whose two trailing numbers are 00 and 01. Throws listing what exists when none.
 std::string FindPairDir(const std::string& root, const std::string& pair);

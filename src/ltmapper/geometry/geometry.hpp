@@ -67,6 +67,15 @@ class KdTree {
   std::unique_ptr<Impl> impl_;
 };
 
+// ------------------------------------------------------------------------------- clusters
+// Euclidean clusters: points closer than `gap_m` [m] (strict, as KdTree::Radius) are in one
+// cluster, transitively. Returns each point's cluster number, 0 .. clusters - 1, numbered in the
+// order of their lowest point index (deterministic). Non-finite points: ltm::Error (KdTree).
+std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m);
+// The longest horizontal edge [m] of the xy-oriented box of cloud[idx] (box axes: the principal
+// axes of the points' x, y spread); 0 for fewer than two points.
+double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx);
+
 // ------------------------------------------------------------------------------ range images
 // Spherical projection of a spinning LiDAR. Rows span the vertical FOV (row 0 = top), columns
 // the full 360 deg (column 0 at azimuth +180 deg, increasing clockwise seen from above, i.e.

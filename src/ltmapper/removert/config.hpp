@@ -108,6 +108,13 @@ struct RemovertConfig {
   std::string ld_same_test = "beams";  // beams: the beam test (ld_beam, BeamTest); pixel: the nearest return of
                                       // the point's LD-resolution pixel or window on its plane (ld.surface_max_m)
   BeamTest ld_beam;                    // keys ld.beam_*
+  // Multi-session cleanup (paper Fig. 3(f)): seen-through changes (strong ND of the central, weak
+  // PD of the query) are clustered (points closer than ld_residue_gap_m); a cluster whose longest
+  // horizontal edge is shorter than ld_residue_length_m, and that no longer cluster comes that
+  // close to, is a residue of a moving object that its session's HD removal missed: the
+  // session's HD, not a change (0 = off).
+  double ld_residue_gap_m = 0.5;     // [m]
+  double ld_residue_length_m = 2.0;  // [m]
   bool covisible_only = false;    // true: a raw change counts only where the other session had its line
                                   // of sight at all (a return in the window); else unobserved
   std::string pairs = "central";  // central: (0, q) for every query q; consecutive: (q-1, q)
@@ -168,6 +175,8 @@ struct RemovertConfig {
     v("ld.beam_tol_rel", ld_beam.tol_rel, "", 0.0, 1.0);
     v("ld.beam_grazing_max_m", ld_beam.grazing_max_m, "m", 0.0, 100.0);
     v("ld.beam_edge_max_m", ld_beam.edge_max_m, "m", 0.0, 1000.0);
+    v("ld.residue_gap_m", ld_residue_gap_m, "m", 0.01, 10.0);
+    v("ld.residue_length_m", ld_residue_length_m, "m", 0.0, 100.0);
     v("ld.covisible_only", covisible_only);
     v("ld.pairs", pairs, {"central", "consecutive"});
     v("out.assign_radius_m", assign_radius_m, "m", 0.0, 1e6);

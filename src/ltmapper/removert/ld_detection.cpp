@@ -89,6 +89,38 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
   return s;
 }
 
+// Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through) split
+// into clusters at ld_residue_gap_m. A cluster shorter than ld_residue_length_m along its longest
+// horizontal edge, and no closer than that to a longer one, is a residue of a mover (moved to
+// *residue): a short piece beside a long one is part of that object (a trunk's foot under its
+// canopy, a sparse object's fragment), seen in pieces.
+void SplitResidues(PointCloud* seen, PointCloud* residue, const RemovertConfig& cfg) {
+  if (cfg.ld_residue_length_m <= 0.0 || seen->empty()) return;
+  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(*seen, cfg.ld_residue_gap_m);
+  std::vector<std::vector<std::uint32_t>> members(*std::max_element(label.begin(), label.end()) + 1);
+  for (std::size_t i = 0; i < label.size(); ++i) members[label[i]].push_back(std::uint32_t(i));
+  std::vector<bool> small(seen->size(), false);
+  for (const auto& m : members)
+    if (geometry::LongestHorizontalEdge(*seen, m) < cfg.ld_residue_length_m)
+      for (auto i : m) small[i] = true;
+  const std::vector<bool> large = [&] { auto l = small; l.flip(); return l; }();
+  if (std::find(large.begin(), large.end(), true) != large.end()) {
+    const geometry::KdTree objects(seen->select(large));
+    const float near = float(cfg.ld_residue_length_m);
+    for (const auto& m : members) {
+      if (!small[m.front()]) continue;
+      const bool beside = std::any_of(m.begin(), m.end(), [&](std::uint32_t i) {
+        return objects.CountWithin(seen->points[i].xyz(), near, 1) > 0;
+      });
+      if (beside)
+        for (auto i : m) small[i] = false;
+    }
+  }
+  *residue = seen->select(small);
+  small.flip();
+  *seen = seen->select(small);
+}
+
 }  // namespace
 
 LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
@@ -122,6 +154,10 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   res.pd_weak = pd.select(pds.weak);
   res.pd_strong = pd.select(pds.strong);
   res.pd_unobserved = pd.select(pds.unobserved);
+  SplitResidues(&res.nd_strong, &res.nd_residue, cfg);
+  SplitResidues(&res.pd_weak, &res.pd_residue, cfg);
+  res.stats.nd_residue = res.nd_residue.size();
+  res.stats.pd_residue = res.pd_residue.size();
   res.stats.nd_strong = res.nd_strong.size();
   res.stats.nd_weak = res.nd_weak.size();
   res.stats.pd_strong = res.pd_strong.size();

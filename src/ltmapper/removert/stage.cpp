@@ -129,6 +129,8 @@ void WriteLdClouds(const std::string& dir, const LdResult& ld, const PointCloud&
   io::WritePcd(dir + "/nd_strong.pcd", ld.nd_strong);
   io::WritePcd(dir + "/nd_weak.pcd", ld.nd_weak);
   io::WritePcd(dir + "/pd_unobserved.pcd", ld.pd_unobserved);
+  io::WritePcd(dir + "/nd_residue.pcd", ld.nd_residue);
+  io::WritePcd(dir + "/pd_residue.pcd", ld.pd_residue);
   if (!cfg.write_ply) return;
   std::vector<bool> unchanged(cmap.size());  // central static minus ND
   for (std::size_t i = 0; i < cmap.size(); ++i) unchanged[i] = !ld.central_nd[i];
@@ -139,7 +141,9 @@ void WriteLdClouds(const std::string& dir, const LdResult& ld, const PointCloud&
                                       {&ld.nd_weak, PointClass::kNDWeak, cs},
                                       {&ld.pd_strong, PointClass::kPDStrong, qs},
                                       {&ld.pd_weak, PointClass::kPDWeak, qs},
-                                      {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory}});
+                                      {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory},
+                                      {&ld.nd_residue, PointClass::kHD, cs},
+                                      {&ld.pd_residue, PointClass::kHD, qs}});
 }
 
 // Which keyframe every output point of a pair belongs to (rule at the top of this file).
@@ -147,6 +151,7 @@ void WriteLdClouds(const std::string& dir, const LdResult& ld, const PointCloud&
 struct KeyframeAssignment {
   std::size_t nc = 0;
   PointCloud pd_strong_kf;  // strong PD + new territory (added to the map like strong PD)
+  PointCloud hd_kf;         // the central's HD + the residues of movers the query saw through
   std::vector<std::vector<std::uint32_t>> b_static, b_hd, b_nds, b_ndw, b_pds, b_pdw;
   std::vector<int> new_list;  // query keyframe positions that become new map keyframes
 };
@@ -199,11 +204,13 @@ KeyframeAssignment AssignKeyframes(const SessionData& c, const SessionData& q, c
   a.nc = c.kfs.size();
   a.pd_strong_kf = ld.pd_strong;
   a.pd_strong_kf.append(ld.pd_unobserved);
+  a.hd_kf = c.hd_map;
+  a.hd_kf.append(ld.nd_residue);
   const std::vector<std::uint32_t> new_q = FarQueryKeyframes(c.kfs, q.kfs, cfg, threads);
   const geometry::KdTree ctree(detail::Positions(c.kfs));
   const std::size_t nk = a.nc + q.kfs.size();
   a.b_static = Buckets(Nearest(c.static_map, ctree, threads), nk);
-  a.b_hd = Buckets(Nearest(c.hd_map, ctree, threads), nk);
+  a.b_hd = Buckets(Nearest(a.hd_kf, ctree, threads), nk);
   a.b_nds = Buckets(Nearest(ld.nd_strong, ctree, threads), nk);
   a.b_ndw = Buckets(Nearest(ld.nd_weak, ctree, threads), nk);
   a.b_pds = Buckets(PdOwners(a.pd_strong_kf, c.kfs, q.kfs, new_q, cfg, threads), nk);
@@ -224,7 +231,7 @@ void WriteKeyframeFolders(const std::string& dir, const SessionData& c, const Se
   detail::ParallelFor(a.nc, threads, [&](std::size_t k) {
     WriteKeyframeDir(dir + "/keyframes/" + Index6(c.kfs[k].index), c.kfs[k].T_world_sensor,
                      {{"static", pick(c.static_map, a.b_static[k]), PointClass::kStatic, ci},
-                      {"hd", pick(c.hd_map, a.b_hd[k]), PointClass::kHD, ci},
+                      {"hd", pick(a.hd_kf, a.b_hd[k]), PointClass::kHD, ci},
                       {"pd_strong", pick(a.pd_strong_kf, a.b_pds[k]), PointClass::kPDStrong, qi},
                       {"pd_weak", pick(ld.pd_weak, a.b_pdw[k]), PointClass::kPDWeak, qi},
                       {"nd_strong", pick(ld.nd_strong, a.b_nds[k]), PointClass::kNDStrong, ci},
@@ -270,9 +277,11 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
                                                 const std::string& dir, const RemovertConfig& cfg, int threads) {
   spdlog::info("removert: LD {} vs {}", c.name, q.name);
   const LdResult ld = DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads);
-  spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} (unobserved {}) ({:.1f} s)",
+  spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} (unobserved {}); residues of "
+               "movers (HD) {} of {}, {} of {} ({:.1f} s)",
                io::layout::PairDirName(ci, qi), ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
-               ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.seconds);
+               ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.nd_residue, c.name,
+               ld.stats.pd_residue, q.name, ld.stats.seconds);
   WriteLdClouds(dir, ld, c.static_map, ci, qi, cfg);
   const KeyframeAssignment a = AssignKeyframes(c, q, ld, cfg, threads);
   if (cfg.write_keyframes) WriteKeyframeFolders(dir, c, q, ci, qi, ld, a, cfg, threads);
@@ -298,7 +307,8 @@ void WritePairJson(std::ostream& os, int c, int q, const LdStats& l, const std::
   os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << io::json::Quote(io::layout::PairDirName(c, q))
      << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak << ", \"pd_strong\": " << l.pd_strong
      << ", \"pd_weak\": " << l.pd_weak << ", \"pd_unobserved\": " << l.pd_unobserved
-     << ", \"nd_unobserved\": " << l.nd_unobserved << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
+     << ", \"nd_unobserved\": " << l.nd_unobserved << ", \"nd_residue\": " << l.nd_residue
+     << ", \"pd_residue\": " << l.pd_residue << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
   for (std::size_t j = 0; j < new_keyframes.size(); ++j) os << (j ? ", " : "") << new_keyframes[j];
   os << "]}";
 }

@@ -1,0 +1,60 @@
+// Euclidean clusters (union-find over the kd-tree's radius neighbours) and the longest
+// horizontal edge of a cluster's oriented box.
+#include "ltmapper/geometry/geometry.hpp"
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <numeric>
+
+namespace ltm::geometry {
+
+namespace {
+std::uint32_t Root(std::vector<std::uint32_t>& parent, std::uint32_t i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];  // path halving
+  return i;
+}
+}  // namespace
+
+std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m) {
+  const std::size_t n = cloud.size();
+  std::vector<std::uint32_t> parent(n);
+  std::iota(parent.begin(), parent.end(), 0u);
+  if (n == 0) return parent;
+  const KdTree tree(cloud);
+  for (std::size_t i = 0; i < n; ++i)
+    for (const auto& [j, d2] : tree.Radius(cloud.points[i].xyz(), float(gap_m))) {
+      const std::uint32_t a = Root(parent, std::uint32_t(i)), b = Root(parent, j);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the root is the lowest index
+    }
+  std::vector<std::uint32_t> label(n), number(n, std::uint32_t(-1));
+  std::uint32_t clusters = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t r = Root(parent, std::uint32_t(i));
+    if (number[r] == std::uint32_t(-1)) number[r] = clusters++;
+    label[i] = number[r];
+  }
+  return label;
+}
+
+double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
+  if (idx.size() < 2) return 0.0;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (auto i : idx) mean += Eigen::Vector2d(cloud.points[i].x, cloud.points[i].y);
+  mean /= double(idx.size());
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (auto i : idx) {
+    const Eigen::Vector2d d = Eigen::Vector2d(cloud.points[i].x, cloud.points[i].y) - mean;
+    cov += d * d.transpose();
+  }
+  const Eigen::Matrix2d axes = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvectors();
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e300), hi = -lo;
+  for (auto i : idx) {
+    const Eigen::Vector2d a = axes.transpose() * (Eigen::Vector2d(cloud.points[i].x, cloud.points[i].y) - mean);
+    lo = lo.cwiseMin(a);
+    hi = hi.cwiseMax(a);
+  }
+  return (hi - lo).maxCoeff();
+}
+
+}  // namespace ltm::geometry
