@@ -487,5 +487,28 @@ TEST(Geometry, EuclideanClustersAndHorizontalEdge) {
   EXPECT_TRUE(geometry::EuclideanClusters(PointCloud(), 0.5).empty());
 }
 
+// The lowest point per xy cell: a cell's own lowest z, a box's lowest over the cells it overlaps.
+TEST(Geometry, LowestGridIsTheGroundUnderABox) {
+  PointCloud c;
+  c.push_back(0.5f, 0.5f, 2.f);
+  c.push_back(0.6f, 0.4f, -1.f);  // same cell (0, 0)
+  c.push_back(1.5f, 0.5f, 0.5f);  // cell (1, 0)
+  c.push_back(-0.5f, -0.5f, -3.f);  // cell (-1, -1)
+  geometry::LowestGrid g(1.0);
+  EXPECT_TRUE(g.empty());
+  g.Add(c);
+  float z = 0.f;
+  ASSERT_TRUE(g.At({0.1f, 0.9f, 5.f}, &z));
+  EXPECT_EQ(z, -1.f);
+  EXPECT_FALSE(g.At({5.f, 5.f, 0.f}, &z));
+  EXPECT_EQ(g.Under({1.2f, 0.2f, 0.f}, {1.8f, 0.8f, 0.f}), 0.5f);
+  EXPECT_EQ(g.Under({0.2f, 0.2f, 0.f}, {1.8f, 0.8f, 0.f}), -1.f);
+  EXPECT_EQ(g.Under({0.2f, 0.2f, 0.f}, {0.8f, 0.8f, 0.f}, 1), -3.f);  // grown by one cell
+  EXPECT_TRUE(std::isinf(g.Under({10.f, 10.f, 0.f}, {11.f, 11.f, 0.f})));
+  geometry::LowestGrid off(0.0);
+  off.Add(c);
+  EXPECT_TRUE(off.empty());
+}
+
 }  // namespace
 }  // namespace ltm::geometry

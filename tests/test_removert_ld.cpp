@@ -226,13 +226,15 @@ TEST(RemovertLd, PointsPastTheRimOfTheOtherCoverageAreChanges) {
 
 // Multi-session cleanup (paper Fig. 3(f)): a pedestrian-sized thing that only one session has, in
 // space the other saw through, is a residue of a mover (HD of its session), not a change; a car
-// stays a change, and so does a small piece beside it (part of the same object, seen apart).
+// stays a change, and so do a small piece beside it (part of the same object, seen apart) and a
+// pole (thin, but taller than any mover).
 TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
   const test::Box ped_c = test::MakeBox(0, 5, 0, 0.6, 5.6, 1.7, 20), ped_q = test::MakeBox(-10, 5, 0, -9.4, 5.6, 1.7, 21);
   const test::Box car_c = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
   const test::Box piece_c = test::MakeBox(7.8, -5.5, 0, 8.3, -5.0, 1.0, 22);  // 0.8 m from the car
+  const test::Box pole_c = test::MakeBox(-14, 5, 0, -13.7, 5.3, 5.0, 23);
   auto cb = Common();
-  for (const auto& b : {ped_c, car_c, piece_c}) cb.push_back(b);
+  for (const auto& b : {ped_c, car_c, piece_c, pole_c}) cb.push_back(b);
   auto qb = Common();
   qb.push_back(ped_q);
   const auto central = Drive(cb, 0.0, nullptr), query = Drive(qb, 0.7, nullptr);
@@ -267,6 +269,8 @@ TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
   EXPECT_EQ(CountIn(ld.nd_residue, car_c), 0u);
   EXPECT_GT(CountIn(ld.nd_strong, piece_c), 0u);
   EXPECT_EQ(CountIn(ld.nd_residue, piece_c), 0u);
+  EXPECT_GE(double(CountIn(ld.nd_strong, pole_c)), 0.9 * double(CountIn(cmap, body(pole_c))));
+  EXPECT_EQ(CountIn(ld.nd_residue, pole_c), 0u);
 }
 
 }  // namespace

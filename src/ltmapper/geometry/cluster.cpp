@@ -1,10 +1,12 @@
-// Euclidean clusters (union-find over the kd-tree's radius neighbours) and the longest
-// horizontal edge of a cluster's oriented box.
+// Euclidean clusters (union-find over the kd-tree's radius neighbours), the longest horizontal
+// edge of a cluster's oriented box, and the lowest point per xy cell (the ground under things).
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <numeric>
 
 namespace ltm::geometry {
@@ -55,6 +57,38 @@ double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uin
     hi = hi.cwiseMax(a);
   }
   return (hi - lo).maxCoeff();
+}
+
+std::int64_t LowestGrid::Cell(double v) const { return std::int64_t(std::floor(v / cell_m_)); }
+
+// 32 bits per axis: cells of 1 cm still span +-21000 km.
+std::int64_t LowestGrid::Pack(std::int64_t ix, std::int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffll); }
+
+void LowestGrid::Add(const PointCloud& cloud) {
+  if (cell_m_ <= 0.0) return;
+  for (const auto& p : cloud.points) {
+    const auto [it, added] = z_.emplace(Pack(Cell(p.x), Cell(p.y)), p.z);
+    if (!added) it->second = std::min(it->second, p.z);
+  }
+}
+
+bool LowestGrid::At(const Eigen::Vector3f& p, float* z) const {
+  if (z_.empty()) return false;
+  const auto it = z_.find(Pack(Cell(p.x()), Cell(p.y())));
+  if (it == z_.end()) return false;
+  *z = it->second;
+  return true;
+}
+
+float LowestGrid::Under(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int grow) const {
+  float best = std::numeric_limits<float>::infinity();
+  if (z_.empty()) return best;
+  for (std::int64_t ix = Cell(lo.x()) - grow; ix <= Cell(hi.x()) + grow; ++ix)
+    for (std::int64_t iy = Cell(lo.y()) - grow; iy <= Cell(hi.y()) + grow; ++iy) {
+      const auto it = z_.find(Pack(ix, iy));
+      if (it != z_.end()) best = std::min(best, it->second);
+    }
+  return best;
 }
 
 }  // namespace ltm::geometry

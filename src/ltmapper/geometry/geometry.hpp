@@ -7,7 +7,9 @@
 #include "ltmapper/core/core.hpp"
 #include "ltmapper/geometry/sensor.hpp"  // SensorModel: beam tables, presets, estimation
 
+#include <cstdint>
 #include <memory>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -75,6 +77,27 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
 // The longest horizontal edge [m] of the xy-oriented box of cloud[idx] (box axes: the principal
 // axes of the points' x, y spread); 0 for fewer than two points.
 double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx);
+
+// The lowest z per square xy cell of edge cell_m (cell floor(x / cell_m), floor(y / cell_m)) of
+// the clouds added: the local ground, where they have it. cell_m <= 0: always empty.
+class LowestGrid {
+ public:
+  explicit LowestGrid(double cell_m) : cell_m_(cell_m) {}
+  void Add(const PointCloud& cloud);
+  bool empty() const { return z_.empty(); }
+  double cell_m() const { return cell_m_; }
+  // The lowest z of p's cell; false where no point fell in it.
+  bool At(const Eigen::Vector3f& p, float* z) const;
+  // The lowest z over the cells overlapping the xy box [lo, hi] grown by `grow` cells on each
+  // side; +inf where none has a point.
+  float Under(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int grow = 0) const;
+
+ private:
+  std::int64_t Cell(double v) const;  // the cell index along one axis
+  static std::int64_t Pack(std::int64_t ix, std::int64_t iy);
+  double cell_m_;
+  std::unordered_map<std::int64_t, float> z_;
+};
 
 // ------------------------------------------------------------------------------ range images
 // Spherical projection of a spinning LiDAR. Rows span the vertical FOV (row 0 = top), columns

@@ -11,6 +11,7 @@
 //  4. Geometry (Reject()): ghosts of misalignment, height above ground, width across the sensor's sampling at the
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
 
@@ -47,34 +48,26 @@ struct CellKey {
 struct CellKeyHash {
   std::size_t operator()(const CellKey& c) const { return std::size_t(c.x * 73856093) ^ std::size_t(c.y * 19349663); }
 };
-using Floor = std::unordered_map<CellKey, float, CellKeyHash>;
+using Floor = geometry::LowestGrid;
 
 CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
   return {std::int64_t(std::floor(double(p.x()) / cell)), std::int64_t(std::floor(double(p.y()) / cell))};
-}
-void Lower(Floor& floor, const PointCloud& c, double cell) {
-  for (const auto& p : c.points) {
-    auto [it, added] = floor.emplace(KeyOf(p.xyz(), cell), p.z);
-    if (!added) it->second = std::min(it->second, p.z);
-  }
 }
 
 // Local ground of one step: lowest point per xy cell of the maps before and after the step and
 // of the changes. The cell must be wider than the footprint an object hides from every view (a
 // car's width), so that each cell holds some ground.
 Floor StepFloor(const PointCloud& before, const PointCloud& after, const PointCloud& changes, double cell) {
-  Floor floor;
-  if (cell <= 0.0) return floor;
-  Lower(floor, before, cell);
-  Lower(floor, after, cell);
-  Lower(floor, changes, cell);
+  Floor floor(cell);
+  floor.Add(before);
+  floor.Add(after);
+  floor.Add(changes);
   return floor;
 }
 
 bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& cfg) {
-  if (floor.empty()) return true;
-  const auto it = floor.find(KeyOf(p, cfg.object_ground_cell_m));
-  return it == floor.end() || p.z() > it->second + float(cfg.object_ground_height_m);
+  float z = 0.f;
+  return !floor.At(p, &z) || p.z() > z + float(cfg.object_ground_height_m);
 }
 
 // The other side of a change: PD (the query's new surfaces) for disappeared clusters, ND strong
@@ -216,14 +209,14 @@ Spread3 Spread(const MapObject& o) {
 // Clearance of the cluster above the local ground: the smallest height of a point above the
 // floor of its own cell (not the lowest cell under the box: slopes and curbs across a long
 // cluster would count as clearance). Sets ground_z to the floor under that point.
-double Clearance(MapObject& o, const Floor& floor, double cell) {
+double Clearance(MapObject& o, const Floor& floor) {
   double best = 1e300;
   o.ground_z = o.lo.z();
   for (const auto& p : o.cloud.points) {
-    const auto it = floor.find(KeyOf(p.xyz(), cell));
-    if (it == floor.end() || double(p.z - it->second) >= best) continue;
-    best = double(p.z - it->second);
-    o.ground_z = double(it->second);
+    float z = 0.f;
+    if (!floor.At(p.xyz(), &z) || double(p.z - z) >= best) continue;
+    best = double(p.z - z);
+    o.ground_z = double(z);
   }
   return best == 1e300 ? 0.0 : best;
 }
@@ -347,7 +340,7 @@ double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& se
 
 MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
                       const SessionRecord& step, const Floor& floor, const Masks& masks,
-                      const StepContext& ctx, const MapConfig& cfg) {
+                      const StepContext& ctx) {
   MapObject o;
   o.twin_fraction = Share(masks.twin, sel);
   o.attached_fraction = Share(masks.attached, sel);
@@ -359,7 +352,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   Describe(o);
   OrientedBox(o);
   o.ground_z = o.lo.z();
-  o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor, cfg.object_ground_cell_m);
+  o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
   const Eigen::Vector3d* s = Nearest(ctx.all_sensors, o.centroid);
   o.range_m = s ? (*s - o.centroid).norm() : 0.0;
@@ -451,7 +444,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
                       NearMask(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, cfg))
-      group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
+      group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx));
     HoldUp(group, cfg);
     for (MapObject& o : group) {
       Judge(o, ctx, cfg);

@@ -89,19 +89,30 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
   return s;
 }
 
-// Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through) split
-// into clusters at ld_residue_gap_m. A cluster shorter than ld_residue_length_m along its longest
-// horizontal edge, and no closer than that to a longer one, is a residue of a mover (moved to
-// *residue): a short piece beside a long one is part of that object (a trunk's foot under its
-// canopy, a sparse object's fragment), seen in pieces.
-void SplitResidues(PointCloud* seen, PointCloud* residue, const RemovertConfig& cfg) {
+// Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
+// of `own` map) split into clusters at ld_residue_gap_m. A cluster that fits in a mover's size,
+// ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
+// point of `own` within half that around it) to its top, and that no larger cluster comes that
+// close to, is a residue of a mover (moved to *residue). A pole, a facade's edge or a lamp head
+// that poses let the other session see past reaches higher; a short piece beside a large one is
+// part of that object (a trunk's foot under its canopy, a sparse object's fragment).
+void SplitResidues(PointCloud* seen, PointCloud* residue, const PointCloud& own, const RemovertConfig& cfg) {
   if (cfg.ld_residue_length_m <= 0.0 || seen->empty()) return;
+  const double size = cfg.ld_residue_length_m;
   const std::vector<std::uint32_t> label = geometry::EuclideanClusters(*seen, cfg.ld_residue_gap_m);
   std::vector<std::vector<std::uint32_t>> members(*std::max_element(label.begin(), label.end()) + 1);
   for (std::size_t i = 0; i < label.size(); ++i) members[label[i]].push_back(std::uint32_t(i));
+  geometry::LowestGrid ground(0.5 * size);
+  ground.Add(own);
+  auto fits = [&](const std::vector<std::uint32_t>& m) {
+    if (geometry::LongestHorizontalEdge(*seen, m) >= size) return false;
+    Eigen::Vector3f lo = seen->points[m.front()].xyz(), hi = lo;
+    for (auto i : m) lo = lo.cwiseMin(seen->points[i].xyz()), hi = hi.cwiseMax(seen->points[i].xyz());
+    return double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, 1))) < size;
+  };
   std::vector<bool> small(seen->size(), false);
   for (const auto& m : members)
-    if (geometry::LongestHorizontalEdge(*seen, m) < cfg.ld_residue_length_m)
+    if (fits(m))
       for (auto i : m) small[i] = true;
   const std::vector<bool> large = [&] { auto l = small; l.flip(); return l; }();
   if (std::find(large.begin(), large.end(), true) != large.end()) {
@@ -154,8 +165,8 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   res.pd_weak = pd.select(pds.weak);
   res.pd_strong = pd.select(pds.strong);
   res.pd_unobserved = pd.select(pds.unobserved);
-  SplitResidues(&res.nd_strong, &res.nd_residue, cfg);
-  SplitResidues(&res.pd_weak, &res.pd_residue, cfg);
+  SplitResidues(&res.nd_strong, &res.nd_residue, central_map, cfg);
+  SplitResidues(&res.pd_weak, &res.pd_residue, query_map, cfg);
   res.stats.nd_residue = res.nd_residue.size();
   res.stats.pd_residue = res.pd_residue.size();
   res.stats.nd_strong = res.nd_strong.size();
