@@ -175,6 +175,20 @@ void BindEval(py::module_& m) {
   m.def("find_pair_dir", &eval::FindPairDir, py::arg("root"), py::arg("pair"),
         "ROOT/pair_<pair> (\"00_01\" also finds pair_session_00_session_01 ...).");
   m.def(
+      "cleaned_session_map",
+      [](const std::string& changes, const std::string& session) {
+        std::string note;
+        PointCloud c;
+        {
+          py::gil_scoped_release unlock;
+          c = eval::CleanedSessionMap(changes, session, &note);
+        }
+        return py::make_tuple(PointsToNumpy(c), note);
+      },
+      py::arg("changes"), py::arg("session"),
+      "A session's HD-free map after LT-removert's multi-session cleanup (what `eval hd --changes` scores): "
+      "(points (N,4), what was taken out).");
+  m.def(
       "kept_map_from_changes",
       [](const py::object& central_static, const py::object& nd_strong, const py::object& cfg_obj, int threads) {
         const eval::EvalConfig cfg = cfg_obj.is_none() ? eval::EvalConfig{} : py::cast<eval::EvalConfig>(cfg_obj);

@@ -261,6 +261,10 @@ def test_stages_store_eval():
     ld = ltmapper.evaluate_ld(truth_ld, pred, kept_map=kept)
     assert ld["pd"]["truth"] == len(truth_ld["pd_strong"]) + len(truth_ld["pd_weak"]) and ld["weak_nd_kept"]["kept_map_given"]
     raises(ValueError, ltmapper.evaluate_ld, {"pd_strong": pred["pd_strong"]}, pred)
+    # The multi-session cleanup: the central's map minus the residues of movers its pair found.
+    cleaned, note = ltmapper.cleaned_session_map(changes, "session_00")
+    residue = ltmapper.read_cloud(os.path.join(ltmapper.find_pair_dir(changes, "00_01"), "nd_residue.pcd"))
+    assert len(cleaned) == len(static) - len(residue) and note.startswith(changes)
     raises(ltmapper.Error, ltmapper.evaluate_hd_sim, sim_dir(), "session_09", static,
            ltmapper.read_kitti_poses(truth_poses(0)))
 
