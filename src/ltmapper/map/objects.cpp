@@ -514,14 +514,11 @@ MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
 }
 
 namespace {
-// Version of the rules in this file: bump it with any change to what they decide, so that objects
-// a store keeps from an earlier version are computed again instead of read.
-constexpr int kObjectRulesVersion = 3;
-
-// What a step's stored objects were made with: the rules' version and every map config value.
+// What a step's stored objects were made with: the code (its id: any change to the rules makes a
+// store's earlier objects be computed again instead of read) and every map config value.
 std::string ObjectsKey(const MapConfig& cfg) {
   MapConfig c = cfg;
-  return "objects rules " + std::to_string(kObjectRulesVersion) + "\n" + FieldsToString(FieldsOf(c));
+  return std::string("objects of code ") + CodeId() + "\n" + FieldsToString(FieldsOf(c));
 }
 
 void RequireSensorStep(const MapConfig& cfg) {

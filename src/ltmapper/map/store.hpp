@@ -83,7 +83,8 @@ class Store {
   // the geometric rules; moved pairs linked. `rejected` (optional) receives the other clusters
   // with the reason.
   // Each step's objects are kept in the store once computed (CacheObjects) and decoded from there
-  // while the object config is the same; a step without them is computed (two map restores).
+  // while the object config and the code (CodeId) are the same; a step without them is computed
+  // (two map restores).
   // `rejected` rows carry no clouds.
   std::vector<MapObject> Objects(std::vector<MapObject>* rejected = nullptr) const;  // needs object_sensor_step_deg > 0
   // Computes and stores the objects of every step that has none for this object config (one
