@@ -110,9 +110,10 @@ struct RemovertConfig {
   BeamTest ld_beam;                    // keys ld.beam_*
   // Multi-session cleanup (paper Fig. 3(f)): seen-through changes (strong ND of the central, weak
   // PD of the query) are clustered (points closer than ld_residue_gap_m); a cluster that fits in
-  // ld_residue_length_m (its longest horizontal edge, and its top above the ground under it),
-  // and that no larger cluster comes that close to, is a residue of a moving object that its
-  // session's HD removal missed: the session's HD, not a change (0 = off).
+  // ld_residue_length_m (its longest horizontal edge, and its top above the ground under it, which
+  // must reach ld_radius_m: lower is ground the other session did not cover), and that no larger
+  // cluster comes that close to, is a residue of a moving object that its session's HD removal
+  // missed: the session's HD, not a change (0 = off).
   double ld_residue_gap_m = 0.5;     // [m]
   double ld_residue_length_m = 2.0;  // [m]
   bool covisible_only = false;    // true: a raw change counts only where the other session had its line

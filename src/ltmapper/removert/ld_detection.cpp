@@ -95,7 +95,10 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
 // point of `own` within half that around it) to its top, and that no larger cluster comes that
 // close to, is a residue of a mover (moved to *residue). A pole, a facade's edge or a lamp head
 // that poses let the other session see past reaches higher; a short piece beside a large one is
-// part of that object (a trunk's foot under its canopy, a sparse object's fragment).
+// part of that object (a trunk's foot under its canopy, a sparse object's fragment). A flat patch
+// within ld_radius_m of the ground is no mover's: a mover's part that low is within the radius of
+// the other session's ground, so no change at all; such a patch is ground the other session did
+// not cover (on real scans, around the other vehicle's place).
 void SplitResidues(PointCloud* seen, PointCloud* residue, const PointCloud& own, const RemovertConfig& cfg) {
   if (cfg.ld_residue_length_m <= 0.0 || seen->empty()) return;
   const double size = cfg.ld_residue_length_m;
@@ -108,7 +111,8 @@ void SplitResidues(PointCloud* seen, PointCloud* residue, const PointCloud& own,
     if (geometry::LongestHorizontalEdge(*seen, m) >= size) return false;
     Eigen::Vector3f lo = seen->points[m.front()].xyz(), hi = lo;
     for (auto i : m) lo = lo.cwiseMin(seen->points[i].xyz()), hi = hi.cwiseMax(seen->points[i].xyz());
-    return double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, 1))) < size;
+    const double top = double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, 1)));
+    return top >= cfg.ld_radius_m && top < size;
   };
   std::vector<bool> small(seen->size(), false);
   for (const auto& m : members)
