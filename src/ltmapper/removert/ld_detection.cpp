@@ -89,6 +89,41 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
   return s;
 }
 
+// The Euclidean clusters of `c` at `gap_m`, each as its point indices.
+std::vector<std::vector<std::uint32_t>> ClusterMembers(const PointCloud& c, double gap_m) {
+  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(c, gap_m);
+  std::vector<std::vector<std::uint32_t>> members(*std::max_element(label.begin(), label.end()) + 1);
+  for (std::size_t i = 0; i < label.size(); ++i) members[label[i]].push_back(std::uint32_t(i));
+  return members;
+}
+
+// Cluster m of `c` fits in a mover's size (SplitResidues).
+bool FitsAMover(const PointCloud& c, const std::vector<std::uint32_t>& m, const geometry::LowestGrid& ground,
+                const RemovertConfig& cfg) {
+  if (geometry::LongestHorizontalEdge(c, m) >= cfg.ld_residue_length_m) return false;
+  Eigen::Vector3f lo = c.points[m.front()].xyz(), hi = lo;
+  for (auto i : m) lo = lo.cwiseMin(c.points[i].xyz()), hi = hi.cwiseMax(c.points[i].xyz());
+  const double top = double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, 1)));
+  return top >= cfg.ld_radius_m && top < cfg.ld_residue_length_m;
+}
+
+// Unmarks the marked clusters with a point within `near_m` of an unmarked one (a piece of it).
+void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
+                              double near_m, std::vector<bool>* marked) {
+  std::vector<bool> large = *marked;
+  large.flip();
+  if (std::find(large.begin(), large.end(), true) == large.end()) return;
+  const geometry::KdTree larger(c.select(large));
+  for (const auto& m : members) {
+    if (!(*marked)[m.front()]) continue;
+    const bool beside = std::any_of(m.begin(), m.end(), [&](std::uint32_t i) {
+      return larger.CountWithin(c.points[i].xyz(), float(near_m), 1) > 0;
+    });
+    if (beside)
+      for (auto i : m) (*marked)[i] = false;
+  }
+}
+
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
 // of `own` map) split into clusters at ld_residue_gap_m. A cluster that fits in a mover's size,
 // ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
@@ -101,36 +136,14 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
 // not cover (on real scans, around the other vehicle's place).
 void SplitResidues(PointCloud* seen, PointCloud* residue, const PointCloud& own, const RemovertConfig& cfg) {
   if (cfg.ld_residue_length_m <= 0.0 || seen->empty()) return;
-  const double size = cfg.ld_residue_length_m;
-  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(*seen, cfg.ld_residue_gap_m);
-  std::vector<std::vector<std::uint32_t>> members(*std::max_element(label.begin(), label.end()) + 1);
-  for (std::size_t i = 0; i < label.size(); ++i) members[label[i]].push_back(std::uint32_t(i));
-  geometry::LowestGrid ground(0.5 * size);
+  const auto members = ClusterMembers(*seen, cfg.ld_residue_gap_m);
+  geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
   ground.Add(own);
-  auto fits = [&](const std::vector<std::uint32_t>& m) {
-    if (geometry::LongestHorizontalEdge(*seen, m) >= size) return false;
-    Eigen::Vector3f lo = seen->points[m.front()].xyz(), hi = lo;
-    for (auto i : m) lo = lo.cwiseMin(seen->points[i].xyz()), hi = hi.cwiseMax(seen->points[i].xyz());
-    const double top = double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, 1)));
-    return top >= cfg.ld_radius_m && top < size;
-  };
   std::vector<bool> small(seen->size(), false);
   for (const auto& m : members)
-    if (fits(m))
+    if (FitsAMover(*seen, m, ground, cfg))
       for (auto i : m) small[i] = true;
-  const std::vector<bool> large = [&] { auto l = small; l.flip(); return l; }();
-  if (std::find(large.begin(), large.end(), true) != large.end()) {
-    const geometry::KdTree objects(seen->select(large));
-    const float near = float(cfg.ld_residue_length_m);
-    for (const auto& m : members) {
-      if (!small[m.front()]) continue;
-      const bool beside = std::any_of(m.begin(), m.end(), [&](std::uint32_t i) {
-        return objects.CountWithin(seen->points[i].xyz(), near, 1) > 0;
-      });
-      if (beside)
-        for (auto i : m) small[i] = false;
-    }
-  }
+  UnmarkPiecesOfLargerOnes(*seen, members, cfg.ld_residue_length_m, &small);
   *residue = seen->select(small);
   small.flip();
   *seen = seen->select(small);
