@@ -175,7 +175,7 @@ void SetupHd(CLI::App& parent) {
     else if (o->single_session)
       out = io::ReadCloud(output = io::layout::StaticMapFile(o->changes, o->session));
     else
-      out = eval::CleanedSessionMap(o->changes, o->session, &output);
+      out = eval::CleanedSessionMap(o->changes, o->session, cfg, o->common.threads, &output);
     const std::string objects = !o->objects.empty() ? o->objects : sim_form ? Join(Join(o->sim, "truth"), "objects.csv") : "";
     if (!o->objects.empty() && !fs::exists(o->objects)) throw Error(o->objects, 0, "no such file");
     eval::Report report;

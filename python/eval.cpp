@@ -176,16 +176,17 @@ void BindEval(py::module_& m) {
         "ROOT/pair_<pair> (\"00_01\" also finds pair_session_00_session_01 ...).");
   m.def(
       "cleaned_session_map",
-      [](const std::string& changes, const std::string& session) {
+      [](const std::string& changes, const std::string& session, const py::object& cfg_obj, int threads) {
+        const eval::EvalConfig cfg = cfg_obj.is_none() ? eval::EvalConfig{} : py::cast<eval::EvalConfig>(cfg_obj);
         std::string note;
         PointCloud c;
         {
           py::gil_scoped_release unlock;
-          c = eval::CleanedSessionMap(changes, session, &note);
+          c = eval::CleanedSessionMap(changes, session, cfg, threads, &note);
         }
         return py::make_tuple(PointsToNumpy(c), note);
       },
-      py::arg("changes"), py::arg("session"),
+      py::arg("changes"), py::arg("session"), py::arg("cfg") = py::none(), py::arg("threads") = 0,
       "A session's HD-free map after LT-removert's multi-session cleanup (what `eval hd --changes` scores): "
       "(points (N,4), what was taken out).");
   m.def(

@@ -71,10 +71,12 @@ TEST(RemovertStage, WritesFormatsAndPartitions) {
   EXPECT_EQ(hd_sum, io::ReadPcd(out + "/session_00/hd_map.pcd").size() + residue.size());
   // The session's map after the cleanup (eval's default): the static map minus those residues.
   std::string note;
-  EXPECT_EQ(eval::CleanedSessionMap(out, "session_00", &note).size(), cmap.size() - residue.size());
-  EXPECT_EQ(eval::CleanedSessionMap(out, "session_01", nullptr).size(),
+  EXPECT_EQ(eval::CleanedSessionMap(out, "session_00", eval::EvalConfig{}, 2, &note).size(),
+            cmap.size() - residue.size());
+  EXPECT_EQ(eval::CleanedSessionMap(out, "session_01", eval::EvalConfig{}, 2, nullptr).size(),
             io::ReadPcd(out + "/session_01/static_map.pcd").size() -
                 io::ReadPcd(out + "/pair_00_01/pd_residue.pcd").size());
+  EXPECT_THROW(eval::CleanedSessionMap(out, "session_09", eval::EvalConfig{}, 2, nullptr), Error);  // not in report.json
 
   // The query's keyframes beyond 20 m from the central's last keyframe are new keyframes.
   ASSERT_EQ(rep.new_keyframes.size(), 1u);

@@ -399,21 +399,25 @@ LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& pred, cons
   return e;
 }
 
-PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
-                              const EvalConfig& cfg, int threads) {
+PointCloud WithoutPoints(const PointCloud& cloud, const PointCloud& taken, const EvalConfig& cfg, int threads) {
   cfg.Validate();
-  if (nd_strong.empty()) return central_static;
-  const geometry::KdTree tree(std::make_shared<const PointCloud>(nd_strong));
+  if (taken.empty()) return cloud;
+  const geometry::KdTree tree(std::make_shared<const PointCloud>(taken));
   const float eps2 = float(cfg.ld_same_point_m * cfg.ld_same_point_m);
-  std::vector<std::uint8_t> keep(central_static.size(), 1);
-  ParallelForChunks(central_static.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+  std::vector<std::uint8_t> keep(cloud.size(), 1);
+  ParallelForChunks(cloud.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
     std::uint32_t idx = 0;
     float sq = 0.f;
     for (std::size_t i = begin; i != end; ++i)
-      if (tree.Nearest(central_static.points[i].xyz(), &idx, &sq) && sq <= eps2)
+      if (tree.Nearest(cloud.points[i].xyz(), &idx, &sq) && sq <= eps2)
         keep[i] = 0;
   });
-  return central_static.select(std::vector<bool>(keep.begin(), keep.end()));
+  return cloud.select(std::vector<bool>(keep.begin(), keep.end()));
+}
+
+PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
+                              const EvalConfig& cfg, int threads) {
+  return WithoutPoints(central_static, nd_strong, cfg, threads);
 }
 
 // -------------------------------------------------------------------------------- restore

@@ -7,11 +7,9 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <unordered_set>
 
 namespace fs = std::filesystem;
 
@@ -235,14 +233,11 @@ ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T) {
 }
 
 namespace {
-// The residue clouds of `session` in the pairs listed by the stage's report.json.
+// The residue clouds of `session` in the pairs listed by the stage's report.json (none without one).
 std::vector<std::string> ResidueFiles(const std::string& changes, const std::string& session) {
   const std::string report = Join(changes, "report.json");
   if (!fs::exists(report)) return {};
-  std::ifstream in(report);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const io::json::Value doc = io::json::Parse(ss.str(), report);
+  const io::json::Value doc = io::json::ParseFile(report);
   const io::json::Value* sessions = doc.Find("sessions");
   const io::json::Value* pairs = doc.Find("pairs");
   if (!sessions || !pairs) throw Error(report, 0, "no 'sessions' or 'pairs' (not an LT-removert report)");
@@ -251,6 +246,7 @@ std::vector<std::string> ResidueFiles(const std::string& changes, const std::str
     const io::json::Value* name = sessions->arr[i].Find("name");
     if (name && name->str == session) position = long(i);
   }
+  if (position < 0) throw Error(report, 0, "no session '" + session + "' among the stage's sessions");
   std::vector<std::string> files;
   for (const auto& p : pairs->arr) {
     const io::json::Value *c = p.Find("central"), *q = p.Find("query"), *dir = p.Find("dir");
@@ -260,32 +256,19 @@ std::vector<std::string> ResidueFiles(const std::string& changes, const std::str
   }
   return files;
 }
-
-std::uint64_t PointKey(const PointXYZI& p) {  // exact coordinates: residues are copies of map points
-  std::uint32_t b[3];
-  std::memcpy(&b[0], &p.x, 4), std::memcpy(&b[1], &p.y, 4), std::memcpy(&b[2], &p.z, 4);
-  return (std::uint64_t(b[0]) * 0x9E3779B97F4A7C15ull) ^ (std::uint64_t(b[1]) * 0xC2B2AE3D27D4EB4Full) ^ b[2];
-}
 }  // namespace
 
-PointCloud CleanedSessionMap(const std::string& changes, const std::string& session, std::string* note) {
+PointCloud CleanedSessionMap(const std::string& changes, const std::string& session, const EvalConfig& cfg,
+                             int threads, std::string* note) {
   const std::string file = io::layout::StaticMapFile(changes, session);
-  PointCloud map = io::ReadCloud(file);
-  std::unordered_set<std::uint64_t> residue;
-  std::size_t listed = 0;
-  for (const auto& f : ResidueFiles(changes, session)) {
-    const PointCloud r = io::ReadPcd(f);
-    listed += r.size();
-    for (const auto& p : r.points) residue.insert(PointKey(p));
-  }
-  std::vector<bool> keep(map.size(), true);
-  std::size_t taken = 0;
-  for (std::size_t i = 0; i < map.size(); ++i)
-    if (residue.count(PointKey(map.points[i]))) keep[i] = false, ++taken;
+  const PointCloud map = io::ReadCloud(file);
+  PointCloud residues;
+  for (const auto& f : ResidueFiles(changes, session)) residues.append(io::ReadPcd(f));
+  PointCloud cleaned = WithoutPoints(map, residues, cfg, threads);
   if (note)
-    *note = file + (listed ? " minus " + std::to_string(taken) + " residues of movers the other sessions saw through"
-                           : "");
-  return taken ? map.select(keep) : map;
+    *note = file + (residues.empty() ? "" : " minus " + std::to_string(map.size() - cleaned.size()) +
+                                                " residues of movers the other sessions saw through");
+  return cleaned;
 }
 
 std::string FindPairDir(const std::string& root, const std::string& pair) {

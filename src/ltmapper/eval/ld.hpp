@@ -60,8 +60,11 @@ struct LdErrors {
 };
 LdErrors LdErrorClouds(const ChangeClouds& truth, const ChangeClouds& predicted, const EvalConfig& cfg,
                        int threads = 0);
-// Kept map derived from a removert output: the central static map minus the points that have a
-// predicted strong-ND point within ld_same_point_m (strong ND is removed, weak ND kept).
+// `cloud` minus its points that have a point of `taken` within ld_same_point_m (`taken` holds
+// copies of some of its points: strong ND, residues of movers).
+PointCloud WithoutPoints(const PointCloud& cloud, const PointCloud& taken, const EvalConfig& cfg, int threads = 0);
+// Kept map derived from a removert output: the central static map minus the predicted strong ND
+// (WithoutPoints: strong ND is removed, weak ND kept).
 PointCloud KeptMapFromChanges(const PointCloud& central_static, const PointCloud& nd_strong,
                               const EvalConfig& cfg, int threads = 0);
 

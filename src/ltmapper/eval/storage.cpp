@@ -74,11 +74,7 @@ const io::json::Value* FindNumber(const io::json::Value& root, const std::vector
 }  // namespace
 
 CostItem ReadCostReport(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path, 0, "cannot open report");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const io::json::Value doc = io::json::Parse(ss.str(), path);
+  const io::json::Value doc = io::json::ParseFile(path);
   CostItem c;
   c.label = path;
   std::size_t which = 0;

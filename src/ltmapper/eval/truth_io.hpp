@@ -46,8 +46,10 @@ ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T);
 // A session's HD-free map after LT-removert's multi-session cleanup (paper Fig. 3(f)): its
 // <changes>/<session>/static_map.pcd minus the residues of movers that the pairs of report.json
 // holding it found (nd_residue.pcd where it is the central, pd_residue.pcd where it is the
-// query). Without report.json (no pairs): the static map. `note` says what was taken out.
-PointCloud CleanedSessionMap(const std::string& changes, const std::string& session, std::string* note);
+// query; points within cfg.ld_same_point_m, WithoutPoints). Without report.json (no pairs): the
+// static map; a session report.json does not list: ltm::Error. `note` says what was taken out.
+PointCloud CleanedSessionMap(const std::string& changes, const std::string& session, const EvalConfig& cfg,
+                             int threads, std::string* note);
 // `root/pair_<pair>`; pair "00_01" also finds pair_session_00_session_01 and any pair_*
 // folder whose two trailing numbers are 00 and 01. Throws listing what exists when none.
 std::string FindPairDir(const std::string& root, const std::string& pair);

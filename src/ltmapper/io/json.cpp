@@ -1,6 +1,8 @@
 #include "ltmapper/io/json.hpp"
 
 #include <cmath>
+#include <fstream>
+#include <sstream>
 #include <cstdio>
 #include <cstdlib>
 
@@ -162,6 +164,14 @@ class Parser {
 
 Value Parse(const std::string& text, const std::string& where) {
   return Parser(text, where).ParseDocument();
+}
+
+Value ParseFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path, 0, "cannot open (missing?)");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return Parse(ss.str(), path);
 }
 
 std::string Quote(const std::string& s) {

@@ -27,6 +27,8 @@ struct Value {
 
 // Throws ltm::Error("<where>: JSON error at offset N: ...") on malformed input.
 Value Parse(const std::string& text, const std::string& where);
+// The JSON file at `path`; ltm::Error naming it when it cannot be read or is malformed.
+Value ParseFile(const std::string& path);
 
 // Pretty writer (2-space indent). Non-finite numbers are written as null.
 class Writer {

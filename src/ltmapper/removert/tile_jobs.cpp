@@ -23,13 +23,6 @@ std::string PlanFile(const std::string& plan_dir) { return plan_dir + "/plan.jso
 std::string ConfigFile(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
 std::string TileJsonIn(const std::string& part_dir) { return part_dir + "/tile.json"; }
 
-json::Value ReadJson(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path, 0, "cannot open (missing?)");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return json::Parse(ss.str(), path);
-}
 
 // The member `key` of an object, of the given type; ltm::Error naming the file otherwise.
 const json::Value& Member(const json::Value& obj, const std::string& key, json::Value::Type type,
@@ -98,7 +91,7 @@ void WriteStats(json::Writer& w, const HdStats& st) {
 
 HdStats ReadStats(const std::string& path) {
   using T = json::Value::Type;
-  const json::Value doc = ReadJson(path);
+  const json::Value doc = json::ParseFile(path);
   auto count = [&](const char* key) { return Count(Member(doc, key, T::kNumber, path), key, path); };
   HdStats st;
   st.map_points = count("map_points");
@@ -154,7 +147,7 @@ TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_d
 TilePlanFile ReadTilePlan(const std::string& plan_dir) {
   using T = json::Value::Type;
   const std::string path = PlanFile(plan_dir);
-  const json::Value doc = ReadJson(path);
+  const json::Value doc = json::ParseFile(path);
   if (Member(doc, "format", T::kString, path).str != "ltmapper tile plan")
     throw Error(path, 0, "not a tile plan (format is not 'ltmapper tile plan')");
   TilePlanFile f;
