@@ -505,6 +505,14 @@ TEST(Geometry, LowestGridIsTheGroundUnderABox) {
   EXPECT_EQ(g.Under({0.2f, 0.2f, 0.f}, {1.8f, 0.8f, 0.f}), -1.f);
   EXPECT_EQ(g.Under({0.2f, 0.2f, 0.f}, {0.8f, 0.8f, 0.f}, 1), -3.f);  // grown by one cell
   EXPECT_TRUE(std::isinf(g.Under({10.f, 10.f, 0.f}, {11.f, 11.f, 0.f})));
+  // Watching one box: only its cells are lowered, with the same answer there.
+  geometry::LowestGrid watched(1.0);
+  watched.Watch({0.2f, 0.2f, 0.f}, {1.8f, 0.8f, 0.f});
+  watched.AddWatched(c);
+  EXPECT_EQ(watched.Under({0.2f, 0.2f, 0.f}, {1.8f, 0.8f, 0.f}), -1.f);
+  EXPECT_FALSE(watched.At({-0.5f, -0.5f, 0.f}, &z));  // cell (-1, -1): not watched
+  watched.Watch({5.f, 5.f, 0.f}, {5.f, 5.f, 0.f});
+  EXPECT_FALSE(watched.At({5.f, 5.f, 0.f}, &z));      // watched, no point in it
   geometry::LowestGrid off(0.0);
   off.Add(c);
   EXPECT_TRUE(off.empty());

@@ -72,10 +72,25 @@ void LowestGrid::Add(const PointCloud& cloud) {
   }
 }
 
+void LowestGrid::Watch(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int grow) {
+  if (cell_m_ <= 0.0) return;
+  for (std::int64_t ix = Cell(lo.x()) - grow; ix <= Cell(hi.x()) + grow; ++ix)
+    for (std::int64_t iy = Cell(lo.y()) - grow; iy <= Cell(hi.y()) + grow; ++iy)
+      z_.emplace(Pack(ix, iy), std::numeric_limits<float>::infinity());
+}
+
+void LowestGrid::AddWatched(const PointCloud& cloud) {
+  if (z_.empty()) return;
+  for (const auto& p : cloud.points) {
+    const auto it = z_.find(Pack(Cell(p.x), Cell(p.y)));
+    if (it != z_.end()) it->second = std::min(it->second, p.z);
+  }
+}
+
 bool LowestGrid::At(const Eigen::Vector3f& p, float* z) const {
   if (z_.empty()) return false;
   const auto it = z_.find(Pack(Cell(p.x()), Cell(p.y())));
-  if (it == z_.end()) return false;
+  if (it == z_.end() || !std::isfinite(it->second)) return false;
   *z = it->second;
   return true;
 }

@@ -84,9 +84,13 @@ class LowestGrid {
  public:
   explicit LowestGrid(double cell_m) : cell_m_(cell_m) {}
   void Add(const PointCloud& cloud);
+  // Only some places wanted: Watch the cells overlapping the xy box [lo, hi] grown by `grow` cells,
+  // then AddWatched(cloud) lowers those cells only (a whole map's points, few cells hashed).
+  void Watch(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int grow = 0);
+  void AddWatched(const PointCloud& cloud);
   bool empty() const { return z_.empty(); }
   double cell_m() const { return cell_m_; }
-  // The lowest z of p's cell; false where no point fell in it.
+  // The lowest z of p's cell; false where no point fell in it (or it is watched and none did).
   bool At(const Eigen::Vector3f& p, float* z) const;
   // The lowest z over the cells overlapping the xy box [lo, hi] grown by `grow` cells on each
   // side; +inf where none has a point.

@@ -97,14 +97,36 @@ std::vector<std::vector<std::uint32_t>> ClusterMembers(const PointCloud& c, doub
   return members;
 }
 
-// Cluster m of `c` fits in a mover's size (SplitResidues).
-bool FitsAMover(const PointCloud& c, const std::vector<std::uint32_t>& m, const geometry::LowestGrid& ground,
-                const RemovertConfig& cfg) {
-  if (geometry::LongestHorizontalEdge(c, m) >= cfg.ld_residue_length_m) return false;
+// The xy box of cluster m of `c`.
+std::pair<Eigen::Vector3f, Eigen::Vector3f> BoxOf(const PointCloud& c, const std::vector<std::uint32_t>& m) {
   Eigen::Vector3f lo = c.points[m.front()].xyz(), hi = lo;
   for (auto i : m) lo = lo.cwiseMin(c.points[i].xyz()), hi = hi.cwiseMax(c.points[i].xyz());
-  const double top = double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, 1)));
-  return top >= cfg.ld_radius_m && top < cfg.ld_residue_length_m;
+  return {lo, hi};
+}
+
+// The clusters of `c` that fit in a mover's size (SplitResidues), marked point by point: first
+// across (longest horizontal edge), then in height above the ground of `own` under them (the
+// ground hashed only under the clusters that fit across).
+std::vector<bool> FitAMover(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
+                            const PointCloud& own, const RemovertConfig& cfg) {
+  constexpr int kGrowCells = 1;
+  std::vector<const std::vector<std::uint32_t>*> across;
+  geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
+  for (const auto& m : members)
+    if (geometry::LongestHorizontalEdge(c, m) < cfg.ld_residue_length_m) {
+      across.push_back(&m);
+      const auto [lo, hi] = BoxOf(c, m);
+      ground.Watch(lo, hi, kGrowCells);
+    }
+  ground.AddWatched(own);
+  std::vector<bool> fit(c.size(), false);
+  for (const auto* m : across) {
+    const auto [lo, hi] = BoxOf(c, *m);
+    const double top = double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, kGrowCells)));
+    if (top >= cfg.ld_radius_m && top < cfg.ld_residue_length_m)
+      for (auto i : *m) fit[i] = true;
+  }
+  return fit;
 }
 
 // Unmarks the marked clusters with a point within `near_m` of an unmarked one (a piece of it).
@@ -137,12 +159,7 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 void SplitResidues(PointCloud* seen, PointCloud* residue, const PointCloud& own, const RemovertConfig& cfg) {
   if (cfg.ld_residue_length_m <= 0.0 || seen->empty()) return;
   const auto members = ClusterMembers(*seen, cfg.ld_residue_gap_m);
-  geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
-  ground.Add(own);
-  std::vector<bool> small(seen->size(), false);
-  for (const auto& m : members)
-    if (FitsAMover(*seen, m, ground, cfg))
-      for (auto i : m) small[i] = true;
+  std::vector<bool> small = FitAMover(*seen, members, own, cfg);
   UnmarkPiecesOfLargerOnes(*seen, members, cfg.ld_residue_length_m, &small);
   *residue = seen->select(small);
   small.flip();
