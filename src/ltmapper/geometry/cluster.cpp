@@ -39,24 +39,38 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
   return label;
 }
 
+HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
+  const std::size_t n = idx.empty() ? cloud.size() : idx.size();
+  auto xy = [&](std::size_t k) {
+    const PointXYZI& p = cloud.points[idx.empty() ? k : idx[k]];
+    return Eigen::Vector2d(double(p.x), double(p.y));
+  };
+  HorizontalBox box;
+  if (n == 0) return box;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (std::size_t k = 0; k < n; ++k) mean += xy(k);
+  mean /= double(n);
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (std::size_t k = 0; k < n; ++k) cov += (xy(k) - mean) * (xy(k) - mean).transpose();
+  const Eigen::Vector2d major = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvectors().col(1);
+  const Eigen::Vector2d minor(-major.y(), major.x());
+  double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Vector2d d = xy(k) - mean;
+    a0 = std::min(a0, d.dot(major)), a1 = std::max(a1, d.dot(major));
+    b0 = std::min(b0, d.dot(minor)), b1 = std::max(b1, d.dot(minor));
+  }
+  box.yaw_rad = std::atan2(major.y(), major.x());
+  box.center = mean + major * (a0 + a1) / 2 + minor * (b0 + b1) / 2;
+  box.length = a1 - a0;
+  box.width = b1 - b0;
+  return box;
+}
+
 double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
   if (idx.size() < 2) return 0.0;
-  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-  for (auto i : idx) mean += Eigen::Vector2d(cloud.points[i].x, cloud.points[i].y);
-  mean /= double(idx.size());
-  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
-  for (auto i : idx) {
-    const Eigen::Vector2d d = Eigen::Vector2d(cloud.points[i].x, cloud.points[i].y) - mean;
-    cov += d * d.transpose();
-  }
-  const Eigen::Matrix2d axes = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvectors();
-  Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e300), hi = -lo;
-  for (auto i : idx) {
-    const Eigen::Vector2d a = axes.transpose() * (Eigen::Vector2d(cloud.points[i].x, cloud.points[i].y) - mean);
-    lo = lo.cwiseMin(a);
-    hi = hi.cwiseMax(a);
-  }
-  return (hi - lo).maxCoeff();
+  const HorizontalBox box = HorizontalBoxOf(cloud, idx);
+  return std::max(box.length, box.width);
 }
 
 std::int64_t LowestGrid::Cell(double v) const { return std::int64_t(std::floor(v / cell_m_)); }

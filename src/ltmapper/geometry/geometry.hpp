@@ -74,8 +74,16 @@ class KdTree {
 // cluster, transitively. Returns each point's cluster number, 0 .. clusters - 1, numbered in the
 // order of their lowest point index (deterministic). Non-finite points: ltm::Error (KdTree).
 std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m);
-// The longest horizontal edge [m] of the xy-oriented box of cloud[idx] (box axes: the principal
-// axes of the points' x, y spread); 0 for fewer than two points.
+// The xy-oriented box of cloud[idx] (all points when idx is empty): its major axis the principal
+// axis of the points' x, y spread (2x2 covariance about their mean), at yaw_rad; the minor axis
+// 90 deg counter-clockwise from it; the box's xy centre and its extents along the two axes [m].
+struct HorizontalBox {
+  double yaw_rad = 0.0;
+  Eigen::Vector2d center = Eigen::Vector2d::Zero();
+  double length = 0.0, width = 0.0;  // along the major / minor axis
+};
+HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx = {});
+// Its longest edge [m]; 0 for fewer than two points.
 double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx);
 
 // The lowest z per square xy cell of edge cell_m (cell floor(x / cell_m), floor(y / cell_m)) of

@@ -169,27 +169,13 @@ void Describe(MapObject& o) {
     if (n > best) best = n, o.cls = c;
 }
 
-// Oriented box: yaw of the main horizontal axis (2x2 covariance of x, y), extents along it, its
-// normal and z.
+// Oriented box: yaw of the main horizontal axis (geometry::HorizontalBoxOf), extents along it,
+// its normal and z.
 void OrientedBox(MapObject& o) {
-  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
-  for (const auto& p : o.cloud.points) {
-    const Eigen::Vector2d d(double(p.x) - o.centroid.x(), double(p.y) - o.centroid.y());
-    cov += d * d.transpose();
-  }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
-  const Eigen::Vector2d major = es.eigenvectors().col(1);
-  o.yaw_rad = std::atan2(major.y(), major.x());
-  const Eigen::Vector2d minor(-major.y(), major.x());
-  double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
-  for (const auto& p : o.cloud.points) {
-    const Eigen::Vector2d d(double(p.x) - o.centroid.x(), double(p.y) - o.centroid.y());
-    a0 = std::min(a0, d.dot(major)), a1 = std::max(a1, d.dot(major));
-    b0 = std::min(b0, d.dot(minor)), b1 = std::max(b1, d.dot(minor));
-  }
-  const Eigen::Vector2d c = o.centroid.head<2>() + major * (a0 + a1) / 2 + minor * (b0 + b1) / 2;
-  o.box_center = Eigen::Vector3d(c.x(), c.y(), (o.lo.z() + o.hi.z()) / 2);
-  o.size = Eigen::Vector3d(a1 - a0, b1 - b0, o.hi.z() - o.lo.z());
+  const geometry::HorizontalBox b = geometry::HorizontalBoxOf(o.cloud);
+  o.yaw_rad = b.yaw_rad;
+  o.box_center = Eigen::Vector3d(b.center.x(), b.center.y(), (o.lo.z() + o.hi.z()) / 2);
+  o.size = Eigen::Vector3d(b.length, b.width, o.hi.z() - o.lo.z());
 }
 
 // Principal spreads (std along the 3D principal axes, ascending) and the smallest axis.
