@@ -167,6 +167,8 @@ void SetupHd(CLI::App& parent) {
     if (sim_form && o->session.empty()) Usage("eval hd: --session is required with --sim");
     if (sim_form && o->output.empty() && o->changes.empty()) Usage("eval hd: give --changes DIR or --output F");
     if (!o->aligned.empty() && !o->poses.empty()) Usage("eval hd: give at most one of --aligned and --poses");
+    if (o->single_session && (o->changes.empty() || !o->output.empty()))
+      Usage("eval hd: --single-session goes with --changes DIR, without --output");
     const auto cfg = LoadEvalConfig(*o);
     std::string output = o->output;
     PointCloud out;

@@ -312,6 +312,8 @@ TEST(Cli, ExitCodesOnMissingFilesAndBadUsage) {
   // Usage errors are non-zero too, and nothing is written.
   EXPECT_NE(RunCli("eval traj --truth-poses a.txt", &out), 0) << out;
   EXPECT_NE(RunCli("eval hd --output x.pcd", &out), 0) << out;
+  EXPECT_NE(RunCli("eval hd --sim s --session session_00 --output x.pcd --single-session", &out), 0) << out;
+  EXPECT_NE(out.find("--single-session goes with --changes"), std::string::npos) << out;
   EXPECT_NE(RunCli("eval restore --map-a a.pcd --set restore.nope=1 --map-b b.pcd", &out), 0) << out;
   EXPECT_NE(RunCli("eval", &out), 0) << out;
   EXPECT_FALSE(fs::exists(dir / "x.json"));

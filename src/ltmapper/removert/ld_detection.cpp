@@ -110,21 +110,24 @@ std::pair<Eigen::Vector3f, Eigen::Vector3f> BoxOf(const PointCloud& c, const std
 std::vector<bool> FitAMover(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
                             const PointCloud& own, const RemovertConfig& cfg) {
   constexpr int kGrowCells = 1;
-  std::vector<const std::vector<std::uint32_t>*> across;
+  struct Candidate {
+    const std::vector<std::uint32_t>* members;
+    Eigen::Vector3f lo, hi;
+  };
+  std::vector<Candidate> across;
   geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
   for (const auto& m : members)
     if (geometry::LongestHorizontalEdge(c, m) < cfg.ld_residue_length_m) {
-      across.push_back(&m);
       const auto [lo, hi] = BoxOf(c, m);
+      across.push_back({&m, lo, hi});
       ground.Watch(lo, hi, kGrowCells);
     }
   ground.AddWatched(own);
   std::vector<bool> fit(c.size(), false);
-  for (const auto* m : across) {
-    const auto [lo, hi] = BoxOf(c, *m);
-    const double top = double(hi.z() - std::min(lo.z(), ground.Under(lo, hi, kGrowCells)));
+  for (const Candidate& k : across) {
+    const double top = double(k.hi.z() - std::min(k.lo.z(), ground.Under(k.lo, k.hi, kGrowCells)));
     if (top >= cfg.ld_radius_m && top < cfg.ld_residue_length_m)
-      for (auto i : *m) fit[i] = true;
+      for (auto i : *k.members) fit[i] = true;
   }
   return fit;
 }

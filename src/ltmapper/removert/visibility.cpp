@@ -32,13 +32,13 @@ namespace ltm::removert {
 namespace detail {
 
 MultiResImage::Grid MultiResImage::Grid::Make(const RemovertConfig& cfg, double row_deg, double col_deg) {
-  constexpr double kPi = 3.14159265358979323846, kDeg = kRadPerDeg;
+  constexpr double kPi = 3.14159265358979323846;
   Grid g;
   g.rows = std::max(1, int(std::ceil((cfg.fov_up_deg - cfg.fov_down_deg) / row_deg - 1e-9)));
   g.cols = std::max(1, int(std::lround(360.0 / col_deg)));
-  g.row_scale = float(g.rows / ((cfg.fov_up_deg - cfg.fov_down_deg) * kDeg));
+  g.row_scale = float(g.rows / ((cfg.fov_up_deg - cfg.fov_down_deg) * kRadPerDeg));
   g.col_scale = float(g.cols / (2.0 * kPi));
-  g.up = float(cfg.fov_up_deg * kDeg);  // = MultiResImage::up_, which Angles() checks
+  g.up = float(cfg.fov_up_deg * kRadPerDeg);  // = MultiResImage::up_, which Angles() checks
   return g;
 }
 
@@ -273,9 +273,8 @@ std::vector<int> MultiResImage::WindowRows(const RemovertConfig& cfg, int rows, 
 MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double>& resolutions_deg,
                              bool keep_returns, bool within_beams)
     : keep_returns_(keep_returns) {
-  constexpr double kDeg = kRadPerDeg;
-  up_ = float(cfg.fov_up_deg * kDeg);
-  down_ = float(cfg.fov_down_deg * kDeg);
+  up_ = float(cfg.fov_up_deg * kRadPerDeg);
+  down_ = float(cfg.fov_down_deg * kRadPerDeg);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   window_ = cfg.window_px;
@@ -300,9 +299,8 @@ MultiResImage::MultiResImage(const RemovertConfig& cfg, const std::vector<double
 void MultiResImage::PointBounds(const RemovertConfig& cfg) {
   const geometry::SensorModel& m = cfg.sensor_model;
   if (!cfg.SensorResolved() || !m.ring_based || m.beams() < 2) return;
-  constexpr double kDeg = kRadPerDeg;
-  point_up_ = std::min(up_, float((m.fov_up_deg + m.spread_deg) * kDeg));
-  point_down_ = std::max(down_, float((m.fov_down_deg - m.spread_deg) * kDeg));
+  point_up_ = std::min(up_, float((m.fov_up_deg + m.spread_deg) * kRadPerDeg));
+  point_down_ = std::max(down_, float((m.fov_down_deg - m.spread_deg) * kRadPerDeg));
 }
 
 std::size_t MultiResImage::Project(const float* x, const float* y, const float* z, std::size_t n,
@@ -539,8 +537,7 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     const double spacing = cfg.SensorResolved() ? cfg.sensor_model.SpacingAt(elevation) : 0.0;
     span_[std::size_t(r)] = std::max(1, int(std::lround(std::max(test.span_deg, kSpanSpacings * spacing) / test.row_deg)));
   }
-  constexpr double kDeg = kRadPerDeg;
-  down_ = float(cfg.fov_down_deg * kDeg);
+  down_ = float(cfg.fov_down_deg * kRadPerDeg);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
