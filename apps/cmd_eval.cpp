@@ -217,7 +217,7 @@ void SetupLd(CLI::App& parent) {
     std::string sim, changes, pair, aligned;
     std::string truth_frame = "central", truth_mapping = "keyframe";
     std::string errors;
-    bool from_scans = false;
+    bool from_scans = false, exact_ray = false;
   };
   auto o = std::make_shared<Opt>();
   auto* cmd = parent.add_subcommand("ld", "LD changes: precision / recall / F1 of PD and ND, strong and weak");
@@ -235,6 +235,9 @@ void SetupLd(CLI::App& parent) {
   cmd->add_flag("--truth-from-scans", o->from_scans,
                 "With --sim: rebuild the truth from the labelled scans placed with the method's poses "
                 "(its maps' own blur far from the trajectory) instead of moving the truth clouds");
+  cmd->add_flag("--exact-ray", o->exact_ray,
+                "With --sim: score against the second truth (strong / weak by a ray cast straight at each "
+                "point, truth/pair_*/exact_ray) instead of the beam truth (the scans' own rays)");
   cmd->add_option("--errors", o->errors,
                   "Write DIR/false_positives.ply and DIR/false_negatives.ply (class field: which PD/ND cloud)");
   AddTruthFrame(*cmd, o->truth_frame);
@@ -243,12 +246,18 @@ void SetupLd(CLI::App& parent) {
     const bool sim_form = !o->sim.empty();
     if (sim_form && (o->changes.empty() || o->pair.empty()))
       Usage("eval ld: with --sim give --changes DIR and --pair 00_XX");
+    if (!sim_form && o->exact_ray) Usage("eval ld: --exact-ray needs --sim");
     if (!sim_form && (o->truth_dir.empty() || o->pred_dir.empty()))
       Usage("eval ld: give --truth-dir D --pred-dir D, or --sim DIR --changes DIR --pair 00_XX");
     const auto cfg = LoadEvalConfig(*o);
     eval::LdCase ld;
     if (sim_form) {
-      const std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
+      std::string tdir = eval::FindPairDir(Join(o->sim, "truth"), o->pair);
+      if (o->exact_ray) {
+        tdir = io::layout::ExactRayTruthDir(tdir);
+        if (!std::filesystem::is_directory(tdir))
+          throw Error(tdir + ": no exact-ray truth (simulated by an older ltmapper: run `ltmapper sim` again)");
+      }
       const std::string pdir = eval::FindPairDir(o->changes, o->pair);
       int c = -1, q = -1;
       if (std::sscanf(o->pair.c_str(), "%d_%d", &c, &q) != 2 || c < 0 || q < 0)

@@ -277,6 +277,19 @@ TEST(Cli, TruthAsOutputIsPerfectThroughEveryCommand) {
     EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".precision"), 1.0) << k;
     EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".recall"), 1.0) << k;
   }
+  {  // --exact-ray scores against truth/pair_*/exact_ray: an error naming it while it is missing.
+    const std::string l = "eval ld --sim " + f.sim + " --changes " + f.changes + " --pair 00_01 --exact-ray --json " +
+                          (dir / "le.json");
+    EXPECT_EQ(RunCli(l, &out), 1) << out;
+    EXPECT_NE(out.find("exact_ray: no exact-ray truth"), std::string::npos) << out;
+    const std::string truth = FindPairDir(f.sim + "/truth", "00_01");
+    fs::create_directories(io::layout::ExactRayTruthDir(truth));
+    for (const char* k : {"pd_strong", "pd_weak", "nd_strong", "nd_weak"})
+      fs::copy_file(truth + "/" + k + ".pcd", io::layout::ExactRayTruthDir(truth) + "/" + k + ".pcd");
+    ASSERT_EQ(RunCli(l, &out), 0) << out;
+    EXPECT_DOUBLE_EQ(*JsonNumber(test::ReadText(dir / "le.json"), "ld.pd.precision"), 1.0);
+    EXPECT_NE(test::ReadText(dir / "le.json").find("exact_ray"), std::string::npos);
+  }
   // The prediction is in the central frame: claiming it is in the sim world misses everything.
   ASSERT_EQ(RunCli("eval ld --sim " + f.sim + " --changes " + f.changes + " --pair 00_01 --truth-frame world --json " +
                        (dir / "lw.json"),
@@ -314,6 +327,8 @@ TEST(Cli, ExitCodesOnMissingFilesAndBadUsage) {
   EXPECT_NE(RunCli("eval hd --output x.pcd", &out), 0) << out;
   EXPECT_NE(RunCli("eval hd --sim s --session session_00 --output x.pcd --single-session", &out), 0) << out;
   EXPECT_NE(out.find("--single-session goes with --changes"), std::string::npos) << out;
+  EXPECT_NE(RunCli("eval ld --truth-dir t --pred-dir p --exact-ray", &out), 0) << out;
+  EXPECT_NE(out.find("--exact-ray needs --sim"), std::string::npos) << out;
   EXPECT_NE(RunCli("eval restore --map-a a.pcd --set restore.nope=1 --map-b b.pcd", &out), 0) << out;
   EXPECT_NE(RunCli("eval", &out), 0) << out;
   EXPECT_FALSE(fs::exists(dir / "x.json"));

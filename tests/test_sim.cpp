@@ -222,6 +222,56 @@ std::set<std::array<float, 3>> PointSet(const PointCloud& c) {
   return s;
 }
 
+// The LD change truth comes twice: strong / weak by the scans' own rays (beam truth, the pair
+// folder) and by a ray cast straight at each point (exact_ray/). Same points; a beam passes near
+// a point only where the scan pattern has one, so the beam truth sees through no more often:
+// its strong ND and weak PD are (nearly) subsets of the exact-ray ones, and each label is kept.
+TEST_F(SimTruth, BeamTruthBesideExactRayTruth) {
+  const std::string pair = Out() + "/truth/pair_00_01", exact = io::layout::ExactRayTruthDir(pair);
+  std::size_t beam_seen = 0, exact_seen = 0, both = 0;
+  for (const char* k : {"nd_strong", "pd_weak"}) {
+    const auto b = PointSet(io::ReadPcd(pair + "/objects_" + std::string(k) + ".pcd"));
+    const auto e = PointSet(io::ReadPcd(exact + "/objects_" + std::string(k) + ".pcd"));
+    beam_seen += b.size(), exact_seen += e.size();
+    for (const auto& p : b) both += e.count(p);
+  }
+  std::printf("seen through: beam truth %zu, exact-ray truth %zu, both %zu\n", beam_seen, exact_seen, both);
+  EXPECT_GT(beam_seen, 0u);
+  EXPECT_GE(double(both), 0.98 * double(beam_seen));
+  const PointCloud bc = io::ReadPly(pair + "/objects_changes.ply"), ec = io::ReadPly(exact + "/objects_changes.ply");
+  EXPECT_EQ(PointSet(bc), PointSet(ec));
+}
+
+// FiredRays are the rays CastScan fires: without noise and dropout, casting them again gives the
+// scan's points, one by one in its order (rays with a return in range), from a moving sweep too.
+TEST(Sim, FiredRaysAreTheScansRays) {
+  SimConfig cfg = TinyConfig();
+  cfg.range_noise_m = 0.0;
+  cfg.dropout = 0.0;
+  cfg.ego_speed_mps = 15.0;
+  cfg.sweep = "distorted";
+  Simulator sim(cfg, 2);
+  const int k = 3;
+  const PointCloud scan = sim.CastScan(0, k);  // each point in the sensor frame of its firing
+  std::vector<Eigen::Vector3f> origins, dirs;
+  sim.FiredRays(0, k, &origins, &dirs);
+  ASSERT_EQ(dirs.size(), std::size_t(cfg.beams) * cfg.columns);
+  const auto hits = sim.CastRays(0, k, origins, dirs);
+  const std::vector<Pose> sweep = sim.SweepPoses(0, k);
+  std::size_t n = 0, close = 0;
+  for (std::size_t i = 0; i < dirs.size(); ++i) {
+    if (!hits[i].hit || hits[i].range < cfg.min_range_m || hits[i].range > cfg.max_range_m) continue;
+    if (n < scan.size()) {
+      const Eigen::Vector3f world = origins[i] + hits[i].range * dirs[i];
+      const Eigen::Vector3f fired = (sweep[i % std::size_t(cfg.columns)].cast<float>() * scan.points[n].xyz());
+      close += (world - fired).norm() < 1e-3f;
+    }
+    ++n;
+  }
+  EXPECT_EQ(n, scan.size());
+  EXPECT_GE(double(close), 0.999 * double(scan.size()));
+}
+
 TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
   const SimConfig cfg = TinyConfig();
   Simulator sim(cfg, 2);

@@ -64,6 +64,9 @@ std::string HdMapIn(const std::string& session_changes_dir);      // hd_map.pcd 
 // among the manifest's aligned sessions, in manifest order.
 std::string PairDirName(int central, int query);
 std::string KeyframeDirName(int index);  // "000123"
+// The simulator's second change truth of a pair (truth/pair_<c>_<q>/exact_ray: strong / weak by a
+// ray cast straight at each point, beside the beam truth of the scans' own rays).
+std::string ExactRayTruthDir(const std::string& pair_truth_dir);
 }  // namespace layout
 
 // What LT-SLAM knows and every later stage needs, written once as aligned/manifest.yaml: the

@@ -132,6 +132,7 @@ std::string KeyframeDirName(int index) {
   std::snprintf(buf, sizeof(buf), "%06d", index);
   return buf;
 }
+std::string ExactRayTruthDir(const std::string& pair_truth_dir) { return Join(pair_truth_dir, "exact_ray"); }
 }  // namespace layout
 
 // ----------------------------------------------------------------------------- manifest

@@ -450,6 +450,12 @@ PointCloud Simulator::CastScan(int session, int keyframe) {
 
 std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const Eigen::Vector3d& origin,
                                         const std::vector<Eigen::Vector3f>& dirs) {
+  return CastRays(session, keyframe, std::vector<Eigen::Vector3f>(dirs.size(), origin.cast<float>()), dirs);
+}
+
+std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const std::vector<Eigen::Vector3f>& origins,
+                                        const std::vector<Eigen::Vector3f>& dirs) {
+  if (origins.size() != dirs.size()) throw Error("sim: CastRays needs one origin per ray");
   Impl& I = *impl_;
   I.SetKeyframe(session, keyframe);
   std::vector<RayHit> out(dirs.size());
@@ -460,9 +466,9 @@ std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const Eigen::
     rtcInitIntersectContext(&ctx);
     for (std::size_t i = begin; i < end; ++i) {
       RTCRayHit rh;
-      rh.ray.org_x = float(origin.x());
-      rh.ray.org_y = float(origin.y());
-      rh.ray.org_z = float(origin.z());
+      rh.ray.org_x = origins[i].x();
+      rh.ray.org_y = origins[i].y();
+      rh.ray.org_z = origins[i].z();
       rh.ray.dir_x = dirs[i].x();
       rh.ray.dir_y = dirs[i].y();
       rh.ray.dir_z = dirs[i].z();
@@ -486,6 +492,30 @@ std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const Eigen::
   });
   I.Check("casting rays");
   return out;
+}
+
+void Simulator::FiredRays(int session, int keyframe, std::vector<Eigen::Vector3f>* origins,
+                          std::vector<Eigen::Vector3f>* dirs_world) const {
+  const Impl& I = *impl_;
+  const SimConfig& cfg = I.sc.cfg;
+  const std::vector<Pose> sweep = SweepPoses(session, keyframe);
+  const std::vector<Eigen::Vector3f> rosette =
+      cfg.lidar_pattern == "rosette"
+          ? RosetteDirections(cfg, std::uint64_t(session) * 1000003u + std::uint64_t(keyframe))
+          : std::vector<Eigen::Vector3f>();
+  const std::vector<Eigen::Vector3f>& dirs = rosette.empty() ? I.dirs : rosette;
+  const int B = cfg.beams, C = cfg.columns;
+  origins->resize(std::size_t(B) * C);
+  dirs_world->resize(std::size_t(B) * C);
+  for (int c = 0; c < C; ++c) {
+    const Eigen::Matrix3f R = sweep[std::size_t(c)].linear().cast<float>();
+    const Eigen::Vector3f o = sweep[std::size_t(c)].translation().cast<float>();
+    for (int b = 0; b < B; ++b) {
+      const std::size_t i = std::size_t(b) * C + c;
+      (*origins)[i] = o;
+      (*dirs_world)[i] = R * dirs[i];  // as FillPacket fires it
+    }
+  }
 }
 
 }  // namespace ltm::sim

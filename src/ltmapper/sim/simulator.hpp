@@ -111,6 +111,14 @@ class Simulator {
   // actors at `keyframe` (noise free, up to max_range). Runs in parallel.
   std::vector<RayHit> CastRays(int session, int keyframe, const Eigen::Vector3d& origin_world,
                                const std::vector<Eigen::Vector3f>& dirs_world);
+  // The same with one origin per ray.
+  std::vector<RayHit> CastRays(int session, int keyframe, const std::vector<Eigen::Vector3f>& origins_world,
+                               const std::vector<Eigen::Vector3f>& dirs_world);
+  // The rays CastScan fires for a keyframe, before casting: ray i = beam * columns + column (the
+  // beam x column table, or this scan's rosette), from its column's sweep pose (SweepPoses):
+  // world origins and unit world directions.
+  void FiredRays(int session, int keyframe, std::vector<Eigen::Vector3f>* origins_world,
+                 std::vector<Eigen::Vector3f>* dirs_world) const;
 
  private:
   struct Impl;

@@ -140,6 +140,123 @@ std::vector<std::size_t> CoarseToFine(std::size_t n) {
   return order;
 }
 
+// The rays of one scan binned by direction in the keyframe's sensor frame (cells of kCellDeg
+// in elevation and azimuth), to find the rays that pass near a point.
+class RayDirectionGrid {
+ public:
+  static constexpr double kCellDeg = 0.5;
+  RayDirectionGrid(const std::vector<Eigen::Vector3f>& dirs_world, const Eigen::Matrix3d& Rt)
+      : rows_(int(std::ceil(180.0 / kCellDeg))), cols_(int(std::ceil(360.0 / kCellDeg))) {
+    std::vector<std::uint32_t> cell(dirs_world.size());
+    start_.assign(std::size_t(rows_) * cols_ + 1, 0);
+    for (std::size_t i = 0; i < dirs_world.size(); ++i) {
+      const Eigen::Vector3d u = Rt * dirs_world[i].cast<double>();
+      cell[i] = std::uint32_t(Cell(Row(Elevation(u)), Col(Azimuth(u))));
+      ++start_[cell[i] + 1];
+    }
+    for (std::size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
+    rays_.resize(dirs_world.size());
+    std::vector<std::uint32_t> fill(start_.begin(), start_.end() - 1);
+    for (std::size_t i = 0; i < dirs_world.size(); ++i) rays_[fill[cell[i]]++] = std::uint32_t(i);
+  }
+  // Calls f(ray) for every ray binned within `radius_deg` (plus one cell) of direction u.
+  template <class F>
+  void Near(const Eigen::Vector3d& u, double radius_deg, F&& f) const {
+    const double el = Elevation(u), az = Azimuth(u);
+    const int r0 = Row(std::max(-90.0, el - radius_deg)), r1 = Row(std::min(90.0, el + radius_deg));
+    const double cos_el = std::cos((std::abs(el) + radius_deg) * M_PI / 180.0);
+    const double span = cos_el > 1e-3 ? std::min(180.0, radius_deg / cos_el) : 180.0;
+    const int dc = int(std::ceil(span / kCellDeg)) + 1, c = Col(az);
+    for (int r = r0; r <= r1; ++r)
+      for (int k = -std::min(dc, cols_ / 2); k <= std::min(dc, (cols_ - 1) / 2); ++k) {
+        const int cell = Cell(r, (c + k + cols_) % cols_);
+        for (std::uint32_t j = start_[std::size_t(cell)]; j < start_[std::size_t(cell) + 1]; ++j) f(rays_[j]);
+      }
+  }
+
+ private:
+  static double Elevation(const Eigen::Vector3d& u) { return std::asin(std::clamp(u.z(), -1.0, 1.0)) * 180.0 / M_PI; }
+  static double Azimuth(const Eigen::Vector3d& u) { return std::atan2(u.y(), u.x()) * 180.0 / M_PI; }
+  int Row(double el) const { return std::clamp(int((el + 90.0) / kCellDeg), 0, rows_ - 1); }
+  int Col(double az) const { return std::clamp(int((az + 180.0) / kCellDeg), 0, cols_ - 1); }
+  int Cell(int r, int c) const { return r * cols_ + c; }
+  int rows_, cols_;
+  std::vector<std::uint32_t> start_, rays_;
+};
+
+// The largest angle [deg] a column's sweep pose turns from the keyframe pose, and the farthest
+// it moves [m]: a ray's direction in the keyframe frame is off by at most the one plus the other
+// over the point's range.
+std::pair<double, double> SweepSpread(const std::vector<Pose>& sweep, const Pose& T) {
+  double deg = 0.0, m = 0.0;
+  for (const Pose& P : sweep) {
+    deg = std::max(deg, Eigen::AngleAxisd(T.linear().transpose() * P.linear()).angle() * 180.0 / M_PI);
+    m = std::max(m, (P.translation() - T.translation()).norm());
+  }
+  return {deg, m};
+}
+
+// Beam truth: for each world point, did one of the very rays of `session`'s scans (the beam x
+// column table or the scan's rosette, from each column's sweep pose; noise-free, cast in that
+// session's world with its HD actors at that keyframe) pass within truth.visibility_tolerance_m
+// of it (perpendicular distance, at a distance along the ray within [min_range, max_range - tol])
+// and end beyond it: first hit farther than that distance + tol, or none? Keyframes coarse to fine
+// (CoarseToFine); a point stops being tested once seen.
+std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg,
+                                  int threads) {
+  const std::size_t n = pts.size();
+  std::vector<char> seen(n, 0);
+  const double tol = cfg.visibility_tolerance_m;
+  const auto& poses = sim.T_world_sensor(session);
+  std::vector<Eigen::Vector3f> origins, dirs;
+  for (const std::size_t j : CoarseToFine(poses.size())) {
+    const Pose& T = poses[j];
+    const Eigen::Matrix3d Rt = T.linear().transpose();
+    sim.FiredRays(session, int(j), &origins, &dirs);
+    const RayDirectionGrid grid(dirs, Rt);
+    const auto [turn_deg, move_m] = SweepSpread(sim.SweepPoses(session, int(j)), T);
+    // Candidate (point, ray, distance along the ray) per chunk of points.
+    struct Pass {
+      std::uint32_t point, ray;
+      float along;
+    };
+    constexpr std::size_t kBlock = 1024;
+    std::vector<std::vector<Pass>> chunks((n + kBlock - 1) / kBlock);
+    ParallelFor(chunks.size(), threads, [&](std::size_t block) {
+      const std::size_t b = block * kBlock, e = std::min(n, b + kBlock);
+      auto& out = chunks[block];
+      for (std::size_t i = b; i < e; ++i) {
+        if (seen[i]) continue;
+        const Eigen::Vector3d p = pts.points[i].xyz().cast<double>(), d = p - T.translation();
+        const double r = d.norm();
+        if (r < cfg.min_range_m || r + tol > cfg.max_range_m + move_m) continue;
+        const double radius_deg = std::asin(std::min(1.0, (tol + move_m) / r)) * 180.0 / M_PI + turn_deg;
+        grid.Near(Rt * d / r, radius_deg, [&](std::uint32_t k) {
+          const Eigen::Vector3d o = origins[k].cast<double>(), v = dirs[k].cast<double>();
+          const double s = (p - o).dot(v);
+          if (s < cfg.min_range_m || s + tol > cfg.max_range_m) return;
+          if ((p - o - s * v).squaredNorm() <= tol * tol) out.push_back({std::uint32_t(i), k, float(s)});
+        });
+      }
+    });
+    std::vector<Pass> passes;
+    for (auto& c : chunks) passes.insert(passes.end(), c.begin(), c.end());
+    if (passes.empty()) continue;
+    std::vector<std::uint32_t> rays;
+    for (const Pass& q : passes) rays.push_back(q.ray);
+    std::sort(rays.begin(), rays.end());
+    rays.erase(std::unique(rays.begin(), rays.end()), rays.end());
+    std::vector<Eigen::Vector3f> o(rays.size()), v(rays.size());
+    for (std::size_t m = 0; m < rays.size(); ++m) o[m] = origins[rays[m]], v[m] = dirs[rays[m]];
+    const auto hits = sim.CastRays(session, int(j), o, v);
+    for (const Pass& q : passes) {
+      const RayHit& h = hits[std::size_t(std::lower_bound(rays.begin(), rays.end(), q.ray) - rays.begin())];
+      if (!h.hit || double(h.range) > double(q.along) + tol) seen[q.point] = 1;
+    }
+  }
+  return seen;
+}
+
 // Did session `session` observe the surface of each point (a point of session `owner`'s
 // HD-free world, world frame)? A point is observed when some keyframe ray of `session` towards
 // it (range within [lidar.min_range_m, lidar.max_range_m], elevation inside the vertical FOV,
@@ -442,6 +559,14 @@ void WritePairClouds(const std::string& pdir, const PointCloud& nd, const PointC
   io::WritePly(pdir + "/changes.ply", all);
 }
 
+// Strong / weak of LD object points by whether the other session saw through them: ND is
+// strong when seen through, PD weak (its space was observed free).
+void Split(PointCloud& c, const std::vector<char>& seen, bool nd) {
+  for (std::size_t i = 0; i < c.size(); ++i)
+    c.cls[i] = nd ? (seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak)
+                  : (seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong);
+}
+
 // Change truth of the pair (central 0, query q): the LD objects that changed, plus every other
 // surface one session has and the other never observed (FORMATS.md).
 PairTruthCounts WritePairTruth(Simulator& sim, const SimConfig& cfg, int q, const std::vector<SessionTruth>& st,
@@ -457,17 +582,23 @@ PairTruthCounts WritePairTruth(Simulator& sim, const SimConfig& cfg, int q, cons
   const SessionTruth& query = st[std::size_t(q)];
   // LD objects: present in one session only.
   PointCloud nd = changed(central.ld_world, 0, q), pd = changed(query.ld_world, q, 0);
-  const auto nd_seen = SeenThrough(sim, q, nd, cfg);  // query saw through: strong ND
-  const auto pd_seen = SeenThrough(sim, 0, pd, cfg);  // central saw the space free: weak PD
-  for (std::size_t i = 0; i < nd.size(); ++i) nd.cls[i] = nd_seen[i] ? PointClass::kNDStrong : PointClass::kNDWeak;
-  for (std::size_t i = 0; i < pd.size(); ++i) pd.cls[i] = pd_seen[i] ? PointClass::kPDWeak : PointClass::kPDStrong;
+  // The beam truth (the scans' own rays) decides strong / weak; the exact-ray truth (a ray cast
+  // straight at each point) is written beside it (exact_ray/).
+  PointCloud nd_exact = nd, pd_exact = pd;
+  Split(nd, BeamSeenThrough(sim, q, nd, cfg, threads), true);  // query saw through: strong ND
+  Split(pd, BeamSeenThrough(sim, 0, pd, cfg, threads), false);  // central saw the space free: weak PD
+  Split(nd_exact, SeenThrough(sim, q, nd_exact, cfg), true);
+  Split(pd_exact, SeenThrough(sim, 0, pd_exact, cfg), false);
   // Surfaces both sessions have (permanent, LD objects present in both) that the other
   // session never observed: weak ND (central side, kept in the map) and strong PD (query side).
   PointCloud snd = Unobserved(sim, 0, q, central.static_world, query.static_world, cfg, threads, &counts.rays);
   PointCloud spd = Unobserved(sim, q, 0, query.static_world, central.static_world, cfg, threads, &counts.rays);
   snd.cls.assign(snd.size(), PointClass::kNDWeak);
   spd.cls.assign(spd.size(), PointClass::kPDStrong);
-  WritePairClouds(truth + "/pair_00_" + Num(q, 2), nd, pd, snd, spd, &counts);
+  const std::string pdir = truth + "/pair_00_" + Num(q, 2);
+  WritePairClouds(pdir, nd, pd, snd, spd, &counts);
+  PairTruthCounts exact;
+  WritePairClouds(io::layout::ExactRayTruthDir(pdir), nd_exact, pd_exact, snd, spd, &exact);
   return counts;
 }
 }  // namespace
