@@ -79,7 +79,6 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   out.seen.assign(points.size(), false);
   out.observed.assign(points.size(), false);
   out.same.assign(points.size(), false);
-  out.seen_own.assign(points.size(), false);
   if (points.empty() || keyframes.empty()) return out;
   RemovertConfig vcfg = cfg;
   vcfg.submap_radius_m = cfg.ld_submap_radius_m;
@@ -88,7 +87,6 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   VisibilityOptions opt;
   opt.count_occluded = true;
   opt.within_beams = false;
-  opt.count_own_see = true;
   std::vector<Eigen::Vector3f> normals;
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
@@ -101,18 +99,15 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
   for (std::size_t i = 0; i < points.size(); ++i) {
-    bool seen = false, observed = false, seen_own = false;
+    bool seen = false, observed = false;
     int hits = beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
-      const double o = v.see_own[std::size_t(l) * v.points + i];
-      seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
       observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
       if (!beams) hits = std::max(hits, int(h));
     }
     out.seen[i] = seen;
-    out.seen_own[i] = seen || seen_own;
     out.observed[i] = observed;
     out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
   }
