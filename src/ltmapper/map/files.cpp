@@ -266,7 +266,7 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
   const std::vector<int> nidx = ListedKeyframes(poses, "new", pair + "/new_keyframes");
   std::vector<KeyframeDelta> deltas(kidx.size());
   std::vector<KeyframeInput> fresh(nidx.size());
-  ParallelFor(kidx.size() + nidx.size(), 0, [&](std::size_t k) {
+  ParallelFor(kidx.size() + nidx.size(), store.threads(), [&](std::size_t k) {
     if (k < kidx.size()) {
       deltas[k] = ReadDelta(pair + "/keyframes/" + io::layout::KeyframeDirName(kidx[k]) + "/", kidx[k]);
     } else {

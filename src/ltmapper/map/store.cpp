@@ -400,6 +400,7 @@ Store::~Store() = default;
 const std::string& Store::path() const { return impl_->path; }
 const MapConfig& Store::config() const { return impl_->cfg; }
 void Store::set_threads(int threads) { impl_->threads = threads; }
+int Store::threads() const { return impl_->threads; }
 
 Store Store::Create(const std::string& path, const MapConfig& cfg) {
   ValidateConfig(cfg, "map config");

@@ -30,6 +30,7 @@ class Store {
   const std::string& path() const;
   const MapConfig& config() const;  // encoding fields as stored
   void set_threads(int threads);    // 0 = all cores
+  int threads() const;
 
   // The central session: every keyframe becomes a map keyframe. One transaction.
   IntegrationResult IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes);
