@@ -224,6 +224,42 @@ TEST(RemovertLd, PointsPastTheRimOfTheOtherCoverageAreChanges) {
   EXPECT_EQ(inside, 0u);
 }
 
+// A sparse sensor (16 beams 2 deg apart) passes an appeared car 40 m to the side: the beam through
+// the car's place went on to the far wall, while the beam below it met the ground in front of the
+// car. The pooled (both-sides) test calls that occluded; the beam that passed decides the PD's
+// strength, so the car is weak PD (space the central observed free), an object a user is told
+// about. A box the central's wall hid stays strong PD (no beam passed its place).
+TEST(RemovertLd, TheBeamThatPassedAnAppearedCarMakesItWeakPd) {
+  const test::Lidar sparse{16, 15.0, -15.0, 1800, 100.0};
+  RemovertConfig cfg = test::ConfigFor(sparse);
+  const test::Box car = test::MakeBox(-2, -42, 0.3, 2, -40, 1.8, 30), hidden = test::MakeBox(-50, -25, 0, -46, -23, 2.0, 31);
+  std::vector<test::Box> central = {test::MakeBox(-90, -70.3, 0, 90, -70, 8, 1), test::MakeBox(-60, -15.3, 0, -20, -15, 4, 32),
+                                    hidden},
+                         query = {test::MakeBox(-90, -70.3, 0, 90, -70, 8, 1), hidden, car};
+  auto drive = [&](const std::vector<test::Box>& boxes) {
+    std::vector<WorldKeyframe> kfs;
+    for (int k = 0; k <= 20; ++k) {
+      WorldKeyframe kf;
+      kf.index = k;
+      kf.T_world_sensor = test::At(-20.0 + 2.0 * k, 0.0, 1.8, 0.0);
+      kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, sparse));
+      kfs.push_back(kf);
+    }
+    return kfs;
+  };
+  const auto c = drive(central), q = drive(query);
+  const auto ld = removert::DetectLd(removert::BuildSessionMap(c, cfg, 2), removert::BuildSessionMap(q, cfg, 2), c, q,
+                                     cfg, 2);
+  const std::size_t car_w = CountIn(ld.pd_weak, car), car_s = CountIn(ld.pd_strong, car);
+  const std::size_t hid_w = CountIn(ld.pd_weak, hidden), hid_s = CountIn(ld.pd_strong, hidden);
+  std::printf("appeared car: PD weak %zu strong %zu; box the central's wall hid: PD weak %zu strong %zu\n", car_w, car_s,
+              hid_w, hid_s);
+  ASSERT_GT(car_w + car_s, 30u);
+  EXPECT_GE(double(car_w), 0.9 * double(car_w + car_s));
+  ASSERT_GT(hid_w + hid_s, 10u);
+  EXPECT_GE(double(hid_s), 0.9 * double(hid_w + hid_s));
+}
+
 // Multi-session cleanup (paper Fig. 3(f)): a pedestrian-sized thing that only one session has, in
 // space the other saw through, is a residue of a mover (HD of its session), not a change; a car
 // stays a change, and so do a small piece beside it (part of the same object, seen apart) and a

@@ -35,6 +35,7 @@ using ltm::ParallelFor;  // core.hpp
 // points come from) gives their normals.
 struct Visibility {
   std::vector<bool> seen, observed, same;
+  std::vector<bool> seen_own;  // seen through by the points' own pixels (count_own_see)
 };
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
@@ -55,8 +56,10 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
 // Unit normals of `points` from their neighbourhood in `map` (at most 16 nearest within
 // radius_m): the PCA normal of a planar neighbourhood; for a line-like one (a far ground ring,
 // a pole) the direction perpendicular to the line closest to vertical; +z with < 2 neighbours.
+// planar (optional): per point, whether its normal is a plane's (else a line's, or none).
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
-                                             double radius_m, int threads);
+                                             double radius_m, int threads,
+                                             std::vector<bool>* planar = nullptr);
 
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);

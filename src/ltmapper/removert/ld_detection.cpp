@@ -82,7 +82,7 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
       continue;
     }
     const bool covered = !cfg.covisible_only || vis.observed[i];
-    s.strong[i] = covered && (nd ? vis.seen[i] || !cfg.weak_nd : !vis.seen[i]);
+    s.strong[i] = covered && (nd ? vis.seen[i] || !cfg.weak_nd : !vis.seen_own[i]);
     s.weak[i] = covered && !s.strong[i];
     s.unobserved[i] = !covered;
   }

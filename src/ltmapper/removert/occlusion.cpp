@@ -23,6 +23,9 @@
 
 namespace ltm::removert::detail {
 
+// |normal z| below cos 45 deg: the surface is more upright than horizontal.
+constexpr float kUprightNormalZ = 0.70710678f;
+
 Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& cloud, const Eigen::Vector3f& p,
                                float radius) {
   Neighbourhood nb;
@@ -45,8 +48,9 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
 }
 
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
-                                             double radius_m, int threads) {
+                                             double radius_m, int threads, std::vector<bool>* planar) {
   std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
+  std::vector<std::uint8_t> plane(points.size(), 0);
   if (points.empty() || map.empty()) return normals;
   const geometry::KdTree tree(std::make_shared<const PointCloud>(map));
   const std::size_t chunk = 2048;
@@ -61,6 +65,7 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
       // perpendicular to it closest to vertical.
       if (nb.n >= 3 && ev(1) > 0.05 * ev(2)) {
         nrm = nb.eigenvectors.col(0);
+        plane[i] = 1;
       } else {
         const Eigen::Vector3d line = nb.eigenvectors.col(2);
         nrm = Eigen::Vector3d::UnitZ() - line.z() * line;
@@ -69,6 +74,7 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
       normals[i] = nrm.normalized().cast<float>();
     }
   });
+  if (planar) planar->assign(plane.begin(), plane.end());
   return normals;
 }
 
@@ -79,6 +85,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   out.seen.assign(points.size(), false);
   out.observed.assign(points.size(), false);
   out.same.assign(points.size(), false);
+  out.seen_own.assign(points.size(), false);
   if (points.empty() || keyframes.empty()) return out;
   RemovertConfig vcfg = cfg;
   vcfg.submap_radius_m = cfg.ld_submap_radius_m;
@@ -87,10 +94,12 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   VisibilityOptions opt;
   opt.count_occluded = true;
   opt.within_beams = false;
+  opt.count_own_see = true;
   std::vector<Eigen::Vector3f> normals;
+  std::vector<bool> planar;  // normals[i] is a plane's (else a scan line's: orientation unknown)
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
-    normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads);
+    normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &planar);
     opt.normals = &normals;
     if (beams)
       opt.beams = &cfg.ld_beam;
@@ -99,15 +108,22 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
   for (std::size_t i = 0; i < points.size(); ++i) {
-    bool seen = false, observed = false;
+    bool seen = false, observed = false, seen_own = false;
     int hits = beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
+      const double o = v.see_own[std::size_t(l) * v.points + i];
+      seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
       observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
       if (!beams) hits = std::max(hits, int(h));
     }
     out.seen[i] = seen;
+    // A beam going on past a surface more horizontal than vertical (ground, a roof) passed it at
+    // a grazing angle, no sign its place was free: the own pixel decides only on upright planes
+    // and on scan lines (a sparse sensor's rows on an upright side, orientation unknown).
+    const bool upright = planar.empty() || !planar[i] || std::abs(normals[i].z()) < kUprightNormalZ;
+    out.seen_own[i] = seen || (seen_own && upright);
     out.observed[i] = observed;
     out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
   }

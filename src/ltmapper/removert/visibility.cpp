@@ -122,11 +122,12 @@ inline int ScanAngles4(const PointCloud& scan, std::size_t i, const ScanBounds4&
 // also cancels the next points' lookups in flight) with the scalar code's float operations.
 // Surface hits (normals given) need the points' planes in the sensor frame and the image's
 // nearest return per pixel (MultiResImage keep_returns).
-constexpr std::uint8_t kSee = 1, kHit = 2, kOcc = 4;
+constexpr std::uint8_t kSee = 1, kHit = 2, kOcc = 4, kSeeOwn = 8;
 struct VoteTest {
   float tol_abs = 0.f, tol_rel = 0.f;
   float surface_max = 0.f;    // [m] cap of the surface-hit range difference
   std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
+  std::uint8_t see_own = 0;   // kSeeOwn when the own pixel's see-through is counted, else 0
   float yaw_sigma = 0.f;      // [rad] the poses' angular uncertainty: the window is also read at yaw -+ it
 };
 // Surface hit: the pixel's nearest return q lies on the point's plane (n . q = off, sensor
@@ -186,7 +187,7 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
   const __m128 sign = _mm_set1_ps(-0.f), inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
   const __m128 tol_abs = _mm_set1_ps(t.tol_abs), tol_rel = _mm_set1_ps(t.tol_rel);
   const __m128i code_see = _mm_set1_epi32(kSee), code_hit = _mm_set1_epi32(kHit);
-  const __m128i code_occ = _mm_set1_epi32(t.occluded);
+  const __m128i code_occ = _mm_set1_epi32(t.occluded), code_own = _mm_set1_epi32(t.see_own);
   alignas(16) std::int32_t pix[4], code[4];
   for (std::size_t j = 0; j < m; j += 4) {
     const __m128i pix4 = Pixel4(grid, _mm_loadu_ps(pitch + j), _mm_loadu_ps(yaw + j));
@@ -214,9 +215,14 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
     const __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
     const __m128 hit = _mm_andnot_ps(see, _mm_and_ps(evidence, near));
     const __m128 occ = _mm_andnot_ps(_mm_or_ps(see, hit), evidence);
-    const __m128i c = _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), code_see),
-                                                _mm_and_si128(_mm_castps_si128(hit), code_hit)),
-                                   _mm_and_si128(_mm_castps_si128(occ), code_occ));
+    // Own see-through: the point's own pixel has a return and it lies beyond the point (the beam
+    // that passed the point went on), whatever the beams above and below it met.
+    const __m128 see_own = _mm_and_ps(_mm_cmplt_ps(at, inf), _mm_cmpgt_ps(at, _mm_add_ps(r, tol)));
+    const __m128i c = _mm_or_si128(
+        _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), code_see),
+                                  _mm_and_si128(_mm_castps_si128(hit), code_hit)),
+                     _mm_and_si128(_mm_castps_si128(occ), code_occ)),
+        _mm_and_si128(_mm_castps_si128(see_own), code_own));
     _mm_store_si128(reinterpret_cast<__m128i*>(code), c);
     const std::size_t lanes = std::min<std::size_t>(4, m - j);
     if constexpr (kSurface) {
@@ -248,7 +254,8 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
     if constexpr (kSurface)
       hit = hit || (!(s > r + tol) && std::isfinite(at) &&
                     OnPlane(plane + 4 * j, returns[pix], std::fabs(at - r), tol, t.surface_max));
-    vote[idx[j]] = s > r + tol ? kSee : (hit ? kHit : t.occluded);
+    vote[idx[j]] = std::uint8_t((s > r + tol ? kSee : (hit ? kHit : t.occluded)) |
+                                (std::isfinite(at) && at > r + tol ? t.see_own : 0));
   }
 #endif
 }
@@ -703,7 +710,7 @@ PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
 }  // namespace detail
 
 namespace {
-using detail::kHit, detail::kOcc, detail::kSee;
+using detail::kHit, detail::kOcc, detail::kSee, detail::kSeeOwn;
 
 // What one CountVisibility call fixes: the points' tile index, the options and the vote test.
 struct VoteSetup {
@@ -724,6 +731,7 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   s.test.tol_rel = float(cfg.tol_rel);
   s.test.surface_max = float(options.surface_max_m);
   s.test.occluded = options.count_occluded ? kOcc : 0;
+  s.test.see_own = options.count_own_see ? detail::kSeeOwn : 0;
   // A point's direction seen from another keyframe is off by the poses' relative rotation (yaw,
   // the odometry's largest error, moves it along the columns): the window is read there too. Not
   // without rings: there a wider reach fills the pattern's gaps with returns no ray near the point
@@ -810,6 +818,7 @@ void VoteTile(const VoteSetup& s, std::size_t tn, Scratch* sc) {
 struct VoteCounts {
   VoteCounts(const VoteSetup& s, std::size_t n)
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
+        see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
@@ -830,6 +839,10 @@ struct VoteCounts {
         std::uint16_t* ov = occ.data() + l * n + b;
         for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + ((vote[i] & kOcc) >> 2));
       }
+      if (!see_own.empty()) {
+        std::uint16_t* ov = see_own.data() + l * n + b;
+        for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + ((vote[i] & kSeeOwn) >> 3));
+      }
     }
   }
 
@@ -842,11 +855,12 @@ struct VoteCounts {
         out->see[l * n + orig] = see[l * n + i];
         out->hit[l * n + orig] = hit[l * n + i];
         if (!occ.empty()) out->occ[l * n + orig] = occ[l * n + i];
+        if (!see_own.empty()) out->see_own[l * n + orig] = see_own[l * n + i];
       }
   }
 
   std::size_t n, levels;
-  std::vector<std::uint16_t> see, hit, occ, beam_hits;
+  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits;
   std::unique_ptr<std::mutex[]> locks;
 };
 
@@ -867,6 +881,7 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   out.see.assign(n * levels, 0);
   out.hit.assign(n * levels, 0);
   if (options.count_occluded) out.occ.assign(n * levels, 0);
+  if (options.count_own_see) out.see_own.assign(n * levels, 0);
   if (options.normals != nullptr && options.beams != nullptr) out.beam_hits.assign(n, 0);
   return out;
 }

@@ -21,6 +21,7 @@ struct VisibilityVotes {
   std::vector<std::uint16_t> see;  // [level * points + i]
   std::vector<std::uint16_t> hit;
   std::vector<std::uint16_t> occ;  // occluded (nearer return); only when count_occluded
+  std::vector<std::uint16_t> see_own;  // the own pixel's return beyond the point; only when count_own_see
   std::vector<std::uint16_t> beam_hits;  // [i] keyframes that observed the point's surface by the BeamTest
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
@@ -32,6 +33,10 @@ struct VisibilityVotes {
 // it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
 struct VisibilityOptions {
   bool count_occluded = false;
+  // Also count, per level, the keyframes whose own pixel of the point has a return beyond it
+  // (VisibilityVotes::see_own), whatever the beams above and below met: the beam that passed the
+  // point went on (LD's strength of PD).
+  bool count_own_see = false;
   // Judge a point only within the beams' span (the outermost beams widened by their scatter):
   // beyond it only one beam passes near the point and that is no evidence (HD removal, revert).
   // LD's occlusion test judges anywhere in the images' FOV (a change above the top beam).
