@@ -35,7 +35,7 @@ using ltm::ParallelFor;  // core.hpp
 // points come from) gives their normals.
 struct Visibility {
   std::vector<bool> seen, observed, same;
-  std::vector<bool> seen_own;  // seen through by the points' own pixels (count_own_see)
+  std::vector<bool> seen_own;  // seen, or seen through by an upright point's own pixel (PD strength)
 };
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,

@@ -113,7 +113,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
-      const double o = v.see_own[std::size_t(l) * v.points + i];
+      const double o = v.SeeOwn(l, i);
       seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
       observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
       if (!beams) hits = std::max(hits, int(h));

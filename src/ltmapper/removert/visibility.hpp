@@ -25,6 +25,7 @@ struct VisibilityVotes {
   std::vector<std::uint16_t> beam_hits;  // [i] keyframes that observed the point's surface by the BeamTest
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
+  std::uint16_t SeeOwn(int level, std::size_t i) const { return see_own[std::size_t(level) * points + i]; }
 };
 // Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit
 // when the nearest return of its own pixel lies on the point's surface plane (distance to the
