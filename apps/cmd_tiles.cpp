@@ -24,12 +24,13 @@ struct TilesArgs {
 void Plan(const TilesArgs& a) {
   auto cfg = LoadParams<removert::RemovertConfig>(a.config, a.set);
   cfg.Validate(a.config.empty() ? "removert config" : a.config);
-  const removert::TilePlan plan = removert::WriteTilePlan(a.out, a.session, a.poses, cfg);
+  const removert::TilePlan plan = removert::WriteTilePlan(a.out, a.session, a.poses, cfg, a.common.threads);
   std::size_t most = 0;
   for (const auto& t : plan.tiles) most = std::max(most, t.keyframes.size());
-  spdlog::info("tiles: {} tiles of {:.1f} m (margin {:.2f} m, reach {:.1f} m) over {} keyframes, at most {} per tile; plan {}",
+  spdlog::info("tiles: {} tiles of {:.1f} m (margin {:.2f} m, reach {:.1f} m) over {} keyframes, at most {} per tile, "
+               "largest map ~{:.0f} points (tiles.max_map_points {}); plan {}",
                plan.tiles.size(), plan.EdgeM(), double(plan.margin_voxels) * plan.voxel_m, plan.reach_m,
-               plan.session_keyframes, most, a.out);
+               plan.session_keyframes, most, plan.largest_map_estimate, cfg.tiles_max_map_points, a.out);
 }
 
 void Run(const TilesArgs& a) {

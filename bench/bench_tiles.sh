@@ -37,7 +37,7 @@ timed() {
   echo "$((kb / 1024)) $wall"
 }
 
-printf "| keyframes | map points | tiles | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
+printf "| keyframes | map points | tiles (edge m) | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
 printf "|---|---|---|---|---|---|---|---|---|---|\n"
 for K in $LENGTHS; do
   dir="$WORK/k$K"
@@ -54,11 +54,12 @@ for K in $LENGTHS; do
   tiled_s=$(awk "BEGIN { print $plan_s + $run_s + $merge_s }")
   points=$(awk -F': ' '/"map_points"/ {gsub(/,/, "", $2); print $2}' "$dir/merged/report.json")
   tiles=$(awk -F': ' '/"tiles"/ {gsub(/,/, "", $2); print $2; exit}' "$dir/merged/report.json")
+  edge=$("$PYTHON" -c "import json, sys; p = json.load(open(sys.argv[1])); print(round(p['edge_voxels'] * p['voxel_m'], 1))" "$dir/plan/plan.json")
   largest=$(cat "$dir"/plan/parts/tile_*/tile.json | awk -F': ' '/"map_points"/ {v = $2 + 0; if (v > m) m = v} END {print m}')
-  most_kf=$("$PYTHON" -c "import json, sys; print(max(len(t['keyframes']) for t in json.load(open(sys.argv[1]))['tiles']))" "$dir/plan/plan.json")
+  most_kf=$("$PYTHON" -c "import json, sys; print(max(sum(e - b + 1 for b, e in t['keyframe_runs']) for t in json.load(open(sys.argv[1]))['tiles']))" "$dir/plan/plan.json")
   parts_mb=$(du -sm "$dir/plan/parts" | cut -f1)
   equal=$(cmp -s "$dir/whole.pcd" "$dir/merged/static_map.pcd" && echo "bytes equal" || echo "DIFFERENT")
-  printf "| %s | %s | %s | %s, %s | %s | %s | %.4f | %s (run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$tiles" \
-    "$largest" "$most_kf" "$parts_mb" "$whole_mb" \
-    "$(awk "BEGIN { print $whole_s / $K }")" "$tiled_mb" "$run_mb" "$merge_mb" "$(awk "BEGIN { print $tiled_s / $K }")" "$equal"
+  printf "| %s | %s | %s (%s) | %s, %s | %s | %s | %.4f | %s (plan %s, run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$tiles" \
+    "$edge" "$largest" "$most_kf" "$parts_mb" "$whole_mb" \
+    "$(awk "BEGIN { print $whole_s / $K }")" "$tiled_mb" "$plan_mb" "$run_mb" "$merge_mb" "$(awk "BEGIN { print $tiled_s / $K }")" "$equal"
 done

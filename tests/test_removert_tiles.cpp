@@ -113,6 +113,44 @@ TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
   EXPECT_TRUE(plan.tiles.empty());
 }
 
+// tiles.max_map_points: the plan counts the map's voxels per cell from the scans and shrinks the
+// edge until the largest tile's map (core + margin) is estimated within the bound; the estimate
+// is within 10 % of the tiles' real maps, every tile's map stays near the bound, and the merged
+// maps are still the whole session's bytes.
+TEST(RemovertTiles, MapPointsBoundShrinksTheEdgeKeepingTheBytes) {
+  const auto kfs = LongStreet();
+  RemovertConfig cfg = removert::WithSensor(ShortRange(), kfs);
+  const removert::HdResult whole = removert::RemoveHd(kfs, cfg, 2);
+  cfg.tiles_max_map_points = 0;
+  const removert::TilePlan unbounded = removert::PlanTiles(kfs, cfg, 2);
+  EXPECT_EQ(unbounded.edge_voxels, removert::TileEdgeChoices(cfg).front());
+  EXPECT_EQ(unbounded.largest_map_estimate, 0.0);
+  cfg.tiles_max_map_points = int(whole.stats.map_points / 5);
+  const removert::TilePlan plan = removert::PlanTiles(kfs, cfg, 2);
+  EXPECT_LT(plan.edge_voxels, unbounded.edge_voxels);
+  EXPECT_LE(plan.largest_map_estimate, double(cfg.tiles_max_map_points));
+  std::vector<removert::HdResult> parts;
+  double largest = 0.0;  // the real largest map of a tile: its core's points plus the margin's share
+  const double grown = double(plan.edge_voxels + 2 * plan.margin_voxels) / double(plan.edge_voxels);
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) {
+    parts.push_back(removert::RemoveHdTile(plan, t, kfs, cfg, 2));
+    largest = std::max(largest, double(parts.back().stats.map_points) * grown * grown);
+  }
+  std::printf("bound %d points: edge %.1f m (unbounded %.1f m), %zu tiles; largest map estimated %.0f, real %.0f\n",
+              cfg.tiles_max_map_points, plan.EdgeM(), unbounded.EdgeM(), plan.tiles.size(), plan.largest_map_estimate,
+              largest);
+  EXPECT_NEAR(plan.largest_map_estimate, largest, 0.1 * largest);
+  const removert::HdResult merged = removert::MergeTiles(plan, parts);
+  EXPECT_TRUE(SameBytes(merged.static_map, whole.static_map));
+  EXPECT_TRUE(SameBytes(merged.hd_map, whole.hd_map));
+  // The edges a plan may take: the configured one, then whole multiples of 5 margins below it.
+  const std::vector<std::int64_t> edges = removert::TileEdgeChoices(RemovertConfig{});
+  EXPECT_EQ(edges.front(), 2000);
+  EXPECT_EQ(edges[1], 22 * 90);
+  EXPECT_EQ(edges.back(), 90);
+  EXPECT_TRUE(std::is_sorted(edges.rbegin(), edges.rend()));
+}
+
 TEST(RemovertTiles, EachTileReadsOnlyTheKeyframesThatReachIt) {
   const auto kfs = LongStreet();
   RemovertConfig cfg = ShortRange();
@@ -164,7 +202,8 @@ TEST(RemovertTileJobs, PlanRunMergeEqualsWholeSessionFiles) {
   ASSERT_GE(plan.tiles.size(), 4u);
   const removert::TilePlanFile read = removert::ReadTilePlan(tmp / "plan");
   EXPECT_EQ(read.plan.tiles.size(), plan.tiles.size());
-  EXPECT_EQ(read.plan.tiles.back().keyframes, plan.tiles.back().keyframes);
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) EXPECT_EQ(read.plan.tiles[t].keyframes, plan.tiles[t].keyframes);
+  EXPECT_EQ(read.plan.edge_voxels, plan.edge_voxels);
   EXPECT_EQ(read.cfg.tiles_edge_m, 20.0);
 
   for (std::size_t t = 0; t + 1 < plan.tiles.size(); ++t) EXPECT_TRUE(removert::RunTileJob(tmp / "plan", t, 2));
@@ -203,6 +242,18 @@ TEST(RemovertTileJobs, BadPlanFilesAreErrorsNamingTheFile) {
   test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "edge_voxels"});
   test::WriteText(plan_dir + "/config.yaml", "no_such_key: 1\n");
   test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/config.yaml", "no_such_key"});
+  // A plan of the version that listed every keyframe, and keyframe runs out of order.
+  removert::WriteTilePlan(plan_dir, session, "", cfg);
+  const std::string good = test::ReadText(plan_dir + "/plan.json");
+  auto with = [&](const std::string& from, const std::string& to) {
+    const std::size_t at = good.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    test::WriteText(plan_dir + "/plan.json", good.substr(0, at) + to + good.substr(at + from.size()));
+  };
+  with("\"version\": 2", "\"version\": 1");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "version 2", "plan the tiles again"});
+  with("\"keyframe_runs\": [", "\"keyframe_runs\": [[3, 1], ");
+  test::ExpectError([&] { removert::ReadTilePlan(plan_dir); }, {plan_dir + "/plan.json", "runs must ascend"});
   // A folder that is no plan is never replaced.
   test::WriteText(tmp / "mine/notes.txt", "keep");
   EXPECT_THROW(removert::WriteTilePlan(tmp / "mine", session, "", cfg), Error);

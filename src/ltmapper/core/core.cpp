@@ -338,4 +338,38 @@ void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_
   });
 }
 
+DistinctCounter::DistinctCounter() : registers_(std::size_t(1) << kBits, 0) {}
+
+void DistinctCounter::Add(std::uint64_t hash) {
+  const std::size_t slot = std::size_t(hash >> (64 - kBits));
+  const std::uint64_t rest = hash << kBits;  // the other 54 bits, leftmost first
+  const int rank = rest == 0 ? 64 - kBits + 1 : __builtin_clzll(rest) + 1;
+  registers_[slot] = std::max(registers_[slot], std::uint8_t(rank));
+}
+
+void DistinctCounter::Merge(const DistinctCounter& other) {
+  for (std::size_t i = 0; i < registers_.size(); ++i) registers_[i] = std::max(registers_[i], other.registers_[i]);
+}
+
+double DistinctCounter::Estimate() const {
+  const double m = double(registers_.size());
+  double inverse_sum = 0.0;
+  std::size_t zeros = 0;
+  for (std::uint8_t r : registers_) {
+    inverse_sum += std::ldexp(1.0, -int(r));
+    zeros += r == 0 ? 1 : 0;
+  }
+  const double raw = 0.7213 / (1.0 + 1.079 / m) * m * m / inverse_sum;
+  // Small sets: linear counting over the empty registers is the better estimate.
+  if (raw <= 2.5 * m && zeros > 0) return m * std::log(m / double(zeros));
+  return raw;
+}
+
+std::uint64_t MixHash(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
 }  // namespace ltm

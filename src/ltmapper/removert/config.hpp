@@ -128,6 +128,9 @@ struct RemovertConfig {
   // --- tiles (tiles.hpp: HD removal tile by tile, memory bounded by the tile)
   double tiles_edge_m = 0.0;  // [m] edge of the square world tiles; 0 = 2 x the keyframes' reach
                               //     (TileReachM: max(sensor.max_range_m, submap_radius_m))
+  int tiles_max_map_points = 500000;  // [points] a tile job's map (core + margin) holds at most about this
+                              //     many (~100 B each): the plan estimates every tile's map from the scans and
+                              //     shrinks the edge until the largest fits (PlanTiles); 0 = no bound
   bool tiles_stage = false;   // true: the stage's HD removal runs tile by tile (RemoveHdTiled): the same
                               //     files, memory bounded by the tile, more CPU where tiles share keyframes
 
@@ -186,6 +189,7 @@ struct RemovertConfig {
     v("out.write_keyframes", write_keyframes);
     v("out.write_ply", write_ply);
     v("tiles.edge_m", tiles_edge_m, "m", 0.0, 1e6);
+    v("tiles.max_map_points", tiles_max_map_points, "points", 0, 2000000000);
     v("tiles.stage", tiles_stage);
   }
   // Range checks plus the cross-field rules (non-empty resolution lists, sensor table, ...).

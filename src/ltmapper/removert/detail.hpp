@@ -73,6 +73,10 @@ struct VoxelBox {
   std::int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   bool Contains(std::int64_t ix, std::int64_t iy) const { return ix >= x0 && ix < x1 && iy >= y0 && iy < y1; }
 };
+// One keyframe's scan for the map: range filtered, in the world frame, clipped to `clip` (when
+// given) and voxelised. Clipping keeps the order of the points, so a voxel inside the box sums
+// the same points in the same order as without it.
+PointCloud ScanForMap(const WorldKeyframe& kf, const RemovertConfig& cfg, const VoxelBox* clip);
 // Keyframes per map batch: a batch's scans are voxelised together (one centroid per voxel).
 constexpr std::size_t kMapBatch = 32;
 // The map of keyframes that hold the session positions `slots` (ascending): keyframe slot s is in

@@ -49,11 +49,6 @@ namespace detail {
 
 std::int64_t VoxelIndex(float v, double voxel_m) { return std::int64_t(std::floor(double(v) / voxel_m)); }
 
-namespace {
-
-// One keyframe's scan for the map: range filtered, in the world frame, clipped to `clip` (when
-// given) and voxelised. Clipping keeps the order of the points, so a voxel inside the box sums
-// the same points in the same order as without it.
 PointCloud ScanForMap(const WorldKeyframe& kf, const RemovertConfig& cfg, const VoxelBox* clip) {
   const auto scan = LoadScan(kf);
   PointCloud local = geometry::RangeFilter(*scan, cfg.min_range_m, cfg.max_range_m);
@@ -70,6 +65,8 @@ PointCloud ScanForMap(const WorldKeyframe& kf, const RemovertConfig& cfg, const 
   }
   return geometry::VoxelDownsample(local, cfg.map_voxel_m, 1);
 }
+
+namespace {
 
 // Per-voxel means of two voxelised clouds (a before b).
 PointCloud MeanOfTwo(PointCloud a, const PointCloud& b, double voxel_m, int threads) {

@@ -19,6 +19,9 @@ namespace {
 namespace fs = std::filesystem;
 namespace json = io::json;
 
+// plan.json's version: 2 lists each tile's keyframes as runs [first, last] (1 listed every one).
+constexpr int kPlanVersion = 2;
+
 std::string PlanFile(const std::string& plan_dir) { return plan_dir + "/plan.json"; }
 std::string ConfigFile(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
 std::string TileJsonIn(const std::string& part_dir) { return part_dir + "/tile.json"; }
@@ -45,40 +48,50 @@ std::int64_t Integer(const json::Value& v, const std::string& what, const std::s
 
 void WritePlanJson(const std::string& path, const TilePlanFile& f) {
   json::Writer w;
-  w.BeginObject().String("format", "ltmapper tile plan").Int("version", 1);
+  w.BeginObject().String("format", "ltmapper tile plan").Int("version", kPlanVersion);
   w.String("session_dir", f.session_dir).String("poses_file", f.poses_file);
   w.Int("keyframes", (long long)f.plan.session_keyframes).Number("voxel_m", f.plan.voxel_m);
   w.Int("edge_voxels", f.plan.edge_voxels).Int("margin_voxels", f.plan.margin_voxels).Number("reach_m", f.plan.reach_m);
+  w.Number("largest_map_estimate", f.plan.largest_map_estimate);
   w.BeginArray("tiles");
   for (const Tile& t : f.plan.tiles) {
-    w.BeginObject().Int("ix", t.ix).Int("iy", t.iy).BeginArray("keyframes");
-    for (std::size_t k : t.keyframes) w.Number(double(k));
+    w.BeginObject().Int("ix", t.ix).Int("iy", t.iy).BeginArray("keyframe_runs");
+    for (std::size_t b = 0, e = 0; b < t.keyframes.size(); b = e) {  // [first, last] of consecutive keyframes
+      for (e = b + 1; e < t.keyframes.size() && t.keyframes[e] == t.keyframes[e - 1] + 1; ++e) {}
+      w.BeginArray().Number(double(t.keyframes[b])).Number(double(t.keyframes[e - 1])).EndArray();
+    }
     w.EndArray().EndObject();
   }
   w.EndArray().EndObject();
   io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
 }
 
-// The tiles of plan.json; the plan's numbers come from the config (PlanTiles) and must agree.
-std::vector<Tile> ReadTiles(const json::Value& doc, const TilePlan& expected, const std::string& path) {
+// The edge and tiles of plan.json into `plan`; the margin comes from the config (PlanTiles) and
+// must agree, the edge must be one the config allows (TileEdgeChoices).
+void ReadTiles(const json::Value& doc, const RemovertConfig& cfg, const std::string& path, TilePlan* plan) {
   using T = json::Value::Type;
-  if (Integer(Member(doc, "edge_voxels", T::kNumber, path), "edge_voxels", path) != expected.edge_voxels ||
-      Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path) != expected.margin_voxels)
+  const std::int64_t edge = Integer(Member(doc, "edge_voxels", T::kNumber, path), "edge_voxels", path);
+  const std::vector<std::int64_t> edges = TileEdgeChoices(cfg);
+  if (std::find(edges.begin(), edges.end(), edge) == edges.end() ||
+      Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path) != plan->margin_voxels)
     throw Error(path, 0, "edge_voxels / margin_voxels differ from what config.yaml gives");
-  std::vector<Tile> tiles;
+  plan->edge_voxels = edge;
+  if (const json::Value* est = doc.Find("largest_map_estimate"); est && est->type == T::kNumber)
+    plan->largest_map_estimate = est->num;
   const std::size_t n = Count(Member(doc, "keyframes", T::kNumber, path), "keyframes", path);
   for (const json::Value& jt : Member(doc, "tiles", T::kArray, path).arr) {
     Tile t;
     t.ix = Integer(Member(jt, "ix", T::kNumber, path), "ix", path);
     t.iy = Integer(Member(jt, "iy", T::kNumber, path), "iy", path);
-    for (const json::Value& k : Member(jt, "keyframes", T::kArray, path).arr) {
-      t.keyframes.push_back(Count(k, "a tile's keyframe", path));
-      if (t.keyframes.back() >= n || (t.keyframes.size() > 1 && t.keyframes.back() <= t.keyframes[t.keyframes.size() - 2]))
-        throw Error(path, 0, "a tile's keyframes must ascend below " + std::to_string(n));
+    for (const json::Value& run : Member(jt, "keyframe_runs", T::kArray, path).arr) {
+      if (run.type != T::kArray || run.arr.size() != 2) throw Error(path, 0, "a keyframe run must be [first, last]");
+      const std::size_t first = Count(run.arr[0], "a tile's keyframe", path), last = Count(run.arr[1], "a tile's keyframe", path);
+      if (last >= n || first > last || (!t.keyframes.empty() && first <= t.keyframes.back()))
+        throw Error(path, 0, "a tile's keyframe runs must ascend below " + std::to_string(n));
+      for (std::size_t k = first; k <= last; ++k) t.keyframes.push_back(k);
     }
-    tiles.push_back(std::move(t));
+    plan->tiles.push_back(std::move(t));
   }
-  return tiles;
 }
 
 void WriteStats(json::Writer& w, const HdStats& st) {
@@ -133,10 +146,10 @@ std::string Absolute(const std::string& path) { return path.empty() ? path : fs:
 }  // namespace
 
 TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
-                       const RemovertConfig& cfg) {
+                       const RemovertConfig& cfg, int threads) {
   cfg.Validate();
   TilePlanFile f{Absolute(session_dir), Absolute(poses_file), cfg, {}};
-  f.plan = PlanTiles(LoadWorldKeyframes(f.session_dir, f.poses_file), cfg);
+  f.plan = PlanTiles(LoadWorldKeyframes(f.session_dir, f.poses_file), cfg, threads);
   io::StagingDir staging(plan_dir, "plan.json");
   io::SaveConfigFields(ConfigFile(staging.path()), FieldsOf(f.cfg));
   WritePlanJson(PlanFile(staging.path()), f);
@@ -150,6 +163,9 @@ TilePlanFile ReadTilePlan(const std::string& plan_dir) {
   const json::Value doc = json::ParseFile(path);
   if (Member(doc, "format", T::kString, path).str != "ltmapper tile plan")
     throw Error(path, 0, "not a tile plan (format is not 'ltmapper tile plan')");
+  if (Integer(Member(doc, "version", T::kNumber, path), "version", path) != kPlanVersion)
+    throw Error(path, 0, "a tile plan of another version (this build reads version " + std::to_string(kPlanVersion) +
+                                 "): plan the tiles again");
   TilePlanFile f;
   io::LoadConfig(ConfigFile(plan_dir), f.cfg);
   f.cfg.Validate(ConfigFile(plan_dir));
@@ -157,7 +173,7 @@ TilePlanFile ReadTilePlan(const std::string& plan_dir) {
   f.poses_file = Member(doc, "poses_file", T::kString, path).str;
   f.plan = PlanTiles({}, f.cfg);
   f.plan.session_keyframes = Count(Member(doc, "keyframes", T::kNumber, path), "keyframes", path);
-  f.plan.tiles = ReadTiles(doc, f.plan, path);
+  ReadTiles(doc, f.cfg, path, &f.plan);
   return f;
 }
 

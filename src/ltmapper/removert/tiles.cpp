@@ -10,6 +10,9 @@
 #include <cmath>
 #include <map>
 #include <utility>
+#include <unordered_map>
+
+#include <spdlog/spdlog.h>
 
 namespace ltm::removert {
 
@@ -58,7 +61,8 @@ void CheckPlan(const TilePlan& plan, std::size_t tile, const std::vector<WorldKe
     throw Error("tiles: the plan is for " + std::to_string(plan.session_keyframes) + " keyframes, the session has " +
                 std::to_string(keyframes.size()));
   const TilePlan expected = PlanTiles({}, cfg);
-  if (plan.voxel_m != expected.voxel_m || plan.edge_voxels != expected.edge_voxels ||
+  const std::vector<std::int64_t> edges = TileEdgeChoices(cfg);
+  if (plan.voxel_m != expected.voxel_m || std::find(edges.begin(), edges.end(), plan.edge_voxels) == edges.end() ||
       plan.margin_voxels != expected.margin_voxels || plan.reach_m != expected.reach_m)
     throw Error("tiles: the plan was made with other map_voxel_m / tiles.edge_m / margin keys than this config");
   for (std::size_t k : plan.tiles[tile].keyframes)
@@ -76,6 +80,109 @@ std::vector<WorldKeyframe> Voters(const std::vector<WorldKeyframe>& kfs, const d
     if (DistanceTo(box, voxel_m, c.x(), c.y()) <= cfg.submap_radius_m + voxel_m) voters.push_back(kf);
   }
   return voters;
+}
+
+// [map voxels] The finest tile edge the plan may choose: 5 margins, so that the margin's area,
+// read by the job but not decided, stays below the core's ((e + 2 m)^2 <= 2 e^2 needs e >= 4.83 m).
+std::int64_t FineCellVoxels(const RemovertConfig& cfg) {
+  const std::int64_t margin = std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;
+  return std::max<std::int64_t>(1, 5 * margin);
+}
+
+std::int64_t FloorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+// Distinct map voxels (map points) per xy cell of a grid, estimated (DistinctCounter).
+struct CellCounts {
+  std::int64_t cell_voxels = 1;
+  std::unordered_map<std::uint64_t, DistinctCounter> cells;  // by PackXY(cell x, cell y)
+};
+std::uint64_t PackXY(std::int64_t x, std::int64_t y) { return (std::uint64_t(x) << 32) ^ (std::uint64_t(y) & 0xffffffffULL); }
+
+// Every keyframe's scan for the map (detail::ScanForMap) counted into each grid: one pass over the
+// scans, a batch of keyframes at a time (memory: the batch's voxels and the counters).
+void CountMapVoxels(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads,
+                    std::vector<CellCounts>* grids) {
+  const std::size_t batch = detail::kMapBatch;
+  for (std::size_t b = 0; b < keyframes.size(); b += batch) {
+    const std::size_t e = std::min(keyframes.size(), b + batch);
+    std::vector<std::vector<std::array<std::int64_t, 3>>> voxels(e - b);
+    ParallelFor(e - b, threads, [&](std::size_t k) {
+      const PointCloud scan = detail::ScanForMap(keyframes[b + k], cfg, nullptr);
+      for (const PointXYZI& p : scan.points)
+        voxels[k].push_back({detail::VoxelIndex(p.x, cfg.map_voxel_m), detail::VoxelIndex(p.y, cfg.map_voxel_m),
+                             detail::VoxelIndex(p.z, cfg.map_voxel_m)});
+    });
+    for (CellCounts& g : *grids) {
+      std::uint64_t last_key = 0;
+      DistinctCounter* last = nullptr;  // a scan's points come in runs of one cell
+      for (const auto& scan : voxels)
+        for (const auto& v : scan) {
+          const std::uint64_t key = PackXY(FloorDiv(v[0], g.cell_voxels), FloorDiv(v[1], g.cell_voxels));
+          if (!last || key != last_key) last = &g.cells[key], last_key = key;
+          last->Add(MixHash(MixHash(MixHash(std::uint64_t(v[0])) ^ std::uint64_t(v[1])) ^ std::uint64_t(v[2])));
+        }
+    }
+  }
+}
+
+// The largest estimated map (core + margin) of the tiles `edge` voxels wide made of whole cells of
+// `grid` (edge a multiple of its cell): the union of each tile's cells, plus the margin's share.
+double LargestTileMap(const CellCounts& grid, std::int64_t edge, std::int64_t margin) {
+  const std::int64_t n = edge / grid.cell_voxels;
+  std::unordered_map<std::uint64_t, DistinctCounter> tiles;
+  for (const auto& [key, counter] : grid.cells) {
+    const auto cx = std::int64_t(std::int32_t(key >> 32)), cy = std::int64_t(std::int32_t(key & 0xffffffffULL));
+    tiles[PackXY(FloorDiv(cx, n), FloorDiv(cy, n))].Merge(counter);
+  }
+  double largest = 0.0;
+  for (const auto& [key, counter] : tiles) largest = std::max(largest, counter.Estimate());
+  const double grown = double(edge + 2 * margin) / double(edge);
+  return largest * grown * grown;
+}
+
+// The largest tile edge among TileEdgeChoices whose largest tile map is estimated within
+// tiles.max_map_points (the finest when none is), from one counting pass over the scans.
+void ChooseEdge(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads, TilePlan* plan) {
+  const std::vector<std::int64_t> edges = TileEdgeChoices(cfg);
+  std::vector<CellCounts> grids(1);
+  grids[0].cell_voxels = edges[0];
+  if (edges.size() > 1) grids.push_back(CellCounts{FineCellVoxels(cfg), {}});
+  CountMapVoxels(keyframes, cfg, threads, &grids);
+  for (std::int64_t edge : edges) {
+    const CellCounts& grid = edge == edges[0] ? grids[0] : grids[1];
+    plan->edge_voxels = edge;
+    plan->largest_map_estimate = LargestTileMap(grid, edge, plan->margin_voxels);
+    if (plan->largest_map_estimate <= double(cfg.tiles_max_map_points)) return;
+  }
+  spdlog::warn("tiles: the largest tile map of the finest edge ({:.1f} m) is estimated at {:.0f} points, over "
+               "tiles.max_map_points {}", plan->EdgeM(), plan->largest_map_estimate, cfg.tiles_max_map_points);
+}
+
+// Each keyframe into the tiles it reaches (core + margin within reach_m); only tiles whose core
+// some keyframe reaches can hold map points.
+void AssignKeyframes(const std::vector<WorldKeyframe>& keyframes, TilePlan* out) {
+  TilePlan& plan = *out;
+  const double edge_m = plan.EdgeM(), span_m = plan.reach_m + double(plan.margin_voxels) * plan.voxel_m;
+  std::map<std::pair<std::int64_t, std::int64_t>, Tile> tiles;
+  for (std::size_t k = 0; k < keyframes.size(); ++k) {
+    const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
+    const auto lo_x = std::int64_t(std::floor((c.x() - span_m) / edge_m)), hi_x = std::int64_t(std::floor((c.x() + span_m) / edge_m));
+    const auto lo_y = std::int64_t(std::floor((c.y() - span_m) / edge_m)), hi_y = std::int64_t(std::floor((c.y() + span_m) / edge_m));
+    for (std::int64_t ix = lo_x; ix <= hi_x; ++ix)
+      for (std::int64_t iy = lo_y; iy <= hi_y; ++iy) {
+        Tile t{ix, iy, {}};
+        if (DistanceTo(BoxOf(plan, t, plan.margin_voxels), plan.voxel_m, c.x(), c.y()) > plan.reach_m) continue;
+        auto it = tiles.try_emplace({ix, iy}, std::move(t)).first;
+        it->second.keyframes.push_back(k);
+      }
+  }
+  for (auto& [key, t] : tiles) {
+    const bool core_reached = std::any_of(t.keyframes.begin(), t.keyframes.end(), [&](std::size_t k) {
+      const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
+      return DistanceTo(BoxOf(plan, t, 0), plan.voxel_m, c.x(), c.y()) <= plan.reach_m;
+    });
+    if (core_reached) plan.tiles.push_back(std::move(t));
+  }
 }
 
 double Since(std::chrono::steady_clock::time_point t0) {
@@ -136,7 +243,16 @@ void AddHdStats(const HdStats& s, HdStats* sum) {
 
 }  // namespace detail
 
-TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg) {
+std::vector<std::int64_t> TileEdgeChoices(const RemovertConfig& cfg) {
+  const std::int64_t most = EdgeVoxels(cfg);
+  const std::int64_t cell = FineCellVoxels(cfg);
+  std::vector<std::int64_t> edges = {most};
+  for (std::int64_t n = most / cell; n >= 1; --n)
+    if (n * cell < most) edges.push_back(n * cell);
+  return edges;
+}
+
+TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads) {
   cfg.Validate();
   TilePlan plan;
   plan.voxel_m = cfg.map_voxel_m;
@@ -144,28 +260,8 @@ TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertCo
   plan.margin_voxels = std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;  // + the centroid's voxel
   plan.reach_m = TileReachM(cfg) + cfg.map_voxel_m;  // + float rounding of world-frame returns
   plan.session_keyframes = keyframes.size();
-  const double edge_m = plan.EdgeM(), span_m = plan.reach_m + double(plan.margin_voxels) * plan.voxel_m;
-  std::map<std::pair<std::int64_t, std::int64_t>, Tile> tiles;
-  for (std::size_t k = 0; k < keyframes.size(); ++k) {
-    const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
-    const auto lo_x = std::int64_t(std::floor((c.x() - span_m) / edge_m)), hi_x = std::int64_t(std::floor((c.x() + span_m) / edge_m));
-    const auto lo_y = std::int64_t(std::floor((c.y() - span_m) / edge_m)), hi_y = std::int64_t(std::floor((c.y() + span_m) / edge_m));
-    for (std::int64_t ix = lo_x; ix <= hi_x; ++ix)
-      for (std::int64_t iy = lo_y; iy <= hi_y; ++iy) {
-        Tile t{ix, iy, {}};
-        if (DistanceTo(BoxOf(plan, t, plan.margin_voxels), plan.voxel_m, c.x(), c.y()) > plan.reach_m) continue;
-        auto it = tiles.try_emplace({ix, iy}, std::move(t)).first;
-        it->second.keyframes.push_back(k);
-      }
-  }
-  // Only tiles whose core some keyframe reaches can hold map points.
-  for (auto& [key, t] : tiles) {
-    const bool core_reached = std::any_of(t.keyframes.begin(), t.keyframes.end(), [&](std::size_t k) {
-      const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
-      return DistanceTo(BoxOf(plan, t, 0), plan.voxel_m, c.x(), c.y()) <= plan.reach_m;
-    });
-    if (core_reached) plan.tiles.push_back(std::move(t));
-  }
+  if (!keyframes.empty() && cfg.tiles_max_map_points > 0) ChooseEdge(keyframes, cfg, threads, &plan);
+  AssignKeyframes(keyframes, &plan);
   return plan;
 }
 
@@ -227,7 +323,7 @@ HdResult MergeTiles(const TilePlan& plan, std::vector<HdResult> parts) {
 HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& user_cfg, int threads) {
   user_cfg.Validate();
   const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
-  const TilePlan plan = PlanTiles(keyframes, cfg);
+  const TilePlan plan = PlanTiles(keyframes, cfg, threads);
   TileMerger merger(plan.voxel_m);
   for (std::size_t t = 0; t < plan.tiles.size(); ++t) merger.Add(plan.tiles[t], RemoveHdTile(plan, t, keyframes, cfg, threads));
   return merger.Finish();

@@ -25,7 +25,8 @@ struct Tile {
 };
 struct TilePlan {
   double voxel_m = 0.0;              // [m] map voxel (map_voxel_m)
-  std::int64_t edge_voxels = 0;      // tile edge [map voxels]
+  std::int64_t edge_voxels = 0;      // tile edge [map voxels]: one of TileEdgeChoices
+  double largest_map_estimate = 0.0; // [points] the largest tile's map (core + margin), estimated; 0 = not estimated
   std::int64_t margin_voxels = 0;    // margin around the core [map voxels]
   double reach_m = 0.0;              // [m] keyframes this close (xy) to core + margin belong to the tile
   std::size_t session_keyframes = 0;
@@ -42,8 +43,16 @@ double TileReachM(const RemovertConfig& cfg);
 // normal neighbourhood; (c) the local ground of the groundward dilation: cells of hd.dilate_voxels
 // voxels, the 3 x 3 cells around the point and around a body's foot up to one cell away (3 cells).
 double TileMarginM(const RemovertConfig& cfg);
-// The tiles of a session (keyframes placed in the world) and the keyframes each reads.
-TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg);
+// [map voxels] The tile edges a plan may have, largest first: tiles.edge_m (0: 2 x the reach),
+// then the whole multiples of the finest edge (5 margins: the margin's area stays below the
+// core's) below it.
+std::vector<std::int64_t> TileEdgeChoices(const RemovertConfig& cfg);
+// The tiles of a session (keyframes placed in the world) and the keyframes each reads. With
+// tiles.max_map_points > 0, one pass over the scans counts the distinct map voxels per cell of the
+// finest edge (DistinctCounter: ~3 % error, ~1 KB a cell) and the plan takes the largest edge of
+// TileEdgeChoices whose largest tile map (core + margin) is estimated within it: a job's memory
+// follows the bound, not the session (more tiles read the same keyframes where maps are dense).
+TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads = 0);
 // HD removal of one tile: the static and HD points of its core, stats of its core's points.
 // `keyframes` is the whole session (its scans are read only for the tile's keyframes and for the
 // sensor estimate, as RemoveHd does); the plan must be PlanTiles' for them and `cfg`.
@@ -84,7 +93,7 @@ struct TilePlanFile {
 // Plans the session's tiles into a fresh `plan_dir` (replaced whole when it holds a plan.json;
 // any other non-empty folder is an error naming it). Returns the plan.
 TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
-                       const RemovertConfig& cfg);
+                       const RemovertConfig& cfg, int threads = 0);
 // ltm::Error naming the file when plan.json or config.yaml is missing or malformed.
 TilePlanFile ReadTilePlan(const std::string& plan_dir);
 std::string TilePartDir(const std::string& plan_dir, std::size_t tile);
