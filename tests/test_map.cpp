@@ -513,6 +513,29 @@ TEST(MapObjects, RulesFromGeometry) {
   EXPECT_EQ(why["coverage"], 1);
 }
 
+// A car that left, whose lower body (z <= 0.5 m, within LD's neighbour radius of the new
+// session's ground) stayed in the map: the unchanged points under its own footprint are its own
+// lower part, not a surface it is a fragment of, so the seen-through body is an object. A strip
+// of a pole that stayed (one face seen through by grazing rays) has the pole beside it: a fragment.
+TEST(MapObjects, LeftCarOverItsOwnRemnantsIsAnObjectPoleStripIsAFragment) {
+  test::TempDir tmp;
+  const PointCloud car = Car(8, 8), pole = Car(-8, -8, 0.5f, 0.5f, 3.0f);
+  KeyframeDelta d;
+  for (const auto& p : car.points)
+    if (p.z > 0.6f) d.nd_strong.push_back(p.x, p.y, p.z, p.intensity);  // the body; z 0.25, 0.5 stay
+  for (const auto& p : pole.points)
+    if (p.x == -8.f) d.nd_strong.push_back(p.x, p.y, p.z, p.intensity);  // one face of the pole
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, Cat(car, pole), d, &rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].change, "disappeared");
+  EXPECT_NEAR(objs[0].centroid.x(), 9.0, 0.1);
+  EXPECT_EQ(objs[0].attached_fraction, 0.0);
+  ASSERT_EQ(rejected.size(), 1u);
+  EXPECT_EQ(rejected[0].rejected, "fragment");
+  EXPECT_NEAR(rejected[0].centroid.x(), -8.0, 0.01);
+}
+
 // A cut tree whose trunk's top was not scanned: canopy and trunk are two clusters. The trunk
 // stands on the ground and holds the canopy up, so the canopy is an object; alone, it floats.
 TEST(MapObjects, CanopyHeldUpByItsTrunkIsNotFloating) {

@@ -23,12 +23,15 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstring>
 #include <deque>
 #include <iterator>
 #include <map>
 #include <tuple>
 #include <unordered_map>
+#include <unordered_set>
 
 namespace ltm::map {
 namespace {
@@ -70,42 +73,72 @@ bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& 
   return !floor.At(p, &z) || p.z() > z + float(cfg.object_ground_height_m);
 }
 
-// The other side of a change: PD (the query's new surfaces) for disappeared clusters, ND strong
-// and weak (the reference's missing surfaces) for appeared ones.
+// The other side of a change: PD (the query's new surfaces) for disappeared clusters, strong ND
+// (the reference's surfaces the query saw through) for appeared ones. Not weak ND: the wall
+// behind a car that appeared is weak ND (the car hides it from the query), not its twin.
 PointCloud OtherSide(const PointCloud& changes, bool appeared) {
   std::vector<bool> mask(changes.size());
   for (std::size_t i = 0; i < changes.size(); ++i) {
     const PointClass c = changes.cls[i];
-    mask[i] = appeared ? c == PointClass::kNDStrong || c == PointClass::kNDWeak
-                       : c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+    mask[i] = appeared ? c == PointClass::kNDStrong : c == PointClass::kPDStrong || c == PointClass::kPDWeak;
   }
   return changes.select(mask);
 }
 
-// Surfaces the step left unchanged: points of the map after the step that existed before it
-// (not added by the step).
-PointCloud Unchanged(const PointCloud& after, int step) {
+// Surfaces the step left unchanged and the query saw: points of the map after the step that
+// existed before it (not added by the step), except the step's weak ND when the store keeps them
+// (store_weak_nd). Those are the reference's surfaces the query never saw (occluded, no point of
+// its own there): the far side of a car that left, kept in the map only for lack of evidence.
+// Weak ND points are map points decoded alike, so they are matched by their coordinates' bits.
+// (On the sensor matrix, both seeds, storing them changed no object found: the objects' own
+// lower part (AttachedFraction) is what separates them; the store is 15 % smaller without.)
+PointCloud Unchanged(const PointCloud& after, int step, const PointCloud& changes) {
+  using Bits = std::array<std::uint32_t, 3>;
+  auto bits = [](const PointXYZI& p) {
+    Bits b;
+    std::memcpy(b.data(), &p.x, sizeof(float));
+    std::memcpy(b.data() + 1, &p.y, sizeof(float));
+    std::memcpy(b.data() + 2, &p.z, sizeof(float));
+    return b;
+  };
+  struct BitsHash {
+    std::size_t operator()(const Bits& b) const {
+      return std::size_t(MixHash((std::uint64_t(b[0]) << 32 | b[1]) ^ MixHash(b[2])));
+    }
+  };
+  std::unordered_set<Bits, BitsHash> weak;
+  for (std::size_t i = 0; i < changes.size(); ++i)
+    if (changes.cls[i] == PointClass::kNDWeak) weak.insert(bits(changes.points[i]));
   std::vector<bool> mask(after.size(), true);
-  if (after.session.size() == after.size())
-    for (std::size_t i = 0; i < after.size(); ++i) mask[i] = int(after.session[i]) < step;
+  for (std::size_t i = 0; i < after.size(); ++i)
+    mask[i] = (after.session.size() != after.size() || int(after.session[i]) < step) &&
+              (weak.empty() || !weak.count(bits(after.points[i])));
   return after.select(mask);
 }
 
-// Per change point of `idx`: `other` has a point above ground within `radius`. Only map points in the xy cells
-// (object_twin_radius_m wide) around the change points are hashed.
-std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uint32_t>& idx, const PointCloud& other,
-                           const Floor& floor, const MapConfig& cfg, double r) {
-  std::vector<bool> out(changes.size(), false);
-  if (r <= 0.0 || idx.empty()) return out;
+// The points of `other` above ground in the xy cells (`r` wide) around the change points of
+// `idx`: the only ones within `r` of them.
+PointCloud NearbyAboveGround(const PointCloud& changes, const std::vector<std::uint32_t>& idx, const PointCloud& other,
+                             const Floor& floor, const MapConfig& cfg, double r) {
+  PointCloud nearby;
+  if (r <= 0.0 || idx.empty()) return nearby;
   std::unordered_map<CellKey, bool, CellKeyHash> near;
   for (auto i : idx) {
     const CellKey k = KeyOf(changes.points[i].xyz(), r);
     for (std::int64_t dx = -1; dx <= 1; ++dx)
       for (std::int64_t dy = -1; dy <= 1; ++dy) near[{k.x + dx, k.y + dy}] = true;
   }
-  PointCloud nearby;
   for (const auto& p : other.points)
     if (near.count(KeyOf(p.xyz(), r)) && AboveGround(p.xyz(), floor, cfg)) nearby.push_back(p.x, p.y, p.z);
+  return nearby;
+}
+
+// Per change point of `idx`: `other` has a point above ground within `radius`.
+std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uint32_t>& idx, const PointCloud& other,
+                           const Floor& floor, const MapConfig& cfg, double r) {
+  std::vector<bool> out(changes.size(), false);
+  const PointCloud nearby = NearbyAboveGround(changes, idx, other, floor, cfg, r);
+  if (nearby.empty()) return out;
   const std::vector<bool> hit = WithinRadius(changes.select(idx), nearby, r);
   for (std::size_t j = 0; j < idx.size(); ++j) out[idx[j]] = hit[j];
   return out;
@@ -260,9 +293,10 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // object_twin_radius_m (a removed car leaves only ground there; a misaligned pole leaves its
 // displaced copy a few decimetres away). A fragment is a piece of a surface the step left
 // unchanged: most of its points lie within the cluster tolerance of unchanged above-ground map
-// points, so clustered with them it would be one object that did not change (a strip of a pole
-// or trunk seen through by grazing rays); a removed or new object is surrounded by free space
-// and ground. The sensor samples a surface at range r every
+// points the query saw (AttachedFraction), so clustered with them it would be one object that did
+// not change (a strip of a pole or trunk seen through by grazing rays); a removed or new object is
+// surrounded by free space and ground, and by its own remnants (its occluded side, weak ND; its
+// lower part under the seen-through body). The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one or two scan rows wide) spans fewer than object_min_samples rows across its middle
 // principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread; MinWidth). A cluster whose top is
@@ -313,23 +347,62 @@ double Confidence(const MapObject& o, const MapConfig& cfg, double width_m, doub
 }
 
 
-// Per change point: it has a twin (other side within object_twin_radius_m) / an unchanged
-// surface within the cluster tolerance.
-struct Masks {
-  std::vector<bool> twin, attached;
-};
-
 double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& sel) {
   const auto n = std::count_if(sel.begin(), sel.end(), [&](std::uint32_t i) { return bool(mask[i]); });
   return double(n) / double(std::max<std::size_t>(sel.size(), 1));
 }
 
+// Per change point: it has a twin (other side within object_twin_radius_m). `unchanged`: the
+// unchanged surfaces above ground near the change points (NearbyAboveGround at the cluster
+// tolerance), for each cluster's attached share (AttachedFraction).
+struct Masks {
+  std::vector<bool> twin;
+  PointCloud unchanged;
+};
+
+// Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
+// not the object's own lower part. Unchanged points inside its oriented xy box (grown by `edge`:
+// the map's sample spacing, at least the store's quantisation step) with cluster points above them
+// (in the 3 x 3 cells of edge r around them) are that: a disappeared car's points within LD's
+// neighbour radius of the new session's ground matched that ground and stayed in the map, under
+// the body that was seen through. A fragment's surface lies beside it (the rest of a pole or trunk
+// a grazing ray cut a strip from) or above it (a wall whose lower band was seen through).
+double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double r, double edge) {
+  std::unordered_map<CellKey, float, CellKeyHash> top;  // highest cluster point per xy cell
+  for (const auto& p : o.cloud.points) {
+    auto [it, fresh] = top.try_emplace(KeyOf(p.xyz(), r), p.z);
+    if (!fresh) it->second = std::max(it->second, p.z);
+  }
+  auto under = [&](const PointXYZI& q) {
+    const CellKey k = KeyOf(q.xyz(), r);
+    for (std::int64_t dx = -1; dx <= 1; ++dx)
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        const auto it = top.find({k.x + dx, k.y + dy});
+        if (it != top.end() && it->second > q.z) return true;
+      }
+    return false;
+  };
+  const double c = std::cos(o.yaw_rad), s = std::sin(o.yaw_rad);
+  const Eigen::Vector3d lo = o.lo.array() - r, hi = o.hi.array() + r;
+  PointCloud other;
+  for (const auto& p : unchanged.points) {
+    const Eigen::Vector3d q = p.xyz().cast<double>();
+    if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) continue;
+    const double dx = q.x() - o.box_center.x(), dy = q.y() - o.box_center.y();
+    const bool inside =
+        std::abs(c * dx + s * dy) <= 0.5 * o.size.x() + edge && std::abs(-s * dx + c * dy) <= 0.5 * o.size.y() + edge;
+    if (!inside || !under(p)) other.push_back(p.x, p.y, p.z);
+  }
+  if (other.empty()) return 0.0;
+  const std::vector<bool> hit = WithinRadius(o.cloud, other, r);
+  return double(std::count(hit.begin(), hit.end(), true)) / double(std::max<std::size_t>(o.points, 1));
+}
+
 MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
                       const SessionRecord& step, const Floor& floor, const Masks& masks,
-                      const StepContext& ctx) {
+                      const StepContext& ctx, const MapConfig& cfg) {
   MapObject o;
   o.twin_fraction = Share(masks.twin, sel);
-  o.attached_fraction = Share(masks.attached, sel);
   o.session = step.order;
   o.reference = step.reference;
   o.change = appeared ? "appeared" : "disappeared";
@@ -337,6 +410,8 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.cloud = changes.select(sel);
   Describe(o);
   OrientedBox(o);
+  o.attached_fraction =
+      AttachedFraction(o, masks.unchanged, cfg.object_tolerance_m, std::max(cfg.output_voxel_m, cfg.resolution_m));
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
@@ -422,15 +497,15 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   const PointCloud changes = store.StepChanges(step.order);
   const PointCloud before = store.MapAt(step.reference), after = store.MapAt(step.order);
   const Floor floor = StepFloor(before, after, changes, cfg.object_ground_cell_m);
-  const PointCloud unchanged = Unchanged(after, step.order);
+  const PointCloud unchanged = Unchanged(after, step.order, changes);
   std::deque<MapObject> step_kept;  // pointers in ctx.disappeared stay valid
   for (const bool appeared : {false, true}) {
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
-                      NearMask(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
+                      NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, cfg))
-      group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx));
+      group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     HoldUp(group, cfg);
     for (MapObject& o : group) {
       Judge(o, ctx, cfg);
