@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Tiles benchmark (issue #18): simulates one session per length on a long route (a world of
 # --extent metres, keyframes 2 m apart) and runs HD removal of it whole (`ltmapper hd`) and tile
-# by tile (`ltmapper tiles plan` / `run` / `merge`, every tile in one process, one after another).
+# by tile (`ltmapper tiles plan` / `run` / `merge`, every tile in one process, one after another),
+# both on the true poses (--poses; the session's own odometry drifts tens of metres over such
+# routes without loop closures, which smears every revisit into the map).
 # Prints per length: peak RSS (/usr/bin/time -v) and wall seconds per keyframe of both, the tiles,
 # the largest tile (its core's map points and the keyframes it reads: a tile job's memory follows
 # them), the tiles' parts on disk, and whether the merged HD-free map is the whole-session map byte
@@ -37,7 +39,7 @@ timed() {
   echo "$((kb / 1024)) $wall"
 }
 
-printf "| keyframes | map points | tiles (edge m) | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
+printf "| keyframes | map points (removed %%) | tiles (edge m) | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
 printf "|---|---|---|---|---|---|---|---|---|---|\n"
 for K in $LENGTHS; do
   dir="$WORK/k$K"
@@ -46,20 +48,22 @@ for K in $LENGTHS; do
     "$EXTENT" "$K" > "$dir/sim.yaml"
   [ -d "$dir/sim/sessions/session_00" ] || "$EXE" sim --config "$dir/sim.yaml" --out "$dir/sim" --quiet --threads "$THREADS"
   ses="$dir/sim/sessions/session_00"
-  read -r whole_mb whole_s < <(timed "$EXE" hd "$ses" "${SETS[@]}" --out "$dir/whole.pcd" --threads "$THREADS" --quiet)
-  read -r plan_mb plan_s < <(timed "$EXE" tiles plan "$ses" "${SETS[@]}" --out "$dir/plan" --quiet)
+  poses="$dir/sim/truth/session_00/poses_world.txt"
+  read -r whole_mb whole_s < <(timed "$EXE" hd "$ses" --poses "$poses" "${SETS[@]}" --out "$dir/whole.pcd" --threads "$THREADS" --quiet)
+  read -r plan_mb plan_s < <(timed "$EXE" tiles plan "$ses" --poses "$poses" "${SETS[@]}" --out "$dir/plan" --threads "$THREADS" --quiet)
   read -r run_mb run_s < <(timed "$EXE" tiles run "$dir/plan" --threads "$THREADS" --quiet)
   read -r merge_mb merge_s < <(timed "$EXE" tiles merge "$dir/plan" --out "$dir/merged" --quiet)
   tiled_mb=$(printf "%s\n%s\n%s\n" "$plan_mb" "$run_mb" "$merge_mb" | sort -n | tail -1)
   tiled_s=$(awk "BEGIN { print $plan_s + $run_s + $merge_s }")
   points=$(awk -F': ' '/"map_points"/ {gsub(/,/, "", $2); print $2}' "$dir/merged/report.json")
+  removed=$("$PYTHON" -c "import json, sys; r = json.load(open(sys.argv[1])); print(round(100 * (r['removed'] + r['dilated']) / r['map_points'], 2))" "$dir/merged/report.json")
   tiles=$(awk -F': ' '/"tiles"/ {gsub(/,/, "", $2); print $2; exit}' "$dir/merged/report.json")
   edge=$("$PYTHON" -c "import json, sys; p = json.load(open(sys.argv[1])); print(round(p['edge_voxels'] * p['voxel_m'], 1))" "$dir/plan/plan.json")
   largest=$(cat "$dir"/plan/parts/tile_*/tile.json | awk -F': ' '/"map_points"/ {v = $2 + 0; if (v > m) m = v} END {print m}')
   most_kf=$("$PYTHON" -c "import json, sys; print(max(sum(e - b + 1 for b, e in t['keyframe_runs']) for t in json.load(open(sys.argv[1]))['tiles']))" "$dir/plan/plan.json")
   parts_mb=$(du -sm "$dir/plan/parts" | cut -f1)
   equal=$(cmp -s "$dir/whole.pcd" "$dir/merged/static_map.pcd" && echo "bytes equal" || echo "DIFFERENT")
-  printf "| %s | %s | %s (%s) | %s, %s | %s | %s | %.4f | %s (plan %s, run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$tiles" \
+  printf "| %s | %s (%s) | %s (%s) | %s, %s | %s | %s | %.4f | %s (plan %s, run %s, merge %s) | %.4f | %s |\n" "$K" "$points" "$removed" "$tiles" \
     "$edge" "$largest" "$most_kf" "$parts_mb" "$whole_mb" \
     "$(awk "BEGIN { print $whole_s / $K }")" "$tiled_mb" "$plan_mb" "$run_mb" "$merge_mb" "$(awk "BEGIN { print $tiled_s / $K }")" "$equal"
 done

@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <cstring>
 #include <random>
 
 namespace fs = std::filesystem;
@@ -73,6 +74,36 @@ TEST_P(PcdFormats, EmptyCloudRoundTrips) {
 INSTANTIATE_TEST_SUITE_P(All, PcdFormats,
                          ::testing::Values(io::PcdFormat::kAscii, io::PcdFormat::kBinary,
                                            io::PcdFormat::kBinaryCompressed));
+
+// A binary PCD read a piece at a time gives ReadPcd's points in order, for pieces that do and do
+// not divide the count; an empty file gives no piece; ascii data and a truncated file are errors
+// naming the file.
+TEST(Pcd, PieceReaderGivesTheFileInPieces) {
+  test::TempDir tmp;
+  const PointCloud c = RandomCloud(1000);
+  io::WritePcd(tmp / "c.pcd", c);
+  for (std::size_t piece : {1u, 7u, 1000u, 4096u}) {
+    io::PcdPieceReader reader(tmp / "c.pcd");
+    PointCloud all, part;
+    std::size_t pieces = 0;
+    while (reader.Next(piece, &part)) {
+      EXPECT_LE(part.size(), piece);
+      all.append(part);
+      ++pieces;
+    }
+    EXPECT_EQ(pieces, (c.size() + piece - 1) / piece);
+    ASSERT_EQ(all.size(), c.size());
+    EXPECT_EQ(std::memcmp(all.points.data(), c.points.data(), c.size() * sizeof(PointXYZI)), 0) << piece;
+  }
+  io::WritePcd(tmp / "empty.pcd", PointCloud{});
+  PointCloud part;
+  EXPECT_FALSE(io::PcdPieceReader(tmp / "empty.pcd").Next(10, &part));
+  io::WritePcd(tmp / "a.pcd", c, io::PcdFormat::kAscii);
+  test::ExpectError([&] { io::PcdPieceReader r(tmp / "a.pcd"); }, {tmp / "a.pcd", "ascii"});
+  const std::string bytes = test::ReadText(tmp / "c.pcd");
+  test::WriteText(tmp / "cut.pcd", bytes.substr(0, bytes.size() - 100));
+  test::ExpectError([&] { io::PcdPieceReader r(tmp / "cut.pcd"); }, {tmp / "cut.pcd"});
+}
 
 TEST(Pcd, BinaryIsByteForByteWhatPclWrites) {
   test::TempDir tmp;

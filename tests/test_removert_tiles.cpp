@@ -5,6 +5,7 @@
 #include "test_removert_scene.hpp"
 #include "test_util.hpp"
 
+#include "ltmapper/io/io.hpp"
 #include "ltmapper/removert/removert.hpp"
 
 #include <gtest/gtest.h>
@@ -277,6 +278,21 @@ TEST(RemovertTileJobs, CliPlanRunMerge) {
   EXPECT_EQ(test::ReadText(tmp / "whole.pcd"), test::ReadText(tmp / "out/static_map.pcd"));
   EXPECT_NE(0, test::RunCli("tiles run " + (tmp / "plan") + " --tile 99", &out));
   EXPECT_NE(out.find("tile 99 of a plan with"), std::string::npos) << out;
+  // Other poses (--poses, as with LT-SLAM's world poses): the session moved 1.5 m, the same bytes
+  // both ways and not the own poses' map; a pose file of another length names the file.
+  std::vector<Pose> moved;
+  for (const auto& kf : removert::LoadWorldKeyframes(session, "")) moved.push_back(Eigen::Translation3d(1.5, 0, 0) * kf.T_world_sensor);
+  io::WriteKittiPoses(tmp / "moved.txt", moved);
+  ASSERT_EQ(0, test::RunCli("tiles plan " + session + sets + " --poses " + (tmp / "moved.txt") + " --out " + (tmp / "plan2"), &out)) << out;
+  ASSERT_EQ(0, test::RunCli("tiles run " + (tmp / "plan2"), &out)) << out;
+  ASSERT_EQ(0, test::RunCli("tiles merge " + (tmp / "plan2") + " --out " + (tmp / "out2"), &out)) << out;
+  ASSERT_EQ(0, test::RunCli("hd " + session + sets + " --poses " + (tmp / "moved.txt") + " --out " + (tmp / "moved.pcd"), &out)) << out;
+  EXPECT_EQ(test::ReadText(tmp / "moved.pcd"), test::ReadText(tmp / "out2/static_map.pcd"));
+  EXPECT_NE(test::ReadText(tmp / "moved.pcd"), test::ReadText(tmp / "whole.pcd"));
+  moved.pop_back();
+  io::WriteKittiPoses(tmp / "short.txt", moved);
+  EXPECT_NE(0, test::RunCli("hd " + session + sets + " --poses " + (tmp / "short.txt") + " --out " + (tmp / "x.pcd"), &out));
+  EXPECT_NE(out.find(tmp / "short.txt"), std::string::npos) << out;
 }
 
 // The stage with tiles.stage: true writes the same files as without (HD maps and the pair's LD).

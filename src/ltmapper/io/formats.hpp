@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -35,6 +36,21 @@ void WritePcdPieces(const std::string& path, std::size_t points,
 // KITTI velodyne .bin: float32 x y z reflectance, little endian, 16 bytes per point.
 PointCloud ReadKittiBin(const std::string& path, CloudReadStats* stats = nullptr);
 void WriteKittiBin(const std::string& path, const PointCloud& cloud);
+// A binary PCD read a piece at a time (memory: one piece, not the file): Next(n, &cloud) replaces
+// `cloud` with the next at most n points (ReadPcd's fields and checks, the header checked against
+// the file's size first) and returns false once every point was read. Other DATA types are an
+// ltm::Error naming the file (read those whole with ReadPcd).
+class PcdPieceReader {
+ public:
+  explicit PcdPieceReader(const std::string& path);
+  ~PcdPieceReader();
+  PcdPieceReader(PcdPieceReader&&) noexcept;
+  bool Next(std::size_t max_points, PointCloud* out);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 // Reads .pcd or .bin by extension.
 PointCloud ReadCloud(const std::string& path, CloudReadStats* stats = nullptr);
 // Binary little-endian PLY with float x y z intensity and, when present, uchar class,

@@ -551,6 +551,56 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   return ReadPclPcd(path, stats);
 }
 
+struct PcdPieceReader::Impl {
+  std::string path;
+  std::ifstream in;
+  PcdHeader h;
+  std::array<FieldAt, 8> fields;
+  std::size_t left = 0;
+};
+
+PcdPieceReader::PcdPieceReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.path = path;
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
+  m.in.open(path, std::ios::binary);
+  if (!m.in) throw Error(path + ": cannot open");
+  m.h = ParseHeader(path, m.in);
+  CheckDataSize(path, m.in, m.h);
+  if (m.h.points == 0) return;
+  if (m.h.data != "binary") throw Error(path + ": DATA " + m.h.data + " cannot be read a piece at a time (only binary)");
+  for (const char* name : {"x", "y", "z"})
+    if (std::find(m.h.fields.begin(), m.h.fields.end(), name) == m.h.fields.end())
+      throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
+  m.fields = BinaryFields(path, m.h);
+  m.left = std::size_t(m.h.points);
+  m.in.clear();
+  m.in.seekg(std::streamoff(m.h.data_offset));
+}
+
+PcdPieceReader::~PcdPieceReader() = default;
+PcdPieceReader::PcdPieceReader(PcdPieceReader&&) noexcept = default;
+
+bool PcdPieceReader::Next(std::size_t max_points, PointCloud* out) {
+  Impl& m = *impl_;
+  *out = PointCloud{};
+  if (m.left == 0) return false;
+  Records rec;
+  rec.cols = std::min(m.left, std::max<std::size_t>(max_points, 1));
+  rec.rows = 1;
+  rec.point_step = m.h.PointStep();
+  rec.row_step = rec.cols * rec.point_step;
+  std::vector<std::uint8_t> bytes(rec.row_step);
+  if (!m.in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
+    throw Error(m.path + ": cannot read the PCD data section");
+  rec.data = bytes.data();
+  const auto& f = m.fields;
+  *out = ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], m.path, nullptr);
+  m.left -= rec.cols;
+  return true;
+}
+
 namespace {
 // The header PCL's PCDWriter writes for x y z intensity floats (the same bytes); with `time`, a
 // raw sweep's fifth float.

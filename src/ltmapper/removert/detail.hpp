@@ -108,6 +108,11 @@ HdResult SplitHd(const PointCloud& map, const HdDecision& decision, const std::v
 constexpr std::size_t kMergePiece = 1 << 16;
 void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
                        const std::function<void(const PointCloud&)>& emit);
+// The same over parts that arrive a piece at a time (a tile's PCD read by io::PcdPieceReader):
+// next() gives the part's next piece (valid until the following call), null at its end. Memory:
+// one piece per part and one output piece.
+using PieceSource = std::function<const PointCloud*()>;
+void MergeInVoxelOrder(std::vector<PieceSource> parts, double voxel_m, const std::function<void(const PointCloud&)>& emit);
 // Adds a tile's counts and seconds to *sum.
 void AddHdStats(const HdStats& part, HdStats* sum);
 

@@ -19,6 +19,9 @@ namespace {
 namespace fs = std::filesystem;
 namespace json = io::json;
 
+// Points read from a tile's part at once by the merge.
+constexpr std::size_t kReadPiece = 1 << 14;
+
 // plan.json's version: 2 lists each tile's keyframes as runs [first, last] (1 listed every one).
 constexpr int kPlanVersion = 2;
 
@@ -128,15 +131,22 @@ void WriteStatsJson(const std::string& path, const HdStats& st, std::size_t tile
 }
 
 // One map of every tile (`file_in` of its part folder) into `path`, one column of tiles (same ix:
-// a contiguous range of x voxels) at a time in voxel order: memory = one column's parts.
+// a contiguous range of x voxels) at a time in voxel order, each part read a piece at a time:
+// memory = one piece per tile of a column.
 void MergeMapFile(const std::string& plan_dir, const TilePlan& plan, std::string (*file_in)(const std::string&),
                   std::size_t points, const std::string& path) {
   io::WritePcdPieces(path, points, [&](const auto& write) {
     for (std::size_t b = 0, e = 0; b < plan.tiles.size(); b = e) {
-      std::vector<PointCloud> column;
+      std::vector<io::PcdPieceReader> readers;
       for (e = b; e < plan.tiles.size() && plan.tiles[e].ix == plan.tiles[b].ix; ++e)
-        column.push_back(io::ReadPcd(file_in(TilePartDir(plan_dir, e))));
-      detail::MergeInVoxelOrder(column, plan.voxel_m, write);
+        readers.emplace_back(file_in(TilePartDir(plan_dir, e)));
+      std::vector<PointCloud> pieces(readers.size());
+      std::vector<detail::PieceSource> column;
+      for (std::size_t t = 0; t < readers.size(); ++t)
+        column.push_back([&, t]() -> const PointCloud* {
+          return readers[t].Next(kReadPiece, &pieces[t]) ? &pieces[t] : nullptr;
+        });
+      detail::MergeInVoxelOrder(std::move(column), plan.voxel_m, write);
     }
   });
 }

@@ -193,8 +193,7 @@ double Since(std::chrono::steady_clock::time_point t0) {
 
 namespace detail {
 
-void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
-                       const std::function<void(const PointCloud&)>& emit) {
+void MergeInVoxelOrder(std::vector<PieceSource> parts, double voxel_m, const std::function<void(const PointCloud&)>& emit) {
   using Key = std::array<std::int64_t, 3>;
   auto key = [&](const PointXYZI& p) {
     return Key{VoxelIndex(p.x, voxel_m), VoxelIndex(p.y, voxel_m), VoxelIndex(p.z, voxel_m)};
@@ -204,27 +203,44 @@ void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
     std::size_t part, i;
     bool operator>(const Head& o) const { return key != o.key ? key > o.key : part > o.part; }
   };
+  std::vector<const PointCloud*> piece_of(parts.size(), nullptr);
+  auto next_piece = [&](std::size_t r) {  // the part's next non-empty piece, or null
+    do piece_of[r] = parts[r]();
+    while (piece_of[r] && piece_of[r]->empty());
+    return piece_of[r] != nullptr;
+  };
   std::vector<Head> heap;
   for (std::size_t r = 0; r < parts.size(); ++r)
-    if (!parts[r].empty()) heap.push_back({key(parts[r].points[0]), r, 0});
+    if (next_piece(r)) heap.push_back({key(piece_of[r]->points[0]), r, 0});
   const auto later = std::greater<Head>();
   std::make_heap(heap.begin(), heap.end(), later);
-  PointCloud piece;
+  PointCloud out;
   while (!heap.empty()) {
     std::pop_heap(heap.begin(), heap.end(), later);
     Head& h = heap.back();
-    piece.points.push_back(parts[h.part].points[h.i]);
-    if (++h.i < parts[h.part].size()) {
-      h.key = key(parts[h.part].points[h.i]);
+    out.points.push_back(piece_of[h.part]->points[h.i]);
+    if (++h.i < piece_of[h.part]->size() || (next_piece(h.part) && (h.i = 0, true))) {
+      h.key = key(piece_of[h.part]->points[h.i]);
       std::push_heap(heap.begin(), heap.end(), later);
     } else {
       heap.pop_back();
     }
-    if (piece.size() == kMergePiece || heap.empty()) {
-      emit(piece);
-      piece.points.clear();
+    if (out.size() == kMergePiece || heap.empty()) {
+      emit(out);
+      out.points.clear();
     }
   }
+}
+
+void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
+                       const std::function<void(const PointCloud&)>& emit) {
+  std::vector<PieceSource> sources;
+  for (const PointCloud& p : parts) sources.push_back([&p, given = false]() mutable -> const PointCloud* {
+    if (given) return nullptr;
+    given = true;
+    return &p;
+  });
+  MergeInVoxelOrder(std::move(sources), voxel_m, emit);
 }
 
 void AddHdStats(const HdStats& s, HdStats* sum) {
