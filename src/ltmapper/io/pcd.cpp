@@ -463,20 +463,42 @@ namespace {
 // one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's loadPCDFile 1.4-1.9 ms; going
 // through PCL's reader and a per-value type switch took ~1.5-2 ms), never through PCL (see
 // BinaryFields).
-PointCloud ReadBinaryPcd(const std::string& path, std::ifstream& in, const PcdHeader& h, CloudReadStats* stats) {
-  const auto f = BinaryFields(path, h);
+// The next `count` points of binary data from the stream's position (ReadPcd and PcdPieceReader).
+PointCloud ReadBinaryPoints(const std::string& path, std::ifstream& in, const PcdHeader& h,
+                            const std::array<FieldAt, 8>& f, std::size_t count, CloudReadStats* stats) {
   Records rec;
-  rec.cols = std::size_t(h.points);
+  rec.cols = count;
   rec.rows = 1;
   rec.point_step = h.PointStep();
   rec.row_step = rec.cols * rec.point_step;
   std::vector<std::uint8_t> bytes(rec.row_step);
-  in.clear();
-  in.seekg(std::streamoff(h.data_offset));
   if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
     throw Error(path + ": cannot read the PCD data section");
   rec.data = bytes.data();
   return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
+}
+
+// Positions the stream at the first data byte.
+void SeekData(std::ifstream& in, const PcdHeader& h) {
+  in.clear();
+  in.seekg(std::streamoff(h.data_offset));
+}
+
+// The header of a PCD file opened in `in`, checked against the data's size and, when it has
+// points, for x y z fields (fuzz/fuzz_pcd: a binary_compressed file without x made
+// pcl::PCDReader::read dereference null).
+PcdHeader OpenPcd(const std::string& path, std::ifstream& in) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
+  in.open(path, std::ios::binary);
+  if (!in) throw Error(path + ": cannot open");
+  PcdHeader h = ParseHeader(path, in);
+  CheckDataSize(path, in, h);
+  if (h.points != 0)
+    for (const char* name : {"x", "y", "z"})
+      if (std::find(h.fields.begin(), h.fields.end(), name) == h.fields.end())
+        throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
+  return h;
 }
 
 // ascii and binary_compressed PCDs through PCL's reader, every field's type and offset checked
@@ -531,22 +553,16 @@ PointCloud ReadPclPcd(const std::string& path, CloudReadStats* stats) {
 }  // namespace
 
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot open");
-  const PcdHeader h = ParseHeader(path, in);
-  CheckDataSize(path, in, h);
+  std::ifstream in;
+  const PcdHeader h = OpenPcd(path, in);
   if (h.points == 0) {  // a valid empty scan; PCL would only print a warning
     if (stats) *stats = CloudReadStats{};
     return PointCloud{};
   }
-  // No x y z: an error here, before PCL's reader (fuzz/fuzz_pcd: a binary_compressed file without
-  // x made pcl::PCDReader::read dereference null).
-  for (const char* name : {"x", "y", "z"})
-    if (std::find(h.fields.begin(), h.fields.end(), name) == h.fields.end())
-      throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
-  if (h.data == "binary") return ReadBinaryPcd(path, in, h, stats);
+  if (h.data == "binary") {
+    SeekData(in, h);
+    return ReadBinaryPoints(path, in, h, BinaryFields(path, h), std::size_t(h.points), stats);
+  }
   in.close();
   return ReadPclPcd(path, stats);
 }
@@ -562,21 +578,12 @@ struct PcdPieceReader::Impl {
 PcdPieceReader::PcdPieceReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.path = path;
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
-  m.in.open(path, std::ios::binary);
-  if (!m.in) throw Error(path + ": cannot open");
-  m.h = ParseHeader(path, m.in);
-  CheckDataSize(path, m.in, m.h);
+  m.h = OpenPcd(path, m.in);
   if (m.h.points == 0) return;
   if (m.h.data != "binary") throw Error(path + ": DATA " + m.h.data + " cannot be read a piece at a time (only binary)");
-  for (const char* name : {"x", "y", "z"})
-    if (std::find(m.h.fields.begin(), m.h.fields.end(), name) == m.h.fields.end())
-      throw Error(path + ": PCD has no x y z fields (no '" + name + "')");
   m.fields = BinaryFields(path, m.h);
   m.left = std::size_t(m.h.points);
-  m.in.clear();
-  m.in.seekg(std::streamoff(m.h.data_offset));
+  SeekData(m.in, m.h);
 }
 
 PcdPieceReader::~PcdPieceReader() = default;
@@ -586,18 +593,9 @@ bool PcdPieceReader::Next(std::size_t max_points, PointCloud* out) {
   Impl& m = *impl_;
   *out = PointCloud{};
   if (m.left == 0) return false;
-  Records rec;
-  rec.cols = std::min(m.left, std::max<std::size_t>(max_points, 1));
-  rec.rows = 1;
-  rec.point_step = m.h.PointStep();
-  rec.row_step = rec.cols * rec.point_step;
-  std::vector<std::uint8_t> bytes(rec.row_step);
-  if (!m.in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
-    throw Error(m.path + ": cannot read the PCD data section");
-  rec.data = bytes.data();
-  const auto& f = m.fields;
-  *out = ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], m.path, nullptr);
-  m.left -= rec.cols;
+  const std::size_t n = std::min(m.left, std::max<std::size_t>(max_points, 1));
+  *out = ReadBinaryPoints(m.path, m.in, m.h, m.fields, n, nullptr);
+  m.left -= n;
   return true;
 }
 

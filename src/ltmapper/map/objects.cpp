@@ -23,15 +23,12 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <cstring>
 #include <deque>
 #include <iterator>
 #include <map>
 #include <tuple>
 #include <unordered_map>
-#include <unordered_set>
 
 namespace ltm::map {
 namespace {
@@ -85,34 +82,12 @@ PointCloud OtherSide(const PointCloud& changes, bool appeared) {
   return changes.select(mask);
 }
 
-// Surfaces the step left unchanged and the query saw: points of the map after the step that
-// existed before it (not added by the step), except the step's weak ND when the store keeps them
-// (store_weak_nd). Those are the reference's surfaces the query never saw (occluded, no point of
-// its own there): the far side of a car that left, kept in the map only for lack of evidence.
-// Weak ND points are map points decoded alike, so they are matched by their coordinates' bits.
-// (On the sensor matrix, both seeds, storing them changed no object found: the objects' own
-// lower part (AttachedFraction) is what separates them; the store is 15 % smaller without.)
-PointCloud Unchanged(const PointCloud& after, int step, const PointCloud& changes) {
-  using Bits = std::array<std::uint32_t, 3>;
-  auto bits = [](const PointXYZI& p) {
-    Bits b;
-    std::memcpy(b.data(), &p.x, sizeof(float));
-    std::memcpy(b.data() + 1, &p.y, sizeof(float));
-    std::memcpy(b.data() + 2, &p.z, sizeof(float));
-    return b;
-  };
-  struct BitsHash {
-    std::size_t operator()(const Bits& b) const {
-      return std::size_t(MixHash((std::uint64_t(b[0]) << 32 | b[1]) ^ MixHash(b[2])));
-    }
-  };
-  std::unordered_set<Bits, BitsHash> weak;
-  for (std::size_t i = 0; i < changes.size(); ++i)
-    if (changes.cls[i] == PointClass::kNDWeak) weak.insert(bits(changes.points[i]));
+// Surfaces the step left unchanged: points of the map after the step that existed before it
+// (not added by the step).
+PointCloud Unchanged(const PointCloud& after, int step) {
   std::vector<bool> mask(after.size(), true);
-  for (std::size_t i = 0; i < after.size(); ++i)
-    mask[i] = (after.session.size() != after.size() || int(after.session[i]) < step) &&
-              (weak.empty() || !weak.count(bits(after.points[i])));
+  if (after.session.size() == after.size())
+    for (std::size_t i = 0; i < after.size(); ++i) mask[i] = int(after.session[i]) < step;
   return after.select(mask);
 }
 
@@ -293,10 +268,10 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // object_twin_radius_m (a removed car leaves only ground there; a misaligned pole leaves its
 // displaced copy a few decimetres away). A fragment is a piece of a surface the step left
 // unchanged: most of its points lie within the cluster tolerance of unchanged above-ground map
-// points the query saw (AttachedFraction), so clustered with them it would be one object that did
-// not change (a strip of a pole or trunk seen through by grazing rays); a removed or new object is
-// surrounded by free space and ground, and by its own remnants (its occluded side, weak ND; its
-// lower part under the seen-through body). The sensor samples a surface at range r every
+// points that are not its own lower part (AttachedFraction), so clustered with them it would be
+// one object that did not change (a strip of a pole or trunk seen through by grazing rays); a
+// removed or new object is surrounded by free space and ground, and stands on its own remnants
+// (its lower part, under the seen-through body). The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one or two scan rows wide) spans fewer than object_min_samples rows across its middle
 // principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread; MinWidth). A cluster whose top is
@@ -352,9 +327,9 @@ double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& se
   return double(n) / double(std::max<std::size_t>(sel.size(), 1));
 }
 
-// Per change point: it has a twin (other side within object_twin_radius_m). `unchanged`: the
-// unchanged surfaces above ground near the change points (NearbyAboveGround at the cluster
-// tolerance), for each cluster's attached share (AttachedFraction).
+// What each cluster is judged against: per change point, whether it has a twin (other side within
+// object_twin_radius_m); the unchanged surfaces above ground near the change points
+// (NearbyAboveGround at the cluster tolerance), for each cluster's attached share.
 struct Masks {
   std::vector<bool> twin;
   PointCloud unchanged;
@@ -497,7 +472,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   const PointCloud changes = store.StepChanges(step.order);
   const PointCloud before = store.MapAt(step.reference), after = store.MapAt(step.order);
   const Floor floor = StepFloor(before, after, changes, cfg.object_ground_cell_m);
-  const PointCloud unchanged = Unchanged(after, step.order, changes);
+  const PointCloud unchanged = Unchanged(after, step.order);
   std::deque<MapObject> step_kept;  // pointers in ctx.disappeared stay valid
   for (const bool appeared : {false, true}) {
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);

@@ -32,14 +32,15 @@ using ltm::ParallelFor;  // core.hpp
 // a return in the window at its pixel at all (observed) (occlusion.cpp).
 // same: not seen through, and at least ld_same_min_hits keyframes hit it on its surface plane
 // (the other session has this surface; its map is only sparser there). `own_map` (the map the
-// points come from) gives their normals.
+// points come from) gives their normals. own_pixel (PD): also count the keyframes whose own pixel
+// of the point has a return beyond it (seen_own); the ND pass leaves it empty.
 struct Visibility {
   std::vector<bool> seen, observed, same;
-  std::vector<bool> seen_own;  // seen, or seen through by an upright point's own pixel (PD strength)
+  std::vector<bool> seen_own;  // with own_pixel: seen, or seen through by an upright point's own pixel (PD strength)
 };
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                         int threads);
+                         int threads, bool own_pixel);
 
 // The at most kNeighbourhoodPoints nearest points of `cloud` within `radius` of p: how many, their
 // mean offset from p, and the eigen decomposition (ascending) of their covariance.
@@ -113,6 +114,8 @@ void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
 // one piece per part and one output piece.
 using PieceSource = std::function<const PointCloud*()>;
 void MergeInVoxelOrder(std::vector<PieceSource> parts, double voxel_m, const std::function<void(const PointCloud&)>& emit);
+// Whether a plan may have this tile edge under `cfg` (one of TileEdgeChoices).
+bool IsTileEdgeChoice(const RemovertConfig& cfg, std::int64_t edge_voxels);
 // Adds a tile's counts and seconds to *sum.
 void AddHdStats(const HdStats& part, HdStats* sum);
 

@@ -188,7 +188,7 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   const PointCloud pd = query_map.select(Missing(query_map, central_map, qkf, ckf, cfg, threads));
 
   // Weak ND preservation: ND the query never saw through stays in the map.
-  const Strength nds = Split(detail::SeenThroughBy(nd, central_map, query_keyframes, cfg, threads), true, cfg);
+  const Strength nds = Split(detail::SeenThroughBy(nd, central_map, query_keyframes, cfg, threads, false), true, cfg);
   res.stats.nd_same = nds.same;
   res.nd_strong = nd.select(nds.strong);
   res.nd_weak = nd.select(nds.weak);
@@ -197,7 +197,7 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   for (std::size_t i = 0, j = 0; i < central_map.size(); ++i)
     if (missing[i]) res.central_nd[i] = nds.strong[j] || nds.weak[j], ++j;
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
-  const Strength pds = Split(detail::SeenThroughBy(pd, query_map, central_keyframes, cfg, threads), false, cfg);
+  const Strength pds = Split(detail::SeenThroughBy(pd, query_map, central_keyframes, cfg, threads, true), false, cfg);
   res.stats.pd_same = pds.same;
   res.pd_weak = pd.select(pds.weak);
   res.pd_strong = pd.select(pds.strong);

@@ -80,12 +80,12 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
 
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                         int threads) {
+                         int threads, bool own_pixel) {
   Visibility out;
   out.seen.assign(points.size(), false);
   out.observed.assign(points.size(), false);
   out.same.assign(points.size(), false);
-  out.seen_own.assign(points.size(), false);
+  if (own_pixel) out.seen_own.assign(points.size(), false);
   if (points.empty() || keyframes.empty()) return out;
   RemovertConfig vcfg = cfg;
   vcfg.submap_radius_m = cfg.ld_submap_radius_m;
@@ -94,7 +94,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   VisibilityOptions opt;
   opt.count_occluded = true;
   opt.within_beams = false;
-  opt.count_own_see = true;
+  opt.count_own_see = own_pixel;
   std::vector<Eigen::Vector3f> normals;
   std::vector<bool> planar;  // normals[i] is a plane's (else a scan line's: orientation unknown)
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
@@ -113,8 +113,10 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
-      const double o = v.SeeOwn(l, i);
-      seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
+      if (own_pixel) {
+        const double o = v.SeeOwn(l, i);
+        seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
+      }
       observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
       if (!beams) hits = std::max(hits, int(h));
     }
@@ -122,8 +124,10 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     // A beam going on past a surface more horizontal than vertical (ground, a roof) passed it at
     // a grazing angle, no sign its place was free: the own pixel decides only on upright planes
     // and on scan lines (a sparse sensor's rows on an upright side, orientation unknown).
-    const bool upright = planar.empty() || !planar[i] || std::abs(normals[i].z()) < kUprightNormalZ;
-    out.seen_own[i] = seen || (seen_own && upright);
+    if (own_pixel) {
+      const bool upright = planar.empty() || !planar[i] || std::abs(normals[i].z()) < kUprightNormalZ;
+      out.seen_own[i] = seen || (seen_own && upright);
+    }
     out.observed[i] = observed;
     out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
   }

@@ -74,8 +74,7 @@ void WritePlanJson(const std::string& path, const TilePlanFile& f) {
 void ReadTiles(const json::Value& doc, const RemovertConfig& cfg, const std::string& path, TilePlan* plan) {
   using T = json::Value::Type;
   const std::int64_t edge = Integer(Member(doc, "edge_voxels", T::kNumber, path), "edge_voxels", path);
-  const std::vector<std::int64_t> edges = TileEdgeChoices(cfg);
-  if (std::find(edges.begin(), edges.end(), edge) == edges.end() ||
+  if (!detail::IsTileEdgeChoice(cfg, edge) ||
       Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path) != plan->margin_voxels)
     throw Error(path, 0, "edge_voxels / margin_voxels differ from what config.yaml gives");
   plan->edge_voxels = edge;

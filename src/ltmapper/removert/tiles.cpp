@@ -61,8 +61,7 @@ void CheckPlan(const TilePlan& plan, std::size_t tile, const std::vector<WorldKe
     throw Error("tiles: the plan is for " + std::to_string(plan.session_keyframes) + " keyframes, the session has " +
                 std::to_string(keyframes.size()));
   const TilePlan expected = PlanTiles({}, cfg);
-  const std::vector<std::int64_t> edges = TileEdgeChoices(cfg);
-  if (plan.voxel_m != expected.voxel_m || std::find(edges.begin(), edges.end(), plan.edge_voxels) == edges.end() ||
+  if (plan.voxel_m != expected.voxel_m || !detail::IsTileEdgeChoice(cfg, plan.edge_voxels) ||
       plan.margin_voxels != expected.margin_voxels || plan.reach_m != expected.reach_m)
     throw Error("tiles: the plan was made with other map_voxel_m / tiles.edge_m / margin keys than this config");
   for (std::size_t k : plan.tiles[tile].keyframes)
@@ -82,11 +81,18 @@ std::vector<WorldKeyframe> Voters(const std::vector<WorldKeyframe>& kfs, const d
   return voters;
 }
 
-// [map voxels] The finest tile edge the plan may choose: 5 margins, so that the margin's area,
-// read by the job but not decided, stays below the core's ((e + 2 m)^2 <= 2 e^2 needs e >= 4.83 m).
+// [map voxels] TileMarginM rounded up to whole voxels, + the centroid's voxel.
+std::int64_t MarginVoxels(const RemovertConfig& cfg) {
+  return std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;
+}
+
+// The finest tile edge in margins: the margin's area, read by a job but not decided, stays below
+// the core's: (e + 2 m)^2 <= 2 e^2 needs e >= 2 m / (sqrt 2 - 1) = 4.83 m, in whole margins 5.
+constexpr std::int64_t kFinestEdgeMargins = 5;
+
+// [map voxels] The finest tile edge the plan may choose, the cell its counts are kept in.
 std::int64_t FineCellVoxels(const RemovertConfig& cfg) {
-  const std::int64_t margin = std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;
-  return std::max<std::int64_t>(1, 5 * margin);
+  return std::max<std::int64_t>(1, kFinestEdgeMargins * MarginVoxels(cfg));
 }
 
 std::int64_t FloorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
@@ -105,21 +111,28 @@ void CountMapVoxels(const std::vector<WorldKeyframe>& keyframes, const RemovertC
   const std::size_t batch = detail::kMapBatch;
   for (std::size_t b = 0; b < keyframes.size(); b += batch) {
     const std::size_t e = std::min(keyframes.size(), b + batch);
-    std::vector<std::vector<std::array<std::int64_t, 3>>> voxels(e - b);
+    struct Voxel {
+      std::int64_t x, y;
+      std::uint64_t hash;  // of (x, y, z), computed once for every grid
+    };
+    std::vector<std::vector<Voxel>> voxels(e - b);
     ParallelFor(e - b, threads, [&](std::size_t k) {
       const PointCloud scan = detail::ScanForMap(keyframes[b + k], cfg, nullptr);
-      for (const PointXYZI& p : scan.points)
-        voxels[k].push_back({detail::VoxelIndex(p.x, cfg.map_voxel_m), detail::VoxelIndex(p.y, cfg.map_voxel_m),
-                             detail::VoxelIndex(p.z, cfg.map_voxel_m)});
+      voxels[k].reserve(scan.size());
+      for (const PointXYZI& p : scan.points) {
+        const std::int64_t x = detail::VoxelIndex(p.x, cfg.map_voxel_m), y = detail::VoxelIndex(p.y, cfg.map_voxel_m);
+        const auto z = std::uint64_t(detail::VoxelIndex(p.z, cfg.map_voxel_m));
+        voxels[k].push_back({x, y, MixHash(MixHash(MixHash(std::uint64_t(x)) ^ std::uint64_t(y)) ^ z)});
+      }
     });
     for (CellCounts& g : *grids) {
       std::uint64_t last_key = 0;
       DistinctCounter* last = nullptr;  // a scan's points come in runs of one cell
       for (const auto& scan : voxels)
-        for (const auto& v : scan) {
-          const std::uint64_t key = PackXY(FloorDiv(v[0], g.cell_voxels), FloorDiv(v[1], g.cell_voxels));
+        for (const Voxel& v : scan) {
+          const std::uint64_t key = PackXY(FloorDiv(v.x, g.cell_voxels), FloorDiv(v.y, g.cell_voxels));
           if (!last || key != last_key) last = &g.cells[key], last_key = key;
-          last->Add(MixHash(MixHash(MixHash(std::uint64_t(v[0])) ^ std::uint64_t(v[1])) ^ std::uint64_t(v[2])));
+          last->Add(v.hash);
         }
     }
   }
@@ -259,6 +272,11 @@ void AddHdStats(const HdStats& s, HdStats* sum) {
 
 }  // namespace detail
 
+bool detail::IsTileEdgeChoice(const RemovertConfig& cfg, std::int64_t edge_voxels) {
+  const std::vector<std::int64_t> edges = TileEdgeChoices(cfg);
+  return std::find(edges.begin(), edges.end(), edge_voxels) != edges.end();
+}
+
 std::vector<std::int64_t> TileEdgeChoices(const RemovertConfig& cfg) {
   const std::int64_t most = EdgeVoxels(cfg);
   const std::int64_t cell = FineCellVoxels(cfg);
@@ -273,7 +291,7 @@ TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertCo
   TilePlan plan;
   plan.voxel_m = cfg.map_voxel_m;
   plan.edge_voxels = EdgeVoxels(cfg);
-  plan.margin_voxels = std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;  // + the centroid's voxel
+  plan.margin_voxels = MarginVoxels(cfg);
   plan.reach_m = TileReachM(cfg) + cfg.map_voxel_m;  // + float rounding of world-frame returns
   plan.session_keyframes = keyframes.size();
   if (!keyframes.empty() && cfg.tiles_max_map_points > 0) ChooseEdge(keyframes, cfg, threads, &plan);
