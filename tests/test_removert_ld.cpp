@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 namespace ltm {
 namespace {
 
@@ -307,6 +309,65 @@ TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
   EXPECT_EQ(CountIn(ld.nd_residue, piece_c), 0u);
   EXPECT_GE(double(CountIn(ld.nd_strong, pole_c)), 0.9 * double(CountIn(cmap, body(pole_c))));
   EXPECT_EQ(CountIn(ld.nd_residue, pole_c), 0u);
+}
+
+
+bool SameBytes(const PointCloud& a, const PointCloud& b) {
+  return a.size() == b.size() && std::memcmp(a.points.data(), b.points.data(), a.size() * sizeof(PointXYZI)) == 0;
+}
+
+// LD tile by tile (DetectLdTiled) gives DetectLd's clouds, counts and central_nd: on the finest
+// tiles (5 margins), whose cores meet at x = 0 and y = 0, through a pedestrian (a residue), the
+// walls and the street; the residue rule's clusters and the raw changes' neighbourhoods cross them.
+TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
+  const test::Box ped_c = test::MakeBox(-0.3, 5, 0, 0.3, 5.6, 1.7, 20), ped_q = test::MakeBox(-10, 5, 0, -9.4, 5.6, 1.7, 21);
+  auto cb = Common();
+  cb.push_back(ped_c);
+  cb.push_back(test::MakeBox(-2, -6, 0.3, 2, -4, 1.8, kCarCentral));  // across x = 0
+  cb.push_back(test::MakeBox(-20, -0.3, 0, -10, 0.3, 3.5, kWallCentral));  // across y = 0
+  auto qb = Common();
+  qb.push_back(ped_q);
+  qb.push_back(test::MakeBox(-7, -6, 0.3, -3, -4, 1.8, kCarQuery));
+  const auto central = Drive(cb, 2.0, nullptr), query = Drive(qb, 2.7, nullptr);
+  RemovertConfig cfg = test::ConfigFor();
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  cfg.tiles_max_map_points = 1;  // the finest edge
+  removert::LdCellCounts counts(removert::WithSensor(cfg, central));
+  counts.Add(cmap);
+  counts.Add(qmap);
+  const removert::LdTilePlan plan = removert::PlanLdTiles(counts, central, query, removert::WithSensor(cfg, central));
+  std::printf("LD tiles: %zu of %.2f m, margin %.2f m, largest window %zu of %zu points\n", plan.tiles.size(),
+              plan.EdgeM(), double(plan.margin_voxels) * plan.voxel_m, plan.largest_window, cmap.size() + qmap.size());
+  EXPECT_GE(plan.tiles.size(), 4u);
+  EXPECT_LT(plan.largest_window, cmap.size() + qmap.size());
+
+  const auto whole = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const auto tiled = removert::DetectLdTiled(cmap, qmap, central, query, cfg, 2);
+  ASSERT_GT(whole.nd_residue.size(), 20u) << "the pedestrian must be a residue for the comparison to mean anything";
+  ASSERT_GT(whole.nd_strong.size(), 100u);
+  ASSERT_GT(whole.pd_weak.size(), 100u);
+  const std::vector<std::pair<const PointCloud*, const PointCloud*>> clouds = {
+      {&whole.nd_strong, &tiled.nd_strong}, {&whole.nd_weak, &tiled.nd_weak},
+      {&whole.nd_unobserved, &tiled.nd_unobserved}, {&whole.nd_residue, &tiled.nd_residue},
+      {&whole.pd_strong, &tiled.pd_strong}, {&whole.pd_weak, &tiled.pd_weak},
+      {&whole.pd_unobserved, &tiled.pd_unobserved}, {&whole.pd_residue, &tiled.pd_residue}};
+  for (std::size_t c = 0; c < clouds.size(); ++c)
+    EXPECT_TRUE(SameBytes(*clouds[c].first, *clouds[c].second)) << "cloud " << c << ": " << clouds[c].first->size()
+                                                                << " whole, " << clouds[c].second->size() << " tiled";
+  EXPECT_EQ(whole.central_nd, tiled.central_nd);
+  EXPECT_EQ(whole.stats.nd_same, tiled.stats.nd_same);
+  EXPECT_EQ(whole.stats.pd_same, tiled.stats.pd_same);
+  EXPECT_EQ(whole.stats.nd_residue, tiled.stats.nd_residue);
+
+  // Without the residue rule the margin is the neighbourhoods' alone, and the labels still agree.
+  cfg.ld_residue_length_m = 0.0;
+  cfg.tiles_max_map_points = 60000;
+  EXPECT_DOUBLE_EQ(removert::LdTileMarginM(cfg), std::max(cfg.ld_radius_max_m, cfg.ld_normal_radius_m));
+  const auto whole0 = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const auto tiled0 = removert::DetectLdTiled(cmap, qmap, central, query, cfg, 2);
+  EXPECT_TRUE(SameBytes(whole0.nd_strong, tiled0.nd_strong));
+  EXPECT_TRUE(SameBytes(whole0.pd_weak, tiled0.pd_weak));
+  EXPECT_EQ(whole0.central_nd, tiled0.central_nd);
 }
 
 }  // namespace

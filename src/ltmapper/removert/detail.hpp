@@ -16,6 +16,7 @@
 #include <functional>
 #include <limits>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace ltm::removert::detail {
@@ -65,6 +66,21 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);
 
+// ---- LD as labels (ld_detection.cpp), shared with LD tile by tile (ld_tiles.cpp)
+enum LdLabel : std::uint8_t { kLdUnchanged = 0, kLdStrong, kLdWeak, kLdUnobserved, kLdResidue, kLdSame };
+struct LdLabels {
+  std::vector<std::uint8_t> central, query;  // per map point: an LdLabel (ND of central, PD of query)
+};
+// DetectLd's decision for every point of both maps. The positions are every keyframe's of each
+// session (the radius's distance term); the voters are the keyframes whose scans judge
+// occlusion (those within ld.submap_radius_m of the points give the same votes as all). `cfg`
+// has its sensor resolved.
+LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, const PointCloud& central_positions,
+                 const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_voters,
+                 const std::vector<WorldKeyframe>& query_voters, const RemovertConfig& cfg, int threads);
+// The labelled points as DetectLd's clouds (map order) and counts (seconds left 0).
+LdResult LdFromLabels(const PointCloud& central_map, const PointCloud& query_map, const LdLabels& labels);
+
 // ---- the session map and the HD decision (hd_removal.cpp), shared with the tiles (tiles.cpp)
 
 // The map voxel's index along one axis: floor(v / voxel_m), the grid of geometry::VoxelDownsample.
@@ -73,6 +89,12 @@ std::int64_t VoxelIndex(float v, double voxel_m);
 struct VoxelBox {
   std::int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   bool Contains(std::int64_t ix, std::int64_t iy) const { return ix >= x0 && ix < x1 && iy >= y0 && iy < y1; }
+  // [m] xy distance from (x, y) to the box (voxels of voxel_m).
+  double DistanceM(double voxel_m, double x, double y) const {
+    const double dx = std::max({double(x0) * voxel_m - x, 0.0, x - double(x1) * voxel_m});
+    const double dy = std::max({double(y0) * voxel_m - y, 0.0, y - double(y1) * voxel_m});
+    return std::hypot(dx, dy);
+  }
 };
 // One keyframe's scan for the map: range filtered, in the world frame, clipped to `clip` (when
 // given) and voxelised. Clipping keeps the order of the points, so a voxel inside the box sums
@@ -114,6 +136,25 @@ void MergeInVoxelOrder(const std::vector<PointCloud>& parts, double voxel_m,
 // one piece per part and one output piece.
 using PieceSource = std::function<const PointCloud*()>;
 void MergeInVoxelOrder(std::vector<PieceSource> parts, double voxel_m, const std::function<void(const PointCloud&)>& emit);
+// floor(a / b) for b > 0.
+inline std::int64_t FloorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+// A key of an xy cell (32 bits per axis).
+inline std::uint64_t PackXY(std::int64_t x, std::int64_t y) {
+  return (std::uint64_t(x) << 32) ^ (std::uint64_t(y) & 0xffffffffULL);
+}
+// The positions (ascending) of the keyframes within radius_m (xy, + one voxel for float rounding)
+// of the box: every keyframe within radius_m (3D) of a point in it.
+std::vector<std::size_t> KeyframesNear(const std::vector<WorldKeyframe>& kfs, const VoxelBox& box, double voxel_m,
+                                       double radius_m);
+// The cell (x, y) of a PackXY key.
+inline std::pair<std::int64_t, std::int64_t> UnpackXY(std::uint64_t key) {
+  return {std::int64_t(std::int32_t(key >> 32)), std::int64_t(std::int32_t(key & 0xffffffffULL))};
+}
+// [map voxels] The largest tile edge: tiles.edge_m, or 2 x the keyframes' reach, in whole voxels.
+std::int64_t MostEdgeVoxels(const RemovertConfig& cfg);
+// The finest tile edge in margins: the margin's area, read by a job but not decided, stays below
+// the core's: (e + 2 m)^2 <= 2 e^2 needs e >= 2 m / (sqrt 2 - 1) = 4.83 m, in whole margins 5.
+constexpr std::int64_t kFinestEdgeMargins = 5;
 // Whether a plan may have this tile edge under `cfg` (one of TileEdgeChoices).
 bool IsTileEdgeChoice(const RemovertConfig& cfg, std::int64_t edge_voxels);
 // Adds a tile's counts and seconds to *sum.

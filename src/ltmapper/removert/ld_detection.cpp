@@ -153,23 +153,98 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 // of `own` map) split into clusters at ld_residue_gap_m. A cluster that fits in a mover's size,
 // ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
 // point of `own` within half that around it) to its top, and that no larger cluster comes that
-// close to, is a residue of a mover (moved to *residue). A pole, a facade's edge or a lamp head
-// that poses let the other session see past reaches higher; a short piece beside a large one is
-// part of that object (a trunk's foot under its canopy, a sparse object's fragment). A flat patch
-// within ld_radius_m of the ground is no mover's: a mover's part that low is within the radius of
-// the other session's ground, so no change at all; such a patch is ground the other session did
-// not cover (on real scans, around the other vehicle's place).
-void SplitResidues(PointCloud* seen, PointCloud* residue, const PointCloud& own, const RemovertConfig& cfg) {
-  if (cfg.ld_residue_length_m <= 0.0 || seen->empty()) return;
-  const auto members = ClusterMembers(*seen, cfg.ld_residue_gap_m);
-  std::vector<bool> small = FitAMover(*seen, members, own, cfg);
-  UnmarkPiecesOfLargerOnes(*seen, members, cfg.ld_residue_length_m, &small);
-  *residue = seen->select(small);
-  small.flip();
-  *seen = seen->select(small);
+// close to, is a residue of a mover (marked in the result, per point of `seen`). A pole, a
+// facade's edge or a lamp head that poses let the other session see past reaches higher; a short
+// piece beside a large one is part of that object (a trunk's foot under its canopy, a sparse
+// object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
+// that low is within the radius of the other session's ground, so no change at all; such a patch
+// is ground the other session did not cover (on real scans, around the other vehicle's place).
+std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const RemovertConfig& cfg) {
+  if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
+  const auto members = ClusterMembers(seen, cfg.ld_residue_gap_m);
+  std::vector<bool> small = FitAMover(seen, members, own, cfg);
+  UnmarkPiecesOfLargerOnes(seen, members, cfg.ld_residue_length_m, &small);
+  return small;
+}
+
+// The labels of one map's points (`own`) given its raw changes (`missing`) and the other
+// session's keyframes: same / strong / weak / unobserved (Split), then the residues among the
+// changes the other session saw through (strong ND, weak PD).
+void LabelChanges(const PointCloud& own, const std::vector<bool>& missing, const std::vector<WorldKeyframe>& others,
+                  bool nd, const RemovertConfig& cfg, int threads, std::vector<std::uint8_t>* label) {
+  using namespace detail;
+  std::vector<std::uint32_t> raw;
+  for (std::size_t i = 0; i < missing.size(); ++i)
+    if (missing[i]) raw.push_back(std::uint32_t(i));
+  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd), nd, cfg);
+  for (std::size_t j = 0; j < raw.size(); ++j)
+    (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
+  const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak;
+  std::vector<std::uint32_t> seen;
+  for (std::uint32_t i : raw)
+    if ((*label)[i] == seen_label) seen.push_back(i);
+  const std::vector<bool> residue = Residues(own.select(seen), own, cfg);
+  for (std::size_t j = 0; j < seen.size(); ++j)
+    if (residue[j]) (*label)[seen[j]] = kLdResidue;
+}
+
+// The points of `map` with label `l`, in map order.
+PointCloud WithLabel(const PointCloud& map, const std::vector<std::uint8_t>& label, std::uint8_t l) {
+  std::vector<bool> mask(label.size());
+  for (std::size_t i = 0; i < label.size(); ++i) mask[i] = label[i] == l;
+  return map.select(mask);
 }
 
 }  // namespace
+
+namespace detail {
+
+LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, const PointCloud& central_positions,
+                 const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_voters,
+                 const std::vector<WorldKeyframe>& query_voters, const RemovertConfig& cfg, int threads) {
+  LdLabels out{std::vector<std::uint8_t>(central_map.size(), kLdUnchanged),
+               std::vector<std::uint8_t>(query_map.size(), kLdUnchanged)};
+  const std::vector<bool> nd = Missing(central_map, query_map, central_positions, query_positions, cfg, threads);
+  const std::vector<bool> pd = Missing(query_map, central_map, query_positions, central_positions, cfg, threads);
+  // Weak ND preservation: ND the query never saw through stays in the map.
+  LabelChanges(central_map, nd, query_voters, true, cfg, threads, &out.central);
+  // PD in space the central session observed as free is weak; behind / beyond it, strong.
+  LabelChanges(query_map, pd, central_voters, false, cfg, threads, &out.query);
+  return out;
+}
+
+LdResult LdFromLabels(const PointCloud& central_map, const PointCloud& query_map, const LdLabels& labels) {
+  LdResult res;
+  res.nd_strong = WithLabel(central_map, labels.central, kLdStrong);
+  res.nd_weak = WithLabel(central_map, labels.central, kLdWeak);
+  res.nd_unobserved = WithLabel(central_map, labels.central, kLdUnobserved);
+  res.nd_residue = WithLabel(central_map, labels.central, kLdResidue);
+  res.pd_strong = WithLabel(query_map, labels.query, kLdStrong);
+  res.pd_weak = WithLabel(query_map, labels.query, kLdWeak);
+  res.pd_unobserved = WithLabel(query_map, labels.query, kLdUnobserved);
+  res.pd_residue = WithLabel(query_map, labels.query, kLdResidue);
+  res.central_nd.resize(labels.central.size());
+  for (std::size_t i = 0; i < labels.central.size(); ++i) {
+    const std::uint8_t l = labels.central[i];
+    res.central_nd[i] = l == kLdStrong || l == kLdWeak || l == kLdResidue;
+  }
+  LdStats& st = res.stats;
+  st.central_points = central_map.size();
+  st.query_points = query_map.size();
+  st.nd_same = std::size_t(std::count(labels.central.begin(), labels.central.end(), kLdSame));
+  st.pd_same = std::size_t(std::count(labels.query.begin(), labels.query.end(), kLdSame));
+  st.nd_strong = res.nd_strong.size();
+  st.nd_weak = res.nd_weak.size();
+  st.nd_unobserved = res.nd_unobserved.size();
+  st.nd_residue = res.nd_residue.size();
+  st.pd_strong = res.pd_strong.size();
+  st.pd_weak = res.pd_weak.size();
+  st.pd_unobserved = res.pd_unobserved.size();
+  st.pd_residue = res.pd_residue.size();
+  return res;
+}
+
+}  // namespace detail
 
 LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
                   const std::vector<WorldKeyframe>& central_keyframes,
@@ -178,40 +253,10 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   user_cfg.Validate();
   const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
   const auto t0 = std::chrono::steady_clock::now();
-  LdResult res;
-  res.stats.central_points = central_map.size();
-  res.stats.query_points = query_map.size();
-
-  const PointCloud ckf = detail::Positions(central_keyframes), qkf = detail::Positions(query_keyframes);
-  const std::vector<bool> missing = Missing(central_map, query_map, ckf, qkf, cfg, threads);
-  const PointCloud nd = central_map.select(missing);
-  const PointCloud pd = query_map.select(Missing(query_map, central_map, qkf, ckf, cfg, threads));
-
-  // Weak ND preservation: ND the query never saw through stays in the map.
-  const Strength nds = Split(detail::SeenThroughBy(nd, central_map, query_keyframes, cfg, threads, false), true, cfg);
-  res.stats.nd_same = nds.same;
-  res.nd_strong = nd.select(nds.strong);
-  res.nd_weak = nd.select(nds.weak);
-  res.nd_unobserved = nd.select(nds.unobserved);
-  res.central_nd.assign(central_map.size(), false);
-  for (std::size_t i = 0, j = 0; i < central_map.size(); ++i)
-    if (missing[i]) res.central_nd[i] = nds.strong[j] || nds.weak[j], ++j;
-  // PD in space the central session observed as free is weak; behind / beyond it, strong.
-  const Strength pds = Split(detail::SeenThroughBy(pd, query_map, central_keyframes, cfg, threads, true), false, cfg);
-  res.stats.pd_same = pds.same;
-  res.pd_weak = pd.select(pds.weak);
-  res.pd_strong = pd.select(pds.strong);
-  res.pd_unobserved = pd.select(pds.unobserved);
-  SplitResidues(&res.nd_strong, &res.nd_residue, central_map, cfg);
-  SplitResidues(&res.pd_weak, &res.pd_residue, query_map, cfg);
-  res.stats.nd_residue = res.nd_residue.size();
-  res.stats.pd_residue = res.pd_residue.size();
-  res.stats.nd_strong = res.nd_strong.size();
-  res.stats.nd_weak = res.nd_weak.size();
-  res.stats.pd_strong = res.pd_strong.size();
-  res.stats.pd_weak = res.pd_weak.size();
-  res.stats.pd_unobserved = res.pd_unobserved.size();
-  res.stats.nd_unobserved = res.nd_unobserved.size();
+  const detail::LdLabels labels =
+      detail::LabelLd(central_map, query_map, detail::Positions(central_keyframes), detail::Positions(query_keyframes),
+                      central_keyframes, query_keyframes, cfg, threads);
+  LdResult res = detail::LdFromLabels(central_map, query_map, labels);
   res.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return res;
 }

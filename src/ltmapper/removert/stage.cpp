@@ -276,7 +276,8 @@ void WriteKeyframesCsv(const std::string& dir, const SessionData& c, const Sessi
 std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const SessionData& q, int ci, int qi,
                                                 const std::string& dir, const RemovertConfig& cfg, int threads) {
   spdlog::info("removert: LD {} vs {}", c.name, q.name);
-  const LdResult ld = DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads);
+  const LdResult ld = cfg.tiles_stage ? DetectLdTiled(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads)
+                                      : DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads);
   spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} (unobserved {}); residues of "
                "movers (HD) {} of {}, {} of {} ({:.1f} s)",
                io::layout::PairDirName(ci, qi), ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,

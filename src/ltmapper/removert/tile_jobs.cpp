@@ -2,6 +2,7 @@
 #include "ltmapper/removert/tiles.hpp"
 
 #include "ltmapper/removert/detail.hpp"
+#include "ltmapper/removert/tile_files.hpp"
 
 #include "ltmapper/io/io.hpp"
 
@@ -18,37 +19,13 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace json = io::json;
-
-// Points read from a tile's part at once by the merge.
-constexpr std::size_t kReadPiece = 1 << 14;
+using detail::Count, detail::Integer, detail::Member;
 
 // plan.json's version: 2 lists each tile's keyframes as runs [first, last] (1 listed every one).
 constexpr int kPlanVersion = 2;
 
 std::string PlanFile(const std::string& plan_dir) { return plan_dir + "/plan.json"; }
 std::string ConfigFile(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
-std::string TileJsonIn(const std::string& part_dir) { return part_dir + "/tile.json"; }
-
-
-// The member `key` of an object, of the given type; ltm::Error naming the file otherwise.
-const json::Value& Member(const json::Value& obj, const std::string& key, json::Value::Type type,
-                          const std::string& path) {
-  const json::Value* v = obj.Find(key);
-  if (!v || v->type != type) throw Error(path, 0, "missing or mistyped key '" + key + "'");
-  return *v;
-}
-// A non-negative integer member.
-std::size_t Count(const json::Value& v, const std::string& what, const std::string& path) {
-  if (v.type != json::Value::Type::kNumber || !(v.num >= 0) || v.num != std::floor(v.num) || v.num > 9e15)
-    throw Error(path, 0, what + " must be a non-negative integer");
-  return std::size_t(v.num);
-}
-std::int64_t Integer(const json::Value& v, const std::string& what, const std::string& path) {
-  if (v.type != json::Value::Type::kNumber || v.num != std::floor(v.num) || std::fabs(v.num) > 9e15)
-    throw Error(path, 0, what + " must be an integer");
-  return std::int64_t(v.num);
-}
-
 void WritePlanJson(const std::string& path, const TilePlanFile& f) {
   json::Writer w;
   w.BeginObject().String("format", "ltmapper tile plan").Int("version", kPlanVersion);
@@ -58,12 +35,9 @@ void WritePlanJson(const std::string& path, const TilePlanFile& f) {
   w.Number("largest_map_estimate", f.plan.largest_map_estimate);
   w.BeginArray("tiles");
   for (const Tile& t : f.plan.tiles) {
-    w.BeginObject().Int("ix", t.ix).Int("iy", t.iy).BeginArray("keyframe_runs");
-    for (std::size_t b = 0, e = 0; b < t.keyframes.size(); b = e) {  // [first, last] of consecutive keyframes
-      for (e = b + 1; e < t.keyframes.size() && t.keyframes[e] == t.keyframes[e - 1] + 1; ++e) {}
-      w.BeginArray().Number(double(t.keyframes[b])).Number(double(t.keyframes[e - 1])).EndArray();
-    }
-    w.EndArray().EndObject();
+    w.BeginObject().Int("ix", t.ix).Int("iy", t.iy);
+    detail::WriteRuns(w, "keyframe_runs", t.keyframes);
+    w.EndObject();
   }
   w.EndArray().EndObject();
   io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
@@ -85,13 +59,7 @@ void ReadTiles(const json::Value& doc, const RemovertConfig& cfg, const std::str
     Tile t;
     t.ix = Integer(Member(jt, "ix", T::kNumber, path), "ix", path);
     t.iy = Integer(Member(jt, "iy", T::kNumber, path), "iy", path);
-    for (const json::Value& run : Member(jt, "keyframe_runs", T::kArray, path).arr) {
-      if (run.type != T::kArray || run.arr.size() != 2) throw Error(path, 0, "a keyframe run must be [first, last]");
-      const std::size_t first = Count(run.arr[0], "a tile's keyframe", path), last = Count(run.arr[1], "a tile's keyframe", path);
-      if (last >= n || first > last || (!t.keyframes.empty() && first <= t.keyframes.back()))
-        throw Error(path, 0, "a tile's keyframe runs must ascend below " + std::to_string(n));
-      for (std::size_t k = first; k <= last; ++k) t.keyframes.push_back(k);
-    }
+    t.keyframes = detail::ReadRuns(Member(jt, "keyframe_runs", T::kArray, path), n, "a tile's keyframe", path);
     plan->tiles.push_back(std::move(t));
   }
 }
@@ -129,25 +97,16 @@ void WriteStatsJson(const std::string& path, const HdStats& st, std::size_t tile
   io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
 }
 
-// One map of every tile (`file_in` of its part folder) into `path`, one column of tiles (same ix:
-// a contiguous range of x voxels) at a time in voxel order, each part read a piece at a time:
-// memory = one piece per tile of a column.
+// One map of every tile (`file_in` of its part folder) into `path`, in voxel order.
 void MergeMapFile(const std::string& plan_dir, const TilePlan& plan, std::string (*file_in)(const std::string&),
                   std::size_t points, const std::string& path) {
-  io::WritePcdPieces(path, points, [&](const auto& write) {
-    for (std::size_t b = 0, e = 0; b < plan.tiles.size(); b = e) {
-      std::vector<io::PcdPieceReader> readers;
-      for (e = b; e < plan.tiles.size() && plan.tiles[e].ix == plan.tiles[b].ix; ++e)
-        readers.emplace_back(file_in(TilePartDir(plan_dir, e)));
-      std::vector<PointCloud> pieces(readers.size());
-      std::vector<detail::PieceSource> column;
-      for (std::size_t t = 0; t < readers.size(); ++t)
-        column.push_back([&, t]() -> const PointCloud* {
-          return readers[t].Next(kReadPiece, &pieces[t]) ? &pieces[t] : nullptr;
-        });
-      detail::MergeInVoxelOrder(std::move(column), plan.voxel_m, write);
-    }
-  });
+  std::vector<std::string> files;
+  std::vector<std::int64_t> columns;
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) {
+    files.push_back(file_in(TilePartDir(plan_dir, t)));
+    columns.push_back(plan.tiles[t].ix);
+  }
+  detail::MergePartFiles(files, columns, plan.voxel_m, points, path);
 }
 
 std::string Absolute(const std::string& path) { return path.empty() ? path : fs::absolute(path).lexically_normal().string(); }
@@ -195,17 +154,17 @@ std::string TilePartDir(const std::string& plan_dir, std::size_t tile) {
 bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool force) {
   const TilePlanFile f = ReadTilePlan(plan_dir);
   const std::string dir = TilePartDir(plan_dir, tile);
-  if (!force && fs::exists(TileJsonIn(dir))) {
-    spdlog::info("tiles: tile {} is done ({})", tile, TileJsonIn(dir));
+  if (!force && fs::exists(detail::TileJsonIn(dir))) {
+    spdlog::info("tiles: tile {} is done ({})", tile, detail::TileJsonIn(dir));
     return false;
   }
   const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
   const HdResult res = RemoveHdTile(f.plan, tile, kfs, f.cfg, threads);
-  fs::remove(TileJsonIn(dir));  // forced: not done while its parts are rewritten
+  fs::remove(detail::TileJsonIn(dir));  // forced: not done while its parts are rewritten
   io::MakeDirs(dir);
   io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);
   io::WritePcd(io::layout::HdMapIn(dir), res.hd_map);
-  WriteStatsJson(TileJsonIn(dir), res.stats, 1);  // last: the tile is done
+  WriteStatsJson(detail::TileJsonIn(dir), res.stats, 1);  // last: the tile is done
   spdlog::info("tiles: tile {} of {}: {} keyframes, {} static + {} HD points", tile, f.plan.tiles.size(),
                f.plan.tiles[tile].keyframes.size(), res.static_map.size(), res.hd_map.size());
   return true;
@@ -214,11 +173,8 @@ bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool
 HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
   const TilePlanFile f = ReadTilePlan(plan_dir);
   HdStats st;
-  for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) {  // every tile done before writing anything
-    const std::string done = TileJsonIn(TilePartDir(plan_dir, t));
-    if (!fs::exists(done)) throw Error(done, 0, "tile " + std::to_string(t) + " is not done");
+  for (const std::string& done : detail::DoneTiles(plan_dir, f.plan.tiles.size()))  // before writing anything
     detail::AddHdStats(ReadStats(done), &st);
-  }
   io::StagingDir staging(out_dir, "report.json");
   const std::size_t hd = st.removed + st.dilated;
   MergeMapFile(plan_dir, f.plan, io::layout::StaticMapIn, st.map_points - hd, io::layout::StaticMapIn(staging.path()));
@@ -227,5 +183,84 @@ HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
   staging.Publish();
   return st;
 }
+
+
+namespace detail {
+
+// Points read from a tile's part at once by the merge.
+constexpr std::size_t kReadPiece = 1 << 14;
+
+std::string TileJsonIn(const std::string& part_dir) { return part_dir + "/tile.json"; }
+
+
+// The member `key` of an object, of the given type; ltm::Error naming the file otherwise.
+const json::Value& Member(const json::Value& obj, const std::string& key, json::Value::Type type,
+                          const std::string& path) {
+  const json::Value* v = obj.Find(key);
+  if (!v || v->type != type) throw Error(path, 0, "missing or mistyped key '" + key + "'");
+  return *v;
+}
+// A non-negative integer member.
+std::size_t Count(const json::Value& v, const std::string& what, const std::string& path) {
+  if (v.type != json::Value::Type::kNumber || !(v.num >= 0) || v.num != std::floor(v.num) || v.num > 9e15)
+    throw Error(path, 0, what + " must be a non-negative integer");
+  return std::size_t(v.num);
+}
+std::int64_t Integer(const json::Value& v, const std::string& what, const std::string& path) {
+  if (v.type != json::Value::Type::kNumber || v.num != std::floor(v.num) || std::fabs(v.num) > 9e15)
+    throw Error(path, 0, what + " must be an integer");
+  return std::int64_t(v.num);
+}
+
+void WriteRuns(json::Writer& w, const std::string& key, const std::vector<std::size_t>& positions) {
+  w.BeginArray(key);
+  for (std::size_t b = 0, e = 0; b < positions.size(); b = e) {  // [first, last] of consecutive positions
+    for (e = b + 1; e < positions.size() && positions[e] == positions[e - 1] + 1; ++e) {}
+    w.BeginArray().Number(double(positions[b])).Number(double(positions[e - 1])).EndArray();
+  }
+  w.EndArray();
+}
+
+std::vector<std::size_t> ReadRuns(const json::Value& runs, std::size_t n, const std::string& what,
+                                  const std::string& path) {
+  using T = json::Value::Type;
+  std::vector<std::size_t> out;
+  for (const json::Value& run : runs.arr) {
+    if (run.type != T::kArray || run.arr.size() != 2) throw Error(path, 0, what + " run must be [first, last]");
+    const std::size_t first = Count(run.arr[0], what, path), last = Count(run.arr[1], what, path);
+    if (last >= n || first > last || (!out.empty() && first <= out.back()))
+      throw Error(path, 0, what + " runs must ascend below " + std::to_string(n));
+    for (std::size_t k = first; k <= last; ++k) out.push_back(k);
+  }
+  return out;
+}
+
+std::vector<std::string> DoneTiles(const std::string& plan_dir, std::size_t tiles) {
+  std::vector<std::string> done;
+  for (std::size_t t = 0; t < tiles; ++t) {
+    done.push_back(TileJsonIn(TilePartDir(plan_dir, t)));
+    if (!fs::exists(done.back())) throw Error(done.back(), 0, "tile " + std::to_string(t) + " is not done");
+  }
+  return done;
+}
+
+void MergePartFiles(const std::vector<std::string>& files, const std::vector<std::int64_t>& columns, double voxel_m,
+                    std::size_t points, const std::string& path) {
+  io::WritePcdPieces(path, points, [&](const auto& write) {
+    for (std::size_t b = 0, e = 0; b < files.size(); b = e) {
+      std::vector<io::PcdPieceReader> readers;
+      for (e = b; e < files.size() && columns[e] == columns[b]; ++e) readers.emplace_back(files[e]);
+      std::vector<PointCloud> pieces(readers.size());
+      std::vector<PieceSource> column;
+      for (std::size_t t = 0; t < readers.size(); ++t)
+        column.push_back([&, t]() -> const PointCloud* {
+          return readers[t].Next(kReadPiece, &pieces[t]) ? &pieces[t] : nullptr;
+        });
+      MergeInVoxelOrder(std::move(column), voxel_m, write);
+    }
+  });
+}
+
+}  // namespace detail
 
 }  // namespace ltm::removert

@@ -31,23 +31,10 @@ double TileMarginM(const RemovertConfig& cfg) {
 
 namespace {
 
-// The tile edge in map voxels: tiles.edge_m, or 2 x the reach, rounded to whole voxels.
-std::int64_t EdgeVoxels(const RemovertConfig& cfg) {
-  const double edge_m = cfg.tiles_edge_m > 0.0 ? cfg.tiles_edge_m : 2.0 * TileReachM(cfg);
-  return std::max<std::int64_t>(1, std::int64_t(std::llround(edge_m / cfg.map_voxel_m)));
-}
-
 // The tile's core grown by `grow` voxels on every side.
 detail::VoxelBox BoxOf(const TilePlan& plan, const Tile& t, std::int64_t grow) {
   const std::int64_t e = plan.edge_voxels;
   return {t.ix * e - grow, t.iy * e - grow, (t.ix + 1) * e + grow, (t.iy + 1) * e + grow};
-}
-
-// xy distance from (x, y) to a voxel box [m].
-double DistanceTo(const detail::VoxelBox& b, double voxel_m, double x, double y) {
-  const double dx = std::max({double(b.x0) * voxel_m - x, 0.0, x - double(b.x1) * voxel_m});
-  const double dy = std::max({double(b.y0) * voxel_m - y, 0.0, y - double(b.y1) * voxel_m});
-  return std::hypot(dx, dy);
 }
 
 // The plan must be the one of these keyframes and this config (a plan file of another session or
@@ -68,16 +55,13 @@ void CheckPlan(const TilePlan& plan, std::size_t tile, const std::vector<WorldKe
     if (k >= keyframes.size()) throw Error("tiles: tile " + std::to_string(tile) + " names keyframe " + std::to_string(k));
 }
 
-// The keyframes that vote on the box's points: within submap_radius_m of them (+ one voxel for float
-// rounding). The others of the tile (up to sensor.max_range_m away) only add returns to its map;
-// building their range images would be wasted.
+// The keyframes that vote on the box's points: within submap_radius_m of them. The others of the
+// tile (up to sensor.max_range_m away) only add returns to its map; building their range images
+// would be wasted.
 std::vector<WorldKeyframe> Voters(const std::vector<WorldKeyframe>& kfs, const detail::VoxelBox& box, double voxel_m,
                                   const RemovertConfig& cfg) {
   std::vector<WorldKeyframe> voters;
-  for (const WorldKeyframe& kf : kfs) {
-    const Eigen::Vector3d c = kf.T_world_sensor.translation();
-    if (DistanceTo(box, voxel_m, c.x(), c.y()) <= cfg.submap_radius_m + voxel_m) voters.push_back(kf);
-  }
+  for (std::size_t k : detail::KeyframesNear(kfs, box, voxel_m, cfg.submap_radius_m)) voters.push_back(kfs[k]);
   return voters;
 }
 
@@ -86,23 +70,16 @@ std::int64_t MarginVoxels(const RemovertConfig& cfg) {
   return std::int64_t(std::ceil(TileMarginM(cfg) / cfg.map_voxel_m)) + 1;
 }
 
-// The finest tile edge in margins: the margin's area, read by a job but not decided, stays below
-// the core's: (e + 2 m)^2 <= 2 e^2 needs e >= 2 m / (sqrt 2 - 1) = 4.83 m, in whole margins 5.
-constexpr std::int64_t kFinestEdgeMargins = 5;
-
 // [map voxels] The finest tile edge the plan may choose, the cell its counts are kept in.
 std::int64_t FineCellVoxels(const RemovertConfig& cfg) {
-  return std::max<std::int64_t>(1, kFinestEdgeMargins * MarginVoxels(cfg));
+  return std::max<std::int64_t>(1, detail::kFinestEdgeMargins * MarginVoxels(cfg));
 }
-
-std::int64_t FloorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 // Distinct map voxels (map points) per xy cell of a grid, estimated (DistinctCounter).
 struct CellCounts {
   std::int64_t cell_voxels = 1;
   std::unordered_map<std::uint64_t, DistinctCounter> cells;  // by PackXY(cell x, cell y)
 };
-std::uint64_t PackXY(std::int64_t x, std::int64_t y) { return (std::uint64_t(x) << 32) ^ (std::uint64_t(y) & 0xffffffffULL); }
 
 // Every keyframe's scan for the map (detail::ScanForMap) counted into each grid: one pass over the
 // scans, a batch of keyframes at a time (memory: the batch's voxels and the counters).
@@ -130,7 +107,8 @@ void CountMapVoxels(const std::vector<WorldKeyframe>& keyframes, const RemovertC
       DistinctCounter* last = nullptr;  // a scan's points come in runs of one cell
       for (const auto& scan : voxels)
         for (const Voxel& v : scan) {
-          const std::uint64_t key = PackXY(FloorDiv(v.x, g.cell_voxels), FloorDiv(v.y, g.cell_voxels));
+          const std::uint64_t key =
+              detail::PackXY(detail::FloorDiv(v.x, g.cell_voxels), detail::FloorDiv(v.y, g.cell_voxels));
           if (!last || key != last_key) last = &g.cells[key], last_key = key;
           last->Add(v.hash);
         }
@@ -144,8 +122,8 @@ double LargestTileMap(const CellCounts& grid, std::int64_t edge, std::int64_t ma
   const std::int64_t n = edge / grid.cell_voxels;
   std::unordered_map<std::uint64_t, DistinctCounter> tiles;
   for (const auto& [key, counter] : grid.cells) {
-    const auto cx = std::int64_t(std::int32_t(key >> 32)), cy = std::int64_t(std::int32_t(key & 0xffffffffULL));
-    tiles[PackXY(FloorDiv(cx, n), FloorDiv(cy, n))].Merge(counter);
+    const auto [cx, cy] = detail::UnpackXY(key);
+    tiles[detail::PackXY(detail::FloorDiv(cx, n), detail::FloorDiv(cy, n))].Merge(counter);
   }
   double largest = 0.0;
   for (const auto& [key, counter] : tiles) largest = std::max(largest, counter.Estimate());
@@ -184,7 +162,7 @@ void AssignKeyframes(const std::vector<WorldKeyframe>& keyframes, TilePlan* out)
     for (std::int64_t ix = lo_x; ix <= hi_x; ++ix)
       for (std::int64_t iy = lo_y; iy <= hi_y; ++iy) {
         Tile t{ix, iy, {}};
-        if (DistanceTo(BoxOf(plan, t, plan.margin_voxels), plan.voxel_m, c.x(), c.y()) > plan.reach_m) continue;
+        if (BoxOf(plan, t, plan.margin_voxels).DistanceM(plan.voxel_m, c.x(), c.y()) > plan.reach_m) continue;
         auto it = tiles.try_emplace({ix, iy}, std::move(t)).first;
         it->second.keyframes.push_back(k);
       }
@@ -192,7 +170,7 @@ void AssignKeyframes(const std::vector<WorldKeyframe>& keyframes, TilePlan* out)
   for (auto& [key, t] : tiles) {
     const bool core_reached = std::any_of(t.keyframes.begin(), t.keyframes.end(), [&](std::size_t k) {
       const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
-      return DistanceTo(BoxOf(plan, t, 0), plan.voxel_m, c.x(), c.y()) <= plan.reach_m;
+      return BoxOf(plan, t, 0).DistanceM(plan.voxel_m, c.x(), c.y()) <= plan.reach_m;
     });
     if (core_reached) plan.tiles.push_back(std::move(t));
   }
@@ -205,6 +183,21 @@ double Since(std::chrono::steady_clock::time_point t0) {
 }  // namespace
 
 namespace detail {
+
+std::vector<std::size_t> KeyframesNear(const std::vector<WorldKeyframe>& kfs, const VoxelBox& box, double voxel_m,
+                                       double radius_m) {
+  std::vector<std::size_t> near;
+  for (std::size_t k = 0; k < kfs.size(); ++k) {
+    const Eigen::Vector3d c = kfs[k].T_world_sensor.translation();
+    if (box.DistanceM(voxel_m, c.x(), c.y()) <= radius_m + voxel_m) near.push_back(k);
+  }
+  return near;
+}
+
+std::int64_t MostEdgeVoxels(const RemovertConfig& cfg) {
+  const double edge_m = cfg.tiles_edge_m > 0.0 ? cfg.tiles_edge_m : 2.0 * TileReachM(cfg);
+  return std::max<std::int64_t>(1, std::int64_t(std::llround(edge_m / cfg.map_voxel_m)));
+}
 
 void MergeInVoxelOrder(std::vector<PieceSource> parts, double voxel_m, const std::function<void(const PointCloud&)>& emit) {
   using Key = std::array<std::int64_t, 3>;
@@ -278,7 +271,7 @@ bool detail::IsTileEdgeChoice(const RemovertConfig& cfg, std::int64_t edge_voxel
 }
 
 std::vector<std::int64_t> TileEdgeChoices(const RemovertConfig& cfg) {
-  const std::int64_t most = EdgeVoxels(cfg);
+  const std::int64_t most = detail::MostEdgeVoxels(cfg);
   const std::int64_t cell = FineCellVoxels(cfg);
   std::vector<std::int64_t> edges = {most};
   for (std::int64_t n = most / cell; n >= 1; --n)
@@ -290,7 +283,7 @@ TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertCo
   cfg.Validate();
   TilePlan plan;
   plan.voxel_m = cfg.map_voxel_m;
-  plan.edge_voxels = EdgeVoxels(cfg);
+  plan.edge_voxels = detail::MostEdgeVoxels(cfg);
   plan.margin_voxels = MarginVoxels(cfg);
   plan.reach_m = TileReachM(cfg) + cfg.map_voxel_m;  // + float rounding of world-frame returns
   plan.session_keyframes = keyframes.size();

@@ -12,9 +12,11 @@
 #pragma once
 
 #include "ltmapper/removert/hd.hpp"
+#include "ltmapper/removert/ld.hpp"
 
 #include <cstdint>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 namespace ltm::removert {
@@ -79,6 +81,53 @@ class TileMerger {
 HdResult MergeTiles(const TilePlan& plan, std::vector<HdResult> parts);
 // PlanTiles, every tile in turn (each on `threads`), MergeTiles: RemoveHd with the memory of a tile.
 HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg, int threads = 0);
+
+// ---- LD tile by tile (ld_tiles.cpp)
+// A point's LD label (DetectLd) reads (a) the other map within ld.radius_max_m and its own map
+// within ld.normal_radius_m; (b) with residues on, the clusters of seen-through changes near it:
+// a cluster that fits a mover (ld.residue_length_m L across, its box's diagonal >= its xy span) and
+// touches a core lies within L of it, the larger clusters that unmark it within 2 L, their ground
+// within 3 L; a cluster cut by the window's edge reaches from there to the edge, so with
+// (2 + sqrt 2) L + 2 ld.residue_gap_m it is no mover's in the window as in truth. The margin is
+// (a) + (b).
+double LdTileMarginM(const RemovertConfig& cfg);
+struct LdTile {
+  std::int64_t ix = 0, iy = 0;  // core: voxels [ix, ix + 1) x [iy, iy + 1) tile edges
+  // positions of the keyframes within ld.submap_radius_m of core + margin (they judge occlusion)
+  std::vector<std::size_t> central_voters, query_voters;
+};
+struct LdTilePlan {
+  double voxel_m = 0.0;           // [m] map voxel (map_voxel_m)
+  std::int64_t edge_voxels = 0;   // tile edge [map voxels]: a whole number of margins (>= 5)
+  std::int64_t margin_voxels = 0; // [map voxels] LdTileMarginM rounded up, + the centroid's voxel
+  std::size_t largest_window = 0; // [points] both maps in the largest tile's core + margin
+  std::vector<LdTile> tiles;      // by (ix, iy); the tiles whose core holds map points
+  double EdgeM() const { return double(edge_voxels) * voxel_m; }
+};
+// Map points per cell of one LD margin, of both maps (counted in memory or streamed from files).
+class LdCellCounts {
+ public:
+  explicit LdCellCounts(const RemovertConfig& cfg);
+  void Add(const PointCloud& points);
+  std::int64_t CellVoxels() const { return cell_voxels_; }
+  const std::unordered_map<std::uint64_t, std::size_t>& Cells() const { return cells_; }
+
+ private:
+  double voxel_m_;
+  std::int64_t cell_voxels_;
+  std::unordered_map<std::uint64_t, std::size_t> cells_;  // points by xy cell
+};
+// The LD tiles of a pair: the largest edge (tiles.edge_m or 2 x the reach, then every whole number
+// of margins down to 5) whose largest window (both maps' points in core + margin, counted
+// exactly) holds at most tiles.max_map_points (0: the largest edge), and each tile's voters.
+LdTilePlan PlanLdTiles(const LdCellCounts& counts, const std::vector<WorldKeyframe>& central_keyframes,
+                       const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg);
+// DetectLd tile by tile: each tile labels the maps' points in its core + margin against its voters
+// and keeps its core's labels; the same clouds, stats and central_nd as DetectLd (seconds: the
+// whole call). Memory: the maps (given whole) and one tile's window.
+LdResult DetectLdTiled(const PointCloud& central_map, const PointCloud& query_map,
+                       const std::vector<WorldKeyframe>& central_keyframes,
+                       const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg, int threads = 0);
 
 // ---- from files: `ltmapper tiles` and the Dask driver (python/ltmapper_dask.py)
 // A plan folder holds plan.json (session folder, pose file, tiles with their keyframes) and
