@@ -8,11 +8,15 @@
 # the largest tile (its core's map points and the keyframes it reads: a tile job's memory follows
 # them), the tiles' parts on disk, and whether the merged HD-free map is the whole-session map byte
 # for byte.
+# With --pair: two sessions per length (the simulator's changes between them) and the whole
+# LT-removert stage (`ltmapper removert`: HD of both, LD of the pair) against the same tile by tile
+# from files (each session's HD tiles, then the pair's LD tiles over their parts: `tiles ld-plan` /
+# `run` / `merge`); prints the stage's peak and s/kf and whether the pair's LD clouds are equal.
 # usage: bench/bench_tiles.sh [--lengths "250 500 1000 2000"] [--extent M] [--threads N] [--build DIR] [--work DIR]
-#        [--set KEY=VALUE]...   (removert keys for both runs, e.g. --set tiles.edge_m=100)
+#        [--pair] [--set KEY=VALUE]...   (removert keys for both runs, e.g. --set tiles.edge_m=100)
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
-BUILD="$ROOT/build"; WORK=""; LENGTHS="250 500 1000 2000"; EXTENT=1000; THREADS=2; SETS=()
+BUILD="$ROOT/build"; WORK=""; LENGTHS="250 500 1000 2000"; EXTENT=1000; THREADS=2; SETS=(); PAIR=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --lengths) LENGTHS="$2"; shift 2 ;;
@@ -21,6 +25,7 @@ while [ $# -gt 0 ]; do
     --build) BUILD="$2"; shift 2 ;;
     --work) WORK="$2"; shift 2 ;;
     --set) SETS+=(--set "$2"); shift 2 ;;
+    --pair) PAIR=1; shift ;;
     *) echo "unknown argument: $1" >&2; exit 2 ;;
   esac
 done
@@ -29,6 +34,7 @@ EXE="$BUILD/apps/ltmapper"
 PYTHON=/usr/bin/python3
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "sessions: world ${EXTENT} m, keyframes 2 m apart, 32 x 512 beams; --threads $THREADS ${SETS[*]:-}"
+SESSIONS=$((PAIR + 1))
 
 # Peak RSS [MB] and wall seconds of a command, from /usr/bin/time -v (appended to $WORK/last_time).
 timed() {
@@ -39,14 +45,55 @@ timed() {
   echo "$((kb / 1024)) $wall"
 }
 
+# The simulated sessions of length $1 in $2 (sim/ and its config).
+simulate() {
+  mkdir -p "$2"
+  printf "world:\n  extent_m: %s\nroute:\n  sessions: %s\n  keyframes: %s\n  keyframe_spacing_m: 2.0\nlidar:\n  beams: 32\n  columns: 512\n" \
+    "$EXTENT" "$SESSIONS" "$1" > "$2/sim.yaml"
+  [ -d "$2/sim/sessions/session_0$PAIR" ] || "$EXE" sim --config "$2/sim.yaml" --out "$2/sim" --quiet --threads "$THREADS"
+}
+
+# The larger of the peaks and the sum of the seconds of "MB s" lines on stdin: "MB s".
+peak_sum() { awk '{ if ($1 > m) m = $1; s += $2 } END { print m, s }'; }
+
+if [ "$PAIR" = 1 ]; then
+  printf "| keyframes per session | LD: tiles (edge m), largest window points | whole stage peak MB | whole s/kf | tiled peak MB: HD, LD plan, LD run, LD merge | tiled s/kf | LD clouds tiled == whole |\n"
+  printf "|---|---|---|---|---|---|---|\n"
+  for K in $LENGTHS; do
+    dir="$WORK/pair$K"
+    simulate "$K" "$dir"
+    ses=("$dir/sim/sessions/session_00" "$dir/sim/sessions/session_01")
+    poses=("$dir/sim/truth/session_00/poses_world.txt" "$dir/sim/truth/session_01/poses_world.txt")
+    outs=(--set out.write_keyframes=false --set out.write_ply=false)
+    read -r whole_mb whole_s < <(timed "$EXE" removert --sessions "${ses[@]}" --poses "${poses[@]}" "${SETS[@]}" "${outs[@]}" --out "$dir/whole" --threads "$THREADS" --quiet)
+    hd=$(for s in 0 1; do
+      timed "$EXE" tiles plan "${ses[$s]}" --poses "${poses[$s]}" "${SETS[@]}" --out "$dir/hd$s" --threads "$THREADS" --quiet
+      timed "$EXE" tiles run "$dir/hd$s" --threads "$THREADS" --quiet
+    done | peak_sum)
+    read -r hd_mb hd_s <<< "$hd"
+    read -r plan_mb plan_s < <(timed "$EXE" tiles ld-plan --central "$dir/hd0" --query "$dir/hd1" --out "$dir/ld" --quiet)
+    read -r run_mb run_s < <(timed "$EXE" tiles run "$dir/ld" --threads "$THREADS" --quiet)
+    read -r merge_mb merge_s < <(timed "$EXE" tiles merge "$dir/ld" --out "$dir/pair" --quiet)
+    tiled=$(printf "%s %s\n%s %s\n%s %s\n%s %s\n" "$hd_mb" "$hd_s" "$plan_mb" "$plan_s" "$run_mb" "$run_s" "$merge_mb" "$merge_s" | peak_sum)
+    read -r tiled_mb tiled_s <<< "$tiled"
+    equal="bytes equal"
+    for f in nd_strong nd_weak pd_strong pd_weak pd_unobserved nd_residue pd_residue; do
+      cmp -s "$dir/whole/pair_00_01/$f.pcd" "$dir/pair/$f.pcd" || equal="DIFFERENT ($f)"
+    done
+    ld=$("$PYTHON" -c "import json, sys; p = json.load(open(sys.argv[1])); print(len(p['tiles']), round(p['edge_voxels'] * p['voxel_m'], 1), p['largest_window'])" "$dir/ld/plan.json")
+    read -r ld_tiles ld_edge ld_window <<< "$ld"
+    printf "| %s | %s (%s), %s | %s | %.4f | %s (HD %s, plan %s, run %s, merge %s) | %.4f | %s |\n" "$K" "$ld_tiles" "$ld_edge" \
+      "$ld_window" "$whole_mb" "$(awk "BEGIN { print $whole_s / (2 * $K) }")" "$tiled_mb" "$hd_mb" "$plan_mb" "$run_mb" \
+      "$merge_mb" "$(awk "BEGIN { print $tiled_s / (2 * $K) }")" "$equal"
+  done
+  exit 0
+fi
+
 printf "| keyframes | map points (removed %%) | tiles (edge m) | largest tile: points, keyframes | parts MB | whole peak MB | whole s/kf | tiled peak MB | tiled s/kf | tiled == whole |\n"
 printf "|---|---|---|---|---|---|---|---|---|---|\n"
 for K in $LENGTHS; do
   dir="$WORK/k$K"
-  mkdir -p "$dir"
-  printf "world:\n  extent_m: %s\nroute:\n  sessions: 1\n  keyframes: %s\n  keyframe_spacing_m: 2.0\nlidar:\n  beams: 32\n  columns: 512\n" \
-    "$EXTENT" "$K" > "$dir/sim.yaml"
-  [ -d "$dir/sim/sessions/session_00" ] || "$EXE" sim --config "$dir/sim.yaml" --out "$dir/sim" --quiet --threads "$THREADS"
+  simulate "$K" "$dir"
   ses="$dir/sim/sessions/session_00"
   poses="$dir/sim/truth/session_00/poses_world.txt"
   read -r whole_mb whole_s < <(timed "$EXE" hd "$ses" --poses "$poses" "${SETS[@]}" --out "$dir/whole.pcd" --threads "$THREADS" --quiet)

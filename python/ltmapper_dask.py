@@ -4,6 +4,9 @@
     ltmapper tiles plan SESSION --poses POSES --out PLAN
     python3 python/ltmapper_dask.py PLAN --out OUT [--scheduler tcp://HOST:8786 | --local-workers N]
 
+An LD plan of a pair (`ltmapper tiles ld-plan --central PLAN_C --query PLAN_Q --out LDPLAN`, once
+every HD tile of both sessions is done) runs the same way: its merge writes the pair's clouds.
+
 Each task runs the `ltmapper` executable (`tiles run PLAN --tile N`) in a subprocess, so the
 workers need the executable and a shared file system holding the plan folder and the session.
 A tile job writes its parts under temporary names and its tile.json last: a task that fails, or
@@ -28,7 +31,7 @@ def tile_count(plan_dir):
             plan = json.load(f)
     except (OSError, ValueError) as e:
         raise RuntimeError(f"{path}: cannot read the tile plan: {e}") from e
-    if plan.get("format") != "ltmapper tile plan" or not isinstance(plan.get("tiles"), list):
+    if plan.get("format") not in ("ltmapper tile plan", "ltmapper LD tile plan") or not isinstance(plan.get("tiles"), list):
         raise RuntimeError(f"{path}: not a tile plan")
     return len(plan["tiles"])
 
@@ -67,8 +70,9 @@ def run_plan(client, plan_dir, out_dir, exe="ltmapper", threads=1, retries=3):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("plan_dir", help="plan folder of `ltmapper tiles plan`")
-    ap.add_argument("--out", required=True, help="output folder of the merge (static_map.pcd, hd_map.pcd, report.json)")
+    ap.add_argument("plan_dir", help="plan folder of `ltmapper tiles plan` or `tiles ld-plan`")
+    ap.add_argument("--out", required=True, help="output folder of the merge (static_map.pcd, hd_map.pcd, report.json; "
+                    "an LD plan: the pair's clouds)")
     where = ap.add_mutually_exclusive_group()
     where.add_argument("--scheduler", help="address of a running dask-scheduler (tcp://HOST:8786)")
     where.add_argument("--local-workers", type=int, default=2, help="else a local cluster of this many worker processes")

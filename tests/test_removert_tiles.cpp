@@ -295,9 +295,9 @@ TEST(RemovertTileJobs, CliPlanRunMerge) {
   EXPECT_NE(out.find(tmp / "short.txt"), std::string::npos) << out;
 }
 
-// The stage with tiles.stage: true writes the same files as without (HD maps and the pair's LD).
-TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
-  test::TempDir tmp;
+// Two sessions of a street in tmp/s0 (a parked car at x = 0) and tmp/s1 (none), their world poses
+// in tmp/p0.txt and tmp/p1.txt (returned).
+std::vector<std::string> TwoStreetSessions(const test::TempDir& tmp) {
   const std::vector<std::vector<Pose>> w = {test::WriteStreetSession(tmp / "s0", -10.0, 12, true),
                                             test::WriteStreetSession(tmp / "s1", -6.0, 12, false)};
   std::vector<std::string> poses;
@@ -305,10 +305,23 @@ TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
     poses.push_back(tmp / ("p" + std::to_string(s) + ".txt"));
     io::WriteKittiPoses(poses.back(), w[s]);
   }
+  return poses;
+}
+
+// The stage's keys for them: short range, 15 m HD tiles, only the maps and the pair's clouds.
+RemovertConfig PairConfig() {
   RemovertConfig cfg = ShortRange();
   cfg.write_keyframes = false;
   cfg.write_ply = false;
   cfg.tiles_edge_m = 15.0;
+  return cfg;
+}
+
+// The stage with tiles.stage: true writes the same files as without (HD maps and the pair's LD).
+TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
+  test::TempDir tmp;
+  const std::vector<std::string> poses = TwoStreetSessions(tmp);
+  RemovertConfig cfg = PairConfig();
   removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "whole", 2);
   cfg.tiles_stage = true;
   removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "tiled", 2);
@@ -321,6 +334,62 @@ TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
   }
   EXPECT_GE(files, 6u);  // 2 x (static, hd) + the pair's changes
   EXPECT_GT(io::ReadPcd(tmp / "tiled/pair_00_01/nd_strong.pcd").size(), 100u);  // the parked car left
+}
+
+
+// LD from files: the two sessions' HD tiles, then the pair's LD tiles over their parts (in any
+// order, one killed), merged: the stage's pair clouds bit for bit; the CLI the same; a query plan
+// of another config and a merge before every tile is done are errors naming the file.
+TEST(RemovertTileJobs, LdPlanRunMergeEqualsTheStagesPairFiles) {
+  test::TempDir tmp;
+  const std::vector<std::string> poses = TwoStreetSessions(tmp);
+  RemovertConfig cfg = PairConfig();
+  cfg.tiles_max_map_points = 1;  // the finest LD tiles: cores meet at x = 0, through the parked car
+  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "whole", 2);
+  for (int s : {0, 1}) {
+    const std::string hd = tmp / ("hd" + std::to_string(s));
+    const removert::TilePlan plan = removert::WriteTilePlan(hd, tmp / ("s" + std::to_string(s)), poses[std::size_t(s)], cfg);
+    for (std::size_t t = 0; t < plan.tiles.size(); ++t) removert::RunTileJob(hd, t, 2);
+  }
+  const removert::LdTilePlan plan = removert::WriteLdTilePlan(tmp / "ld", tmp / "hd0", tmp / "hd1");
+  std::printf("LD tiles: %zu of %.2f m, margin %.2f m, largest window %zu points\n", plan.tiles.size(), plan.EdgeM(),
+              double(plan.margin_voxels) * plan.voxel_m, plan.largest_window);
+  ASSERT_GE(plan.tiles.size(), 2u);
+  EXPECT_TRUE(removert::IsLdTilePlan(tmp / "ld"));
+  EXPECT_FALSE(removert::IsLdTilePlan(tmp / "hd0"));
+  const removert::LdTilePlanFile read = removert::ReadLdTilePlan(tmp / "ld");
+  ASSERT_EQ(read.plan.tiles.size(), plan.tiles.size());
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) {
+    EXPECT_EQ(read.plan.tiles[t].central_voters, plan.tiles[t].central_voters);
+    EXPECT_EQ(read.plan.tiles[t].query_voters, plan.tiles[t].query_voters);
+  }
+  for (std::size_t t = plan.tiles.size(); t-- > 1;) EXPECT_TRUE(removert::RunLdTileJob(tmp / "ld", t, 2));
+  const std::string first = removert::TilePartDir(tmp / "ld", 0);
+  test::ExpectError([&] { removert::MergeLdTileJobs(tmp / "ld", tmp / "pair"); }, {first + "/tile.json", "not done"});
+  test::WriteText(first + "/nd_strong.pcd", "half");  // a killed job: no tile.json, rerun whole
+  EXPECT_TRUE(removert::RunLdTileJob(tmp / "ld", 0, 2));
+  EXPECT_FALSE(removert::RunLdTileJob(tmp / "ld", 0, 2));  // done: skipped
+  const removert::LdStats st = removert::MergeLdTileJobs(tmp / "ld", tmp / "pair");
+  EXPECT_GT(st.nd_strong, 100u);  // the parked car left
+  std::string out;
+  ASSERT_EQ(0, test::RunCli("tiles ld-plan --central " + (tmp / "hd0") + " --query " + (tmp / "hd1") + " --out " +
+                                (tmp / "ld_cli"), &out)) << out;
+  ASSERT_EQ(0, test::RunCli("tiles run " + (tmp / "ld_cli") + " --threads 2", &out)) << out;
+  ASSERT_EQ(0, test::RunCli("tiles merge " + (tmp / "ld_cli") + " --out " + (tmp / "pair_cli"), &out)) << out;
+  std::size_t files = 0;
+  for (const char* f : {"nd_strong", "nd_weak", "pd_strong", "pd_weak", "pd_unobserved", "nd_residue", "pd_residue"}) {
+    const std::string whole = test::ReadText(tmp / ("whole/pair_00_01/" + std::string(f) + ".pcd"));
+    EXPECT_EQ(whole, test::ReadText(tmp / ("pair/" + std::string(f) + ".pcd"))) << f;
+    EXPECT_EQ(whole, test::ReadText(tmp / ("pair_cli/" + std::string(f) + ".pcd"))) << f;
+    ++files;
+  }
+  EXPECT_EQ(files, 7u);
+
+  RemovertConfig other = cfg;
+  other.ld_radius_m = 0.25;
+  removert::WriteTilePlan(tmp / "hd1", tmp / "s1", poses[1], other);
+  test::ExpectError([&] { removert::WriteLdTilePlan(tmp / "ld2", tmp / "hd0", tmp / "hd1"); },
+                    {tmp / "hd1/config.yaml", "one config"});
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 
 The merged maps equal the local run's bytes; and again when one worker is killed (SIGKILL, with
 its tile job) in the middle of a tile: Dask reruns that tile, nothing half-written is merged.
+A pair's LD plan over its sessions' HD tiles runs on the cluster too: the same pair clouds.
 Runs under pytest or as a script (exit code 77 = skipped: python3-distributed is not installed).
 Needs LTM_EXE (the ltmapper executable) and LTM_SOURCE_DIR (the source tree).
 """
@@ -29,12 +30,17 @@ def ltmapper(*args):
     subprocess.run([EXE, *args, "--quiet"], check=True)
 
 
-def make_session(work):
+LD_CLOUDS = ("nd_strong.pcd", "nd_weak.pcd", "pd_strong.pcd", "pd_weak.pcd", "pd_unobserved.pcd", "nd_residue.pcd",
+             "pd_residue.pcd")
+
+
+def make_sessions(work, sessions=1):
+    """The simulated sessions' folders and true world poses: [(session, poses), ...]."""
     with open(os.path.join(work, "sim.yaml"), "w", encoding="utf-8") as f:
-        f.write(SIM_YAML)
+        f.write(SIM_YAML.replace("sessions: 1", f"sessions: {sessions}"))
     ltmapper("sim", "--config", os.path.join(work, "sim.yaml"), "--out", os.path.join(work, "sim"), "--threads", "2")
-    return (os.path.join(work, "sim", "sessions", "session_00"),
-            os.path.join(work, "sim", "truth", "session_00", "poses_world.txt"))
+    return [(os.path.join(work, "sim", "sessions", f"session_{s:02d}"),
+             os.path.join(work, "sim", "truth", f"session_{s:02d}", "poses_world.txt")) for s in range(sessions)]
 
 
 def plan(work, name, session, poses):
@@ -81,7 +87,7 @@ def test_dask_cluster_equals_local_run_even_when_a_worker_dies():
         import pytest
         pytest.skip("python3-distributed is not installed (scripts/install-deps.sh installs it)")
     with tempfile.TemporaryDirectory(prefix="ltm_dask_") as work:
-        session, poses = make_session(work)
+        session, poses = make_sessions(work)[0]
         local = plan(work, "plan_local", session, poses)
         ltmapper("tiles", "run", local, "--threads", "2")
         ltmapper("tiles", "merge", local, "--out", os.path.join(work, "out_local"))
@@ -100,6 +106,31 @@ def test_dask_cluster_equals_local_run_even_when_a_worker_dies():
             same_outputs(os.path.join(work, "out_local"), os.path.join(work, "out_kill"))
 
 
+def test_pair_ld_on_dask_equals_local_run():
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        import pytest
+        pytest.skip("python3-distributed is not installed (scripts/install-deps.sh installs it)")
+    with tempfile.TemporaryDirectory(prefix="ltm_dask_ld_") as work:
+        hd = []
+        for s, (session, poses) in enumerate(make_sessions(work, 2)):
+            hd.append(plan(work, f"hd{s}", session, poses))
+            ltmapper("tiles", "run", hd[-1], "--threads", "2")
+        ld = os.path.join(work, "ld")
+        ltmapper("tiles", "ld-plan", "--central", hd[0], "--query", hd[1], "--out", ld)
+        n = ltmapper_dask.tile_count(ld)
+        assert n >= 2, f"{n} LD tiles: the scenario must span several"
+        with LocalCluster(n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None) as cluster, \
+                Client(cluster) as client:
+            ltmapper_dask.run_plan(client, ld, os.path.join(work, "pair_dask"), EXE)
+        ltmapper("tiles", "run", ld, "--threads", "2", "--force")
+        ltmapper("tiles", "merge", ld, "--out", os.path.join(work, "pair_local"))
+        for name in LD_CLOUDS:
+            a, b = os.path.join(work, "pair_local", name), os.path.join(work, "pair_dask", name)
+            assert filecmp.cmp(a, b, shallow=False), f"{name} differs: {a} {b}"
+
+
 if __name__ == "__main__":
     try:
         import distributed  # noqa: F401
@@ -108,3 +139,5 @@ if __name__ == "__main__":
         sys.exit(77)
     test_dask_cluster_equals_local_run_even_when_a_worker_dies()
     print("ok: Dask (2 worker processes, one killed mid-tile) == local run")
+    test_pair_ld_on_dask_equals_local_run()
+    print("ok: a pair's LD tiles on Dask == local run")

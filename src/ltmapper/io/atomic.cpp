@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <system_error>
 
 namespace fs = std::filesystem;
@@ -42,6 +43,14 @@ void Commit(const std::string& tmp, const std::string& path) {
 }
 
 }  // namespace
+
+std::string ReadFileText(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path, 0, "cannot open (missing?)");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
 
 void MakeDirs(const std::string& dir) {
   if (dir.empty()) return;

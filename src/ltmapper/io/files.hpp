@@ -16,6 +16,8 @@ namespace ltm::io {
 void WriteFileAtomic(const std::string& path, const std::function<void(std::ostream&)>& write);
 // Same, for writers that need a path (e.g. PCL): `write(tmp_path)` must create tmp_path.
 void WritePathAtomic(const std::string& path, const std::function<void(const std::string&)>& write);
+// A file's whole content; ltm::Error naming it when it cannot be opened.
+std::string ReadFileText(const std::string& path);
 // Creates a directory and its parents; throws on failure.
 void MakeDirs(const std::string& dir);
 // MakeDirs, then checks that files can be created in `dir` ("<dir>: output directory is not

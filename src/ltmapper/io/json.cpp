@@ -1,7 +1,8 @@
 #include "ltmapper/io/json.hpp"
 
+#include "ltmapper/io/files.hpp"
+
 #include <cmath>
-#include <fstream>
 #include <sstream>
 #include <cstdio>
 #include <cstdlib>
@@ -166,13 +167,7 @@ Value Parse(const std::string& text, const std::string& where) {
   return Parser(text, where).ParseDocument();
 }
 
-Value ParseFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path, 0, "cannot open (missing?)");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return Parse(ss.str(), path);
-}
+Value ParseFile(const std::string& path) { return Parse(ReadFileText(path), path); }
 
 std::string Quote(const std::string& s) {
   std::string out = "\"";

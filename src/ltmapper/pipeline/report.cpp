@@ -3,7 +3,6 @@
 #include "ltmapper/io/io.hpp"
 
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 
 namespace ltm::pipeline {
@@ -67,14 +66,6 @@ std::vector<std::string> Cells(const std::string& line) {
 
 bool IsSeparatorRow(const std::string& line) {
   return line.find_first_not_of("|-: \t") == std::string::npos && line.find('-') != std::string::npos;
-}
-
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path, 0, "cannot read report item");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 bool EndsWith(const std::string& s, const std::string& suffix) {
@@ -176,7 +167,7 @@ void WriteReport(const std::string& out_base, const std::string& title, const st
   for (const auto& item : items) {
     if (!fs::exists(item.path)) throw Error(item.path, 0, "report item not found");
     if (EndsWith(item.path, ".md")) {
-      const std::string text = ReadAll(item.path);
+      const std::string text = io::ReadFileText(item.path);
       md << text << (EndsWith(text, "\n") ? "\n" : "\n\n");
       html << "<section>\n" << MarkdownToHtml(text) << "</section>\n";
     } else if (EndsWith(item.path, ".png")) {

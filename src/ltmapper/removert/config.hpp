@@ -125,14 +125,15 @@ struct RemovertConfig {
   double keyframe_voxel_m = 0.0;       // [m] extra voxel for per-keyframe clouds (0 = map voxel)
   bool write_keyframes = true;         // per keyframe local clouds
   bool write_ply = true;               // PLY twins with a class field
-  // --- tiles (tiles.hpp: HD removal tile by tile, memory bounded by the tile)
+  // --- tiles (tiles.hpp: HD removal and LD tile by tile, memory bounded by the tile)
   double tiles_edge_m = 0.0;  // [m] edge of the square world tiles; 0 = 2 x the keyframes' reach
                               //     (TileReachM: max(sensor.max_range_m, submap_radius_m))
   int tiles_max_map_points = 500000;  // [points] a tile job's map (core + margin) holds at most about this
                               //     many (~100 B each): the plan estimates every tile's map from the scans and
-                              //     shrinks the edge until the largest fits (PlanTiles); 0 = no bound
-  bool tiles_stage = false;   // true: the stage's HD removal runs tile by tile (RemoveHdTiled): the same
-                              //     files, memory bounded by the tile, more CPU where tiles share keyframes
+                              //     shrinks the edge until the largest fits (PlanTiles); an LD tile's window
+                              //     holds both sessions' maps (PlanLdTiles, counted exactly); 0 = no bound
+  bool tiles_stage = false;   // true: the stage's HD removal and LD run tile by tile (RemoveHdTiled,
+                              //     DetectLdTiled): the same files, more CPU where tiles share keyframes
 
   template <class V>
   void Visit(V& v) {

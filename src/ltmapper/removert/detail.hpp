@@ -67,7 +67,8 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);
 
 // ---- LD as labels (ld_detection.cpp), shared with LD tile by tile (ld_tiles.cpp)
-enum LdLabel : std::uint8_t { kLdUnchanged = 0, kLdStrong, kLdWeak, kLdUnobserved, kLdResidue, kLdSame };
+// kLdOutside: a point of a tile's window outside its core (decided by another tile).
+enum LdLabel : std::uint8_t { kLdUnchanged = 0, kLdStrong, kLdWeak, kLdUnobserved, kLdResidue, kLdSame, kLdOutside };
 struct LdLabels {
   std::vector<std::uint8_t> central, query;  // per map point: an LdLabel (ND of central, PD of query)
 };
@@ -159,5 +160,15 @@ constexpr std::int64_t kFinestEdgeMargins = 5;
 bool IsTileEdgeChoice(const RemovertConfig& cfg, std::int64_t edge_voxels);
 // Adds a tile's counts and seconds to *sum.
 void AddHdStats(const HdStats& part, HdStats* sum);
+
+// ---- LD tiles (ld_tiles.cpp), shared with the LD tile jobs from files (ld_tile_jobs.cpp)
+// The voxels of an LD tile's core + margin (its window).
+VoxelBox LdWindowBox(const LdTilePlan& plan, std::size_t tile);
+// An LD tile's labels of its window's points (each map's points in the window, in map order);
+// those outside the core are kLdOutside. Positions and keyframes: the whole sessions'.
+LdLabels LabelTile(const LdTilePlan& plan, std::size_t tile, const PointCloud& central_window,
+                   const PointCloud& query_window, const PointCloud& central_positions,
+                   const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_keyframes,
+                   const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg, int threads);
 
 }  // namespace ltm::removert::detail

@@ -90,12 +90,19 @@ std::vector<WorldKeyframe> Pick(const std::vector<WorldKeyframe>& kfs, const std
   return out;
 }
 
-// The labels of the window's points that lie in the core, written at their map positions.
-void KeepCore(const PointCloud& map, const std::vector<std::uint32_t>& window, const std::vector<std::uint8_t>& label,
-              const detail::VoxelBox& core, double voxel_m, std::vector<std::uint8_t>* out) {
+// The labels of the window's points (window[j]: map position, label[j]) that are not kLdOutside.
+void KeepCore(const std::vector<std::uint32_t>& window, const std::vector<std::uint8_t>& label,
+              std::vector<std::uint8_t>* out) {
+  for (std::size_t j = 0; j < window.size(); ++j)
+    if (label[j] != detail::kLdOutside) (*out)[window[j]] = label[j];
+}
+
+// The window's points outside the core labelled kLdOutside.
+void MarkOutside(const PointCloud& window, const detail::VoxelBox& core, double voxel_m, std::vector<std::uint8_t>* label) {
   for (std::size_t j = 0; j < window.size(); ++j) {
-    const PointXYZI& p = map.points[window[j]];
-    if (core.Contains(detail::VoxelIndex(p.x, voxel_m), detail::VoxelIndex(p.y, voxel_m))) (*out)[window[j]] = label[j];
+    const PointXYZI& p = window.points[j];
+    if (!core.Contains(detail::VoxelIndex(p.x, voxel_m), detail::VoxelIndex(p.y, voxel_m)))
+      (*label)[j] = detail::kLdOutside;
   }
 }
 
@@ -139,6 +146,42 @@ LdTilePlan PlanLdTiles(const LdCellCounts& counts, const std::vector<WorldKeyfra
   return plan;
 }
 
+detail::VoxelBox detail::LdWindowBox(const LdTilePlan& plan, std::size_t tile) {
+  return BoxOf(plan, plan.tiles.at(tile), plan.margin_voxels);
+}
+
+detail::LdLabels detail::LabelTile(const LdTilePlan& plan, std::size_t tile, const PointCloud& central_window,
+                                   const PointCloud& query_window, const PointCloud& central_positions,
+                                   const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_keyframes,
+                                   const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg,
+                                   int threads) {
+  const LdTile& t = plan.tiles.at(tile);
+  LdLabels w = LabelLd(central_window, query_window, central_positions, query_positions,
+                       Pick(central_keyframes, t.central_voters), Pick(query_keyframes, t.query_voters), cfg, threads);
+  const VoxelBox core = BoxOf(plan, t, 0);
+  MarkOutside(central_window, core, plan.voxel_m, &w.central);
+  MarkOutside(query_window, core, plan.voxel_m, &w.query);
+  return w;
+}
+
+LdResult DetectLdTile(const LdTilePlan& plan, std::size_t tile, const PointCloud& central_window,
+                      const PointCloud& query_window, const std::vector<WorldKeyframe>& central_keyframes,
+                      const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg, int threads) {
+  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
+  const auto t0 = std::chrono::steady_clock::now();
+  const detail::LdLabels w =
+      detail::LabelTile(plan, tile, central_window, query_window, detail::Positions(central_keyframes),
+                        detail::Positions(query_keyframes), central_keyframes, query_keyframes, cfg, threads);
+  LdResult res = detail::LdFromLabels(central_window, query_window, w);
+  auto inside = [](const std::vector<std::uint8_t>& l) {
+    return l.size() - std::size_t(std::count(l.begin(), l.end(), detail::kLdOutside));
+  };
+  res.stats.central_points = inside(w.central);
+  res.stats.query_points = inside(w.query);
+  res.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return res;
+}
+
 LdResult DetectLdTiled(const PointCloud& central_map, const PointCloud& query_map,
                        const std::vector<WorldKeyframe>& central_keyframes,
                        const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg, int threads) {
@@ -156,14 +199,12 @@ LdResult DetectLdTiled(const PointCloud& central_map, const PointCloud& query_ma
   const PointCloud c_pos = detail::Positions(central_keyframes), q_pos = detail::Positions(query_keyframes);
   detail::LdLabels labels{std::vector<std::uint8_t>(central_map.size(), detail::kLdUnchanged),
                           std::vector<std::uint8_t>(query_map.size(), detail::kLdUnchanged)};
-  for (const LdTile& t : plan.tiles) {
-    const std::vector<std::uint32_t> cw = WindowOf(plan, t, c_cells), qw = WindowOf(plan, t, q_cells);
-    const detail::LdLabels w =
-        detail::LabelLd(central_map.select(cw), query_map.select(qw), c_pos, q_pos,
-                        Pick(central_keyframes, t.central_voters), Pick(query_keyframes, t.query_voters), cfg, threads);
-    const detail::VoxelBox core = BoxOf(plan, t, 0);
-    KeepCore(central_map, cw, w.central, core, plan.voxel_m, &labels.central);
-    KeepCore(query_map, qw, w.query, core, plan.voxel_m, &labels.query);
+  for (std::size_t t = 0; t < plan.tiles.size(); ++t) {
+    const std::vector<std::uint32_t> cw = WindowOf(plan, plan.tiles[t], c_cells), qw = WindowOf(plan, plan.tiles[t], q_cells);
+    const detail::LdLabels w = detail::LabelTile(plan, t, central_map.select(cw), query_map.select(qw), c_pos, q_pos,
+                                                 central_keyframes, query_keyframes, cfg, threads);
+    KeepCore(cw, w.central, &labels.central);
+    KeepCore(qw, w.query, &labels.query);
   }
   LdResult res = detail::LdFromLabels(central_map, query_map, labels);
   res.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -21,7 +21,8 @@
 // `submap_radius_m` of it (tile index), so memory is the maps of at most two sessions (the
 // central and the current query: a session's maps are freed when no later pair needs them) plus
 // O(threads) scans; it still grows with the length of a session (its whole map is in memory),
-// unless HD removal runs tile by tile (tiles.hpp: the same maps, memory bounded by the tile).
+// unless HD removal and LD run tile by tile from files (tiles.hpp: the same maps and changes,
+// memory bounded by the tile).
 //
 // This header only gathers the module's parts, one topic each (include the part you need):
 // config.hpp, keyframes.hpp, hd.hpp, ld.hpp, visibility.hpp, stage.hpp, tiles.hpp.

@@ -122,6 +122,11 @@ class LdCellCounts {
 // exactly) holds at most tiles.max_map_points (0: the largest edge), and each tile's voters.
 LdTilePlan PlanLdTiles(const LdCellCounts& counts, const std::vector<WorldKeyframe>& central_keyframes,
                        const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg);
+// One LD tile: DetectLd's clouds of the points in its core (in window order), given each map's
+// points in its core + margin (in map order) and the whole sessions' keyframes; stats of the core.
+LdResult DetectLdTile(const LdTilePlan& plan, std::size_t tile, const PointCloud& central_window,
+                      const PointCloud& query_window, const std::vector<WorldKeyframe>& central_keyframes,
+                      const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg, int threads = 0);
 // DetectLd tile by tile: each tile labels the maps' points in its core + margin against its voters
 // and keeps its core's labels; the same clouds, stats and central_nd as DetectLd (seconds: the
 // whole call). Memory: the maps (given whole) and one tile's window.
@@ -151,5 +156,30 @@ bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads = 0, 
 // Every tile's parts merged (MergeTiles) into out_dir: static_map.pcd, hd_map.pcd, report.json.
 // ltm::Error naming the tile.json of the first tile not done.
 HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir);
+
+// ---- LD from files: a pair's LD tiles over its sessions' HD tile plans (ld_tile_jobs.cpp)
+// The pair's sessions are planned and run tile by tile first (`tiles plan` + `tiles run`, one
+// config for both). An LD plan folder holds plan.json (the two HD plan folders, the LD tiles and
+// their voters) and config.yaml (the central plan's). An LD tile's job reads its window from the
+// HD tiles' parts (static_map.pcd of the HD tiles whose core meets it; memory: the window) and
+// writes <plan>/parts/tile_NNNNNN/ with the pair's clouds (nd_strong, nd_weak, pd_strong, pd_weak,
+// pd_unobserved, nd_residue, pd_residue .pcd), then tile.json; the merge writes those clouds
+// (RunRemovertStage's pair files, bit for bit) and report.json.
+struct LdTilePlanFile {
+  std::string central_plan, query_plan;  // HD tile plan folders (absolute)
+  RemovertConfig cfg;
+  LdTilePlan plan;
+};
+// Plans the pair's LD tiles into a fresh `plan_dir` from one pass over the HD parts of both
+// sessions (every HD tile must be done; their configs must be equal: ltm::Error naming the file).
+LdTilePlan WriteLdTilePlan(const std::string& plan_dir, const std::string& central_plan_dir,
+                           const std::string& query_plan_dir);
+// Whether `plan_dir` holds an LD tile plan (else, e.g., an HD tile plan).
+bool IsLdTilePlan(const std::string& plan_dir);
+LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir);
+// One LD tile's job; skipped (false) when its tile.json exists, unless `force`.
+bool RunLdTileJob(const std::string& plan_dir, std::size_t tile, int threads = 0, bool force = false);
+// Every LD tile's parts merged into out_dir; ltm::Error naming the tile.json of the first tile not done.
+LdStats MergeLdTileJobs(const std::string& plan_dir, const std::string& out_dir);
 
 }  // namespace ltm::removert
