@@ -317,25 +317,46 @@ RemovertConfig PairConfig() {
   return cfg;
 }
 
-// The stage with tiles.stage: true writes the same files as without (HD maps and the pair's LD).
+// The stage with tiles.stage: true (HD and LD tiles from files, the keyframe folders cut from the
+// merged clouds) writes the same files as without: the HD maps, the pair's LD clouds, every
+// keyframe's and new keyframe's clouds and keyframes.csv; no work folder is left. Three sessions:
+// the third drives further on (new keyframes) and is paired with the central.
 TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
   test::TempDir tmp;
-  const std::vector<std::string> poses = TwoStreetSessions(tmp);
+  std::vector<std::string> poses = TwoStreetSessions(tmp);
+  poses.push_back(tmp / "p2.txt");
+  io::WriteKittiPoses(poses.back(), test::WriteStreetSession(tmp / "s2", 30.0, 12, false));
   RemovertConfig cfg = PairConfig();
-  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "whole", 2);
+  cfg.write_keyframes = true;
+  cfg.write_ply = true;            // the keyframes' classes.ply; the whole-map twins are skipped tiled
+  cfg.tiles_max_map_points = 1;    // the finest tiles
+  const std::vector<std::string> sessions = {tmp / "s0", tmp / "s1", tmp / "s2"};
+  const removert::StageReport whole = removert::RunRemovertStage(cfg, sessions, poses, tmp / "whole", 2);
   cfg.tiles_stage = true;
-  removert::RunRemovertStage(cfg, {tmp / "s0", tmp / "s1"}, poses, tmp / "tiled", 2);
-  std::size_t files = 0;
+  const removert::StageReport tiled = removert::RunRemovertStage(cfg, sessions, poses, tmp / "tiled", 2);
+  std::size_t files = 0, keyframe_files = 0;
   for (const auto& e : std::filesystem::recursive_directory_iterator(tmp / "whole")) {
-    if (e.path().extension() != ".pcd") continue;
+    const std::string ext = e.path().extension().string(), name = e.path().filename().string();
+    if (ext != ".pcd" && ext != ".csv" && name != "classes.ply") continue;
     const std::string rel = std::filesystem::relative(e.path(), tmp / "whole").string();
     EXPECT_EQ(test::ReadText(e.path().string()), test::ReadText(tmp / ("tiled/" + rel))) << rel;
     ++files;
+    keyframe_files += rel.find("keyframes/") != std::string::npos ? 1 : 0;
   }
-  EXPECT_GE(files, 6u);  // 2 x (static, hd) + the pair's changes
+  EXPECT_GE(keyframe_files, 2u * 12u * 7u);  // 12 central keyframes x 6 clouds + classes.ply, 2 pairs
+  EXPECT_GE(files, keyframe_files + 2u * 3u + 2u * 8u);  // + 3 x (static, hd) + 2 x (7 clouds + csv)
+  EXPECT_FALSE(std::filesystem::exists(tmp / "tiled/.tiles"));
+  EXPECT_FALSE(std::filesystem::exists(tmp / "tiled/pair_00_01/.spill"));
   EXPECT_GT(io::ReadPcd(tmp / "tiled/pair_00_01/nd_strong.pcd").size(), 100u);  // the parked car left
+  ASSERT_EQ(tiled.new_keyframes.size(), 2u);
+  EXPECT_EQ(tiled.new_keyframes, whole.new_keyframes);
+  EXPECT_FALSE(tiled.new_keyframes[1].empty()) << "the third session drives past the central's end";
+  for (std::size_t p = 0; p < 2; ++p) {
+    EXPECT_EQ(tiled.ld[p].nd_strong, whole.ld[p].nd_strong);
+    EXPECT_EQ(tiled.ld[p].pd_strong, whole.ld[p].pd_strong);
+  }
+  EXPECT_EQ(tiled.hd[2].removed, whole.hd[2].removed);
 }
-
 
 // LD from files: the two sessions' HD tiles, then the pair's LD tiles over their parts (in any
 // order, one killed), merged: the stage's pair clouds bit for bit; the CLI the same; a query plan

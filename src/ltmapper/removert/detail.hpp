@@ -11,10 +11,13 @@
 #include <Eigen/Core>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <string>
+#include <memory>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -170,5 +173,74 @@ LdLabels LabelTile(const LdTilePlan& plan, std::size_t tile, const PointCloud& c
                    const PointCloud& query_window, const PointCloud& central_positions,
                    const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_keyframes,
                    const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg, int threads);
+
+// ---- the stage's keyframe folders (stage.cpp), shared with the stage from tiles (stage_tiles.cpp)
+// The clouds of a pair's keyframe folder, in keyframes.csv's column order.
+enum KeyframeCloud : int { kKfStatic = 0, kKfHd, kKfPdStrong, kKfPdWeak, kKfNdStrong, kKfNdWeak };
+constexpr int kKeyframeClouds = 6;
+inline constexpr const char* kKeyframeCloudNames[kKeyframeClouds] = {"static",    "hd",        "pd_strong",
+                                                                     "pd_weak",   "nd_strong", "nd_weak"};
+inline constexpr PointClass kKeyframeCloudClasses[kKeyframeClouds] = {
+    PointClass::kStatic, PointClass::kHD, PointClass::kPDStrong, PointClass::kPDWeak, PointClass::kNDStrong,
+    PointClass::kNDWeak};
+// The nearest keyframe (position in `tree`) of every point, and optionally its squared distance.
+std::vector<std::uint32_t> NearestKeyframes(const PointCloud& pts, const geometry::KdTree& tree, int threads,
+                                            std::vector<float>* sq_dist = nullptr);
+// Query keyframes farther than out.new_keyframe_dist_m from every central keyframe.
+std::vector<std::uint32_t> FarQueryKeyframes(const std::vector<WorldKeyframe>& ckf,
+                                             const std::vector<WorldKeyframe>& qkf, const RemovertConfig& cfg,
+                                             int threads);
+// The keyframe bucket of a pair's output points (stage.cpp's rule): [0, nc) central keyframes,
+// nc + j query keyframe j. Central(): the nearest central keyframe; Pd(): the nearest central or
+// far query keyframe, a central one farther than out.assign_radius_m giving way to the nearest
+// query keyframe. Point-local: a cloud may be given in pieces.
+class KeyframeOwners {
+ public:
+  KeyframeOwners(const std::vector<WorldKeyframe>& ckf, const std::vector<WorldKeyframe>& qkf,
+                 const RemovertConfig& cfg, int threads);
+  std::vector<std::uint32_t> Central(const PointCloud& pts) const;
+  std::vector<std::uint32_t> Pd(const PointCloud& pd) const;
+  // The query keyframes (positions) that become new map keyframes: far ones and those owning PD
+  // (owns_pd: per bucket).
+  std::vector<int> NewKeyframes(const std::vector<bool>& owns_pd) const;
+
+ private:
+  std::size_t nc_;
+  std::vector<std::uint32_t> new_q_;
+  int threads_;
+  float assign_r2_;
+  geometry::KdTree central_, query_;
+  std::unique_ptr<geometry::KdTree> candidates_;
+};
+// One cloud of a keyframe folder: file name (without .pcd), world-frame points, class and session.
+struct KeyframePart {
+  const char* name;
+  PointCloud cloud;
+  PointClass cls;
+  int session;
+};
+// The parts in the keyframe's local frame as PCDs, and with a class field in classes.ply.
+void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const std::vector<KeyframePart>& parts,
+                      const RemovertConfig& cfg);
+// A central keyframe's parts (every KeyframeCloud) and a new keyframe's (its PD).
+std::vector<KeyframePart> CentralKeyframeParts(std::array<PointCloud, kKeyframeClouds> clouds, int ci, int qi);
+std::vector<KeyframePart> NewKeyframeParts(PointCloud pd_strong, PointCloud pd_weak, int qi);
+// keyframes.csv: counts[bucket][cloud] for every central keyframe, then the new ones (their PD).
+void WriteKeyframesCsv(const std::string& dir, const std::vector<WorldKeyframe>& ckf,
+                       const std::vector<WorldKeyframe>& qkf, int ci, int qi,
+                       const std::vector<std::array<std::size_t, kKeyframeClouds>>& counts,
+                       const std::vector<int>& new_list);
+
+// The files of a pair's LD clouds (the stage's pair folder, an LD tile's part, its merge).
+std::vector<std::string> LdPairCloudFiles();
+// ---- the stage tile by tile from files (stage_tiles.cpp)
+// RunRemovertStage's sessions and pairs with tiles.stage: every session's HD tiles and every pair's
+// LD tiles run from files under out/.tiles (removed at the end) and merged into the stage's
+// folders; the pair's keyframe folders cut from the merged clouds. `cfg`: the sensor resolved (the
+// central's); rep->pairs given; fills rep->hd, rep->ld and rep->new_keyframes.
+void RunStageFromTiles(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
+                       const std::vector<std::string>& poses_files, const std::vector<std::string>& names,
+                       const std::vector<std::vector<WorldKeyframe>>& kfs, const std::string& out, int threads,
+                       StageReport* rep);
 
 }  // namespace ltm::removert::detail

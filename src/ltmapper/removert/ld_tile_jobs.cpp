@@ -132,6 +132,12 @@ std::string Absolute(const std::string& path) { return fs::absolute(path).lexica
 
 }  // namespace
 
+std::vector<std::string> detail::LdPairCloudFiles() {
+  std::vector<std::string> files;
+  for (const LdCloud& c : kLdClouds) files.push_back(c.file);
+  return files;
+}
+
 LdTilePlan WriteLdTilePlan(const std::string& plan_dir, const std::string& central_plan_dir,
                            const std::string& query_plan_dir) {
   LdTilePlanFile f{Absolute(central_plan_dir), Absolute(query_plan_dir), {}, {}};

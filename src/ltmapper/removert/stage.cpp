@@ -17,6 +17,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -31,9 +32,10 @@ namespace fs = std::filesystem;
 
 std::string Index6(int index) { return io::layout::KeyframeDirName(index); }
 
-// Nearest keyframe (position index) of every point.
-std::vector<std::uint32_t> Nearest(const PointCloud& pts, const geometry::KdTree& tree, int threads,
-                                   std::vector<float>* sq_dist = nullptr) {
+}  // namespace
+
+std::vector<std::uint32_t> detail::NearestKeyframes(const PointCloud& pts, const geometry::KdTree& tree, int threads,
+                                                    std::vector<float>* sq_dist) {
   std::vector<std::uint32_t> out(pts.size(), 0);
   if (sq_dist) sq_dist->assign(pts.size(), 0.f);
   const std::size_t chunk = 8192;
@@ -50,6 +52,9 @@ std::vector<std::uint32_t> Nearest(const PointCloud& pts, const geometry::KdTree
   return out;
 }
 
+namespace {
+using detail::NearestKeyframes;
+
 // Member indices per bucket.
 std::vector<std::vector<std::uint32_t>> Buckets(const std::vector<std::uint32_t>& owner, std::size_t n) {
   std::vector<std::vector<std::uint32_t>> b(n);
@@ -62,16 +67,9 @@ PointCloud Voxel(const PointCloud& c, double voxel_m) {
   return voxel_m > 0.0 ? geometry::VoxelDownsample(c, voxel_m, 1) : c;
 }
 
-// One cloud of a keyframe folder: file name (without .pcd), world-frame points, class and session.
-struct KeyframePart {
-  const char* name;
-  PointCloud cloud;
-  PointClass cls;
-  int session;
-};
+}  // namespace
 
-// The parts in the keyframe's local frame as PCDs, and with a class field in classes.ply.
-void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const std::vector<KeyframePart>& parts,
+void detail::WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const std::vector<KeyframePart>& parts,
                       const RemovertConfig& cfg) {
   io::MakeDirs(dir);
   std::vector<PointCloud> local(parts.size());
@@ -83,6 +81,23 @@ void WriteKeyframeDir(const std::string& dir, const Pose& T_world_sensor, const 
   }
   if (cfg.write_ply) io::WritePly(dir + "/classes.ply", ply);
 }
+
+std::vector<detail::KeyframePart> detail::CentralKeyframeParts(std::array<PointCloud, kKeyframeClouds> clouds, int ci,
+                                                               int qi) {
+  std::vector<KeyframePart> parts;
+  for (int c = 0; c < kKeyframeClouds; ++c)
+    parts.push_back({kKeyframeCloudNames[c], std::move(clouds[std::size_t(c)]), kKeyframeCloudClasses[c],
+                     c == kKfPdStrong || c == kKfPdWeak ? qi : ci});
+  return parts;
+}
+
+std::vector<detail::KeyframePart> detail::NewKeyframeParts(PointCloud pd_strong, PointCloud pd_weak, int qi) {
+  return {{kKeyframeCloudNames[kKfPdStrong], std::move(pd_strong), PointClass::kPDStrong, qi},
+          {kKeyframeCloudNames[kKfPdWeak], std::move(pd_weak), PointClass::kPDWeak, qi}};
+}
+
+namespace {
+using detail::KeyframePart, detail::WriteKeyframeDir;
 
 // ---- the stage's steps -------------------------------------------------------------------
 
@@ -150,18 +165,18 @@ void WriteLdClouds(const std::string& dir, const LdResult& ld, const PointCloud&
 // Buckets: [0, nc) central keyframes, nc + j query keyframe j.
 struct KeyframeAssignment {
   std::size_t nc = 0;
-  PointCloud pd_strong_kf;  // strong PD + new territory (added to the map like strong PD)
-  PointCloud hd_kf;         // the central's HD + the residues of movers the query saw through
-  std::vector<std::vector<std::uint32_t>> b_static, b_hd, b_nds, b_ndw, b_pds, b_pdw;
+  std::array<PointCloud, detail::kKeyframeClouds> clouds;  // what the keyframes' clouds are cut from
+  std::array<std::vector<std::vector<std::uint32_t>>, detail::kKeyframeClouds> members;  // [cloud][bucket]
   std::vector<int> new_list;  // query keyframe positions that become new map keyframes
 };
 
-// Query keyframes farther than new_keyframe_dist_m from every central keyframe.
-std::vector<std::uint32_t> FarQueryKeyframes(const std::vector<WorldKeyframe>& ckf,
-                                             const std::vector<WorldKeyframe>& qkf, const RemovertConfig& cfg,
-                                             int threads) {
+}  // namespace
+
+std::vector<std::uint32_t> detail::FarQueryKeyframes(const std::vector<WorldKeyframe>& ckf,
+                                                     const std::vector<WorldKeyframe>& qkf, const RemovertConfig& cfg,
+                                                     int threads) {
   std::vector<float> qd2;
-  Nearest(detail::Positions(qkf), geometry::KdTree(detail::Positions(ckf)), threads, &qd2);
+  NearestKeyframes(Positions(qkf), geometry::KdTree(Positions(ckf)), threads, &qd2);
   std::vector<std::uint32_t> far;
   const float nk2 = float(cfg.new_keyframe_dist_m * cfg.new_keyframe_dist_m);
   for (std::size_t j = 0; j < qkf.size(); ++j)
@@ -169,107 +184,128 @@ std::vector<std::uint32_t> FarQueryKeyframes(const std::vector<WorldKeyframe>& c
   return far;
 }
 
-// PD owner: the nearest central or new query keyframe; a central one farther than
-// assign_radius_m gives the point to its nearest query keyframe instead.
-std::vector<std::uint32_t> PdOwners(const PointCloud& pd, const std::vector<WorldKeyframe>& ckf,
-                                    const std::vector<WorldKeyframe>& qkf, const std::vector<std::uint32_t>& new_q,
-                                    const RemovertConfig& cfg, int threads) {
-  const std::size_t nc = ckf.size();
-  PointCloud cand = detail::Positions(ckf);
-  for (auto j : new_q) {
-    const Eigen::Vector3d t = qkf[j].T_world_sensor.translation();
-    cand.push_back(float(t.x()), float(t.y()), float(t.z()));
-  }
-  const geometry::KdTree cand_tree(cand), qtree(detail::Positions(qkf));
+detail::KeyframeOwners::KeyframeOwners(const std::vector<WorldKeyframe>& ckf, const std::vector<WorldKeyframe>& qkf,
+                                       const RemovertConfig& cfg, int threads)
+    : nc_(ckf.size()), new_q_(FarQueryKeyframes(ckf, qkf, cfg, threads)), threads_(threads),
+      assign_r2_(float(cfg.assign_radius_m * cfg.assign_radius_m)), central_(Positions(ckf)), query_(Positions(qkf)) {
+  PointCloud cand = Positions(ckf);
+  const PointCloud query = Positions(qkf);
+  for (auto j : new_q_) cand.points.push_back(query.points[j]);
+  candidates_ = std::make_unique<geometry::KdTree>(std::move(cand));
+}
+
+std::vector<std::uint32_t> detail::KeyframeOwners::Central(const PointCloud& pts) const {
+  return NearestKeyframes(pts, central_, threads_);
+}
+
+std::vector<std::uint32_t> detail::KeyframeOwners::Pd(const PointCloud& pd) const {
   std::vector<float> d2;
-  std::vector<std::uint32_t> owner = Nearest(pd, cand_tree, threads, &d2);
-  const float ar2 = float(cfg.assign_radius_m * cfg.assign_radius_m);
+  std::vector<std::uint32_t> owner = NearestKeyframes(pd, *candidates_, threads_, &d2);
   for (std::size_t i = 0; i < pd.size(); ++i) {
     std::uint32_t& o = owner[i];
-    if (o >= nc) {
-      o = std::uint32_t(nc) + new_q[o - nc];
-    } else if (d2[i] > ar2) {
+    if (o >= nc_) {
+      o = std::uint32_t(nc_) + new_q_[o - nc_];
+    } else if (d2[i] > assign_r2_) {
       std::uint32_t j = 0;
       float dq = 0.f;
-      qtree.Nearest(pd.points[i].xyz(), &j, &dq);
-      o = std::uint32_t(nc) + j;
+      query_.Nearest(pd.points[i].xyz(), &j, &dq);
+      o = std::uint32_t(nc_) + j;
     }
   }
   return owner;
 }
 
-KeyframeAssignment AssignKeyframes(const SessionData& c, const SessionData& q, const LdResult& ld,
-                                   const RemovertConfig& cfg, int threads) {
-  KeyframeAssignment a;
-  a.nc = c.kfs.size();
-  a.pd_strong_kf = ld.pd_strong;
-  a.pd_strong_kf.append(ld.pd_unobserved);
-  a.hd_kf = c.hd_map;
-  a.hd_kf.append(ld.nd_residue);
-  const std::vector<std::uint32_t> new_q = FarQueryKeyframes(c.kfs, q.kfs, cfg, threads);
-  const geometry::KdTree ctree(detail::Positions(c.kfs));
-  const std::size_t nk = a.nc + q.kfs.size();
-  a.b_static = Buckets(Nearest(c.static_map, ctree, threads), nk);
-  a.b_hd = Buckets(Nearest(a.hd_kf, ctree, threads), nk);
-  a.b_nds = Buckets(Nearest(ld.nd_strong, ctree, threads), nk);
-  a.b_ndw = Buckets(Nearest(ld.nd_weak, ctree, threads), nk);
-  a.b_pds = Buckets(PdOwners(a.pd_strong_kf, c.kfs, q.kfs, new_q, cfg, threads), nk);
-  a.b_pdw = Buckets(PdOwners(ld.pd_weak, c.kfs, q.kfs, new_q, cfg, threads), nk);
-  std::vector<int> is_new(q.kfs.size(), 0);
-  for (std::size_t j = 0; j < q.kfs.size(); ++j)
-    if (!a.b_pds[a.nc + j].empty() || !a.b_pdw[a.nc + j].empty()) is_new[j] = 1;
-  for (auto j : new_q) is_new[j] = 1;
-  for (std::size_t j = 0; j < q.kfs.size(); ++j)
-    if (is_new[j]) a.new_list.push_back(int(j));
-  return a;
+std::vector<int> detail::KeyframeOwners::NewKeyframes(const std::vector<bool>& owns_pd) const {
+  std::vector<bool> is_new(owns_pd.size() - nc_, false);
+  for (std::size_t j = 0; j < is_new.size(); ++j) is_new[j] = owns_pd[nc_ + j];
+  for (auto j : new_q_) is_new[j] = true;
+  std::vector<int> list;
+  for (std::size_t j = 0; j < is_new.size(); ++j)
+    if (is_new[j]) list.push_back(int(j));
+  return list;
 }
 
-// keyframes/NNNNNN/ for every central keyframe and new_keyframes/NNNNNN/ for the new ones.
-void WriteKeyframeFolders(const std::string& dir, const SessionData& c, const SessionData& q, int ci, int qi,
-                          const LdResult& ld, const KeyframeAssignment& a, const RemovertConfig& cfg, int threads) {
-  auto pick = [](const PointCloud& cl, const std::vector<std::uint32_t>& idx) { return cl.select(idx); };
-  detail::ParallelFor(a.nc, threads, [&](std::size_t k) {
-    WriteKeyframeDir(dir + "/keyframes/" + Index6(c.kfs[k].index), c.kfs[k].T_world_sensor,
-                     {{"static", pick(c.static_map, a.b_static[k]), PointClass::kStatic, ci},
-                      {"hd", pick(a.hd_kf, a.b_hd[k]), PointClass::kHD, ci},
-                      {"pd_strong", pick(a.pd_strong_kf, a.b_pds[k]), PointClass::kPDStrong, qi},
-                      {"pd_weak", pick(ld.pd_weak, a.b_pdw[k]), PointClass::kPDWeak, qi},
-                      {"nd_strong", pick(ld.nd_strong, a.b_nds[k]), PointClass::kNDStrong, ci},
-                      {"nd_weak", pick(ld.nd_weak, a.b_ndw[k]), PointClass::kNDWeak, ci}},
-                     cfg);
-  });
-  detail::ParallelFor(a.new_list.size(), threads, [&](std::size_t t) {
-    const std::size_t j = std::size_t(a.new_list[t]);
-    WriteKeyframeDir(dir + "/new_keyframes/" + Index6(q.kfs[j].index), q.kfs[j].T_world_sensor,
-                     {{"pd_strong", pick(a.pd_strong_kf, a.b_pds[a.nc + j]), PointClass::kPDStrong, qi},
-                      {"pd_weak", pick(ld.pd_weak, a.b_pdw[a.nc + j]), PointClass::kPDWeak, qi}},
-                     cfg);
-  });
-}
-
-// Keyframe list: kind, session, index, point counts, world pose (KITTI 12 numbers).
-void WriteKeyframesCsv(const std::string& dir, const SessionData& c, const SessionData& q, int ci, int qi,
-                       const KeyframeAssignment& a) {
+void detail::WriteKeyframesCsv(const std::string& dir, const std::vector<WorldKeyframe>& ckf,
+                               const std::vector<WorldKeyframe>& qkf, int ci, int qi,
+                               const std::vector<std::array<std::size_t, kKeyframeClouds>>& counts,
+                               const std::vector<int>& new_list) {
   io::WriteFileAtomic(dir + "/keyframes.csv", [&](std::ostream& os) {
-    os << "kind,session,index,static,hd,pd_strong,pd_weak,nd_strong,nd_weak,"
-          "r00,r01,r02,tx,r10,r11,r12,ty,r20,r21,r22,tz\n";
+    os << "kind,session,index";
+    for (const char* name : kKeyframeCloudNames) os << ',' << name;
+    os << ",r00,r01,r02,tx,r10,r11,r12,ty,r20,r21,r22,tz\n";
     os << std::setprecision(9);
-    auto row = [&](const char* kind, int ses, const WorldKeyframe& kf, std::initializer_list<std::size_t> counts) {
+    auto row = [&](const char* kind, int ses, const WorldKeyframe& kf, const std::array<std::size_t, kKeyframeClouds>& n) {
       os << kind << ',' << ses << ',' << kf.index;
-      for (std::size_t n : counts) os << ',' << n;
+      for (std::size_t c : n) os << ',' << c;
       const Eigen::Matrix4d M = kf.T_world_sensor.matrix();
       for (int r = 0; r < 3; ++r)
         for (int cc = 0; cc < 4; ++cc) os << ',' << M(r, cc);
       os << '\n';
     };
-    for (std::size_t k = 0; k < a.nc; ++k)
-      row("central", ci, c.kfs[k],
-          {a.b_static[k].size(), a.b_hd[k].size(), a.b_pds[k].size(), a.b_pdw[k].size(), a.b_nds[k].size(),
-           a.b_ndw[k].size()});
-    for (int j : a.new_list)
-      row("new", qi, q.kfs[std::size_t(j)],
-          {0, 0, a.b_pds[a.nc + std::size_t(j)].size(), a.b_pdw[a.nc + std::size_t(j)].size(), 0, 0});
+    for (std::size_t k = 0; k < ckf.size(); ++k) row("central", ci, ckf[k], counts[k]);
+    for (int j : new_list) {
+      std::array<std::size_t, kKeyframeClouds> n{};
+      n[kKfPdStrong] = counts[ckf.size() + std::size_t(j)][kKfPdStrong];
+      n[kKfPdWeak] = counts[ckf.size() + std::size_t(j)][kKfPdWeak];
+      row("new", qi, qkf[std::size_t(j)], n);
+    }
   });
+}
+
+namespace {
+
+KeyframeAssignment AssignKeyframes(const SessionData& c, const SessionData& q, const LdResult& ld,
+                                   const RemovertConfig& cfg, int threads) {
+  using namespace detail;
+  KeyframeAssignment a;
+  a.nc = c.kfs.size();
+  a.clouds[kKfStatic] = c.static_map;
+  a.clouds[kKfHd] = c.hd_map;
+  a.clouds[kKfHd].append(ld.nd_residue);  // the central's HD + the residues of movers the query saw through
+  a.clouds[kKfPdStrong] = ld.pd_strong;
+  a.clouds[kKfPdStrong].append(ld.pd_unobserved);  // new territory is added to the map like strong PD
+  a.clouds[kKfPdWeak] = ld.pd_weak;
+  a.clouds[kKfNdStrong] = ld.nd_strong;
+  a.clouds[kKfNdWeak] = ld.nd_weak;
+  const KeyframeOwners owners(c.kfs, q.kfs, cfg, threads);
+  const std::size_t nk = a.nc + q.kfs.size();
+  std::vector<bool> owns_pd(nk, false);
+  for (int k = 0; k < kKeyframeClouds; ++k) {
+    const bool pd = k == kKfPdStrong || k == kKfPdWeak;
+    a.members[std::size_t(k)] = Buckets(pd ? owners.Pd(a.clouds[std::size_t(k)]) : owners.Central(a.clouds[std::size_t(k)]), nk);
+    if (pd)
+      for (std::size_t b = 0; b < nk; ++b) owns_pd[b] = owns_pd[b] || !a.members[std::size_t(k)][b].empty();
+  }
+  a.new_list = owners.NewKeyframes(owns_pd);
+  return a;
+}
+
+// keyframes/NNNNNN/ for every central keyframe and new_keyframes/NNNNNN/ for the new ones.
+void WriteKeyframeFolders(const std::string& dir, const SessionData& c, const SessionData& q, int ci, int qi,
+                          const KeyframeAssignment& a, const RemovertConfig& cfg, int threads) {
+  using namespace detail;
+  auto pick = [&](int cloud, std::size_t bucket) {
+    return a.clouds[std::size_t(cloud)].select(a.members[std::size_t(cloud)][bucket]);
+  };
+  ParallelFor(a.nc, threads, [&](std::size_t k) {
+    std::array<PointCloud, kKeyframeClouds> clouds;
+    for (int cl = 0; cl < kKeyframeClouds; ++cl) clouds[std::size_t(cl)] = pick(cl, k);
+    WriteKeyframeDir(dir + "/keyframes/" + Index6(c.kfs[k].index), c.kfs[k].T_world_sensor,
+                     CentralKeyframeParts(std::move(clouds), ci, qi), cfg);
+  });
+  ParallelFor(a.new_list.size(), threads, [&](std::size_t t) {
+    const std::size_t j = std::size_t(a.new_list[t]);
+    WriteKeyframeDir(dir + "/new_keyframes/" + Index6(q.kfs[j].index), q.kfs[j].T_world_sensor,
+                     NewKeyframeParts(pick(kKfPdStrong, a.nc + j), pick(kKfPdWeak, a.nc + j), qi), cfg);
+  });
+}
+
+// Points per keyframe bucket and cloud (keyframes.csv).
+std::vector<std::array<std::size_t, detail::kKeyframeClouds>> Counts(const KeyframeAssignment& a) {
+  std::vector<std::array<std::size_t, detail::kKeyframeClouds>> n(a.members[0].size());
+  for (std::size_t b = 0; b < n.size(); ++b)
+    for (std::size_t c = 0; c < a.members.size(); ++c) n[b][c] = a.members[c][b].size();
+  return n;
 }
 
 // LD of the pair (c, q) written to `dir`; returns its stats and the new keyframes' indices.
@@ -285,8 +321,8 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
                ld.stats.pd_residue, q.name, ld.stats.seconds);
   WriteLdClouds(dir, ld, c.static_map, ci, qi, cfg);
   const KeyframeAssignment a = AssignKeyframes(c, q, ld, cfg, threads);
-  if (cfg.write_keyframes) WriteKeyframeFolders(dir, c, q, ci, qi, ld, a, cfg, threads);
-  WriteKeyframesCsv(dir, c, q, ci, qi, a);
+  if (cfg.write_keyframes) WriteKeyframeFolders(dir, c, q, ci, qi, a, cfg, threads);
+  detail::WriteKeyframesCsv(dir, c.kfs, q.kfs, ci, qi, Counts(a), a.new_list);
   std::vector<int> new_idx;
   for (int j : a.new_list) new_idx.push_back(q.kfs[std::size_t(j)].index);
   return {ld.stats, new_idx};
@@ -367,10 +403,16 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
   const RemovertConfig cfg = WithSensor(user_cfg, sd[0].kfs);
   for (std::size_t q = 1; q < ns; ++q) rep.pairs.emplace_back(PairCentral(cfg, int(q)), int(q));
 
+  if (cfg.tiles_stage) {  // memory bounded by the tile, not the sessions (stage_tiles.cpp)
+    std::vector<std::string> names;
+    std::vector<std::vector<WorldKeyframe>> kfs;
+    for (const SessionData& d : sd) names.push_back(d.name), kfs.push_back(d.kfs);
+    detail::RunStageFromTiles(cfg, session_dirs, poses_files, names, kfs, out, threads, &rep);
+  }
   // Sessions in order: HD removal of session s, then the pairs whose query is s (their central
   // came earlier). A session's maps are freed as soon as no later pair needs them, so memory
   // holds at most two sessions' maps (central + current query), not all N.
-  for (std::size_t s = 0; s < ns; ++s) {
+  for (std::size_t s = 0; s < ns && !cfg.tiles_stage; ++s) {
     rep.hd.push_back(RemoveSessionHd(sd[s], int(s), io::layout::SessionChangesDir(out, sd[s].name), cfg, threads));
     for (const auto& [c, q] : rep.pairs) {
       if (std::size_t(q) != s) continue;

@@ -30,6 +30,7 @@ void WritePlanJson(const std::string& path, const TilePlanFile& f) {
   json::Writer w;
   w.BeginObject().String("format", "ltmapper tile plan").Int("version", kPlanVersion);
   w.String("session_dir", f.session_dir).String("poses_file", f.poses_file);
+  w.String("sensor_session_dir", f.sensor_session_dir);
   w.Int("keyframes", (long long)f.plan.session_keyframes).Number("voxel_m", f.plan.voxel_m);
   w.Int("edge_voxels", f.plan.edge_voxels).Int("margin_voxels", f.plan.margin_voxels).Number("reach_m", f.plan.reach_m);
   w.Number("largest_map_estimate", f.plan.largest_map_estimate);
@@ -114,9 +115,9 @@ std::string Absolute(const std::string& path) { return path.empty() ? path : fs:
 }  // namespace
 
 TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
-                       const RemovertConfig& cfg, int threads) {
+                       const RemovertConfig& cfg, int threads, const std::string& sensor_session_dir) {
   cfg.Validate();
-  TilePlanFile f{Absolute(session_dir), Absolute(poses_file), cfg, {}};
+  TilePlanFile f{Absolute(session_dir), Absolute(poses_file), Absolute(sensor_session_dir), cfg, {}};
   f.plan = PlanTiles(LoadWorldKeyframes(f.session_dir, f.poses_file), cfg, threads);
   io::StagingDir staging(plan_dir, "plan.json");
   io::SaveConfigFields(ConfigFile(staging.path()), FieldsOf(f.cfg));
@@ -139,6 +140,8 @@ TilePlanFile ReadTilePlan(const std::string& plan_dir) {
   f.cfg.Validate(ConfigFile(plan_dir));
   f.session_dir = Member(doc, "session_dir", T::kString, path).str;
   f.poses_file = Member(doc, "poses_file", T::kString, path).str;
+  if (const json::Value* sensor = doc.Find("sensor_session_dir"); sensor && sensor->type == T::kString)
+    f.sensor_session_dir = sensor->str;  // optional: plans without it take the sensor from their session
   f.plan = PlanTiles({}, f.cfg);
   f.plan.session_keyframes = Count(Member(doc, "keyframes", T::kNumber, path), "keyframes", path);
   ReadTiles(doc, f.cfg, path, &f.plan);
@@ -159,7 +162,9 @@ bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool
     return false;
   }
   const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
-  const HdResult res = RemoveHdTile(f.plan, tile, kfs, f.cfg, threads);
+  const RemovertConfig cfg =
+      f.sensor_session_dir.empty() ? f.cfg : WithSensor(f.cfg, LoadWorldKeyframes(f.sensor_session_dir, ""));
+  const HdResult res = RemoveHdTile(f.plan, tile, kfs, cfg, threads);
   fs::remove(detail::TileJsonIn(dir));  // forced: not done while its parts are rewritten
   io::MakeDirs(dir);
   io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);

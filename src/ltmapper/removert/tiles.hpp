@@ -141,13 +141,15 @@ LdResult DetectLdTiled(const PointCloud& central_map, const PointCloud& query_ma
 // done exactly when its tile.json exists: a killed job leaves none and is simply run again.
 struct TilePlanFile {
   std::string session_dir, poses_file;  // poses_file "": the session's own poses
+  std::string sensor_session_dir;       // the session whose scans give the sensor ("": this one)
   RemovertConfig cfg;
   TilePlan plan;
 };
 // Plans the session's tiles into a fresh `plan_dir` (replaced whole when it holds a plan.json;
-// any other non-empty folder is an error naming it). Returns the plan.
+// any other non-empty folder is an error naming it). Returns the plan. `sensor_session_dir`: the
+// session whose scans give the sensor model when it is estimated (the stage's central; "": this).
 TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_dir, const std::string& poses_file,
-                       const RemovertConfig& cfg, int threads = 0);
+                       const RemovertConfig& cfg, int threads = 0, const std::string& sensor_session_dir = "");
 // ltm::Error naming the file when plan.json or config.yaml is missing or malformed.
 TilePlanFile ReadTilePlan(const std::string& plan_dir);
 std::string TilePartDir(const std::string& plan_dir, std::size_t tile);
