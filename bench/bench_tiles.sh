@@ -8,10 +8,10 @@
 # the largest tile (its core's map points and the keyframes it reads: a tile job's memory follows
 # them), the tiles' parts on disk, and whether the merged HD-free map is the whole-session map byte
 # for byte.
-# With --pair: two sessions per length (the simulator's changes between them) and the whole
-# LT-removert stage (`ltmapper removert`: HD of both, LD of the pair) against the same tile by tile
-# from files (each session's HD tiles, then the pair's LD tiles over their parts: `tiles ld-plan` /
-# `run` / `merge`); prints the stage's peak and s/kf and whether the pair's LD clouds are equal.
+# With --pair: two sessions per length (the simulator's changes between them) and the LT-removert
+# stage (`ltmapper removert`: HD of both, LD of the pair, the keyframe folders) whole and with
+# tiles.stage (every HD and LD tile from files, the keyframe folders cut from the merged clouds);
+# prints both peaks and s/kf and whether every PCD and CSV of the output is equal.
 # usage: bench/bench_tiles.sh [--lengths "250 500 1000 2000"] [--extent M] [--threads N] [--build DIR] [--work DIR]
 #        [--pair] [--set KEY=VALUE]...   (removert keys for both runs, e.g. --set tiles.edge_m=100)
 set -euo pipefail
@@ -53,38 +53,25 @@ simulate() {
   [ -d "$2/sim/sessions/session_0$PAIR" ] || "$EXE" sim --config "$2/sim.yaml" --out "$2/sim" --quiet --threads "$THREADS"
 }
 
-# The larger of the peaks and the sum of the seconds of "MB s" lines on stdin: "MB s".
-peak_sum() { awk '{ if ($1 > m) m = $1; s += $2 } END { print m, s }'; }
-
 if [ "$PAIR" = 1 ]; then
-  printf "| keyframes per session | LD: tiles (edge m), largest window points | whole stage peak MB | whole s/kf | tiled peak MB: HD, LD plan, LD run, LD merge | tiled s/kf | LD clouds tiled == whole |\n"
+  printf "| keyframes per session | whole stage peak MB | whole s/kf | tiled stage peak MB | tiled s/kf | files | tiled == whole |\n"
   printf "|---|---|---|---|---|---|---|\n"
   for K in $LENGTHS; do
     dir="$WORK/pair$K"
     simulate "$K" "$dir"
     ses=("$dir/sim/sessions/session_00" "$dir/sim/sessions/session_01")
     poses=("$dir/sim/truth/session_00/poses_world.txt" "$dir/sim/truth/session_01/poses_world.txt")
-    outs=(--set out.write_keyframes=false --set out.write_ply=false)
+    outs=(--set out.write_ply=false)
     read -r whole_mb whole_s < <(timed "$EXE" removert --sessions "${ses[@]}" --poses "${poses[@]}" "${SETS[@]}" "${outs[@]}" --out "$dir/whole" --threads "$THREADS" --quiet)
-    hd=$(for s in 0 1; do
-      timed "$EXE" tiles plan "${ses[$s]}" --poses "${poses[$s]}" "${SETS[@]}" --out "$dir/hd$s" --threads "$THREADS" --quiet
-      timed "$EXE" tiles run "$dir/hd$s" --threads "$THREADS" --quiet
-    done | peak_sum)
-    read -r hd_mb hd_s <<< "$hd"
-    read -r plan_mb plan_s < <(timed "$EXE" tiles ld-plan --central "$dir/hd0" --query "$dir/hd1" --out "$dir/ld" --quiet)
-    read -r run_mb run_s < <(timed "$EXE" tiles run "$dir/ld" --threads "$THREADS" --quiet)
-    read -r merge_mb merge_s < <(timed "$EXE" tiles merge "$dir/ld" --out "$dir/pair" --quiet)
-    tiled=$(printf "%s %s\n%s %s\n%s %s\n%s %s\n" "$hd_mb" "$hd_s" "$plan_mb" "$plan_s" "$run_mb" "$run_s" "$merge_mb" "$merge_s" | peak_sum)
-    read -r tiled_mb tiled_s <<< "$tiled"
-    equal="bytes equal"
-    for f in nd_strong nd_weak pd_strong pd_weak pd_unobserved nd_residue pd_residue; do
-      cmp -s "$dir/whole/pair_00_01/$f.pcd" "$dir/pair/$f.pcd" || equal="DIFFERENT ($f)"
-    done
-    ld=$("$PYTHON" -c "import json, sys; p = json.load(open(sys.argv[1])); print(len(p['tiles']), round(p['edge_voxels'] * p['voxel_m'], 1), p['largest_window'])" "$dir/ld/plan.json")
-    read -r ld_tiles ld_edge ld_window <<< "$ld"
-    printf "| %s | %s (%s), %s | %s | %.4f | %s (HD %s, plan %s, run %s, merge %s) | %.4f | %s |\n" "$K" "$ld_tiles" "$ld_edge" \
-      "$ld_window" "$whole_mb" "$(awk "BEGIN { print $whole_s / (2 * $K) }")" "$tiled_mb" "$hd_mb" "$plan_mb" "$run_mb" \
-      "$merge_mb" "$(awk "BEGIN { print $tiled_s / (2 * $K) }")" "$equal"
+    read -r tiled_mb tiled_s < <(timed "$EXE" removert --sessions "${ses[@]}" --poses "${poses[@]}" "${SETS[@]}" "${outs[@]}" --set tiles.stage=true --out "$dir/tiled" --threads "$THREADS" --quiet)
+    files=0; differ=0
+    while IFS= read -r f; do
+      files=$((files + 1))
+      cmp -s "$dir/whole/$f" "$dir/tiled/$f" || differ=$((differ + 1))
+    done < <(cd "$dir/whole" && find . -name '*.pcd' -o -name '*.csv')
+    equal=$([ "$differ" = 0 ] && echo "bytes equal" || echo "$differ DIFFERENT")
+    printf "| %s | %s | %.4f | %s | %.4f | %s | %s |\n" "$K" "$whole_mb" "$(awk "BEGIN { print $whole_s / (2 * $K) }")" \
+      "$tiled_mb" "$(awk "BEGIN { print $tiled_s / (2 * $K) }")" "$files" "$equal"
   done
   exit 0
 fi

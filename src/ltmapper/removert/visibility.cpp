@@ -902,6 +902,10 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
   tbb::enumerable_thread_specific<Scratch> scratch([&] { return Scratch(cfg, resolutions_deg, setup); });
   detail::ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
     const WorldKeyframe& kf = keyframes[k];
+    const Eigen::Vector3f c = kf.T_world_sensor.translation().cast<float>();
+    bool near = false;  // no point within its radius: no vote, so its scan is not even read
+    index.ForTilesNear(c, setup.radius, [&](std::uint32_t, std::uint32_t, std::uint32_t) { near = true; });
+    if (!near) return;
     Scratch& sc = scratch.local();
     {
       const auto scan = detail::LoadScan(kf);
@@ -909,7 +913,6 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
       if (setup.beams) sc.columns->Build(*scan);
     }
     const Eigen::Matrix3f Rt = kf.T_world_sensor.linear().transpose().cast<float>();
-    const Eigen::Vector3f c = kf.T_world_sensor.translation().cast<float>();
     index.ForTilesNear(c, setup.radius, [&](std::uint32_t tile, std::uint32_t b, std::uint32_t e) {
       ProjectTile(setup, c, Rt, b, e - b, &sc);
       if (sc.valid == 0) return;
