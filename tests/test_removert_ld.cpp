@@ -317,8 +317,9 @@ bool SameBytes(const PointCloud& a, const PointCloud& b) {
 }
 
 // LD tile by tile (DetectLdTiled) gives DetectLd's clouds, counts and central_nd: on the finest
-// tiles (5 margins), whose cores meet at x = 0 and y = 0, through a pedestrian (a residue), the
-// walls and the street; the residue rule's clusters and the raw changes' neighbourhoods cross them.
+// tiles (one margin: a window 3 x the core), whose cores meet at x = 0 and y = 0, through a
+// pedestrian (a residue), a car and a wall; the residue rule's clusters and the raw changes'
+// neighbourhoods cross them.
 TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
   const test::Box ped_c = test::MakeBox(-0.3, 5, 0, 0.3, 5.6, 1.7, 20), ped_q = test::MakeBox(-10, 5, 0, -9.4, 5.6, 1.7, 21);
   auto cb = Common();

@@ -183,8 +183,7 @@ LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir) {
   f.plan.margin_voxels = LdCellCounts(f.cfg).CellVoxels();
   f.plan.edge_voxels = Integer(Member(doc, "edge_voxels", T::kNumber, path), "edge_voxels", path);
   if (Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path) != f.plan.margin_voxels ||
-      f.plan.edge_voxels % f.plan.margin_voxels != 0 ||
-      f.plan.edge_voxels < detail::kFinestEdgeMargins * f.plan.margin_voxels)
+      f.plan.edge_voxels <= 0 || f.plan.edge_voxels % f.plan.margin_voxels != 0)
     throw Error(path, 0, "edge_voxels / margin_voxels differ from what config.yaml gives");
   f.plan.largest_window = Count(Member(doc, "largest_window", T::kNumber, path), "largest_window", path);
   const std::size_t nc = Count(Member(doc, "central_keyframes", T::kNumber, path), "central_keyframes", path);

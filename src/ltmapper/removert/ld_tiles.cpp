@@ -34,6 +34,7 @@ void TilesAround(std::int64_t c, std::int64_t k, F&& f) {
 
 // [points] The largest window (core + one cell, the margin, on every side) of tiles k cells wide.
 std::size_t LargestWindow(const LdCellCounts& counts, std::int64_t k) {
+  if (counts.Cells().empty()) return 0;
   std::unordered_map<std::uint64_t, std::size_t> windows;
   for (const auto& [key, n] : counts.Cells()) {
     const auto [cx, cy] = detail::UnpackXY(key);
@@ -46,17 +47,19 @@ std::size_t LargestWindow(const LdCellCounts& counts, std::int64_t k) {
   return largest;
 }
 
-// [cells] The tile edge: the largest whole number of cells from tiles.edge_m (or 2 x the reach)
-// down to kFinestEdgeMargins whose largest window is within tiles.max_map_points.
+// [cells] The tile edge: the largest whole number of cells (margins) from tiles.edge_m (or 2 x the
+// reach) down to one whose largest window is within tiles.max_map_points. LD's margin is wide
+// (the residue rule's clusters), so below kFinestEdgeMargins a tile labels more margin than core:
+// memory holds to the bound, CPU grows.
 std::int64_t ChooseEdgeCells(const LdCellCounts& counts, const RemovertConfig& cfg, std::size_t* largest) {
-  const std::int64_t most = std::max(detail::kFinestEdgeMargins, detail::MostEdgeVoxels(cfg) / counts.CellVoxels());
-  for (std::int64_t k = most; k >= detail::kFinestEdgeMargins; --k) {
+  const std::int64_t most = std::max<std::int64_t>(1, detail::MostEdgeVoxels(cfg) / counts.CellVoxels());
+  for (std::int64_t k = most; k >= 1; --k) {
     *largest = LargestWindow(counts, k);
     if (cfg.tiles_max_map_points == 0 || *largest <= std::size_t(cfg.tiles_max_map_points)) return k;
   }
-  spdlog::warn("tiles: the largest LD window of the finest edge ({} margins) holds {} points, over "
-               "tiles.max_map_points {}", detail::kFinestEdgeMargins, *largest, cfg.tiles_max_map_points);
-  return detail::kFinestEdgeMargins;
+  spdlog::warn("tiles: the largest LD window of the finest edge (one margin) holds {} points, over "
+               "tiles.max_map_points {}", *largest, cfg.tiles_max_map_points);
+  return 1;
 }
 
 // Point indices of a map by LD cell, each list ascending.

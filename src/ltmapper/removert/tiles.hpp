@@ -98,7 +98,7 @@ struct LdTile {
 };
 struct LdTilePlan {
   double voxel_m = 0.0;           // [m] map voxel (map_voxel_m)
-  std::int64_t edge_voxels = 0;   // tile edge [map voxels]: a whole number of margins (>= 5)
+  std::int64_t edge_voxels = 0;   // tile edge [map voxels]: a whole number of margins
   std::int64_t margin_voxels = 0; // [map voxels] LdTileMarginM rounded up, + the centroid's voxel
   std::size_t largest_window = 0; // [points] both maps in the largest tile's core + margin
   std::vector<LdTile> tiles;      // by (ix, iy); the tiles whose core holds map points
@@ -118,7 +118,7 @@ class LdCellCounts {
   std::unordered_map<std::uint64_t, std::size_t> cells_;  // points by xy cell
 };
 // The LD tiles of a pair: the largest edge (tiles.edge_m or 2 x the reach, then every whole number
-// of margins down to 5) whose largest window (both maps' points in core + margin, counted
+// of margins down to one) whose largest window (both maps' points in core + margin, counted
 // exactly) holds at most tiles.max_map_points (0: the largest edge), and each tile's voters.
 LdTilePlan PlanLdTiles(const LdCellCounts& counts, const std::vector<WorldKeyframe>& central_keyframes,
                        const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& cfg);
