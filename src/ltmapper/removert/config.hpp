@@ -132,8 +132,9 @@ struct RemovertConfig {
                               //     many (~100 B each): the plan estimates every tile's map from the scans and
                               //     shrinks the edge until the largest fits (PlanTiles); an LD tile's window
                               //     holds both sessions' maps (PlanLdTiles, counted exactly); 0 = no bound
-  bool tiles_stage = false;   // true: the stage's HD removal and LD run tile by tile (RemoveHdTiled,
-                              //     DetectLdTiled): the same files, more CPU where tiles share keyframes
+  bool tiles_stage = false;   // true: the stage's HD removal and LD run tile by tile from files (the batch;
+                              //     a lifelong add: in memory, RemoveHdTiled / DetectLdTiled): the same
+                              //     files, more CPU where tiles share keyframes
 
   template <class V>
   void Visit(V& v) {
