@@ -406,6 +406,10 @@ TEST(RemovertTileJobs, LdPlanRunMergeEqualsTheStagesPairFiles) {
   }
   EXPECT_EQ(files, 7u);
 
+  // The query's HD tiles not run yet: the error names the first missing tile.json.
+  removert::WriteTilePlan(tmp / "hd1", tmp / "s1", poses[1], cfg);
+  test::ExpectError([&] { removert::WriteLdTilePlan(tmp / "ld2", tmp / "hd0", tmp / "hd1"); },
+                    {tmp / "hd1/parts/tile_000000/tile.json", "not done"});
   RemovertConfig other = cfg;
   other.ld_radius_m = 0.25;
   removert::WriteTilePlan(tmp / "hd1", tmp / "s1", poses[1], other);
