@@ -41,18 +41,10 @@ void LdPlan(const TilesArgs& a) {
 }
 
 void Run(const TilesArgs& a) {
-  const bool ld = removert::IsLdTilePlan(a.plan);
-  std::vector<std::size_t> tiles = a.tiles;
-  if (tiles.empty()) {  // every tile, one after another
-    const std::size_t n = ld ? removert::ReadLdTilePlan(a.plan).plan.tiles.size()
-                             : removert::ReadTilePlan(a.plan).plan.tiles.size();
-    for (std::size_t t = 0; t < n; ++t) tiles.push_back(t);
-  }
-  std::size_t ran = 0;
-  for (std::size_t t : tiles)
-    ran += (ld ? removert::RunLdTileJob(a.plan, t, a.common.threads, a.force)
-               : removert::RunTileJob(a.plan, t, a.common.threads, a.force)) ? 1 : 0;
-  spdlog::info("tiles: ran {} of {} tiles ({} done before)", ran, tiles.size(), tiles.size() - ran);
+  const bool ld = removert::IsLdTilePlan(a.plan);  // a.tiles empty: every tile, one after another
+  const std::size_t ran = ld ? removert::RunLdTileJobs(a.plan, a.tiles, a.common.threads, a.force)
+                             : removert::RunTileJobs(a.plan, a.tiles, a.common.threads, a.force);
+  spdlog::info("tiles: ran {} tiles", ran);
 }
 
 void Merge(const TilesArgs& a) {

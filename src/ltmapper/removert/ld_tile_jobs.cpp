@@ -20,10 +20,7 @@ using detail::Count, detail::Integer, detail::Member;
 
 constexpr const char* kLdPlanFormat = "ltmapper LD tile plan";
 constexpr int kLdPlanVersion = 1;
-constexpr std::size_t kReadPiece = 1 << 14;  // points read from an HD part at once
 
-std::string PlanFile(const std::string& plan_dir) { return plan_dir + "/plan.json"; }
-std::string ConfigFile(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
 
 // The pair's clouds: a tile's part files, the merge's output files (the stage's pair files).
 struct LdCloud {
@@ -77,7 +74,7 @@ void ForHdParts(const std::string& hd_plan_dir, const TilePlan& hd, const detail
                 (tile.iy + 1) * e <= box->y0))
       continue;
     io::PcdPieceReader reader(io::layout::StaticMapIn(TilePartDir(hd_plan_dir, t)));
-    while (reader.Next(kReadPiece, &piece)) {
+    while (reader.Next(detail::kReadPiece, &piece)) {
       kept.points.clear();
       for (const PointXYZI& p : piece.points)
         if (!box || box->Contains(detail::VoxelIndex(p.x, hd.voxel_m), detail::VoxelIndex(p.y, hd.voxel_m)))
@@ -120,8 +117,8 @@ struct PairSessions {
 };
 PairSessions LoadPair(const std::string& central_plan, const std::string& query_plan) {
   PairSessions p{ReadTilePlan(central_plan), ReadTilePlan(query_plan), {}, {}};
-  if (io::ReadFileText(ConfigFile(central_plan)) != io::ReadFileText(ConfigFile(query_plan)))
-    throw Error(ConfigFile(query_plan), 0, "differs from " + ConfigFile(central_plan) +
+  if (io::ReadFileText(detail::ConfigFileIn(central_plan)) != io::ReadFileText(detail::ConfigFileIn(query_plan)))
+    throw Error(detail::ConfigFileIn(query_plan), 0, "differs from " + detail::ConfigFileIn(central_plan) +
                                                ": plan both sessions' HD tiles with one config");
   p.central_kfs = LoadWorldKeyframes(p.central.session_dir, p.central.poses_file);
   p.query_kfs = LoadWorldKeyframes(p.query.session_dir, p.query.poses_file);
@@ -152,14 +149,14 @@ LdTilePlan WriteLdTilePlan(const std::string& plan_dir, const std::string& centr
   f.plan = PlanLdTiles(counts, p.central_kfs, p.query_kfs, f.cfg);
   io::StagingDir staging(plan_dir, "plan.json");
   RemovertConfig saved = p.central.cfg;  // as the HD plans have it (the sensor resolved by each job)
-  io::SaveConfigFields(ConfigFile(staging.path()), FieldsOf(saved));
-  WriteLdPlanJson(PlanFile(staging.path()), f, p.central_kfs.size(), p.query_kfs.size());
+  io::SaveConfigFields(detail::ConfigFileIn(staging.path()), FieldsOf(saved));
+  WriteLdPlanJson(detail::PlanFileIn(staging.path()), f, p.central_kfs.size(), p.query_kfs.size());
   staging.Publish();
   return f.plan;
 }
 
 bool IsLdTilePlan(const std::string& plan_dir) {
-  const std::string path = PlanFile(plan_dir);
+  const std::string path = detail::PlanFileIn(plan_dir);
   if (!fs::exists(path)) return false;
   const json::Value doc = json::ParseFile(path);
   const json::Value* format = doc.Find("format");
@@ -168,15 +165,15 @@ bool IsLdTilePlan(const std::string& plan_dir) {
 
 LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir) {
   using T = json::Value::Type;
-  const std::string path = PlanFile(plan_dir);
+  const std::string path = detail::PlanFileIn(plan_dir);
   const json::Value doc = json::ParseFile(path);
   if (Member(doc, "format", T::kString, path).str != kLdPlanFormat)
     throw Error(path, 0, std::string("not an LD tile plan (format is not '") + kLdPlanFormat + "')");
   if (Integer(Member(doc, "version", T::kNumber, path), "version", path) != kLdPlanVersion)
     throw Error(path, 0, "an LD tile plan of another version: plan the LD tiles again");
   LdTilePlanFile f;
-  io::LoadConfig(ConfigFile(plan_dir), f.cfg);
-  f.cfg.Validate(ConfigFile(plan_dir));
+  io::LoadConfig(detail::ConfigFileIn(plan_dir), f.cfg);
+  f.cfg.Validate(detail::ConfigFileIn(plan_dir));
   f.central_plan = Member(doc, "central_plan", T::kString, path).str;
   f.query_plan = Member(doc, "query_plan", T::kString, path).str;
   f.plan.voxel_m = f.cfg.map_voxel_m;
@@ -199,28 +196,32 @@ LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir) {
   return f;
 }
 
-bool RunLdTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool force) {
+std::size_t RunLdTileJobs(const std::string& plan_dir, std::vector<std::size_t> tiles, int threads, bool force) {
   const LdTilePlanFile f = ReadLdTilePlan(plan_dir);
-  if (tile >= f.plan.tiles.size())
-    throw Error(PlanFile(plan_dir), 0, "no tile " + std::to_string(tile) + " (" + std::to_string(f.plan.tiles.size()) + " tiles)");
-  const std::string dir = TilePartDir(plan_dir, tile);
-  if (!force && fs::exists(detail::TileJsonIn(dir))) {
-    spdlog::info("tiles: LD tile {} is done ({})", tile, detail::TileJsonIn(dir));
-    return false;
-  }
+  if (tiles.empty())
+    for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) tiles.push_back(t);
+  for (std::size_t tile : tiles)
+    if (tile >= f.plan.tiles.size())
+      throw Error(detail::PlanFileIn(plan_dir), 0,
+                  "no tile " + std::to_string(tile) + " (" + std::to_string(f.plan.tiles.size()) + " tiles)");
+  // The pair's sessions and the sensor (the central's scans) once for every tile.
   const PairSessions p = LoadPair(f.central_plan, f.query_plan);
-  const detail::VoxelBox window = detail::LdWindowBox(f.plan, tile);
-  const LdResult res = DetectLdTile(f.plan, tile, ReadWindow(f.central_plan, p.central.plan, window),
-                                    ReadWindow(f.query_plan, p.query.plan, window), p.central_kfs, p.query_kfs,
-                                    f.cfg, threads);
-  fs::remove(detail::TileJsonIn(dir));  // forced: not done while its parts are rewritten
-  io::MakeDirs(dir);
-  for (const LdCloud& c : kLdClouds) io::WritePcd(dir + "/" + c.file, res.*c.cloud);
-  WriteLdStatsJson(detail::TileJsonIn(dir), res.stats, 1);  // last: the tile is done
-  spdlog::info("tiles: LD tile {} of {}: {} central + {} query points in its core; ND strong {} weak {}, PD strong {} "
-               "weak {}", tile, f.plan.tiles.size(), res.stats.central_points, res.stats.query_points,
-               res.stats.nd_strong, res.stats.nd_weak, res.stats.pd_strong, res.stats.pd_weak);
-  return true;
+  const RemovertConfig cfg = WithSensor(f.cfg, p.central_kfs);
+  return detail::RunUndoneTiles(plan_dir, tiles, force, [&](std::size_t tile, const std::string& dir) {
+    const detail::VoxelBox window = detail::LdWindowBox(f.plan, tile);
+    const LdResult res = DetectLdTile(f.plan, tile, ReadWindow(f.central_plan, p.central.plan, window),
+                                      ReadWindow(f.query_plan, p.query.plan, window), p.central_kfs, p.query_kfs,
+                                      cfg, threads);
+    for (const LdCloud& c : kLdClouds) io::WritePcd(dir + "/" + c.file, res.*c.cloud);
+    WriteLdStatsJson(detail::TileJsonIn(dir), res.stats, 1);  // last: the tile is done
+    spdlog::info("tiles: LD tile {} of {}: {} central + {} query points in its core; ND strong {} weak {}, PD strong "
+                 "{} weak {}", tile, f.plan.tiles.size(), res.stats.central_points, res.stats.query_points,
+                 res.stats.nd_strong, res.stats.nd_weak, res.stats.pd_strong, res.stats.pd_weak);
+  });
+}
+
+bool RunLdTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool force) {
+  return RunLdTileJobs(plan_dir, {tile}, threads, force) == 1;
 }
 
 LdStats MergeLdTileJobs(const std::string& plan_dir, const std::string& out_dir) {

@@ -5,6 +5,7 @@
 // spill's buffer, not the sessions' maps. The files equal the whole stage's, except the whole-map
 // PLY twins (map.ply, changes.ply: they would hold the whole maps), which are not written.
 #include "ltmapper/removert/detail.hpp"
+#include "ltmapper/removert/tile_files.hpp"
 
 #include "ltmapper/io/io.hpp"
 
@@ -20,8 +21,6 @@ namespace fs = std::filesystem;
 
 // Points held by the keyframe spill before they are appended to the buckets' files (16 B each).
 constexpr std::size_t kSpillPoints = std::size_t(1) << 20;
-// Points read from a merged cloud at once.
-constexpr std::size_t kReadPiece = std::size_t(1) << 16;
 
 // A pair's keyframe clouds by bucket (KeyframeOwners), appended as raw points to one file per
 // (bucket, cloud) under `dir`; each bucket's points keep the order they came in.
@@ -125,11 +124,6 @@ std::vector<int> WritePairKeyframes(const std::string& pair_dir, const std::stri
   return new_idx;
 }
 
-// Every tile of a plan (HD or LD) run here, one after another.
-void RunAllTiles(const std::string& plan_dir, std::size_t tiles, bool ld, int threads) {
-  for (std::size_t t = 0; t < tiles; ++t) ld ? RunLdTileJob(plan_dir, t, threads) : RunTileJob(plan_dir, t, threads);
-}
-
 // The named files of `from` moved into `to` (made).
 void MoveFiles(const std::string& from, const std::string& to, const std::vector<std::string>& names) {
   io::MakeDirs(to);
@@ -147,8 +141,8 @@ void RunStageFromTiles(const RemovertConfig& cfg, const std::vector<std::string>
   auto hd_plan = [&](std::size_t s) { return work + "/hd_" + std::to_string(s); };
   for (std::size_t s = 0; s < session_dirs.size(); ++s) {
     spdlog::info("removert: HD removal of {} ({} keyframes), tile by tile from files", names[s], kfs[s].size());
-    const TilePlan plan = WriteTilePlan(hd_plan(s), session_dirs[s], poses_files[s], cfg, threads, session_dirs[0]);
-    RunAllTiles(hd_plan(s), plan.tiles.size(), false, threads);
+    WriteTilePlan(hd_plan(s), session_dirs[s], poses_files[s], cfg, threads, session_dirs[0]);
+    RunTileJobs(hd_plan(s), {}, threads);
     rep->hd.push_back(MergeTileJobs(hd_plan(s), hd_plan(s) + "_out"));
     MoveFiles(hd_plan(s) + "_out", io::layout::SessionChangesDir(out, names[s]),
               {fs::path(io::layout::StaticMapIn(".")).filename().string(),
@@ -157,8 +151,8 @@ void RunStageFromTiles(const RemovertConfig& cfg, const std::vector<std::string>
       if (std::size_t(q) != s) continue;
       const std::string pair_dir = out + "/" + io::layout::PairDirName(c, q), ld_plan = work + "/" + io::layout::PairDirName(c, q);
       spdlog::info("removert: LD {} vs {}, tile by tile from files", names[std::size_t(c)], names[s]);
-      const LdTilePlan plan_ld = WriteLdTilePlan(ld_plan, hd_plan(std::size_t(c)), hd_plan(s));
-      RunAllTiles(ld_plan, plan_ld.tiles.size(), true, threads);
+      WriteLdTilePlan(ld_plan, hd_plan(std::size_t(c)), hd_plan(s));
+      RunLdTileJobs(ld_plan, {}, threads);
       rep->ld.push_back(MergeLdTileJobs(ld_plan, ld_plan + "_out"));
       MoveFiles(ld_plan + "_out", pair_dir, LdPairCloudFiles());
       rep->new_keyframes.push_back(WritePairKeyframes(pair_dir, io::layout::SessionChangesDir(out, names[std::size_t(c)]),

@@ -6,6 +6,7 @@
 #include "ltmapper/io/json.hpp"
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -22,8 +23,17 @@ void WriteRuns(io::json::Writer& w, const std::string& key, const std::vector<st
 // The positions of an array of runs: ascending, each below n; ltm::Error naming the file otherwise.
 std::vector<std::size_t> ReadRuns(const io::json::Value& runs, std::size_t n, const std::string& what,
                                   const std::string& path);
+// A plan folder's plan.json and config.yaml (HD and LD plans alike).
+inline std::string PlanFileIn(const std::string& plan_dir) { return plan_dir + "/plan.json"; }
+inline std::string ConfigFileIn(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
+// Points read from a part or a merged cloud at once (16 B each).
+constexpr std::size_t kReadPiece = std::size_t(1) << 14;
 // A part folder's tile.json: written last, the tile is done exactly when it exists.
 std::string TileJsonIn(const std::string& part_dir);
+// run(tile, part_dir) for each of `tiles` not done (every one with `force`), its tile.json removed
+// first (not done while its parts are rewritten; `run` writes it last); returns how many ran.
+std::size_t RunUndoneTiles(const std::string& plan_dir, const std::vector<std::size_t>& tiles, bool force,
+                           const std::function<void(std::size_t, const std::string&)>& run);
 // Every tile of the plan done (ltm::Error naming the first missing tile.json); their tile.json paths.
 std::vector<std::string> DoneTiles(const std::string& plan_dir, std::size_t tiles);
 // The clouds files[t] (each in voxel order) into one PCD at `path` of `points` points in voxel

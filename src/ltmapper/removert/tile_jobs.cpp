@@ -24,8 +24,6 @@ using detail::Count, detail::Integer, detail::Member;
 // plan.json's version: 2 lists each tile's keyframes as runs [first, last] (1 listed every one).
 constexpr int kPlanVersion = 2;
 
-std::string PlanFile(const std::string& plan_dir) { return plan_dir + "/plan.json"; }
-std::string ConfigFile(const std::string& plan_dir) { return plan_dir + "/config.yaml"; }
 void WritePlanJson(const std::string& path, const TilePlanFile& f) {
   json::Writer w;
   w.BeginObject().String("format", "ltmapper tile plan").Int("version", kPlanVersion);
@@ -120,15 +118,15 @@ TilePlan WriteTilePlan(const std::string& plan_dir, const std::string& session_d
   TilePlanFile f{Absolute(session_dir), Absolute(poses_file), Absolute(sensor_session_dir), cfg, {}};
   f.plan = PlanTiles(LoadWorldKeyframes(f.session_dir, f.poses_file), cfg, threads);
   io::StagingDir staging(plan_dir, "plan.json");
-  io::SaveConfigFields(ConfigFile(staging.path()), FieldsOf(f.cfg));
-  WritePlanJson(PlanFile(staging.path()), f);
+  io::SaveConfigFields(detail::ConfigFileIn(staging.path()), FieldsOf(f.cfg));
+  WritePlanJson(detail::PlanFileIn(staging.path()), f);
   staging.Publish();
   return f.plan;
 }
 
 TilePlanFile ReadTilePlan(const std::string& plan_dir) {
   using T = json::Value::Type;
-  const std::string path = PlanFile(plan_dir);
+  const std::string path = detail::PlanFileIn(plan_dir);
   const json::Value doc = json::ParseFile(path);
   if (Member(doc, "format", T::kString, path).str != "ltmapper tile plan")
     throw Error(path, 0, "not a tile plan (format is not 'ltmapper tile plan')");
@@ -136,8 +134,8 @@ TilePlanFile ReadTilePlan(const std::string& plan_dir) {
     throw Error(path, 0, "a tile plan of another version (this build reads version " + std::to_string(kPlanVersion) +
                                  "): plan the tiles again");
   TilePlanFile f;
-  io::LoadConfig(ConfigFile(plan_dir), f.cfg);
-  f.cfg.Validate(ConfigFile(plan_dir));
+  io::LoadConfig(detail::ConfigFileIn(plan_dir), f.cfg);
+  f.cfg.Validate(detail::ConfigFileIn(plan_dir));
   f.session_dir = Member(doc, "session_dir", T::kString, path).str;
   f.poses_file = Member(doc, "poses_file", T::kString, path).str;
   if (const json::Value* sensor = doc.Find("sensor_session_dir"); sensor && sensor->type == T::kString)
@@ -154,25 +152,26 @@ std::string TilePartDir(const std::string& plan_dir, std::size_t tile) {
   return name.str();
 }
 
-bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool force) {
+std::size_t RunTileJobs(const std::string& plan_dir, std::vector<std::size_t> tiles, int threads, bool force) {
   const TilePlanFile f = ReadTilePlan(plan_dir);
-  const std::string dir = TilePartDir(plan_dir, tile);
-  if (!force && fs::exists(detail::TileJsonIn(dir))) {
-    spdlog::info("tiles: tile {} is done ({})", tile, detail::TileJsonIn(dir));
-    return false;
-  }
+  if (tiles.empty())
+    for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) tiles.push_back(t);
+  // The session and the sensor once for every tile.
   const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
-  const RemovertConfig cfg =
-      f.sensor_session_dir.empty() ? f.cfg : WithSensor(f.cfg, LoadWorldKeyframes(f.sensor_session_dir, ""));
-  const HdResult res = RemoveHdTile(f.plan, tile, kfs, cfg, threads);
-  fs::remove(detail::TileJsonIn(dir));  // forced: not done while its parts are rewritten
-  io::MakeDirs(dir);
-  io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);
-  io::WritePcd(io::layout::HdMapIn(dir), res.hd_map);
-  WriteStatsJson(detail::TileJsonIn(dir), res.stats, 1);  // last: the tile is done
-  spdlog::info("tiles: tile {} of {}: {} keyframes, {} static + {} HD points", tile, f.plan.tiles.size(),
-               f.plan.tiles[tile].keyframes.size(), res.static_map.size(), res.hd_map.size());
-  return true;
+  const RemovertConfig cfg = WithSensor(
+      f.cfg, f.sensor_session_dir.empty() ? kfs : LoadWorldKeyframes(f.sensor_session_dir, ""));
+  return detail::RunUndoneTiles(plan_dir, tiles, force, [&](std::size_t tile, const std::string& dir) {
+    const HdResult res = RemoveHdTile(f.plan, tile, kfs, cfg, threads);
+    io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);
+    io::WritePcd(io::layout::HdMapIn(dir), res.hd_map);
+    WriteStatsJson(detail::TileJsonIn(dir), res.stats, 1);  // last: the tile is done
+    spdlog::info("tiles: tile {} of {}: {} keyframes, {} static + {} HD points", tile, f.plan.tiles.size(),
+                 f.plan.tiles[tile].keyframes.size(), res.static_map.size(), res.hd_map.size());
+  });
+}
+
+bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads, bool force) {
+  return RunTileJobs(plan_dir, {tile}, threads, force) == 1;
 }
 
 HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
@@ -191,9 +190,6 @@ HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir) {
 
 
 namespace detail {
-
-// Points read from a tile's part at once by the merge.
-constexpr std::size_t kReadPiece = 1 << 14;
 
 std::string TileJsonIn(const std::string& part_dir) { return part_dir + "/tile.json"; }
 
@@ -238,6 +234,23 @@ std::vector<std::size_t> ReadRuns(const json::Value& runs, std::size_t n, const 
     for (std::size_t k = first; k <= last; ++k) out.push_back(k);
   }
   return out;
+}
+
+std::size_t RunUndoneTiles(const std::string& plan_dir, const std::vector<std::size_t>& tiles, bool force,
+                           const std::function<void(std::size_t, const std::string&)>& run) {
+  std::size_t ran = 0;
+  for (std::size_t tile : tiles) {
+    const std::string dir = TilePartDir(plan_dir, tile);
+    if (!force && fs::exists(TileJsonIn(dir))) {
+      spdlog::info("tiles: tile {} is done ({})", tile, TileJsonIn(dir));
+      continue;
+    }
+    fs::remove(TileJsonIn(dir));
+    io::MakeDirs(dir);
+    run(tile, dir);
+    ++ran;
+  }
+  return ran;
 }
 
 std::vector<std::string> DoneTiles(const std::string& plan_dir, std::size_t tiles) {

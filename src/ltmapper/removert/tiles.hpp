@@ -155,6 +155,10 @@ TilePlanFile ReadTilePlan(const std::string& plan_dir);
 std::string TilePartDir(const std::string& plan_dir, std::size_t tile);
 // One tile's job; skipped (false) when its tile.json exists, unless `force`.
 bool RunTileJob(const std::string& plan_dir, std::size_t tile, int threads = 0, bool force = false);
+// The jobs of `tiles` (empty: every tile) one after another, the plan, session and sensor read once;
+// returns how many ran (the others were done).
+std::size_t RunTileJobs(const std::string& plan_dir, std::vector<std::size_t> tiles, int threads = 0,
+                        bool force = false);
 // Every tile's parts merged (MergeTiles) into out_dir: static_map.pcd, hd_map.pcd, report.json.
 // ltm::Error naming the tile.json of the first tile not done.
 HdStats MergeTileJobs(const std::string& plan_dir, const std::string& out_dir);
@@ -181,6 +185,9 @@ bool IsLdTilePlan(const std::string& plan_dir);
 LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir);
 // One LD tile's job; skipped (false) when its tile.json exists, unless `force`.
 bool RunLdTileJob(const std::string& plan_dir, std::size_t tile, int threads = 0, bool force = false);
+// The LD jobs of `tiles` (empty: every tile), the plans, sessions and sensor read once; how many ran.
+std::size_t RunLdTileJobs(const std::string& plan_dir, std::vector<std::size_t> tiles, int threads = 0,
+                          bool force = false);
 // Every LD tile's parts merged into out_dir; ltm::Error naming the tile.json of the first tile not done.
 LdStats MergeLdTileJobs(const std::string& plan_dir, const std::string& out_dir);
 
