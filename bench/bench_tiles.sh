@@ -12,11 +12,15 @@
 # stage (`ltmapper removert`: HD of both, LD of the pair, the keyframe folders) whole and with
 # tiles.stage (every HD and LD tile from files, the keyframe folders cut from the merged clouds);
 # prints both peaks and s/kf and whether every PCD and CSV of the output is equal.
+# With --ltmap: two sessions per length, the whole LT-removert stage once (kept in the work folder),
+# then LT-map's commands on it, each its own process: `map integrate` (creates the store: init and
+# the query session), `map objects` and `map live`; prints each one's peak RSS and wall seconds,
+# the store's points and the objects found.
 # usage: bench/bench_tiles.sh [--lengths "250 500 1000 2000"] [--extent M] [--threads N] [--build DIR] [--work DIR]
-#        [--pair] [--set KEY=VALUE]...   (removert keys for both runs, e.g. --set tiles.edge_m=100)
+#        [--pair | --ltmap] [--set KEY=VALUE]...   (removert keys, e.g. --set tiles.edge_m=100)
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
-BUILD="$ROOT/build"; WORK=""; LENGTHS="250 500 1000 2000"; EXTENT=1000; THREADS=2; SETS=(); PAIR=0
+BUILD="$ROOT/build"; WORK=""; LENGTHS="250 500 1000 2000"; EXTENT=1000; THREADS=2; SETS=(); PAIR=0; LTMAP=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --lengths) LENGTHS="$2"; shift 2 ;;
@@ -26,6 +30,7 @@ while [ $# -gt 0 ]; do
     --work) WORK="$2"; shift 2 ;;
     --set) SETS+=(--set "$2"); shift 2 ;;
     --pair) PAIR=1; shift ;;
+    --ltmap) PAIR=1; LTMAP=1; shift ;;
     *) echo "unknown argument: $1" >&2; exit 2 ;;
   esac
 done
@@ -52,6 +57,31 @@ simulate() {
     "$EXTENT" "$SESSIONS" "$1" > "$2/sim.yaml"
   [ -d "$2/sim/sessions/session_0$PAIR" ] || "$EXE" sim --config "$2/sim.yaml" --out "$2/sim" --quiet --threads "$THREADS"
 }
+
+if [ "$LTMAP" = 1 ]; then
+  printf "| keyframes per session | map points | objects | map integrate peak MB (s) | map objects peak MB (s) | map live peak MB (s) |\n"
+  printf "|---|---|---|---|---|---|\n"
+  for K in $LENGTHS; do
+    dir="$WORK/pair$K"
+    simulate "$K" "$dir"
+    for s in session_00 session_01; do  # LT-map reads the world poses from LT-SLAM's folder
+      mkdir -p "$dir/aligned/$s" && cp "$dir/sim/truth/$s/poses_world.txt" "$dir/aligned/$s/"
+    done
+    [ -f "$dir/changes/pair_00_01/keyframes.csv" ] || "$EXE" removert --sessions "$dir/sim/sessions/session_00" \
+      "$dir/sim/sessions/session_01" --poses "$dir/sim/truth/session_00/poses_world.txt" \
+      "$dir/sim/truth/session_01/poses_world.txt" "${SETS[@]}" --set out.write_ply=false --out "$dir/changes" \
+      --threads "$THREADS" --quiet
+    rm -rf "$dir/ltmap" && mkdir -p "$dir/ltmap"
+    store="$dir/ltmap/map.ltmap"
+    read -r int_mb int_s < <(timed "$EXE" map integrate --store "$store" --aligned "$dir/aligned" --changes "$dir/changes" --central session_00 --threads "$THREADS" --quiet)
+    read -r obj_mb obj_s < <(timed "$EXE" map objects --store "$store" --out "$dir/ltmap/objects" --session "$dir/sim/sessions/session_00" --threads "$THREADS" --quiet)
+    read -r live_mb live_s < <(timed "$EXE" map live --store "$store" --out "$dir/ltmap/live.pcd" --threads "$THREADS" --quiet)
+    points=$(head -c 4096 "$dir/ltmap/live.pcd" | awk '/^POINTS/ {print $2 + 0; exit}')
+    objects=$(($(wc -l < "$dir/ltmap/objects/objects.csv") - 1))
+    printf "| %s | %s | %s | %s (%s) | %s (%s) | %s (%s) |\n" "$K" "$points" "$objects" "$int_mb" "$int_s" "$obj_mb" "$obj_s" "$live_mb" "$live_s"
+  done
+  exit 0
+fi
 
 if [ "$PAIR" = 1 ]; then
   printf "| keyframes per session | whole stage peak MB | whole s/kf | tiled stage peak MB | tiled s/kf | files | tiled == whole |\n"

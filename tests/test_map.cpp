@@ -7,6 +7,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -322,6 +323,47 @@ TEST(MapStore, StreamedMapsEqualWholeOnesAcrossBatchesAndTiles) {
     EXPECT_GT(live, voxel > 0 ? 1000u : 100000u);
     for (const auto& e : std::filesystem::directory_iterator(tmp.str())) EXPECT_EQ(e.path().string().find(".tiles"), std::string::npos) << e.path();
   }
+}
+
+// Sources are read as the store steps its chunks of 64 map keyframes, once per item, and give the
+// store the in-memory inputs give.
+TEST(MapStore, SourcesReadChunkByChunkAndEqualInMemoryInputs) {
+  test::TempDir tmp;
+  std::vector<KeyframeInput> base;
+  for (int k = 0; k < 200; ++k) base.push_back({k, At(3.0 * k, 0), Cat(Grid(-3, -3, 0, 12, 12, 0.5f), Car(0, 0))});
+  std::vector<KeyframeDelta> deltas(200);
+  for (int k = 0; k < 200; ++k) {
+    deltas[std::size_t(k)].keyframe = k;
+    deltas[std::size_t(k)].nd_strong = Car(0, 0);
+    deltas[std::size_t(k)].pd_strong = Car(-2.5f, -2.5f, 1.f, 1.f, 1.f);
+  }
+  const std::vector<KeyframeInput> query = {{900, At(900, 0), Grid(-3, -3, 0, 10, 10, 0.3f)},
+                                            {901, At(3, 1), Car(1, 1)}};
+  Store whole = Store::Create(tmp / "whole.ltmap", Cfg());
+  whole.IntegrateBase({"s0"}, base);
+  whole.IntegrateSession({"s1"}, "s0", deltas, query);
+
+  std::atomic<std::size_t> reads{0};
+  KeyframeSource bsrc = InMemory(base);
+  bsrc.read = [&](std::size_t k) { ++reads; return base[k].cloud; };
+  Store streamed = Store::Create(tmp / "streamed.ltmap", Cfg());
+  long most_ahead = 0;  // reads beyond the keyframes written when one is written
+  streamed.on_keyframe_written = [&](std::size_t written) {
+    most_ahead = std::max(most_ahead, long(reads.load()) - long(written));
+  };
+  streamed.IntegrateBaseFrom({"s0"}, bsrc);
+  EXPECT_EQ(reads.load(), 200u);
+  EXPECT_LE(most_ahead, 65);  // a chunk's deltas and the query cloud near it
+  DeltaSource dsrc = InMemory(deltas);
+  dsrc.read = [&](std::size_t k) { ++reads; return deltas[k]; };
+  KeyframeSource qsrc = InMemory(query);
+  qsrc.read = [&](std::size_t k) { ++reads; return query[k].cloud; };
+  reads = 0;
+  most_ahead = 0;
+  streamed.IntegrateSessionFrom({"s1"}, "s0", dsrc, qsrc);
+  EXPECT_EQ(reads.load(), 202u);  // every delta and query cloud once
+  EXPECT_LE(most_ahead, 65);  // a chunk's deltas and the query cloud near it
+  EXPECT_EQ(streamed.Digest(), whole.Digest());
 }
 
 TEST(MapStore, WeakNdStoredOnlyOnRequest) {

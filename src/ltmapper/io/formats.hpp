@@ -21,6 +21,9 @@ struct CloudReadStats {
 // optional (0 when absent); a float `time` field (a raw sweep's seconds after the scan's
 // timestamp) fills PointCloud::time. Truncated files and headers that disagree with the data are errors.
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats = nullptr);
+// The point count a PCD's header declares (checked against the file's size), without reading the
+// points. ReadPcd may return fewer: it drops non-finite points.
+std::size_t ReadPcdPointCount(const std::string& path);
 // The sensor pose of a PCD's VIEWPOINT header line (tx ty tz qw qx qy qz; identity when absent):
 // the KTH DynamicMap benchmark stores each scan in the world frame with its sensor pose there.
 Pose ReadPcdViewpoint(const std::string& path);

@@ -567,6 +567,11 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   return ReadPclPcd(path, stats);
 }
 
+std::size_t ReadPcdPointCount(const std::string& path) {
+  std::ifstream in;
+  return std::size_t(OpenPcd(path, in).points);
+}
+
 struct PcdPieceReader::Impl {
   std::string path;
   std::ifstream in;

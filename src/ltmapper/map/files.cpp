@@ -58,6 +58,10 @@ PointCloud ReadIfExists(const std::string& path) {
   return fs::exists(path) ? io::ReadPcd(path) : PointCloud{};
 }
 
+std::size_t PointsIfExists(const std::string& path) {
+  return fs::exists(path) ? io::ReadPcdPointCount(path) : 0;
+}
+
 PointCloud WithClass(PointCloud c, PointClass cls) {
   c.cls.assign(c.size(), cls);
   c.session.clear();
@@ -195,18 +199,19 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
   if (fs::exists(store_path)) throw Error(store_path + ": map store already exists");
   // Central keyframes: poses and static clouds from the first pair directory; else the central
   // static map split by nearest keyframe.
-  std::vector<KeyframeInput> kfs;
+  // Read chunk by chunk while the store encodes them (memory: a chunk, not the session).
+  KeyframeSource src;
+  std::vector<KeyframeInput> kfs;  // without a pair directory: split from the static map in memory
   std::string pair;
   for (std::size_t q = 1; q < names.size() && pair.empty(); ++q) pair = PairDir(dirs, names, 0, int(q));
   if (!pair.empty()) {
     const auto poses = ReadKeyframesCsv(pair + "/keyframes.csv");
-    for (const auto& [key, T] : poses)
-      if (key.first == "central") kfs.push_back({key.second, T, {}});
-    std::sort(kfs.begin(), kfs.end(), [](const auto& a, const auto& b) { return a.index < b.index; });
-    ParallelFor(kfs.size(), threads, [&](std::size_t k) {
-      kfs[k].cloud = ReadIfExists(pair + "/keyframes/" + io::layout::KeyframeDirName(kfs[k].index) + "/static.pcd");
-    });
-    spdlog::info("map init: {} central keyframes from {}", kfs.size(), pair);
+    for (const auto& [key, T] : poses)  // (kind, index) order: the central keyframes by index
+      if (key.first == "central") src.keyframes.push_back({key.second, T, 0});
+    src.read = [&src, pair](std::size_t k) {
+      return ReadIfExists(pair + "/keyframes/" + io::layout::KeyframeDirName(src.keyframes[k].index) + "/static.pcd");
+    };
+    spdlog::info("map init: {} central keyframes from {}", src.keyframes.size(), pair);
   } else {
     const std::string smap = io::layout::StaticMapFile(dirs.changes, cname);
     const auto poses = io::ReadKittiPoses(io::layout::PosesWorldFile(dirs.aligned, cname));
@@ -224,6 +229,7 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
     for (std::size_t k = 0; k < poses.size(); ++k)
       kfs.push_back({idx[k], poses[k], geometry::Transform(world.select(own[k]), poses[k].inverse())});
     spdlog::info("map init: no pair directory; {} keyframes from {}", kfs.size(), smap);
+    src = InMemory(kfs);
   }
   RemoveStaleTemps(store_path);
   const std::string tmp = store_path + kTempInfix + std::to_string(::getpid());
@@ -232,7 +238,7 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
   try {
     Store store = Store::Create(tmp, cfg);
     store.set_threads(threads);
-    r = store.IntegrateBase({cname, ReadAnchor(dirs, cname), ConfigToString(cfg)}, kfs);
+    r = store.IntegrateBaseFrom({cname, ReadAnchor(dirs, cname), ConfigToString(cfg)}, src);
   } catch (...) {
     RemoveStoreFiles(tmp);
     throw;
@@ -264,25 +270,30 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
   const auto poses = ReadKeyframesCsv(pair + "/keyframes.csv");
   const std::vector<int> kidx = ListedKeyframes(poses, "central", pair + "/keyframes");
   const std::vector<int> nidx = ListedKeyframes(poses, "new", pair + "/new_keyframes");
-  std::vector<KeyframeDelta> deltas(kidx.size());
-  std::vector<KeyframeInput> fresh(nidx.size());
-  ParallelFor(kidx.size() + nidx.size(), store.threads(), [&](std::size_t k) {
-    if (k < kidx.size()) {
-      deltas[k] = ReadDelta(pair + "/keyframes/" + io::layout::KeyframeDirName(kidx[k]) + "/", kidx[k]);
-    } else {
-      const int index = nidx[k - kidx.size()];
-      const std::string d = pair + "/new_keyframes/" + io::layout::KeyframeDirName(index) + "/";
-      KeyframeInput& in = fresh[k - kidx.size()];
-      in.index = index;
-      in.T_world_sensor = poses.at({"new", index});
-      in.cloud = WithClass(ReadIfExists(d + "pd_strong.pcd"), PointClass::kPDStrong);
-      in.cloud.append(WithClass(ReadIfExists(d + "pd_weak.pcd"), PointClass::kPDWeak));
-    }
+  // Read keyframe by keyframe while the store steps its chunks (memory: a chunk, not the session);
+  // a new keyframe's point count comes from its PCD headers.
+  DeltaSource deltas;
+  deltas.keyframes = kidx;
+  deltas.read = [&](std::size_t k) {
+    return ReadDelta(pair + "/keyframes/" + io::layout::KeyframeDirName(kidx[k]) + "/", kidx[k]);
+  };
+  auto new_dir = [&](std::size_t k) { return pair + "/new_keyframes/" + io::layout::KeyframeDirName(nidx[k]) + "/"; };
+  KeyframeSource fresh;
+  fresh.keyframes.resize(nidx.size());
+  ParallelFor(nidx.size(), store.threads(), [&](std::size_t k) {
+    const std::string d = new_dir(k);
+    fresh.keyframes[k] = {nidx[k], poses.at({"new", nidx[k]}),
+                          PointsIfExists(d + "pd_strong.pcd") + PointsIfExists(d + "pd_weak.pcd")};
   });
+  fresh.read = [&](std::size_t k) {
+    PointCloud cloud = WithClass(ReadIfExists(new_dir(k) + "pd_strong.pcd"), PointClass::kPDStrong);
+    cloud.append(WithClass(ReadIfExists(new_dir(k) + "pd_weak.pcd"), PointClass::kPDWeak));
+    return cloud;
+  };
   spdlog::info("map integrate: {} from {} ({} reference keyframes, {} new-territory keyframes)", query, pair,
-               deltas.size(), fresh.size());
-  return store.IntegrateSession({query, ReadAnchor(dirs, query), ConfigToString(store.config())}, names[std::size_t(ci)],
-                                deltas, fresh);
+               kidx.size(), nidx.size());
+  return store.IntegrateSessionFrom({query, ReadAnchor(dirs, query), ConfigToString(store.config())},
+                                    names[std::size_t(ci)], deltas, fresh);
 }
 
 }  // namespace ltm::map

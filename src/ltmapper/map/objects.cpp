@@ -29,6 +29,7 @@
 #include <map>
 #include <tuple>
 #include <unordered_map>
+#include <unordered_set>
 
 namespace ltm::map {
 namespace {
@@ -54,16 +55,6 @@ CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
   return {std::int64_t(std::floor(double(p.x()) / cell)), std::int64_t(std::floor(double(p.y()) / cell))};
 }
 
-// Local ground of one step: lowest point per xy cell of the maps before and after the step and
-// of the changes. The cell must be wider than the footprint an object hides from every view (a
-// car's width), so that each cell holds some ground.
-Floor StepFloor(const PointCloud& before, const PointCloud& after, const PointCloud& changes, double cell) {
-  Floor floor(cell);
-  floor.Add(before);
-  floor.Add(after);
-  floor.Add(changes);
-  return floor;
-}
 
 bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& cfg) {
   float z = 0.f;
@@ -82,14 +73,26 @@ PointCloud OtherSide(const PointCloud& changes, bool appeared) {
   return changes.select(mask);
 }
 
-// Surfaces the step left unchanged: points of the map after the step that existed before it
-// (not added by the step).
-PointCloud Unchanged(const PointCloud& after, int step) {
-  std::vector<bool> mask(after.size(), true);
-  if (after.session.size() == after.size())
-    for (std::size_t i = 0; i < after.size(); ++i) mask[i] = int(after.session[i]) < step;
-  return after.select(mask);
-}
+// The xy cells (`r` wide) that hold some points: a point in one of them or in one of their eight
+// neighbours is Near (every point within r of them is). Memory: one entry per occupied cell.
+class NearCells {
+ public:
+  explicit NearCells(double r) : r_(r) {}
+  void Add(const Eigen::Vector3f& p) { cells_.insert(Key(KeyOf(p, r_))); }
+  bool empty() const { return cells_.empty(); }
+  bool Near(const Eigen::Vector3f& p) const {
+    const CellKey k = KeyOf(p, r_);
+    for (std::int64_t dx = -1; dx <= 1; ++dx)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        if (cells_.count(Key({k.x + dx, k.y + dy}))) return true;
+    return false;
+  }
+
+ private:
+  static std::uint64_t Key(const CellKey& c) { return (std::uint64_t(c.x) << 32) ^ (std::uint64_t(c.y) & 0xffffffffu); }
+  double r_;
+  std::unordered_set<std::uint64_t> cells_;
+};
 
 // The points of `other` above ground in the xy cells (`r` wide) around the change points of
 // `idx`: the only ones within `r` of them.
@@ -97,14 +100,10 @@ PointCloud NearbyAboveGround(const PointCloud& changes, const std::vector<std::u
                              const Floor& floor, const MapConfig& cfg, double r) {
   PointCloud nearby;
   if (r <= 0.0 || idx.empty()) return nearby;
-  std::unordered_map<CellKey, bool, CellKeyHash> near;
-  for (auto i : idx) {
-    const CellKey k = KeyOf(changes.points[i].xyz(), r);
-    for (std::int64_t dx = -1; dx <= 1; ++dx)
-      for (std::int64_t dy = -1; dy <= 1; ++dy) near[{k.x + dx, k.y + dy}] = true;
-  }
+  NearCells near(r);
+  for (auto i : idx) near.Add(changes.points[i].xyz());
   for (const auto& p : other.points)
-    if (near.count(KeyOf(p.xyz(), r)) && AboveGround(p.xyz(), floor, cfg)) nearby.push_back(p.x, p.y, p.z);
+    if (near.Near(p.xyz()) && AboveGround(p.xyz(), floor, cfg)) nearby.push_back(p.x, p.y, p.z);
   return nearby;
 }
 
@@ -117,6 +116,37 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
   const std::vector<bool> hit = WithinRadius(changes.select(idx), nearby, r);
   for (std::size_t j = 0; j < idx.size(); ++j) out[idx[j]] = hit[j];
   return out;
+}
+
+// What a step's objects read from the maps before and after it, gathered as the store streams
+// them (memory: a batch of keyframes, the floor's cells and the surfaces near the changes, never
+// a map):
+//  - the local ground: lowest point per xy cell of both maps and of the changes. The cell must be
+//    wider than the footprint an object hides from every view (a car's width), so that each cell
+//    holds some ground;
+//  - the surfaces the step left unchanged (points of the map after the step that existed before
+//    it), only those in the xy cells (object_tolerance_m wide) around a change point: the only
+//    ones NearbyAboveGround can return for any group of the changes.
+struct StepMaps {
+  Floor floor;
+  PointCloud unchanged_near;
+};
+StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const PointCloud& changes, const MapConfig& cfg) {
+  StepMaps m{Floor(cfg.object_ground_cell_m), {}};
+  m.floor.Add(changes);
+  NearCells near(cfg.object_tolerance_m);
+  if (cfg.object_tolerance_m > 0.0)
+    for (const auto& p : changes.points) near.Add(p.xyz());
+  store.StreamMapAt(step.reference, {}, [&](PointCloud&& part) { m.floor.Add(part); });
+  store.StreamMapAt(step.order, {}, [&](PointCloud&& part) {
+    m.floor.Add(part);
+    if (near.empty()) return;
+    const bool labelled = part.session.size() == part.size();
+    for (std::size_t i = 0; i < part.size(); ++i)
+      if ((!labelled || int(part.session[i]) < step.order) && near.Near(part.points[i].xyz()))
+        m.unchanged_near.push_back(part.points[i].x, part.points[i].y, part.points[i].z);
+  });
+  return m;
 }
 
 // Indices of the change points of one group (disappeared: strong ND; appeared: PD) above ground.
@@ -470,9 +500,9 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
                  std::vector<MapObject>& rejected) {
   const MapConfig& cfg = store.config();
   const PointCloud changes = store.StepChanges(step.order);
-  const PointCloud before = store.MapAt(step.reference), after = store.MapAt(step.order);
-  const Floor floor = StepFloor(before, after, changes, cfg.object_ground_cell_m);
-  const PointCloud unchanged = Unchanged(after, step.order);
+  const StepMaps maps = ReadStepMaps(store, step, changes, cfg);
+  const Floor& floor = maps.floor;
+  const PointCloud& unchanged = maps.unchanged_near;
   std::deque<MapObject> step_kept;  // pointers in ctx.disappeared stay valid
   for (const bool appeared : {false, true}) {
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);

@@ -27,6 +27,26 @@ struct KeyframeDelta {
   PointCloud pd_strong, pd_weak, nd_strong, nd_weak;
 };
 
+// The same inputs read while the store integrates them, a chunk of keyframes at a time, so that
+// memory holds a chunk and not the session (InitFromDirs / IntegrateFromDirs read LT-removert's
+// folders this way). `read` is called once per item, from several threads at once.
+struct KeyframeSlot {
+  int index = 0;
+  Pose T_world_sensor = Pose::Identity();
+  std::size_t points = 0;  // the cloud's size, known without reading it (0: no cloud)
+};
+struct KeyframeSource {
+  std::vector<KeyframeSlot> keyframes;
+  std::function<PointCloud(std::size_t k)> read;  // keyframes[k]'s cloud
+};
+struct DeltaSource {
+  std::vector<int> keyframes;  // reference keyframe indices with a delta
+  std::function<KeyframeDelta(std::size_t k)> read;  // the delta of keyframes[k]
+};
+// Sources over clouds held in memory (copied item by item as the store asks).
+KeyframeSource InMemory(const std::vector<KeyframeInput>& keyframes);
+DeltaSource InMemory(const std::vector<KeyframeDelta>& deltas);
+
 struct SessionMeta {
   SessionMeta(std::string name_ = {}, const Pose& anchor_ = Pose::Identity(), std::string params_ = {})
       : name(std::move(name_)), anchor(anchor_), params(std::move(params_)) {}

@@ -371,15 +371,21 @@ struct Store::Impl {
   // not the map.
   void StreamParts(int max_created_session, int min_delta_session, const std::function<PointCloud(const KfBlobs&)>& part,
                    const PartSink& sink) const {
-    Stmt st(db, "SELECT max(id) FROM keyframes", path);
-    st.Step();
-    const int max_id = st.Null(0) ? -1 : int(st.Int(0));
-    for (int first = 0; first <= max_id; first += kStreamKeyframes) {
-      const auto blobs = LoadBlobs(max_created_session, min_delta_session, -1, {first, first + kStreamKeyframes});
+    ForEachBatch(max_created_session, min_delta_session, [&](const std::vector<KfBlobs>& blobs) {
       std::vector<PointCloud> parts(blobs.size());
       ParallelFor(blobs.size(), threads, [&](std::size_t k) { parts[k] = part(blobs[k]); });
       for (PointCloud& p : parts) sink(std::move(p));
-    }
+    });
+  }
+  // LoadBlobs(max_created_session, min_delta_session) kStreamKeyframes keyframe ids at a time,
+  // in id order: memory is a batch, not the map.
+  void ForEachBatch(int max_created_session, int min_delta_session,
+                    const std::function<void(const std::vector<KfBlobs>&)>& batch) const {
+    Stmt st(db, "SELECT max(id) FROM keyframes", path);
+    st.Step();
+    const int max_id = st.Null(0) ? -1 : int(st.Int(0));
+    for (int first = 0; first <= max_id; first += kStreamKeyframes)
+      batch(LoadBlobs(max_created_session, min_delta_session, -1, {first, first + kStreamKeyframes}));
   }
   // State as of the oldest session above which deltas were loaded (inverse chain from the base).
   QCloud Rollback(const KfBlobs& b) const {
@@ -509,26 +515,41 @@ void CheckName(const std::string& name) {
 }
 }  // namespace
 
-// Adds keyframes (their clouds become bases owned by `session`), encoding in parallel chunks.
-static void InsertKeyframes(Store::Impl& s, Store& store, int session, const std::vector<const KeyframeInput*>& kfs,
-                            IntegrationResult& r, std::size_t& written) {
+KeyframeSource InMemory(const std::vector<KeyframeInput>& keyframes) {
+  KeyframeSource src;
+  for (const auto& kf : keyframes) src.keyframes.push_back({kf.index, kf.T_world_sensor, kf.cloud.size()});
+  src.read = [&keyframes](std::size_t k) { return keyframes[k].cloud; };
+  return src;
+}
+
+DeltaSource InMemory(const std::vector<KeyframeDelta>& deltas) {
+  DeltaSource src;
+  for (const auto& d : deltas) src.keyframes.push_back(d.keyframe);
+  src.read = [&deltas](std::size_t k) { return deltas[k]; };
+  return src;
+}
+
+// Adds the keyframes `which` of `src` (their clouds become bases owned by `session`), reading and
+// encoding them in parallel chunks.
+static void InsertKeyframes(Store::Impl& s, Store& store, int session, const KeyframeSource& src,
+                            const std::vector<std::size_t>& which, IntegrationResult& r, std::size_t& written) {
   Stmt ik(s.db, "INSERT INTO keyframes(session, source_index, pose) VALUES(?,?,?)", s.path);
   Stmt ib(s.db, "INSERT INTO base_clouds(keyframe, as_of, points, data) VALUES(?,?,?,?)", s.path);
   constexpr std::size_t kChunk = 64;
-  for (std::size_t c0 = 0; c0 < kfs.size(); c0 += kChunk) {
-    const std::size_t n = std::min(kChunk, kfs.size() - c0);
+  for (std::size_t c0 = 0; c0 < which.size(); c0 += kChunk) {
+    const std::size_t n = std::min(kChunk, which.size() - c0);
     std::vector<std::string> blobs(n);
     std::vector<std::size_t> points(n);
     ParallelFor(n, s.threads, [&](std::size_t k) {
-      const KeyframeInput& kf = *kfs[c0 + k];
-      const QCloud q = detail::Quantize(kf.cloud, s.cfg.resolution_m, s.cfg.intensity_step, PointClass::kStatic,
-                                        std::uint16_t(session), "session " + std::to_string(session) +
-                                                                    " keyframe " + std::to_string(kf.index));
+      const KeyframeSlot& kf = src.keyframes[which[c0 + k]];
+      const QCloud q = detail::Quantize(src.read(which[c0 + k]), s.cfg.resolution_m, s.cfg.intensity_step,
+                                        PointClass::kStatic, std::uint16_t(session),
+                                        "session " + std::to_string(session) + " keyframe " + std::to_string(kf.index));
       points[k] = q.size();
       blobs[k] = s.Encode(q);
     });
     for (std::size_t k = 0; k < n; ++k) {
-      const KeyframeInput& kf = *kfs[c0 + k];
+      const KeyframeSlot& kf = src.keyframes[which[c0 + k]];
       ik.Bind(1, session).Bind(2, kf.index).Bind(3, PoseToText(kf.T_world_sensor)).Run();
       const long long id = sqlite3_last_insert_rowid(s.db);
       ib.Bind(1, id).Bind(2, session).Bind(3, (long long)points[k]).BindBlob(4, blobs[k]).Run();
@@ -541,6 +562,10 @@ static void InsertKeyframes(Store::Impl& s, Store& store, int session, const std
 }
 
 IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes) {
+  return IntegrateBaseFrom(session, InMemory(keyframes));
+}
+
+IntegrationResult Store::IntegrateBaseFrom(const SessionMeta& session, const KeyframeSource& keyframes) {
   const auto t0 = std::chrono::steady_clock::now();
   CheckName(session.name);
   Impl& s = *impl_;
@@ -549,10 +574,10 @@ IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::ve
   IntegrationResult r;
   r.session = 0;
   InsertSession(s, 0, session, -1);
-  std::vector<const KeyframeInput*> kfs;
-  for (const auto& kf : keyframes) kfs.push_back(&kf);
+  std::vector<std::size_t> all(keyframes.keyframes.size());
+  for (std::size_t k = 0; k < all.size(); ++k) all[k] = k;
   std::size_t written = 0;
-  InsertKeyframes(s, *this, 0, kfs, r, written);
+  InsertKeyframes(s, *this, 0, keyframes, all, r, written);
   FinishSession(s, r);
   tx.Commit();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -561,12 +586,19 @@ IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::ve
 
 namespace {
 // Work per map keyframe: the removert delta (keyframes owned by the reference session) and / or
-// query points re-expressed in its frame (query keyframes near it).
+// query points re-expressed in its frame (query keyframes near it), as positions in the sources.
 struct KeyframeWork {
-  const KeyframeDelta* delta = nullptr;
-  std::vector<std::pair<const KeyframeInput*, Pose>> extra;  // query cloud, T_map_query
+  std::size_t delta = kNone;
+  std::vector<std::pair<std::size_t, Pose>> extra;  // query keyframe, T_map_query
+  static constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
 };
 using WorkPlan = std::map<std::size_t, KeyframeWork>;  // by position in the map's keyframes
+
+// What a step reads: the session's sources.
+struct StepInputs {
+  const DeltaSource& deltas;
+  const KeyframeSource& query;
+};
 
 // One map keyframe's step: the blobs to write and the counts of the delta's points.
 struct KeyframeStep {
@@ -589,28 +621,32 @@ int NewSessionOrder(Store::Impl& s, const SessionMeta& session) {
 
 // LT-removert's delta of each reference keyframe goes to that map keyframe.
 void AssignDeltas(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs, int ref, const std::string& reference,
-                  const std::vector<KeyframeDelta>& deltas, WorkPlan* work) {
+                  const DeltaSource& deltas, WorkPlan* work) {
   std::map<int, std::size_t> owned;  // reference keyframe index -> position in kfs
   for (std::size_t k = 0; k < kfs.size(); ++k)
     if (kfs[k].session == ref) owned[kfs[k].source_index] = k;
-  for (const auto& d : deltas) {
-    const auto it = owned.find(d.keyframe);
+  for (std::size_t d = 0; d < deltas.keyframes.size(); ++d) {
+    const int keyframe = deltas.keyframes[d];
+    const auto it = owned.find(keyframe);
     if (it == owned.end())
-      throw Error(s.path + ": delta for keyframe " + std::to_string(d.keyframe) + " of session '" + reference +
+      throw Error(s.path + ": delta for keyframe " + std::to_string(keyframe) + " of session '" + reference +
                   "', which is not a map keyframe");
-    if ((*work)[it->second].delta) throw Error(s.path + ": two deltas for keyframe " + std::to_string(d.keyframe));
-    (*work)[it->second].delta = &d;
+    if ((*work)[it->second].delta != KeyframeWork::kNone)
+      throw Error(s.path + ": two deltas for keyframe " + std::to_string(keyframe));
+    (*work)[it->second].delta = d;
   }
 }
 
 // A query keyframe within new_keyframe_radius_m of a map keyframe adds its cloud to the nearest
-// one; the others become new map keyframes (returned), one per place unless they carry points.
-std::vector<const KeyframeInput*> AssignQueryKeyframes(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs,
-                                                       const std::vector<KeyframeInput>& query, WorkPlan* work) {
+// one; the others become new map keyframes (their positions returned), one per place unless they
+// carry points.
+std::vector<std::size_t> AssignQueryKeyframes(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs,
+                                              const KeyframeSource& query, WorkPlan* work) {
   const double r2 = s.cfg.new_keyframe_radius_m * s.cfg.new_keyframe_radius_m;
-  std::vector<const KeyframeInput*> fresh;
+  std::vector<std::size_t> fresh;
   std::vector<Eigen::Vector3d> fresh_t;
-  for (const auto& q : query) {
+  for (std::size_t qk = 0; qk < query.keyframes.size(); ++qk) {
+    const KeyframeSlot& q = query.keyframes[qk];
     const Eigen::Vector3d t = q.T_world_sensor.translation();
     double best = std::numeric_limits<double>::infinity();
     std::size_t m = 0;
@@ -621,12 +657,12 @@ std::vector<const KeyframeInput*> AssignQueryKeyframes(const Store::Impl& s, con
     bool near_fresh = false;
     for (const auto& f : fresh_t) near_fresh |= (f - t).squaredNorm() <= r2;
     if (best > r2) {
-      if (!near_fresh || !q.cloud.empty()) {  // keep every point: a cloud near a fresh one is its own
-        fresh.push_back(&q);
+      if (!near_fresh || q.points > 0) {  // keep every point: a cloud near a fresh one is its own
+        fresh.push_back(qk);
         fresh_t.push_back(t);
       }
-    } else if (!q.cloud.empty()) {
-      (*work)[m].extra.emplace_back(&q, kfs[m].T_world_sensor.inverse() * q.T_world_sensor);
+    } else if (q.points > 0) {
+      (*work)[m].extra.emplace_back(qk, kfs[m].T_world_sensor.inverse() * q.T_world_sensor);
     }
   }
   return fresh;
@@ -656,8 +692,9 @@ std::vector<Store::Impl::KfBlobs> LoadChunk(const Store::Impl& s, const std::vec
 // strong ND matched within nd_match_radius_m (their keys into change_keys) plus PD (paper eq. 4);
 // then the query points near it (new territory seen again, or PD beyond the assignment radius):
 // a keyframe the reference never had is replaced by what this session saw.
-QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const KeyframeWork& w, int ref, int S,
-                   const QCloud& latest_q, const std::string& what, detail::KeySet* change_keys, QCloud* nd_weak) {
+QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const KeyframeDelta* delta,
+                   const StepInputs& src, const KeyframeWork& w, int ref, int S, const QCloud& latest_q,
+                   const std::string& what, detail::KeySet* change_keys, QCloud* nd_weak) {
   auto quant = [&](const PointCloud& c, PointClass cls, const std::string& name) {
     return detail::Quantize(c, s.cfg.resolution_m, s.cfg.intensity_step, cls, std::uint16_t(S), what + " " + name);
   };
@@ -665,10 +702,10 @@ QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const K
   if (in.rec.session == ref) {
     const QCloud ref_q = in.deltas.empty() ? latest_q : s.Rollback(in);
     QCloud nd_strong;
-    if (w.delta) {
-      nd_strong = quant(w.delta->nd_strong, PointClass::kNDStrong, "nd_strong");
+    if (delta) {
+      nd_strong = quant(delta->nd_strong, PointClass::kNDStrong, "nd_strong");
       // Weak ND changes nothing in the map (occluded, kept); it is stored only on request.
-      if (s.cfg.store_weak_nd) *nd_weak = quant(w.delta->nd_weak, PointClass::kNDWeak, "nd_weak");
+      if (s.cfg.store_weak_nd) *nd_weak = quant(delta->nd_weak, PointClass::kNDWeak, "nd_weak");
     }
     const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, s.cfg.nd_match_radius_m / s.cfg.resolution_m);
     target.reserve(ref_q.size());
@@ -678,14 +715,14 @@ QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const K
       else
         target.push_back(ref_q[i]);
     }
-    if (w.delta) {
-      for (const QPoint& p : quant(w.delta->pd_strong, PointClass::kPDStrong, "pd_strong")) target.push_back(p);
-      for (const QPoint& p : quant(w.delta->pd_weak, PointClass::kPDWeak, "pd_weak")) target.push_back(p);
+    if (delta) {
+      for (const QPoint& p : quant(delta->pd_strong, PointClass::kPDStrong, "pd_strong")) target.push_back(p);
+      for (const QPoint& p : quant(delta->pd_weak, PointClass::kPDWeak, "pd_weak")) target.push_back(p);
     }
   }
   for (const auto& [q, T] : w.extra)
-    for (const QPoint& p : quant(geometry::Transform(q->cloud, T), PointClass::kPDStrong,
-                                 "query keyframe " + std::to_string(q->index)))
+    for (const QPoint& p : quant(geometry::Transform(src.query.read(q), T), PointClass::kPDStrong,
+                                 "query keyframe " + std::to_string(src.query.keyframes[q].index)))
       target.push_back(p);
   return target;
 }
@@ -707,16 +744,20 @@ void CountRoles(const QCloud& delta, int S, KeyframeStep* o) {
 }
 
 // The delta from the keyframe's latest state to its target, and the new latest state.
-KeyframeStep StepKeyframe(const Store::Impl& s, const Store::Impl::KfBlobs& in, const KeyframeWork& w, int ref, int S,
-                          const std::string& session_name) {
+// The keyframe's delta and query clouds are read here, one keyframe's at a time per worker.
+KeyframeStep StepKeyframe(const Store::Impl& s, const Store::Impl::KfBlobs& in, const StepInputs& src,
+                          const KeyframeWork& w, int ref, int S, const std::string& session_name) {
   const std::string what = "session '" + session_name + "' map keyframe " + std::to_string(in.rec.id);
   const QCloud latest_q = s.Decode(in.base, what + " base");
+  KeyframeDelta removert;
+  if (w.delta != KeyframeWork::kNone) removert = src.deltas.read(w.delta);
+  const KeyframeDelta* d = w.delta != KeyframeWork::kNone ? &removert : nullptr;
   detail::KeySet change_keys;
   QCloud nd_weak;
-  const QCloud target = TargetState(s, in, w, ref, S, latest_q, what, &change_keys, &nd_weak);
+  const QCloud target = TargetState(s, in, d, src, w, ref, S, latest_q, what, &change_keys, &nd_weak);
   const QCloud delta = detail::MakeDelta(latest_q, target, change_keys, nd_weak);
   KeyframeStep o;
-  o.nd_weak_in = w.delta ? w.delta->nd_weak.size() : 0;
+  o.nd_weak_in = d ? d->nd_weak.size() : 0;
   CountRoles(delta, S, &o);
   if (delta.empty()) return o;
   o.delta_blob = s.Encode(delta);
@@ -762,6 +803,11 @@ struct StepWriter {
 IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std::string& reference,
                                           const std::vector<KeyframeDelta>& deltas,
                                           const std::vector<KeyframeInput>& query_keyframes) {
+  return IntegrateSessionFrom(session, reference, InMemory(deltas), InMemory(query_keyframes));
+}
+
+IntegrationResult Store::IntegrateSessionFrom(const SessionMeta& session, const std::string& reference,
+                                              const DeltaSource& deltas, const KeyframeSource& query_keyframes) {
   const auto t0 = std::chrono::steady_clock::now();
   CheckName(session.name);
   Impl& s = *impl_;
@@ -774,7 +820,8 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
   const std::vector<KeyframeRecord> kfs = s.Keyframes();
   WorkPlan work;
   AssignDeltas(s, kfs, ref, reference, deltas, &work);
-  const std::vector<const KeyframeInput*> fresh = AssignQueryKeyframes(s, kfs, query_keyframes, &work);
+  const std::vector<std::size_t> fresh = AssignQueryKeyframes(s, kfs, query_keyframes, &work);
+  const StepInputs src{deltas, query_keyframes};
   std::vector<std::pair<std::size_t, const KeyframeWork*>> items;
   for (const auto& [k, w] : work) items.emplace_back(k, &w);
   std::size_t written = 0;
@@ -787,14 +834,14 @@ IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std:
     const std::vector<Impl::KfBlobs> in = LoadChunk(s, kfs, positions, ref);
     std::vector<KeyframeStep> steps(n);
     ParallelFor(n, s.threads,
-                [&](std::size_t k) { steps[k] = StepKeyframe(s, in[k], *items[c0 + k].second, ref, S, session.name); });
+                [&](std::size_t k) { steps[k] = StepKeyframe(s, in[k], src, *items[c0 + k].second, ref, S, session.name); });
     for (std::size_t k = 0; k < n; ++k) {
       if (!writer.Write(in[k].rec.id, S, steps[k], r)) continue;
       ++written;
       if (on_keyframe_written) on_keyframe_written(written);
     }
   }
-  InsertKeyframes(s, *this, S, fresh, r, written);
+  InsertKeyframes(s, *this, S, query_keyframes, fresh, r, written);
   FinishSession(s, r);
   tx.Commit();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -882,43 +929,51 @@ PointCloud Store::MapAt(int session, const Region& region) const {
   return Concat(parts, region, impl_->threads);
 }
 
+namespace {
+// One keyframe's (points of a's state with no point of b's near, the reverse) in the world frame;
+// false when the keyframe is the same in both states. Its deltas above `lo` are loaded, newest first.
+bool KeyframeChange(const Store::Impl& s, const Store::Impl::KfBlobs& kb, int a, int lo, int hi, const Region& region,
+                    std::pair<PointCloud, PointCloud>* out) {
+  const bool created_between = kb.rec.session > lo;
+  const bool delta_between = std::any_of(kb.deltas.begin(), kb.deltas.end(), [&](const auto& d) { return d.first <= hi; });
+  if (!created_between && !delta_between) return false;
+  const std::string what = "keyframe " + std::to_string(kb.rec.id);
+  QCloud state = s.Decode(kb.base, what + " base");
+  QCloud at_hi;
+  bool passed_hi = false;
+  for (const auto& [session, blob] : kb.deltas) {  // newest first: roll back to hi, then to lo
+    if (!passed_hi && session <= hi) {
+      at_hi = state;
+      passed_hi = true;
+    }
+    state = detail::ApplyInverse(state, s.Decode(blob, what + " delta " + std::to_string(session)));
+  }
+  if (!passed_hi) at_hi = state;
+  const QCloud at_lo = created_between ? QCloud() : state;
+  auto world = [&](const QCloud& q) {
+    return ToWorld(q, kb.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+  };
+  const QCloud& at_a = a == lo ? at_lo : at_hi;
+  const QCloud& at_b = a == lo ? at_hi : at_lo;
+  *out = {world(detail::Unmatched(at_a, at_b)), world(detail::Unmatched(at_b, at_a))};
+  return true;
+}
+}  // namespace
+
 std::vector<std::pair<PointCloud, PointCloud>> Store::KeyframeChanges(int a, int b, const Region& region) const {
   const Impl& s = *impl_;
   const int lo = std::min(a, b), hi = std::max(a, b);
   if (lo < 0 || hi > s.Latest())
     throw Error(s.path + ": no session " + std::to_string(lo < 0 ? lo : hi) + " in the map store");
-  const auto blobs = s.LoadBlobs(hi, lo);  // keyframes of the `hi` state, deltas above `lo`, newest first
-  std::vector<std::pair<PointCloud, PointCloud>> out(blobs.size());
-  std::vector<char> changed(blobs.size(), 0);
-  ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
-    const auto& kb = blobs[k];
-    const bool created_between = kb.rec.session > lo;
-    const bool delta_between = std::any_of(kb.deltas.begin(), kb.deltas.end(), [&](const auto& d) { return d.first <= hi; });
-    if (!created_between && !delta_between) return;  // the same in both states
-    const std::string what = "keyframe " + std::to_string(kb.rec.id);
-    QCloud state = s.Decode(kb.base, what + " base");
-    QCloud at_hi;
-    bool passed_hi = false;
-    for (const auto& [session, blob] : kb.deltas) {  // newest first: roll back to hi, then to lo
-      if (!passed_hi && session <= hi) {
-        at_hi = state;
-        passed_hi = true;
-      }
-      state = detail::ApplyInverse(state, s.Decode(blob, what + " delta " + std::to_string(session)));
-    }
-    if (!passed_hi) at_hi = state;
-    const QCloud at_lo = created_between ? QCloud() : state;
-    auto world = [&](const QCloud& q) {
-      return ToWorld(q, kb.rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
-    };
-    const QCloud& at_a = a == lo ? at_lo : at_hi;
-    const QCloud& at_b = a == lo ? at_hi : at_lo;
-    out[k] = {world(detail::Unmatched(at_a, at_b)), world(detail::Unmatched(at_b, at_a))};
-    changed[k] = 1;
-  });
   std::vector<std::pair<PointCloud, PointCloud>> kept;
-  for (std::size_t k = 0; k < out.size(); ++k)
-    if (changed[k]) kept.push_back(std::move(out[k]));
+  s.ForEachBatch(hi, lo, [&](const std::vector<Impl::KfBlobs>& blobs) {  // the `hi` state, deltas above `lo`
+    std::vector<std::pair<PointCloud, PointCloud>> out(blobs.size());
+    std::vector<char> changed(blobs.size(), 0);
+    ParallelFor(blobs.size(), s.threads,
+                [&](std::size_t k) { changed[k] = KeyframeChange(s, blobs[k], a, lo, hi, region, &out[k]) ? 1 : 0; });
+    for (std::size_t k = 0; k < out.size(); ++k)
+      if (changed[k]) kept.push_back(std::move(out[k]));
+  });
   return kept;
 }
 
@@ -1003,17 +1058,24 @@ PointCloud Store::StepChanges(int session, const Region& region) const {
   });
   // Keyframes this step created (new territory) hold their changes in the base cloud: their
   // weak PD (space the reference saw free, e.g. a new object) is a change of the step too.
-  std::vector<Impl::KfBlobs> created;
-  for (auto& b : s.LoadBlobs(session, session))
-    if (b.rec.session == session) created.push_back(std::move(b));
-  std::vector<PointCloud> fresh(created.size());
-  ParallelFor(created.size(), s.threads, [&](std::size_t k) {
-    QCloud changes;
-    for (const QPoint& p : s.Rollback(created[k]))
-      if (p.session == session && p.cls == std::uint8_t(PointClass::kPDWeak)) changes.push_back(p);
-    fresh[k] = ToWorld(changes, created[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
-  });
-  for (auto& f : fresh) parts.push_back(std::move(f));
+  // Only their ids' range is loaded, kStreamKeyframes at a time (never every keyframe's base).
+  Stmt range(s.db, "SELECT min(id), max(id) FROM keyframes WHERE session = ?", s.path);
+  range.Bind(1, session);
+  const bool any = range.Step() && !range.Null(0);
+  const int lo = any ? int(range.Int(0)) : 0, hi = any ? int(range.Int(1)) : -1;
+  for (int first = lo; first <= hi; first += kStreamKeyframes) {
+    std::vector<Impl::KfBlobs> created;
+    for (auto& b : s.LoadBlobs(session, session, -1, {first, std::min(first + kStreamKeyframes, hi + 1)}))
+      if (b.rec.session == session) created.push_back(std::move(b));
+    std::vector<PointCloud> fresh(created.size());
+    ParallelFor(created.size(), s.threads, [&](std::size_t k) {
+      QCloud changes;
+      for (const QPoint& p : s.Rollback(created[k]))
+        if (p.session == session && p.cls == std::uint8_t(PointClass::kPDWeak)) changes.push_back(p);
+      fresh[k] = ToWorld(changes, created[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+    });
+    for (auto& f : fresh) parts.push_back(std::move(f));
+  }
   Region no_voxel = region;
   no_voxel.voxel_m = 0;
   return Concat(parts, no_voxel, s.threads);

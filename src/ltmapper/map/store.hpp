@@ -34,6 +34,8 @@ class Store {
 
   // The central session: every keyframe becomes a map keyframe. One transaction.
   IntegrationResult IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes);
+  // The same, each keyframe's cloud read when its chunk is encoded.
+  IntegrationResult IntegrateBaseFrom(const SessionMeta& session, const KeyframeSource& keyframes);
   // A query session's changes against `reference` (an integrated session, usually the central
   // one): per reference keyframe with a delta, the keyframe's state becomes reference-state − ND
   // + PD. `query_keyframes` carry this session's points that no reference keyframe owns (LT-
@@ -46,6 +48,10 @@ class Store {
   IntegrationResult IntegrateSession(const SessionMeta& session, const std::string& reference,
                                      const std::vector<KeyframeDelta>& deltas,
                                      const std::vector<KeyframeInput>& query_keyframes);
+  // The same, each delta and query cloud read when the chunk of map keyframes it goes to is
+  // stepped (a query keyframe's cloud is "empty" when its slot's `points` is 0).
+  IntegrationResult IntegrateSessionFrom(const SessionMeta& session, const std::string& reference,
+                                         const DeltaSource& deltas, const KeyframeSource& query_keyframes);
   // Test hook: called inside the integration transaction after each keyframe is written.
   std::function<void(std::size_t keyframes_written)> on_keyframe_written;
 

@@ -106,8 +106,8 @@ MapFigures ReadMapFigures(const RunPaths& p, const map::MapConfig& map_cfg, bool
     f.live = totals.base_points;
   }
   if (!export_maps) return f;
-  if (fs::exists(p.live)) f.live = io::ReadPcd(p.live).size();
-  if (fs::exists(p.meta)) f.meta = io::ReadPcd(p.meta).size();
+  if (fs::exists(p.live)) f.live = io::ReadPcdPointCount(p.live);  // the header: never the map
+  if (fs::exists(p.meta)) f.meta = io::ReadPcdPointCount(p.meta);
   const auto csv = fs::path(p.objects) / "objects.csv";
   if (!fs::exists(csv)) return f;
   std::ifstream in(csv);
