@@ -86,6 +86,13 @@ void LowestGrid::Add(const PointCloud& cloud) {
   }
 }
 
+void LowestGrid::Add(const LowestGrid& other) {
+  for (const auto& [cell, z] : other.z_) {
+    const auto [it, added] = z_.emplace(cell, z);
+    if (!added) it->second = std::min(it->second, z);
+  }
+}
+
 void LowestGrid::Watch(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int grow) {
   if (cell_m_ <= 0.0) return;
   for (std::int64_t ix = Cell(lo.x()) - grow; ix <= Cell(hi.x()) + grow; ++ix)

@@ -92,6 +92,7 @@ class LowestGrid {
  public:
   explicit LowestGrid(double cell_m) : cell_m_(cell_m) {}
   void Add(const PointCloud& cloud);
+  void Add(const LowestGrid& other);  // the lower of both per cell (same cell_m)
   // Only some places wanted: Watch the cells overlapping the xy box [lo, hi] grown by `grow` cells,
   // then AddWatched(cloud) lowers those cells only (a whole map's points, few cells hashed).
   void Watch(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int grow = 0);

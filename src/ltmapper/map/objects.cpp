@@ -137,15 +137,35 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
   NearCells near(cfg.object_tolerance_m);
   if (cfg.object_tolerance_m > 0.0)
     for (const auto& p : changes.points) near.Add(p.xyz());
-  store.StreamMapAt(step.reference, {}, [&](PointCloud&& part) { m.floor.Add(part); });
-  store.StreamMapAt(step.order, {}, [&](PointCloud&& part) {
-    m.floor.Add(part);
-    if (near.empty()) return;
-    const bool labelled = part.session.size() == part.size();
-    for (std::size_t i = 0; i < part.size(); ++i)
-      if ((!labelled || int(part.session[i]) < step.order) && near.Near(part.points[i].xyz()))
-        m.unchanged_near.push_back(part.points[i].x, part.points[i].y, part.points[i].z);
-  });
+  // Parts are taken a batch at a time and read on every worker (each part's floor and surfaces),
+  // then merged in part order.
+  constexpr std::size_t kBatch = 64;
+  std::vector<PointCloud> batch;
+  auto read_batch = [&](bool after) {
+    std::vector<Floor> floors(batch.size(), Floor(cfg.object_ground_cell_m));
+    std::vector<PointCloud> kept(batch.size());
+    ParallelFor(batch.size(), store.threads(), [&](std::size_t k) {
+      const PointCloud& part = batch[k];
+      floors[k].Add(part);
+      if (!after || near.empty()) return;
+      const bool labelled = part.session.size() == part.size();
+      for (std::size_t i = 0; i < part.size(); ++i)
+        if ((!labelled || int(part.session[i]) < step.order) && near.Near(part.points[i].xyz()))
+          kept[k].push_back(part.points[i].x, part.points[i].y, part.points[i].z);
+    });
+    for (std::size_t k = 0; k < batch.size(); ++k) {
+      m.floor.Add(floors[k]);
+      m.unchanged_near.append(kept[k]);
+    }
+    batch.clear();
+  };
+  for (const bool after : {false, true}) {
+    store.StreamMapAt(after ? step.order : step.reference, {}, [&](PointCloud&& part) {
+      batch.push_back(std::move(part));
+      if (batch.size() == kBatch) read_batch(after);
+    });
+    read_batch(after);
+  }
   return m;
 }
 
