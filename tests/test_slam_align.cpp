@@ -60,6 +60,25 @@ TEST(SlamAlign, RecoversUnknownOriginFromScans) {
   }
 }
 
+// The registration clouds are kept within registration.cache_mb and made again when dropped:
+// a budget of almost nothing gives the same poses and loops as one that keeps every cloud.
+TEST(SlamAlign, CloudCacheBudgetDoesNotChangeTheResult) {
+  const PointCloud world = test::SynthWorld(41);
+  std::vector<Session> s = {
+      test::SynthSession(world, "c", Pose::Identity(), -36, 36, 4.0, 0.0, 1, nullptr),
+      test::SynthSession(world, "q", test::MakePose(-63, 48, 1.5, 118 * kDeg), -34, 34, 4.0, 0.0005, 2, nullptr)};
+  SlamConfig tiny = FastConfig(), ample = FastConfig();
+  tiny.reg_cache_mb = 0.01;  // 10 kB: about one keyframe's cloud kept, the others made again
+  ample.reg_cache_mb = 1e5;
+  const SlamResult a = AlignSessions(s, tiny, 2), b = AlignSessions(s, ample, 2);
+  ASSERT_TRUE(b.sessions[1].aligned) << b.sessions[1].reason;
+  ASSERT_EQ(a.loops.size(), b.loops.size());
+  for (std::size_t i = 0; i < a.loops.size(); ++i) EXPECT_EQ(a.loops[i].accepted, b.loops[i].accepted);
+  for (std::size_t q = 0; q < s.size(); ++q)
+    for (std::size_t k = 0; k < s[q].keyframes.size(); ++k)
+      EXPECT_TRUE(a.sessions[q].T_world_sensor[k].isApprox(b.sessions[q].T_world_sensor[k], 1e-12)) << q << " " << k;
+}
+
 TEST(SlamAlign, SessionsWithoutOverlapAreNotAligned) {
   // Two different worlds: whatever Scan Context proposes, nothing may be accepted.
   const PointCloud w1 = test::SynthWorld(51), w2 = test::SynthWorld(52);

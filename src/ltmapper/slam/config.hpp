@@ -33,6 +33,8 @@ struct SlamConfig {
   double reg_max_range_m = 60.0;      // scan points farther than this are dropped
   double reg_voxel_m = 0.5;           // voxel of keyframe clouds and submaps
   int reg_submap_neighbours = 1;      // keyframes on each side merged into a submap
+  double reg_cache_mb = 64.0;         // downsampled keyframe clouds kept for reuse (least recently used
+                                      // dropped beyond it, read again when needed): memory vs rereads
   double reg_coarse_voxel_m = 1.0;    // coarse stage (Scan Context gives no translation) ...
   double reg_coarse_correspondence_m = 8.0;  // ... with this correspondence distance; 0 = off
   double reg_max_correspondence_m = 1.0;  // fine GICP correspondence distance
@@ -93,6 +95,7 @@ struct SlamConfig {
     v("registration.max_range_m", reg_max_range_m, "m", 1.0, 1000.0);
     v("registration.voxel_m", reg_voxel_m, "m", 0.01, 10.0);
     v("registration.submap_neighbours", reg_submap_neighbours, "keyframes", 0, 100);
+    v("registration.cache_mb", reg_cache_mb, "MB", 0.01, 1e6);
     v("registration.coarse_voxel_m", reg_coarse_voxel_m, "m", 0.01, 20.0);
     v("registration.coarse_correspondence_m", reg_coarse_correspondence_m, "m", 0.0, 200.0);
     v("registration.max_correspondence_m", reg_max_correspondence_m, "m", 0.01, 100.0);

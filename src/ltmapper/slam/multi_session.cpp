@@ -13,6 +13,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <list>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -38,15 +39,15 @@ std::string ScdPath(const Session& s, const Keyframe& kf) {
   return (fs::path(s.dir) / "SCDs" / ((stem.empty() ? std::string(buf) : stem) + ".scd")).string();
 }
 
-// Per-keyframe downsampled clouds, loaded once on first use (thread-safe).
+// Per-keyframe downsampled clouds, made on first use and kept while they fit in
+// registration.cache_mb (least recently used dropped first, made again from the scan when asked
+// for again: the same points, so results do not depend on the budget). Thread-safe; two threads
+// asking for the same missing keyframe may both make it.
 class CloudStore {
  public:
   CloudStore(const std::vector<Session>& sessions, const SlamConfig& cfg)
-      : sessions_(sessions), cfg_(cfg) {
-    for (const Session& s : sessions) {
-      clouds_.emplace_back(s.keyframes.size());
-      once_.emplace_back(new std::once_flag[s.keyframes.size()]);
-    }
+      : sessions_(sessions), cfg_(cfg), budget_bytes_(std::size_t(cfg.reg_cache_mb * 1e6)) {
+    for (const Session& s : sessions) slots_.emplace_back(s.keyframes.size());
   }
   std::size_t Keyframes(int s) const { return sessions_[std::size_t(s)].keyframes.size(); }
   // Loads a keyframe's raw scan; empty scans are an error.
@@ -57,13 +58,13 @@ class CloudStore {
     io::RequireScanPoints(*cloud, KeyframeWhere(ses, kf));
     return cloud;
   }
-  // Stores the downsampled version of an already loaded scan.
+  // Keeps the downsampled version of an already loaded scan.
   void Put(int s, int k, const PointCloud& raw) {
-    std::call_once(once_[s][k], [&] { clouds_[s][k] = Prepare(raw); });
+    if (!Cached(s, k)) Keep(s, k, Prepare(raw));
   }
   std::shared_ptr<const PointCloud> Get(int s, int k) {
-    std::call_once(once_[s][k], [&] { clouds_[s][k] = Prepare(*Raw(s, k)); });
-    return clouds_[s][k];
+    if (auto c = Cached(s, k)) return c;
+    return Keep(s, k, Prepare(*Raw(s, k)));
   }
   // Keyframe k with its neighbours, in k's sensor frame (session-local poses), downsampled.
   PointCloud Submap(int s, int k) {
@@ -90,10 +91,45 @@ class CloudStore {
     c.object.clear();
     return std::make_shared<const PointCloud>(geometry::VoxelDownsample(c, cfg_.reg_voxel_m, 1));
   }
+  static std::size_t Bytes(const PointCloud& c) { return c.points.size() * sizeof(c.points[0]); }
+  // The kept cloud, marked as used now; null when not kept.
+  std::shared_ptr<const PointCloud> Cached(int s, int k) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    Slot& slot = slots_[std::size_t(s)][std::size_t(k)];
+    if (!slot.cloud) return nullptr;
+    used_.splice(used_.begin(), used_, slot.use);
+    return slot.cloud;
+  }
+  // Keeps `c` (or the copy another thread kept first) and drops the least recently used beyond
+  // the budget (the newest is always kept).
+  std::shared_ptr<const PointCloud> Keep(int s, int k, std::shared_ptr<const PointCloud> c) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    Slot& slot = slots_[std::size_t(s)][std::size_t(k)];
+    if (slot.cloud) return slot.cloud;
+    slot.cloud = std::move(c);
+    used_.emplace_front(s, k);
+    slot.use = used_.begin();
+    bytes_ += Bytes(*slot.cloud);
+    while (bytes_ > budget_bytes_ && used_.size() > 1) {
+      const auto [ds, dk] = used_.back();
+      Slot& old = slots_[std::size_t(ds)][std::size_t(dk)];
+      bytes_ -= Bytes(*old.cloud);
+      old.cloud.reset();
+      used_.pop_back();
+    }
+    return slot.cloud;
+  }
+  struct Slot {
+    std::shared_ptr<const PointCloud> cloud;
+    std::list<std::pair<int, int>>::iterator use;
+  };
   const std::vector<Session>& sessions_;
   const SlamConfig& cfg_;
-  std::vector<std::vector<std::shared_ptr<const PointCloud>>> clouds_;
-  std::vector<std::unique_ptr<std::once_flag[]>> once_;
+  const std::size_t budget_bytes_;
+  std::mutex mutex_;
+  std::vector<std::vector<Slot>> slots_;
+  std::list<std::pair<int, int>> used_;  // kept keyframes, most recently used first
+  std::size_t bytes_ = 0;
 };
 
 // nanoflann adaptor over the ring keys of one session.
