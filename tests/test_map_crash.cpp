@@ -78,6 +78,44 @@ std::vector<std::string> Listing(const std::string& dir) {
 
 // Read-only media or another user's store (file 0444 in a 0555 directory): every reader works
 // and leaves no -wal / -shm behind (they failed with "attempt to write a readonly database").
+// Inputs are read while the step is written (a chunk at a time): a truncated keyframe PCD late in
+// the session is an error naming it, and the store keeps its previous state (the transaction is
+// rolled back, no session added).
+TEST(MapFiles, BadKeyframeFileMidSessionLeavesTheStoreAsItWas) {
+  test::TempDir tmp;
+  WriteLayout(tmp.str(), 150);  // more than two chunks of 64 map keyframes
+  PipelineDirs dirs;
+  dirs.aligned = tmp / "aligned";
+  dirs.changes = tmp / "changes";
+  const std::string store_path = tmp / "m.ltmap";
+  InitFromDirs(store_path, MapConfig{}, dirs, "session_00", 2);
+  bool ok = false;
+  const std::uint64_t before = DigestOf(store_path, &ok);
+  ASSERT_TRUE(ok);
+  for (const std::string bad : {"keyframes/000140/nd_strong.pcd", "new_keyframes/000101/pd_weak.pcd"}) {
+    const std::string file = tmp / ("changes/pair_00_01/" + bad);
+    const std::string good = file + ".good";
+    fs::copy_file(file, good);
+    fs::resize_file(file, fs::file_size(file) - 7);
+    {
+      Store store = Store::Open(store_path);
+      store.set_threads(2);
+      try {
+        IntegrateFromDirs(store, dirs, "session_01");
+        ADD_FAILURE() << "no error for a truncated " << bad;
+      } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+      }
+    }
+    EXPECT_EQ(DigestOf(store_path, &ok), before) << bad;
+    EXPECT_TRUE(ok);
+    fs::rename(good, file);
+  }
+  Store store = Store::Open(store_path);
+  EXPECT_EQ(IntegrateFromDirs(store, dirs, "session_01").session, 1);  // the repaired folder integrates
+  EXPECT_EQ(store.Sessions().size(), 2u);
+}
+
 TEST(MapCli, ReadOnlyStoreCanBeRead) {
   test::TempDir tmp;
   WriteLayout(tmp.str(), 4);
