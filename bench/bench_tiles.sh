@@ -58,6 +58,16 @@ simulate() {
   [ -d "$2/sim/sessions/session_0$PAIR" ] || "$EXE" sim --config "$2/sim.yaml" --out "$2/sim" --quiet --threads "$THREADS"
 }
 
+# The arguments of `ltmapper removert` for the pair simulated in $1 on its true poses, out to $2,
+# with the bench's keys and any further arguments: into RV (an array; `timed` needs a command).
+removert_pair() {
+  local dir="$1" out="$2"
+  shift 2
+  RV=(removert --sessions "$dir/sim/sessions/session_00" "$dir/sim/sessions/session_01"
+      --poses "$dir/sim/truth/session_00/poses_world.txt" "$dir/sim/truth/session_01/poses_world.txt"
+      "${SETS[@]}" --set out.write_ply=false "$@" --out "$out" --threads "$THREADS" --quiet)
+}
+
 if [ "$LTMAP" = 1 ]; then
   printf "| keyframes per session | map points | objects | map integrate peak MB (s) | map objects peak MB (s) | map live peak MB (s) |\n"
   printf "|---|---|---|---|---|---|\n"
@@ -67,10 +77,8 @@ if [ "$LTMAP" = 1 ]; then
     for s in session_00 session_01; do  # LT-map reads the world poses from LT-SLAM's folder
       mkdir -p "$dir/aligned/$s" && cp "$dir/sim/truth/$s/poses_world.txt" "$dir/aligned/$s/"
     done
-    [ -f "$dir/changes/pair_00_01/keyframes.csv" ] || "$EXE" removert --sessions "$dir/sim/sessions/session_00" \
-      "$dir/sim/sessions/session_01" --poses "$dir/sim/truth/session_00/poses_world.txt" \
-      "$dir/sim/truth/session_01/poses_world.txt" "${SETS[@]}" --set out.write_ply=false --out "$dir/changes" \
-      --threads "$THREADS" --quiet
+    removert_pair "$dir" "$dir/changes"
+    [ -f "$dir/changes/pair_00_01/keyframes.csv" ] || "$EXE" "${RV[@]}" > /dev/null
     rm -rf "$dir/ltmap" && mkdir -p "$dir/ltmap"
     store="$dir/ltmap/map.ltmap"
     read -r int_mb int_s < <(timed "$EXE" map integrate --store "$store" --aligned "$dir/aligned" --changes "$dir/changes" --central session_00 --threads "$THREADS" --quiet)
@@ -89,11 +97,10 @@ if [ "$PAIR" = 1 ]; then
   for K in $LENGTHS; do
     dir="$WORK/pair$K"
     simulate "$K" "$dir"
-    ses=("$dir/sim/sessions/session_00" "$dir/sim/sessions/session_01")
-    poses=("$dir/sim/truth/session_00/poses_world.txt" "$dir/sim/truth/session_01/poses_world.txt")
-    outs=(--set out.write_ply=false)
-    read -r whole_mb whole_s < <(timed "$EXE" removert --sessions "${ses[@]}" --poses "${poses[@]}" "${SETS[@]}" "${outs[@]}" --out "$dir/whole" --threads "$THREADS" --quiet)
-    read -r tiled_mb tiled_s < <(timed "$EXE" removert --sessions "${ses[@]}" --poses "${poses[@]}" "${SETS[@]}" "${outs[@]}" --set tiles.stage=true --out "$dir/tiled" --threads "$THREADS" --quiet)
+    removert_pair "$dir" "$dir/whole"
+    read -r whole_mb whole_s < <(timed "$EXE" "${RV[@]}")
+    removert_pair "$dir" "$dir/tiled" --set tiles.stage=true
+    read -r tiled_mb tiled_s < <(timed "$EXE" "${RV[@]}")
     files=0; differ=0
     while IFS= read -r f; do
       files=$((files + 1))

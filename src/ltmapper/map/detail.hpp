@@ -9,6 +9,10 @@
 
 namespace ltm::map::detail {
 
+// Keyframes decoded, read or stepped at a time (streamed maps, integration, objects): enough for
+// every worker to have several, few enough that a batch is a small part of any large map.
+constexpr std::size_t kKeyframesPerBatch = 64;
+
 // Role of a point inside a stored delta (a state point always has kAdded).
 enum Role : std::uint8_t {
   kAdded = 0,               // appended by the step (PD, or a point the reference state had)

@@ -286,8 +286,9 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
                           PointsIfExists(d + "pd_strong.pcd") + PointsIfExists(d + "pd_weak.pcd")};
   });
   fresh.read = [&](std::size_t k) {
-    PointCloud cloud = WithClass(ReadIfExists(new_dir(k) + "pd_strong.pcd"), PointClass::kPDStrong);
-    cloud.append(WithClass(ReadIfExists(new_dir(k) + "pd_weak.pcd"), PointClass::kPDWeak));
+    const std::string d = new_dir(k);
+    PointCloud cloud = WithClass(ReadIfExists(d + "pd_strong.pcd"), PointClass::kPDStrong);
+    cloud.append(WithClass(ReadIfExists(d + "pd_weak.pcd"), PointClass::kPDWeak));
     return cloud;
   };
   spdlog::info("map integrate: {} from {} ({} reference keyframes, {} new-territory keyframes)", query, pair,

@@ -56,6 +56,10 @@ CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
 }
 
 
+bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
+// The change points objects are clustered from (GroupPoints): PD and strong ND, not weak ND.
+bool Grouped(PointClass c) { return IsPd(c) || c == PointClass::kNDStrong; }
+
 bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& cfg) {
   float z = 0.f;
   return !floor.At(p, &z) || p.z() > z + float(cfg.object_ground_height_m);
@@ -68,7 +72,7 @@ PointCloud OtherSide(const PointCloud& changes, bool appeared) {
   std::vector<bool> mask(changes.size());
   for (std::size_t i = 0; i < changes.size(); ++i) {
     const PointClass c = changes.cls[i];
-    mask[i] = appeared ? c == PointClass::kNDStrong : c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+    mask[i] = appeared ? c == PointClass::kNDStrong : IsPd(c);
   }
   return changes.select(mask);
 }
@@ -136,10 +140,11 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
   m.floor.Add(changes);
   NearCells near(cfg.object_tolerance_m);
   if (cfg.object_tolerance_m > 0.0)
-    for (const auto& p : changes.points) near.Add(p.xyz());
+    for (std::size_t i = 0; i < changes.size(); ++i)
+      if (Grouped(changes.cls[i])) near.Add(changes.points[i].xyz());
   // Parts are taken a batch at a time and read on every worker (each part's floor and surfaces),
   // then merged in part order.
-  constexpr std::size_t kBatch = 64;
+  constexpr std::size_t kBatch = detail::kKeyframesPerBatch;
   std::vector<PointCloud> batch;
   auto read_batch = [&](bool after) {
     std::vector<Floor> floors(batch.size(), Floor(cfg.object_ground_cell_m));
@@ -175,8 +180,7 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
   std::vector<std::uint32_t> idx;
   for (std::size_t i = 0; i < changes.size(); ++i) {
     const PointClass c = changes.cls[i];
-    const bool pd = c == PointClass::kPDStrong || c == PointClass::kPDWeak;
-    if (appeared ? !pd : c != PointClass::kNDStrong) continue;
+    if (!Grouped(c) || IsPd(c) != appeared) continue;
     if (AboveGround(changes.points[i].xyz(), floor, cfg)) idx.push_back(std::uint32_t(i));
   }
   return idx;

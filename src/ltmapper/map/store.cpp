@@ -215,9 +215,7 @@ struct IdRange {
   }
 };
 
-// Keyframes loaded and decoded at a time when a map is streamed (Impl::StreamParts): enough for
-// every worker to have several, few enough that a batch is a small part of any large map.
-constexpr int kStreamKeyframes = 64;
+constexpr int kStreamKeyframes = int(detail::kKeyframesPerBatch);  // per streamed batch of ids
 
 // ====================================================================================== Impl
 struct Store::Impl {
@@ -378,14 +376,16 @@ struct Store::Impl {
     });
   }
   // LoadBlobs(max_created_session, min_delta_session) kStreamKeyframes keyframe ids at a time,
-  // in id order: memory is a batch, not the map.
+  // in id order, over the ids of `ids` (default: every keyframe): memory is a batch, not the map.
   void ForEachBatch(int max_created_session, int min_delta_session,
-                    const std::function<void(const std::vector<KfBlobs>&)>& batch) const {
-    Stmt st(db, "SELECT max(id) FROM keyframes", path);
-    st.Step();
-    const int max_id = st.Null(0) ? -1 : int(st.Int(0));
-    for (int first = 0; first <= max_id; first += kStreamKeyframes)
-      batch(LoadBlobs(max_created_session, min_delta_session, -1, {first, first + kStreamKeyframes}));
+                    const std::function<void(const std::vector<KfBlobs>&)>& batch, IdRange ids = {}) const {
+    if (ids.all()) {
+      Stmt st(db, "SELECT max(id) FROM keyframes", path);
+      st.Step();
+      ids.last = st.Null(0) ? 0 : int(st.Int(0)) + 1;
+    }
+    for (int first = ids.first; first < ids.last; first += kStreamKeyframes)
+      batch(LoadBlobs(max_created_session, min_delta_session, -1, {first, std::min(first + kStreamKeyframes, ids.last)}));
   }
   // State as of the oldest session above which deltas were loaded (inverse chain from the base).
   QCloud Rollback(const KfBlobs& b) const {
@@ -535,7 +535,7 @@ static void InsertKeyframes(Store::Impl& s, Store& store, int session, const Key
                             const std::vector<std::size_t>& which, IntegrationResult& r, std::size_t& written) {
   Stmt ik(s.db, "INSERT INTO keyframes(session, source_index, pose) VALUES(?,?,?)", s.path);
   Stmt ib(s.db, "INSERT INTO base_clouds(keyframe, as_of, points, data) VALUES(?,?,?,?)", s.path);
-  constexpr std::size_t kChunk = 64;
+  constexpr std::size_t kChunk = detail::kKeyframesPerBatch;
   for (std::size_t c0 = 0; c0 < which.size(); c0 += kChunk) {
     const std::size_t n = std::min(kChunk, which.size() - c0);
     std::vector<std::string> blobs(n);
@@ -826,7 +826,7 @@ IntegrationResult Store::IntegrateSessionFrom(const SessionMeta& session, const 
   for (const auto& [k, w] : work) items.emplace_back(k, &w);
   std::size_t written = 0;
   StepWriter writer(s);
-  constexpr std::size_t kChunk = 64;  // keyframes decoded at once: memory vs parallelism
+  constexpr std::size_t kChunk = detail::kKeyframesPerBatch;
   for (std::size_t c0 = 0; c0 < items.size(); c0 += kChunk) {
     const std::size_t n = std::min(kChunk, items.size() - c0);
     std::vector<std::size_t> positions(n);
@@ -1058,24 +1058,22 @@ PointCloud Store::StepChanges(int session, const Region& region) const {
   });
   // Keyframes this step created (new territory) hold their changes in the base cloud: their
   // weak PD (space the reference saw free, e.g. a new object) is a change of the step too.
-  // Only their ids' range is loaded, kStreamKeyframes at a time (never every keyframe's base).
+  // Only their ids' range is loaded, a batch at a time (never every keyframe's base).
   Stmt range(s.db, "SELECT min(id), max(id) FROM keyframes WHERE session = ?", s.path);
   range.Bind(1, session);
-  const bool any = range.Step() && !range.Null(0);
-  const int lo = any ? int(range.Int(0)) : 0, hi = any ? int(range.Int(1)) : -1;
-  for (int first = lo; first <= hi; first += kStreamKeyframes) {
-    std::vector<Impl::KfBlobs> created;
-    for (auto& b : s.LoadBlobs(session, session, -1, {first, std::min(first + kStreamKeyframes, hi + 1)}))
-      if (b.rec.session == session) created.push_back(std::move(b));
-    std::vector<PointCloud> fresh(created.size());
-    ParallelFor(created.size(), s.threads, [&](std::size_t k) {
-      QCloud changes;
-      for (const QPoint& p : s.Rollback(created[k]))
-        if (p.session == session && p.cls == std::uint8_t(PointClass::kPDWeak)) changes.push_back(p);
-      fresh[k] = ToWorld(changes, created[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
-    });
-    for (auto& f : fresh) parts.push_back(std::move(f));
-  }
+  if (range.Step() && !range.Null(0))
+    s.ForEachBatch(session, session, [&](const std::vector<Impl::KfBlobs>& blobs) {
+      std::vector<PointCloud> fresh(blobs.size());
+      ParallelFor(blobs.size(), s.threads, [&](std::size_t k) {
+        if (blobs[k].rec.session != session) return;
+        QCloud changes;
+        for (const QPoint& p : s.Rollback(blobs[k]))
+          if (p.session == session && p.cls == std::uint8_t(PointClass::kPDWeak)) changes.push_back(p);
+        fresh[k] = ToWorld(changes, blobs[k].rec.T_world_sensor, s.cfg.resolution_m, s.cfg.intensity_step, region);
+      });
+      for (auto& f : fresh)
+        if (!f.empty()) parts.push_back(std::move(f));
+    }, {int(range.Int(0)), int(range.Int(1)) + 1});
   Region no_voxel = region;
   no_voxel.voxel_m = 0;
   return Concat(parts, no_voxel, s.threads);
