@@ -278,6 +278,7 @@ TEST(RemovertTileJobs, CliPlanRunMerge) {
   EXPECT_EQ(test::ReadText(tmp / "whole.pcd"), test::ReadText(tmp / "out/static_map.pcd"));
   EXPECT_NE(0, test::RunCli("tiles run " + (tmp / "plan") + " --tile 99", &out));
   EXPECT_NE(out.find("tile 99 of a plan with"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(removert::TilePartDir(tmp / "plan", 99)));  // refused before any part folder
   // Other poses (--poses, as with LT-SLAM's world poses): the session moved 1.5 m, the same bytes
   // both ways and not the own poses' map; a pose file of another length names the file.
   std::vector<Pose> moved;

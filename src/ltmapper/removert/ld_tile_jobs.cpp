@@ -198,16 +198,11 @@ LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir) {
 
 std::size_t RunLdTileJobs(const std::string& plan_dir, std::vector<std::size_t> tiles, int threads, bool force) {
   const LdTilePlanFile f = ReadLdTilePlan(plan_dir);
-  if (tiles.empty())
-    for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) tiles.push_back(t);
-  for (std::size_t tile : tiles)
-    if (tile >= f.plan.tiles.size())
-      throw Error(detail::PlanFileIn(plan_dir), 0,
-                  "no tile " + std::to_string(tile) + " (" + std::to_string(f.plan.tiles.size()) + " tiles)");
   // The pair's sessions and the sensor (the central's scans) once for every tile.
   const PairSessions p = LoadPair(f.central_plan, f.query_plan);
   const RemovertConfig cfg = WithSensor(f.cfg, p.central_kfs);
-  return detail::RunUndoneTiles(plan_dir, tiles, force, [&](std::size_t tile, const std::string& dir) {
+  return detail::RunUndoneTiles(plan_dir, std::move(tiles), f.plan.tiles.size(), force, [&](std::size_t tile,
+                                                                                          const std::string& dir) {
     const detail::VoxelBox window = detail::LdWindowBox(f.plan, tile);
     const LdResult res = DetectLdTile(f.plan, tile, ReadWindow(f.central_plan, p.central.plan, window),
                                       ReadWindow(f.query_plan, p.query.plan, window), p.central_kfs, p.query_kfs,

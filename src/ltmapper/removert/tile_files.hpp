@@ -30,10 +30,12 @@ inline std::string ConfigFileIn(const std::string& plan_dir) { return plan_dir +
 constexpr std::size_t kReadPiece = std::size_t(1) << 14;
 // A part folder's tile.json: written last, the tile is done exactly when it exists.
 std::string TileJsonIn(const std::string& part_dir);
-// run(tile, part_dir) for each of `tiles` not done (every one with `force`), its tile.json removed
-// first (not done while its parts are rewritten; `run` writes it last); returns how many ran.
-std::size_t RunUndoneTiles(const std::string& plan_dir, const std::vector<std::size_t>& tiles, bool force,
-                           const std::function<void(std::size_t, const std::string&)>& run);
+// run(tile, part_dir) for each of `tiles` (empty: all `plan_tiles` of the plan) not done (every one
+// with `force`), its tile.json removed first (not done while its parts are rewritten; `run` writes
+// it last); returns how many ran. A tile outside the plan is an ltm::Error naming plan.json, before
+// any part folder is touched.
+std::size_t RunUndoneTiles(const std::string& plan_dir, std::vector<std::size_t> tiles, std::size_t plan_tiles,
+                           bool force, const std::function<void(std::size_t, const std::string&)>& run);
 // Every tile of the plan done (ltm::Error naming the first missing tile.json); their tile.json paths.
 std::vector<std::string> DoneTiles(const std::string& plan_dir, std::size_t tiles);
 // The clouds files[t] (each in voxel order) into one PCD at `path` of `points` points in voxel

@@ -138,8 +138,8 @@ TilePlanFile ReadTilePlan(const std::string& plan_dir) {
   f.cfg.Validate(detail::ConfigFileIn(plan_dir));
   f.session_dir = Member(doc, "session_dir", T::kString, path).str;
   f.poses_file = Member(doc, "poses_file", T::kString, path).str;
-  if (const json::Value* sensor = doc.Find("sensor_session_dir"); sensor && sensor->type == T::kString)
-    f.sensor_session_dir = sensor->str;  // optional: plans without it take the sensor from their session
+  if (doc.Find("sensor_session_dir"))  // optional: plans without it take the sensor from their session
+    f.sensor_session_dir = Member(doc, "sensor_session_dir", T::kString, path).str;
   f.plan = PlanTiles({}, f.cfg);
   f.plan.session_keyframes = Count(Member(doc, "keyframes", T::kNumber, path), "keyframes", path);
   ReadTiles(doc, f.cfg, path, &f.plan);
@@ -154,13 +154,12 @@ std::string TilePartDir(const std::string& plan_dir, std::size_t tile) {
 
 std::size_t RunTileJobs(const std::string& plan_dir, std::vector<std::size_t> tiles, int threads, bool force) {
   const TilePlanFile f = ReadTilePlan(plan_dir);
-  if (tiles.empty())
-    for (std::size_t t = 0; t < f.plan.tiles.size(); ++t) tiles.push_back(t);
   // The session and the sensor once for every tile.
   const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
   const RemovertConfig cfg = WithSensor(
       f.cfg, f.sensor_session_dir.empty() ? kfs : LoadWorldKeyframes(f.sensor_session_dir, ""));
-  return detail::RunUndoneTiles(plan_dir, tiles, force, [&](std::size_t tile, const std::string& dir) {
+  return detail::RunUndoneTiles(plan_dir, std::move(tiles), f.plan.tiles.size(), force, [&](std::size_t tile,
+                                                                                          const std::string& dir) {
     const HdResult res = RemoveHdTile(f.plan, tile, kfs, cfg, threads);
     io::WritePcd(io::layout::StaticMapIn(dir), res.static_map);
     io::WritePcd(io::layout::HdMapIn(dir), res.hd_map);
@@ -236,8 +235,15 @@ std::vector<std::size_t> ReadRuns(const json::Value& runs, std::size_t n, const 
   return out;
 }
 
-std::size_t RunUndoneTiles(const std::string& plan_dir, const std::vector<std::size_t>& tiles, bool force,
-                           const std::function<void(std::size_t, const std::string&)>& run) {
+std::size_t RunUndoneTiles(const std::string& plan_dir, std::vector<std::size_t> tiles, std::size_t plan_tiles,
+                           bool force, const std::function<void(std::size_t, const std::string&)>& run) {
+  if (tiles.empty())
+    for (std::size_t t = 0; t < plan_tiles; ++t) tiles.push_back(t);
+  for (std::size_t tile : tiles)
+    if (tile >= plan_tiles)
+      throw Error(PlanFileIn(plan_dir), 0,
+                  "no tile " + std::to_string(tile) + " in it (tile " + std::to_string(tile) + " of a plan with " +
+                      std::to_string(plan_tiles) + " tiles)");
   std::size_t ran = 0;
   for (std::size_t tile : tiles) {
     const std::string dir = TilePartDir(plan_dir, tile);
