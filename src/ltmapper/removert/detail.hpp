@@ -183,6 +183,12 @@ inline constexpr const char* kKeyframeCloudNames[kKeyframeClouds] = {"static",  
 inline constexpr PointClass kKeyframeCloudClasses[kKeyframeClouds] = {
     PointClass::kStatic, PointClass::kHD, PointClass::kPDStrong, PointClass::kPDWeak, PointClass::kNDStrong,
     PointClass::kNDWeak};
+// The pair's LD clouds a keyframe cloud is cut from, in order, after the central session's static
+// map (kKfStatic) or HD map (kKfHd): the whole stage concatenates them, the stage from tiles
+// streams their files (LdCloudFile).
+std::vector<PointCloud LdResult::*> KeyframeCloudLd(int cloud);
+// The file of one of the pair's LD clouds ("nd_strong.pcd", ...).
+std::string LdCloudFile(PointCloud LdResult::*cloud);
 // The nearest keyframe (position in `tree`) of every point, and optionally its squared distance.
 std::vector<std::uint32_t> NearestKeyframes(const PointCloud& pts, const geometry::KdTree& tree, int threads,
                                             std::vector<float>* sq_dist = nullptr);

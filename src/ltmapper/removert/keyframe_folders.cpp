@@ -16,6 +16,17 @@ PointCloud Voxel(const PointCloud& c, double voxel_m) {
 
 }  // namespace
 
+std::vector<PointCloud LdResult::*> detail::KeyframeCloudLd(int cloud) {
+  switch (cloud) {
+    case kKfStatic: return {};
+    case kKfHd: return {&LdResult::nd_residue};  // the residues of movers the query saw through
+    case kKfPdStrong: return {&LdResult::pd_strong, &LdResult::pd_unobserved};  // new territory like strong PD
+    case kKfPdWeak: return {&LdResult::pd_weak};
+    case kKfNdStrong: return {&LdResult::nd_strong};
+    default: return {&LdResult::nd_weak};
+  }
+}
+
 std::vector<std::uint32_t> detail::NearestKeyframes(const PointCloud& pts, const geometry::KdTree& tree, int threads,
                                                     std::vector<float>* sq_dist) {
   std::vector<std::uint32_t> out(pts.size(), 0);

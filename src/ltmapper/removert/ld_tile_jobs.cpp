@@ -129,6 +129,12 @@ std::string Absolute(const std::string& path) { return fs::absolute(path).lexica
 
 }  // namespace
 
+std::string detail::LdCloudFile(PointCloud LdResult::*cloud) {
+  for (const LdCloud& c : kLdClouds)
+    if (c.cloud == cloud) return c.file;
+  throw Error("LdCloudFile: not one of the pair's LD clouds");
+}
+
 std::vector<std::string> detail::LdPairCloudFiles() {
   std::vector<std::string> files;
   for (const LdCloud& c : kLdClouds) files.push_back(c.file);

@@ -119,12 +119,8 @@ KeyframeAssignment AssignKeyframes(const SessionData& c, const SessionData& q, c
   a.nc = c.kfs.size();
   a.clouds[kKfStatic] = c.static_map;
   a.clouds[kKfHd] = c.hd_map;
-  a.clouds[kKfHd].append(ld.nd_residue);  // the central's HD + the residues of movers the query saw through
-  a.clouds[kKfPdStrong] = ld.pd_strong;
-  a.clouds[kKfPdStrong].append(ld.pd_unobserved);  // new territory is added to the map like strong PD
-  a.clouds[kKfPdWeak] = ld.pd_weak;
-  a.clouds[kKfNdStrong] = ld.nd_strong;
-  a.clouds[kKfNdWeak] = ld.nd_weak;
+  for (int k = 0; k < kKeyframeClouds; ++k)
+    for (auto m : KeyframeCloudLd(k)) a.clouds[std::size_t(k)].append(ld.*m);
   const KeyframeOwners owners(c.kfs, q.kfs, cfg, threads);
   const std::size_t nk = a.nc + q.kfs.size();
   std::vector<bool> owns_pd(nk, false);

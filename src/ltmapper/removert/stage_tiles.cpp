@@ -75,14 +75,11 @@ class KeyframeSpill {
 
 // The files each keyframe cloud is cut from, in order (the whole stage's concatenations).
 std::vector<std::string> SourcesOf(int cloud, const std::string& central_dir, const std::string& pair_dir) {
-  switch (cloud) {
-    case kKfStatic: return {io::layout::StaticMapIn(central_dir)};
-    case kKfHd: return {io::layout::HdMapIn(central_dir), pair_dir + "/nd_residue.pcd"};
-    case kKfPdStrong: return {pair_dir + "/pd_strong.pcd", pair_dir + "/pd_unobserved.pcd"};
-    case kKfPdWeak: return {pair_dir + "/pd_weak.pcd"};
-    case kKfNdStrong: return {pair_dir + "/nd_strong.pcd"};
-    default: return {pair_dir + "/nd_weak.pcd"};
-  }
+  std::vector<std::string> files;
+  if (cloud == kKfStatic) files.push_back(io::layout::StaticMapIn(central_dir));
+  if (cloud == kKfHd) files.push_back(io::layout::HdMapIn(central_dir));
+  for (auto m : KeyframeCloudLd(cloud)) files.push_back(pair_dir + "/" + LdCloudFile(m));
+  return files;
 }
 
 // The pair's keyframe folders and keyframes.csv from its merged clouds (pair_dir) and the central's
