@@ -15,13 +15,23 @@ namespace ltm::removert {
 
 namespace {
 
-// mask[i] = points[i] has fewer than k neighbours within r_i in `other`, where r_i = ld_radius_m
-// + ld_radius_rel * (the larger distance from the point to the nearest keyframe of either
-// session): a surface seen from afar carries the sessions' rotation error times that distance.
-std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
+// A neighbourhood is one plane when its thickness (std along its normal) is below this many map
+// voxels (a surface sampled at the map voxel, with the sessions' range noise), and ground when
+// its normal is more vertical than horizontal (as for the own-pixel rule of the PD strength).
+constexpr double kPlaneMaxThickness = 0.5;
+constexpr double kGroundMinNormalZ = M_SQRT1_2;
+
+// What Missing says of a point.
+enum Raw : std::uint8_t { kRawNone = 0, kRawMissing = 1, kRawAboveTheirGround = 2 };
+
+// Per point: kRawMissing when points[i] has fewer than k neighbours within r_i in `other`, where
+// r_i = ld_radius_m + ld_radius_rel * (the larger distance from the point to the nearest keyframe
+// of either session): a surface seen from afar carries the sessions' rotation error times that
+// distance; kRawAboveTheirGround when its neighbours there are only the other session's ground,
+// which it stands above (OffTheirGround); else kRawNone.
+std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
                           const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
-  std::vector<bool> mask(points.size(), true);
-  if (other.empty() || points.empty()) return mask;
+  if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
   const geometry::KdTree tree(other);
   const bool rel = cfg.ld_radius_rel > 0.0 && !own_kf.empty() && !other_kf.empty();
   std::unique_ptr<geometry::KdTree> own_tree, other_tree;
@@ -44,7 +54,26 @@ std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, con
     const Eigen::Vector3d lateral = nb.mean - nb.mean.dot(nrm) * nrm;
     return lateral.norm() > cfg.ld_rim_frac * r;
   };
-  std::vector<std::uint8_t> m(points.size(), 1);
+  // No neighbour within a map voxel, and those within r on one plane of ground (normal within
+  // 45 deg of vertical), around the point (not to one side: a kerb's edge, see AtRim) and below
+  // it by more than a map voxel: two samplings of one surface at the map voxel lie within a voxel
+  // of each other's plane, so the point is another surface standing on that ground (the lower
+  // body of a car that left or came). It goes on as a raw change; the beam test decides.
+  const float off_m = float(cfg.map_voxel_m);
+  auto OffTheirGround = [&](const Eigen::Vector3f& p, float r) {
+    const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
+    if (nb.n < 3) return false;
+    const double thick = std::sqrt(std::max(nb.eigenvalues.x(), 0.0));
+    const double spread = std::sqrt(std::max(nb.eigenvalues.y(), 0.0));
+    if (thick > kPlaneMaxThickness * off_m || spread < off_m) return false;  // not one plane (a corner, a line)
+    Eigen::Vector3d up = nb.eigenvectors.col(0);
+    if (up.z() < 0.0) up = -up;
+    if (up.z() < kGroundMinNormalZ) return false;  // not ground
+    const Eigen::Vector3d lateral = nb.mean - nb.mean.dot(up) * up;
+    if (lateral.norm() > cfg.ld_rim_frac * r) return false;  // beside it (a kerb's edge), not under it
+    return -up.dot(nb.mean) > off_m;  // above it
+  };
+  std::vector<std::uint8_t> m(points.size(), kRawMissing);
   const std::size_t chunk = 4096;
   detail::ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
     const std::size_t b = c * chunk, e = std::min(points.size(), b + chunk);
@@ -58,12 +87,12 @@ std::vector<bool> Missing(const PointCloud& points, const PointCloud& other, con
         other_tree->Nearest(p, &j, &d_other);
         r = std::min(r_max, r0 + rr * std::sqrt(std::max(d_own, d_other)));
       }
-      m[i] = tree.CountWithin(p, r, k) < k ? 1 : 0;
-      if (!m[i] && rim && r > r0 && tree.CountWithin(p, r0, 1) == 0) m[i] = AtRim(p, r) ? 1 : 0;
+      m[i] = tree.CountWithin(p, r, k) < k ? kRawMissing : kRawNone;
+      if (!m[i] && rim && r > r0 && tree.CountWithin(p, r0, 1) == 0) m[i] = AtRim(p, r) ? kRawMissing : kRawNone;
+      if (!m[i] && tree.CountWithin(p, off_m, 1) == 0) m[i] = OffTheirGround(p, r) ? kRawAboveTheirGround : kRawNone;
     }
   });
-  for (std::size_t i = 0; i < m.size(); ++i) mask[i] = m[i] != 0;
-  return mask;
+  return m;
 }
 
 // Raw changes split by what the other session saw (SeenThroughBy): the same surface (no change,
@@ -167,25 +196,43 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const 
   return small;
 }
 
-// The labels of one map's points (`own`) given its raw changes (`missing`) and the other
+// Marks the points of `lower` within ld_residue_gap_m of a marked point of `body` (a residue's
+// lower part, which only the other session's ground was near).
+std::vector<bool> LowerPartsOf(const PointCloud& body, const std::vector<bool>& residue, const PointCloud& lower,
+                               const RemovertConfig& cfg) {
+  std::vector<bool> out(lower.size(), false);
+  if (lower.empty() || std::find(residue.begin(), residue.end(), true) == residue.end()) return out;
+  const geometry::KdTree tree(body.select(residue));
+  for (std::size_t i = 0; i < lower.size(); ++i)
+    out[i] = tree.CountWithin(lower.points[i].xyz(), float(cfg.ld_residue_gap_m), 1) > 0;
+  return out;
+}
+
+// The labels of one map's points (`own`) given its raw changes (`missing`, Raw) and the other
 // session's keyframes: same / strong / weak / unobserved (Split), then the residues among the
-// changes the other session saw through (strong ND, weak PD).
-void LabelChanges(const PointCloud& own, const std::vector<bool>& missing, const std::vector<WorldKeyframe>& others,
-                  bool nd, const RemovertConfig& cfg, int threads, std::vector<std::uint8_t>* label) {
+// changes the other session saw through (strong ND, weak PD): clustered without the lower parts
+// (kRawAboveTheirGround), which join the residue they touch.
+void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missing,
+                  const std::vector<WorldKeyframe>& others, bool nd, const RemovertConfig& cfg, int threads,
+                  std::vector<std::uint8_t>* label) {
   using namespace detail;
   std::vector<std::uint32_t> raw;
   for (std::size_t i = 0; i < missing.size(); ++i)
-    if (missing[i]) raw.push_back(std::uint32_t(i));
+    if (missing[i] != kRawNone) raw.push_back(std::uint32_t(i));
   const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd), nd, cfg);
   for (std::size_t j = 0; j < raw.size(); ++j)
     (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
   const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak;
-  std::vector<std::uint32_t> seen;
+  std::vector<std::uint32_t> body, lower;
   for (std::uint32_t i : raw)
-    if ((*label)[i] == seen_label) seen.push_back(i);
-  const std::vector<bool> residue = Residues(own.select(seen), own, cfg);
-  for (std::size_t j = 0; j < seen.size(); ++j)
-    if (residue[j]) (*label)[seen[j]] = kLdResidue;
+    if ((*label)[i] == seen_label) (missing[i] == kRawAboveTheirGround ? lower : body).push_back(i);
+  const PointCloud body_pts = own.select(body);
+  const std::vector<bool> residue = Residues(body_pts, own, cfg);
+  const std::vector<bool> residue_lower = LowerPartsOf(body_pts, residue, own.select(lower), cfg);
+  for (std::size_t j = 0; j < body.size(); ++j)
+    if (residue[j]) (*label)[body[j]] = kLdResidue;
+  for (std::size_t j = 0; j < lower.size(); ++j)
+    if (residue_lower[j]) (*label)[lower[j]] = kLdResidue;
 }
 
 // The points of `map` with label `l`, in map order.
@@ -204,8 +251,8 @@ LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, con
                  const std::vector<WorldKeyframe>& query_voters, const RemovertConfig& cfg, int threads) {
   LdLabels out{std::vector<std::uint8_t>(central_map.size(), kLdUnchanged),
                std::vector<std::uint8_t>(query_map.size(), kLdUnchanged)};
-  const std::vector<bool> nd = Missing(central_map, query_map, central_positions, query_positions, cfg, threads);
-  const std::vector<bool> pd = Missing(query_map, central_map, query_positions, central_positions, cfg, threads);
+  const std::vector<std::uint8_t> nd = Missing(central_map, query_map, central_positions, query_positions, cfg, threads);
+  const std::vector<std::uint8_t> pd = Missing(query_map, central_map, query_positions, central_positions, cfg, threads);
   // Weak ND preservation: ND the query never saw through stays in the map.
   LabelChanges(central_map, nd, query_voters, true, cfg, threads, &out.central);
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
