@@ -603,6 +603,33 @@ TEST(MapObjects, CanopyHeldUpByItsTrunkIsNotFloating) {
   }
 }
 
+// A car left (8..10, 8..12); behind it, as the reference keyframe at the origin saw it, the new
+// session sees what the car hid (strong PD: no reference beam passed there). A fence revealed
+// there was never observed by the reference: a coverage difference, no object. A car of the
+// same shape there is the car that moved: both ends are objects, linked as moved.
+TEST(MapObjects, RevealedBehindARemovedObjectOnlyWhenItMovedThere) {
+  const PointCloud left = Car(8, 8);
+  const PointCloud fence = Car(13.5f, 15.f, 3.f, 0.25f, 2.f), moved = Car(12.5f, 14.f);
+  for (const bool same_shape : {false, true}) {
+    test::TempDir tmp;
+    KeyframeDelta d;
+    d.nd_strong = left;
+    d.pd_strong = same_shape ? moved : fence;
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, left, d, &rejected);
+    if (same_shape) {
+      ASSERT_EQ(objs.size(), 2u);
+      for (const auto& o : objs) EXPECT_EQ(o.change, "moved");
+    } else {
+      ASSERT_EQ(objs.size(), 1u);
+      EXPECT_EQ(objs[0].change, "disappeared");
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "coverage");
+      EXPECT_NEAR(rejected[0].centroid.x(), 15.0, 0.1);
+    }
+  }
+}
+
 TEST(MapObjects, MovedContainerAndStableIds) {
   test::TempDir tmp;
   KeyframeDelta d;

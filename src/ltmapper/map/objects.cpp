@@ -303,17 +303,34 @@ struct StepContext {
   std::vector<const MapObject*> disappeared;       // accepted strong-ND objects of the step
 };
 
+// Largest relative difference of two oriented-box sizes (length, width, height).
+double SizeDifference(const MapObject& a, const MapObject& b) {
+  double d = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double m = std::max(a.size[k], b.size[k]);
+    if (m > 0.0) d = std::max(d, std::abs(a.size[k] - b.size[k]) / m);
+  }
+  return d;
+}
+
 // Coverage rule (step 3 above) for an appeared cluster: its space was observed free by the
 // reference (majority of weak PD), or the reference's view of it was blocked by an object the
-// step removed: the segment from the nearest reference sensor to the centroid crosses the box of
-// a disappeared object (grown by the cluster tolerance).
+// step removed (the segment from the nearest reference sensor to the centroid crosses the box of
+// a disappeared object, grown by the cluster tolerance) and it has the shape of an object the
+// step removed (box sizes within object_moved_size_tol, at least object_moved_min_dist_m away):
+// that object moved there (LinkMoved pairs them). Anything else behind a blocked view the
+// reference never observed: a facade or fence revealed behind a car that left is a coverage
+// difference, not an object (it was a false object on HDL-64E, OS1-128, Pandar64 and VLP-32C).
 bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   if (o.change == "disappeared" || o.observed_fraction >= cfg.object_min_observed_fraction) return true;
   const Eigen::Vector3d* s = Nearest(ctx.reference_sensors, o.centroid);
   if (!s) return false;
-  for (const MapObject* d : ctx.disappeared)
-    if (SegmentHitsBox(*s, o.centroid, d->lo, d->hi, cfg.object_tolerance_m)) return true;
-  return false;
+  const auto blocks = [&](const MapObject* d) { return SegmentHitsBox(*s, o.centroid, d->lo, d->hi, cfg.object_tolerance_m); };
+  const auto moved_here = [&](const MapObject* d) {
+    return SizeDifference(*d, o) <= cfg.object_moved_size_tol && (d->centroid - o.centroid).norm() >= cfg.object_moved_min_dist_m;
+  };
+  return std::any_of(ctx.disappeared.begin(), ctx.disappeared.end(), blocks) &&
+         std::any_of(ctx.disappeared.begin(), ctx.disappeared.end(), moved_here);
 }
 
 // Geometric rules (step 4 above); "" = an object. A ghost is the same surface in both sessions,
@@ -560,16 +577,6 @@ void AssignIds(std::vector<MapObject>& objects) {
     objects[k].id = int(k);
     objects[k].cloud.object.assign(objects[k].cloud.size(), objects[k].id);
   }
-}
-
-// Largest relative difference of two oriented-box sizes (length, width, height).
-double SizeDifference(const MapObject& a, const MapObject& b) {
-  double d = 0.0;
-  for (int k = 0; k < 3; ++k) {
-    const double m = std::max(a.size[k], b.size[k]);
-    if (m > 0.0) d = std::max(d, std::abs(a.size[k] - b.size[k]) / m);
-  }
-  return d;
 }
 
 // Moved: a disappeared and an appeared object of the same step whose boxes agree in size within
