@@ -313,12 +313,17 @@ double SizeDifference(const MapObject& a, const MapObject& b) {
   return d;
 }
 
+// Disappeared object d and appeared object a could be one object that moved: their boxes agree in
+// size within object_moved_size_tol and their centroids are at least object_moved_min_dist_m apart.
+bool CouldHaveMoved(const MapObject& d, const MapObject& a, const MapConfig& cfg) {
+  return SizeDifference(d, a) <= cfg.object_moved_size_tol && (d.centroid - a.centroid).norm() >= cfg.object_moved_min_dist_m;
+}
+
 // Coverage rule (step 3 above) for an appeared cluster: its space was observed free by the
 // reference (majority of weak PD), or the reference's view of it was blocked by an object the
 // step removed (the segment from the nearest reference sensor to the centroid crosses the box of
 // a disappeared object, grown by the cluster tolerance) and it has the shape of an object the
-// step removed (box sizes within object_moved_size_tol, at least object_moved_min_dist_m away):
-// that object moved there (LinkMoved pairs them). Anything else behind a blocked view the
+// step removed (CouldHaveMoved): that object moved there (LinkMoved pairs them). Anything else behind a blocked view the
 // reference never observed: a facade or fence revealed behind a car that left is a coverage
 // difference, not an object (it was a false object on HDL-64E, OS1-128, Pandar64 and VLP-32C).
 bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
@@ -326,9 +331,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   const Eigen::Vector3d* s = Nearest(ctx.reference_sensors, o.centroid);
   if (!s) return false;
   const auto blocks = [&](const MapObject* d) { return SegmentHitsBox(*s, o.centroid, d->lo, d->hi, cfg.object_tolerance_m); };
-  const auto moved_here = [&](const MapObject* d) {
-    return SizeDifference(*d, o) <= cfg.object_moved_size_tol && (d->centroid - o.centroid).norm() >= cfg.object_moved_min_dist_m;
-  };
+  const auto moved_here = [&](const MapObject* d) { return CouldHaveMoved(*d, o, cfg); };
   return std::any_of(ctx.disappeared.begin(), ctx.disappeared.end(), blocks) &&
          std::any_of(ctx.disappeared.begin(), ctx.disappeared.end(), moved_here);
 }
@@ -579,18 +582,15 @@ void AssignIds(std::vector<MapObject>& objects) {
   }
 }
 
-// Moved: a disappeared and an appeared object of the same step whose boxes agree in size within
-// object_moved_size_tol and whose centroids are at least object_moved_min_dist_m apart; best
-// matches first, each object in at most one pair.
+// Moved: a disappeared and an appeared object of the same step that could be one (CouldHaveMoved);
+// best size matches first, each object in at most one pair.
 void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
   std::vector<std::tuple<double, std::size_t, std::size_t>> cand;
   for (std::size_t i = 0; i < objects.size(); ++i)
     for (std::size_t j = 0; j < objects.size(); ++j) {
       const MapObject &d = objects[i], &a = objects[j];
       if (d.session != a.session || d.change != "disappeared" || a.change != "appeared") continue;
-      const double diff = SizeDifference(d, a);
-      if (diff <= cfg.object_moved_size_tol && (d.centroid - a.centroid).norm() >= cfg.object_moved_min_dist_m)
-        cand.emplace_back(diff, i, j);
+      if (CouldHaveMoved(d, a, cfg)) cand.emplace_back(SizeDifference(d, a), i, j);
     }
   std::sort(cand.begin(), cand.end());
   for (const auto& [diff, i, j] : cand) {

@@ -46,6 +46,10 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                          int threads, bool own_pixel);
 
+// |normal z| below cos 45 deg: the surface is more upright than horizontal (a wall, a car's flank);
+// above it, more horizontal (ground, a roof).
+constexpr float kUprightNormalZ = 0.70710678f;
+
 // The at most kNeighbourhoodPoints nearest points of `cloud` within `radius` of p: how many, their
 // mean offset from p, and the eigen decomposition (ascending) of their covariance.
 constexpr std::size_t kNeighbourhoodPoints = 16;

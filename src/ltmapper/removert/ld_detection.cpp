@@ -16,21 +16,52 @@ namespace ltm::removert {
 namespace {
 
 // A neighbourhood is one plane when its thickness (std along its normal) is below this many map
-// voxels (a surface sampled at the map voxel, with the sessions' range noise), and ground when
-// its normal is more vertical than horizontal (as for the own-pixel rule of the PD strength).
+// voxels: a surface sampled at the map voxel, with the sessions' range noise.
 constexpr double kPlaneMaxThickness = 0.5;
-constexpr double kGroundMinNormalZ = M_SQRT1_2;
 
 // What Missing says of a point.
 enum Raw : std::uint8_t { kRawNone = 0, kRawMissing = 1, kRawAboveTheirGround = 2 };
 
+// How far the mean of a neighbourhood (offset from the point) lies from the point along the plane
+// whose normal is `normal`.
+double LateralOffset(const detail::Neighbourhood& nb, const Eigen::Vector3d& normal) {
+  return (nb.mean - nb.mean.dot(normal) * normal).norm();
+}
+
+// The other session's neighbours of a point lie only beyond ld_radius_m, within r, all to one side
+// of it along their surface (their mean off it by more than ld_rim_frac * r in their plane): the
+// point lies past the rim of what that session sampled, not on a surface the poses shifted.
+bool PastTheirRim(const detail::Neighbourhood& nb, float r, const RemovertConfig& cfg) {
+  return nb.n < 3 || LateralOffset(nb, nb.eigenvectors.col(0)) > cfg.ld_rim_frac * r;
+}
+
+// The other session's neighbours of a point (none within a map voxel) are one plane of ground
+// (thinner than kPlaneMaxThickness map voxels, normal more vertical than horizontal), around the
+// point (not to one side as at a kerb's edge, PastTheirRim's rule) and below it by more than a map
+// voxel: two samplings of one surface at the map voxel lie within a voxel of each other's plane,
+// so the point is another surface standing on that ground (the lower body of a car that left or
+// came).
+bool AboveTheirGround(const detail::Neighbourhood& nb, float r, const RemovertConfig& cfg) {
+  if (nb.n < 3) return false;
+  const double voxel = cfg.map_voxel_m;
+  const double thick = std::sqrt(std::max(nb.eigenvalues.x(), 0.0));
+  const double spread = std::sqrt(std::max(nb.eigenvalues.y(), 0.0));
+  if (thick > kPlaneMaxThickness * voxel || spread < voxel) return false;  // not one plane (a corner, a line)
+  Eigen::Vector3d up = nb.eigenvectors.col(0);
+  if (up.z() < 0.0) up = -up;
+  if (up.z() < detail::kUprightNormalZ) return false;  // not ground
+  if (LateralOffset(nb, up) > cfg.ld_rim_frac * r) return false;  // beside it, not under it
+  return -up.dot(nb.mean) > voxel;
+}
+
 // Per point: kRawMissing when points[i] has fewer than k neighbours within r_i in `other`, where
 // r_i = ld_radius_m + ld_radius_rel * (the larger distance from the point to the nearest keyframe
 // of either session): a surface seen from afar carries the sessions' rotation error times that
-// distance; kRawAboveTheirGround when its neighbours there are only the other session's ground,
-// which it stands above (OffTheirGround); else kRawNone.
+// distance; or when it lies past the rim of the other's coverage (PastTheirRim, with ld.rim_frac);
+// kRawAboveTheirGround when its neighbours there are the other session's ground under it
+// (AboveTheirGround); else kRawNone. Either raw change goes on to the beam test, which decides.
 std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
-                          const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
+                                  const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
   const geometry::KdTree tree(other);
   const bool rel = cfg.ld_radius_rel > 0.0 && !own_kf.empty() && !other_kf.empty();
@@ -41,38 +72,8 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
   }
   const std::size_t k = std::size_t(cfg.ld_min_neighbors);
   const float r0 = float(cfg.ld_radius_m), rr = float(cfg.ld_radius_rel);
-  const float r_max = float(cfg.ld_radius_max_m);
+  const float r_max = float(cfg.ld_radius_max_m), voxel = float(cfg.map_voxel_m);
   const bool rim = cfg.ld_rim_frac > 0.0;
-  // Neighbours only beyond radius_m, within r, and all to one side of the point along their
-  // surface (the centroid of the nearest ones off the point by more than rim_frac * r in their
-  // plane): the point lies past the rim of what the other session sampled, not on a surface
-  // the poses shifted. It goes on as a raw change; the beam test decides.
-  auto AtRim = [&](const Eigen::Vector3f& p, float r) {
-    const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
-    if (nb.n < 3) return true;
-    const Eigen::Vector3d nrm = nb.eigenvectors.col(0);
-    const Eigen::Vector3d lateral = nb.mean - nb.mean.dot(nrm) * nrm;
-    return lateral.norm() > cfg.ld_rim_frac * r;
-  };
-  // No neighbour within a map voxel, and those within r on one plane of ground (normal within
-  // 45 deg of vertical), around the point (not to one side: a kerb's edge, see AtRim) and below
-  // it by more than a map voxel: two samplings of one surface at the map voxel lie within a voxel
-  // of each other's plane, so the point is another surface standing on that ground (the lower
-  // body of a car that left or came). It goes on as a raw change; the beam test decides.
-  const float off_m = float(cfg.map_voxel_m);
-  auto OffTheirGround = [&](const Eigen::Vector3f& p, float r) {
-    const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
-    if (nb.n < 3) return false;
-    const double thick = std::sqrt(std::max(nb.eigenvalues.x(), 0.0));
-    const double spread = std::sqrt(std::max(nb.eigenvalues.y(), 0.0));
-    if (thick > kPlaneMaxThickness * off_m || spread < off_m) return false;  // not one plane (a corner, a line)
-    Eigen::Vector3d up = nb.eigenvectors.col(0);
-    if (up.z() < 0.0) up = -up;
-    if (up.z() < kGroundMinNormalZ) return false;  // not ground
-    const Eigen::Vector3d lateral = nb.mean - nb.mean.dot(up) * up;
-    if (lateral.norm() > cfg.ld_rim_frac * r) return false;  // beside it (a kerb's edge), not under it
-    return -up.dot(nb.mean) > off_m;  // above it
-  };
   std::vector<std::uint8_t> m(points.size(), kRawMissing);
   const std::size_t chunk = 4096;
   detail::ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
@@ -88,8 +89,16 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
         r = std::min(r_max, r0 + rr * std::sqrt(std::max(d_own, d_other)));
       }
       m[i] = tree.CountWithin(p, r, k) < k ? kRawMissing : kRawNone;
-      if (!m[i] && rim && r > r0 && tree.CountWithin(p, r0, 1) == 0) m[i] = AtRim(p, r) ? kRawMissing : kRawNone;
-      if (!m[i] && tree.CountWithin(p, off_m, 1) == 0) m[i] = OffTheirGround(p, r) ? kRawAboveTheirGround : kRawNone;
+      if (m[i]) continue;
+      // Neighbours only beyond r0, or none within a map voxel: one fit of them for both rules.
+      const bool beyond_r0 = rim && r > r0 && tree.CountWithin(p, r0, 1) == 0;
+      const bool beyond_voxel = tree.CountWithin(p, voxel, 1) == 0;
+      if (!beyond_r0 && !beyond_voxel) continue;
+      const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
+      if (beyond_r0 && PastTheirRim(nb, r, cfg))
+        m[i] = kRawMissing;
+      else if (beyond_voxel && AboveTheirGround(nb, r, cfg))
+        m[i] = kRawAboveTheirGround;
     }
   });
   return m;

@@ -23,9 +23,6 @@
 
 namespace ltm::removert::detail {
 
-// |normal z| below cos 45 deg: the surface is more upright than horizontal.
-constexpr float kUprightNormalZ = 0.70710678f;
-
 Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& cloud, const Eigen::Vector3f& p,
                                float radius) {
   Neighbourhood nb;
