@@ -56,36 +56,49 @@ inline double HitBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const B
   return t0 > 1e-9 ? t0 : std::numeric_limits<double>::infinity();
 }
 
-// Scan in the sensor frame (sensor at T_world_sensor, axes aligned with world up). Ground z = 0
-// has object id -1; boxes their id. `object` holds the label.
-inline PointCloud CastScan(const Pose& T_world_sensor, const std::vector<Box>& boxes, const Lidar& L) {
+// Scan in the sensor frame (sensor at T_world_sensor, axes aligned with world up) along the unit
+// directions `dirs` (sensor frame). Ground z = 0 has object id -1; boxes their id. `object` holds
+// the label.
+inline PointCloud CastDirections(const Pose& T_world_sensor, const std::vector<Box>& boxes,
+                                 const std::vector<Eigen::Vector3d>& dirs, double max_range) {
   PointCloud scan;
   const Eigen::Vector3d o = T_world_sensor.translation();
   const Eigen::Matrix3d R = T_world_sensor.linear();
-  constexpr double kDeg = 3.14159265358979323846 / 180.0;
-  for (int b = 0; b < L.beams; ++b) {
-    const double el = (L.fov_up_deg - (b + 0.5) * (L.fov_up_deg - L.fov_down_deg) / L.beams) * kDeg;
-    for (int c = 0; c < L.cols; ++c) {
-      const double az = (c + 0.5) * 2.0 * 3.14159265358979323846 / L.cols;
-      const Eigen::Vector3d ds(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
-      const Eigen::Vector3d dw = R * ds;
-      double best = L.max_range;
-      int label = -2;
-      if (dw.z() < -1e-9) {
-        const double tg = -o.z() / dw.z();
-        if (tg < best) best = tg, label = -1;
-      }
-      for (const Box& bx : boxes) {
-        const double t = HitBox(o, dw, bx);
-        if (t < best) best = t, label = bx.id;
-      }
-      if (label == -2) continue;
-      const Eigen::Vector3d p = ds * best;
-      scan.push_back(float(p.x()), float(p.y()), float(p.z()));
-      scan.object.push_back(label);
+  for (const Eigen::Vector3d& ds : dirs) {
+    const Eigen::Vector3d dw = R * ds;
+    double best = max_range;
+    int label = -2;
+    if (dw.z() < -1e-9) {
+      const double tg = -o.z() / dw.z();
+      if (tg < best) best = tg, label = -1;
     }
+    for (const Box& bx : boxes) {
+      const double t = HitBox(o, dw, bx);
+      if (t < best) best = t, label = bx.id;
+    }
+    if (label == -2) continue;
+    const Eigen::Vector3d p = ds * best;
+    scan.push_back(float(p.x()), float(p.y()), float(p.z()));
+    scan.object.push_back(label);
   }
   return scan;
+}
+
+// Unit direction at elevation / azimuth [rad].
+inline Eigen::Vector3d Direction(double el, double az) {
+  return {std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};
+}
+
+// A spinning LiDAR's scan: L.beams rings x L.cols columns.
+inline PointCloud CastScan(const Pose& T_world_sensor, const std::vector<Box>& boxes, const Lidar& L) {
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  std::vector<Eigen::Vector3d> dirs;
+  dirs.reserve(std::size_t(L.beams) * std::size_t(L.cols));
+  for (int b = 0; b < L.beams; ++b) {
+    const double el = (L.fov_up_deg - (b + 0.5) * (L.fov_up_deg - L.fov_down_deg) / L.beams) * kDeg;
+    for (int c = 0; c < L.cols; ++c) dirs.push_back(Direction(el, (c + 0.5) * 2.0 * 3.14159265358979323846 / L.cols));
+  }
+  return CastDirections(T_world_sensor, boxes, dirs, L.max_range);
 }
 
 inline Pose At(double x, double y, double z = 1.8, double yaw = 0.0) {

@@ -142,7 +142,7 @@ std::pair<Eigen::Vector3f, Eigen::Vector3f> BoxOf(const PointCloud& c, const std
   return {lo, hi};
 }
 
-// The clusters of `c` that fit in a mover's size (SplitResidues), marked point by point: first
+// The clusters of `c` that fit in a mover's size (Residues), marked point by point: first
 // across (longest horizontal edge), then in height above the ground of `own` under them (the
 // ground hashed only under the clusters that fit across).
 std::vector<bool> FitAMover(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,

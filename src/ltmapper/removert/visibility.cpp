@@ -129,6 +129,7 @@ struct VoteTest {
   std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
   std::uint8_t see_own = 0;   // kSeeOwn when the own pixel's see-through is counted, else 0
   float yaw_sigma = 0.f;      // [rad] the poses' angular uncertainty: the window is also read at yaw -+ it
+  bool yaw_needs_own = false; // no rings: read at yaw -+ yaw_sigma only where the point's own window has evidence
 };
 // Surface hit: the pixel's nearest return q lies on the point's plane (n . q = off, sensor
 // frame) within the tolerance, at most surface_max from the point in range. Far ground at a
@@ -199,8 +200,15 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
                                     reinterpret_cast<const __m64*>(pairs + 2 * pix[3]));
     __m128 s = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
     const __m128 at = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(3, 1, 3, 1));
-    if (t.yaw_sigma > 0.f) s = _mm_min_ps(s, _mm_min_ps(PooledAt(grid, pairs, pitch + j, yaw + j, -t.yaw_sigma),
-                                                       PooledAt(grid, pairs, pitch + j, yaw + j, t.yaw_sigma)));
+    if (t.yaw_sigma > 0.f) {
+      __m128 w = _mm_min_ps(PooledAt(grid, pairs, pitch + j, yaw + j, -t.yaw_sigma),
+                            PooledAt(grid, pairs, pitch + j, yaw + j, t.yaw_sigma));
+      if (t.yaw_needs_own) {
+        const __m128 own = _mm_cmplt_ps(s, inf);
+        w = _mm_or_ps(_mm_and_ps(own, w), _mm_andnot_ps(own, inf));
+      }
+      s = _mm_min_ps(s, w);
+    }
     const __m128 r = _mm_loadu_ps(range + j);
     const __m128 tol = _mm_add_ps(tol_abs, _mm_mul_ps(tol_rel, r));
     // See-through: even the nearest return in the window around the point's pixel lies beyond
@@ -244,7 +252,7 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
     const std::size_t pix = grid.Pixel(pitch[j], yaw[j]);
     float s = pairs[2 * pix];
     const float at = pairs[2 * pix + 1];
-    if (t.yaw_sigma > 0.f)
+    if (t.yaw_sigma > 0.f && (!t.yaw_needs_own || std::isfinite(s)))
       s = std::min({s, pairs[2 * grid.Pixel(pitch[j], yaw[j] - t.yaw_sigma)],
                     pairs[2 * grid.Pixel(pitch[j], yaw[j] + t.yaw_sigma)]});
     const float r = range[j];
@@ -733,11 +741,12 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   s.test.occluded = options.count_occluded ? kOcc : 0;
   s.test.see_own = options.count_own_see ? detail::kSeeOwn : 0;
   // A point's direction seen from another keyframe is off by the poses' relative rotation (yaw,
-  // the odometry's largest error, moves it along the columns): the window is read there too. Not
-  // without rings: there a wider reach fills the pattern's gaps with returns no ray near the point
-  // made (evidence from nothing).
-  const bool rings = !cfg.SensorResolved() || cfg.sensor_model.ring_based;
-  s.test.yaw_sigma = rings ? float(cfg.pose_sigma_deg * detail::kRadPerDeg) : 0.f;
+  // the odometry's largest error, moves it along the columns): the window is read there too.
+  // Without rings only where the point's own window has evidence: there the windows at yaw -+ it
+  // may hold returns of the pattern's other passes, no ray near the point (evidence from nothing),
+  // so they may only withdraw a see-through, never make one.
+  s.test.yaw_sigma = float(cfg.pose_sigma_deg * detail::kRadPerDeg);
+  s.test.yaw_needs_own = cfg.SensorResolved() && !cfg.sensor_model.ring_based;
   s.beams = options.normals != nullptr && options.beams != nullptr;
   s.surface = options.normals != nullptr && (s.test.surface_max > 0.f || s.beams);
   return s;
