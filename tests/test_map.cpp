@@ -603,6 +603,28 @@ TEST(MapObjects, CanopyHeldUpByItsTrunkIsNotFloating) {
   }
 }
 
+// A tree that was cut, its trunk and lower crown one cluster standing on the ground, its upper
+// crown another 0.75 m above it (the rows between were not scanned): the upper one floats alone,
+// is held up by the lower one, and both pass the rules. They are one object, not two (the upper
+// part was a false object on HDL-32E).
+TEST(MapObjects, APartHeldUpByAnotherIsOneObjectWithIt) {
+  const PointCloud lower = Car(-1, -1, 2.f, 2.f, 2.0f);             // z 0.25 .. 2.0 m
+  const PointCloud upper = WithZ(Car(-1.5f, -1.5f, 3.f, 3.f, 2.0f), 2.5f);  // z 2.75 .. 4.5 m
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.nd_strong = Cat(lower, upper);
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, d.nd_strong, d, &rejected);
+  ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected";
+  std::size_t lower_above_ground = 0;  // the lowest row lies in the ground band
+  for (const auto& p : lower.points) lower_above_ground += p.z > 0.3f;
+  EXPECT_EQ(objs[0].points, lower_above_ground + upper.size());
+  EXPECT_EQ(objs[0].change, "disappeared");
+  EXPECT_NEAR(objs[0].hi.z(), 4.5, 0.01);
+  EXPECT_NEAR(objs[0].lo.z(), 0.5, 0.01);
+  EXPECT_TRUE(rejected.empty());
+}
+
 // A car left (8..10, 8..12); behind it, as the reference keyframe at the origin saw it, the new
 // session sees what the car hid (strong PD: no reference beam passed there). A fence revealed
 // there was never observed by the reference: a coverage difference, no object. A car of the

@@ -7,9 +7,13 @@
 //     definition seen through by the query. PD is weak when the reference saw its space free,
 //     strong when it never saw there (new territory, facades newly in view) or its view was
 //     blocked: an appeared cluster needs a majority of weak PD, or a disappeared cluster of the
-//     step between it and the nearest reference keyframe (revealed behind a removed wall).
+//     step between it and the nearest reference keyframe and the shape of an object the step
+//     removed (that object moved there; anything else revealed behind it is coverage).
 //  4. Geometry (Reject()): ghosts of misalignment, height above ground, width across the sensor's sampling at the
 //     cluster's range, flat horizontal patches, optional maximum extent.
+//     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
+//     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
+//     object's box (MergeParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
@@ -474,23 +478,53 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
 // tolerance), topping out between object_max_clearance_m below its bottom and the tolerance above
 // it, and itself standing on the ground. A cut tree's canopy and its trunk are two clusters where
 // the trunk's top was not scanned; the canopy then takes the trunk's clearance (one level: a
-// cluster held up by a floating one still floats).
-void HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
+// cluster held up by a floating one still floats). Returns per cluster the index of the one that
+// holds it up (the lowest), or -1: the two are parts of one object (JoinHeldParts).
+std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
   const double gap = cfg.object_max_clearance_m, tol = cfg.object_tolerance_m;
-  if (gap <= 0.0) return;
+  std::vector<int> holder(group.size(), -1);
+  if (gap <= 0.0) return holder;
   std::vector<double> held(group.size());
   for (std::size_t i = 0; i < group.size(); ++i) {
     const MapObject& o = group[i];
     held[i] = o.clearance_m;
     if (o.clearance_m <= gap) continue;
-    for (const MapObject& b : group) {
+    for (std::size_t j = 0; j < group.size(); ++j) {
+      const MapObject& b = group[j];
       const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
                          (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
       const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - gap;
-      if (&b != &o && under && just_below && b.clearance_m <= gap) held[i] = std::min(held[i], b.clearance_m);
+      if (j != i && under && just_below && b.clearance_m <= gap && b.clearance_m < held[i]) {
+        held[i] = b.clearance_m;
+        holder[i] = int(j);
+      }
     }
   }
   for (std::size_t i = 0; i < group.size(); ++i) group[i].clearance_m = held[i];
+  return holder;
+}
+
+// Appends `part`'s points to `whole` and describes it again (box, class votes, height).
+void Absorb(MapObject& whole, const MapObject& part) {
+  whole.cloud.append(part.cloud);
+  whole.centroid.setZero();
+  Describe(whole);
+  OrientedBox(whole);
+  whole.height_above_ground = whole.hi.z() - whole.ground_z;
+}
+
+// A cluster held up by another (HoldUp) that both pass the rules is one object with it: a tree's
+// canopy standing on its trunk, a container's top on its side (they were reported twice, the
+// upper part a false object). The held part joins its holder; returns which clusters remain.
+std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector<int>& holder) {
+  std::vector<bool> keep(group.size(), true);
+  for (std::size_t i = 0; i < group.size(); ++i) {
+    const int h = holder[i];
+    if (h < 0 || !group[i].rejected.empty() || !group[std::size_t(h)].rejected.empty() || !keep[std::size_t(h)]) continue;
+    Absorb(group[std::size_t(h)], group[i]);
+    keep[i] = false;
+  }
+  return keep;
 }
 
 // The rules (Reject) and the confidence of a built cluster.
@@ -530,11 +564,7 @@ void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
       out.push_back(std::move(o));
       continue;
     }
-    whole->cloud.append(o.cloud);
-    whole->centroid.setZero();
-    Describe(*whole);
-    OrientedBox(*whole);
-    whole->height_above_ground = whole->hi.z() - whole->ground_z;
+    Absorb(*whole, o);
   }
   objects.swap(out);
 }
@@ -555,9 +585,12 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, cfg))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
-    HoldUp(group, cfg);
-    for (MapObject& o : group) {
-      Judge(o, ctx, cfg);
+    const std::vector<int> holder = HoldUp(group, cfg);
+    for (MapObject& o : group) Judge(o, ctx, cfg);
+    const std::vector<bool> keep = JoinHeldParts(group, holder);
+    for (std::size_t k = 0; k < group.size(); ++k) {
+      MapObject& o = group[k];
+      if (!keep[k]) continue;
       if (!o.rejected.empty()) {
         rejected.push_back(std::move(o));
         continue;
