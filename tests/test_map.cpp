@@ -625,6 +625,38 @@ TEST(MapObjects, APartHeldUpByAnotherIsOneObjectWithIt) {
   EXPECT_TRUE(rejected.empty());
 }
 
+// A fence that left: the new session saw through its upper half (strong ND) while parked cars hid
+// its lower half (weak ND, kept in the map). Alone the upper half floats 1.25 m above the ground;
+// with the lower part it stood on (stored under strong ND even without store_weak_nd) it is one
+// object from the ground band up. Weak ND elsewhere (a wall the new session never saw) is not
+// stored and joins nothing.
+TEST(MapObjects, AFenceThatLeftStandsOnItsUnseenLowerHalf) {
+  const PointCloud upper = WithZ(Car(-6, 2, 12.f, 0.25f, 1.0f), 1.25f);  // z 1.5 .. 2.25 m
+  const PointCloud lower = Car(-6, 2, 12.f, 0.25f, 1.25f);                // z 0.25 .. 1.25 m
+  const PointCloud far_wall = Car(-6, 20, 12.f, 0.25f, 2.0f);
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.nd_strong = upper;
+  d.nd_weak = Cat(lower, far_wall);
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, Cat(Cat(upper, lower), far_wall), d, &rejected);
+  ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
+  std::size_t lower_above_ground = 0;  // the lowest row lies in the ground band
+  for (const auto& p : lower.points) lower_above_ground += p.z > 0.3f;
+  EXPECT_EQ(objs[0].points, upper.size() + lower_above_ground);
+  EXPECT_NEAR(objs[0].lo.z(), 0.5, 0.01);
+  EXPECT_LE(objs[0].clearance_m, 1.0);
+  EXPECT_EQ(objs[0].cls, PointClass::kNDStrong);  // the class of what was seen
+  EXPECT_NEAR(objs[0].observed_fraction, double(upper.size()) / double(objs[0].points), 1e-9);
+  Store s = Store::Open(tmp / "o.ltmap");
+  std::size_t weak = 0, weak_far = 0;
+  const PointCloud changes = s.StepChanges(1);
+  for (std::size_t i = 0; i < changes.size(); ++i)
+    if (changes.cls[i] == PointClass::kNDWeak) ++weak, weak_far += changes.points[i].y > 10.f;
+  EXPECT_EQ(weak, lower.size());
+  EXPECT_EQ(weak_far, 0u);
+}
+
 // A car left (8..10, 8..12); behind it, as the reference keyframe at the origin saw it, the new
 // session sees what the car hid (strong PD: no reference beam passed there). A fence revealed
 // there was never observed by the reference: a coverage difference, no object. A car of the

@@ -214,7 +214,8 @@ std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const
   return out;
 }
 
-// Centroid, axis-aligned box, class votes and see-through share.
+// Centroid, axis-aligned box, class votes (of the changes seen, not of a joined unseen lower part)
+// and see-through share.
 void Describe(MapObject& o) {
   std::map<PointClass, std::size_t> votes;
   o.lo = o.hi = o.cloud.points[0].xyz().cast<double>();
@@ -224,7 +225,7 @@ void Describe(MapObject& o) {
     o.centroid += p;
     o.lo = o.lo.cwiseMin(p);
     o.hi = o.hi.cwiseMax(p);
-    ++votes[o.cloud.cls[i]];
+    if (o.cloud.cls[i] != PointClass::kNDWeak) ++votes[o.cloud.cls[i]];  // weak ND: a joined lower part
     if (o.cloud.cls[i] == PointClass::kNDStrong || o.cloud.cls[i] == PointClass::kPDWeak) ++seen_through;
   }
   o.points = o.cloud.size();
@@ -504,9 +505,9 @@ std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
   return holder;
 }
 
-// Appends `part`'s points to `whole` and describes it again (box, class votes, height).
-void Absorb(MapObject& whole, const MapObject& part) {
-  whole.cloud.append(part.cloud);
+// Appends `part` (points with their classes) to `whole` and describes it again (box, class votes, height).
+void Absorb(MapObject& whole, const PointCloud& part) {
+  whole.cloud.append(part);
   whole.centroid.setZero();
   Describe(whole);
   OrientedBox(whole);
@@ -521,10 +522,43 @@ std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector
   for (std::size_t i = 0; i < group.size(); ++i) {
     const int h = holder[i];
     if (h < 0 || !group[i].rejected.empty() || !group[std::size_t(h)].rejected.empty() || !keep[std::size_t(h)]) continue;
-    Absorb(group[std::size_t(h)], group[i]);
+    Absorb(group[std::size_t(h)], group[i].cloud);
     keep[i] = false;
   }
   return keep;
+}
+
+// A disappeared cluster's lower part that the query did not see through is part of it: weak ND of
+// the step (stored under strong ND, store.cpp) under its xy box grown by the cluster tolerance,
+// reaching down from its bottom with no vertical gap wider than the tolerance, above the ground
+// band. It joins the cloud, and the clearance is that of the lowest point reached. A fence whose
+// upper half the query saw through while parked cars hid its lower half is a fence that left, not
+// a floating piece half its height (a cut tree's trunk that stayed is unchanged: no weak ND).
+void JoinUnseenLowerPart(std::vector<MapObject>& group, const PointCloud& changes, const Floor& floor,
+                         const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m;
+  std::vector<std::uint32_t> weak;
+  for (std::size_t i = 0; i < changes.size(); ++i)
+    if (changes.cls[i] == PointClass::kNDWeak) weak.push_back(std::uint32_t(i));
+  if (weak.empty() || floor.empty()) return;
+  std::sort(weak.begin(), weak.end(), [&](std::uint32_t a, std::uint32_t b) { return changes.points[a].z > changes.points[b].z; });
+  for (MapObject& o : group) {
+    double reached = o.lo.z();
+    std::vector<std::uint32_t> part;
+    for (std::uint32_t i : weak) {
+      const PointXYZI& p = changes.points[i];
+      if (double(p.z) >= o.lo.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
+          double(p.y) < o.lo.y() - tol || double(p.y) > o.hi.y() + tol)
+        continue;
+      if (double(p.z) < reached - tol) break;
+      reached = double(p.z);
+      if (AboveGround(p.xyz(), floor, cfg)) part.push_back(i);
+    }
+    float z = 0.f;
+    if (part.empty() || !floor.At(changes.points[part.back()].xyz(), &z)) continue;
+    o.clearance_m = std::min(o.clearance_m, double(changes.points[part.back()].z) - double(z));
+    Absorb(o, changes.select(part));
+  }
 }
 
 // The rules (Reject) and the confidence of a built cluster.
@@ -564,7 +598,7 @@ void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
       out.push_back(std::move(o));
       continue;
     }
-    Absorb(*whole, o);
+    Absorb(*whole, o.cloud);
   }
   objects.swap(out);
 }
@@ -585,6 +619,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, cfg))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
+    if (!appeared) JoinUnseenLowerPart(group, changes, floor, cfg);
     const std::vector<int> holder = HoldUp(group, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
     const std::vector<bool> keep = JoinHeldParts(group, holder);

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <limits>
@@ -688,6 +689,36 @@ std::vector<Store::Impl::KfBlobs> LoadChunk(const Store::Impl& s, const std::vec
   return in;
 }
 
+// The weak ND points of a keyframe's delta that lie under one of its strong ND points (within
+// `radius_m` in xy, lower): the lower part of something that left which the query did not see
+// through (its view of the foot blocked). They change nothing in the map but are an object's part
+// (objects.cpp, JoinUnseenLowerPart), so they are stored even without store_weak_nd.
+PointCloud WeakNdUnderStrongNd(const PointCloud& weak, const PointCloud& strong, double radius_m) {
+  if (weak.empty() || strong.empty() || radius_m <= 0.0) return {};
+  auto cell = [&](float x, float y) {
+    return std::make_pair(std::int64_t(std::floor(double(x) / radius_m)), std::int64_t(std::floor(double(y) / radius_m)));
+  };
+  std::map<std::pair<std::int64_t, std::int64_t>, std::vector<Eigen::Vector3f>> top;
+  for (const auto& p : strong.points) top[cell(p.x, p.y)].push_back(p.xyz());
+  const float r2 = float(radius_m * radius_m);
+  std::vector<bool> keep(weak.size(), false);
+  for (std::size_t i = 0; i < weak.size(); ++i) {
+    const Eigen::Vector3f w = weak.points[i].xyz();
+    const auto [cx, cy] = cell(w.x(), w.y());
+    for (std::int64_t dx = -1; dx <= 1 && !keep[i]; ++dx)
+      for (std::int64_t dy = -1; dy <= 1 && !keep[i]; ++dy) {
+        const auto it = top.find({cx + dx, cy + dy});
+        if (it == top.end()) continue;
+        for (const Eigen::Vector3f& q : it->second)
+          if (q.z() > w.z() && (q - w).head<2>().squaredNorm() <= r2) {
+            keep[i] = true;
+            break;
+          }
+      }
+  }
+  return weak.select(keep);
+}
+
 // The keyframe's target state. A reference keyframe: its state at the reference's step minus the
 // strong ND matched within nd_match_radius_m (their keys into change_keys) plus PD (paper eq. 4);
 // then the query points near it (new territory seen again, or PD beyond the assignment radius):
@@ -704,8 +735,11 @@ QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const K
     QCloud nd_strong;
     if (delta) {
       nd_strong = quant(delta->nd_strong, PointClass::kNDStrong, "nd_strong");
-      // Weak ND changes nothing in the map (occluded, kept); it is stored only on request.
-      if (s.cfg.store_weak_nd) *nd_weak = quant(delta->nd_weak, PointClass::kNDWeak, "nd_weak");
+      // Weak ND changes nothing in the map (occluded, kept); it is stored on request, else only
+      // under strong ND (an object's unseen lower part).
+      *nd_weak = quant(s.cfg.store_weak_nd ? delta->nd_weak
+                                           : WeakNdUnderStrongNd(delta->nd_weak, delta->nd_strong, s.cfg.object_tolerance_m),
+                       PointClass::kNDWeak, "nd_weak");
     }
     const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, s.cfg.nd_match_radius_m / s.cfg.resolution_m);
     target.reserve(ref_q.size());
