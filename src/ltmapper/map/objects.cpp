@@ -13,7 +13,8 @@
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
-//     object's box (MergeParts).
+//     object's box (MergeParts). A disappeared cluster also stands on its lower part the query
+//     did not see, which an object keeps (UnseenLowerParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
@@ -528,23 +529,26 @@ std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector
   return keep;
 }
 
-// A disappeared cluster's lower part that the query did not see through is part of it: weak ND of
-// the step (stored under strong ND, store.cpp) under its xy box grown by the cluster tolerance,
-// reaching down from its bottom with no vertical gap wider than the tolerance, above the ground
-// band. It joins the cloud, and the clearance is that of the lowest point reached. A fence whose
-// upper half the query saw through while parked cars hid its lower half is a fence that left, not
-// a floating piece half its height (a cut tree's trunk that stayed is unchanged: no weak ND).
-void JoinUnseenLowerPart(std::vector<MapObject>& group, const PointCloud& changes, const Floor& floor,
-                         const MapConfig& cfg) {
+// A disappeared cluster's lower part that the query did not see through: weak ND of the step
+// (stored under strong ND, store.cpp) under its xy box grown by the cluster tolerance, reaching
+// down from its bottom with no vertical gap wider than the tolerance, above the ground band. The
+// cluster's clearance is counted from the lowest point reached (a fence whose upper half the query
+// saw through while parked cars hid its lower half stands on the ground, it does not float; a
+// trunk that stayed under a cut crown is unchanged, no weak ND); the rules judge what was seen,
+// and an object keeps the lower part (JoinLowerParts). Returns per cluster the part's indices.
+std::vector<std::vector<std::uint32_t>> UnseenLowerParts(std::vector<MapObject>& group, const PointCloud& changes,
+                                                         const Floor& floor, const MapConfig& cfg) {
+  std::vector<std::vector<std::uint32_t>> parts(group.size());
   const double tol = cfg.object_tolerance_m;
   std::vector<std::uint32_t> weak;
   for (std::size_t i = 0; i < changes.size(); ++i)
     if (changes.cls[i] == PointClass::kNDWeak) weak.push_back(std::uint32_t(i));
-  if (weak.empty() || floor.empty()) return;
+  if (weak.empty() || floor.empty()) return parts;
   std::sort(weak.begin(), weak.end(), [&](std::uint32_t a, std::uint32_t b) { return changes.points[a].z > changes.points[b].z; });
-  for (MapObject& o : group) {
+  for (std::size_t k = 0; k < group.size(); ++k) {
+    MapObject& o = group[k];
     double reached = o.lo.z();
-    std::vector<std::uint32_t> part;
+    std::vector<std::uint32_t>& part = parts[k];
     for (std::uint32_t i : weak) {
       const PointXYZI& p = changes.points[i];
       if (double(p.z) >= o.lo.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
@@ -555,10 +559,13 @@ void JoinUnseenLowerPart(std::vector<MapObject>& group, const PointCloud& change
       if (AboveGround(p.xyz(), floor, cfg)) part.push_back(i);
     }
     float z = 0.f;
-    if (part.empty() || !floor.At(changes.points[part.back()].xyz(), &z)) continue;
+    if (part.empty() || !floor.At(changes.points[part.back()].xyz(), &z)) {
+      part.clear();
+      continue;
+    }
     o.clearance_m = std::min(o.clearance_m, double(changes.points[part.back()].z) - double(z));
-    Absorb(o, changes.select(part));
   }
+  return parts;
 }
 
 // The rules (Reject) and the confidence of a built cluster.
@@ -569,15 +576,18 @@ void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   o.confidence = Confidence(o, cfg, width, MinWidth(o.range_m, cfg));
 }
 
-// Share of `part`'s points inside `whole`'s axis-aligned box grown by `margin`.
+// Share of `part`'s points inside `whole`'s axis-aligned box grown by `margin` (of the points
+// seen: not of its unseen lower part).
 double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
   const Eigen::Vector3d lo = whole.lo.array() - margin, hi = whole.hi.array() + margin;
-  std::size_t n = 0;
-  for (const auto& p : part.cloud.points) {
-    const Eigen::Vector3d q = p.xyz().cast<double>();
+  std::size_t n = 0, seen = 0;
+  for (std::size_t i = 0; i < part.cloud.size(); ++i) {
+    if (part.cloud.cls[i] == PointClass::kNDWeak) continue;  // a joined unseen lower part
+    const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
     n += (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() ? 1 : 0;
+    ++seen;
   }
-  return double(n) / double(std::max<std::size_t>(part.points, 1));
+  return double(n) / double(std::max<std::size_t>(seen, 1));
 }
 
 // Parts of one object split by an occlusion gap wider than the cluster tolerance: an accepted
@@ -619,9 +629,12 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, cfg))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
-    if (!appeared) JoinUnseenLowerPart(group, changes, floor, cfg);
     const std::vector<int> holder = HoldUp(group, cfg);
+    const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
+                                : UnseenLowerParts(group, changes, floor, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
+    for (std::size_t k = 0; k < group.size(); ++k)  // an object keeps its unseen lower part
+      if (group[k].rejected.empty() && !lower[k].empty()) Absorb(group[k], changes.select(lower[k]));
     const std::vector<bool> keep = JoinHeldParts(group, holder);
     for (std::size_t k = 0; k < group.size(); ++k) {
       MapObject& o = group[k];

@@ -692,7 +692,7 @@ std::vector<Store::Impl::KfBlobs> LoadChunk(const Store::Impl& s, const std::vec
 // The weak ND points of a keyframe's delta that lie under one of its strong ND points (within
 // `radius_m` in xy, lower): the lower part of something that left which the query did not see
 // through (its view of the foot blocked). They change nothing in the map but are an object's part
-// (objects.cpp, JoinUnseenLowerPart), so they are stored even without store_weak_nd.
+// (objects.cpp, UnseenLowerParts), so they are stored even without store_weak_nd.
 PointCloud WeakNdUnderStrongNd(const PointCloud& weak, const PointCloud& strong, double radius_m) {
   if (weak.empty() || strong.empty() || radius_m <= 0.0) return {};
   auto cell = [&](float x, float y) {
