@@ -657,6 +657,36 @@ TEST(MapObjects, AFenceThatLeftStandsOnItsUnseenLowerHalf) {
   EXPECT_EQ(weak_far, 0u);
 }
 
+// A structure that came, seen as one cluster above 1.5 m (weak PD) and, lower, as scattered
+// points, each more than the cluster tolerance from the others (too few to be a cluster of their
+// own), one above the other within the tolerance down to the ground band: it stands on them, it
+// does not float.
+TEST(MapObjects, AClusterStandsOnScatteredChangesBelowIt) {
+  const PointCloud upper = WithZ(Car(0, 0, 3.f, 3.f, 1.0f), 1.25f);  // z 1.5 .. 2.25 m
+  PointCloud below;
+  below.push_back(-0.4f, 1.5f, 1.1f, 0.8f);  // beside the cluster's foot: 0.57 m from its nearest point
+  below.push_back(3.4f, 1.5f, 0.7f, 0.8f);
+  below.push_back(-0.4f, 0.5f, 0.35f, 0.8f);
+  for (const bool with_below : {false, true}) {
+    test::TempDir tmp;
+    KeyframeDelta d;
+    d.pd_weak = with_below ? Cat(upper, below) : upper;
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, Car(30, 30), d, &rejected);
+    std::map<std::string, int> why;
+    for (const auto& r : rejected) ++why[r.rejected];
+    if (with_below) {
+      ASSERT_EQ(objs.size(), 1u) << "floating " << why["floating"];
+      EXPECT_EQ(objs[0].change, "appeared");
+      EXPECT_EQ(objs[0].points, upper.size());
+      EXPECT_NEAR(objs[0].clearance_m, 0.35, 0.01);
+    } else {
+      EXPECT_TRUE(objs.empty());
+      EXPECT_EQ(why["floating"], 1);
+    }
+  }
+}
+
 // A car left (8..10, 8..12); behind it, as the reference keyframe at the origin saw it, the new
 // session sees what the car hid (strong PD: no reference beam passed there). A fence revealed
 // there was never observed by the reference: a coverage difference, no object. A car of the

@@ -13,8 +13,9 @@
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
-//     object's box (MergeParts). A disappeared cluster also stands on its lower part the query
-//     did not see, which an object keeps (UnseenLowerParts).
+//     object's box (MergeParts). A cluster also stands on change points of its group under it
+//     (StandOnChangesBelow), and a disappeared one on its lower part the query did not see, which
+//     an object keeps (UnseenLowerParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
@@ -529,41 +530,68 @@ std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector
   return keep;
 }
 
+// The points of `by_z` (indices into `changes`, highest first) under o's xy box grown by `tol`
+// that reach down from its bottom with no vertical gap wider than `tol`, highest first.
+std::vector<std::uint32_t> ChainBelow(const MapObject& o, const PointCloud& changes,
+                                      const std::vector<std::uint32_t>& by_z, double tol) {
+  std::vector<std::uint32_t> chain;
+  double reached = o.lo.z();
+  for (std::uint32_t i : by_z) {
+    const PointXYZI& p = changes.points[i];
+    if (double(p.z) >= o.lo.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
+        double(p.y) < o.lo.y() - tol || double(p.y) > o.hi.y() + tol)
+      continue;
+    if (double(p.z) < reached - tol) break;
+    reached = double(p.z);
+    chain.push_back(i);
+  }
+  return chain;
+}
+
+// `idx` sorted by z, highest first (for ChainBelow).
+std::vector<std::uint32_t> ByZ(const PointCloud& changes, std::vector<std::uint32_t> idx) {
+  std::sort(idx.begin(), idx.end(), [&](std::uint32_t a, std::uint32_t b) { return changes.points[a].z > changes.points[b].z; });
+  return idx;
+}
+
+// Lowers o's clearance to that of the lowest of `chain` above the floor of its cell.
+void StandOn(MapObject& o, const PointCloud& changes, const std::vector<std::uint32_t>& chain, const Floor& floor) {
+  float z = 0.f;
+  if (!chain.empty() && floor.At(changes.points[chain.back()].xyz(), &z))
+    o.clearance_m = std::min(o.clearance_m, double(changes.points[chain.back()].z) - double(z));
+}
+
+// A cluster stands on the group's own change points under it (`idx`: above the ground band),
+// reaching down from its bottom with no vertical gap wider than the cluster tolerance: points
+// too few to be a cluster of their own (HoldUp needs one) still hold it up. The appeared
+// structure whose upper part OS1-64 saw as one cluster and whose lower part as scattered points
+// floated.
+void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& changes, const std::vector<std::uint32_t>& idx,
+                         const Floor& floor, const MapConfig& cfg) {
+  if (cfg.object_max_clearance_m <= 0.0) return;
+  const std::vector<std::uint32_t> by_z = ByZ(changes, idx);
+  for (MapObject& o : group)
+    if (o.clearance_m > cfg.object_max_clearance_m) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
+}
+
 // A disappeared cluster's lower part that the query did not see through: weak ND of the step
-// (stored under strong ND, store.cpp) under its xy box grown by the cluster tolerance, reaching
-// down from its bottom with no vertical gap wider than the tolerance, above the ground band. The
-// cluster's clearance is counted from the lowest point reached (a fence whose upper half the query
-// saw through while parked cars hid its lower half stands on the ground, it does not float; a
-// trunk that stayed under a cut crown is unchanged, no weak ND); the rules judge what was seen,
-// and an object keeps the lower part (JoinLowerParts). Returns per cluster the part's indices.
+// (stored under strong ND, store.cpp) chained down from its bottom (ChainBelow), above the ground
+// band. The cluster's clearance is counted from its lowest point (a fence whose upper half the
+// query saw through while parked cars hid its lower half stands on the ground, it does not float;
+// a trunk that stayed under a cut crown is unchanged, no weak ND); the rules judge what was seen,
+// and an object keeps the lower part in its cloud. Returns per cluster the part's indices.
 std::vector<std::vector<std::uint32_t>> UnseenLowerParts(std::vector<MapObject>& group, const PointCloud& changes,
                                                          const Floor& floor, const MapConfig& cfg) {
   std::vector<std::vector<std::uint32_t>> parts(group.size());
-  const double tol = cfg.object_tolerance_m;
   std::vector<std::uint32_t> weak;
   for (std::size_t i = 0; i < changes.size(); ++i)
     if (changes.cls[i] == PointClass::kNDWeak) weak.push_back(std::uint32_t(i));
   if (weak.empty() || floor.empty()) return parts;
-  std::sort(weak.begin(), weak.end(), [&](std::uint32_t a, std::uint32_t b) { return changes.points[a].z > changes.points[b].z; });
+  const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(weak));
   for (std::size_t k = 0; k < group.size(); ++k) {
-    MapObject& o = group[k];
-    double reached = o.lo.z();
-    std::vector<std::uint32_t>& part = parts[k];
-    for (std::uint32_t i : weak) {
-      const PointXYZI& p = changes.points[i];
-      if (double(p.z) >= o.lo.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
-          double(p.y) < o.lo.y() - tol || double(p.y) > o.hi.y() + tol)
-        continue;
-      if (double(p.z) < reached - tol) break;
-      reached = double(p.z);
-      if (AboveGround(p.xyz(), floor, cfg)) part.push_back(i);
-    }
-    float z = 0.f;
-    if (part.empty() || !floor.At(changes.points[part.back()].xyz(), &z)) {
-      part.clear();
-      continue;
-    }
-    o.clearance_m = std::min(o.clearance_m, double(changes.points[part.back()].z) - double(z));
+    for (std::uint32_t i : ChainBelow(group[k], changes, by_z, cfg.object_tolerance_m))
+      if (AboveGround(changes.points[i].xyz(), floor, cfg)) parts[k].push_back(i);
+    StandOn(group[k], changes, parts[k], floor);
   }
   return parts;
 }
@@ -632,6 +660,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const std::vector<int> holder = HoldUp(group, cfg);
     const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
                                 : UnseenLowerParts(group, changes, floor, cfg);
+    StandOnChangesBelow(group, changes, idx, floor, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
     for (std::size_t k = 0; k < group.size(); ++k)  // an object keeps its unseen lower part
       if (group[k].rejected.empty() && !lower[k].empty()) Absorb(group[k], changes.select(lower[k]));
