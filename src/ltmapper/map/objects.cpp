@@ -63,6 +63,8 @@ CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
 
 
 bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
+// Weak ND in an object's cloud: its unseen lower part (UnseenLowerParts), not something seen.
+bool Unseen(PointClass c) { return c == PointClass::kNDWeak; }
 // The change points objects are clustered from (GroupPoints): PD and strong ND, not weak ND.
 bool Grouped(PointClass c) { return IsPd(c) || c == PointClass::kNDStrong; }
 
@@ -227,7 +229,7 @@ void Describe(MapObject& o) {
     o.centroid += p;
     o.lo = o.lo.cwiseMin(p);
     o.hi = o.hi.cwiseMax(p);
-    if (o.cloud.cls[i] != PointClass::kNDWeak) ++votes[o.cloud.cls[i]];  // weak ND: a joined lower part
+    if (!Unseen(o.cloud.cls[i])) ++votes[o.cloud.cls[i]];
     if (o.cloud.cls[i] == PointClass::kNDStrong || o.cloud.cls[i] == PointClass::kPDWeak) ++seen_through;
   }
   o.points = o.cloud.size();
@@ -585,7 +587,7 @@ std::vector<std::vector<std::uint32_t>> UnseenLowerParts(std::vector<MapObject>&
   std::vector<std::vector<std::uint32_t>> parts(group.size());
   std::vector<std::uint32_t> weak;
   for (std::size_t i = 0; i < changes.size(); ++i)
-    if (changes.cls[i] == PointClass::kNDWeak) weak.push_back(std::uint32_t(i));
+    if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
   if (weak.empty() || floor.empty()) return parts;
   const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(weak));
   for (std::size_t k = 0; k < group.size(); ++k) {
@@ -610,7 +612,7 @@ double InsideShare(const MapObject& part, const MapObject& whole, double margin)
   const Eigen::Vector3d lo = whole.lo.array() - margin, hi = whole.hi.array() + margin;
   std::size_t n = 0, seen = 0;
   for (std::size_t i = 0; i < part.cloud.size(); ++i) {
-    if (part.cloud.cls[i] == PointClass::kNDWeak) continue;  // a joined unseen lower part
+    if (Unseen(part.cloud.cls[i])) continue;
     const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
     n += (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() ? 1 : 0;
     ++seen;

@@ -10,7 +10,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <limits>
@@ -695,25 +694,16 @@ std::vector<Store::Impl::KfBlobs> LoadChunk(const Store::Impl& s, const std::vec
 // (objects.cpp, UnseenLowerParts), so they are stored even without store_weak_nd.
 PointCloud WeakNdUnderStrongNd(const PointCloud& weak, const PointCloud& strong, double radius_m) {
   if (weak.empty() || strong.empty() || radius_m <= 0.0) return {};
-  auto cell = [&](float x, float y) {
-    return std::make_pair(std::int64_t(std::floor(double(x) / radius_m)), std::int64_t(std::floor(double(y) / radius_m)));
-  };
-  std::map<std::pair<std::int64_t, std::int64_t>, std::vector<Eigen::Vector3f>> top;
-  for (const auto& p : strong.points) top[cell(p.x, p.y)].push_back(p.xyz());
-  const float r2 = float(radius_m * radius_m);
+  PointCloud flat = strong;  // xy only: the strong points' heights are read from `strong`
+  for (auto& p : flat.points) p.z = 0.f;
+  const geometry::KdTree tree(std::move(flat));
   std::vector<bool> keep(weak.size(), false);
   for (std::size_t i = 0; i < weak.size(); ++i) {
-    const Eigen::Vector3f w = weak.points[i].xyz();
-    const auto [cx, cy] = cell(w.x(), w.y());
-    for (std::int64_t dx = -1; dx <= 1 && !keep[i]; ++dx)
-      for (std::int64_t dy = -1; dy <= 1 && !keep[i]; ++dy) {
-        const auto it = top.find({cx + dx, cy + dy});
-        if (it == top.end()) continue;
-        for (const Eigen::Vector3f& q : it->second)
-          if (q.z() > w.z() && (q - w).head<2>().squaredNorm() <= r2) {
-            keep[i] = true;
-            break;
-          }
+    const PointXYZI& w = weak.points[i];
+    for (const auto& [j, d2] : tree.Radius(Eigen::Vector3f(w.x, w.y, 0.f), float(radius_m)))
+      if (strong.points[j].z > w.z) {
+        keep[i] = true;
+        break;
       }
   }
   return weak.select(keep);

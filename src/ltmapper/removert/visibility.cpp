@@ -178,68 +178,89 @@ inline __m128 PooledAt(const MultiResImage::Grid& g, const float* pairs, const f
 }
 #endif
 
+#if defined(__SSE2__)
+// The (pooled, range) pairs of four pixels: the nearest return in each pixel's window (s) and the
+// pixel's own nearest return (at), lanes 0..3. Two pairs per register, then split.
+inline void PairsAt4(const float* pairs, const std::int32_t* pix, __m128* s, __m128* at) {
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 p01 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[0])),
+                                  reinterpret_cast<const __m64*>(pairs + 2 * pix[1]));
+  const __m128 p23 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[2])),
+                                  reinterpret_cast<const __m64*>(pairs + 2 * pix[3]));
+  *s = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
+  *at = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(3, 1, 3, 1));
+}
+
+// The window's nearest return s of four points, also read at yaw -+ t.yaw_sigma (pose error);
+// with t.yaw_needs_own only in lanes whose own window has a return (VoteTest).
+inline __m128 WidenedByYaw4(const MultiResImage::Grid& grid, const float* pairs, const float* pitch, const float* yaw,
+                            const VoteTest& t, __m128 s) {
+  if (t.yaw_sigma <= 0.f) return s;
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  __m128 w = _mm_min_ps(PooledAt(grid, pairs, pitch, yaw, -t.yaw_sigma), PooledAt(grid, pairs, pitch, yaw, t.yaw_sigma));
+  if (t.yaw_needs_own) {
+    const __m128 own = _mm_cmplt_ps(s, inf);
+    w = _mm_or_ps(_mm_and_ps(own, w), _mm_andnot_ps(own, inf));
+  }
+  return _mm_min_ps(s, w);
+}
+
+// Four points' votes from their window's nearest return s, own pixel's return at and range r.
+// See-through: even the nearest return in the window around the point's pixel lies beyond it (so
+// grazing surfaces and silhouette edges, whose neighbouring pixels return nearer, give no vote).
+// Hit: the pixel's own or the window's nearest return is at the point's range. No return anywhere
+// in the window: no evidence. Own see-through: the point's own pixel has a return beyond it (the
+// beam that passed the point went on), whatever the beams above and below it met. `occ`, `at_off`
+// and `tol` are kept for the surface test of occluded lanes.
+struct Votes4 {
+  __m128i code;
+  __m128 occ, at_off, tol;
+};
+inline Votes4 Classify4(__m128 s, __m128 at, __m128 r, const VoteTest& t) {
+  const __m128 sign = _mm_set1_ps(-0.f), inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 tol = _mm_add_ps(_mm_set1_ps(t.tol_abs), _mm_mul_ps(_mm_set1_ps(t.tol_rel), r));
+  const __m128 evidence = _mm_cmplt_ps(_mm_andnot_ps(sign, s), inf);
+  const __m128 see = _mm_and_ps(evidence, _mm_cmpgt_ps(s, _mm_add_ps(r, tol)));
+  const __m128 at_off = _mm_andnot_ps(sign, _mm_sub_ps(at, r));
+  const __m128 s_off = _mm_andnot_ps(sign, _mm_sub_ps(s, r));
+  const __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
+  const __m128 hit = _mm_andnot_ps(see, _mm_and_ps(evidence, near));
+  const __m128 occ = _mm_andnot_ps(_mm_or_ps(see, hit), evidence);
+  const __m128 see_own = _mm_and_ps(_mm_cmplt_ps(at, inf), _mm_cmpgt_ps(at, _mm_add_ps(r, tol)));
+  const __m128i c = _mm_or_si128(
+      _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), _mm_set1_epi32(kSee)),
+                                _mm_and_si128(_mm_castps_si128(hit), _mm_set1_epi32(kHit))),
+                   _mm_and_si128(_mm_castps_si128(occ), _mm_set1_epi32(t.occluded))),
+      _mm_and_si128(_mm_castps_si128(see_own), _mm_set1_epi32(t.see_own)));
+  return {c, occ, at_off, tol};
+}
+#endif
+
 // Arrays range / pitch / yaw hold m valid points plus 3 entries of padding (0); with kSurface,
-// plane holds 4 floats per point (sensor-frame normal, offset) and returns the image's.
+// plane holds 4 floats per point (sensor-frame normal, offset) and returns the image's. Surface
+// hit: an occluded point whose own pixel's return lies on its plane (OnPlane).
 template <bool kSurface>
 void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTest t, std::size_t m,
                const std::uint32_t* idx, const float* range, const float* pitch, const float* yaw,
                const float* plane, const Eigen::Vector3f* returns, std::uint8_t* vote) {
 #if defined(__SSE2__)
-  const __m128 sign = _mm_set1_ps(-0.f), inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
-  const __m128 tol_abs = _mm_set1_ps(t.tol_abs), tol_rel = _mm_set1_ps(t.tol_rel);
-  const __m128i code_see = _mm_set1_epi32(kSee), code_hit = _mm_set1_epi32(kHit);
-  const __m128i code_occ = _mm_set1_epi32(t.occluded), code_own = _mm_set1_epi32(t.see_own);
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
   alignas(16) std::int32_t pix[4], code[4];
   for (std::size_t j = 0; j < m; j += 4) {
-    const __m128i pix4 = Pixel4(grid, _mm_loadu_ps(pitch + j), _mm_loadu_ps(yaw + j));
-    _mm_store_si128(reinterpret_cast<__m128i*>(pix), pix4);
-    // Lanes 0..3 of (pooled, range): two pairs per register, then split.
-    const __m128 p01 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[0])),
-                                    reinterpret_cast<const __m64*>(pairs + 2 * pix[1]));
-    const __m128 p23 = _mm_loadh_pi(_mm_loadl_pi(inf, reinterpret_cast<const __m64*>(pairs + 2 * pix[2])),
-                                    reinterpret_cast<const __m64*>(pairs + 2 * pix[3]));
-    __m128 s = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
-    const __m128 at = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(3, 1, 3, 1));
-    if (t.yaw_sigma > 0.f) {
-      __m128 w = _mm_min_ps(PooledAt(grid, pairs, pitch + j, yaw + j, -t.yaw_sigma),
-                            PooledAt(grid, pairs, pitch + j, yaw + j, t.yaw_sigma));
-      if (t.yaw_needs_own) {
-        const __m128 own = _mm_cmplt_ps(s, inf);
-        w = _mm_or_ps(_mm_and_ps(own, w), _mm_andnot_ps(own, inf));
-      }
-      s = _mm_min_ps(s, w);
-    }
-    const __m128 r = _mm_loadu_ps(range + j);
-    const __m128 tol = _mm_add_ps(tol_abs, _mm_mul_ps(tol_rel, r));
-    // See-through: even the nearest return in the window around the point's pixel lies beyond
-    // it (so grazing surfaces and silhouette edges, whose neighbouring pixels return nearer,
-    // give no vote). Hit: the pixel's own or the window's nearest return is at the point's
-    // range, or (surface) its own return lies on the point's plane (OnPlane). No return
-    // anywhere in the window: no evidence.
-    const __m128 evidence = _mm_cmplt_ps(_mm_andnot_ps(sign, s), inf);
-    const __m128 see = _mm_and_ps(evidence, _mm_cmpgt_ps(s, _mm_add_ps(r, tol)));
-    const __m128 at_off = _mm_andnot_ps(sign, _mm_sub_ps(at, r));
-    const __m128 s_off = _mm_andnot_ps(sign, _mm_sub_ps(s, r));
-    const __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
-    const __m128 hit = _mm_andnot_ps(see, _mm_and_ps(evidence, near));
-    const __m128 occ = _mm_andnot_ps(_mm_or_ps(see, hit), evidence);
-    // Own see-through: the point's own pixel has a return and it lies beyond the point (the beam
-    // that passed the point went on), whatever the beams above and below it met.
-    const __m128 see_own = _mm_and_ps(_mm_cmplt_ps(at, inf), _mm_cmpgt_ps(at, _mm_add_ps(r, tol)));
-    const __m128i c = _mm_or_si128(
-        _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), code_see),
-                                  _mm_and_si128(_mm_castps_si128(hit), code_hit)),
-                     _mm_and_si128(_mm_castps_si128(occ), code_occ)),
-        _mm_and_si128(_mm_castps_si128(see_own), code_own));
-    _mm_store_si128(reinterpret_cast<__m128i*>(code), c);
+    _mm_store_si128(reinterpret_cast<__m128i*>(pix), Pixel4(grid, _mm_loadu_ps(pitch + j), _mm_loadu_ps(yaw + j)));
+    __m128 s, at;
+    PairsAt4(pairs, pix, &s, &at);
+    s = WidenedByYaw4(grid, pairs, pitch + j, yaw + j, t, s);
+    const Votes4 v = Classify4(s, at, _mm_loadu_ps(range + j), t);
+    _mm_store_si128(reinterpret_cast<__m128i*>(code), v.code);
     const std::size_t lanes = std::min<std::size_t>(4, m - j);
     if constexpr (kSurface) {
       // Occluded lanes whose own pixel has a return: the (rarer) plane test, one at a time.
-      int cand = _mm_movemask_ps(_mm_and_ps(occ, _mm_cmplt_ps(at, inf)));
+      const int cand = _mm_movemask_ps(_mm_and_ps(v.occ, _mm_cmplt_ps(at, inf)));
       if (cand) {
         alignas(16) float offs[4], tols[4];
-        _mm_store_ps(offs, at_off);
-        _mm_store_ps(tols, tol);
+        _mm_store_ps(offs, v.at_off);
+        _mm_store_ps(tols, v.tol);
         for (std::size_t k = 0; k < lanes; ++k)
           if ((cand >> k & 1) && OnPlane(plane + 4 * (j + k), returns[std::size_t(pix[k])], offs[k], tols[k], t.surface_max))
             code[k] = kHit;
