@@ -5,6 +5,8 @@ thread count asked for, on the same simulated sessions, and one table is printed
 
   stage | threads | wall s | CPU s | CPU / wall | speedup vs 1 thread | serial fraction
 
+and a "pipeline" row, the three stages one after the other (their walls and CPU summed).
+
 Serial fraction (Amdahl), two estimates: from one run at N threads, s = (N * wall / CPU - 1) / (N - 1)
 (the share of the work that ran on one core, if CPU time is the work); and from the 1-thread run,
 s = (N * T_N / T_1 - 1) / (N - 1). The first needs no 1-thread run and is what the issue's "CPU vs
@@ -49,7 +51,7 @@ def run_stages(ltm, sim, out, threads):
     os.makedirs(d)
     sessions = sorted(glob.glob(os.path.join(sim, "sessions", "session_*")))
     aligned, changes, store = os.path.join(d, "aligned"), os.path.join(d, "changes"), os.path.join(d, "map.ltmap")
-    t = ["--threads", str(threads), "--quiet"]
+    t = ["--threads", str(threads)]  # each log keeps the stage's own phase timings
     res = {}
     cpu, _, wall = timed([ltm, "slam", "--sessions"] + sessions + ["--out", aligned] + t, os.path.join(d, "slam.log"))
     res["LT-SLAM"] = (cpu, wall)
@@ -58,7 +60,12 @@ def run_stages(ltm, sim, out, threads):
     cpu, _, wall = timed([ltm, "map", "integrate", "--store", store, "--aligned", aligned, "--changes", changes,
                           "--sessions", os.path.join(sim, "sessions")] + t, os.path.join(d, "map.log"))
     res["LT-map"] = (cpu, wall)
+    for stage, (cpu, wall) in res.items():  # as it goes, so that a run cut short still tells something
+        print("%d threads: %s %.1f s wall, %.1f s CPU" % (threads, stage, wall, cpu), file=sys.stderr, flush=True)
     return res
+
+
+STAGES = ("LT-SLAM", "LT-removert", "LT-map")
 
 
 def serial_from_cpu(n, cpu, wall):
@@ -89,7 +96,9 @@ def main():
     print("| stage | threads | wall s | CPU s | CPU / wall | speedup vs 1 thread | serial fraction (CPU vs wall) "
           "| serial fraction (vs 1 thread) |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for stage in ("LT-SLAM", "LT-removert", "LT-map"):
+    for n in counts:  # the whole pipeline: the three stages one after the other
+        results[n]["pipeline"] = tuple(sum(results[n][s][i] for s in STAGES) for i in (0, 1))
+    for stage in STAGES + ("pipeline",):
         t1 = results[1][stage][1] if 1 in results else None
         for n in counts:
             cpu, wall = results[n][stage]

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <random>
 
 namespace ltm::geometry {
@@ -250,8 +251,19 @@ double Sq(const Eigen::Vector3f& q, const PointXYZI& p) {
   return dx * dx + dy * dy + dz * dz;
 }
 
+void CheckOneTree(const KdTree& tree, const PointCloud& c, const std::vector<Eigen::Vector3f>& queries, float radius);
+
+// One tree and forests of blocks (2 threads; 3, 17 and 500 points a block) give the same exact
+// answers.
 void CheckTree(const PointCloud& c, const std::vector<Eigen::Vector3f>& queries, float radius) {
-  const KdTree tree(c);
+  CheckOneTree(KdTree(c), c, queries, radius);
+  for (std::size_t block : {std::size_t(3), std::size_t(17), std::size_t(500)}) {
+    SCOPED_TRACE("blocks of " + std::to_string(block));
+    CheckOneTree(KdTree(c, 2, block), c, queries, radius);
+  }
+}
+
+void CheckOneTree(const KdTree& tree, const PointCloud& c, const std::vector<Eigen::Vector3f>& queries, float radius) {
   ASSERT_EQ(tree.size(), c.size());
   const double r2 = double(radius) * double(radius);
   for (const auto& q : queries) {
@@ -485,6 +497,51 @@ TEST(Geometry, EuclideanClustersAndHorizontalEdge) {
   EXPECT_NEAR(geometry::LongestHorizontalEdge(c, diag), 1.6, 1e-5);  // along the diagonal, not the axes' 1.13
   EXPECT_EQ(geometry::LongestHorizontalEdge(c, {10}), 0.0);
   EXPECT_TRUE(geometry::EuclideanClusters(PointCloud(), 0.5).empty());
+}
+
+// More points than one batch of the parallel neighbour search (64 x 1024), more than one kd-tree
+// block: the labels of every thread count equal those of a brute-force join of all close pairs.
+TEST(Geometry, EuclideanClustersOnManyCoresEqualOneCore) {
+  const PointCloud c = RandomCloud(140000, 20.f, 41);  // about 2 neighbours a point
+  const double gap = 0.6;
+  const auto one = geometry::EuclideanClusters(c, gap, 1);
+  EXPECT_EQ(geometry::EuclideanClusters(c, gap, 3), one);
+  // Brute force on a grid of gap-sized cells: join every pair closer than the gap.
+  std::vector<std::uint32_t> parent(c.size());
+  std::iota(parent.begin(), parent.end(), 0u);
+  auto root = [&](std::uint32_t i) {
+    while (parent[i] != i) i = parent[i];
+    return i;
+  };
+  std::map<std::array<int, 3>, std::vector<std::uint32_t>> cells;
+  auto cell = [&](const PointXYZI& p) {
+    return std::array<int, 3>{int(std::floor(p.x / gap)), int(std::floor(p.y / gap)), int(std::floor(p.z / gap))};
+  };
+  for (std::uint32_t i = 0; i < c.size(); ++i) cells[cell(c.points[i])].push_back(i);
+  for (std::uint32_t i = 0; i < c.size(); ++i) {
+    const auto k = cell(c.points[i]);
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = cells.find({k[0] + dx, k[1] + dy, k[2] + dz});
+          if (it == cells.end()) continue;
+          for (const std::uint32_t j : it->second)
+            if (j > i && Sq(c.points[i].xyz(), c.points[j]) < gap * gap) {
+              const std::uint32_t a = root(i), b = root(j);
+              if (a != b) parent[std::max(a, b)] = std::min(a, b);
+            }
+        }
+  }
+  std::map<std::uint32_t, std::uint32_t> number;
+  std::size_t differ = 0;
+  for (std::uint32_t i = 0; i < c.size(); ++i) {
+    const std::uint32_t r = root(i);
+    const auto it = number.emplace(r, std::uint32_t(number.size())).first;
+    differ += it->second != one[i];
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GT(number.size(), 100u);   // many clusters,
+  EXPECT_LT(number.size(), 50000u);  // and many links
 }
 
 // The lowest point per xy cell: a cell's own lowest z, a box's lowest over the cells it overlaps.

@@ -18,17 +18,31 @@ std::uint32_t Root(std::vector<std::uint32_t>& parent, std::uint32_t i) {
 }
 }  // namespace
 
-std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m) {
+// The pairs (i, j), j > i, of radius neighbours are found on `threads` cores a batch at a time
+// and joined on one: the components, so the labels, do not depend on the order of the joins.
+std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m, int threads) {
   const std::size_t n = cloud.size();
   std::vector<std::uint32_t> parent(n);
   std::iota(parent.begin(), parent.end(), 0u);
   if (n == 0) return parent;
-  const KdTree tree(cloud);
-  for (std::size_t i = 0; i < n; ++i)
-    for (const auto& [j, d2] : tree.Radius(cloud.points[i].xyz(), float(gap_m))) {
-      const std::uint32_t a = Root(parent, std::uint32_t(i)), b = Root(parent, j);
-      if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the root is the lowest index
-    }
+  const KdTree tree(cloud, threads);
+  constexpr std::size_t kChunk = 1024, kChunksPerBatch = 64;  // batches bound the pairs held
+  std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> pairs(kChunksPerBatch);
+  for (std::size_t b = 0; b < n; b += kChunk * kChunksPerBatch) {
+    const std::size_t chunks = std::min(kChunksPerBatch, (n - b + kChunk - 1) / kChunk);
+    ParallelFor(chunks, threads, [&](std::size_t c) {
+      pairs[c].clear();
+      const std::size_t from = b + c * kChunk, to = std::min(n, from + kChunk);
+      for (std::size_t i = from; i < to; ++i)
+        for (const auto& [j, d2] : tree.Radius(cloud.points[i].xyz(), float(gap_m)))
+          if (j > i) pairs[c].emplace_back(std::uint32_t(i), j);
+    });
+    for (std::size_t c = 0; c < chunks; ++c)
+      for (const auto& [i, j] : pairs[c]) {
+        const std::uint32_t ri = Root(parent, i), rj = Root(parent, j);
+        if (ri != rj) parent[std::max(ri, rj)] = std::min(ri, rj);  // the root is the lowest index
+      }
+  }
   std::vector<std::uint32_t> label(n), number(n, std::uint32_t(-1));
   std::uint32_t clusters = 0;
   for (std::size_t i = 0; i < n; ++i) {

@@ -43,11 +43,15 @@ PointCloud VoxelDownsampleRuns(const PointCloud& cloud, const std::vector<std::s
 // nanoflann kd-tree over a cloud's xyz. Owns a copy of the cloud or shares it. The cloud must be
 // finite (ltm::Error otherwise: see RemoveNonFinite). Distances are computed in double and
 // returned as float; "within radius" means squared distance < radius^2 (strict). Equal
-// distances are ordered by index.
+// distances are ordered by index. A cloud of more than `block_points` points (0 = 131072) is cut
+// into blocks of at most that many, each its own tree, built on `threads` cores; results do not
+// depend on `threads` (Knn may pick another of several points at exactly the k-th distance than
+// one tree would).
 class KdTree {
  public:
-  explicit KdTree(PointCloud cloud);                       // owns
-  explicit KdTree(std::shared_ptr<const PointCloud> cloud);  // shares
+  explicit KdTree(PointCloud cloud, int threads = 1, std::size_t block_points = 0);  // owns
+  explicit KdTree(std::shared_ptr<const PointCloud> cloud, int threads = 1,
+                  std::size_t block_points = 0);  // shares
   ~KdTree();
   KdTree(KdTree&&) noexcept;
   KdTree& operator=(KdTree&&) noexcept;
@@ -72,8 +76,9 @@ class KdTree {
 // ------------------------------------------------------------------------------- clusters
 // Euclidean clusters: points closer than `gap_m` [m] (strict, as KdTree::Radius) are in one
 // cluster, transitively. Returns each point's cluster number, 0 .. clusters - 1, numbered in the
-// order of their lowest point index (deterministic). Non-finite points: ltm::Error (KdTree).
-std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m);
+// order of their lowest point index (deterministic, whatever `threads`). Non-finite points:
+// ltm::Error (KdTree).
+std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m, int threads = 1);
 // The xy-oriented box of cloud[idx] (all points when idx is empty): its major axis the principal
 // axis of the points' x, y spread (2x2 covariance about their mean), at yaw_rad; the minor axis
 // 90 deg counter-clockwise from it; the box's xy centre and its extents along the two axes [m].

@@ -63,7 +63,7 @@ bool AboveTheirGround(const detail::Neighbourhood& nb, float r, const RemovertCo
 std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
                                   const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
-  const geometry::KdTree tree(other);
+  const geometry::KdTree tree(other, threads);
   const bool rel = cfg.ld_radius_rel > 0.0 && !own_kf.empty() && !other_kf.empty();
   std::unique_ptr<geometry::KdTree> own_tree, other_tree;
   if (rel) {
@@ -128,8 +128,8 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
 }
 
 // The Euclidean clusters of `c` at `gap_m`, each as its point indices.
-std::vector<std::vector<std::uint32_t>> ClusterMembers(const PointCloud& c, double gap_m) {
-  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(c, gap_m);
+std::vector<std::vector<std::uint32_t>> ClusterMembers(const PointCloud& c, double gap_m, int threads) {
+  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(c, gap_m, threads);
   std::vector<std::vector<std::uint32_t>> members(*std::max_element(label.begin(), label.end()) + 1);
   for (std::size_t i = 0; i < label.size(); ++i) members[label[i]].push_back(std::uint32_t(i));
   return members;
@@ -197,9 +197,9 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 // object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
 // that low is within the radius of the other session's ground, so no change at all; such a patch
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
-std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const RemovertConfig& cfg) {
+std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
-  const auto members = ClusterMembers(seen, cfg.ld_residue_gap_m);
+  const auto members = ClusterMembers(seen, cfg.ld_residue_gap_m, threads);
   std::vector<bool> small = FitAMover(seen, members, own, cfg);
   UnmarkPiecesOfLargerOnes(seen, members, cfg.ld_residue_length_m, &small);
   return small;
@@ -236,7 +236,7 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
   for (std::uint32_t i : raw)
     if ((*label)[i] == seen_label) (missing[i] == kRawAboveTheirGround ? lower : body).push_back(i);
   const PointCloud body_pts = own.select(body);
-  const std::vector<bool> residue = Residues(body_pts, own, cfg);
+  const std::vector<bool> residue = Residues(body_pts, own, cfg, threads);
   const std::vector<bool> residue_lower = LowerPartsOf(body_pts, residue, own.select(lower), cfg);
   for (std::size_t j = 0; j < body.size(); ++j)
     if (residue[j]) (*label)[body[j]] = kLdResidue;

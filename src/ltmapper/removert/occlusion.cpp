@@ -49,7 +49,7 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
   std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
   std::vector<std::uint8_t> plane(points.size(), 0);
   if (points.empty() || map.empty()) return normals;
-  const geometry::KdTree tree(std::make_shared<const PointCloud>(map));
+  const geometry::KdTree tree(std::make_shared<const PointCloud>(map), threads);
   const std::size_t chunk = 2048;
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
     const std::size_t b = ch * chunk, e = std::min(points.size(), b + chunk);

@@ -21,6 +21,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <iomanip>
 #include <set>
 #include <sstream>
@@ -51,6 +52,13 @@ struct SessionData {
 };
 
 // HD removal of session `s`; writes `dir` (static_map.pcd, hd_map.pcd, map.ply).
+// Independent output files written at once (each to a temporary name, then renamed): a stage's
+// maps are tens of MB, and one core writing them while the others wait was LT-removert's largest
+// serial step after the kd-tree builds (issue 18).
+void WriteAtOnce(const std::vector<std::function<void()>>& writes, int threads) {
+  ParallelFor(writes.size(), threads, [&](std::size_t i) { writes[i](); });
+}
+
 HdStats RemoveSessionHd(SessionData& sd, int s, const std::string& dir, const RemovertConfig& cfg, int threads) {
   spdlog::info("removert: HD removal of {} ({} keyframes{})", sd.name, sd.kfs.size(), cfg.tiles_stage ? ", tile by tile" : "");
   HdResult hd;
@@ -66,41 +74,45 @@ HdStats RemoveSessionHd(SessionData& sd, int s, const std::string& dir, const Re
                st.map_points ? 100.0 * double(st.removed + st.dilated) / double(st.map_points) : 0.0,
                st.seconds_map, st.seconds_votes);
   io::MakeDirs(dir);
-  io::WritePcd(io::layout::StaticMapIn(dir), hd.static_map);
-  io::WritePcd(io::layout::HdMapIn(dir), hd.hd_map);
-  if (cfg.write_ply) {
-    const auto ses = std::uint16_t(s);
-    io::WritePly(dir + "/map.ply", {{&hd.static_map, PointClass::kStatic, ses}, {&hd.hd_map, PointClass::kHD, ses}});
-  }
+  const auto ses = std::uint16_t(s);
+  std::vector<std::function<void()>> writes{[&] { io::WritePcd(io::layout::StaticMapIn(dir), hd.static_map); },
+                                            [&] { io::WritePcd(io::layout::HdMapIn(dir), hd.hd_map); }};
+  if (cfg.write_ply)
+    writes.emplace_back([&] {
+      io::WritePly(dir + "/map.ply", {{&hd.static_map, PointClass::kStatic, ses}, {&hd.hd_map, PointClass::kHD, ses}});
+    });
+  WriteAtOnce(writes, threads);
   sd.static_map = std::move(hd.static_map);
   sd.hd_map = std::move(hd.hd_map);
   return st;
 }
 
-// The LD clouds of a pair and its labelled changes.ply.
+// The LD clouds of a pair and its labelled changes.ply, written at once.
 void WriteLdClouds(const std::string& dir, const LdResult& ld, const PointCloud& cmap, int c, int q,
-                   const RemovertConfig& cfg) {
+                   const RemovertConfig& cfg, int threads) {
   io::MakeDirs(dir);
-  io::WritePcd(dir + "/pd_strong.pcd", ld.pd_strong);
-  io::WritePcd(dir + "/pd_weak.pcd", ld.pd_weak);
-  io::WritePcd(dir + "/nd_strong.pcd", ld.nd_strong);
-  io::WritePcd(dir + "/nd_weak.pcd", ld.nd_weak);
-  io::WritePcd(dir + "/pd_unobserved.pcd", ld.pd_unobserved);
-  io::WritePcd(dir + "/nd_residue.pcd", ld.nd_residue);
-  io::WritePcd(dir + "/pd_residue.pcd", ld.pd_residue);
-  if (!cfg.write_ply) return;
+  std::vector<std::function<void()>> writes;
+  for (const auto& [name, cloud] : {std::pair{"pd_strong", &ld.pd_strong}, {"pd_weak", &ld.pd_weak},
+                                    {"nd_strong", &ld.nd_strong}, {"nd_weak", &ld.nd_weak},
+                                    {"pd_unobserved", &ld.pd_unobserved}, {"nd_residue", &ld.nd_residue},
+                                    {"pd_residue", &ld.pd_residue}})
+    writes.emplace_back([&dir, name = std::string(name), cloud = cloud] { io::WritePcd(dir + "/" + name + ".pcd", *cloud); });
   std::vector<bool> unchanged(cmap.size());  // central static minus ND
   for (std::size_t i = 0; i < cmap.size(); ++i) unchanged[i] = !ld.central_nd[i];
   const auto cs = std::uint16_t(c), qs = std::uint16_t(q);
   constexpr std::int32_t kNoObject = -1, kNewTerritory = 1;  // object field of changes.ply
-  io::WritePly(dir + "/changes.ply", {{&cmap, PointClass::kStatic, cs, kNoObject, &unchanged},
-                                      {&ld.nd_strong, PointClass::kNDStrong, cs},
-                                      {&ld.nd_weak, PointClass::kNDWeak, cs},
-                                      {&ld.pd_strong, PointClass::kPDStrong, qs},
-                                      {&ld.pd_weak, PointClass::kPDWeak, qs},
-                                      {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory},
-                                      {&ld.nd_residue, PointClass::kHD, cs},
-                                      {&ld.pd_residue, PointClass::kHD, qs}});
+  if (cfg.write_ply)
+    writes.emplace_back([&] {
+      io::WritePly(dir + "/changes.ply", {{&cmap, PointClass::kStatic, cs, kNoObject, &unchanged},
+                                          {&ld.nd_strong, PointClass::kNDStrong, cs},
+                                          {&ld.nd_weak, PointClass::kNDWeak, cs},
+                                          {&ld.pd_strong, PointClass::kPDStrong, qs},
+                                          {&ld.pd_weak, PointClass::kPDWeak, qs},
+                                          {&ld.pd_unobserved, PointClass::kPDStrong, qs, kNewTerritory},
+                                          {&ld.nd_residue, PointClass::kHD, cs},
+                                          {&ld.pd_residue, PointClass::kHD, qs}});
+    });
+  WriteAtOnce(writes, threads);
 }
 
 // Which keyframe every output point of a pair belongs to (rule at the top of this file).
@@ -173,7 +185,7 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
                io::layout::PairDirName(ci, qi), ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
                ld.stats.pd_strong, ld.stats.pd_weak, ld.stats.pd_unobserved, ld.stats.nd_residue, c.name,
                ld.stats.pd_residue, q.name, ld.stats.seconds);
-  WriteLdClouds(dir, ld, c.static_map, ci, qi, cfg);
+  WriteLdClouds(dir, ld, c.static_map, ci, qi, cfg, threads);
   const KeyframeAssignment a = AssignKeyframes(c, q, ld, cfg, threads);
   if (cfg.write_keyframes) WriteKeyframeFolders(dir, c, q, ci, qi, a, cfg, threads);
   detail::WriteKeyframesCsv(dir, c.kfs, q.kfs, ci, qi, Counts(a), a.new_list);
