@@ -83,6 +83,45 @@ void PointCloud::append(const PointCloud& other) {
   points.insert(points.end(), other.points.begin(), other.points.end());
 }
 
+namespace {
+// Part k's array copied to `dst` at `at[k]` when every non-empty part has the array; else `dst`
+// stays empty.
+template <class T>
+void ConcatenateArray(std::vector<T> PointCloud::*array, const std::vector<PointCloud>& parts,
+                      const std::vector<std::size_t>& at, std::size_t n, int threads, std::vector<T>* dst) {
+  for (const PointCloud& part : parts)
+    if (!part.empty() && (part.*array).empty()) return;
+  dst->resize(n);
+  constexpr std::size_t kPiece = std::size_t(1) << 16;  // elements a task copies: a big part on many cores
+  std::vector<std::pair<std::size_t, std::size_t>> pieces;  // (part, first element)
+  for (std::size_t k = 0; k < parts.size(); ++k)
+    for (std::size_t b = 0; b < parts[k].size(); b += kPiece) pieces.emplace_back(k, b);
+  ParallelFor(pieces.size(), threads, [&](std::size_t t) {
+    const auto [k, b] = pieces[t];
+    const std::vector<T>& src = parts[k].*array;
+    const std::size_t e = std::min(src.size(), b + kPiece);
+    std::copy(src.begin() + std::ptrdiff_t(b), src.begin() + std::ptrdiff_t(e), dst->begin() + std::ptrdiff_t(at[k] + b));
+  });
+}
+}  // namespace
+
+PointCloud Concatenate(std::vector<PointCloud> parts, int threads) {
+  std::vector<PointCloud> kept;
+  for (PointCloud& part : parts)
+    if (!part.empty()) kept.push_back(std::move(part));
+  if (kept.size() == 1) return std::move(kept.front());
+  std::vector<std::size_t> at(kept.size() + 1, 0);
+  for (std::size_t k = 0; k < kept.size(); ++k) at[k + 1] = at[k] + kept[k].size();
+  const std::size_t n = at.back();
+  PointCloud out;
+  ConcatenateArray(&PointCloud::points, kept, at, n, threads, &out.points);
+  ConcatenateArray(&PointCloud::cls, kept, at, n, threads, &out.cls);
+  ConcatenateArray(&PointCloud::session, kept, at, n, threads, &out.session);
+  ConcatenateArray(&PointCloud::object, kept, at, n, threads, &out.object);
+  ConcatenateArray(&PointCloud::time, kept, at, n, threads, &out.time);
+  return out;
+}
+
 PointCloud PointCloud::select(const std::vector<bool>& mask) const {
   if (mask.size() != size())
     throw Error("PointCloud::select: mask has " + std::to_string(mask.size()) +

@@ -91,6 +91,10 @@ struct PointCloud {
   void CheckConsistent(const std::string& what) const;
 };
 
+// The parts one after the other, as append() one by one would make them (an optional array kept
+// when every non-empty part has it), copied on `threads` cores; the parts are consumed.
+PointCloud Concatenate(std::vector<PointCloud> parts, int threads);
+
 // ---------------------------------------------------------------------------------------------
 // Pose graph pieces, as in a session's g2o file.
 struct Edge {

@@ -184,19 +184,28 @@ std::vector<Span> SortedSpans(const PointCloud& cloud, std::vector<std::size_t> 
   return spans;
 }
 
-// Key ranges merged in parallel: split at evenly spaced keys of the longest run (strictly
-// increasing). bound[r * (ranges + 1) + t] is the first point of run r in range t (key >=
-// split[t - 1]); returns the number of ranges.
+// Key ranges merged in parallel: split at evenly spaced keys of all runs together (strictly
+// increasing), sampled from every run in proportion to its length, so that each range holds
+// about as many points whatever the runs cover (split at the longest run's keys alone, the other
+// runs' points outside its key span all fell in the first and last range: a map batch of 32
+// scans merged on one or two cores, issue 18). A voxel's points lie in one range, so the output
+// does not depend on the split. bound[r * (ranges + 1) + t] is the first point of run r in range
+// t (key >= split[t - 1]); returns the number of ranges.
 template <class KeyFn>
 std::size_t MergeRanges(const PointCloud& cloud, const std::vector<Span>& spans, const KeyFn& key,
                         std::vector<std::size_t>* bound, int threads) {
-  const Span longest = *std::max_element(spans.begin(), spans.end(), [](const Span& a, const Span& b) {
-    return a.e - a.b < b.e - b.b;
-  });
   const std::size_t ranges = std::max<std::size_t>(1, std::min(kMaxMergeRanges, cloud.size() / kMergeRangePoints));
+  constexpr std::size_t kSamplesPerRange = 8;
+  std::vector<std::uint64_t> sample;
+  for (const Span& sp : spans) {
+    const std::size_t len = sp.e - sp.b;
+    const std::size_t m = (ranges * kSamplesPerRange * len + cloud.size() - 1) / cloud.size();
+    for (std::size_t j = 0; j < m; ++j) sample.push_back(key(cloud.points[sp.b + len * j / m]));
+  }
+  std::sort(sample.begin(), sample.end());
   std::vector<std::uint64_t> split;
-  for (std::size_t t = 1; t < ranges; ++t) {
-    const std::uint64_t k = key(cloud.points[longest.b + (longest.e - longest.b) * t / ranges]);
+  for (std::size_t t = 1; t < ranges && !sample.empty(); ++t) {
+    const std::uint64_t k = sample[sample.size() * t / ranges];
     if (split.empty() || k > split.back()) split.push_back(k);
   }
   const std::size_t nr = split.size() + 1;
@@ -281,13 +290,7 @@ bool ReduceRuns(const PointCloud& cloud, const std::vector<std::size_t>& runs, c
   const std::size_t nr = MergeRanges(cloud, spans, key, &bound, threads);
   std::vector<PointCloud> parts(nr);
   ParallelFor(nr, threads, [&](std::size_t t) { parts[t] = MergeRange(cloud, spans.size(), bound, nr, t, key); });
-  std::size_t m = 0;
-  for (const auto& part : parts) m += part.size();
-  out->points.reserve(m);
-  for (auto& part : parts) {
-    out->append(part);
-    part = PointCloud();
-  }
+  *out = Concatenate(std::move(parts), threads);
   return true;
 }
 

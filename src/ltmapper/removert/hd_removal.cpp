@@ -69,10 +69,12 @@ PointCloud ScanForMap(const WorldKeyframe& kf, const RemovertConfig& cfg, const 
 namespace {
 
 // Per-voxel means of two voxelised clouds (a before b).
-PointCloud MeanOfTwo(PointCloud a, const PointCloud& b, double voxel_m, int threads) {
+PointCloud MeanOfTwo(PointCloud a, PointCloud b, double voxel_m, int threads) {
   const std::size_t split = a.size();
-  a.append(b);
-  return geometry::VoxelDownsampleRuns(a, {0, split}, voxel_m, threads);
+  std::vector<PointCloud> both;
+  both.push_back(std::move(a));
+  both.push_back(std::move(b));
+  return geometry::VoxelDownsampleRuns(Concatenate(std::move(both), threads), {0, split}, voxel_m, threads);
 }
 
 // Bit length of x: the level of the lowest common ancestor of two leaves whose ids differ by x.
@@ -99,7 +101,7 @@ PointCloud BuildMap(const std::vector<WorldKeyframe>& keyframes, const std::vect
   auto fold = [&] {
     Pending top = std::move(stack.back());
     stack.pop_back();
-    stack.back().map = MeanOfTwo(std::move(stack.back().map), top.map, cfg.map_voxel_m, threads);
+    stack.back().map = MeanOfTwo(std::move(stack.back().map), std::move(top.map), cfg.map_voxel_m, threads);
   };
   std::size_t last_batch = 0;
   for (std::size_t b = 0; b < keyframes.size();) {
@@ -108,13 +110,10 @@ PointCloud BuildMap(const std::vector<WorldKeyframe>& keyframes, const std::vect
     while (e < keyframes.size() && slots[e] / kMapBatch == batch) ++e;
     std::vector<PointCloud> parts(e - b);
     ParallelFor(e - b, threads, [&](std::size_t k) { parts[k] = ScanForMap(keyframes[b + k], cfg, clip); });
-    PointCloud merged;
     std::vector<std::size_t> part_runs;
-    for (auto& p : parts) {
-      part_runs.push_back(merged.size());
-      merged.append(p);
-      p = PointCloud();
-    }
+    std::size_t at = 0;
+    for (const auto& p : parts) part_runs.push_back(at), at += p.size();
+    const PointCloud merged = Concatenate(std::move(parts), threads);
     const int join = stack.empty() ? 0 : BitLength(std::uint64_t(batch ^ last_batch));
     while (stack.size() >= 2 && stack.back().join < join) fold();
     stack.push_back({geometry::VoxelDownsampleRuns(merged, part_runs, cfg.map_voxel_m, threads), join});
