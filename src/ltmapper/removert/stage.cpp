@@ -51,7 +51,6 @@ struct SessionData {
   PointCloud static_map, hd_map;
 };
 
-// HD removal of session `s`; writes `dir` (static_map.pcd, hd_map.pcd, map.ply).
 // Independent output files written at once (each to a temporary name, then renamed): a stage's
 // maps are tens of MB, and one core writing them while the others wait was LT-removert's largest
 // serial step after the kd-tree builds (issue 18).
@@ -59,6 +58,7 @@ void WriteAtOnce(const std::vector<std::function<void()>>& writes, int threads) 
   ParallelFor(writes.size(), threads, [&](std::size_t i) { writes[i](); });
 }
 
+// HD removal of session `s`; writes `dir` (static_map.pcd, hd_map.pcd, map.ply).
 HdStats RemoveSessionHd(SessionData& sd, int s, const std::string& dir, const RemovertConfig& cfg, int threads) {
   spdlog::info("removert: HD removal of {} ({} keyframes{})", sd.name, sd.kfs.size(), cfg.tiles_stage ? ", tile by tile" : "");
   HdResult hd;
