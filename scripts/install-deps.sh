@@ -8,7 +8,8 @@ PACKAGES=(
   build-essential cmake pkg-config ccache
   libeigen3-dev          # linear algebra, poses
   libceres-dev           # pose graph back end
-  libpcl-dev             # PCD I/O, GICP, Euclidean clustering
+  libpcl-dev             # GICP, Euclidean clustering (tests: PCL's PCD files)
+  liblzf-dev             # binary_compressed PCDs
   libnanoflann-dev       # kd-tree for hot loops
   libtbb-dev             # parallel_for / parallel_reduce
   libembree-dev          # ray casting (simulator)

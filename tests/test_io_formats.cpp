@@ -123,6 +123,54 @@ TEST(Pcd, BinaryIsByteForByteWhatPclWrites) {
   EXPECT_EQ(test::ReadText(tmp / "ours.pcd"), test::ReadText(tmp / "pcl.pcd"));
 }
 
+// Our ascii and binary_compressed reader and writer against PCL's (which the program no longer
+// links): PCL's files with extra fields of several types, a field of COUNT 3 and a NaN point read
+// as PCL reads them; our files read by PCL give our points.
+TEST(Pcd, AsciiAndCompressedAgreeWithPcl) {
+  test::TempDir tmp;
+  pcl::PointCloud<pcl::PointXYZINormal> pc;  // x y z intensity normal_x..z curvature (padded)
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-80.f, 80.f);
+  for (int k = 0; k < 500; ++k) {
+    pcl::PointXYZINormal q;
+    q.x = u(rng), q.y = u(rng), q.z = u(rng) * 0.05f, q.intensity = std::abs(u(rng));
+    q.normal_x = u(rng), q.normal_y = u(rng), q.normal_z = u(rng), q.curvature = u(rng);
+    pc.push_back(q);
+  }
+  pc[7].x = std::nanf("");
+  pc.is_dense = false;
+  for (const bool compressed : {false, true}) {
+    SCOPED_TRACE(compressed ? "binary_compressed" : "ascii");
+    const std::string path = tmp / (compressed ? "pcl_c.pcd" : "pcl_a.pcd");
+    ASSERT_EQ(compressed ? pcl::PCDWriter().writeBinaryCompressed(path, pc) : pcl::PCDWriter().writeASCII(path, pc, 9), 0);
+    io::CloudReadStats st;
+    const PointCloud r = io::ReadPcd(path, &st);
+    EXPECT_EQ(st.non_finite_dropped, 1u);
+    ASSERT_EQ(r.size(), pc.size() - 1);
+    for (std::size_t k = 0, j = 0; k < pc.size(); ++k) {
+      if (k == 7) continue;
+      EXPECT_EQ(r.points[j].x, pc[k].x);
+      EXPECT_EQ(r.points[j].y, pc[k].y);
+      EXPECT_EQ(r.points[j].z, pc[k].z);
+      EXPECT_EQ(r.points[j].intensity, pc[k].intensity);
+      ++j;
+    }
+  }
+  const PointCloud c = RandomCloud(700, 9);
+  for (const auto format : {io::PcdFormat::kAscii, io::PcdFormat::kBinaryCompressed}) {
+    const std::string path = tmp / "ours.pcd";
+    io::WritePcd(path, c, format);
+    pcl::PointCloud<pcl::PointXYZI> back;
+    ASSERT_EQ(pcl::io::loadPCDFile(path, back), 0);
+    ASSERT_EQ(back.size(), c.size());
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      EXPECT_EQ(back[k].x, c.points[k].x);
+      EXPECT_EQ(back[k].z, c.points[k].z);
+      EXPECT_EQ(back[k].intensity, c.points[k].intensity);
+    }
+  }
+}
+
 TEST(Ply, PartsWriteTheLabelledConcatenation) {
   test::TempDir tmp;
   const PointCloud a = RandomCloud(100), b = RandomCloud(70), empty;

@@ -1,22 +1,24 @@
-// PCD through PCL's reader and writer. PCL prints an error and sometimes returns partial data on
-// truncated or inconsistent files, so the header is parsed here first and the data size checked
-// against it (binary: exact byte count; binary_compressed: the two size words; ascii: line and
-// token counts). Non-finite points are dropped and counted, never passed on.
+// PCD reading and writing of our own (ascii, binary, binary_compressed with Debian's liblzf):
+// PCL's reader printed an error and sometimes returned partial data on truncated or inconsistent
+// files, and its pcl_io library brought 67 shared objects (VTK's 29 among them) into every
+// command's start (81 % of `ltmapper --version`'s 95 ms went to the dynamic loader). The header is
+// parsed first and the data size checked against it (binary: exact byte count; binary_compressed:
+// the two size words; ascii: line and token counts). Non-finite points are dropped and counted,
+// never passed on.
 #include "ltmapper/io/files.hpp"
 #include "ltmapper/io/formats.hpp"
 
 #include "detail.hpp"
 
-#include <pcl/PCLPointCloud2.h>
-#include <pcl/io/pcd_io.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
+#include <lzf.h>
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -28,6 +30,9 @@ namespace fs = std::filesystem;
 
 namespace ltm::io {
 namespace {
+
+// Field datatypes, numbered as PCL's PCLPointField numbers them.
+enum Datatypes : std::uint8_t { kInt8 = 1, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
 
 // Most values one PCD field may hold (COUNT): descriptors use a few hundred (VFH 308) to a few
 // thousand (shape context 1980); the bound keeps the point step far from overflowing while no
@@ -249,26 +254,15 @@ void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& 
 
 double ReadValue(const std::uint8_t* p, std::uint8_t datatype) {
   switch (datatype) {
-    case pcl::PCLPointField::INT8: { std::int8_t v; std::memcpy(&v, p, 1); return v; }
-    case pcl::PCLPointField::UINT8: { std::uint8_t v; std::memcpy(&v, p, 1); return v; }
-    case pcl::PCLPointField::INT16: { std::int16_t v; std::memcpy(&v, p, 2); return v; }
-    case pcl::PCLPointField::UINT16: { std::uint16_t v; std::memcpy(&v, p, 2); return v; }
-    case pcl::PCLPointField::INT32: { std::int32_t v; std::memcpy(&v, p, 4); return v; }
-    case pcl::PCLPointField::UINT32: { std::uint32_t v; std::memcpy(&v, p, 4); return v; }
-    case pcl::PCLPointField::FLOAT32: { float v; std::memcpy(&v, p, 4); return v; }
-    case pcl::PCLPointField::FLOAT64: { double v; std::memcpy(&v, p, 8); return v; }
+    case kInt8: { std::int8_t v; std::memcpy(&v, p, 1); return v; }
+    case kUint8: { std::uint8_t v; std::memcpy(&v, p, 1); return v; }
+    case kInt16: { std::int16_t v; std::memcpy(&v, p, 2); return v; }
+    case kUint16: { std::uint16_t v; std::memcpy(&v, p, 2); return v; }
+    case kInt32: { std::int32_t v; std::memcpy(&v, p, 4); return v; }
+    case kUint32: { std::uint32_t v; std::memcpy(&v, p, 4); return v; }
+    case kFloat32: { float v; std::memcpy(&v, p, 4); return v; }
+    case kFloat64: { double v; std::memcpy(&v, p, 8); return v; }
     default: return std::nan("");
-  }
-}
-
-std::size_t TypeSize(std::uint8_t datatype) {
-  switch (datatype) {
-    case pcl::PCLPointField::INT8: case pcl::PCLPointField::UINT8: return 1;
-    case pcl::PCLPointField::INT16: case pcl::PCLPointField::UINT16: return 2;
-    case pcl::PCLPointField::INT32: case pcl::PCLPointField::UINT32:
-    case pcl::PCLPointField::FLOAT32: return 4;
-    case pcl::PCLPointField::FLOAT64: return 8;
-    default: return 0;
   }
 }
 
@@ -337,7 +331,7 @@ void ReadLabels(const Records& rec, const LabelFields& f, const std::vector<std:
 
 // The per-point times of the kept records (a raw sweep's `time` field, seconds).
 void ReadTimes(const Records& rec, FieldAt ft, const std::vector<std::size_t>& kept, PointCloud* cloud) {
-  const double unit = ft.datatype == pcl::PCLPointField::UINT32 ? 1e-9 : 1.0;  // `t`: nanoseconds
+  const double unit = ft.datatype == kUint32 ? 1e-9 : 1.0;  // `t`: nanoseconds
   cloud->time.resize(kept.size());
   for (std::size_t k = 0; k < kept.size(); ++k) {
     const std::size_t n = kept[k];
@@ -352,7 +346,7 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
                        FieldAt ft, const std::string& path, CloudReadStats* stats) {
   PointCloud cloud;
   cloud.reserve(rec.rows * rec.cols);
-  auto is_float = [](FieldAt f) { return f.datatype == 0 || f.datatype == pcl::PCLPointField::FLOAT32; };
+  auto is_float = [](FieldAt f) { return f.datatype == 0 || f.datatype == kFloat32; };
   auto read_float = [](const std::uint8_t* p, std::uint8_t) {
     float v;
     std::memcpy(&v, p, 4);
@@ -375,19 +369,19 @@ PointCloud ReadRecords(const Records& rec, FieldAt fx, FieldAt fy, FieldAt fz, F
 // PCL datatype of a field's TYPE and SIZE (both checked by CheckFields); 0 when PCL has none.
 std::uint8_t Datatype(char type, long long size) {
   switch (type) {
-    case 'F': return size == 4 ? pcl::PCLPointField::FLOAT32 : pcl::PCLPointField::FLOAT64;
-    case 'I': return size == 1 ? pcl::PCLPointField::INT8 : size == 2 ? pcl::PCLPointField::INT16
-                     : size == 4 ? pcl::PCLPointField::INT32 : 0;
-    case 'U': return size == 1 ? pcl::PCLPointField::UINT8 : size == 2 ? pcl::PCLPointField::UINT16
-                     : size == 4 ? pcl::PCLPointField::UINT32 : 0;
+    case 'F': return size == 4 ? kFloat32 : kFloat64;
+    case 'I': return size == 1 ? kInt8 : size == 2 ? kInt16
+                     : size == 4 ? kInt32 : 0;
+    case 'U': return size == 1 ? kUint8 : size == 2 ? kUint16
+                     : size == 4 ? kUint32 : 0;
     default: return 0;
   }
 }
 
 // The label fields as ltmapper's labelled PCDs write them (map/output.cpp): class U1, session
 // U2, object I4. A field of that name with another type is some other tool's and is not read.
-constexpr std::uint8_t kLabelTypes[3] = {pcl::PCLPointField::UINT8, pcl::PCLPointField::UINT16,
-                                         pcl::PCLPointField::INT32};
+constexpr std::uint8_t kLabelTypes[3] = {kUint8, kUint16,
+                                         kInt32};
 FieldAt LabelAt(FieldAt f, int label) { return f.datatype == kLabelTypes[label] ? f : FieldAt{}; }
 
 // A raw sweep's per-point time after the scan's timestamp: `time` in seconds (float, as Velodyne /
@@ -395,8 +389,8 @@ FieldAt LabelAt(FieldAt f, int label) { return f.datatype == kLabelTypes[label] 
 // (uint32, as Ouster's driver writes it; a `t` of another type is some other tool's, not read).
 FieldAt TimeAt(const std::string& path, const std::string& name, FieldAt f) {
   if (!f.datatype) return f;
-  if (name == "t") return f.datatype == pcl::PCLPointField::UINT32 ? f : FieldAt{};
-  if (f.datatype != pcl::PCLPointField::FLOAT32 && f.datatype != pcl::PCLPointField::FLOAT64)
+  if (name == "t") return f.datatype == kUint32 ? f : FieldAt{};
+  if (f.datatype != kFloat32 && f.datatype != kFloat64)
     throw Error(path + ": PCD field 'time' must be F4 or F8 (seconds after the scan's timestamp)");
   return f;
 }
@@ -412,11 +406,11 @@ bool TakeTime(const std::string& path, const std::string& name, FieldAt f, Field
   return true;
 }
 
-// x y z (intensity, and the labels) of an uncompressed binary PCD: their offsets and datatypes in
-// the point record (a field with COUNT > 1: its first value, as PCL reads it). Binary files are
-// never handed to PCL's reader: fuzz/fuzz_pcd found 212-byte files (an 8-byte float x, or no z at
-// all) that made pcl::PCDReader::read ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte
-// integers among x y z intensity.
+// x y z (intensity, and the labels) of a PCD: their offsets and datatypes in the point record, as
+// binary data holds it and as the ascii and compressed data are put back (a field with COUNT > 1:
+// its first value, as PCL reads it). Checked here, before any data is read: fuzz/fuzz_pcd found
+// 212-byte files (an 8-byte float x, or no z at all) that made PCL's reader, which read such files
+// once, ask for ~100 TB. Throws ltm::Error for no x y z or 8-byte integers among x y z intensity.
 std::array<FieldAt, 8> BinaryFields(const std::string& path, const PcdHeader& h) {
   std::array<FieldAt, 8> at{};
   const char* names[9] = {"x", "y", "z", "intensity", "class", "session", "object", "time", "t"};
@@ -486,7 +480,7 @@ void SeekData(std::ifstream& in, const PcdHeader& h) {
 
 // The header of a PCD file opened in `in`, checked against the data's size and, when it has
 // points, for x y z fields (fuzz/fuzz_pcd: a binary_compressed file without x made
-// pcl::PCDReader::read dereference null).
+// PCL's reader, which read such files once, dereference null).
 PcdHeader OpenPcd(const std::string& path, std::ifstream& in) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
@@ -501,53 +495,94 @@ PcdHeader OpenPcd(const std::string& path, std::ifstream& in) {
   return h;
 }
 
-// ascii and binary_compressed PCDs through PCL's reader, every field's type and offset checked
-// against the record before it is read.
-PointCloud ReadPclPcd(const std::string& path, CloudReadStats* stats) {
-  pcl::PCLPointCloud2 blob;
-  Eigen::Vector4f origin;
-  Eigen::Quaternionf orientation;
-  int version = 0;
-  pcl::PCDReader reader;
-  int ret = -1;
-  try {
-    ret = reader.read(path, blob, origin, orientation, version);
-  } catch (const std::exception& e) {
-    throw Error(path + ": PCL cannot read the PCD file: " + e.what());
+// One ascii value of a field of datatype `type` stored in `out` (its size); `ok` false when the
+// token is no number of that kind.
+void StoreAscii(const std::string& token, std::uint8_t type, std::uint8_t* out, bool* ok) {
+  const char* b = token.c_str();
+  char* e = nullptr;
+  errno = 0;
+  auto put = [&](auto v) { std::memcpy(out, &v, sizeof(v)); };
+  switch (type) {
+    case kFloat32: put(std::strtof(b, &e)); break;
+    case kFloat64: put(std::strtod(b, &e)); break;
+    case kInt8: put(std::int8_t(std::strtoll(b, &e, 10))); break;
+    case kInt16: put(std::int16_t(std::strtoll(b, &e, 10))); break;
+    case kInt32: put(std::int32_t(std::strtoll(b, &e, 10))); break;
+    case kUint8: put(std::uint8_t(std::strtoull(b, &e, 10))); break;
+    case kUint16: put(std::uint16_t(std::strtoull(b, &e, 10))); break;
+    case kUint32: put(std::uint32_t(std::strtoull(b, &e, 10))); break;
+    default: return;  // a type no reader uses: left zero
   }
-  if (ret < 0) throw Error(path + ": PCL cannot read the PCD file (corrupt or truncated)");
+  *ok = e != b && *e == '\0';
+}
 
-  const std::size_t n = std::size_t(blob.width) * std::size_t(blob.height);
-  if (blob.data.size() < n * blob.point_step)
-    throw Error(path + ": PCD data holds fewer bytes than WIDTH*HEIGHT points need");
-
-  const pcl::PCLPointField* fx = nullptr;
-  const pcl::PCLPointField* fy = nullptr;
-  const pcl::PCLPointField* fz = nullptr;
-  const pcl::PCLPointField* fi = nullptr;
-  const pcl::PCLPointField *fc = nullptr, *fs = nullptr, *fo = nullptr, *ft = nullptr;
-  FieldAt time;
-  for (const auto& f : blob.fields) {
-    if (f.name == "x") fx = &f;
-    if (f.name == "y") fy = &f;
-    if (f.name == "z") fz = &f;
-    if (f.name == "intensity") fi = &f;
-    if (f.name == "class") fc = &f;
-    if (f.name == "session") fs = &f;
-    if (f.name == "object") fo = &f;
-    if (TakeTime(path, f.name, {f.offset, f.datatype}, &time) && time.datatype && !ft) ft = &f;
+// An ascii PCD's rows as binary records (every field at its offset, in its type), so that
+// ReadRecords reads all three formats alike. CheckDataSize counted the rows and their values.
+std::vector<std::uint8_t> AsciiRecords(const std::string& path, std::ifstream& in, const PcdHeader& h) {
+  const std::size_t step = h.PointStep();
+  std::vector<std::uint8_t> rec(std::size_t(h.points) * step, 0);
+  SeekData(in, h);
+  std::string line;
+  std::size_t lineno = h.header_lines, row = 0;
+  while (row < std::size_t(h.points) && std::getline(in, line)) {
+    ++lineno;
+    std::istringstream ss(line);
+    std::string t;
+    if (!(ss >> t) || t[0] == '#') continue;
+    std::uint8_t* out = &rec[row * step];
+    for (std::size_t f = 0; f < h.fields.size(); ++f) {
+      const std::uint8_t type = Datatype(h.types[f], h.sizes[f]);
+      for (long long c = 0; c < h.counts[f]; ++c, out += h.sizes[f]) {
+        if ((f > 0 || c > 0) && !(ss >> t)) throw Error(path, lineno, "PCD ascii row is short");
+        bool ok = type == 0;
+        StoreAscii(t, type, out, &ok);
+        if (!ok) throw Error(path, lineno, "PCD ascii value '" + t + "' of field '" + h.fields[f] + "' is no number of its TYPE");
+      }
+    }
+    ++row;
   }
-  if (!fx || !fy || !fz) throw Error(path + ": PCD has no x y z fields");
-  for (const auto* f : {fx, fy, fz, fi, fc, fs, fo, ft}) {
-    if (!f || ((f == fc || f == fs || f == fo) && f->datatype != kLabelTypes[f == fc ? 0 : f == fs ? 1 : 2])) continue;
-    if (TypeSize(f->datatype) == 0 || f->offset + TypeSize(f->datatype) > blob.point_step)
-      throw Error(path + ": PCD field '" + f->name + "' has an unsupported type or offset");
-  }
+  if (row < std::size_t(h.points)) throw Error(path + ": truncated PCD: fewer ascii rows than POINTS");
+  return rec;
+}
 
-  auto at = [](const pcl::PCLPointField* f) { return f ? FieldAt{f->offset, f->datatype} : FieldAt{}; };
-  const Records rec{blob.data.data(), blob.height, blob.width, blob.row_step, blob.point_step};
-  return ReadRecords(rec, at(fx), at(fy), at(fz), at(fi), {LabelAt(at(fc), 0), LabelAt(at(fs), 1), LabelAt(at(fo), 2)},
-                     time, path, stats);
+// A binary_compressed PCD's data as binary records: its LZF block (sizes checked by
+// CheckDataSize) decompressed, then each field's column (the format stores field after field)
+// put back into the points' records.
+std::vector<std::uint8_t> CompressedRecords(const std::string& path, std::ifstream& in, const PcdHeader& h) {
+  SeekData(in, h);
+  std::uint32_t sizes[2] = {0, 0};  // compressed, uncompressed byte counts
+  std::vector<char> packed;
+  if (in.read(reinterpret_cast<char*>(sizes), 8)) {
+    packed.resize(sizes[0]);
+    in.read(packed.data(), std::streamsize(packed.size()));
+  }
+  if (!in) throw Error(path + ": cannot read the PCD's compressed block");
+  std::vector<std::uint8_t> columns(sizes[1]);
+  if (lzf_decompress(packed.data(), sizes[0], columns.data(), sizes[1]) != sizes[1])
+    throw Error(path + ": corrupt PCD: the compressed block does not decompress to " + std::to_string(sizes[1]) + " bytes");
+  const std::size_t n = std::size_t(h.points), step = h.PointStep();
+  std::vector<std::uint8_t> rec(n * step);
+  std::size_t offset = 0;  // the field's offset in a record; n * offset is its column's start
+  for (std::size_t f = 0; f < h.fields.size(); ++f) {
+    const std::size_t bytes = std::size_t(h.sizes[f]) * std::size_t(h.counts[f]);
+    const std::uint8_t* column = &columns[n * offset];
+    for (std::size_t i = 0; i < n; ++i) std::memcpy(&rec[i * step + offset], column + i * bytes, bytes);
+    offset += bytes;
+  }
+  return rec;
+}
+
+// An ascii or binary_compressed PCD, read through the binary records' path.
+PointCloud ReadTextOrCompressedPcd(const std::string& path, std::ifstream& in, const PcdHeader& h, CloudReadStats* stats) {
+  const std::array<FieldAt, 8> f = BinaryFields(path, h);
+  const std::vector<std::uint8_t> bytes = h.data == "ascii" ? AsciiRecords(path, in, h) : CompressedRecords(path, in, h);
+  Records rec;
+  rec.data = bytes.data();
+  rec.rows = 1;
+  rec.cols = std::size_t(h.points);
+  rec.point_step = h.PointStep();
+  rec.row_step = rec.cols * rec.point_step;
+  return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
 }
 
 }  // namespace
@@ -563,8 +598,7 @@ PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
     SeekData(in, h);
     return ReadBinaryPoints(path, in, h, BinaryFields(path, h), std::size_t(h.points), stats);
   }
-  in.close();
-  return ReadPclPcd(path, stats);
+  return ReadTextOrCompressedPcd(path, in, h, stats);
 }
 
 std::size_t ReadPcdPointCount(const std::string& path) {
@@ -605,7 +639,7 @@ bool PcdPieceReader::Next(std::size_t max_points, PointCloud* out) {
 }
 
 namespace {
-// The header PCL's PCDWriter writes for x y z intensity floats (the same bytes); with `time`, a
+// The header PCL's PCDWriter writes for x y z intensity floats (the same bytes: test_io_formats); with `time`, a
 // raw sweep's fifth float.
 void WritePcdHeader(std::ostream& out, std::size_t points, const char* data, bool time = false) {
   out << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity" << (time ? " time" : "")
@@ -614,12 +648,6 @@ void WritePcdHeader(std::ostream& out, std::size_t points, const char* data, boo
       << "\nDATA " << data << "\n";
 }
 
-// An empty cloud is a valid PCD (POINTS 0), but PCL's writers refuse it: write the header here.
-void WriteEmptyPcd(const std::string& tmp, PcdFormat format) {
-  std::ofstream out(tmp, std::ios::binary);
-  WritePcdHeader(out, 0, format == PcdFormat::kAscii ? "ascii" : "binary");
-  if (!out) throw Error(tmp + ": write failed");
-}
 }  // namespace
 
 void WritePcdPieces(const std::string& path, std::size_t points,
@@ -658,6 +686,39 @@ void WriteTimedPcd(const std::string& path, const PointCloud& cloud) {
 }
 }  // namespace
 
+namespace {
+// DATA ascii: x y z intensity a row, 9 significant digits (as PCL's writer, precision 9).
+void WriteAsciiPoints(std::ostream& out, const PointCloud& cloud) {
+  WritePcdHeader(out, cloud.size(), "ascii");
+  char buf[128];
+  for (const PointXYZI& p : cloud.points) {
+    const int n = std::snprintf(buf, sizeof(buf), "%.9g %.9g %.9g %.9g\n", double(p.x), double(p.y), double(p.z),
+                                double(p.intensity));
+    out.write(buf, n);
+  }
+}
+
+// DATA binary_compressed: the x, y, z and intensity columns one after another, LZF-compressed,
+// after the compressed and the uncompressed byte counts (uint32 each).
+void WriteCompressedPoints(const std::string& path, std::ostream& out, const PointCloud& cloud) {
+  const std::size_t n = cloud.size();
+  if (n * sizeof(PointXYZI) > std::numeric_limits<std::uint32_t>::max() / 2)
+    throw Error(path + ": " + std::to_string(n) + " points are too many for one binary_compressed PCD");
+  std::vector<float> columns(4 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const PointXYZI& p = cloud.points[i];
+    columns[i] = p.x, columns[n + i] = p.y, columns[2 * n + i] = p.z, columns[3 * n + i] = p.intensity;
+  }
+  const auto raw = std::uint32_t(columns.size() * sizeof(float));
+  std::vector<char> packed(raw + raw / 2 + 16);  // LZF grows incompressible data by at most 1/32
+  const std::uint32_t sizes[2] = {lzf_compress(columns.data(), raw, packed.data(), unsigned(packed.size())), raw};
+  if (sizes[0] == 0) throw Error(path + ": LZF could not compress the points");
+  WritePcdHeader(out, n, "binary_compressed");
+  out.write(reinterpret_cast<const char*>(sizes), sizeof(sizes));
+  out.write(packed.data(), std::streamsize(sizes[0]));
+}
+}  // namespace
+
 void WritePcd(const std::string& path, const PointCloud& cloud, PcdFormat format) {
   if (!cloud.time.empty()) {
     if (format != PcdFormat::kBinary) throw Error(path + ": a cloud with per-point times is written as binary PCD only");
@@ -668,35 +729,13 @@ void WritePcd(const std::string& path, const PointCloud& cloud, PcdFormat format
     WritePcdPieces(path, cloud.size(), [&](const auto& write) { write(cloud); });
     return;
   }
-  WritePathAtomic(path, [&](const std::string& tmp) {
-    if (cloud.empty()) {
-      WriteEmptyPcd(tmp, format);
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    if (cloud.empty()) {  // a valid PCD (POINTS 0); PCL's writers refused it
+      WritePcdHeader(out, 0, format == PcdFormat::kAscii ? "ascii" : "binary");
       return;
     }
-    pcl::PointCloud<pcl::PointXYZI> pc;
-    pc.resize(cloud.size());
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      const auto& p = cloud.points[i];
-      pc[i].x = p.x;
-      pc[i].y = p.y;
-      pc[i].z = p.z;
-      pc[i].intensity = p.intensity;
-    }
-    pc.width = std::uint32_t(cloud.size());
-    pc.height = 1;
-    pc.is_dense = true;
-    pcl::PCDWriter writer;
-    int ret = -1;
-    try {
-      switch (format) {
-        case PcdFormat::kAscii: ret = writer.writeASCII(tmp, pc, 9); break;
-        case PcdFormat::kBinary: ret = writer.writeBinary(tmp, pc); break;
-        case PcdFormat::kBinaryCompressed: ret = writer.writeBinaryCompressed(tmp, pc); break;
-      }
-    } catch (const std::exception& e) {
-      throw Error(path + ": PCL cannot write the PCD file: " + e.what());
-    }
-    if (ret != 0) throw Error(path + ": PCL cannot write the PCD file");
+    if (format == PcdFormat::kAscii) WriteAsciiPoints(out, cloud);
+    else WriteCompressedPoints(path, out, cloud);
   });
 }
 
