@@ -167,7 +167,8 @@ void AssignKeyframes(const std::vector<WorldKeyframe>& keyframes, TilePlan* out)
         it->second.keyframes.push_back(k);
       }
   }
-  for (auto& [key, t] : tiles) {
+  for (auto& entry : tiles) {
+    Tile& t = entry.second;  // a reference, not a structured binding: C++17 lambdas cannot capture those (clang)
     const bool core_reached = std::any_of(t.keyframes.begin(), t.keyframes.end(), [&](std::size_t k) {
       const Eigen::Vector3d c = keyframes[k].T_world_sensor.translation();
       return BoxOf(plan, t, 0).DistanceM(plan.voxel_m, c.x(), c.y()) <= plan.reach_m;
