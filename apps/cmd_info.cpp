@@ -1,12 +1,16 @@
 // `ltmapper info <session-dir>`: what a session holds and what is wrong with it, before any
 // stage runs on it. Exit code 1 when the session cannot be loaded at all or every scan is empty.
+// `ltmapper info <cloud file>` (.pcd, .bin, .ply): the cloud's points, fields, box and range, and
+// the sensor estimated from it as one scan.
 #include "command.hpp"
 
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 #include "ltmapper/removert/removert.hpp"
 
 #include <spdlog/spdlog.h>
 
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
@@ -30,7 +34,25 @@ void PrintSensor(const ltm::Session& session) {
   }
 }
 
+// One cloud file; the sensor estimated from it as one scan in the sensor frame (a KTH-layout scan,
+// in the world frame, is moved back by its VIEWPOINT first).
+void RunCloudInfo(const InfoArgs& a) {
+  if (!a.kitti_poses.empty() || !a.calib.empty() || a.no_scans)
+    throw ltm::Error(a.dir + ": a cloud file takes no --kitti-poses, --calib or --no-scans");
+  ltm::PointCloud cloud;
+  const ltm::io::CloudInfo info = ltm::io::InspectCloud(a.dir, &cloud);
+  std::cout << ltm::io::FormatCloudInfo(info) << std::flush;
+  if (info.viewpoint) ltm::geometry::TransformInPlace(cloud, info.T_viewpoint.inverse());
+  try {
+    std::cout << "  sensor:          " << ltm::geometry::EstimateSensor({cloud}).Describe() << "\n" << std::flush;
+  } catch (const ltm::Error& e) {
+    std::cout << "  sensor:          not estimated (" << e.what() << ")\n" << std::flush;
+  }
+  if (info.points == 0) throw ltm::Error(a.dir + ": no finite points");
+}
+
 void RunInfo(const InfoArgs& a) {
+  if (std::filesystem::is_regular_file(a.dir)) return RunCloudInfo(a);
   ltm::io::SessionInfo info;
   if (!a.kitti_poses.empty()) {
     std::unique_ptr<ltm::Pose> Tr;
@@ -57,9 +79,9 @@ void RunInfo(const InfoArgs& a) {
 LTM_COMMAND(10, [](CLI::App& parent) {
   auto args = std::make_shared<InfoArgs>();
   auto* cmd = parent.add_subcommand(
-      "info", "What a session holds: keyframes, scan sizes, poses, edges, problems");
-  cmd->add_option("session-dir", args->dir, "Session directory (Scans/, g2o / optimized_poses.txt) "
-                                            "or KITTI sequence directory (velodyne/)")
+      "info", "What a session holds: keyframes, scan sizes, poses, edges, problems; or one cloud file");
+  cmd->add_option("session-dir", args->dir, "Session directory (Scans/, g2o / optimized_poses.txt), "
+                                            "KITTI sequence directory (velodyne/), or one cloud file (.pcd, .bin, .ply)")
       ->required();
   cmd->add_option("--kitti-poses", args->kitti_poses,
                   "KITTI layout: poses file (12 numbers per line, one per scan index)");

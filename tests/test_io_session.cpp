@@ -248,6 +248,28 @@ TEST(Cli, InfoKittiLayout) {
   EXPECT_NE(out.find("missing.txt"), std::string::npos) << out;
 }
 
+// `info` on one cloud file: its points, box and range, and the sensor estimated from it as a scan
+// (a 16-beam ring scan written as ascii PCD); a truncated file is an error naming it.
+TEST(Cli, InfoOfOneCloudFile) {
+  test::TempDir tmp;
+  PointCloud scan;
+  for (int beam = 0; beam < 16; ++beam)
+    for (int col = 0; col < 1800; ++col) {
+      const double el = (-15.0 + 2.0 * beam) * M_PI / 180.0, az = col * 0.2 * M_PI / 180.0, r = 12.0;
+      scan.push_back(float(r * std::cos(el) * std::cos(az)), float(r * std::cos(el) * std::sin(az)),
+                     float(r * std::sin(el)), 1.f);
+    }
+  io::WritePcd(tmp / "scan.pcd", scan, io::PcdFormat::kAscii);
+  std::string out;
+  EXPECT_EQ(test::RunCli("info " + (tmp / "scan.pcd"), &out), 0) << out;
+  test::ExpectContains(out, {"points:          28800 (28800 in the file, 0 NaN/Inf dropped)",
+                             "median 12.00 / max 12.00 m", "16 beams +15.000 .. -15.000 deg"});
+  const std::string text = test::ReadText(tmp / "scan.pcd");
+  test::WriteText(tmp / "cut.pcd", text.substr(0, text.rfind('\n', text.size() / 2) + 1));  // whole rows
+  EXPECT_NE(test::RunCli("info " + (tmp / "cut.pcd"), &out), 0);
+  test::ExpectContains(out, {"cut.pcd", "truncated"});
+}
+
 // ---------------------------------------------------------------- layouts users' tools write
 void ExpectPosesNear(const Session& s, const Session& ref) {
   ASSERT_EQ(s.keyframes.size(), ref.keyframes.size());

@@ -17,7 +17,7 @@ struct CloudReadStats {
   std::size_t points_in_file = 0;
   std::size_t non_finite_dropped = 0;  // NaN / Inf points removed (never propagated)
 };
-// PCD (ascii, binary, binary_compressed) through PCL's reader. Needs fields x y z; intensity
+// PCD (ascii, binary, binary_compressed; ltmapper's own reader). Needs fields x y z; intensity
 // optional (0 when absent); a float `time` field (a raw sweep's seconds after the scan's
 // timestamp) fills PointCloud::time. Truncated files and headers that disagree with the data are errors.
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats = nullptr);

@@ -380,4 +380,72 @@ std::string FormatSessionInfo(const SessionInfo& info) {
   return os.str();
 }
 
+CloudInfo InspectCloud(const std::string& path, PointCloud* out) {
+  CloudInfo info;
+  info.path = path;
+  CloudReadStats st;
+  PointCloud c = ReadCloud(path, &st);
+  info.points_in_file = st.points_in_file;
+  info.non_finite = st.non_finite_dropped;
+  info.points = c.size();
+  info.labels = !c.cls.empty() || !c.session.empty() || !c.object.empty();
+  info.times = !c.time.empty();
+  if (info.times) {
+    const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
+    info.time_min_s = *lo, info.time_max_s = *hi;
+  }
+  std::vector<double> range;
+  range.reserve(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Vector3d p = c.points[i].xyz().cast<double>();
+    info.bbox_min = i == 0 ? p : info.bbox_min.cwiseMin(p);
+    info.bbox_max = i == 0 ? p : info.bbox_max.cwiseMax(p);
+    range.push_back(p.norm());
+  }
+  if (!range.empty()) {
+    std::nth_element(range.begin(), range.begin() + std::ptrdiff_t(range.size() / 2), range.end());
+    info.range_median_m = range[range.size() / 2];
+    info.range_min_m = *std::min_element(range.begin(), range.end());
+    info.range_max_m = *std::max_element(range.begin(), range.end());
+  }
+  if (fs::path(path).extension() == ".pcd") {
+    info.T_viewpoint = ReadPcdViewpoint(path);
+    info.viewpoint = !info.T_viewpoint.isApprox(Pose::Identity());
+  }
+  if (out) *out = std::move(c);
+  return info;
+}
+
+std::string FormatCloudInfo(const CloudInfo& info) {
+  std::ostringstream os;
+  char buf[256];
+  os << "cloud " << info.path << "\n";
+  std::snprintf(buf, sizeof(buf), "%zu (%zu in the file, %zu NaN/Inf dropped)", info.points, info.points_in_file,
+                info.non_finite);
+  os << "  points:          " << buf << "\n";
+  os << "  fields:          x y z intensity" << (info.labels ? " class session object" : "");
+  if (info.times) {
+    std::snprintf(buf, sizeof(buf), " time (%.4f .. %.4f s: a raw sweep)", info.time_min_s, info.time_max_s);
+    os << buf;
+  }
+  os << "\n";
+  if (info.points > 0) {
+    auto c = [](double v) { return std::abs(v) < 0.005 ? 0.0 : v; };
+    std::snprintf(buf, sizeof(buf), "x [%.2f, %.2f]  y [%.2f, %.2f]  z [%.2f, %.2f] m", c(info.bbox_min.x()),
+                  c(info.bbox_max.x()), c(info.bbox_min.y()), c(info.bbox_max.y()), c(info.bbox_min.z()),
+                  c(info.bbox_max.z()));
+    os << "  bbox:            " << buf << "\n";
+    std::snprintf(buf, sizeof(buf), "min %.2f / median %.2f / max %.2f m from the origin", info.range_min_m,
+                  info.range_median_m, info.range_max_m);
+    os << "  range:           " << buf << "\n";
+  }
+  if (info.viewpoint) {
+    const Eigen::Vector3d t = info.T_viewpoint.translation();
+    std::snprintf(buf, sizeof(buf), "sensor at (%.2f, %.2f, %.2f): points in the world frame (KTH layout)", t.x(),
+                  t.y(), t.z());
+    os << "  viewpoint:       " << buf << "\n";
+  }
+  return os.str();
+}
+
 }  // namespace ltm::io

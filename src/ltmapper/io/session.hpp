@@ -98,4 +98,20 @@ SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses
                                 const Pose* T_cam_velo = nullptr, bool read_scans = true);
 std::string FormatSessionInfo(const SessionInfo& info);
 
+// What `ltmapper info <cloud file>` prints for one .pcd / .bin / .ply: points, what the file
+// carries besides x y z, the box, the range from the origin; ltm::Error naming the file when it
+// cannot be read (the readers' own checks).
+struct CloudInfo {
+  std::string path;
+  std::size_t points_in_file = 0, non_finite = 0, points = 0;
+  bool labels = false, times = false;
+  double time_min_s = 0.0, time_max_s = 0.0;
+  Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero(), bbox_max = Eigen::Vector3d::Zero();
+  double range_min_m = 0.0, range_median_m = 0.0, range_max_m = 0.0;
+  bool viewpoint = false;  // a PCD VIEWPOINT other than the identity (KTH layout: world-frame points)
+  Pose T_viewpoint = Pose::Identity();
+};
+CloudInfo InspectCloud(const std::string& path, PointCloud* cloud = nullptr);
+std::string FormatCloudInfo(const CloudInfo& info);
+
 }  // namespace ltm::io
