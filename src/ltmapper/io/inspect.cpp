@@ -337,6 +337,17 @@ SessionInfo InspectKittiSession(const std::string& dir, const std::string& poses
   return info;
 }
 
+namespace {
+// "x [..]  y [..]  z [..] m" of a box, tiny values as 0 (no "-0.00").
+std::string BoxText(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+  auto c = [](double v) { return std::abs(v) < 0.005 ? 0.0 : v; };
+  char buf[160];
+  std::snprintf(buf, sizeof(buf), "x [%.2f, %.2f]  y [%.2f, %.2f]  z [%.2f, %.2f] m", c(lo.x()), c(hi.x()), c(lo.y()),
+                c(hi.y()), c(lo.z()), c(hi.z()));
+  return buf;
+}
+}  // namespace
+
 std::string FormatSessionInfo(const SessionInfo& info) {
   std::ostringstream os;
   char buf[256];
@@ -360,12 +371,8 @@ std::string FormatSessionInfo(const SessionInfo& info) {
   }
   if (info.keyframes > 0) {
     const Eigen::Vector3d e = info.bbox_max - info.bbox_min;
-    // Round tiny values to 0 so the box does not print "-0.00".
-    auto c = [](double v) { return std::abs(v) < 0.005 ? 0.0 : v; };
-    std::snprintf(buf, sizeof(buf), "x [%.2f, %.2f]  y [%.2f, %.2f]  z [%.2f, %.2f] m (extent %.2f x %.2f x %.2f m)",
-                  c(info.bbox_min.x()), c(info.bbox_max.x()), c(info.bbox_min.y()), c(info.bbox_max.y()),
-                  c(info.bbox_min.z()), c(info.bbox_max.z()), e.x(), e.y(), e.z());
-    os << "  pose bbox:       " << buf << "\n";
+    std::snprintf(buf, sizeof(buf), " (extent %.2f x %.2f x %.2f m)", e.x(), e.y(), e.z());
+    os << "  pose bbox:       " << BoxText(info.bbox_min, info.bbox_max) << buf << "\n";
     std::snprintf(buf, sizeof(buf), "%.2f m", info.path_length_m);
     os << "  path length:     " << buf << "\n";
   }
@@ -430,11 +437,7 @@ std::string FormatCloudInfo(const CloudInfo& info) {
   }
   os << "\n";
   if (info.points > 0) {
-    auto c = [](double v) { return std::abs(v) < 0.005 ? 0.0 : v; };
-    std::snprintf(buf, sizeof(buf), "x [%.2f, %.2f]  y [%.2f, %.2f]  z [%.2f, %.2f] m", c(info.bbox_min.x()),
-                  c(info.bbox_max.x()), c(info.bbox_min.y()), c(info.bbox_max.y()), c(info.bbox_min.z()),
-                  c(info.bbox_max.z()));
-    os << "  bbox:            " << buf << "\n";
+    os << "  bbox:            " << BoxText(info.bbox_min, info.bbox_max) << "\n";
     std::snprintf(buf, sizeof(buf), "min %.2f / median %.2f / max %.2f m from the origin", info.range_min_m,
                   info.range_median_m, info.range_max_m);
     os << "  range:           " << buf << "\n";

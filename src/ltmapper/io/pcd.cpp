@@ -14,7 +14,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -189,7 +188,51 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
 }
 
 // Checks that the data section holds exactly what the header announces.
-void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& h) {
+// f(row, values) for each data row of an ascii PCD (`values` holds its tokens; blank and '#'
+// lines skipped), every row checked to hold the header's number of values and the rows counted
+// against POINTS: errors name the file and line.
+// Positions the stream at the first data byte.
+void SeekData(std::ifstream& in, const PcdHeader& h) {
+  in.clear();
+  in.seekg(std::streamoff(h.data_offset));
+}
+
+template <class F>
+void ForEachAsciiRow(const std::string& path, std::ifstream& in, const PcdHeader& h, const F& f) {
+  SeekData(in, h);
+  const std::size_t n = std::size_t(h.points), values = h.Values();
+  std::string line;
+  std::size_t lineno = h.header_lines, rows = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    std::istringstream count(line);
+    std::size_t tokens = 0;
+    bool comment = false;
+    for (std::string t; count >> t;) {
+      if (tokens == 0 && t[0] == '#') comment = true;
+      ++tokens;
+    }
+    if (tokens == 0 || comment) continue;
+    ++rows;
+    if (tokens != values)
+      throw Error(path, lineno,
+                  "PCD ascii row has " + std::to_string(tokens) + " values, expected " + std::to_string(values) +
+                      (rows == n && tokens < values ? " (truncated file?)" : ""));
+    if (rows > n) continue;  // counted for the error below
+    std::istringstream row(line);
+    f(lineno, row);
+  }
+  if (rows < n)
+    throw Error(path + ": truncated PCD: header announces " + std::to_string(n) + " points but the file holds " +
+                std::to_string(rows) + " rows");
+  if (rows > n)
+    throw Error(path + ": PCD header disagrees with data: header announces " + std::to_string(n) +
+                " points but the file holds " + std::to_string(rows) + " rows");
+}
+
+// The data section checked against the header; ascii rows only when `check_ascii_rows` (ReadPcd
+// checks them while it reads them).
+void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& h, bool check_ascii_rows) {
   in.clear();
   in.seekg(0, std::ios::end);
   const std::size_t file_size = std::size_t(in.tellg());
@@ -222,33 +265,8 @@ void CheckDataSize(const std::string& path, std::ifstream& in, const PcdHeader& 
     if (std::size_t(sizes[1]) > std::size_t(sizes[0]) * kLzfMaxRatio)
       throw Error(path + ": corrupt PCD: " + std::to_string(sizes[0]) + " compressed bytes cannot hold " +
                   std::to_string(sizes[1]) + " bytes uncompressed");
-  } else {  // ascii: one line per point, each with the announced number of values
-    in.seekg(std::streamoff(h.data_offset));
-    std::string line;
-    std::size_t lineno = h.header_lines, rows = 0;
-    const std::size_t values = h.Values();
-    while (std::getline(in, line)) {
-      ++lineno;
-      std::istringstream ss(line);
-      std::size_t tokens = 0;
-      bool comment = false;
-      for (std::string t; ss >> t;) {
-        if (tokens == 0 && t[0] == '#') comment = true;
-        ++tokens;
-      }
-      if (tokens == 0 || comment) continue;
-      ++rows;
-      if (tokens != values)
-        throw Error(path, lineno,
-                    "PCD ascii row has " + std::to_string(tokens) + " values, expected " +
-                        std::to_string(values) + (rows == n && tokens < values ? " (truncated file?)" : ""));
-    }
-    if (rows < n)
-      throw Error(path + ": truncated PCD: header announces " + std::to_string(n) +
-                  " points but the file holds " + std::to_string(rows) + " rows");
-    if (rows > n)
-      throw Error(path + ": PCD header disagrees with data: header announces " + std::to_string(n) +
-                  " points but the file holds " + std::to_string(rows) + " rows");
+  } else {  // ascii: counted while the rows are read (ForEachAsciiRow), by OpenPcd or ReadPcd
+    if (check_ascii_rows) ForEachAsciiRow(path, in, h, [](std::size_t, std::istringstream&) {});
   }
 }
 
@@ -453,6 +471,19 @@ Pose ReadPcdViewpoint(const std::string& path) {
 }
 
 namespace {
+// `count` point records of the header's layout in `bytes` (binary data as stored, or ascii and
+// compressed data put back into it), read through ReadRecords with the fields BinaryFields found.
+PointCloud ReadPointRecords(const std::string& path, const std::vector<std::uint8_t>& bytes, std::size_t count,
+                            const PcdHeader& h, const std::array<FieldAt, 8>& f, CloudReadStats* stats) {
+  Records rec;
+  rec.data = bytes.data();
+  rec.rows = 1;
+  rec.cols = count;
+  rec.point_step = h.PointStep();
+  rec.row_step = rec.cols * rec.point_step;
+  return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
+}
+
 // An uncompressed binary PCD, its header parsed and its size checked: the records read here in
 // one block (bench/bench_io: 0.4 ms for a 64 x 1024 scan, PCL's loadPCDFile 1.4-1.9 ms; going
 // through PCL's reader and a per-value type switch took ~1.5-2 ms), never through PCL (see
@@ -460,34 +491,23 @@ namespace {
 // The next `count` points of binary data from the stream's position (ReadPcd and PcdPieceReader).
 PointCloud ReadBinaryPoints(const std::string& path, std::ifstream& in, const PcdHeader& h,
                             const std::array<FieldAt, 8>& f, std::size_t count, CloudReadStats* stats) {
-  Records rec;
-  rec.cols = count;
-  rec.rows = 1;
-  rec.point_step = h.PointStep();
-  rec.row_step = rec.cols * rec.point_step;
-  std::vector<std::uint8_t> bytes(rec.row_step);
+  std::vector<std::uint8_t> bytes(count * h.PointStep());
   if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
     throw Error(path + ": cannot read the PCD data section");
-  rec.data = bytes.data();
-  return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
+  return ReadPointRecords(path, bytes, count, h, f, stats);
 }
 
-// Positions the stream at the first data byte.
-void SeekData(std::ifstream& in, const PcdHeader& h) {
-  in.clear();
-  in.seekg(std::streamoff(h.data_offset));
-}
 
 // The header of a PCD file opened in `in`, checked against the data's size and, when it has
 // points, for x y z fields (fuzz/fuzz_pcd: a binary_compressed file without x made
 // PCL's reader, which read such files once, dereference null).
-PcdHeader OpenPcd(const std::string& path, std::ifstream& in) {
+PcdHeader OpenPcd(const std::string& path, std::ifstream& in, bool check_ascii_rows = true) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw Error(path + ": no such file");
   in.open(path, std::ios::binary);
   if (!in) throw Error(path + ": cannot open");
   PcdHeader h = ParseHeader(path, in);
-  CheckDataSize(path, in, h);
+  CheckDataSize(path, in, h, check_ascii_rows);
   if (h.points != 0)
     for (const char* name : {"x", "y", "z"})
       if (std::find(h.fields.begin(), h.fields.end(), name) == h.fields.end())
@@ -495,12 +515,11 @@ PcdHeader OpenPcd(const std::string& path, std::ifstream& in) {
   return h;
 }
 
-// One ascii value of a field of datatype `type` stored in `out` (its size); `ok` false when the
-// token is no number of that kind.
-void StoreAscii(const std::string& token, std::uint8_t type, std::uint8_t* out, bool* ok) {
+// One ascii value of a field of datatype `type` (one that Datatype gives) stored in `out` (its
+// size); false when the token is no number of that kind.
+bool StoreAscii(const std::string& token, std::uint8_t type, std::uint8_t* out) {
   const char* b = token.c_str();
   char* e = nullptr;
-  errno = 0;
   auto put = [&](auto v) { std::memcpy(out, &v, sizeof(v)); };
   switch (type) {
     case kFloat32: put(std::strtof(b, &e)); break;
@@ -511,37 +530,29 @@ void StoreAscii(const std::string& token, std::uint8_t type, std::uint8_t* out, 
     case kUint8: put(std::uint8_t(std::strtoull(b, &e, 10))); break;
     case kUint16: put(std::uint16_t(std::strtoull(b, &e, 10))); break;
     case kUint32: put(std::uint32_t(std::strtoull(b, &e, 10))); break;
-    default: return;  // a type no reader uses: left zero
+    default: return false;
   }
-  *ok = e != b && *e == '\0';
+  return e != b && *e == '\0';
 }
 
 // An ascii PCD's rows as binary records (every field at its offset, in its type), so that
-// ReadRecords reads all three formats alike. CheckDataSize counted the rows and their values.
+// ReadRecords reads all three formats alike; rows and values checked as they are read.
 std::vector<std::uint8_t> AsciiRecords(const std::string& path, std::ifstream& in, const PcdHeader& h) {
   const std::size_t step = h.PointStep();
   std::vector<std::uint8_t> rec(std::size_t(h.points) * step, 0);
-  SeekData(in, h);
-  std::string line;
-  std::size_t lineno = h.header_lines, row = 0;
-  while (row < std::size_t(h.points) && std::getline(in, line)) {
-    ++lineno;
-    std::istringstream ss(line);
+  std::size_t row = 0;
+  ForEachAsciiRow(path, in, h, [&](std::size_t lineno, std::istringstream& values) {
+    std::uint8_t* out = &rec[row++ * step];
     std::string t;
-    if (!(ss >> t) || t[0] == '#') continue;
-    std::uint8_t* out = &rec[row * step];
     for (std::size_t f = 0; f < h.fields.size(); ++f) {
       const std::uint8_t type = Datatype(h.types[f], h.sizes[f]);
       for (long long c = 0; c < h.counts[f]; ++c, out += h.sizes[f]) {
-        if ((f > 0 || c > 0) && !(ss >> t)) throw Error(path, lineno, "PCD ascii row is short");
-        bool ok = type == 0;
-        StoreAscii(t, type, out, &ok);
-        if (!ok) throw Error(path, lineno, "PCD ascii value '" + t + "' of field '" + h.fields[f] + "' is no number of its TYPE");
+        values >> t;  // ForEachAsciiRow counted them
+        if (type != 0 && !StoreAscii(t, type, out))
+          throw Error(path, lineno, "PCD ascii value '" + t + "' of field '" + h.fields[f] + "' is no number of its TYPE");
       }
     }
-    ++row;
-  }
-  if (row < std::size_t(h.points)) throw Error(path + ": truncated PCD: fewer ascii rows than POINTS");
+  });
   return rec;
 }
 
@@ -576,20 +587,14 @@ std::vector<std::uint8_t> CompressedRecords(const std::string& path, std::ifstre
 PointCloud ReadTextOrCompressedPcd(const std::string& path, std::ifstream& in, const PcdHeader& h, CloudReadStats* stats) {
   const std::array<FieldAt, 8> f = BinaryFields(path, h);
   const std::vector<std::uint8_t> bytes = h.data == "ascii" ? AsciiRecords(path, in, h) : CompressedRecords(path, in, h);
-  Records rec;
-  rec.data = bytes.data();
-  rec.rows = 1;
-  rec.cols = std::size_t(h.points);
-  rec.point_step = h.PointStep();
-  rec.row_step = rec.cols * rec.point_step;
-  return ReadRecords(rec, f[0], f[1], f[2], f[3], {f[4], f[5], f[6]}, f[7], path, stats);
+  return ReadPointRecords(path, bytes, std::size_t(h.points), h, f, stats);
 }
 
 }  // namespace
 
 PointCloud ReadPcd(const std::string& path, CloudReadStats* stats) {
   std::ifstream in;
-  const PcdHeader h = OpenPcd(path, in);
+  const PcdHeader h = OpenPcd(path, in, false);  // ascii rows: checked once, as they are read
   if (h.points == 0) {  // a valid empty scan; PCL would only print a warning
     if (stats) *stats = CloudReadStats{};
     return PointCloud{};
@@ -702,7 +707,9 @@ void WriteAsciiPoints(std::ostream& out, const PointCloud& cloud) {
 // after the compressed and the uncompressed byte counts (uint32 each).
 void WriteCompressedPoints(const std::string& path, std::ostream& out, const PointCloud& cloud) {
   const std::size_t n = cloud.size();
-  if (n * sizeof(PointXYZI) > std::numeric_limits<std::uint32_t>::max() / 2)
+  // lzf.h: the output may need 104 % of the input plus a few bytes; both sizes are stored as uint32.
+  auto packed_size = [](std::size_t raw) { return raw + raw / 16 + 16; };
+  if (packed_size(n * sizeof(PointXYZI)) > std::numeric_limits<std::uint32_t>::max())
     throw Error(path + ": " + std::to_string(n) + " points are too many for one binary_compressed PCD");
   std::vector<float> columns(4 * n);
   for (std::size_t i = 0; i < n; ++i) {
@@ -710,7 +717,7 @@ void WriteCompressedPoints(const std::string& path, std::ostream& out, const Poi
     columns[i] = p.x, columns[n + i] = p.y, columns[2 * n + i] = p.z, columns[3 * n + i] = p.intensity;
   }
   const auto raw = std::uint32_t(columns.size() * sizeof(float));
-  std::vector<char> packed(raw + raw / 2 + 16);  // LZF grows incompressible data by at most 1/32
+  std::vector<char> packed(packed_size(raw));
   const std::uint32_t sizes[2] = {lzf_compress(columns.data(), raw, packed.data(), unsigned(packed.size())), raw};
   if (sizes[0] == 0) throw Error(path + ": LZF could not compress the points");
   WritePcdHeader(out, n, "binary_compressed");
