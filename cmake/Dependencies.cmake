@@ -15,7 +15,7 @@ pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
 find_package(nlohmann_json 3 REQUIRED)
 
 # Heavy libraries: only the .cpp files of the module that owns them include their headers.
-find_package(PCL 1.13 REQUIRED COMPONENTS common io kdtree search filters features registration segmentation)
+find_package(PCL 1.13 REQUIRED COMPONENTS common io kdtree search features)
 find_package(Ceres 2.1 REQUIRED)
 find_package(embree 3 REQUIRED)
 
@@ -23,16 +23,18 @@ find_package(embree 3 REQUIRED)
 find_package(liblzf CONFIG REQUIRED)
 
 # PCL exports plain variables; wrap them in imported targets with SYSTEM includes. ltm_pcl is what
-# the program links: no pcl_io, whose VTK-laden 67 shared objects cost every command's start
-# ~75 ms in the dynamic loader. ltm_pcl_io adds it for the tests and benches that compare our
-# PCD files with PCL's.
+# the program links: PCL's templates compiled into our own code (PCL_NO_PRECOMPILE; the one user is
+# slam/global.cpp: normals, kd-tree search and RANSAC; its FPFH is ours), so PCL's libraries of
+# precompiled instantiations are not loaded at every start: pcl_io brought VTK (67 shared objects,
+# ~50 ms), pcl_features 116 000 symbol relocations (~27 ms). FLANN's headers, compiled with them,
+# use LZ4. ltm_pcl_io adds pcl_io for the tests and benches that compare our PCD files with PCL's;
+# PCL_FEATURES_LIBRARIES is for the test that compares our FPFH with PCL's.
 if(NOT TARGET ltm_pcl)
+  pkg_check_modules(LZ4 REQUIRED IMPORTED_TARGET liblz4)
   add_library(ltm_pcl INTERFACE)
   target_include_directories(ltm_pcl SYSTEM INTERFACE ${PCL_INCLUDE_DIRS})
-  target_link_libraries(ltm_pcl INTERFACE ${PCL_COMMON_LIBRARIES} ${PCL_KDTREE_LIBRARIES} ${PCL_SEARCH_LIBRARIES}
-                        ${PCL_FILTERS_LIBRARIES} ${PCL_FEATURES_LIBRARIES} ${PCL_REGISTRATION_LIBRARIES}
-                        ${PCL_SEGMENTATION_LIBRARIES})
-  target_compile_definitions(ltm_pcl INTERFACE ${PCL_DEFINITIONS})
+  target_link_libraries(ltm_pcl INTERFACE ${PCL_COMMON_LIBRARIES} PkgConfig::LZ4)
+  target_compile_definitions(ltm_pcl INTERFACE ${PCL_DEFINITIONS} PCL_NO_PRECOMPILE)
   add_library(ltm_pcl_io INTERFACE)
   target_link_libraries(ltm_pcl_io INTERFACE ltm_pcl ${PCL_IO_LIBRARIES})
 endif()

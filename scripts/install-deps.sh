@@ -8,7 +8,8 @@ PACKAGES=(
   build-essential cmake pkg-config ccache
   libeigen3-dev          # linear algebra, poses
   libceres-dev           # pose graph back end
-  libpcl-dev             # GICP, Euclidean clustering (tests: PCL's PCD files)
+  libpcl-dev             # global registration: normals, kd-tree search, RANSAC (tests: PCL's PCD files, FPFH)
+  liblz4-dev             # FLANN's headers, compiled in with PCL's templates
   liblzf-dev             # binary_compressed PCDs
   libnanoflann-dev       # kd-tree for hot loops
   libtbb-dev             # parallel_for / parallel_reduce

@@ -2,6 +2,14 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
 namespace ltm {
 namespace {
 
@@ -158,5 +166,63 @@ TEST(DistinctCounter, EstimatesDistinctKeysAndUnions) {
   EXPECT_EQ(DistinctCounter().Estimate(), 0.0);
 }
 
+}  // namespace
+}  // namespace ltm
+
+namespace ltm {
+namespace {
+// The pipeline's calling-thread steps run in batch order on the calling thread; work(b + 1) runs
+// beside finish(b) (finish waits for it to end: without overlap it never would, and the wait times
+// out); an exception from a step reaches the caller after the work in flight ended.
+TEST(Pipeline, OrderThreadsAndOverlap) {
+  for (int threads : {1, 3}) {
+    const std::size_t n = 6;
+    std::vector<std::string> calls;
+    std::vector<int> done(n, 0);
+    int overlaps = 0;
+    std::mutex m;
+    std::condition_variable cv;
+    const std::thread::id caller = std::this_thread::get_id();
+    Pipeline(
+        n, threads,
+        [&](std::size_t b) {
+          EXPECT_EQ(std::this_thread::get_id(), caller);
+          calls.push_back("p" + std::to_string(b));
+        },
+        [&](std::size_t b) {
+          std::lock_guard<std::mutex> l(m);
+          done[b] = 1;
+          cv.notify_all();
+        },
+        [&](std::size_t b) {
+          EXPECT_EQ(std::this_thread::get_id(), caller);
+          std::unique_lock<std::mutex> l(m);
+          EXPECT_EQ(done[b], 1);  // its work ended first
+          if (threads > 1 && b + 1 < n)
+            overlaps += cv.wait_for(l, std::chrono::seconds(10), [&] { return done[b + 1] == 1; });
+          calls.push_back("f" + std::to_string(b));
+        });
+    std::vector<std::string> finishes;
+    for (const auto& c : calls)
+      if (c[0] == 'f') finishes.push_back(c);
+    ASSERT_EQ(finishes.size(), n);
+    for (std::size_t b = 0; b < n; ++b) EXPECT_EQ(finishes[b], "f" + std::to_string(b));
+    EXPECT_EQ(calls.size(), 2 * n);
+    EXPECT_EQ(overlaps, threads > 1 ? int(n) - 1 : 0);
+  }
+  std::atomic<int> running{0};
+  EXPECT_THROW(Pipeline(
+                   4, 2, [](std::size_t) {},
+                   [&](std::size_t) {
+                     ++running;
+                     std::this_thread::sleep_for(std::chrono::milliseconds(30));
+                     --running;
+                   },
+                   [&](std::size_t b) {
+                     if (b == 1) throw Error("finish failed");
+                   }),
+               Error);
+  EXPECT_EQ(running.load(), 0);  // no work outlives the call
+}
 }  // namespace
 }  // namespace ltm

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <future>
 #include <iomanip>
 #include <mutex>
 #include <sstream>
@@ -375,6 +376,26 @@ void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_
   ParallelForChunks(n, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i != end; ++i) f(i);
   });
+}
+
+void Pipeline(std::size_t n, int threads, const std::function<void(std::size_t)>& prepare,
+              const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& finish) {
+  if (n == 0) return;
+  if (threads == 1) {
+    for (std::size_t b = 0; b < n; ++b) prepare(b), work(b), finish(b);
+    return;
+  }
+  prepare(0);
+  work(0);
+  for (std::size_t b = 0; b < n; ++b) {
+    std::future<void> next;  // its destructor waits, so no work outlives a throwing finish(b)
+    if (b + 1 < n) {
+      prepare(b + 1);
+      next = std::async(std::launch::async, work, b + 1);
+    }
+    finish(b);
+    if (next.valid()) next.get();
+  }
 }
 
 DistinctCounter::DistinctCounter() : registers_(std::size_t(1) << kBits, 0) {}

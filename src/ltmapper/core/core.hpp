@@ -44,6 +44,14 @@ class Error : public std::runtime_error {
 // per-chunk set-up worth sharing).
 void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f);
 void ParallelForChunks(std::size_t n, int threads, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& f);
+// A batched pipeline: for b = 0 .. n-1, prepare(b) and finish(b) run on the calling thread in
+// batch order (a database read, a database write) and work(b) beside it (usually a ParallelFor);
+// work(b + 1) runs while finish(b) does, so the serial steps overlap the parallel one. The order:
+// prepare(0), work(0); then per b: prepare(b + 1), start work(b + 1), finish(b). At most two
+// batches are in flight. With threads == 1 everything runs on the calling thread, one step after
+// the other. An exception from any step is rethrown once no work is in flight.
+void Pipeline(std::size_t n, int threads, const std::function<void(std::size_t)>& prepare,
+              const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& finish);
 
 // ---------------------------------------------------------------------------------------------
 // Point classes, stored per point when a cloud carries labels (PLY field "class").

@@ -2,7 +2,7 @@
 // made into objects a user can act on. Per session step:
 //  1. Ground: change points within object_ground_height_m above the lowest map point of their
 //     xy cell (object_ground_cell_m) are ground, not clustered (they glue objects together).
-//  2. Euclidean clustering (PCL) of strong ND (disappeared) and of PD (appeared) separately.
+//  2. Euclidean clustering (geometry::EuclideanClusters) of strong ND (disappeared) and of PD (appeared) separately.
 //  3. Coverage: a change is an object only in space both sessions observed. Strong ND is by
 //     definition seen through by the query. PD is weak when the reference saw its space free,
 //     strong when it never saw there (new territory, facades newly in view) or its view was
@@ -20,11 +20,6 @@
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
-
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
-#include <pcl/search/kdtree.h>
-#include <pcl/segmentation/extract_clusters.h>
 
 #include <Eigen/Eigenvalues>
 
@@ -194,27 +189,23 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
   return idx;
 }
 
+// The points idx of changes in clusters (points closer than object_tolerance_m joined,
+// transitively) of object_min_points .. object_max_points points; the largest cluster first (ties:
+// the one with the lowest point first), each cluster's points in idx order.
 std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
                                                 const MapConfig& cfg) {
   std::vector<std::vector<std::uint32_t>> out;
   if (idx.size() < std::size_t(cfg.object_min_points)) return out;
-  pcl::PointCloud<pcl::PointXYZ>::Ptr pc(new pcl::PointCloud<pcl::PointXYZ>);
-  pc->reserve(idx.size());
-  for (auto i : idx) pc->push_back(pcl::PointXYZ(changes.points[i].x, changes.points[i].y, changes.points[i].z));
-  pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
-  tree->setInputCloud(pc);
-  std::vector<pcl::PointIndices> clusters;
-  pcl::EuclideanClusterExtraction<pcl::PointXYZ> ec;
-  ec.setClusterTolerance(cfg.object_tolerance_m);
-  ec.setMinClusterSize(cfg.object_min_points);
-  ec.setMaxClusterSize(cfg.object_max_points);
-  ec.setSearchMethod(tree);
-  ec.setInputCloud(pc);
-  ec.extract(clusters);
-  for (const auto& cl : clusters) {
-    out.emplace_back();
-    for (int j : cl.indices) out.back().push_back(idx[std::size_t(j)]);
+  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(changes.select(idx), cfg.object_tolerance_m);
+  std::vector<std::vector<std::uint32_t>> all;
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    if (label[k] >= all.size()) all.resize(label[k] + 1);
+    all[label[k]].push_back(idx[k]);
   }
+  for (auto& c : all)
+    if (c.size() >= std::size_t(cfg.object_min_points) && c.size() <= std::size_t(cfg.object_max_points))
+      out.push_back(std::move(c));
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.size() > b.size(); });
   return out;
 }
 

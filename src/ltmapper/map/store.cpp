@@ -529,36 +529,48 @@ DeltaSource InMemory(const std::vector<KeyframeDelta>& deltas) {
   return src;
 }
 
-// Adds the keyframes `which` of `src` (their clouds become bases owned by `session`), reading and
-// encoding them in parallel chunks.
+// Adds the keyframes `which` of `src` (their clouds become bases owned by `session`): batches read
+// and encoded in parallel while the batch before is written.
 static void InsertKeyframes(Store::Impl& s, Store& store, int session, const KeyframeSource& src,
                             const std::vector<std::size_t>& which, IntegrationResult& r, std::size_t& written) {
   Stmt ik(s.db, "INSERT INTO keyframes(session, source_index, pose) VALUES(?,?,?)", s.path);
   Stmt ib(s.db, "INSERT INTO base_clouds(keyframe, as_of, points, data) VALUES(?,?,?,?)", s.path);
   constexpr std::size_t kChunk = detail::kKeyframesPerBatch;
-  for (std::size_t c0 = 0; c0 < which.size(); c0 += kChunk) {
-    const std::size_t n = std::min(kChunk, which.size() - c0);
-    std::vector<std::string> blobs(n);
-    std::vector<std::size_t> points(n);
-    ParallelFor(n, s.threads, [&](std::size_t k) {
-      const KeyframeSlot& kf = src.keyframes[which[c0 + k]];
-      const QCloud q = detail::Quantize(src.read(which[c0 + k]), s.cfg.resolution_m, s.cfg.intensity_step,
+  struct Batch {
+    std::vector<std::string> blobs;
+    std::vector<std::size_t> points;
+  };
+  std::vector<Batch> batches((which.size() + kChunk - 1) / kChunk);
+  const auto begin = [&](std::size_t b) { return b * kChunk; };
+  const auto size = [&](std::size_t b) { return std::min(kChunk, which.size() - begin(b)); };
+  const auto encode = [&](std::size_t b) {
+    Batch& out = batches[b];
+    out.blobs.resize(size(b));
+    out.points.resize(size(b));
+    ParallelFor(size(b), s.threads, [&](std::size_t k) {
+      const KeyframeSlot& kf = src.keyframes[which[begin(b) + k]];
+      const QCloud q = detail::Quantize(src.read(which[begin(b) + k]), s.cfg.resolution_m, s.cfg.intensity_step,
                                         PointClass::kStatic, std::uint16_t(session),
                                         "session " + std::to_string(session) + " keyframe " + std::to_string(kf.index));
-      points[k] = q.size();
-      blobs[k] = s.Encode(q);
+      out.points[k] = q.size();
+      out.blobs[k] = s.Encode(q);
     });
-    for (std::size_t k = 0; k < n; ++k) {
-      const KeyframeSlot& kf = src.keyframes[which[c0 + k]];
+  };
+  const auto insert = [&](std::size_t b) {
+    for (std::size_t k = 0; k < size(b); ++k) {
+      const KeyframeSlot& kf = src.keyframes[which[begin(b) + k]];
+      const std::string& blob = batches[b].blobs[k];
       ik.Bind(1, session).Bind(2, kf.index).Bind(3, PoseToText(kf.T_world_sensor)).Run();
       const long long id = sqlite3_last_insert_rowid(s.db);
-      ib.Bind(1, id).Bind(2, session).Bind(3, (long long)points[k]).BindBlob(4, blobs[k]).Run();
-      r.bytes += blobs[k].size();
+      ib.Bind(1, id).Bind(2, session).Bind(3, (long long)batches[b].points[k]).BindBlob(4, blob).Run();
+      r.bytes += blob.size();
       ++r.keyframes_new;
       ++written;
       if (store.on_keyframe_written) store.on_keyframe_written(written);
     }
-  }
+    batches[b] = {};
+  };
+  Pipeline(batches.size(), s.threads, [](std::size_t) {}, encode, insert);
 }
 
 IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes) {
@@ -850,21 +862,37 @@ IntegrationResult Store::IntegrateSessionFrom(const SessionMeta& session, const 
   for (const auto& [k, w] : work) items.emplace_back(k, &w);
   std::size_t written = 0;
   StepWriter writer(s);
+  // Batches of map keyframes: read from the store, stepped in parallel while the batch before is
+  // written.
   constexpr std::size_t kChunk = detail::kKeyframesPerBatch;
-  for (std::size_t c0 = 0; c0 < items.size(); c0 += kChunk) {
-    const std::size_t n = std::min(kChunk, items.size() - c0);
-    std::vector<std::size_t> positions(n);
-    for (std::size_t k = 0; k < n; ++k) positions[k] = items[c0 + k].first;
-    const std::vector<Impl::KfBlobs> in = LoadChunk(s, kfs, positions, ref);
-    std::vector<KeyframeStep> steps(n);
-    ParallelFor(n, s.threads,
-                [&](std::size_t k) { steps[k] = StepKeyframe(s, in[k], src, *items[c0 + k].second, ref, S, session.name); });
-    for (std::size_t k = 0; k < n; ++k) {
-      if (!writer.Write(in[k].rec.id, S, steps[k], r)) continue;
+  struct Batch {
+    std::vector<Impl::KfBlobs> in;
+    std::vector<KeyframeStep> steps;
+  };
+  std::vector<Batch> batches((items.size() + kChunk - 1) / kChunk);
+  const auto begin = [&](std::size_t b) { return b * kChunk; };
+  const auto size = [&](std::size_t b) { return std::min(kChunk, items.size() - begin(b)); };
+  const auto load = [&](std::size_t b) {
+    std::vector<std::size_t> positions(size(b));
+    for (std::size_t k = 0; k < positions.size(); ++k) positions[k] = items[begin(b) + k].first;
+    batches[b].in = LoadChunk(s, kfs, positions, ref);
+  };
+  const auto step = [&](std::size_t b) {
+    Batch& x = batches[b];
+    x.steps.resize(size(b));
+    ParallelFor(size(b), s.threads, [&](std::size_t k) {
+      x.steps[k] = StepKeyframe(s, x.in[k], src, *items[begin(b) + k].second, ref, S, session.name);
+    });
+  };
+  const auto write = [&](std::size_t b) {
+    for (std::size_t k = 0; k < size(b); ++k) {
+      if (!writer.Write(batches[b].in[k].rec.id, S, batches[b].steps[k], r)) continue;
       ++written;
       if (on_keyframe_written) on_keyframe_written(written);
     }
-  }
+    batches[b] = {};
+  };
+  Pipeline(batches.size(), s.threads, load, step, write);
   InsertKeyframes(s, *this, S, query_keyframes, fresh, r, written);
   FinishSession(s, r);
   tx.Commit();

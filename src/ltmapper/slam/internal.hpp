@@ -3,6 +3,7 @@
 
 #include "ltmapper/slam/slam.hpp"
 
+#include <array>
 #include <chrono>
 #include <memory>
 #include <optional>
@@ -69,6 +70,16 @@ Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfi
 // ------------------------------------------------------------------- global registration (global.cpp)
 // An aligned session's map in the world frame with FPFH features, for placing submaps of a session
 // Scan Context could not align (the fallback; its placements are loop candidates to verify).
+// FPFH descriptors (Rusu et al. 2009, "Fast Point Feature Histograms") of every point of `cloud`
+// with unit normals `normals` (a non-finite normal: none), from the neighbours within radius_m:
+// per point, the histogram (11 bins each of the three Darboux-frame angles) of its pairs with
+// its neighbours (SPFH); its FPFH is its neighbours' SPFHs weighted by 1 / squared distance, each
+// of the three parts scaled to sum 100 (all zero without a neighbour's SPFH). PCL's
+// FPFHEstimation computes the same numbers; this one saves loading pcl_features at every start.
+using Fpfh = std::array<float, 33>;
+std::vector<Fpfh> FpfhDescriptors(const PointCloud& cloud, const std::vector<Eigen::Vector3f>& normals,
+                                  double radius_m);
+
 class GlobalMap {
  public:
   GlobalMap(const PointCloud& world_map, const SlamConfig& cfg);
