@@ -236,14 +236,15 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
   RemoveStoreFiles(tmp);
   IntegrationResult r;
   try {
-    Store store = Store::Create(tmp, cfg);
+    Store store = Store::Create(tmp, cfg, Store::Creation::kUnpublished);
     store.set_threads(threads);
     r = store.IntegrateBaseFrom({cname, ReadAnchor(dirs, cname), ConfigToString(cfg)}, src);
+    store.Close();
   } catch (...) {
     RemoveStoreFiles(tmp);
     throw;
   }
-  // The store is closed (WAL checkpointed into the main file): publish it with one rename.
+  // The store is closed (synced to disk): publish it with one rename.
   fs::rename(tmp, store_path);
   return r;
 }

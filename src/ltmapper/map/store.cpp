@@ -4,13 +4,17 @@
 
 #include "ltmapper/geometry/geometry.hpp"
 
+#include <fcntl.h>
 #include <sqlite3.h>
+#include <unistd.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <limits>
 #include <filesystem>
@@ -225,10 +229,31 @@ struct Store::Impl {
   int threads = 0;
 
   bool read_only = false;
+  bool unpublished = false;  // Creation::kUnpublished: no journal, synced by Close()
 
   ~Impl() {
     if (db && !read_only) ToRollbackJournal();
     if (db) sqlite3_close_v2(db);
+  }
+  void Close() {
+    if (!db) return;
+    if (unpublished) {  // one sync of the file as written, then the journal mode of a store at rest
+      Exec("PRAGMA synchronous = FULL");
+      Exec("PRAGMA journal_mode = DELETE");
+      Sync();
+    } else if (!read_only) {
+      ToRollbackJournal();
+    }
+    const int rc = sqlite3_close(db);
+    db = nullptr;
+    if (rc != SQLITE_OK) throw Error(path + ": cannot close the map store (" + sqlite3_errstr(rc) + ")");
+  }
+  // fsync of the store file (SQLite syncs nothing with synchronous = OFF).
+  void Sync() const {
+    const int fd = ::open(path.c_str(), O_RDONLY);
+    const bool ok = fd >= 0 && ::fsync(fd) == 0;
+    if (fd >= 0) ::close(fd);
+    if (!ok) throw Error(path + ": cannot sync the map store to disk: " + std::strerror(errno));
   }
   // At rest the store is in rollback-journal mode, so a read-only reader (read-only media,
   // another user's store) needs no -wal / -shm and creates none. Best effort: while another
@@ -250,7 +275,7 @@ struct Store::Impl {
     Stmt st(db, "PRAGMA " + name, path);
     return st.Step() ? st.Text(0) : std::string();
   }
-  void OpenDb(int flags) {
+  void OpenDb(int flags, bool unpublished = false) {
     read_only = (flags & SQLITE_OPEN_READONLY) != 0;
     if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
       const std::string msg = db ? sqlite3_errmsg(db) : "out of memory";
@@ -260,6 +285,11 @@ struct Store::Impl {
     sqlite3_busy_timeout(db, kBusyTimeoutMs);
     Exec("PRAGMA foreign_keys = ON");
     if (read_only) return;  // readers write nothing: no journal mode switch
+    if (unpublished) {  // no reader, and a crash discards the file: no journal, no sync until Close()
+      Exec("PRAGMA journal_mode = OFF");
+      Exec("PRAGMA synchronous = OFF");
+      return;
+    }
     const std::string mode = Pragma("journal_mode = WAL");
     if (mode != "wal") throw Error(path + ": cannot switch the map store to WAL (journal_mode = " + mode + ")");
     // FULL: a committed integration survives power loss, not only a killed process.
@@ -405,16 +435,18 @@ Store::~Store() = default;
 
 const std::string& Store::path() const { return impl_->path; }
 const MapConfig& Store::config() const { return impl_->cfg; }
+void Store::Close() { impl_->Close(); }
 void Store::set_threads(int threads) { impl_->threads = threads; }
 int Store::threads() const { return impl_->threads; }
 
-Store Store::Create(const std::string& path, const MapConfig& cfg) {
+Store Store::Create(const std::string& path, const MapConfig& cfg, Creation creation) {
   ValidateConfig(cfg, "map config");
   if (std::filesystem::exists(path)) throw Error(path + ": map store already exists");
   auto impl = std::make_unique<Impl>();
   impl->path = path;
   impl->cfg = cfg;
-  impl->OpenDb(SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+  impl->unpublished = creation == Creation::kUnpublished;
+  impl->OpenDb(SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, impl->unpublished);
   impl->Exec("BEGIN IMMEDIATE");
   try {
     impl->Exec("PRAGMA application_id = " + std::to_string(kApplicationId));

@@ -16,7 +16,14 @@ namespace ltm::map {
 class Store {
  public:
   // Creates a new store file (error when `path` exists). Encoding values come from `cfg`.
-  static Store Create(const std::string& path, const MapConfig& cfg);
+  // kUnpublished: a file no one reads until the caller renames it into place (map init's
+  // temporary): written without a journal, each page once; Close() makes it durable. A crash
+  // leaves a broken temporary, never a broken store.
+  enum class Creation { kPublished, kUnpublished };
+  static Store Create(const std::string& path, const MapConfig& cfg, Creation creation = Creation::kPublished);
+  // Closes the store: an unpublished one is synced to disk and in rollback-journal mode after.
+  // The destructor closes too, quietly.
+  void Close();
   // kReadOnly: SQLITE_OPEN_READONLY, no journal mode switch, nothing written or created (works on
   // read-only media and on another user's store); integrating through such a store fails.
   enum class Access { kReadWrite, kReadOnly };
