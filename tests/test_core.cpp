@@ -171,57 +171,58 @@ TEST(DistinctCounter, EstimatesDistinctKeysAndUnions) {
 
 namespace ltm {
 namespace {
-// The pipeline's calling-thread steps run in batch order on the calling thread; work(b + 1) runs
-// beside finish(b) (finish waits for it to end: without overlap it never would, and the wait times
-// out); an exception from a step reaches the caller after the work in flight ended.
-TEST(Pipeline, OrderThreadsAndOverlap) {
+// The pipeline's load and write run on the calling thread in item order, work(i) before write(i),
+// at most `window` items loaded and not written; work on later items runs while an item is
+// written (write waits for the next item's work: without overlap it never would, and the wait
+// times out); an exception from a step reaches the caller after the work in flight ended.
+TEST(OrderedPipeline, OrderWindowAndOverlap) {
   for (int threads : {1, 3}) {
-    const std::size_t n = 6;
+    const std::size_t n = 40, window = 4;
     std::vector<std::string> calls;
     std::vector<int> done(n, 0);
     int overlaps = 0;
+    std::size_t loaded = 0, written = 0, most_in_flight = 0;
     std::mutex m;
     std::condition_variable cv;
     const std::thread::id caller = std::this_thread::get_id();
-    Pipeline(
-        n, threads,
-        [&](std::size_t b) {
+    OrderedPipeline(
+        n, threads, window,
+        [&](std::size_t i) {
           EXPECT_EQ(std::this_thread::get_id(), caller);
-          calls.push_back("p" + std::to_string(b));
+          EXPECT_EQ(i, loaded++);
+          most_in_flight = std::max(most_in_flight, loaded - written);
         },
-        [&](std::size_t b) {
+        [&](std::size_t i) {
           std::lock_guard<std::mutex> l(m);
-          done[b] = 1;
+          done[i] = 1;
           cv.notify_all();
         },
-        [&](std::size_t b) {
+        [&](std::size_t i) {
           EXPECT_EQ(std::this_thread::get_id(), caller);
+          EXPECT_EQ(i, written++);
           std::unique_lock<std::mutex> l(m);
-          EXPECT_EQ(done[b], 1);  // its work ended first
-          if (threads > 1 && b + 1 < n)
-            overlaps += cv.wait_for(l, std::chrono::seconds(10), [&] { return done[b + 1] == 1; });
-          calls.push_back("f" + std::to_string(b));
+          EXPECT_EQ(done[i], 1);  // its work ended first
+          if (threads > 1 && i + 1 < n)
+            overlaps += cv.wait_for(l, std::chrono::seconds(10), [&] { return done[i + 1] == 1; });
         });
-    std::vector<std::string> finishes;
-    for (const auto& c : calls)
-      if (c[0] == 'f') finishes.push_back(c);
-    ASSERT_EQ(finishes.size(), n);
-    for (std::size_t b = 0; b < n; ++b) EXPECT_EQ(finishes[b], "f" + std::to_string(b));
-    EXPECT_EQ(calls.size(), 2 * n);
+    EXPECT_EQ(written, n);
+    EXPECT_LE(most_in_flight, threads > 1 ? window : 1);
     EXPECT_EQ(overlaps, threads > 1 ? int(n) - 1 : 0);
   }
   std::atomic<int> running{0};
-  EXPECT_THROW(Pipeline(
-                   4, 2, [](std::size_t) {},
-                   [&](std::size_t) {
-                     ++running;
-                     std::this_thread::sleep_for(std::chrono::milliseconds(30));
-                     --running;
-                   },
-                   [&](std::size_t b) {
-                     if (b == 1) throw Error("finish failed");
-                   }),
-               Error);
+  for (int failing : {0, 1, 2})  // load, work, write
+    EXPECT_THROW(OrderedPipeline(
+                     20, 2, 4, [&](std::size_t i) { if (failing == 0 && i == 9) throw Error("load failed"); },
+                     [&](std::size_t i) {
+                       ++running;
+                       std::this_thread::sleep_for(std::chrono::milliseconds(5));
+                       --running;
+                       if (failing == 1 && i == 7) throw Error("work failed");
+                     },
+                     [&](std::size_t i) {
+                       if (failing == 2 && i == 5) throw Error("write failed");
+                     }),
+                 Error);
   EXPECT_EQ(running.load(), 0);  // no work outlives the call
 }
 }  // namespace

@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include <unistd.h>
 
@@ -11,8 +12,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <fstream>
-#include <future>
 #include <iomanip>
 #include <mutex>
 #include <sstream>
@@ -378,24 +379,39 @@ void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_
   });
 }
 
-void Pipeline(std::size_t n, int threads, const std::function<void(std::size_t)>& prepare,
-              const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& finish) {
-  if (n == 0) return;
+void OrderedPipeline(std::size_t n, int threads, std::size_t window, const std::function<void(std::size_t)>& load,
+                     const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& write) {
   if (threads == 1) {
-    for (std::size_t b = 0; b < n; ++b) prepare(b), work(b), finish(b);
+    for (std::size_t i = 0; i < n; ++i) load(i), work(i), write(i);
     return;
   }
-  prepare(0);
-  work(0);
-  for (std::size_t b = 0; b < n; ++b) {
-    std::future<void> next;  // its destructor waits, so no work outlives a throwing finish(b)
-    if (b + 1 < n) {
-      prepare(b + 1);
-      next = std::async(std::launch::async, work, b + 1);
+  window = std::max<std::size_t>(window, 1);
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    std::deque<tbb::task_group> running;  // items [written, loaded)
+    std::size_t loaded = 0;
+    try {
+      for (std::size_t i = 0; i < n; ++i) {
+        for (; loaded < n && loaded < i + window; ++loaded) {
+          load(loaded);
+          running.emplace_back();
+          running.back().run([&work, k = loaded] { work(k); });
+        }
+        running.front().wait();  // works on other items meanwhile; rethrows work(i)'s exception
+        running.pop_front();
+        write(i);
+      }
+    } catch (...) {
+      for (auto& g : running) g.cancel();
+      for (auto& g : running) {
+        try {
+          g.wait();
+        } catch (...) {  // the first exception is the one reported
+        }
+      }
+      throw;
     }
-    finish(b);
-    if (next.valid()) next.get();
-  }
+  });
 }
 
 DistinctCounter::DistinctCounter() : registers_(std::size_t(1) << kBits, 0) {}

@@ -44,14 +44,14 @@ class Error : public std::runtime_error {
 // per-chunk set-up worth sharing).
 void ParallelFor(std::size_t n, int threads, const std::function<void(std::size_t)>& f);
 void ParallelForChunks(std::size_t n, int threads, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& f);
-// A batched pipeline: for b = 0 .. n-1, prepare(b) and finish(b) run on the calling thread in
-// batch order (a database read, a database write) and work(b) beside it (usually a ParallelFor);
-// work(b + 1) runs while finish(b) does, so the serial steps overlap the parallel one. The order:
-// prepare(0), work(0); then per b: prepare(b + 1), start work(b + 1), finish(b). At most two
-// batches are in flight. With threads == 1 everything runs on the calling thread, one step after
-// the other. An exception from any step is rethrown once no work is in flight.
-void Pipeline(std::size_t n, int threads, const std::function<void(std::size_t)>& prepare,
-              const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& finish);
+// Items 0 .. n-1 through three steps: load(i) and write(i) run on the calling thread in item order
+// (a database read, a database write), work(i) on the `threads` workers of a task arena (the
+// calling thread among them while it waits for the item it writes next). At most `window` items
+// are loaded and not yet written: a long item delays the writes after it, not the work on them.
+// With threads == 1 each item's three steps run one after the other. An exception from any step
+// reaches the caller once no work runs.
+void OrderedPipeline(std::size_t n, int threads, std::size_t window, const std::function<void(std::size_t)>& load,
+                     const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& write);
 
 // ---------------------------------------------------------------------------------------------
 // Point classes, stored per point when a cloud carries labels (PLY field "class").

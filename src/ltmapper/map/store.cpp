@@ -17,8 +17,10 @@
 #include <cstring>
 #include <ctime>
 #include <limits>
+#include <deque>
 #include <filesystem>
 #include <map>
+#include <numeric>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -561,48 +563,40 @@ DeltaSource InMemory(const std::vector<KeyframeDelta>& deltas) {
   return src;
 }
 
-// Adds the keyframes `which` of `src` (their clouds become bases owned by `session`): batches read
-// and encoded in parallel while the batch before is written.
+// Map keyframes in flight in a store step (read or encoded, not yet written): the memory bound.
+constexpr std::size_t kKeyframesInFlight = 2 * detail::kKeyframesPerBatch;
+
+// Adds the keyframes `which` of `src` (their clouds become bases owned by `session`), in order:
+// each read and encoded in parallel while the ones before it are written.
 static void InsertKeyframes(Store::Impl& s, Store& store, int session, const KeyframeSource& src,
                             const std::vector<std::size_t>& which, IntegrationResult& r, std::size_t& written) {
   Stmt ik(s.db, "INSERT INTO keyframes(session, source_index, pose) VALUES(?,?,?)", s.path);
   Stmt ib(s.db, "INSERT INTO base_clouds(keyframe, as_of, points, data) VALUES(?,?,?,?)", s.path);
-  constexpr std::size_t kChunk = detail::kKeyframesPerBatch;
-  struct Batch {
-    std::vector<std::string> blobs;
-    std::vector<std::size_t> points;
+  struct Encoded {
+    std::string blob;
+    std::size_t points = 0;
   };
-  std::vector<Batch> batches((which.size() + kChunk - 1) / kChunk);
-  const auto begin = [&](std::size_t b) { return b * kChunk; };
-  const auto size = [&](std::size_t b) { return std::min(kChunk, which.size() - begin(b)); };
-  const auto encode = [&](std::size_t b) {
-    Batch& out = batches[b];
-    out.blobs.resize(size(b));
-    out.points.resize(size(b));
-    ParallelFor(size(b), s.threads, [&](std::size_t k) {
-      const KeyframeSlot& kf = src.keyframes[which[begin(b) + k]];
-      const QCloud q = detail::Quantize(src.read(which[begin(b) + k]), s.cfg.resolution_m, s.cfg.intensity_step,
-                                        PointClass::kStatic, std::uint16_t(session),
-                                        "session " + std::to_string(session) + " keyframe " + std::to_string(kf.index));
-      out.points[k] = q.size();
-      out.blobs[k] = s.Encode(q);
-    });
+  std::deque<Encoded> slots(std::min(kKeyframesInFlight, which.size()));  // item i in slot i % size
+  const auto encode = [&](std::size_t i) {
+    const KeyframeSlot& kf = src.keyframes[which[i]];
+    const QCloud q = detail::Quantize(src.read(which[i]), s.cfg.resolution_m, s.cfg.intensity_step,
+                                      PointClass::kStatic, std::uint16_t(session),
+                                      "session " + std::to_string(session) + " keyframe " + std::to_string(kf.index));
+    slots[i % slots.size()] = {s.Encode(q), q.size()};
   };
-  const auto insert = [&](std::size_t b) {
-    for (std::size_t k = 0; k < size(b); ++k) {
-      const KeyframeSlot& kf = src.keyframes[which[begin(b) + k]];
-      const std::string& blob = batches[b].blobs[k];
-      ik.Bind(1, session).Bind(2, kf.index).Bind(3, PoseToText(kf.T_world_sensor)).Run();
-      const long long id = sqlite3_last_insert_rowid(s.db);
-      ib.Bind(1, id).Bind(2, session).Bind(3, (long long)batches[b].points[k]).BindBlob(4, blob).Run();
-      r.bytes += blob.size();
-      ++r.keyframes_new;
-      ++written;
-      if (store.on_keyframe_written) store.on_keyframe_written(written);
-    }
-    batches[b] = {};
+  const auto insert = [&](std::size_t i) {
+    const KeyframeSlot& kf = src.keyframes[which[i]];
+    Encoded& e = slots[i % slots.size()];
+    ik.Bind(1, session).Bind(2, kf.index).Bind(3, PoseToText(kf.T_world_sensor)).Run();
+    const long long id = sqlite3_last_insert_rowid(s.db);
+    ib.Bind(1, id).Bind(2, session).Bind(3, (long long)e.points).BindBlob(4, e.blob).Run();
+    r.bytes += e.blob.size();
+    e = {};
+    ++r.keyframes_new;
+    ++written;
+    if (store.on_keyframe_written) store.on_keyframe_written(written);
   };
-  Pipeline(batches.size(), s.threads, [](std::size_t) {}, encode, insert);
+  OrderedPipeline(which.size(), s.threads, slots.size(), [](std::size_t) {}, encode, insert);
 }
 
 IntegrationResult Store::IntegrateBase(const SessionMeta& session, const std::vector<KeyframeInput>& keyframes) {
@@ -712,25 +706,33 @@ std::vector<std::size_t> AssignQueryKeyframes(const Store::Impl& s, const std::v
   return fresh;
 }
 
-// The stored blobs of the chunk's map keyframes: base and the deltas after the reference's step.
-std::vector<Store::Impl::KfBlobs> LoadChunk(const Store::Impl& s, const std::vector<KeyframeRecord>& kfs,
-                                            const std::vector<std::size_t>& positions, int ref) {
-  Stmt get_base(s.db, "SELECT data FROM base_clouds WHERE keyframe = ?", s.path);
-  Stmt get_deltas(s.db, "SELECT session, data FROM deltas WHERE keyframe = ? AND session > ? ORDER BY session DESC",
-                  s.path);
-  std::vector<Store::Impl::KfBlobs> in(positions.size());
-  for (std::size_t k = 0; k < positions.size(); ++k) {
-    in[k].rec = kfs[positions[k]];
-    get_base.Bind(1, in[k].rec.id);
-    if (!get_base.Step()) throw Error(s.path + ": keyframe " + std::to_string(in[k].rec.id) + " has no base cloud");
-    in[k].base = get_base.Blob(0);
-    get_base.Reset();
-    get_deltas.Bind(1, in[k].rec.id).Bind(2, ref);
-    while (get_deltas.Step()) in[k].deltas.emplace_back(int(get_deltas.Int(0)), get_deltas.Blob(1));
-    get_deltas.Reset();
+// Reads a map keyframe's stored blobs: its base and the deltas after the reference's step.
+class BlobReader {
+ public:
+  BlobReader(const Store::Impl& s, int ref)
+      : s_(s),
+        ref_(ref),
+        base_(s.db, "SELECT data FROM base_clouds WHERE keyframe = ?", s.path),
+        deltas_(s.db, "SELECT session, data FROM deltas WHERE keyframe = ? AND session > ? ORDER BY session DESC",
+                s.path) {}
+  Store::Impl::KfBlobs Read(const KeyframeRecord& rec) {
+    Store::Impl::KfBlobs in;
+    in.rec = rec;
+    base_.Bind(1, rec.id);
+    if (!base_.Step()) throw Error(s_.path + ": keyframe " + std::to_string(rec.id) + " has no base cloud");
+    in.base = base_.Blob(0);
+    base_.Reset();
+    deltas_.Bind(1, rec.id).Bind(2, ref_);
+    while (deltas_.Step()) in.deltas.emplace_back(int(deltas_.Int(0)), deltas_.Blob(1));
+    deltas_.Reset();
+    return in;
   }
-  return in;
-}
+
+ private:
+  const Store::Impl& s_;
+  int ref_;
+  Stmt base_, deltas_;
+};
 
 // The weak ND points of a keyframe's delta that lie under one of its strong ND points (within
 // `radius_m` in xy, lower): the lower part of something that left which the query did not see
@@ -890,41 +892,40 @@ IntegrationResult Store::IntegrateSessionFrom(const SessionMeta& session, const 
   AssignDeltas(s, kfs, ref, reference, deltas, &work);
   const std::vector<std::size_t> fresh = AssignQueryKeyframes(s, kfs, query_keyframes, &work);
   const StepInputs src{deltas, query_keyframes};
+  // The map keyframes' steps, the costliest first (its points and the query points it takes), so
+  // that a long one starts early instead of holding up the writes near the end.
   std::vector<std::pair<std::size_t, const KeyframeWork*>> items;
-  for (const auto& [k, w] : work) items.emplace_back(k, &w);
+  std::vector<std::size_t> cost;
+  for (const auto& [k, w] : work) {
+    items.emplace_back(k, &w);
+    cost.push_back(kfs[k].base_points);
+    for (const auto& [q, T] : w.extra) cost.back() += query_keyframes.keyframes[q].points;
+  }
+  std::vector<std::size_t> order(items.size());
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return cost[a] > cost[b]; });
   std::size_t written = 0;
   StepWriter writer(s);
-  // Batches of map keyframes: read from the store, stepped in parallel while the batch before is
-  // written.
-  constexpr std::size_t kChunk = detail::kKeyframesPerBatch;
-  struct Batch {
-    std::vector<Impl::KfBlobs> in;
-    std::vector<KeyframeStep> steps;
+  BlobReader reader(s, ref);
+  struct InFlight {
+    Impl::KfBlobs in;
+    KeyframeStep step;
   };
-  std::vector<Batch> batches((items.size() + kChunk - 1) / kChunk);
-  const auto begin = [&](std::size_t b) { return b * kChunk; };
-  const auto size = [&](std::size_t b) { return std::min(kChunk, items.size() - begin(b)); };
-  const auto load = [&](std::size_t b) {
-    std::vector<std::size_t> positions(size(b));
-    for (std::size_t k = 0; k < positions.size(); ++k) positions[k] = items[begin(b) + k].first;
-    batches[b].in = LoadChunk(s, kfs, positions, ref);
+  std::deque<InFlight> slots(std::min(kKeyframesInFlight, items.size()));  // item i in slot i % size
+  const auto slot = [&](std::size_t i) -> InFlight& { return slots[i % slots.size()]; };
+  const auto load = [&](std::size_t i) { slot(i).in = reader.Read(kfs[items[order[i]].first]); };
+  const auto step = [&](std::size_t i) {
+    slot(i).step = StepKeyframe(s, slot(i).in, src, *items[order[i]].second, ref, S, session.name);
   };
-  const auto step = [&](std::size_t b) {
-    Batch& x = batches[b];
-    x.steps.resize(size(b));
-    ParallelFor(size(b), s.threads, [&](std::size_t k) {
-      x.steps[k] = StepKeyframe(s, x.in[k], src, *items[begin(b) + k].second, ref, S, session.name);
-    });
+  const auto write = [&](std::size_t i) {
+    InFlight& x = slot(i);
+    const bool changed = writer.Write(x.in.rec.id, S, x.step, r);
+    x = {};
+    if (!changed) return;
+    ++written;
+    if (on_keyframe_written) on_keyframe_written(written);
   };
-  const auto write = [&](std::size_t b) {
-    for (std::size_t k = 0; k < size(b); ++k) {
-      if (!writer.Write(batches[b].in[k].rec.id, S, batches[b].steps[k], r)) continue;
-      ++written;
-      if (on_keyframe_written) on_keyframe_written(written);
-    }
-    batches[b] = {};
-  };
-  Pipeline(batches.size(), s.threads, load, step, write);
+  OrderedPipeline(items.size(), s.threads, slots.size(), load, step, write);
   InsertKeyframes(s, *this, S, query_keyframes, fresh, r, written);
   FinishSession(s, r);
   tx.Commit();
