@@ -17,7 +17,6 @@
 #include <cstring>
 #include <ctime>
 #include <limits>
-#include <deque>
 #include <filesystem>
 #include <map>
 #include <numeric>
@@ -576,7 +575,7 @@ static void InsertKeyframes(Store::Impl& s, Store& store, int session, const Key
     std::string blob;
     std::size_t points = 0;
   };
-  std::deque<Encoded> slots(std::min(kKeyframesInFlight, which.size()));  // item i in slot i % size
+  std::vector<Encoded> slots(std::min(kKeyframesInFlight, which.size()));  // item i in slot i % size
   const auto encode = [&](std::size_t i) {
     const KeyframeSlot& kf = src.keyframes[which[i]];
     const QCloud q = detail::Quantize(src.read(which[i]), s.cfg.resolution_m, s.cfg.intensity_step,
@@ -911,7 +910,7 @@ IntegrationResult Store::IntegrateSessionFrom(const SessionMeta& session, const 
     Impl::KfBlobs in;
     KeyframeStep step;
   };
-  std::deque<InFlight> slots(std::min(kKeyframesInFlight, items.size()));  // item i in slot i % size
+  std::vector<InFlight> slots(std::min(kKeyframesInFlight, items.size()));  // item i in slot i % size
   const auto slot = [&](std::size_t i) -> InFlight& { return slots[i % slots.size()]; };
   const auto load = [&](std::size_t i) { slot(i).in = reader.Read(kfs[items[order[i]].first]); };
   const auto step = [&](std::size_t i) {

@@ -21,8 +21,8 @@ class Store {
   // leaves a broken temporary, never a broken store.
   enum class Creation { kPublished, kUnpublished };
   static Store Create(const std::string& path, const MapConfig& cfg, Creation creation = Creation::kPublished);
-  // Closes the store: an unpublished one is synced to disk and in rollback-journal mode after.
-  // The destructor closes too, quietly.
+  // Closes the store (nothing else may be called after): an unpublished one is synced to disk and
+  // in rollback-journal mode after; errors are thrown. The destructor closes too, quietly.
   void Close();
   // kReadOnly: SQLITE_OPEN_READONLY, no journal mode switch, nothing written or created (works on
   // read-only media and on another user's store); integrating through such a store fails.
