@@ -867,6 +867,57 @@ struct StepWriter {
 
   Stmt put_delta, put_base;
 };
+
+// The planned map keyframes' steps, the costliest first (the keyframe's points and the query
+// points it takes), so that a long one starts at once instead of holding up the writes at the end.
+std::vector<std::pair<std::size_t, const KeyframeWork*>> CostliestFirst(const WorkPlan& work,
+                                                                        const std::vector<KeyframeRecord>& kfs,
+                                                                        const KeyframeSource& query) {
+  std::vector<std::pair<std::size_t, const KeyframeWork*>> items;
+  std::vector<std::size_t> cost;
+  for (const auto& [k, w] : work) {
+    items.emplace_back(k, &w);
+    cost.push_back(kfs[k].base_points);
+    for (const auto& [q, T] : w.extra) cost.back() += query.keyframes[q].points;
+  }
+  std::vector<std::size_t> order(items.size());
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return cost[a] > cost[b]; });
+  std::vector<std::pair<std::size_t, const KeyframeWork*>> out;
+  for (std::size_t i : order) out.push_back(items[i]);
+  return out;
+}
+
+// Steps the planned map keyframes: each read from the store, stepped on the workers and written
+// in order, at most kKeyframesInFlight at once. Returns how many were written (changed).
+std::size_t StepMapKeyframes(Store::Impl& s, const std::vector<KeyframeRecord>& kfs, const WorkPlan& work,
+                             const StepInputs& src, int ref, int S, const std::string& session_name,
+                             IntegrationResult& r, const std::function<void(std::size_t)>& on_written) {
+  const auto items = CostliestFirst(work, kfs, src.query);
+  std::size_t written = 0;
+  StepWriter writer(s);
+  BlobReader reader(s, ref);
+  struct InFlight {
+    Store::Impl::KfBlobs in;
+    KeyframeStep step;
+  };
+  std::vector<InFlight> slots(std::min(kKeyframesInFlight, items.size()));  // item i in slot i % size
+  const auto slot = [&](std::size_t i) -> InFlight& { return slots[i % slots.size()]; };
+  const auto load = [&](std::size_t i) { slot(i).in = reader.Read(kfs[items[i].first]); };
+  const auto step = [&](std::size_t i) {
+    slot(i).step = StepKeyframe(s, slot(i).in, src, *items[i].second, ref, S, session_name);
+  };
+  const auto write = [&](std::size_t i) {
+    InFlight& x = slot(i);
+    const bool changed = writer.Write(x.in.rec.id, S, x.step, r);
+    x = {};
+    if (!changed) return;
+    ++written;
+    if (on_written) on_written(written);
+  };
+  OrderedPipeline(items.size(), s.threads, slots.size(), load, step, write);
+  return written;
+}
 }  // namespace
 
 IntegrationResult Store::IntegrateSession(const SessionMeta& session, const std::string& reference,
@@ -891,40 +942,7 @@ IntegrationResult Store::IntegrateSessionFrom(const SessionMeta& session, const 
   AssignDeltas(s, kfs, ref, reference, deltas, &work);
   const std::vector<std::size_t> fresh = AssignQueryKeyframes(s, kfs, query_keyframes, &work);
   const StepInputs src{deltas, query_keyframes};
-  // The map keyframes' steps, the costliest first (its points and the query points it takes), so
-  // that a long one starts early instead of holding up the writes near the end.
-  std::vector<std::pair<std::size_t, const KeyframeWork*>> items;
-  std::vector<std::size_t> cost;
-  for (const auto& [k, w] : work) {
-    items.emplace_back(k, &w);
-    cost.push_back(kfs[k].base_points);
-    for (const auto& [q, T] : w.extra) cost.back() += query_keyframes.keyframes[q].points;
-  }
-  std::vector<std::size_t> order(items.size());
-  std::iota(order.begin(), order.end(), std::size_t(0));
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return cost[a] > cost[b]; });
-  std::size_t written = 0;
-  StepWriter writer(s);
-  BlobReader reader(s, ref);
-  struct InFlight {
-    Impl::KfBlobs in;
-    KeyframeStep step;
-  };
-  std::vector<InFlight> slots(std::min(kKeyframesInFlight, items.size()));  // item i in slot i % size
-  const auto slot = [&](std::size_t i) -> InFlight& { return slots[i % slots.size()]; };
-  const auto load = [&](std::size_t i) { slot(i).in = reader.Read(kfs[items[order[i]].first]); };
-  const auto step = [&](std::size_t i) {
-    slot(i).step = StepKeyframe(s, slot(i).in, src, *items[order[i]].second, ref, S, session.name);
-  };
-  const auto write = [&](std::size_t i) {
-    InFlight& x = slot(i);
-    const bool changed = writer.Write(x.in.rec.id, S, x.step, r);
-    x = {};
-    if (!changed) return;
-    ++written;
-    if (on_keyframe_written) on_keyframe_written(written);
-  };
-  OrderedPipeline(items.size(), s.threads, slots.size(), load, step, write);
+  std::size_t written = StepMapKeyframes(s, kfs, work, src, ref, S, session.name, r, on_keyframe_written);
   InsertKeyframes(s, *this, S, query_keyframes, fresh, r, written);
   FinishSession(s, r);
   tx.Commit();
