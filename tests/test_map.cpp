@@ -839,6 +839,17 @@ TEST(MapStore, ExceptionMidIntegrationLeavesPreviousState) {
   EXPECT_EQ(s.Sessions().size(), 1u);
   EXPECT_EQ(s.Keyframes().size(), 3u);
   s.on_keyframe_written = nullptr;
+  // A keyframe's input that cannot be read (a step on a worker throws): the same.
+  const std::vector<KeyframeDelta> step1 = Step1();
+  DeltaSource unreadable = InMemory(step1);
+  unreadable.read = [&](std::size_t k) -> KeyframeDelta {
+    if (k == step1.size() - 1) throw Error("delta.pcd: injected read failure");
+    return step1[k];
+  };
+  s.set_threads(2);
+  EXPECT_THROW(s.IntegrateSessionFrom({"s1"}, "s0", unreadable, InMemory(far)), Error);
+  EXPECT_EQ(s.Digest(), before);
+  EXPECT_EQ(s.Sessions().size(), 1u);
   EXPECT_NO_THROW(s.IntegrateSession({"s1"}, "s0", Step1(), far));
   EXPECT_NE(s.Digest(), before);
   // Errors in the input are raised before anything is written, naming the problem.
