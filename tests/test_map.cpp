@@ -351,6 +351,27 @@ TEST(MapStore, StreamedMapsEqualWholeOnesAcrossBatchesAndTiles) {
   }
 }
 
+// 250 keyframes (more than the 192 a stream holds, so its slots are reused): the streamed live map
+// on 3 threads is the 1-thread one record for record, in the same order.
+TEST(MapStore, StreamedMapOnManyThreadsEqualsOneThread) {
+  test::TempDir tmp;
+  std::vector<KeyframeInput> base;
+  for (int k = 0; k < 250; ++k) base.push_back({k, At(3.0 * k, 0), Cat(Grid(-3, -3, 0, 12, 12, 0.5f), Car(0, 0))});
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, base);
+  s.IntegrateSession({"s1"}, "s0", Step1(), {{900, At(2000, 0), Grid(-3, -3, 0, 10, 10, 0.3f)}});
+  std::vector<std::string> files;
+  for (int threads : {1, 3}) {
+    s.set_threads(threads);
+    const std::string f = tmp / ("live" + std::to_string(threads) + ".pcd");
+    const std::size_t n = WriteLabelledCloudParts(f, 0.0, [&](const PartSink& sink) { s.StreamLive({}, sink); });
+    EXPECT_GT(n, 250u * 144u);
+    std::ifstream in(f, std::ios::binary);
+    files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  EXPECT_EQ(files[0], files[1]);
+}
+
 // Sources are read as the store steps its chunks of 64 map keyframes, once per item, and give the
 // store the in-memory inputs give.
 TEST(MapStore, SourcesReadChunkByChunkAndEqualInMemoryInputs) {

@@ -398,13 +398,46 @@ struct Store::Impl {
   // Each keyframe's part (`part` of its blobs) in id order, handed to `sink`: kStreamKeyframes
   // keyframes are loaded and made into parts (in parallel) at a time, so memory is such a batch,
   // not the map.
+  // part(keyframe) of every keyframe created up to max_created_session (deltas above
+  // min_delta_session loaded), handed to `sink` in id order on this thread. The keyframes are read
+  // kStreamKeyframes at a time on this thread too, while the parts of the ones before are computed
+  // on the workers (ltm::OrderedPipeline): at most 2 kStreamKeyframes parts in flight, a large
+  // keyframe holds up no batch.
   void StreamParts(int max_created_session, int min_delta_session, const std::function<PointCloud(const KfBlobs&)>& part,
                    const PartSink& sink) const {
-    ForEachBatch(max_created_session, min_delta_session, [&](const std::vector<KfBlobs>& blobs) {
-      std::vector<PointCloud> parts(blobs.size());
-      ParallelFor(blobs.size(), threads, [&](std::size_t k) { parts[k] = part(blobs[k]); });
-      for (PointCloud& p : parts) sink(std::move(p));
-    });
+    std::vector<int> ids;
+    {
+      Stmt st(db, "SELECT id FROM keyframes WHERE session <= ? ORDER BY id", path);
+      st.Bind(1, max_created_session);
+      while (st.Step()) ids.push_back(int(st.Int(0)));
+    }
+    const std::size_t window = 2 * std::size_t(kStreamKeyframes);
+    struct Slot {
+      KfBlobs in;
+      PointCloud out;
+    };
+    // Item i in slot i % size: a batch read ahead of the window never reaches a slot in flight.
+    std::vector<Slot> ring(std::min(ids.size(), window + std::size_t(kStreamKeyframes)));
+    std::size_t fetched = 0;  // items [0, fetched) read from the store
+    const auto load = [&](std::size_t i) {
+      if (i < fetched) return;
+      std::vector<KfBlobs> batch =
+          LoadBlobs(max_created_session, min_delta_session, -1, {ids[i], ids[i] + kStreamKeyframes});
+      if (batch.empty() || batch.front().rec.id != ids[i] || i + batch.size() > ids.size())
+        throw Error(path + ": the store's keyframes changed while they were read");
+      for (KfBlobs& b : batch) ring[fetched++ % ring.size()].in = std::move(b);
+    };
+    const auto work = [&](std::size_t i) {
+      Slot& x = ring[i % ring.size()];
+      x.out = part(x.in);
+      x.in = {};
+    };
+    const auto write = [&](std::size_t i) {
+      Slot& x = ring[i % ring.size()];
+      sink(std::move(x.out));
+      x.out = {};
+    };
+    OrderedPipeline(ids.size(), threads, window, load, work, write);
   }
   // LoadBlobs(max_created_session, min_delta_session) kStreamKeyframes keyframe ids at a time,
   // in id order, over the ids of `ids` (default: every keyframe): memory is a batch, not the map.
