@@ -289,6 +289,12 @@ void CheckOneTree(const KdTree& tree, const PointCloud& c, const std::vector<Eig
     std::sort(a.begin(), a.end());
     std::sort(b.begin(), b.end());
     EXPECT_EQ(a, b);
+    // RadiusUnsorted: the same pairs in another order.
+    auto unsorted = tree.RadiusUnsorted(q, radius);
+    std::sort(unsorted.begin(), unsorted.end());
+    auto sorted = got_r;
+    std::sort(sorted.begin(), sorted.end());
+    EXPECT_EQ(unsorted, sorted);
 
     // CountWithin with early stop.
     for (std::size_t max_count : {std::size_t(1), std::size_t(3), std::size_t(1000000)})

@@ -34,7 +34,7 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
       pairs[c].clear();
       const std::size_t from = b + c * kChunk, to = std::min(n, from + kChunk);
       for (std::size_t i = from; i < to; ++i)
-        for (const auto& [j, d2] : tree.Radius(cloud.points[i].xyz(), float(gap_m)))
+        for (const auto& [j, d2] : tree.RadiusUnsorted(cloud.points[i].xyz(), float(gap_m)))
           if (j > i) pairs[c].emplace_back(std::uint32_t(i), j);
     });
     for (std::size_t c = 0; c < chunks; ++c)

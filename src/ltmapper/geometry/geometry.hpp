@@ -65,6 +65,9 @@ class KdTree {
   bool Nearest(const Eigen::Vector3f& q, std::uint32_t* index, float* sq_dist) const;
   // All points within `radius` [m]: (index, squared distance) sorted by distance.
   std::vector<std::pair<std::uint32_t, float>> Radius(const Eigen::Vector3f& q, float radius) const;
+  // The same points in the tree's order (the same for the same cloud): cheaper where only the set
+  // matters (clustering: sorting was a third of its time).
+  std::vector<std::pair<std::uint32_t, float>> RadiusUnsorted(const Eigen::Vector3f& q, float radius) const;
   // Number of points within `radius`, stopping early once `max_count` is reached.
   std::size_t CountWithin(const Eigen::Vector3f& q, float radius, std::size_t max_count) const;
 

@@ -382,6 +382,13 @@ bool KdTree::Nearest(const Eigen::Vector3f& q, std::uint32_t* index, float* sq_d
 
 std::vector<std::pair<std::uint32_t, float>> KdTree::Radius(const Eigen::Vector3f& q,
                                                              float radius) const {
+  std::vector<std::pair<std::uint32_t, float>> out = RadiusUnsorted(q, radius);
+  std::sort(out.begin(), out.end(), ByDistThenIndex);
+  return out;
+}
+
+std::vector<std::pair<std::uint32_t, float>> KdTree::RadiusUnsorted(const Eigen::Vector3f& q,
+                                                                     float radius) const {
   std::vector<std::pair<std::uint32_t, float>> out;
   if (size() == 0 || !(radius > 0.f)) return out;
   const double r2 = double(radius) * double(radius);
@@ -398,7 +405,6 @@ std::vector<std::pair<std::uint32_t, float>> KdTree::Radius(const Eigen::Vector3
       for (std::size_t i = from; i < out.size(); ++i) out[i].first = blk.ids[out[i].first];
       return true;
     });
-  std::sort(out.begin(), out.end(), ByDistThenIndex);
   return out;
 }
 

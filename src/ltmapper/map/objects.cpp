@@ -193,10 +193,10 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
 // transitively) of object_min_points .. object_max_points points; the largest cluster first (ties:
 // the one with the lowest point first), each cluster's points in idx order.
 std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
-                                                const MapConfig& cfg) {
+                                                const MapConfig& cfg, int threads) {
   std::vector<std::vector<std::uint32_t>> out;
   if (idx.size() < std::size_t(cfg.object_min_points)) return out;
-  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(changes.select(idx), cfg.object_tolerance_m);
+  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(changes.select(idx), cfg.object_tolerance_m, threads);
   std::vector<std::vector<std::uint32_t>> all;
   for (std::size_t k = 0; k < idx.size(); ++k) {
     if (label[k] >= all.size()) all.resize(label[k] + 1);
@@ -648,7 +648,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
     std::vector<MapObject> group;
-    for (const auto& sel : Cluster(changes, idx, cfg))
+    for (const auto& sel : Cluster(changes, idx, cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
     const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())

@@ -778,7 +778,7 @@ PointCloud WeakNdUnderStrongNd(const PointCloud& weak, const PointCloud& strong,
   std::vector<bool> keep(weak.size(), false);
   for (std::size_t i = 0; i < weak.size(); ++i) {
     const PointXYZI& w = weak.points[i];
-    for (const auto& [j, d2] : tree.Radius(Eigen::Vector3f(w.x, w.y, 0.f), float(radius_m)))
+    for (const auto& [j, d2] : tree.RadiusUnsorted(Eigen::Vector3f(w.x, w.y, 0.f), float(radius_m)))
       if (strong.points[j].z > w.z) {
         keep[i] = true;
         break;
