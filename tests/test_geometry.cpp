@@ -548,6 +548,17 @@ TEST(Geometry, EuclideanClustersOnManyCoresEqualOneCore) {
   EXPECT_EQ(differ, 0u);
   EXPECT_GT(number.size(), 100u);   // many clusters,
   EXPECT_LT(number.size(), 50000u);  // and many links
+  // Members: cluster k's points in ascending order, the same clusters.
+  const auto members = geometry::EuclideanClusterMembers(c, gap, 2);
+  ASSERT_EQ(members.size(), number.size());
+  std::size_t listed = 0;
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    EXPECT_TRUE(std::is_sorted(members[k].begin(), members[k].end()));
+    for (const std::uint32_t i : members[k]) EXPECT_EQ(one[i], k);
+    listed += members[k].size();
+  }
+  EXPECT_EQ(listed, c.size());
+  EXPECT_TRUE(geometry::EuclideanClusterMembers(PointCloud{}, gap).empty());
 }
 
 // The lowest point per xy cell: a cell's own lowest z, a box's lowest over the cells it overlaps.

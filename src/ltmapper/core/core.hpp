@@ -48,8 +48,9 @@ void ParallelForChunks(std::size_t n, int threads, std::size_t grain, const std:
 // (a database read, a database write), work(i) on the `threads` workers of a task arena (the
 // calling thread among them while it waits for the item it writes next). At most `window` items
 // are loaded and not yet written: a long item delays the writes after it, not the work on them.
-// With threads == 1 each item's three steps run one after the other. An exception from any step
-// reaches the caller once no work runs.
+// The items in flight are consecutive, so per-item state in `window` slots, item i in slot
+// i % window, is never shared. With threads == 1 each item's three steps run one after the other.
+// An exception from any step reaches the caller once no work runs.
 void OrderedPipeline(std::size_t n, int threads, std::size_t window, const std::function<void(std::size_t)>& load,
                      const std::function<void(std::size_t)>& work, const std::function<void(std::size_t)>& write);
 

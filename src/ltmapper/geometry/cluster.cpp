@@ -53,6 +53,16 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
   return label;
 }
 
+std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud, double gap_m, int threads) {
+  const std::vector<std::uint32_t> label = EuclideanClusters(cloud, gap_m, threads);
+  std::vector<std::vector<std::uint32_t>> members;
+  for (std::size_t i = 0; i < label.size(); ++i) {
+    if (label[i] >= members.size()) members.resize(label[i] + 1);  // numbered in order of first point
+    members[label[i]].push_back(std::uint32_t(i));
+  }
+  return members;
+}
+
 HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
   const std::size_t n = idx.empty() ? cloud.size() : idx.size();
   auto xy = [&](std::size_t k) {

@@ -82,6 +82,9 @@ class KdTree {
 // order of their lowest point index (deterministic, whatever `threads`). Non-finite points:
 // ltm::Error (KdTree).
 std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m, int threads = 1);
+// The same clusters as point indices: cluster k's points in ascending order, the clusters in
+// EuclideanClusters' numbering (none for an empty cloud).
+std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud, double gap_m, int threads = 1);
 // The xy-oriented box of cloud[idx] (all points when idx is empty): its major axis the principal
 // axis of the points' x, y spread (2x2 covariance about their mean), at yaw_rad; the minor axis
 // 90 deg counter-clockwise from it; the box's xy centre and its extents along the two axes [m].

@@ -1,7 +1,7 @@
 // KdTree: nanoflann (1.4.x API) over the xyz of a PointCloud.
 // Distances are accumulated in double (float coordinates, float differences, double squares),
 // so clouds far from the origin (+-1e6 m) still get exact neighbour sets; results are returned
-// as float squared distances, ordered by (distance, index).
+// as float squared distances, ordered by (distance, index) (RadiusUnsorted: the tree's order).
 //
 // A large cloud is a forest: median splits along the widest axis (the top of a kd-tree) cut it
 // into blocks of at most `block_points`, and each block gets its own nanoflann tree, the blocks

@@ -2,7 +2,8 @@
 // made into objects a user can act on. Per session step:
 //  1. Ground: change points within object_ground_height_m above the lowest map point of their
 //     xy cell (object_ground_cell_m) are ground, not clustered (they glue objects together).
-//  2. Euclidean clustering (geometry::EuclideanClusters) of strong ND (disappeared) and of PD (appeared) separately.
+//  2. Euclidean clustering (geometry::EuclideanClusterMembers) of strong ND (disappeared) and of
+//     PD (appeared) separately.
 //  3. Coverage: a change is an object only in space both sessions observed. Strong ND is by
 //     definition seen through by the query. PD is weak when the reference saw its space free,
 //     strong when it never saw there (new territory, facades newly in view) or its view was
@@ -196,15 +197,11 @@ std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const
                                                 const MapConfig& cfg, int threads) {
   std::vector<std::vector<std::uint32_t>> out;
   if (idx.size() < std::size_t(cfg.object_min_points)) return out;
-  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(changes.select(idx), cfg.object_tolerance_m, threads);
-  std::vector<std::vector<std::uint32_t>> all;
-  for (std::size_t k = 0; k < idx.size(); ++k) {
-    if (label[k] >= all.size()) all.resize(label[k] + 1);
-    all[label[k]].push_back(idx[k]);
+  for (auto& c : geometry::EuclideanClusterMembers(changes.select(idx), cfg.object_tolerance_m, threads)) {
+    if (c.size() < std::size_t(cfg.object_min_points) || c.size() > std::size_t(cfg.object_max_points)) continue;
+    for (std::uint32_t& k : c) k = idx[k];
+    out.push_back(std::move(c));
   }
-  for (auto& c : all)
-    if (c.size() >= std::size_t(cfg.object_min_points) && c.size() <= std::size_t(cfg.object_max_points))
-      out.push_back(std::move(c));
   std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.size() > b.size(); });
   return out;
 }

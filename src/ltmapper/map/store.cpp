@@ -276,7 +276,7 @@ struct Store::Impl {
     Stmt st(db, "PRAGMA " + name, path);
     return st.Step() ? st.Text(0) : std::string();
   }
-  void OpenDb(int flags, bool unpublished = false) {
+  void OpenDb(int flags) {
     read_only = (flags & SQLITE_OPEN_READONLY) != 0;
     if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
       const std::string msg = db ? sqlite3_errmsg(db) : "out of memory";
@@ -416,7 +416,8 @@ struct Store::Impl {
       KfBlobs in;
       PointCloud out;
     };
-    // Item i in slot i % size: a batch read ahead of the window never reaches a slot in flight.
+    // Item i in slot i % size (OrderedPipeline): one batch more than the window, as a batch is read
+    // ahead of it.
     std::vector<Slot> ring(std::min(ids.size(), window + std::size_t(kStreamKeyframes)));
     std::size_t fetched = 0;  // items [0, fetched) read from the store
     const auto load = [&](std::size_t i) {
@@ -480,7 +481,7 @@ Store Store::Create(const std::string& path, const MapConfig& cfg, Creation crea
   impl->path = path;
   impl->cfg = cfg;
   impl->unpublished = creation == Creation::kUnpublished;
-  impl->OpenDb(SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, impl->unpublished);
+  impl->OpenDb(SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
   impl->Exec("BEGIN IMMEDIATE");
   try {
     impl->Exec("PRAGMA application_id = " + std::to_string(kApplicationId));
@@ -608,7 +609,8 @@ static void InsertKeyframes(Store::Impl& s, Store& store, int session, const Key
     std::string blob;
     std::size_t points = 0;
   };
-  std::vector<Encoded> slots(std::min(kKeyframesInFlight, which.size()));  // item i in slot i % size
+  // Item i in slot i % size (OrderedPipeline).
+  std::vector<Encoded> slots(std::min(kKeyframesInFlight, which.size()));
   const auto encode = [&](std::size_t i) {
     const KeyframeSlot& kf = src.keyframes[which[i]];
     const QCloud q = detail::Quantize(src.read(which[i]), s.cfg.resolution_m, s.cfg.intensity_step,
@@ -934,7 +936,8 @@ std::size_t StepMapKeyframes(Store::Impl& s, const std::vector<KeyframeRecord>& 
     Store::Impl::KfBlobs in;
     KeyframeStep step;
   };
-  std::vector<InFlight> slots(std::min(kKeyframesInFlight, items.size()));  // item i in slot i % size
+  // Item i in slot i % size (OrderedPipeline).
+  std::vector<InFlight> slots(std::min(kKeyframesInFlight, items.size()));
   const auto slot = [&](std::size_t i) -> InFlight& { return slots[i % slots.size()]; };
   const auto load = [&](std::size_t i) { slot(i).in = reader.Read(kfs[items[i].first]); };
   const auto step = [&](std::size_t i) {

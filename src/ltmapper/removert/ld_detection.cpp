@@ -127,14 +127,6 @@ Strength Split(const detail::Visibility& vis, bool nd, const RemovertConfig& cfg
   return s;
 }
 
-// The Euclidean clusters of `c` at `gap_m`, each as its point indices.
-std::vector<std::vector<std::uint32_t>> ClusterMembers(const PointCloud& c, double gap_m, int threads) {
-  const std::vector<std::uint32_t> label = geometry::EuclideanClusters(c, gap_m, threads);
-  std::vector<std::vector<std::uint32_t>> members(*std::max_element(label.begin(), label.end()) + 1);
-  for (std::size_t i = 0; i < label.size(); ++i) members[label[i]].push_back(std::uint32_t(i));
-  return members;
-}
-
 // The xy box of cluster m of `c`.
 std::pair<Eigen::Vector3f, Eigen::Vector3f> BoxOf(const PointCloud& c, const std::vector<std::uint32_t>& m) {
   Eigen::Vector3f lo = c.points[m.front()].xyz(), hi = lo;
@@ -199,7 +191,7 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
 std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
-  const auto members = ClusterMembers(seen, cfg.ld_residue_gap_m, threads);
+  const auto members = geometry::EuclideanClusterMembers(seen, cfg.ld_residue_gap_m, threads);
   std::vector<bool> small = FitAMover(seen, members, own, cfg);
   UnmarkPiecesOfLargerOnes(seen, members, cfg.ld_residue_length_m, &small);
   return small;

@@ -136,28 +136,30 @@ std::vector<Fpfh> FpfhDescriptors(const PointCloud& cloud, const std::vector<Eig
 }
 
 namespace {
-Features::Ptr Describe(const Cloud::Ptr& cloud, double voxel_m) {
+// A voxelised cloud as PCL's RANSAC takes it, with its FPFH features (PCL's normals, ours FPFH).
+struct Described {
+  Cloud::Ptr cloud;
+  Features::Ptr features;
+};
+
+Described Describe(const PointCloud& points, double voxel_m) {
+  Described d{ToPcl(points), pcl::make_shared<Features>()};
   auto tree = pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>();
   pcl::PointCloud<pcl::Normal> normals;
   pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
-  ne.setInputCloud(cloud);
+  ne.setInputCloud(d.cloud);
   ne.setSearchMethod(tree);
   ne.setRadiusSearch(kNormalRadiusVoxels * voxel_m);
   ne.setViewPoint(0.f, 0.f, 1e4f);  // normals point up (ground) or outwards consistently
   ne.compute(normals);
-  PointCloud points;
-  std::vector<Eigen::Vector3f> n(cloud->size());
-  for (std::size_t i = 0; i < cloud->size(); ++i) {
-    points.push_back((*cloud)[i].x, (*cloud)[i].y, (*cloud)[i].z);
-    n[i] = normals[i].getNormalVector3fMap();
-  }
-  auto features = pcl::make_shared<Features>();
+  std::vector<Eigen::Vector3f> n(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) n[i] = normals[i].getNormalVector3fMap();
   for (const Fpfh& h : FpfhDescriptors(points, n, kFeatureRadiusVoxels * voxel_m)) {
     pcl::FPFHSignature33 f;
     std::copy(h.begin(), h.end(), f.histogram);
-    features->push_back(f);
+    d.features->push_back(f);
   }
-  return features;
+  return d;
 }
 }  // namespace
 
@@ -170,8 +172,9 @@ struct GlobalMap::Impl {
 GlobalMap::GlobalMap(const PointCloud& world_map, const SlamConfig& cfg) : impl_(std::make_unique<Impl>()) {
   impl_->voxel_m = cfg.reg_coarse_voxel_m;
   impl_->min_inlier_fraction = cfg.reg_min_overlap;
-  impl_->cloud = ToPcl(geometry::VoxelDownsample(world_map, impl_->voxel_m, 1));
-  impl_->features = Describe(impl_->cloud, impl_->voxel_m);
+  Described d = Describe(geometry::VoxelDownsample(world_map, impl_->voxel_m, 1), impl_->voxel_m);
+  impl_->cloud = std::move(d.cloud);
+  impl_->features = std::move(d.features);
 }
 GlobalMap::~GlobalMap() = default;
 
@@ -179,11 +182,12 @@ std::size_t GlobalMap::size() const { return impl_->cloud->size(); }
 
 std::optional<Pose> GlobalMap::Place(const PointCloud& submap) const {
   const Impl& m = *impl_;
-  const Cloud::Ptr src = ToPcl(geometry::VoxelDownsample(submap, m.voxel_m, 1));
-  if (src->size() < std::size_t(kSampleSize) || m.cloud->size() < std::size_t(kSampleSize)) return std::nullopt;
+  const PointCloud points = geometry::VoxelDownsample(submap, m.voxel_m, 1);
+  if (points.size() < std::size_t(kSampleSize) || m.cloud->size() < std::size_t(kSampleSize)) return std::nullopt;
+  const Described src = Describe(points, m.voxel_m);
   pcl::SampleConsensusPrerejective<pcl::PointXYZ, pcl::PointXYZ, pcl::FPFHSignature33> ransac;
-  ransac.setInputSource(src);
-  ransac.setSourceFeatures(Describe(src, m.voxel_m));
+  ransac.setInputSource(src.cloud);
+  ransac.setSourceFeatures(src.features);
   ransac.setInputTarget(m.cloud);
   ransac.setTargetFeatures(m.features);
   ransac.setMaximumIterations(kRansacIterations);
