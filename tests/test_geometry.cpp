@@ -561,6 +561,30 @@ TEST(Geometry, EuclideanClustersOnManyCoresEqualOneCore) {
   EXPECT_TRUE(geometry::EuclideanClusterMembers(PointCloud{}, gap).empty());
 }
 
+// Per-point gaps: equal gaps give the plain clusters; rows 0.6 m apart join with a 1 m vertical
+// gap while columns 0.6 m apart stay apart with a 0.5 m horizontal one; the smaller of two
+// points' gaps decides; a wrong count or a gap <= 0 is an error.
+TEST(Geometry, EuclideanClustersWithPerPointGaps) {
+  PointCloud c;
+  for (const float z : {0.f, 0.6f, 1.2f})
+    for (const float y : {0.f, 0.3f, 1.5f, 1.8f}) c.push_back(0.f, y, z, 0.f);  // two 0.3 m columns, 1.2 m apart
+  const std::vector<Eigen::Vector2f> same(c.size(), Eigen::Vector2f(0.7f, 0.7f));
+  EXPECT_EQ(geometry::EuclideanClusterMembers(c, same), geometry::EuclideanClusterMembers(c, 0.7));
+  const std::vector<Eigen::Vector2f> rows(c.size(), Eigen::Vector2f(0.5f, 1.0f));
+  const auto joined = geometry::EuclideanClusterMembers(c, rows);
+  ASSERT_EQ(joined.size(), 2u);  // each column's three rows, the columns apart
+  EXPECT_EQ(joined[0], (std::vector<std::uint32_t>{0, 1, 4, 5, 8, 9}));
+  EXPECT_EQ(geometry::EuclideanClusterMembers(c, 0.5).size(), 6u);  // the rows apart
+  std::vector<Eigen::Vector2f> one_small = rows;
+  one_small[4] = one_small[5] = Eigen::Vector2f(0.5f, 0.5f);  // the first column's middle row: 0.5 m gaps
+  const auto split = geometry::EuclideanClusterMembers(c, one_small);
+  EXPECT_EQ(split.size(), 4u);  // that column's rows apart, the other column whole
+  EXPECT_THROW(geometry::EuclideanClusterMembers(c, std::vector<Eigen::Vector2f>(3, Eigen::Vector2f(1, 1))), Error);
+  std::vector<Eigen::Vector2f> zero = rows;
+  zero[0].y() = 0.f;
+  EXPECT_THROW(geometry::EuclideanClusterMembers(c, zero), Error);
+}
+
 // The lowest point per xy cell: a cell's own lowest z, a box's lowest over the cells it overlaps.
 TEST(Geometry, LowestGridIsTheGroundUnderABox) {
   PointCloud c;

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <string>
 
 namespace ltm::geometry {
 
@@ -16,11 +17,12 @@ std::uint32_t Root(std::vector<std::uint32_t>& parent, std::uint32_t i) {
   while (parent[i] != i) i = parent[i] = parent[parent[i]];  // path halving
   return i;
 }
-}  // namespace
 
-// The pairs (i, j), j > i, of radius neighbours are found on `threads` cores a batch at a time
-// and joined on one: the components, so the labels, do not depend on the order of the joins.
-std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m, int threads) {
+// Union-find over the pairs (i, j), j > i, that `joined(i, j, d2)` accepts among the kd-tree's
+// neighbours of i within radius(i): the pairs are found on `threads` cores a batch at a time and
+// joined on one, so the components, and the labels, do not depend on the order of the joins.
+template <class Radius, class Joined>
+std::vector<std::uint32_t> ClusterLabels(const PointCloud& cloud, int threads, Radius radius, Joined joined) {
   const std::size_t n = cloud.size();
   std::vector<std::uint32_t> parent(n);
   std::iota(parent.begin(), parent.end(), 0u);
@@ -34,8 +36,8 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
       pairs[c].clear();
       const std::size_t from = b + c * kChunk, to = std::min(n, from + kChunk);
       for (std::size_t i = from; i < to; ++i)
-        for (const auto& [j, d2] : tree.RadiusUnsorted(cloud.points[i].xyz(), float(gap_m)))
-          if (j > i) pairs[c].emplace_back(std::uint32_t(i), j);
+        for (const auto& [j, d2] : tree.RadiusUnsorted(cloud.points[i].xyz(), radius(i)))
+          if (j > i && joined(i, j, d2)) pairs[c].emplace_back(std::uint32_t(i), j);
     });
     for (std::size_t c = 0; c < chunks; ++c)
       for (const auto& [i, j] : pairs[c]) {
@@ -53,14 +55,39 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
   return label;
 }
 
-std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud, double gap_m, int threads) {
-  const std::vector<std::uint32_t> label = EuclideanClusters(cloud, gap_m, threads);
+std::vector<std::vector<std::uint32_t>> Members(const std::vector<std::uint32_t>& label) {
   std::vector<std::vector<std::uint32_t>> members;
   for (std::size_t i = 0; i < label.size(); ++i) {
     if (label[i] >= members.size()) members.resize(label[i] + 1);  // numbered in order of first point
     members[label[i]].push_back(std::uint32_t(i));
   }
   return members;
+}
+}  // namespace
+
+std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap_m, int threads) {
+  return ClusterLabels(cloud, threads, [&](std::size_t) { return float(gap_m); },
+                       [](std::size_t, std::uint32_t, float) { return true; });
+}
+
+std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud, double gap_m, int threads) {
+  return Members(EuclideanClusters(cloud, gap_m, threads));
+}
+
+std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud,
+                                                                const std::vector<Eigen::Vector2f>& gaps, int threads) {
+  if (gaps.size() != cloud.size())
+    throw Error("EuclideanClusterMembers: " + std::to_string(gaps.size()) + " gaps for " + std::to_string(cloud.size()) +
+                " points");
+  for (const auto& g : gaps)
+    if (!(g.minCoeff() > 0.f)) throw Error("EuclideanClusterMembers: a gap is not positive");
+  return Members(ClusterLabels(cloud, threads, [&](std::size_t i) { return gaps[i].maxCoeff(); },
+                               [&](std::size_t i, std::uint32_t j, float) {
+                                 const PointXYZI &a = cloud.points[i], &b = cloud.points[j];
+                                 const Eigen::Vector2f g = gaps[i].cwiseMin(gaps[j]);
+                                 const float dx = a.x - b.x, dy = a.y - b.y, dz = a.z - b.z;
+                                 return (dx * dx + dy * dy) / (g.x() * g.x()) + dz * dz / (g.y() * g.y()) < 1.f;
+                               }));
 }
 
 HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {

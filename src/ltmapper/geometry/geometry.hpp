@@ -85,6 +85,12 @@ std::vector<std::uint32_t> EuclideanClusters(const PointCloud& cloud, double gap
 // The same clusters as point indices: cluster k's points in ascending order, the clusters in
 // EuclideanClusters' numbering (none for an empty cloud).
 std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud, double gap_m, int threads = 1);
+// Clusters with gaps per point, for surfaces a sensor samples in rows and columns far apart:
+// points i and j join when (horizontal distance / gh)^2 + (dz / gv)^2 < 1, gh and gv the smaller
+// of the two points' gaps (gaps[i] = {horizontal, vertical} [m], both > 0; gaps.size() ==
+// cloud.size(), else ltm::Error). With every gap {g, g}, the same clusters as above with gap g.
+std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud,
+                                                                const std::vector<Eigen::Vector2f>& gaps, int threads = 1);
 // The xy-oriented box of cloud[idx] (all points when idx is empty): its major axis the principal
 // axis of the points' x, y spread (2x2 covariance about their mean), at yaw_rad; the minor axis
 // 90 deg counter-clockwise from it; the box's xy centre and its extents along the two axes [m].

@@ -33,6 +33,9 @@ struct MapConfig {
   double object_max_clearance_m = 1.0;  // lowest point above ground: higher = floating (0 = off)
   double object_sensor_step_deg = 0.0;   // [deg] the sensor's coarser angular sampling step; 0 = from the run's
                                          // sensor model (WithSensorStep: `ltmapper run`, `map objects --session`)
+  double object_sensor_azimuth_step_deg = 0.0;  // [deg] the sensor's horizontal sampling step (far clusters join
+                                         // columns up to 2 r x it apart); 0 = from the run's sensor model, or
+                                         // unknown: columns join within object_tolerance_m only
   double object_min_samples = 3.0;       // rows of sensor samples across the cluster's width (objects.cpp MinWidth)
   double object_flat_sigma_m = 0.05;     // thickness (std along the smallest axis) of a flat patch
   double object_flat_tilt_deg = 20.0;    // flat patches with a normal this close to vertical are ground
@@ -64,6 +67,7 @@ struct MapConfig {
     v("object_min_height_m", object_min_height_m, "m", 0.0, 100.0);
     v("object_max_clearance_m", object_max_clearance_m, "m", 0.0, 100.0);
     v("object_sensor_step_deg", object_sensor_step_deg, "deg", 0.0, 45.0);
+    v("object_sensor_azimuth_step_deg", object_sensor_azimuth_step_deg, "deg", 0.0, 45.0);
     v("object_min_samples", object_min_samples, "", 0.0, 1000.0);
     v("object_flat_sigma_m", object_flat_sigma_m, "m", 0.0, 10.0);
     v("object_flat_tilt_deg", object_flat_tilt_deg, "deg", 0.0, 90.0);

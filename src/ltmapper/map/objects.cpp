@@ -190,14 +190,43 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
   return idx;
 }
 
+// The sensor samples a surface at range r in rows r * object_sensor_step_deg apart and columns
+// r * object_sensor_azimuth_step_deg apart, up to twice that on a surface seen at up to 60 deg
+// incidence (1 / cos 60 deg): the gaps that still join a far object's rows and columns into one
+// cluster.
+constexpr double kSampleGapsPerStep = 2.0;
+
+// Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
+// farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
+// of the range it was scanned from).
+std::vector<Eigen::Vector2f> SampleGaps(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
+                                        const std::vector<Eigen::Vector3d>& sensors, const MapConfig& cfg) {
+  const float tol = float(cfg.object_tolerance_m);
+  std::vector<Eigen::Vector2f> gap(idx.size(), Eigen::Vector2f::Constant(tol));
+  if (sensors.empty()) return gap;
+  PointCloud at;
+  for (const auto& s : sensors) at.push_back(float(s.x()), float(s.y()), float(s.z()), 0.f);
+  const geometry::KdTree tree(at);
+  const Eigen::Vector2f per_m = Eigen::Vector2f(float(cfg.object_sensor_azimuth_step_deg), float(cfg.object_sensor_step_deg)) *
+                                float(kSampleGapsPerStep * kDegToRad);
+  std::uint32_t j = 0;
+  float d2 = 0.f;
+  for (std::size_t k = 0; k < idx.size(); ++k)
+    if (tree.Nearest(changes.points[idx[k]].xyz(), &j, &d2)) gap[k] = gap[k].cwiseMax(per_m * std::sqrt(d2));
+  return gap;
+}
+
 // The points idx of changes in clusters (points closer than object_tolerance_m joined,
-// transitively) of object_min_points .. object_max_points points; the largest cluster first (ties:
-// the one with the lowest point first), each cluster's points in idx order.
+// transitively; far out up to the sensor's sample gaps at their range, SampleGaps) of
+// object_min_points .. object_max_points points; the largest cluster first (ties: the one with
+// the lowest point first), each cluster's points in idx order.
 std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
-                                                const MapConfig& cfg, int threads) {
+                                                const std::vector<Eigen::Vector3d>& sensors, const MapConfig& cfg,
+                                                int threads) {
   std::vector<std::vector<std::uint32_t>> out;
   if (idx.size() < std::size_t(cfg.object_min_points)) return out;
-  for (auto& c : geometry::EuclideanClusterMembers(changes.select(idx), cfg.object_tolerance_m, threads)) {
+  const PointCloud pts = changes.select(idx);
+  for (auto& c : geometry::EuclideanClusterMembers(pts, SampleGaps(changes, idx, sensors, cfg), threads)) {
     if (c.size() < std::size_t(cfg.object_min_points) || c.size() > std::size_t(cfg.object_max_points)) continue;
     for (std::uint32_t& k : c) k = idx[k];
     out.push_back(std::move(c));
@@ -645,7 +674,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
     std::vector<MapObject> group;
-    for (const auto& sel : Cluster(changes, idx, cfg, store.threads()))
+    for (const auto& sel : Cluster(changes, idx, ctx.all_sensors, cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
     const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
@@ -707,6 +736,7 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
 MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
   if (cfg.object_sensor_step_deg <= 0.0)
     cfg.object_sensor_step_deg = std::max(sensor.SpacingAt(0.0), sensor.azimuth_step_deg);
+  if (cfg.object_sensor_azimuth_step_deg <= 0.0) cfg.object_sensor_azimuth_step_deg = sensor.azimuth_step_deg;
   return cfg;
 }
 
