@@ -36,7 +36,7 @@ struct MapConfig {
   double object_sensor_azimuth_step_deg = 0.0;  // [deg] the sensor's horizontal sampling step (far clusters join
                                          // columns up to 2 r x it apart); 0 = from the run's sensor model, or
                                          // unknown: columns join within object_tolerance_m only
-  double object_min_samples = 3.0;       // rows of sensor samples across the cluster's width (objects.cpp MinWidth)
+  double object_min_samples = 2.0;       // rows of sensor samples across the cluster's width (objects.cpp MinWidth)
   double object_flat_sigma_m = 0.05;     // thickness (std along the smallest axis) of a flat patch
   double object_flat_tilt_deg = 20.0;    // flat patches with a normal this close to vertical are ground
   double object_twin_radius_m = 1.0;     // other side's change this close = the same surface, misaligned

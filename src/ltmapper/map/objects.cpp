@@ -373,7 +373,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // removed or new object is surrounded by free space and ground, and stands on its own remnants
 // (its lower part, under the seen-through body). The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
-// edge, one or two scan rows wide) spans fewer than object_min_samples rows across its middle
+// edge, one scan row wide) spans fewer than object_min_samples rows across its middle
 // principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread; MinWidth). A cluster whose top is
 // below object_min_height_m above the local ground is a ground bump (kerb, misregistered
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
@@ -389,7 +389,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // sensor's samples (r * object_sensor_step_deg, at least the output voxel). n rows a sample s apart
 // have the width (kUniformExtentPerStd * std) s * sqrt(n^2 - 1): 1.73 s for two rows, 2.83 s for
 // three. The bound lies halfway between n - 1 and n rows, so noise does not decide an n-row
-// cluster (a three-row car at 16 m on a VLP-16 is kept, a two-row rim is not).
+// cluster (a car seen in two rows of a VLP-16 is kept, a one-row rim is not).
 double MinWidth(double range_m, const MapConfig& cfg) {
   const double sample = std::max(cfg.output_voxel_m, range_m * cfg.object_sensor_step_deg * kDegToRad);
   const auto rows_width = [](double n) { return std::sqrt(std::max(0.0, n * n - 1.0)); };
