@@ -3,7 +3,8 @@
 //  1. Ground: change points within object_ground_height_m above the lowest map point of their
 //     xy cell (object_ground_cell_m) are ground, not clustered (they glue objects together).
 //  2. Euclidean clustering (geometry::EuclideanClusterMembers) of strong ND (disappeared) and of
-//     PD (appeared) separately.
+//     PD (appeared) separately, far out with the gaps of the sensor's rows and columns at the
+//     points' range (SampleGaps).
 //  3. Coverage: a change is an object only in space both sessions observed. Strong ND is by
 //     definition seen through by the query. PD is weak when the reference saw its space free,
 //     strong when it never saw there (new territory, facades newly in view) or its view was
