@@ -113,9 +113,13 @@ TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
   EXPECT_EQ(plain.occ[0], 1);
 }
 
-TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
-  // Sensor 1.8 m above flat ground (z = 0); four ground points 20 m away (elevation -5.1 deg),
-  // none sampled: each lies between two beams of its own column, at azimuths 0, 30, -30, 60 deg.
+// The LD beam test, the sim's beam truth in the scan's own beams: a point's surface was observed
+// when a beam ended on it near the point (its ray within the tolerance of the point, its return
+// within the along-ray tolerance of it, at most grazing_max_m at grazing incidence), not when the
+// point merely lies between two beams that hit the same surface farther away.
+TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
+  // Sensor 1.8 m above flat ground (z = 0); ground points 20 m away (elevation -5.1 deg), none
+  // sampled where they are, at azimuths 0, 30, -30, 60, 45 deg.
   const Pose T = test::At(0, 0, 1.8);
   auto at = [](double yaw_deg, double rho, double z) {
     const double a = yaw_deg * M_PI / 180.0;
@@ -123,18 +127,20 @@ TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
   };
   auto scan = std::make_shared<PointCloud>();
   auto add = [&](const Eigen::Vector3f& q) { scan->push_back(q.x(), q.y(), q.z()); };
-  add(at(0, 17, 0));       // A: ground rings before and beyond it: observed
-  add(at(0, 24, 0));
-  add(at(30, 17, 0.25));   // C: both beams hit ground 0.25 m higher (within the plane tolerance):
-  add(at(30, 24, 0.25));   //    the ray to C meets that surface 2.8 m before C: C lies in a trough
-  add(at(-30, 16, 0.5));   // B: the lower beam hits an object in front: occluded
-  add(at(-30, 24, 0));
-  add(at(60, 17, 0));      // D: ground below, no return above (beyond max range): its far edge
+  add(at(0, 19, 0));       // A: a ring 1 m before it (and one 1.5 m beyond): observed
+  add(at(0, 21.5, 0));
+  add(at(30, 19, 0.6));    // C: its beams hit a surface 0.6 m higher (a step, beyond the 0.4 m
+  add(at(30, 21.5, 0.6));  //    tolerance at 20 m): not C's surface
+  add(at(-30, 19, 0.5));   // B: the lower beam hits an object in front, the upper one lands 4 m
+  add(at(-30, 24, 0));     //    beyond it: not observed
+  add(at(60, 19.2, 0));    // D: the ground 0.8 m before it, no return above (beyond max range): observed
+  add(at(45, 17, 0));      // F: rings 3 m before and 4 m beyond it (more than grazing_max_m 2 m):
+  add(at(45, 24, 0));      //    between the beams, not observed (the sim's beam truth: unobserved)
   WorldKeyframe kf;
   kf.T_world_sensor = T;
   kf.cloud = scan;
   PointCloud pts;
-  for (double yaw : {0.0, 30.0, -30.0, 60.0}) {
+  for (double yaw : {0.0, 30.0, -30.0, 60.0, 45.0}) {
     const Eigen::Vector3f p = at(yaw, 20, 0);
     pts.push_back(p.x(), p.y(), 0.f);
   }
@@ -150,9 +156,16 @@ TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
   EXPECT_EQ(v.beam_hits[1], 0);
   EXPECT_EQ(v.beam_hits[2], 0);
   EXPECT_EQ(v.beam_hits[3], 1);
+  EXPECT_EQ(v.beam_hits[4], 0);
+  // With a wider along-ray cap F's ring 3 m before it is near enough.
+  removert::BeamTest wide = beams;
+  wide.grazing_max_m = 3.5;
+  opt.beams = &wide;
+  EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[4], 1);
+  opt.beams = &beams;
   // E: a wall (y = 6 m) seen obliquely (8 deg), its beams 0.15 deg off E's azimuth in the same
-  // column, so 0.8 m nearer in range (more than the tolerance): the surface through them still
-  // meets E's ray at E.
+  // column and 0.6 deg above / below it, so 0.8 m nearer in range (more than the tolerance, within
+  // its along-ray tolerance at that incidence): observed.
   removert::BeamTest defaults;
   const double col_scale = std::lround(360.0 / defaults.col_deg) / (2.0 * M_PI);
   const double yaw_e = M_PI - (std::floor((M_PI - 8.0 * M_PI / 180.0) * col_scale) + 0.5) / col_scale;
@@ -170,16 +183,11 @@ TEST(RemovertVotes, BeamTestJudgesTheSurfaceBetweenTheBeams) {
   opt.normals = &wall_normal;
   EXPECT_EQ(removert::CountVisibility(wall, {kf}, {1.0}, cfg, 1, opt).beam_hits[0], 1);
   opt.normals = &up;
-  // The plain pixel test (2 deg pixel, surface hits up to 10 m) calls C and B's lower rows the
-  // same surface: C is a hit there.
+  // The plain pixel test (2 deg pixel, surface hits up to 10 m) calls A the same surface too.
   opt.beams = nullptr;
   opt.surface_max_m = 10.0;
   const auto pixel = removert::CountVisibility(pts, {kf}, {2.0}, cfg, 1, opt);
-  EXPECT_EQ(pixel.Hit(0, 1), 1);
-  // D's edge rule is bounded in range: with edge_max_m below the 3 m to its ring, not observed.
-  beams.edge_max_m = 2.0;
-  opt.beams = &beams;
-  EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[3], 0);
+  EXPECT_EQ(pixel.Hit(0, 0), 1);
 }
 
 // The street scene: 21 keyframes 2 m apart along x.

@@ -275,12 +275,14 @@ TEST(Sim, FiredRaysAreTheScansRays) {
 TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
   const SimConfig cfg = TinyConfig();
   Simulator sim(cfg, 2);
-  const std::string pair = Out() + "/truth/pair_00_01/";
+  const std::string pair = Out() + "/truth/pair_00_01/", exact = io::layout::ExactRayTruthDir(pair) + "/";
   const auto pds = PointSet(io::ReadPcd(pair + "pd_strong.pcd"));
-  std::set<std::array<float, 3>> any;
+  std::set<std::array<float, 3>> any, any_exact;  // every change point of the beam / exact-ray truth
   for (const char* f : {"pd_strong", "pd_weak", "nd_strong", "nd_weak"}) {
     const auto s = PointSet(io::ReadPcd(pair + f + ".pcd"));
     any.insert(s.begin(), s.end());
+    const auto e = PointSet(io::ReadPcd(exact + f + ".pcd"));
+    any_exact.insert(e.begin(), e.end());
     // The object-only truth is part of the full truth.
     for (const auto& p : PointSet(io::ReadPcd(pair + "objects_" + f + ".pcd"))) EXPECT_TRUE(s.count(p)) << f;
   }
@@ -308,8 +310,31 @@ TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
     ASSERT_TRUE(pds.count({p.x, p.y, p.z})) << p.x << " " << p.y << " " << p.z;
   }
   EXPECT_GT(far, 10u);
-  // Central static points a query ray hits head-on (within 5 cm): in no change file.
+  // Central static points a beam of a query scan ended on (within 10 cm): in no change file of the
+  // beam truth.
   const PointCloud central = io::ReadPly(Out() + "/truth/session_00/static_world.ply");
+  std::size_t sampled = 0;
+  for (int k : {2, 9}) {
+    std::vector<Eigen::Vector3f> origins, dirs;
+    sim.FiredRays(1, k, &origins, &dirs);
+    const auto hits = sim.CastRays(1, k, origins, dirs);
+    PointCloud ends;
+    for (std::size_t i = 0; i < dirs.size(); ++i)
+      if (hits[i].hit && hits[i].object < 0 && hits[i].range >= cfg.min_range_m && hits[i].range <= cfg.max_range_m) {
+        const Eigen::Vector3f e = origins[i] + hits[i].range * dirs[i];
+        ends.push_back(e.x(), e.y(), e.z());
+      }
+    const geometry::KdTree tree(ends);
+    for (std::size_t i = 0; i < central.size(); ++i) {
+      const auto& p = central.points[i];
+      if (central.object[i] >= 0 || tree.CountWithin(p.xyz(), 0.1f, 1) == 0) continue;
+      ++sampled;
+      ASSERT_FALSE(any.count({p.x, p.y, p.z})) << "a beam of query keyframe " << k << " ended on " << p.x << " " << p.y;
+    }
+  }
+  EXPECT_GT(sampled, 100u);
+  // Central static points a query ray cast straight at them hits head-on (within 5 cm): in no
+  // change file of the exact-ray truth.
   std::size_t observed = 0;
   for (int k : {2, 9}) {
     const Pose T = sim.T_world_sensor(1)[std::size_t(k)];
@@ -330,7 +355,7 @@ TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
       const double r = (p.xyz().cast<double>() - T.translation()).norm();
       if (hits[m].hit && hits[m].object < 0 && hits[m].cos_incidence > 0.5 && std::abs(hits[m].range - r) < 0.05) {
         ++observed;
-        ASSERT_FALSE(any.count({p.x, p.y, p.z})) << "observed by query keyframe " << k << ": " << p.x << " " << p.y;
+        ASSERT_FALSE(any_exact.count({p.x, p.y, p.z})) << "observed by query keyframe " << k << ": " << p.x << " " << p.y;
       }
     }
   }

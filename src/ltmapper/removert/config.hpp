@@ -11,16 +11,13 @@
 namespace ltm::removert {
 
 // Did a scan observe the surface of a point (LD "same surface": the other session has it, only
-// sampled more sparsely)? The exact ray towards the point is not among the beams, so it is
-// judged from the beams around it, in the point's column (col_deg wide, rows of row_deg):
-//  - a return in the point's own cell: on the point's plane (within tol_m + tol_rel * range)
-//    and within the along-ray tolerance of it, tol / cos(incidence) capped at grazing_max_m;
-//  - else the nearest returns above and below its direction (within span_deg): both on the
-//    plane, and the ray towards the point meets the surface between them (the plane through
-//    both returns along the point's surface contour) within that along-ray tolerance: so a
-//    point in a trough behind a crest the lower beam hit, or behind an occluder, is not observed;
-//  - else one of them on the plane at most edge_max_m from the point in range and the other
-//    without a return or beyond the point (the surface's edge, far ground below the sky).
+// sampled more sparsely)? As the sim's beam truth asks (FORMATS.md): did one of the scan's beams
+// end on the point's surface near it? Judged in the point's column (col_deg wide, rows of
+// row_deg): the return of its own cell, else the nearest returns above and below its direction
+// (within span_deg), one of them on the point's plane (within tol_m + tol_rel * range), its ray
+// passing within that tolerance of the point and its return within the along-ray tolerance of
+// the point's place along it (tol / cos(incidence), at most grazing_max_m). A point between two
+// beams that met its surface farther away (far ground between rings) was not sampled: unobserved.
 // The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
 // The defaults are those of RemovertConfig::ld_beam (config keys ld.beam_*).
 struct BeamTest {
@@ -30,8 +27,6 @@ struct BeamTest {
   double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface ...
   double tol_rel = 0.005;       // [-] ... plus this times the range (rotation error between the sessions)
   double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
-  double edge_max_m = 60.0;     // [m] at a surface's edge (one beam on it, the other without a return or
-                                //     beyond it) the return on it at most this far from the point in range
 };
 
 struct RemovertConfig {
@@ -180,7 +175,6 @@ struct RemovertConfig {
     v("ld.beam_tol_m", ld_beam.tol_m, "m", 0.0, 10.0);
     v("ld.beam_tol_rel", ld_beam.tol_rel, "", 0.0, 1.0);
     v("ld.beam_grazing_max_m", ld_beam.grazing_max_m, "m", 0.0, 100.0);
-    v("ld.beam_edge_max_m", ld_beam.edge_max_m, "m", 0.0, 1000.0);
     v("ld.residue_gap_m", ld_residue_gap_m, "m", 0.01, 10.0);
     v("ld.residue_length_m", ld_residue_length_m, "m", 0.0, 100.0);
     v("ld.covisible_only", covisible_only);

@@ -625,54 +625,28 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vec
   const std::size_t column = std::size_t(grid_.Col(yaw)) * std::size_t(rows);
   const float* rc = range_.data() + column;
   const Eigen::Vector3f* qc = ret_.data() + column;
-  // Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol`
-  // from the surface, so up to tol / cos along a grazing ray, at most grazing_max_m.
-  auto along = [&](float cosine) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), grazing_max)); };
-  // 0: no return, 1: on the point's plane, 2: nearer (occluder), 3: farther (past the surface's edge).
-  auto kind = [&](int r) {
-    if (PlaneDistance(plane, qc[r]) <= tol) return 1;
-    return rc[r] < range ? 2 : 3;
-  };
-  const Eigen::Vector3f u = ps / range;  // the ray's direction
   const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
-  const float cos_n = std::fabs(nrm.dot(u));
-  if (std::isfinite(rc[row])) return kind(row) == 1 && std::fabs(rc[row] - range) <= along(cos_n);
-  int above = 0, below = 0, ra = -1, rb = -1;
+  // Beam r ended on the point's surface near it: its return on the point's plane, its ray passing
+  // within tol of the point, and its return within the along-ray tolerance of the point's place
+  // along it: tol from the surface, so up to tol / cos(incidence) along a grazing ray, at most
+  // grazing_max_m (the sim's beam truth: a ray of the scan that ended on the surface near the point).
+  auto ended_near = [&](int r) {
+    if (PlaneDistance(plane, qc[r]) > tol) return false;
+    const Eigen::Vector3f u = qc[r] / rc[r];
+    const float s = ps.dot(u);
+    if ((ps - s * u).squaredNorm() > tol * tol) return false;
+    const float along = std::max(tol, std::min(tol / std::max(std::fabs(nrm.dot(u)), 1e-6f), grazing_max));
+    return std::fabs(rc[r] - s) <= along;
+  };
+  if (std::isfinite(rc[row])) return ended_near(row);
   for (int r = row - 1; r >= std::max(0, row - span_[std::size_t(row)]); --r)
     if (std::isfinite(rc[r])) {
-      above = kind(r);
-      ra = r;
+      if (ended_near(r)) return true;
       break;
     }
   for (int r = row + 1; r <= std::min(rows - 1, row + span_[std::size_t(row)]); ++r)
-    if (std::isfinite(rc[r])) {
-      below = kind(r);
-      rb = r;
-      break;
-    }
-  if (above == 1 && below == 1) {
-    // The surface between the two beams: the plane through their returns that holds the
-    // horizontal direction along the point's surface (its contour line; across the ray for
-    // level ground). The ray towards the point must meet it within the along-ray tolerance of
-    // the point: not in a trough behind a crest the lower beam hit. A plane, not the returns'
-    // ranges: on a surface seen obliquely the column's returns lie at other azimuths than the point.
-    // A surface within ~6 deg of level (|n x z| = sin slope < kLevelSine) has no contour
-    // direction to speak of: take the horizontal across the ray.
-    constexpr float kLevelSine = 0.1f;
-    Eigen::Vector3f t = nrm.cross(Eigen::Vector3f::UnitZ());
-    if (t.norm() < kLevelSine) t = Eigen::Vector3f(-u.y(), u.x(), 0.f);
-    Eigen::Vector3f m = (qc[ra] - qc[rb]).cross(t);
-    if (m.norm() < 1e-6f) m = nrm;
-    m.normalize();
-    const float cosine = std::fabs(m.dot(u));
-    if (cosine < 1e-6f) return false;
-    const float s = m.dot(qc[ra]) / m.dot(u);
-    return std::fabs(s - range) <= along(cosine);
-  }
-  // One side on the surface, the other without a return or past it: the surface's edge.
-  const int on = above == 1 ? ra : below == 1 ? rb : -1;
-  const int other = above == 1 ? below : above;
-  return on >= 0 && (other == 0 || other == 3) && std::fabs(rc[on] - range) <= float(test_.edge_max_m);
+    if (std::isfinite(rc[r])) return ended_near(r);
+  return false;
 }
 
 TileIndex::TileIndex(const PointCloud& cloud, double tile_m) : tile_m_(tile_m) {

@@ -196,16 +196,15 @@ std::pair<double, double> SweepSpread(const std::vector<Pose>& sweep, const Pose
   return {deg, m};
 }
 
-// Beam truth: for each world point, did one of the very rays of `session`'s scans (the beam x
-// column table or the scan's rosette, from each column's sweep pose; noise-free, cast in that
-// session's world with its HD actors at that keyframe) pass within truth.visibility_tolerance_m
-// of it (perpendicular distance, at a distance along the ray within [min_range, max_range - tol])
-// and end beyond it: first hit farther than that distance + tol, or none? Keyframes coarse to fine
-// (CoarseToFine); a point stops being tested once seen.
-std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg,
-                                  int threads) {
+// The very rays of `session`'s scans (the beam x column table or the scan's rosette, from each
+// column's sweep pose; noise-free, cast in that session's world with its HD actors at that
+// keyframe) that pass within truth.visibility_tolerance_m of each world point (perpendicular
+// distance, at a distance `along` the ray within [min_range, max_range - tol]): decide(point,
+// first hit, along) marks the point done. Keyframes coarse to fine (CoarseToFine); a point done
+// (on entry or by a ray) is not tested again.
+void BeamRays(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg, int threads,
+              std::vector<char>* done, const std::function<bool(std::size_t, const RayHit&, float)>& decide) {
   const std::size_t n = pts.size();
-  std::vector<char> seen(n, 0);
   const double tol = cfg.visibility_tolerance_m;
   const auto& poses = sim.T_world_sensor(session);
   std::vector<Eigen::Vector3f> origins, dirs;
@@ -226,7 +225,7 @@ std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud&
       const std::size_t b = block * kBlock, e = std::min(n, b + kBlock);
       auto& out = chunks[block];
       for (std::size_t i = b; i < e; ++i) {
-        if (seen[i]) continue;
+        if ((*done)[i]) continue;
         const Eigen::Vector3d p = pts.points[i].xyz().cast<double>(), d = p - T.translation();
         const double r = d.norm();
         if (r < cfg.min_range_m || r + tol > cfg.max_range_m + move_m) continue;
@@ -251,9 +250,19 @@ std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud&
     const auto hits = sim.CastRays(session, int(j), o, v);
     for (const Pass& q : passes) {
       const RayHit& h = hits[std::size_t(std::lower_bound(rays.begin(), rays.end(), q.ray) - rays.begin())];
-      if (!h.hit || double(h.range) > double(q.along) + tol) seen[q.point] = 1;
+      if (decide(q.point, h, q.along)) (*done)[q.point] = 1;
     }
   }
+}
+
+// Beam truth of LD objects: did one of the very rays of `session`'s scans (BeamRays) pass
+// through each world point: end beyond it (first hit farther than along + tol), or hit nothing?
+std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg,
+                                  int threads) {
+  std::vector<char> seen(pts.size(), 0);
+  const double tol = cfg.visibility_tolerance_m;
+  BeamRays(sim, session, pts, cfg, threads, &seen,
+           [&](std::size_t, const RayHit& h, float along) { return !h.hit || double(h.range) > double(along) + tol; });
   return seen;
 }
 
@@ -311,14 +320,28 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
   return rays;
 }
 
+// Beam truth of surfaces both sessions have: did one of the very rays of `session`'s scans
+// (BeamRays) end on the surface of each point of session `owner`'s HD-free world: its first hit
+// permanent structure or an LD object present in both sessions, within the along-ray tolerance
+// of the point (RayTolerance)? Points already marked observed are skipped.
+void BeamObserve(Simulator& sim, int session, int owner, const PointCloud& pts, const SimConfig& cfg, int threads,
+                 std::vector<char>* observed) {
+  BeamRays(sim, session, pts, cfg, threads, observed, [&](std::size_t, const RayHit& h, float along) {
+    const bool same = h.hit && h.cls != PointClass::kHD && (h.object < 0 || sim.IsPresent(h.object, owner));
+    return same && std::abs(double(h.range) - double(along)) <= RayTolerance(cfg, h.cos_incidence);
+  });
+}
+
 // The surfaces of `own` (session `s`'s HD-free world: permanent structure and LD objects
 // present in both sessions) that session `o` did not observe. A point is observed when `o`'s
 // HD-free world has a point of the same kind within truth.visibility_tolerance_m (a cheap
-// first test: `o` scanned that surface), else by casting rays from `o`'s keyframes (Observe).
-// These surfaces exist in both worlds, so no ray of `o` can pass through them (rays that seem
-// to are tangent to an edge): not observed means occluded, out of range or out of the FOV.
+// first test: `o` scanned that surface), else by `o`'s rays: the very rays of its scans
+// (BeamObserve, the beam truth) or, with `exact`, a ray from each keyframe straight at the point
+// (Observe, the exact-ray truth). These surfaces exist in both worlds, so no ray of `o` can pass
+// through them (rays that seem to are tangent to an edge): not observed means occluded, out of
+// range or out of the FOV, or (beam truth) between the beams.
 PointCloud Unobserved(Simulator& sim, int s, int o, const PointCloud& own, const PointCloud& other, const SimConfig& cfg,
-                      int threads, std::size_t* rays) {
+                      int threads, bool exact, std::size_t* rays) {
   auto shared = [&](int obj) { return obj < 0 || (sim.IsPresent(obj, s) && sim.IsPresent(obj, o)); };
   std::vector<bool> keep_own(own.size()), keep_other(other.size());
   for (std::size_t i = 0; i < own.size(); ++i) keep_own[i] = shared(own.object[i]);
@@ -330,7 +353,10 @@ PointCloud Unobserved(Simulator& sim, int s, int o, const PointCloud& own, const
   ParallelForChunks(pts.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) observed[i] = tree.CountWithin(pts.points[i].xyz(), radius, 1) > 0;
   });
-  *rays += Observe(sim, o, s, pts, cfg, &observed);
+  if (exact)
+    *rays += Observe(sim, o, s, pts, cfg, &observed);
+  else
+    BeamObserve(sim, o, s, pts, cfg, threads, &observed);
   std::vector<bool> un(pts.size());
   for (std::size_t i = 0; i < pts.size(); ++i) un[i] = !observed[i];
   return pts.select(un);
@@ -591,14 +617,19 @@ PairTruthCounts WritePairTruth(Simulator& sim, const SimConfig& cfg, int q, cons
   Split(pd_exact, SeenThrough(sim, 0, pd_exact, cfg), false);
   // Surfaces both sessions have (permanent, LD objects present in both) that the other
   // session never observed: weak ND (central side, kept in the map) and strong PD (query side).
-  PointCloud snd = Unobserved(sim, 0, q, central.static_world, query.static_world, cfg, threads, &counts.rays);
-  PointCloud spd = Unobserved(sim, q, 0, query.static_world, central.static_world, cfg, threads, &counts.rays);
-  snd.cls.assign(snd.size(), PointClass::kNDWeak);
-  spd.cls.assign(spd.size(), PointClass::kPDStrong);
+  // Each truth with its own rays: the scans' (beam) or one straight at each point (exact).
   const std::string pdir = truth + "/pair_00_" + Num(q, 2);
-  WritePairClouds(pdir, nd, pd, snd, spd, &counts);
   PairTruthCounts exact;
-  WritePairClouds(io::layout::ExactRayTruthDir(pdir), nd_exact, pd_exact, snd, spd, &exact);
+  for (const bool exact_rays : {false, true}) {
+    PointCloud snd = Unobserved(sim, 0, q, central.static_world, query.static_world, cfg, threads, exact_rays, &counts.rays);
+    PointCloud spd = Unobserved(sim, q, 0, query.static_world, central.static_world, cfg, threads, exact_rays, &counts.rays);
+    snd.cls.assign(snd.size(), PointClass::kNDWeak);
+    spd.cls.assign(spd.size(), PointClass::kPDStrong);
+    if (exact_rays)
+      WritePairClouds(io::layout::ExactRayTruthDir(pdir), nd_exact, pd_exact, snd, spd, &exact);
+    else
+      WritePairClouds(pdir, nd, pd, snd, spd, &counts);
+  }
   return counts;
 }
 }  // namespace
