@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace ltm::app {
@@ -38,7 +39,8 @@ void AddCommonOptions(CLI::App& cmd, CommonOptions& opts) {
 int main(int argc, char** argv) {
   CLI::App app{"ltmapper: LiDAR lifelong mapping (LT-SLAM, LT-removert, LT-map)", "ltmapper"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "ltmapper 0.1.0");
+  // The code id tells builds apart (what a simulation or a run was made with: scripts/demo.sh).
+  app.set_version_flag("--version", std::string("ltmapper 0.1.0 (code ") + ltm::CodeId() + ")");
   auto& entries = ltm::app::Registry();
   std::stable_sort(entries.begin(), entries.end(),
                    [](const auto& a, const auto& b) { return a.order < b.order; });

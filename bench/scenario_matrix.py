@@ -32,14 +32,16 @@ def load(path):
 
 
 def simulate(ltm, yaml, sim, keyframes, seed):
-    """Simulates the scenario (route.keyframes replaced when given) unless the same config is there."""
+    """Simulates the scenario (route.keyframes replaced when given) unless the same config, simulated
+    by the same code (`ltmapper --version` holds its code id), is there."""
     text = open(yaml).read()
     if keyframes:
         text, n = re.subn(r"(?m)^(  keyframes:)\s*\d+", r"\g<1> %d" % keyframes, text)
         if n != 1:
             raise RuntimeError("%s: no 'route: keyframes:' line to replace" % yaml)
     cfg = os.path.join(os.path.dirname(sim), "sim_config.yaml")
-    want = text + "\n# seed %s\n" % seed
+    version = subprocess.run([ltm, "--version"], capture_output=True, text=True).stdout.strip()
+    want = text + "\n# seed %s\n# %s\n" % (seed, version)
     if os.path.exists(os.path.join(sim, "truth", "objects.csv")) and os.path.exists(cfg) and open(cfg).read() == want:
         return
     subprocess.call(["rm", "-rf", sim])

@@ -16,11 +16,14 @@ step() { printf '\n== %s\n' "$*"; }
 T0=$(date +%s)
 
 step "1/6 simulate the default scenario (config/params_sim.yaml)"
-if [ ! -f "$OUT/sim/truth/objects.csv" ]; then
-  rm -rf "$OUT/sim"
+# Reused only when made from the same config by the same code (its id is in --version).
+STAMP="$("$LTM" --version) $(sha256sum < config/params_sim.yaml)"
+if [ ! -f "$OUT/sim/truth/objects.csv" ] || [ "$(cat "$OUT/sim_stamp.txt" 2>/dev/null)" != "$STAMP" ]; then
+  rm -rf "$OUT/sim" "$OUT/sim_stamp.txt"
   "$LTM" sim --config config/params_sim.yaml --out "$OUT/sim"
+  echo "$STAMP" > "$OUT/sim_stamp.txt"
 else
-  echo "simulation found in $OUT/sim, reused"
+  echo "simulation found in $OUT/sim (same config, same code), reused"
 fi
 SESSIONS=("$OUT"/sim/sessions/session_*)
 NAMES=(); for s in "${SESSIONS[@]}"; do NAMES+=("$(basename "$s")"); done
