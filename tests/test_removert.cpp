@@ -157,6 +157,12 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   EXPECT_EQ(v.beam_hits[2], 0);
   EXPECT_EQ(v.beam_hits[3], 1);
   EXPECT_EQ(v.beam_hits[4], 0);
+  // F lies between two beams that met its surface farther away ("around": the surface runs
+  // through its place unsampled, so a beam going on past it there is no sign of free space); C's
+  // beams met another surface: not around.
+  ASSERT_EQ(v.beam_around.size(), pts.size());
+  EXPECT_EQ(v.beam_around[4], 1);
+  EXPECT_EQ(v.beam_around[1], 0);
   // With a wider along-ray cap F's ring 3 m before it is near enough.
   removert::BeamTest wide = beams;
   wide.grazing_max_m = 3.5;

@@ -220,13 +220,11 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   EXPECT_LE(double(total(defaults)), 0.05 * double(total(without)));
   EXPECT_LE(double(total(with)), 0.25 * double(total(without)));
   // Nothing in this world was seen through: no strong ND (it would remove the ground from the
-  // map). Ground of the query between two central rings farther apart than the along-ray
-  // tolerance was not sampled by the central (unobserved, as the sim's beam truth has it); where a
-  // central beam went on past it at a grazing angle it comes out weak PD (34 of the 104 here),
-  // which adds no object (ground is not clustered) and removes nothing.
-  EXPECT_LE(with.nd_strong.size(), total(with) / 20 + 10);
-  EXPECT_LE(defaults.nd_strong.size(), total(defaults) / 20 + 10);
-  EXPECT_LE(with.pd_weak.size(), total(with) / 2);
+  // map), no weak PD either way. Query ground between two central rings farther apart than the
+  // along-ray tolerance was not sampled by the central (unobserved, as the sim's beam truth has
+  // it); a central beam going on past it there is no sign of free space (BeamTest "around").
+  EXPECT_LE(with.nd_strong.size() + with.pd_weak.size(), total(with) / 20 + 10);
+  EXPECT_LE(defaults.nd_strong.size() + defaults.pd_weak.size(), total(defaults) / 20 + 10);
 }
 
 

@@ -17,7 +17,11 @@ namespace ltm::removert {
 // (within span_deg), one of them on the point's plane (within tol_m + tol_rel * range), its ray
 // passing within that tolerance of the point and its return within the along-ray tolerance of
 // the point's place along it (tol / cos(incidence), at most grazing_max_m). A point between two
-// beams that met its surface farther away (far ground between rings) was not sampled: unobserved.
+// beams that met its surface farther away (far ground between rings) was not sampled: unobserved;
+// it is "around" (both beams on its plane and the ray towards it meets the surface through them
+// within the along-ray tolerance, not in a trough behind a crest; or one on its plane and the
+// other without a return or beyond it, the surface's edge), and a beam going on past it there is
+// no evidence its place was free (LD's own-pixel rule of PD strength does not count it).
 // The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
 // The defaults are those of RemovertConfig::ld_beam (config keys ld.beam_*).
 struct BeamTest {

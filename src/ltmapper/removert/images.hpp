@@ -147,15 +147,19 @@ class MultiResImage {
 // A scan's nearest return per (column, row) cell of BeamTest::col_deg x row_deg, stored column
 // by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
 // the first returns above and below a direction are the two beams around it.
+constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2;  // ColumnImage::Observed
 class ColumnImage {
  public:
   ColumnImage(const RemovertConfig& cfg, const BeamTest& test);
   void Build(const PointCloud& scan);
   // BeamTest for a point ps (sensor frame; its range, pitch and yaw as MultiResImage::Angles
-  // gives them) on the plane n . x = off (plane[0..3], sensor frame).
-  bool Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
+  // gives them) on the plane n . x = off (plane[0..3], sensor frame): kBeamEnded when a beam
+  // ended on its surface near it; kBeamAround when its cell is empty and the beams around it met
+  // its surface farther away (Around); both bits or none.
+  std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
 
  private:
+  bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   BeamTest test_;
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams

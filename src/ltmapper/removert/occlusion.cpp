@@ -121,9 +121,13 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     // A beam going on past a surface more horizontal than vertical (ground, a roof) passed it at
     // a grazing angle, no sign its place was free: the own pixel decides only on upright planes
     // and on scan lines (a sparse sensor's rows on an upright side, orientation unknown).
+    // Nor is it where the beams around the point met its own surface farther away (BeamTest's
+    // "around": a surface the other session sampled only sparsely, which its own-pixel beam
+    // went on past).
     if (own_pixel) {
       const bool upright = planar.empty() || !planar[i] || std::abs(normals[i].z()) < kUprightNormalZ;
-      out.seen_own[i] = seen || (seen_own && upright);
+      const bool around = beams && v.beam_around[i] > 0;
+      out.seen_own[i] = seen || (seen_own && upright && !around);
     }
     out.observed[i] = observed;
     out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;

@@ -617,7 +617,7 @@ void ColumnImage::Build(const PointCloud& scan) {
   }
 }
 
-bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
+std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
                            const float* plane) const {
   const float tol = float(test_.tol_m + test_.tol_rel * range);
   const float grazing_max = float(test_.grazing_max_m);
@@ -638,15 +638,56 @@ bool ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vec
     const float along = std::max(tol, std::min(tol / std::max(std::fabs(nrm.dot(u)), 1e-6f), grazing_max));
     return std::fabs(rc[r] - s) <= along;
   };
-  if (std::isfinite(rc[row])) return ended_near(row);
-  for (int r = row - 1; r >= std::max(0, row - span_[std::size_t(row)]); --r)
-    if (std::isfinite(rc[r])) {
-      if (ended_near(r)) return true;
-      break;
-    }
-  for (int r = row + 1; r <= std::min(rows - 1, row + span_[std::size_t(row)]); ++r)
-    if (std::isfinite(rc[r])) return ended_near(r);
-  return false;
+  if (std::isfinite(rc[row])) return ended_near(row) ? kBeamEnded : 0;
+  int ra = -1, rb = -1;
+  for (int r = row - 1; r >= std::max(0, row - span_[std::size_t(row)]) && ra < 0; --r)
+    if (std::isfinite(rc[r])) ra = r;
+  for (int r = row + 1; r <= std::min(rows - 1, row + span_[std::size_t(row)]) && rb < 0; ++r)
+    if (std::isfinite(rc[r])) rb = r;
+  const bool ended = (ra >= 0 && ended_near(ra)) || (rb >= 0 && ended_near(rb));
+  return std::uint8_t((ended ? kBeamEnded : 0) | (Around(range, column, ra, rb, ps, plane) ? kBeamAround : 0));
+}
+
+bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps,
+                         const float* plane) const {
+  const float tol = float(test_.tol_m + test_.tol_rel * range);
+  const float grazing_max = float(test_.grazing_max_m);
+  const float* rc = range_.data() + column;
+  const Eigen::Vector3f* qc = ret_.data() + column;
+  // Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol`
+  // from the surface, so up to tol / cos along a grazing ray, at most grazing_max_m.
+  auto along = [&](float cosine) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), grazing_max)); };
+  // 0: no return, 1: on the point's plane, 2: nearer (occluder), 3: farther (past the surface's edge).
+  auto kind = [&](int r) {
+    if (PlaneDistance(plane, qc[r]) <= tol) return 1;
+    return rc[r] < range ? 2 : 3;
+  };
+  const Eigen::Vector3f u = ps / range;  // the ray's direction
+  const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
+  const int above = ra >= 0 ? kind(ra) : 0, below = rb >= 0 ? kind(rb) : 0;
+  if (above == 1 && below == 1) {
+    // The surface between the two beams: the plane through their returns that holds the
+    // horizontal direction along the point's surface (its contour line; across the ray for
+    // level ground). The ray towards the point must meet it within the along-ray tolerance of
+    // the point: not in a trough behind a crest the lower beam hit. A plane, not the returns'
+    // ranges: on a surface seen obliquely the column's returns lie at other azimuths than the point.
+    // A surface within ~6 deg of level (|n x z| = sin slope < kLevelSine) has no contour
+    // direction to speak of: take the horizontal across the ray.
+    constexpr float kLevelSine = 0.1f;
+    Eigen::Vector3f t = nrm.cross(Eigen::Vector3f::UnitZ());
+    if (t.norm() < kLevelSine) t = Eigen::Vector3f(-u.y(), u.x(), 0.f);
+    Eigen::Vector3f m = (qc[ra] - qc[rb]).cross(t);
+    if (m.norm() < 1e-6f) m = nrm;
+    m.normalize();
+    const float cosine = std::fabs(m.dot(u));
+    if (cosine < 1e-6f) return false;
+    const float s = m.dot(qc[ra]) / m.dot(u);
+    return std::fabs(s - range) <= along(cosine);
+  }
+  // One side on the surface, the other without a return or past it: the surface's edge.
+  const int on = above == 1 ? ra : below == 1 ? rb : -1;
+  const int other = above == 1 ? below : above;
+  return on >= 0 && (other == 0 || other == 3);
 }
 
 TileIndex::TileIndex(const PointCloud& cloud, double tile_m) : tile_m_(tile_m) {
@@ -823,13 +864,17 @@ struct VoteCounts {
   VoteCounts(const VoteSetup& s, std::size_t n)
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
-        beam_hits(s.beams ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
+        beam_hits(s.beams ? n : 0, 0), beam_around(s.beams ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
     const std::lock_guard<std::mutex> lock(locks[tile]);
     if (!beam_hits.empty()) {
       std::uint16_t* ov = beam_hits.data() + b;
-      for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + sc.seen_beams[i]);
+      std::uint16_t* av = beam_around.data() + b;
+      for (std::size_t i = 0; i < tn; ++i) {
+        ov[i] = std::uint16_t(ov[i] + (sc.seen_beams[i] & detail::kBeamEnded));
+        av[i] = std::uint16_t(av[i] + ((sc.seen_beams[i] & detail::kBeamAround) >> 1));
+      }
     }
     for (std::size_t l = 0; l < levels; ++l) {
       const std::uint8_t* vote = sc.votes.data() + l * tn;
@@ -852,7 +897,10 @@ struct VoteCounts {
 
   // The counters in the caller's point order.
   void ToInputOrder(const std::vector<std::uint32_t>& order, VisibilityVotes* out) const {
-    for (std::size_t i = 0; i < beam_hits.size(); ++i) out->beam_hits[std::size_t(order[i])] = beam_hits[i];
+    for (std::size_t i = 0; i < beam_hits.size(); ++i) {
+      out->beam_hits[std::size_t(order[i])] = beam_hits[i];
+      out->beam_around[std::size_t(order[i])] = beam_around[i];
+    }
     for (std::size_t l = 0; l < levels; ++l)
       for (std::size_t i = 0; i < n; ++i) {
         const std::size_t orig = std::size_t(order[i]);
@@ -864,7 +912,7 @@ struct VoteCounts {
   }
 
   std::size_t n, levels;
-  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits;
+  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits, beam_around;
   std::unique_ptr<std::mutex[]> locks;
 };
 
@@ -886,7 +934,10 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   out.hit.assign(n * levels, 0);
   if (options.count_occluded) out.occ.assign(n * levels, 0);
   if (options.count_own_see) out.see_own.assign(n * levels, 0);
-  if (options.normals != nullptr && options.beams != nullptr) out.beam_hits.assign(n, 0);
+  if (options.normals != nullptr && options.beams != nullptr) {
+    out.beam_hits.assign(n, 0);
+    out.beam_around.assign(n, 0);
+  }
   return out;
 }
 }  // namespace
