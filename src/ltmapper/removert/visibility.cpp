@@ -617,6 +617,10 @@ void ColumnImage::Build(const PointCloud& scan) {
   }
 }
 
+// Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol` from
+// the surface, so up to tol / cos along a grazing ray, at most `cap` (BeamTest::grazing_max_m).
+static float AlongRay(float tol, float cosine, float cap) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), cap)); }
+
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
                            const float* plane) const {
   const float tol = float(test_.tol_m + test_.tol_rel * range);
@@ -628,15 +632,13 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
   // Beam r ended on the point's surface near it: its return on the point's plane, its ray passing
   // within tol of the point, and its return within the along-ray tolerance of the point's place
-  // along it: tol from the surface, so up to tol / cos(incidence) along a grazing ray, at most
-  // grazing_max_m (the sim's beam truth: a ray of the scan that ended on the surface near the point).
+  // along it (the sim's beam truth: a ray of the scan that ended on the surface near the point).
   auto ended_near = [&](int r) {
     if (PlaneDistance(plane, qc[r]) > tol) return false;
     const Eigen::Vector3f u = qc[r] / rc[r];
     const float s = ps.dot(u);
     if ((ps - s * u).squaredNorm() > tol * tol) return false;
-    const float along = std::max(tol, std::min(tol / std::max(std::fabs(nrm.dot(u)), 1e-6f), grazing_max));
-    return std::fabs(rc[r] - s) <= along;
+    return std::fabs(rc[r] - s) <= AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max);
   };
   if (std::isfinite(rc[row])) return ended_near(row) ? kBeamEnded : 0;
   int ra = -1, rb = -1;
@@ -654,9 +656,6 @@ bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const 
   const float grazing_max = float(test_.grazing_max_m);
   const float* rc = range_.data() + column;
   const Eigen::Vector3f* qc = ret_.data() + column;
-  // Along-ray tolerance for a surface whose normal makes |cos| `cosine` with the ray: `tol`
-  // from the surface, so up to tol / cos along a grazing ray, at most grazing_max_m.
-  auto along = [&](float cosine) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), grazing_max)); };
   // 0: no return, 1: on the point's plane, 2: nearer (occluder), 3: farther (past the surface's edge).
   auto kind = [&](int r) {
     if (PlaneDistance(plane, qc[r]) <= tol) return 1;
@@ -682,7 +681,7 @@ bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const 
     const float cosine = std::fabs(m.dot(u));
     if (cosine < 1e-6f) return false;
     const float s = m.dot(qc[ra]) / m.dot(u);
-    return std::fabs(s - range) <= along(cosine);
+    return std::fabs(s - range) <= AlongRay(tol, cosine, grazing_max);
   }
   // One side on the surface, the other without a return or past it: the surface's edge.
   const int on = above == 1 ? ra : below == 1 ? rb : -1;
