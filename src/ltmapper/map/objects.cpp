@@ -30,6 +30,7 @@
 #include <deque>
 #include <iterator>
 #include <map>
+#include <memory>
 #include <tuple>
 #include <unordered_map>
 #include <unordered_set>
@@ -191,6 +192,28 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
   return idx;
 }
 
+// Distance from a point to the nearest map keyframe: a lower bound of the range it was scanned
+// from (the sampling of a cluster's surface: SampleGaps, MinWidth through MapObject::range_m).
+class SensorRanges {
+ public:
+  SensorRanges() = default;
+  explicit SensorRanges(const std::vector<Eigen::Vector3d>& sensors) {
+    if (sensors.empty()) return;
+    PointCloud at;
+    for (const auto& s : sensors) at.push_back(float(s.x()), float(s.y()), float(s.z()), 0.f);
+    tree_ = std::make_shared<const geometry::KdTree>(at);
+  }
+  bool empty() const { return !tree_; }
+  double To(const Eigen::Vector3f& p) const {  // 0 without keyframes
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    return tree_ && tree_->Nearest(p, &j, &d2) ? std::sqrt(double(d2)) : 0.0;
+  }
+
+ private:
+  std::shared_ptr<const geometry::KdTree> tree_;
+};
+
 // The sensor samples a surface at range r in rows r * object_sensor_step_deg apart and columns
 // r * object_sensor_azimuth_step_deg apart, up to twice that on a surface seen at up to 60 deg
 // incidence (1 / cos 60 deg): the gaps that still join a far object's rows and columns into one
@@ -201,19 +224,14 @@ constexpr double kSampleGapsPerStep = 2.0;
 // farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
 // of the range it was scanned from).
 std::vector<Eigen::Vector2f> SampleGaps(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
-                                        const std::vector<Eigen::Vector3d>& sensors, const MapConfig& cfg) {
+                                        const SensorRanges& ranges, const MapConfig& cfg) {
   const float tol = float(cfg.object_tolerance_m);
   std::vector<Eigen::Vector2f> gap(idx.size(), Eigen::Vector2f::Constant(tol));
-  if (sensors.empty()) return gap;
-  PointCloud at;
-  for (const auto& s : sensors) at.push_back(float(s.x()), float(s.y()), float(s.z()), 0.f);
-  const geometry::KdTree tree(at);
   const Eigen::Vector2f per_m = Eigen::Vector2f(float(cfg.object_sensor_azimuth_step_deg), float(cfg.object_sensor_step_deg)) *
                                 float(kSampleGapsPerStep * kDegToRad);
-  std::uint32_t j = 0;
-  float d2 = 0.f;
-  for (std::size_t k = 0; k < idx.size(); ++k)
-    if (tree.Nearest(changes.points[idx[k]].xyz(), &j, &d2)) gap[k] = gap[k].cwiseMax(per_m * std::sqrt(d2));
+  if (!ranges.empty())
+    for (std::size_t k = 0; k < idx.size(); ++k)
+      gap[k] = gap[k].cwiseMax(per_m * float(ranges.To(changes.points[idx[k]].xyz())));
   return gap;
 }
 
@@ -222,12 +240,11 @@ std::vector<Eigen::Vector2f> SampleGaps(const PointCloud& changes, const std::ve
 // object_min_points .. object_max_points points; the largest cluster first (ties: the one with
 // the lowest point first), each cluster's points in idx order.
 std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
-                                                const std::vector<Eigen::Vector3d>& sensors, const MapConfig& cfg,
-                                                int threads) {
+                                                const SensorRanges& ranges, const MapConfig& cfg, int threads) {
   std::vector<std::vector<std::uint32_t>> out;
   if (idx.size() < std::size_t(cfg.object_min_points)) return out;
   const PointCloud pts = changes.select(idx);
-  for (auto& c : geometry::EuclideanClusterMembers(pts, SampleGaps(changes, idx, sensors, cfg), threads)) {
+  for (auto& c : geometry::EuclideanClusterMembers(pts, SampleGaps(changes, idx, ranges, cfg), threads)) {
     if (c.size() < std::size_t(cfg.object_min_points) || c.size() > std::size_t(cfg.object_max_points)) continue;
     for (std::uint32_t& k : c) k = idx[k];
     out.push_back(std::move(c));
@@ -326,7 +343,7 @@ const Eigen::Vector3d* Nearest(const std::vector<Eigen::Vector3d>& sensors, cons
 // Step context for the rules: sensor positions and the step's accepted disappeared objects.
 struct StepContext {
   std::vector<Eigen::Vector3d> reference_sensors;  // map keyframes as of the reference session
-  std::vector<Eigen::Vector3d> all_sensors;        // every map keyframe
+  SensorRanges ranges;                             // to every map keyframe as of the step
   std::vector<const MapObject*> disappeared;       // accepted strong-ND objects of the step
 };
 
@@ -491,8 +508,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
-  const Eigen::Vector3d* s = Nearest(ctx.all_sensors, o.centroid);
-  o.range_m = s ? (*s - o.centroid).norm() : 0.0;
+  o.range_m = ctx.ranges.To(o.centroid.cast<float>());
   return o;
 }
 
@@ -675,7 +691,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
     std::vector<MapObject> group;
-    for (const auto& sel : Cluster(changes, idx, ctx.all_sensors, cfg, store.threads()))
+    for (const auto& sel : Cluster(changes, idx, ctx.ranges, cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
     const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
@@ -759,11 +775,13 @@ void RequireSensorStep(const MapConfig& cfg) {
 // yet): a step's objects depend on the store up to that step only, so they can be kept.
 StepContext ContextOf(const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
   StepContext ctx;
+  std::vector<Eigen::Vector3d> all;
   for (const auto& k : keyframes) {
     if (k.session > step.order) continue;
-    ctx.all_sensors.push_back(k.T_world_sensor.translation());
+    all.push_back(k.T_world_sensor.translation());
     if (k.session <= step.reference) ctx.reference_sensors.push_back(k.T_world_sensor.translation());
   }
+  ctx.ranges = SensorRanges(all);
   return ctx;
 }
 

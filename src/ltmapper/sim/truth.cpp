@@ -201,10 +201,11 @@ std::pair<double, double> SweepSpread(const std::vector<Pose>& sweep, const Pose
 // keyframe) that pass within truth.visibility_tolerance_m of each world point (perpendicular
 // distance, at a distance `along` the ray within [min_range, max_range - tol]): decide(point,
 // first hit, along) marks the point done. Keyframes coarse to fine (CoarseToFine); a point done
-// (on entry or by a ray) is not tested again.
-void BeamRays(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg, int threads,
-              std::vector<char>* done, const std::function<bool(std::size_t, const RayHit&, float)>& decide) {
+// (on entry or by a ray) is not tested again. Returns the number of rays cast.
+std::size_t BeamRays(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg, int threads,
+                     std::vector<char>* done, const std::function<bool(std::size_t, const RayHit&, float)>& decide) {
   const std::size_t n = pts.size();
+  std::size_t cast = 0;
   const double tol = cfg.visibility_tolerance_m;
   const auto& poses = sim.T_world_sensor(session);
   std::vector<Eigen::Vector3f> origins, dirs;
@@ -248,11 +249,13 @@ void BeamRays(Simulator& sim, int session, const PointCloud& pts, const SimConfi
     std::vector<Eigen::Vector3f> o(rays.size()), v(rays.size());
     for (std::size_t m = 0; m < rays.size(); ++m) o[m] = origins[rays[m]], v[m] = dirs[rays[m]];
     const auto hits = sim.CastRays(session, int(j), o, v);
+    cast += rays.size();
     for (const Pass& q : passes) {
       const RayHit& h = hits[std::size_t(std::lower_bound(rays.begin(), rays.end(), q.ray) - rays.begin())];
       if (decide(q.point, h, q.along)) (*done)[q.point] = 1;
     }
   }
+  return cast;
 }
 
 // Beam truth of LD objects: did one of the very rays of `session`'s scans (BeamRays) pass
@@ -324,42 +327,51 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
 // (BeamRays) end on the surface of each point of session `owner`'s HD-free world: its first hit
 // permanent structure or an LD object present in both sessions, within the along-ray tolerance
 // of the point (RayTolerance)? Points already marked observed are skipped.
-void BeamObserve(Simulator& sim, int session, int owner, const PointCloud& pts, const SimConfig& cfg, int threads,
-                 std::vector<char>* observed) {
-  BeamRays(sim, session, pts, cfg, threads, observed, [&](std::size_t, const RayHit& h, float along) {
+std::size_t BeamObserve(Simulator& sim, int session, int owner, const PointCloud& pts, const SimConfig& cfg,
+                        int threads, std::vector<char>* observed) {
+  return BeamRays(sim, session, pts, cfg, threads, observed, [&](std::size_t, const RayHit& h, float along) {
     const bool same = h.hit && h.cls != PointClass::kHD && (h.object < 0 || sim.IsPresent(h.object, owner));
     return same && std::abs(double(h.range) - double(along)) <= RayTolerance(cfg, h.cos_incidence);
   });
 }
 
 // The surfaces of `own` (session `s`'s HD-free world: permanent structure and LD objects
-// present in both sessions) that session `o` did not observe. A point is observed when `o`'s
-// HD-free world has a point of the same kind within truth.visibility_tolerance_m (a cheap
-// first test: `o` scanned that surface), else by `o`'s rays: the very rays of its scans
-// (BeamObserve, the beam truth) or, with `exact`, a ray from each keyframe straight at the point
-// (Observe, the exact-ray truth). These surfaces exist in both worlds, so no ray of `o` can pass
-// through them (rays that seem to are tangent to an edge): not observed means occluded, out of
-// range or out of the FOV, or (beam truth) between the beams.
-PointCloud Unobserved(Simulator& sim, int s, int o, const PointCloud& own, const PointCloud& other, const SimConfig& cfg,
-                      int threads, bool exact, std::size_t* rays) {
+// present in both sessions) that session `o` may not have observed, and which of them it surely
+// did: `o`'s HD-free world has a point of the same kind within truth.visibility_tolerance_m
+// (`o` scanned that surface; the first test of both truths, Unobserved).
+struct Coverage {
+  PointCloud pts;
+  std::vector<char> scanned;
+};
+Coverage ScannedByOther(Simulator& sim, int s, int o, const PointCloud& own, const PointCloud& other,
+                        const SimConfig& cfg, int threads) {
   auto shared = [&](int obj) { return obj < 0 || (sim.IsPresent(obj, s) && sim.IsPresent(obj, o)); };
   std::vector<bool> keep_own(own.size()), keep_other(other.size());
   for (std::size_t i = 0; i < own.size(); ++i) keep_own[i] = shared(own.object[i]);
   for (std::size_t i = 0; i < other.size(); ++i) keep_other[i] = shared(other.object[i]);
-  const PointCloud pts = own.select(keep_own);
+  Coverage c{own.select(keep_own), {}};
   const geometry::KdTree tree(other.select(keep_other));
-  std::vector<char> observed(pts.size(), 0);
+  c.scanned.assign(c.pts.size(), 0);
   const float radius = float(cfg.visibility_tolerance_m);
-  ParallelForChunks(pts.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) observed[i] = tree.CountWithin(pts.points[i].xyz(), radius, 1) > 0;
+  ParallelForChunks(c.pts.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) c.scanned[i] = tree.CountWithin(c.pts.points[i].xyz(), radius, 1) > 0;
   });
-  if (exact)
-    *rays += Observe(sim, o, s, pts, cfg, &observed);
-  else
-    BeamObserve(sim, o, s, pts, cfg, threads, &observed);
-  std::vector<bool> un(pts.size());
-  for (std::size_t i = 0; i < pts.size(); ++i) un[i] = !observed[i];
-  return pts.select(un);
+  return c;
+}
+
+// The points of `c` (session `s`'s surfaces) that session `o` did not observe: not scanned, nor
+// reached by `o`'s rays: the very rays of its scans (BeamObserve, the beam truth) or, with
+// `exact`, a ray from each keyframe straight at the point (Observe, the exact-ray truth). These
+// surfaces exist in both worlds, so no ray of `o` can pass through them (rays that seem to are
+// tangent to an edge): not observed means occluded, out of range or out of the FOV, or (beam
+// truth) between the beams. Adds the rays cast to *rays.
+PointCloud Unobserved(Simulator& sim, int s, int o, const Coverage& c, const SimConfig& cfg, int threads, bool exact,
+                      std::size_t* rays) {
+  std::vector<char> observed = c.scanned;
+  *rays += exact ? Observe(sim, o, s, c.pts, cfg, &observed) : BeamObserve(sim, o, s, c.pts, cfg, threads, &observed);
+  std::vector<bool> un(c.pts.size());
+  for (std::size_t i = 0; i < c.pts.size(); ++i) un[i] = !observed[i];
+  return c.pts.select(un);
 }
 
 // Runs jobs in submission order on one background thread (or inline when not threaded), with a
@@ -620,9 +632,11 @@ PairTruthCounts WritePairTruth(Simulator& sim, const SimConfig& cfg, int q, cons
   // Each truth with its own rays: the scans' (beam) or one straight at each point (exact).
   const std::string pdir = truth + "/pair_00_" + Num(q, 2);
   PairTruthCounts exact;
+  const Coverage central_side = ScannedByOther(sim, 0, q, central.static_world, query.static_world, cfg, threads);
+  const Coverage query_side = ScannedByOther(sim, q, 0, query.static_world, central.static_world, cfg, threads);
   for (const bool exact_rays : {false, true}) {
-    PointCloud snd = Unobserved(sim, 0, q, central.static_world, query.static_world, cfg, threads, exact_rays, &counts.rays);
-    PointCloud spd = Unobserved(sim, q, 0, query.static_world, central.static_world, cfg, threads, exact_rays, &counts.rays);
+    PointCloud snd = Unobserved(sim, 0, q, central_side, cfg, threads, exact_rays, &counts.rays);
+    PointCloud spd = Unobserved(sim, q, 0, query_side, cfg, threads, exact_rays, &counts.rays);
     snd.cls.assign(snd.size(), PointClass::kNDWeak);
     spd.cls.assign(spd.size(), PointClass::kPDStrong);
     if (exact_rays)
