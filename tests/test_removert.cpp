@@ -150,6 +150,7 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   removert::VisibilityOptions opt;
   opt.normals = &up;
   opt.beams = &beams;
+  opt.count_own_see = true;  // also counts "around" (the own-pixel rule's veto)
   const auto v = removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt);
   ASSERT_EQ(v.beam_hits.size(), pts.size());
   EXPECT_EQ(v.beam_hits[0], 1);

@@ -154,9 +154,10 @@ class ColumnImage {
   void Build(const PointCloud& scan);
   // BeamTest for a point ps (sensor frame; its range, pitch and yaw as MultiResImage::Angles
   // gives them) on the plane n . x = off (plane[0..3], sensor frame): kBeamEnded when a beam
-  // ended on its surface near it; kBeamAround when its cell is empty and the beams around it met
-  // its surface farther away (Around); both bits or none.
-  std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
+  // ended on its surface near it; with want_around, kBeamAround when its cell is empty and the
+  // beams around it met its surface farther away (Around); both bits or none.
+  std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
+                        bool want_around) const;
 
  private:
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;

@@ -622,7 +622,7 @@ void ColumnImage::Build(const PointCloud& scan) {
 static float AlongRay(float tol, float cosine, float cap) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), cap)); }
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                           const float* plane) const {
+                                   const float* plane, bool want_around) const {
   const float tol = float(test_.tol_m + test_.tol_rel * range);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch);
@@ -647,7 +647,8 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   for (int r = row + 1; r <= std::min(rows - 1, row + span_[std::size_t(row)]) && rb < 0; ++r)
     if (std::isfinite(rc[r])) rb = r;
   const bool ended = (ra >= 0 && ended_near(ra)) || (rb >= 0 && ended_near(rb));
-  return std::uint8_t((ended ? kBeamEnded : 0) | (Around(range, column, ra, rb, ps, plane) ? kBeamAround : 0));
+  const bool around = want_around && Around(range, column, ra, rb, ps, plane);
+  return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0));
 }
 
 bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps,
@@ -835,7 +836,8 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     pl[1] = ns.y();
     pl[2] = ns.z();
     pl[3] = ns.dot(ps);
-    if (s.beams) sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl);
+    if (s.beams) sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl,
+                                                                       s.options.count_own_see);
   }
 }
 
@@ -863,17 +865,17 @@ struct VoteCounts {
   VoteCounts(const VoteSetup& s, std::size_t n)
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
-        beam_hits(s.beams ? n : 0, 0), beam_around(s.beams ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
+        beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
     const std::lock_guard<std::mutex> lock(locks[tile]);
     if (!beam_hits.empty()) {
       std::uint16_t* ov = beam_hits.data() + b;
+      for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + (sc.seen_beams[i] & detail::kBeamEnded));
+    }
+    if (!beam_around.empty()) {
       std::uint16_t* av = beam_around.data() + b;
-      for (std::size_t i = 0; i < tn; ++i) {
-        ov[i] = std::uint16_t(ov[i] + (sc.seen_beams[i] & detail::kBeamEnded));
-        av[i] = std::uint16_t(av[i] + ((sc.seen_beams[i] & detail::kBeamAround) >> 1));
-      }
+      for (std::size_t i = 0; i < tn; ++i) av[i] = std::uint16_t(av[i] + ((sc.seen_beams[i] & detail::kBeamAround) >> 1));
     }
     for (std::size_t l = 0; l < levels; ++l) {
       const std::uint8_t* vote = sc.votes.data() + l * tn;
@@ -896,10 +898,8 @@ struct VoteCounts {
 
   // The counters in the caller's point order.
   void ToInputOrder(const std::vector<std::uint32_t>& order, VisibilityVotes* out) const {
-    for (std::size_t i = 0; i < beam_hits.size(); ++i) {
-      out->beam_hits[std::size_t(order[i])] = beam_hits[i];
-      out->beam_around[std::size_t(order[i])] = beam_around[i];
-    }
+    for (std::size_t i = 0; i < beam_hits.size(); ++i) out->beam_hits[std::size_t(order[i])] = beam_hits[i];
+    for (std::size_t i = 0; i < beam_around.size(); ++i) out->beam_around[std::size_t(order[i])] = beam_around[i];
     for (std::size_t l = 0; l < levels; ++l)
       for (std::size_t i = 0; i < n; ++i) {
         const std::size_t orig = std::size_t(order[i]);
@@ -935,7 +935,7 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   if (options.count_own_see) out.see_own.assign(n * levels, 0);
   if (options.normals != nullptr && options.beams != nullptr) {
     out.beam_hits.assign(n, 0);
-    out.beam_around.assign(n, 0);
+    if (options.count_own_see) out.beam_around.assign(n, 0);
   }
   return out;
 }

@@ -23,7 +23,8 @@ struct VisibilityVotes {
   std::vector<std::uint16_t> occ;  // occluded (nearer return); only when count_occluded
   std::vector<std::uint16_t> see_own;  // the own pixel's return beyond the point; only when count_own_see
   std::vector<std::uint16_t> beam_hits;  // [i] keyframes that observed the point's surface by the BeamTest
-  std::vector<std::uint16_t> beam_around;  // [i] keyframes whose beams around it met its surface farther away
+  std::vector<std::uint16_t> beam_around;  // [i] keyframes whose beams around it met its surface farther away;
+                                           // only with the beam test and count_own_see (its one reader)
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
   std::uint16_t SeeOwn(int level, std::size_t i) const { return see_own[std::size_t(level) * points + i]; }
