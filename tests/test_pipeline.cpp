@@ -209,6 +209,13 @@ TEST_F(Rerun, SameOutWithMoreFewerOrOtherSessionsEqualsFreshOut) {
   Run(sessions, out);
   const auto manifest = io::ReadRunManifest(io::layout::AlignedDir(out));
   ASSERT_EQ(manifest.sessions.size(), 3u);
+  // LT-SLAM measured each query's rotation uncertainty (its loops' residuals), which LD follows;
+  // the central has no earlier session to measure against.
+  EXPECT_EQ(manifest.sessions[0].rotation_sigma_deg, 0.0);
+  for (std::size_t s = 1; s < 3; ++s) {
+    EXPECT_GT(manifest.sessions[s].rotation_sigma_deg, 0.0);
+    EXPECT_LT(manifest.sessions[s].rotation_sigma_deg, 0.5);
+  }
   EXPECT_EQ(manifest.sessions[1].name, "z_drive");
   EXPECT_EQ(manifest.sessions[2].name, "a_drive");
   const auto got = Files(out);
@@ -355,16 +362,22 @@ TEST(StagingDir, RefusesForeignFolderAndReplacesItsOwn) {
 TEST(RunManifest, RoundTripsAndNamesTheFileWhenBroken) {
   test::TempDir tmp;
   io::RunManifest m;
-  m.sessions = {{"base", "/d/base", true, ""}, {"z: drive", "/d/z", false, "no loop \"found\""}};
+  m.sessions = {{"base", "/d/base", true, ""}, {"z: drive", "/d/z", false, "no loop \"found\""},
+                {"later", "/d/later", true, "", 0.0625}};
   m.slam_config = "a: 1\nb: 2\n";
   io::WriteRunManifest(tmp.str(), m);
   const auto r = io::ReadRunManifest(tmp.str());
-  ASSERT_EQ(r.sessions.size(), 2u);
+  ASSERT_EQ(r.sessions.size(), 3u);
   EXPECT_EQ(r.sessions[1].name, "z: drive");
+  EXPECT_EQ(r.sessions[0].rotation_sigma_deg, 0.0);  // not measured: no key
+  EXPECT_DOUBLE_EQ(r.sessions[2].rotation_sigma_deg, 0.0625);
   EXPECT_EQ(r.sessions[1].reason, "no loop \"found\"");
   EXPECT_FALSE(r.sessions[1].aligned);
   EXPECT_EQ(r.slam_config, m.slam_config);
-  EXPECT_EQ(r.Aligned().size(), 1u);
+  EXPECT_EQ(r.Aligned().size(), 2u);
+  test::WriteText(io::layout::ManifestFile(tmp.str()),
+                  "version: 1\nsessions: [{name: a, dir: /a, aligned: true, rotation_sigma_deg: -1}]\n");
+  test::ExpectError([&] { io::ReadRunManifest(tmp.str()); }, {"manifest.yaml", "rotation_sigma_deg"});
   test::WriteText(io::layout::ManifestFile(tmp.str()), "version: 1\nsessions: [{name: a}]\n");
   test::ExpectError([&] { io::ReadRunManifest(tmp.str()); }, {"manifest.yaml", "malformed"});
   test::ExpectError([&] { io::ReadRunManifest(tmp / "none"); }, {"manifest.yaml", "not found"});

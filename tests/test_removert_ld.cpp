@@ -203,7 +203,7 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   const PointCloud ma = removert::BuildSessionMap(a, cfg, 2), mb = removert::BuildSessionMap(b, cfg, 2);
   // With the default distance-dependent radius almost nothing is left either way.
   const auto defaults = removert::DetectLd(ma, mb, a, b, cfg, 2);
-  cfg.ld_radius_rel = 0.0;  // the same-surface test alone
+  cfg.ld_rotation_sigma_deg = 1e-9;  // no distance-dependent radius: the same-surface test alone
   auto total = [](const removert::LdResult& r) {
     return r.nd_strong.size() + r.nd_weak.size() + r.pd_strong.size() + r.pd_weak.size();
   };
@@ -229,7 +229,8 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
 
 
 // The query sampled a wall only up to x = -0.1 m (its coverage ends there), the central the whole
-// wall; both seen from 50 m, so the kd-tree radius is 0.3 m + 1 % x 50 m = 0.8 m. Central points
+// wall; both seen from 50 m, and with a rotation uncertainty of 0.191 deg (tan of 3 sigmas = 1 %)
+// the kd-tree radius is 0.3 m + 1 % x 50 m = 0.8 m. Central points
 // 0.4-0.7 m past that rim have a query point within 0.8 m, all to one side of them: with
 // ld.rim_frac they go on as raw changes (no scan sees them here: weak ND); without it the
 // kd-tree absorbs them. A whole wall the query placed 0.5 m off along its normal (pose error)
@@ -247,6 +248,8 @@ TEST(RemovertLd, PointsPastTheRimOfTheOtherCoverageAreChanges) {
   kf.T_world_sensor = test::At(0, -40, 1.8);
   kf.cloud = std::make_shared<PointCloud>();  // no returns: no visibility evidence either way
   RemovertConfig cfg = test::ConfigFor();
+  cfg.ld_rotation_sigma_deg = 0.191;
+  EXPECT_NEAR(cfg.LdRadiusRel(), 0.01, 1e-4);
   auto nd = [&](const PointCloud& query, const RemovertConfig& c) {
     const auto r = removert::DetectLd(wall, query, {kf}, {kf}, c, 1);
     PointCloud all = r.nd_strong;

@@ -36,6 +36,9 @@ inline removert::RemovertConfig ConfigFor(const Lidar& lidar = {}) {
   cfg.sensor = "table";
   for (int b = 0; b < lidar.beams; ++b)
     cfg.sensor_elevations_deg.push_back(lidar.fov_up_deg - b * (lidar.fov_up_deg - lidar.fov_down_deg) / (lidar.beams - 1));
+  // The scenes' poses are exact; LD's tolerances get the rotation uncertainty LT-SLAM measures on
+  // the simulated drives (0.06-0.08 deg), not the pose_sigma_deg prior of poses given without it.
+  cfg.ld_rotation_sigma_deg = 0.1;
   return removert::WithSensor(cfg, {});
 }
 

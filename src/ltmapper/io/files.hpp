@@ -81,6 +81,9 @@ struct ManifestSession {
   std::string dir;     // input session folder (absolute)
   bool aligned = false;
   std::string reason;  // why not aligned ("" when aligned)
+  // [deg] the rotation uncertainty of its poses against the earlier sessions' that LT-SLAM measured
+  // (slam::SessionAlignment::rotation_sigma_deg); 0 = not measured (the central, poses given)
+  double rotation_sigma_deg = 0.0;
 };
 struct RunManifest {
   std::vector<ManifestSession> sessions;  // run order, central first

@@ -150,8 +150,9 @@ void WriteRunManifest(const std::string& aligned_dir, const RunManifest& m) {
   for (const auto& s : m.sessions) {
     y << YAML::BeginMap << YAML::Key << "name" << YAML::Value << YAML::DoubleQuoted << s.name
       << YAML::Key << "dir" << YAML::Value << YAML::DoubleQuoted << s.dir << YAML::Key << "aligned"
-      << YAML::Value << s.aligned << YAML::Key << "reason" << YAML::Value << YAML::DoubleQuoted << s.reason
-      << YAML::EndMap;
+      << YAML::Value << s.aligned << YAML::Key << "reason" << YAML::Value << YAML::DoubleQuoted << s.reason;
+    if (s.rotation_sigma_deg > 0.0) y << YAML::Key << "rotation_sigma_deg" << YAML::Value << s.rotation_sigma_deg;
+    y << YAML::EndMap;
   }
   y << YAML::EndSeq << YAML::Key << "slam_config" << YAML::Value << YAML::Literal << m.slam_config;
   y << YAML::EndMap;
@@ -178,6 +179,8 @@ RunManifest ReadRunManifest(const std::string& aligned_dir) {
       ManifestSession s{n["name"].as<std::string>(), n["dir"].as<std::string>(), n["aligned"].as<bool>(),
                         n["reason"] ? n["reason"].as<std::string>() : std::string()};
       if (s.name.empty()) throw Error(path + ": a session with an empty name");
+      if (n["rotation_sigma_deg"]) s.rotation_sigma_deg = n["rotation_sigma_deg"].as<double>();
+      if (!(s.rotation_sigma_deg >= 0.0)) throw Error(path + ": session " + s.name + ": rotation_sigma_deg must be >= 0");
       m.sessions.push_back(std::move(s));
     }
     if (root["slam_config"]) m.slam_config = root["slam_config"].as<std::string>();

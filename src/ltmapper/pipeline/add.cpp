@@ -96,7 +96,7 @@ void AddChanges(const io::RunManifest& m, const RunPaths& p, const removert::Rem
     dirs.push_back(s.dir);
     poses.push_back(io::layout::PosesWorldFile(p.aligned, s.name));
   }
-  removert::AddToRemovertStage(cfg, dirs, poses, p.changes, threads);
+  removert::AddToRemovertStage(removert::WithAlignment(cfg, m.Aligned()), dirs, poses, p.changes, threads);
 }
 
 void Integrate(const RunPaths& p, const map::MapConfig& cfg, const std::string& name, int threads) {
@@ -147,11 +147,13 @@ AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std
   auto t = std::chrono::steady_clock::now();
   Session query = io::LoadSession(session_dir);
   query.name = rep.session;
-  PublishAlignment(p, AlignNewSession(m, p, query, sc.slam, threads, &rep));
+  const slam::SessionAlignment aligned = AlignNewSession(m, p, query, sc.slam, threads, &rep);
+  PublishAlignment(p, aligned);
   rep.seconds_slam = Since(t);
 
   t = std::chrono::steady_clock::now();
-  m.sessions.push_back({rep.session, fs::absolute(session_dir).lexically_normal().string(), true, ""});
+  m.sessions.push_back(
+      {rep.session, fs::absolute(session_dir).lexically_normal().string(), true, "", aligned.rotation_sigma_deg});
   AddChanges(m, p, sc.removert, threads);
   rep.seconds_removert = Since(t);
 

@@ -4,6 +4,7 @@
 #include "ltmapper/core/core.hpp"
 #include "ltmapper/geometry/sensor.hpp"
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -29,7 +30,8 @@ struct BeamTest {
   double row_deg = 0.1;         // [deg] row height (well below the beams' elevation spacing)
   double span_deg = 1.5;        // [deg] how far above / below the point's direction to look for the beams
   double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface ...
-  double tol_rel = 0.005;       // [-] ... plus this times the range (rotation error between the sessions)
+  double tol_rel = 0.0;         // [-] ... plus this times the range: not a key, the rotation uncertainty
+                                // between the sessions (RemovertConfig::LdBeamTolRel, set by ForSensor)
   double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
 };
 
@@ -80,10 +82,32 @@ struct RemovertConfig {
                                   // pedestrian's legs), not removed patches of flat ground
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
-  double ld_radius_rel = 0.01;    // [-] ... plus this times the larger of the point's distances to either session's
-                                  // nearest keyframe ... (rotation error grows with viewing distance)
+  // ... plus LdRadiusRel() times the larger of the point's distances to either session's nearest keyframe
+  // (the rotation error between the sessions moves a surface seen from afar by that much) ...
   double ld_radius_max_m = 1.0;   // [m] ... at most this
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
+  // The rotation uncertainty between two sessions' poses at one place (1 sigma). 0: what LT-SLAM
+  // measured for the pair's query session (ForQuery), else pose_sigma_deg.
+  double ld_rotation_sigma_deg = 0.0;  // [deg]
+  // Not a key: LT-SLAM's measures per session position, from the run manifest
+  // (io::ManifestSession::rotation_sigma_deg); empty or 0 = none (poses given).
+  std::vector<double> session_rotation_sigma_deg;  // [deg]
+  // The config of the LD pairs whose query is session position q: ld.rotation_sigma_deg, left 0,
+  // takes LT-SLAM's measure for that session.
+  RemovertConfig ForQuery(std::size_t q) const {
+    RemovertConfig out = *this;
+    if (out.ld_rotation_sigma_deg <= 0.0 && q < session_rotation_sigma_deg.size())
+      out.ld_rotation_sigma_deg = session_rotation_sigma_deg[q];
+    return out;
+  }
+  double LdRotationSigmaDeg() const { return ld_rotation_sigma_deg > 0.0 ? ld_rotation_sigma_deg : pose_sigma_deg; }
+  // The kd-tree radius must hold a surface both sessions have wherever the rotation error puts it:
+  // three sigma, as LT-SLAM's verification. The beam test asks what the change truth asks (a beam of
+  // the other session within ld.beam_tol_m of the point), and the rotation error brings a beam
+  // nearer as often as it takes one away: one sigma, the expected offset.
+  static constexpr double kLdRadiusSigmas = 3.0;
+  double LdRadiusRel() const { return std::tan(kLdRadiusSigmas * LdRotationSigmaDeg() * M_PI / 180.0); }
+  double LdBeamTolRel() const { return std::tan(LdRotationSigmaDeg() * M_PI / 180.0); }
   double ld_rim_frac = 0.45;      // [-] a point whose neighbours are all beyond ld.radius_m and to one side of
                                   // it (centroid of the nearest 16 off it by more than this times r, along
                                   // their surface) is past the rim of the other session's coverage: a raw
@@ -159,7 +183,7 @@ struct RemovertConfig {
     v("hd.dilate_voxels", dilate_voxels, "map voxels", 0.0, 10.0);
     v("hd.dilate_body_m", dilate_body_m, "m", 0.01, 10.0);
     v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
-    v("ld.radius_rel", ld_radius_rel, "", 0.0, 1.0);
+    v("ld.rotation_sigma_deg", ld_rotation_sigma_deg, "deg", 0.0, 10.0);
     v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);
     v("ld.min_neighbors", ld_min_neighbors, "points", 1, 1000);
     v("ld.rim_frac", ld_rim_frac, "", 0.0, 1.0);
@@ -177,7 +201,6 @@ struct RemovertConfig {
     v("ld.beam_row_deg", ld_beam.row_deg, "deg", 0.01, 10.0);
     v("ld.beam_span_deg", ld_beam.span_deg, "deg", 0.01, 30.0);
     v("ld.beam_tol_m", ld_beam.tol_m, "m", 0.0, 10.0);
-    v("ld.beam_tol_rel", ld_beam.tol_rel, "", 0.0, 1.0);
     v("ld.beam_grazing_max_m", ld_beam.grazing_max_m, "m", 0.0, 100.0);
     v("ld.residue_gap_m", ld_residue_gap_m, "m", 0.01, 10.0);
     v("ld.residue_length_m", ld_residue_length_m, "m", 0.0, 100.0);

@@ -6,6 +6,8 @@
 
 #include "ltmapper/geometry/geometry.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -55,7 +57,7 @@ bool AboveTheirGround(const detail::Neighbourhood& nb, float r, const RemovertCo
 }
 
 // Per point: kRawMissing when points[i] has fewer than k neighbours within r_i in `other`, where
-// r_i = ld_radius_m + ld_radius_rel * (the larger distance from the point to the nearest keyframe
+// r_i = ld_radius_m + LdRadiusRel() * (the larger distance from the point to the nearest keyframe
 // of either session): a surface seen from afar carries the sessions' rotation error times that
 // distance; or when it lies past the rim of the other's coverage (PastTheirRim, with ld.rim_frac);
 // kRawAboveTheirGround when its neighbours there are the other session's ground under it
@@ -64,14 +66,14 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
                                   const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
   const geometry::KdTree tree(other, threads);
-  const bool rel = cfg.ld_radius_rel > 0.0 && !own_kf.empty() && !other_kf.empty();
+  const bool rel = cfg.LdRadiusRel() > 0.0 && !own_kf.empty() && !other_kf.empty();
   std::unique_ptr<geometry::KdTree> own_tree, other_tree;
   if (rel) {
     own_tree = std::make_unique<geometry::KdTree>(own_kf);
     other_tree = std::make_unique<geometry::KdTree>(other_kf);
   }
   const std::size_t k = std::size_t(cfg.ld_min_neighbors);
-  const float r0 = float(cfg.ld_radius_m), rr = float(cfg.ld_radius_rel);
+  const float r0 = float(cfg.ld_radius_m), rr = float(cfg.LdRadiusRel());
   const float r_max = float(cfg.ld_radius_max_m), voxel = float(cfg.map_voxel_m);
   const bool rim = cfg.ld_rim_frac > 0.0;
   std::vector<std::uint8_t> m(points.size(), kRawMissing);
@@ -301,6 +303,10 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   user_cfg.Validate();
   const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
   const auto t0 = std::chrono::steady_clock::now();
+  spdlog::info("LD: rotation uncertainty between the sessions {:.3f} deg ({}): kd radius {} m + {:.2f} %, beam "
+               "tolerance {} m + {:.2f} % of the distance", cfg.LdRotationSigmaDeg(),
+               cfg.ld_rotation_sigma_deg > 0.0 ? "ld.rotation_sigma_deg: measured by LT-SLAM, or set" : "pose_sigma_deg",
+               cfg.ld_radius_m, 100.0 * cfg.LdRadiusRel(), cfg.ld_beam.tol_m, 100.0 * cfg.LdBeamTolRel());
   const detail::LdLabels labels =
       detail::LabelLd(central_map, query_map, detail::Positions(central_keyframes), detail::Positions(query_keyframes),
                       central_keyframes, query_keyframes, cfg, threads);

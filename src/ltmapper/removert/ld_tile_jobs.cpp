@@ -147,14 +147,17 @@ LdTilePlan WriteLdTilePlan(const std::string& plan_dir, const std::string& centr
   const PairSessions p = LoadPair(f.central_plan, f.query_plan);
   detail::DoneTiles(f.central_plan, p.central.plan.tiles.size());
   detail::DoneTiles(f.query_plan, p.query.plan.tiles.size());
-  f.cfg = WithSensor(p.central.cfg, p.central_kfs);
+  // The central's config (its sensor), with the LD tolerance of the query's plan (ForQuery).
+  RemovertConfig pair_cfg = p.central.cfg;
+  pair_cfg.ld_rotation_sigma_deg = p.query.cfg.ld_rotation_sigma_deg;
+  f.cfg = WithSensor(pair_cfg, p.central_kfs);
   LdCellCounts counts(f.cfg);
   auto count = [&](std::size_t, const PointCloud& piece) { counts.Add(piece); };
   ForHdParts(f.central_plan, p.central.plan, nullptr, count);
   ForHdParts(f.query_plan, p.query.plan, nullptr, count);
   f.plan = PlanLdTiles(counts, p.central_kfs, p.query_kfs, f.cfg);
   io::StagingDir staging(plan_dir, "plan.json");
-  RemovertConfig saved = p.central.cfg;  // as the HD plans have it (the sensor resolved by each job)
+  RemovertConfig saved = pair_cfg;  // as the HD plans have it (the sensor resolved by each job)
   io::SaveConfigFields(detail::ConfigFileIn(staging.path()), FieldsOf(saved));
   WriteLdPlanJson(detail::PlanFileIn(staging.path()), f, p.central_kfs.size(), p.query_kfs.size());
   staging.Publish();

@@ -178,8 +178,9 @@ std::vector<std::array<std::size_t, detail::kKeyframeClouds>> Counts(const Keyfr
 std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const SessionData& q, int ci, int qi,
                                                 const std::string& dir, const RemovertConfig& cfg, int threads) {
   spdlog::info("removert: LD {} vs {}", c.name, q.name);
-  const LdResult ld = cfg.tiles_stage ? DetectLdTiled(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads)
-                                      : DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, cfg, threads);
+  const RemovertConfig pair_cfg = cfg.ForQuery(std::size_t(qi));
+  const LdResult ld = cfg.tiles_stage ? DetectLdTiled(c.static_map, q.static_map, c.kfs, q.kfs, pair_cfg, threads)
+                                      : DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, pair_cfg, threads);
   spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} (unobserved {}); residues of "
                "movers (HD) {} of {}, {} of {} ({:.1f} s)",
                io::layout::PairDirName(ci, qi), ld.stats.nd_strong, ld.stats.nd_weak, ld.stats.nd_unobserved,
@@ -340,14 +341,22 @@ StageReport AddToRemovertStage(const RemovertConfig& user_cfg, const std::vector
   return rep;
 }
 
+RemovertConfig WithAlignment(const RemovertConfig& cfg, const std::vector<io::ManifestSession>& aligned) {
+  RemovertConfig out = cfg;
+  out.session_rotation_sigma_deg.clear();
+  for (const auto& s : aligned) out.session_rotation_sigma_deg.push_back(s.rotation_sigma_deg);
+  return out;
+}
+
 StageReport RunRemovertStageOnRun(const RemovertConfig& cfg, const std::string& aligned_dir,
                                   const std::string& out_dir, int threads) {
   std::vector<std::string> dirs, poses;
-  for (const auto& s : io::ReadRunManifest(aligned_dir).Aligned()) {
+  const io::RunManifest m = io::ReadRunManifest(aligned_dir);
+  for (const auto& s : m.Aligned()) {
     dirs.push_back(s.dir);
     poses.push_back(io::layout::PosesWorldFile(aligned_dir, s.name));
   }
-  return RunRemovertStage(cfg, dirs, poses, out_dir, threads);
+  return RunRemovertStage(WithAlignment(cfg, m.Aligned()), dirs, poses, out_dir, threads);
 }
 
 }  // namespace ltm::removert

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "ltmapper/removert/hd.hpp"
+#include "ltmapper/io/files.hpp"
 #include "ltmapper/removert/ld.hpp"
 
 #include <string>
@@ -25,8 +26,13 @@ struct StageReport {
 StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
                              const std::vector<std::string>& poses_files, const std::string& out_dir,
                              int threads = 0);
+// `cfg` with the rotation uncertainty of each session's poses that LT-SLAM measured, in run order
+// (io::ManifestSession::rotation_sigma_deg of the aligned sessions), which LD's tolerances follow
+// (RemovertConfig::ForQuery, LdRotationSigmaDeg).
+RemovertConfig WithAlignment(const RemovertConfig& cfg, const std::vector<io::ManifestSession>& aligned);
 // The stage on an LT-SLAM output: the aligned sessions of `aligned_dir`'s run manifest
-// (io::ReadRunManifest), in run order, with their aligned/<session>/poses_world.txt. Pair folder
+// (io::ReadRunManifest), in run order, with their aligned/<session>/poses_world.txt and the
+// manifest's rotation uncertainty (WithAlignment). Pair folder
 // positions are therefore positions among the manifest's aligned sessions, as LT-map reads them.
 StageReport RunRemovertStageOnRun(const RemovertConfig& cfg, const std::string& aligned_dir,
                                   const std::string& out_dir, int threads = 0);

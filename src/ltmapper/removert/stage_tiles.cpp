@@ -138,7 +138,8 @@ void RunStageFromTiles(const RemovertConfig& cfg, const std::vector<std::string>
   auto hd_plan = [&](std::size_t s) { return work + "/hd_" + std::to_string(s); };
   for (std::size_t s = 0; s < session_dirs.size(); ++s) {
     spdlog::info("removert: HD removal of {} ({} keyframes), tile by tile from files", names[s], kfs[s].size());
-    WriteTilePlan(hd_plan(s), session_dirs[s], poses_files[s], cfg, threads, session_dirs[0]);
+    // The session's plan carries its LD tolerance (ForQuery): its pairs' LD plans read it there.
+    WriteTilePlan(hd_plan(s), session_dirs[s], poses_files[s], cfg.ForQuery(s), threads, session_dirs[0]);
     RunTileJobs(hd_plan(s), {}, threads);
     rep->hd.push_back(MergeTileJobs(hd_plan(s), hd_plan(s) + "_out"));
     MoveFiles(hd_plan(s) + "_out", io::layout::SessionChangesDir(out, names[s]),

@@ -549,8 +549,10 @@ void MultiResImage::PoolRows(Level& L) const {
 
 // The beam test's cells for the sensor: columns at least one azimuth step wide (else a column
 // may hold no return of a beam), rows at most half the finest beam spacing (else two beams share
-// a cell and the one above / below is lost).
+// a cell and the one above / below is lost). The tolerance grows with the range by the rotation
+// uncertainty between the sessions (RemovertConfig::LdBeamTolRel).
 static BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test) {
+  test.tol_rel = cfg.LdBeamTolRel();
   if (!cfg.SensorResolved()) return test;
   const geometry::SensorModel& m = cfg.sensor_model;
   test.col_deg = std::max(test.col_deg, m.azimuth_step_deg);

@@ -33,6 +33,10 @@ struct SessionAlignment {
   std::vector<Pose> T_session_sensor;  // optimised, in the session's own frame
   std::vector<Pose> T_world_sensor;    // A * T_session_sensor; empty when not aligned
   int sc_candidates = 0, loops_verified = 0, loops_accepted = 0, radius_loops = 0;
+  // [deg] the RMS residual rotation of the accepted loops tying it to earlier sessions (the loops'
+  // later side) after the optimisation: the rotation uncertainty of its poses against theirs, which
+  // LD's tolerances follow (io::ManifestSession::rotation_sigma_deg); 0 without such a loop
+  double rotation_sigma_deg = 0.0;
 };
 
 struct SlamResult {

@@ -489,6 +489,14 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
       if (l.accepted && l.source == "radius") ++a.radius_loops;
     }
   }
+  std::vector<std::size_t> n(res.sessions.size(), 0);
+  for (const auto& l : loops)
+    if (l.accepted && l.residual_r_deg >= 0.0) {
+      res.sessions[std::size_t(l.b.session)].rotation_sigma_deg += l.residual_r_deg * l.residual_r_deg;
+      ++n[std::size_t(l.b.session)];
+    }
+  for (std::size_t s = 0; s < n.size(); ++s)
+    if (n[s]) res.sessions[s].rotation_sigma_deg = std::sqrt(res.sessions[s].rotation_sigma_deg / double(n[s]));
   res.loops = loops;
   return res;
 }

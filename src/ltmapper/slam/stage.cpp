@@ -180,7 +180,7 @@ void WriteManifest(const std::vector<Session>& sessions, const std::vector<std::
   for (std::size_t s = 0; s < sessions.size(); ++s) {
     const SessionAlignment& a = res.sessions[s];
     m.sessions.push_back({a.name, fs::absolute(session_dirs[s]).lexically_normal().string(), a.aligned,
-                          a.aligned ? std::string() : a.reason});
+                          a.aligned ? std::string() : a.reason, a.aligned ? a.rotation_sigma_deg : 0.0});
   }
   m.slam_config = ConfigToString(cfg);
   io::WriteRunManifest(out_dir, m);
