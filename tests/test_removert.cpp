@@ -119,7 +119,7 @@ TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
 // point merely lies between two beams that hit the same surface farther away.
 TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   // Sensor 1.8 m above flat ground (z = 0); ground points 20 m away (elevation -5.1 deg), none
-  // sampled where they are, at azimuths 0, 30, -30, 60, 45 deg.
+  // sampled where they are, at azimuths 0, 30, -30, 60, 45, 90, 120 deg.
   const Pose T = test::At(0, 0, 1.8);
   auto at = [](double yaw_deg, double rho, double z) {
     const double a = yaw_deg * M_PI / 180.0;
@@ -136,11 +136,14 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   add(at(60, 19.2, 0));    // D: the ground 0.8 m before it, no return above (beyond max range): observed
   add(at(45, 17, 0));      // F: rings 3 m before and 4 m beyond it (more than grazing_max_m 2 m):
   add(at(45, 24, 0));      //    between the beams, not observed (the sim's beam truth: unobserved)
+  add(at(90.6, 20, 0));    // G: a return 0.6 deg to its side (two columns away), 0.21 m from its ray
+                           //    (within 0.3 m): observed, as the truth counts every ray within tol
+  add(at(121.2, 20, 0));   // H: 1.2 deg to its side, 0.42 m from its ray: not observed
   WorldKeyframe kf;
   kf.T_world_sensor = T;
   kf.cloud = scan;
   PointCloud pts;
-  for (double yaw : {0.0, 30.0, -30.0, 60.0, 45.0}) {
+  for (double yaw : {0.0, 30.0, -30.0, 60.0, 45.0, 90.0, 120.0}) {
     const Eigen::Vector3f p = at(yaw, 20, 0);
     pts.push_back(p.x(), p.y(), 0.f);
   }
@@ -158,6 +161,8 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   EXPECT_EQ(v.beam_hits[2], 0);
   EXPECT_EQ(v.beam_hits[3], 1);
   EXPECT_EQ(v.beam_hits[4], 0);
+  EXPECT_EQ(v.beam_hits[5], 1);
+  EXPECT_EQ(v.beam_hits[6], 0);
   // F lies between two beams that met its surface farther away ("around": the surface runs
   // through its place unsampled, so a beam going on past it there is no sign of free space); C's
   // beams met another surface: not around.

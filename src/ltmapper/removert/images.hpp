@@ -161,6 +161,7 @@ class ColumnImage {
 
  private:
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
+  std::pair<int, int> BeamsAround(const float* rc, int row) const;
   BeamTest test_;
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams

@@ -26,6 +26,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <tuple>
 #include <utility>
 
 namespace ltm::removert {
@@ -623,33 +624,57 @@ void ColumnImage::Build(const PointCloud& scan) {
 // the surface, so up to tol / cos along a grazing ray, at most `cap` (BeamTest::grazing_max_m).
 static float AlongRay(float tol, float cosine, float cap) { return std::max(tol, std::min(tol / std::max(cosine, 1e-6f), cap)); }
 
+// The nearest rows above and below `row` within its span holding a return in the column at rc
+// (-1: none).
+std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
+  const int rows = grid_.rows, span = span_[std::size_t(row)];
+  int ra = -1, rb = -1;
+  for (int r = row - 1; r >= std::max(0, row - span) && ra < 0; --r)
+    if (std::isfinite(rc[r])) ra = r;
+  for (int r = row + 1; r <= std::min(rows - 1, row + span) && rb < 0; ++r)
+    if (std::isfinite(rc[r])) rb = r;
+  return {ra, rb};
+}
+
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
                                    const float* plane, bool want_around) const {
   const float tol = float(test_.tol_m + test_.tol_rel * range);
   const float grazing_max = float(test_.grazing_max_m);
-  const int rows = grid_.rows, row = grid_.Row(pitch);
-  const std::size_t column = std::size_t(grid_.Col(yaw)) * std::size_t(rows);
-  const float* rc = range_.data() + column;
-  const Eigen::Vector3f* qc = ret_.data() + column;
+  const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
   const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
-  // Beam r ended on the point's surface near it: its return on the point's plane, its ray passing
-  // within tol of the point, and its return within the along-ray tolerance of the point's place
-  // along it (the sim's beam truth: a ray of the scan that ended on the surface near the point).
-  auto ended_near = [&](int r) {
-    if (PlaneDistance(plane, qc[r]) > tol) return false;
-    const Eigen::Vector3f u = qc[r] / rc[r];
+  // Beam r of column c ended on the point's surface near it: its return on the point's plane, its
+  // ray passing within tol of the point, and its return within the along-ray tolerance of the
+  // point's place along it (the sim's beam truth: a ray of the scan that ended on the surface near
+  // the point).
+  auto ended_near = [&](std::size_t c, int r) {
+    const float rr = range_[c + std::size_t(r)];
+    const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
+    if (PlaneDistance(plane, q) > tol) return false;
+    const Eigen::Vector3f u = q / rr;
     const float s = ps.dot(u);
     if ((ps - s * u).squaredNorm() > tol * tol) return false;
-    return std::fabs(rc[r] - s) <= AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max);
+    return std::fabs(rr - s) <= AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max);
   };
-  if (std::isfinite(rc[row])) return ended_near(row) ? kBeamEnded : 0;
+  // In column c: its cell in the point's row, else the nearest beams above and below it.
+  auto column_ended = [&](int c_index, int* ra, int* rb) {
+    const std::size_t c = std::size_t(c_index) * std::size_t(rows);
+    const float* rc = range_.data() + c;
+    if (std::isfinite(rc[row]) && ended_near(c, row)) return true;
+    std::tie(*ra, *rb) = BeamsAround(rc, row);
+    return (*ra >= 0 && ended_near(c, *ra)) || (*rb >= 0 && ended_near(c, *rb));
+  };
   int ra = -1, rb = -1;
-  for (int r = row - 1; r >= std::max(0, row - span_[std::size_t(row)]) && ra < 0; --r)
-    if (std::isfinite(rc[r])) ra = r;
-  for (int r = row + 1; r <= std::min(rows - 1, row + span_[std::size_t(row)]) && rb < 0; ++r)
-    if (std::isfinite(rc[r])) rb = r;
-  const bool ended = (ra >= 0 && ended_near(ra)) || (rb >= 0 && ended_near(rb));
-  const bool around = want_around && Around(range, column, ra, rb, ps, plane);
+  bool ended = column_ended(col, &ra, &rb);
+  const bool own_empty = !std::isfinite(range_[std::size_t(col) * std::size_t(rows) + std::size_t(row)]);
+  const bool around = want_around && own_empty && Around(range, std::size_t(col) * std::size_t(rows), ra, rb, ps, plane);
+  // The truth counts every ray that passes within tol of the point, whatever its azimuth: the
+  // columns within asin(tol / range) of the point's.
+  const int reach = std::min(grid_.cols / 2, int(std::ceil(std::asin(std::min(1.f, tol / range)) * grid_.col_scale)));
+  for (int d = 1; d <= reach && !ended; ++d)
+    for (int c : {col - d, col + d}) {
+      int a = -1, b = -1;
+      if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
+    }
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0));
 }
 
