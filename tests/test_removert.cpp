@@ -113,6 +113,38 @@ TEST(RemovertVotes, SurfaceHitsNeedTheReturnOnThePointsPlane) {
   EXPECT_EQ(plain.occ[0], 1);
 }
 
+// A beam that went on past a point in its own pixel is evidence that the point's place was free
+// only where the pixel is narrow enough for its beams to pass within the beam tolerance of the
+// point (half the pixel at the point's range <= 0.3 m + tan(0.1 deg) x range): at 1 deg, to 43 m.
+// Farther, a return beyond the point in its pixel may be a beam that passed beside or above a
+// low structure the other session sampled sparsely.
+TEST(RemovertVotes, OwnPixelSeeThroughCountsWhereThePixelIsNarrowerThanTheTolerance) {
+  const Pose T = test::At(0, 0, 1.8);
+  auto scan = std::make_shared<PointCloud>();
+  PointCloud pts;
+  for (const auto& [yaw_deg, rho] : std::vector<std::pair<double, double>>{{0.0, 20.0}, {30.0, 50.0}}) {
+    const double a = yaw_deg * M_PI / 180.0;
+    pts.push_back(float(rho * std::cos(a)), float(rho * std::sin(a)), 1.8f);  // at the sensor's height
+    const double beyond = rho + 15.0;                                          // the beam went on
+    scan->push_back(float(beyond * std::cos(a)), float(beyond * std::sin(a)), 0.f);
+  }
+  WorldKeyframe kf;
+  kf.T_world_sensor = T;
+  kf.cloud = scan;
+  std::vector<Eigen::Vector3f> normals;
+  for (std::size_t i = 0; i < pts.size(); ++i) normals.push_back(-pts.points[i].xyz().normalized());  // facing the sensor
+  RemovertConfig cfg = test::ConfigFor();
+  removert::BeamTest beams;
+  removert::VisibilityOptions opt;
+  opt.normals = &normals;
+  opt.beams = &beams;
+  opt.count_own_see = true;
+  const auto v = removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt);
+  ASSERT_EQ(v.see_own.size(), pts.size());
+  EXPECT_EQ(v.SeeOwn(0, 0), 1);  // 20 m: half a 1 deg pixel is 0.17 m
+  EXPECT_EQ(v.SeeOwn(0, 1), 0);  // 50 m: 0.44 m, wider than the 0.39 m tolerance there
+}
+
 // The LD beam test, the sim's beam truth in the scan's own beams: a point's surface was observed
 // when a beam ended on it near the point (its ray within the tolerance of the point, its return
 // within the along-ray tolerance of it, at most grazing_max_m at grazing incidence), not when the

@@ -129,9 +129,21 @@ struct VoteTest {
   float surface_max = 0.f;    // [m] cap of the surface-hit range difference
   std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
   std::uint8_t see_own = 0;   // kSeeOwn when the own pixel's see-through is counted, else 0
+  // The own pixel's beam passed the point when the pixel's half size at the point's range is
+  // within this tolerance (the beam test's, BeamTest tol_m + tol_rel * range): a pixel wider than
+  // that holds rays that went past beside or above the point, no sign its place was free.
+  float own_tol_abs = std::numeric_limits<float>::infinity(), own_tol_rel = 0.f;
+  float own_max_range = std::numeric_limits<float>::infinity();  // [m] per level (OwnReach)
   float yaw_sigma = 0.f;      // [rad] the poses' angular uncertainty: the window is also read at yaw -+ it
   bool yaw_needs_own = false; // no rings: read at yaw -+ yaw_sigma only where the point's own window has evidence
 };
+// How far the own pixel's see-through counts at this level: where half the pixel's larger side,
+// seen from the sensor, spans at most the own-pixel tolerance: r h <= own_tol_abs + own_tol_rel r.
+inline float OwnReach(const MultiResImage::Grid& grid, const VoteTest& t) {
+  const float h = 0.5f / std::min(grid.row_scale, grid.col_scale);  // [rad]
+  if (!std::isfinite(t.own_tol_abs) || h <= t.own_tol_rel) return std::numeric_limits<float>::infinity();
+  return t.own_tol_abs / (h - t.own_tol_rel);
+}
 // Surface hit: the pixel's nearest return q lies on the point's plane (n . q = off, sensor
 // frame) within the tolerance, at most surface_max from the point in range. Far ground at a
 // grazing angle is sampled by rings metres apart in range, so the plain range test misses it;
@@ -227,7 +239,8 @@ inline Votes4 Classify4(__m128 s, __m128 at, __m128 r, const VoteTest& t) {
   const __m128 near = _mm_or_ps(_mm_cmple_ps(s_off, tol), _mm_cmple_ps(at_off, tol));
   const __m128 hit = _mm_andnot_ps(see, _mm_and_ps(evidence, near));
   const __m128 occ = _mm_andnot_ps(_mm_or_ps(see, hit), evidence);
-  const __m128 see_own = _mm_and_ps(_mm_cmplt_ps(at, inf), _mm_cmpgt_ps(at, _mm_add_ps(r, tol)));
+  const __m128 see_own = _mm_and_ps(_mm_and_ps(_mm_cmplt_ps(at, inf), _mm_cmpgt_ps(at, _mm_add_ps(r, tol))),
+                                    _mm_cmple_ps(r, _mm_set1_ps(t.own_max_range)));
   const __m128i c = _mm_or_si128(
       _mm_or_si128(_mm_or_si128(_mm_and_si128(_mm_castps_si128(see), _mm_set1_epi32(kSee)),
                                 _mm_and_si128(_mm_castps_si128(hit), _mm_set1_epi32(kHit))),
@@ -241,9 +254,10 @@ inline Votes4 Classify4(__m128 s, __m128 at, __m128 r, const VoteTest& t) {
 // plane holds 4 floats per point (sensor-frame normal, offset) and returns the image's. Surface
 // hit: an occluded point whose own pixel's return lies on its plane (OnPlane).
 template <bool kSurface>
-void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTest t, std::size_t m,
+void VoteLevel(const MultiResImage::Grid grid, const float* pairs, VoteTest t, std::size_t m,
                const std::uint32_t* idx, const float* range, const float* pitch, const float* yaw,
                const float* plane, const Eigen::Vector3f* returns, std::uint8_t* vote) {
+  t.own_max_range = OwnReach(grid, t);
 #if defined(__SSE2__)
   const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
   alignas(16) std::int32_t pix[4], code[4];
@@ -285,7 +299,7 @@ void VoteLevel(const MultiResImage::Grid grid, const float* pairs, const VoteTes
       hit = hit || (!(s > r + tol) && std::isfinite(at) &&
                     OnPlane(plane + 4 * j, returns[pix], std::fabs(at - r), tol, t.surface_max));
     vote[idx[j]] = std::uint8_t((s > r + tol ? kSee : (hit ? kHit : t.occluded)) |
-                                (std::isfinite(at) && at > r + tol ? t.see_own : 0));
+                                (std::isfinite(at) && at > r + tol && r <= t.own_max_range ? t.see_own : 0));
   }
 #endif
 }
@@ -803,6 +817,10 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   s.test.surface_max = float(options.surface_max_m);
   s.test.occluded = options.count_occluded ? kOcc : 0;
   s.test.see_own = options.count_own_see ? detail::kSeeOwn : 0;
+  if (options.count_own_see && options.beams) {
+    s.test.own_tol_abs = float(options.beams->tol_m);
+    s.test.own_tol_rel = float(cfg.LdBeamTolRel());
+  }
   // A point's direction seen from another keyframe is off by the poses' relative rotation (yaw,
   // the odometry's largest error, moves it along the columns): the window is read there too.
   // Without rings only where the point's own window has evidence: there the windows at yaw -+ it
