@@ -14,8 +14,9 @@ namespace ltm::removert {
 // Did a scan observe the surface of a point (LD "same surface": the other session has it, only
 // sampled more sparsely)? As the sim's beam truth asks (FORMATS.md): did one of the scan's beams
 // end on the point's surface near it? Judged in the point's column (col_deg wide, rows of
-// row_deg): the return of its own cell, else the nearest returns above and below its direction
-// (within span_deg), one of them on the point's plane (within tol_m + tol_rel * range), its ray
+// row_deg) and the columns within asin(tol / range) of it (the truth counts a ray at any azimuth):
+// in each, the return of the point's row and the nearest returns above and below it (within
+// span_deg), one of them on the point's plane (within tol_m + tol_rel * range), its ray
 // passing within that tolerance of the point and its return within the along-ray tolerance of
 // the point's place along it (tol / cos(incidence), at most grazing_max_m). A point between two
 // beams that met its surface farther away (far ground between rings) was not sampled: unobserved;

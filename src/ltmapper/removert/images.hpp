@@ -153,8 +153,9 @@ class ColumnImage {
   ColumnImage(const RemovertConfig& cfg, const BeamTest& test);
   void Build(const PointCloud& scan);
   // BeamTest for a point ps (sensor frame; its range, pitch and yaw as MultiResImage::Angles
-  // gives them) on the plane n . x = off (plane[0..3], sensor frame): kBeamEnded when a beam
-  // ended on its surface near it; with want_around, kBeamAround when its cell is empty and the
+  // gives them) on the plane n . x = off (plane[0..3], sensor frame): kBeamEnded when a beam of
+  // its column or of the columns within asin(tol / range) of it ended on its surface near it;
+  // with want_around, kBeamAround when its cell is empty and the
   // beams around it met its surface farther away (Around); both bits or none.
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                         bool want_around) const;
