@@ -228,6 +228,22 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
 }
 
 
+// Each LD pair takes its query session's rotation measure (from the run manifest) unless
+// ld.rotation_sigma_deg is set; a session without a measure is an error, not a silent fallback.
+TEST(RemovertLd, EachPairTakesItsQuerysRotationMeasure) {
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.ld_rotation_sigma_deg = 0.0;
+  EXPECT_DOUBLE_EQ(cfg.ForQuery(1).LdRotationSigmaDeg(), cfg.pose_sigma_deg);  // no measures: the prior
+  cfg.session_rotation_sigma_deg = {0.0, 0.05, 0.2};
+  EXPECT_DOUBLE_EQ(cfg.ForQuery(1).LdRotationSigmaDeg(), 0.05);
+  EXPECT_DOUBLE_EQ(cfg.ForQuery(2).LdRotationSigmaDeg(), 0.2);
+  EXPECT_NEAR(cfg.ForQuery(2).LdRadiusRel(), std::tan(3 * 0.2 * M_PI / 180.0), 1e-12);
+  EXPECT_NEAR(cfg.ForQuery(2).LdBeamTolRel(), std::tan(0.2 * M_PI / 180.0), 1e-12);
+  test::ExpectError([&] { cfg.ForQuery(3); }, {"rotation measure", "position 3"});
+  cfg.ld_rotation_sigma_deg = 0.1;  // set by the user: it wins
+  EXPECT_DOUBLE_EQ(cfg.ForQuery(2).LdRotationSigmaDeg(), 0.1);
+}
+
 // The query sampled a wall only up to x = -0.1 m (its coverage ends there), the central the whole
 // wall; both seen from 50 m, and with a rotation uncertainty of 0.191 deg (tan of 3 sigmas = 1 %)
 // the kd-tree radius is 0.3 m + 1 % x 50 m = 0.8 m. Central points

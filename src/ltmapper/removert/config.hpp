@@ -34,6 +34,7 @@ struct BeamTest {
   double tol_rel = 0.0;         // [-] ... plus this times the range: not a key, the rotation uncertainty
                                 // between the sessions (RemovertConfig::LdBeamTolRel, set by ForSensor)
   double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
+  double TolAt(double range) const { return tol_m + tol_rel * range; }  // [m] at `range` [m]
 };
 
 struct RemovertConfig {
@@ -95,10 +96,15 @@ struct RemovertConfig {
   std::vector<double> session_rotation_sigma_deg;  // [deg]
   // The config of the LD pairs whose query is session position q: ld.rotation_sigma_deg, left 0,
   // takes LT-SLAM's measure for that session.
+  // Measures given for fewer sessions than q + 1 are an ltm::Error (a run's manifest lists every
+  // aligned session).
   RemovertConfig ForQuery(std::size_t q) const {
     RemovertConfig out = *this;
-    if (out.ld_rotation_sigma_deg <= 0.0 && q < session_rotation_sigma_deg.size())
-      out.ld_rotation_sigma_deg = session_rotation_sigma_deg[q];
+    if (session_rotation_sigma_deg.empty()) return out;
+    if (q >= session_rotation_sigma_deg.size())
+      throw Error("removert: no rotation measure for session position " + std::to_string(q) + " (" +
+                  std::to_string(session_rotation_sigma_deg.size()) + " given)");
+    if (out.ld_rotation_sigma_deg <= 0.0) out.ld_rotation_sigma_deg = session_rotation_sigma_deg[q];
     return out;
   }
   double LdRotationSigmaDeg() const { return ld_rotation_sigma_deg > 0.0 ? ld_rotation_sigma_deg : pose_sigma_deg; }

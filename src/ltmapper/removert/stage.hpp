@@ -1,8 +1,8 @@
 // ltmapper removert: the LT-removert stage from files (batch, on a run, lifelong add).
 #pragma once
 
-#include "ltmapper/removert/hd.hpp"
 #include "ltmapper/io/files.hpp"
+#include "ltmapper/removert/hd.hpp"
 #include "ltmapper/removert/ld.hpp"
 
 #include <string>

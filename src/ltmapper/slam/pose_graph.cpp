@@ -489,14 +489,16 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
       if (l.accepted && l.source == "radius") ++a.radius_loops;
     }
   }
+  // Per session: the RMS residual rotation of the accepted loops whose later side it is.
+  std::vector<double> sum_sq(res.sessions.size(), 0.0);
   std::vector<std::size_t> n(res.sessions.size(), 0);
   for (const auto& l : loops)
     if (l.accepted && l.residual_r_deg >= 0.0) {
-      res.sessions[std::size_t(l.b.session)].rotation_sigma_deg += l.residual_r_deg * l.residual_r_deg;
+      sum_sq[std::size_t(l.b.session)] += l.residual_r_deg * l.residual_r_deg;
       ++n[std::size_t(l.b.session)];
     }
   for (std::size_t s = 0; s < n.size(); ++s)
-    if (n[s]) res.sessions[s].rotation_sigma_deg = std::sqrt(res.sessions[s].rotation_sigma_deg / double(n[s]));
+    if (n[s]) res.sessions[s].rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
   res.loops = loops;
   return res;
 }
