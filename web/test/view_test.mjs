@@ -72,7 +72,9 @@ function probePixels({ samples, background, group, colour = null }) {
     const rgb = colour || classes.get(cls).rgb;
     const r = { tried: 0, drawn: 0, colour: 0, places: [] };
     const count = parts.reduce((n, p) => n + p.count, 0);
-    const stride = Math.max(1, Math.floor(count / (samples * 4)));
+    // Spread over the whole class (its points are in tile and file order: the first ones are
+    // one corner of the map); those off screen are not tried.
+    const stride = Math.max(1, Math.floor(count / samples));
     for (let j = 0; j < count && r.tried < samples; j += stride) {
       let i = j, part = 0;
       while (i >= parts[part].count) i -= parts[part++].count;
