@@ -375,6 +375,40 @@ TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
 }
 
 
+// A car driving 12 m ahead of the central's sensor in the next lane (its side in view, 4.5 m long:
+// no pedestrian-sized residue): each keyframe met it at another place, and
+// none came back to see through that place (the session's end, where its own HD removal has no
+// later keyframe). Each place was hit by one keyframe, so it may have been moving: a residue of a
+// mover (removed as HD, no object), though car-sized. The parked car, which many keyframes hit at
+// the same place, stays a change (strong ND: the query saw through it).
+TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
+  const test::Box parked = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
+  std::vector<WorldKeyframe> central;
+  for (int k = 0; k <= 20; ++k) {
+    WorldKeyframe kf;
+    kf.index = k;
+    kf.T_world_sensor = test::At(-20.0 + 2.0 * k, 0.0, 1.8, 0.0);
+    auto boxes = Common();
+    boxes.push_back(parked);
+    const double x = -20.0 + 2.0 * k + 12.0;
+    boxes.push_back(test::MakeBox(x, 2.0, 0.3, x + 4.5, 3.8, 1.5, 30));
+    auto scan = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
+    kf.cloud = scan;
+    central.push_back(kf);
+  }
+  const auto query = Drive(Common(), 0.7, nullptr);
+  RemovertConfig cfg = test::ConfigFor();
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box lane = test::MakeBox(-8, 1.95, 0.4, 36.5, 3.85, 1.55, 30);  // every place of the lead car
+  const std::size_t lead = CountIn(cmap, lane);
+  ASSERT_GT(lead, 500u);
+  EXPECT_GE(double(CountIn(ld.nd_residue, lane)), 0.9 * double(CountIn(ld.nd_residue, lane) + CountIn(ld.nd_strong, lane)));
+  EXPECT_GE(double(CountIn(ld.nd_residue, lane) + CountIn(ld.nd_strong, lane)), 0.8 * double(lead));
+  EXPECT_GE(double(CountIn(ld.nd_strong, parked)), 0.9 * double(CountIn(cmap, parked)));
+  EXPECT_EQ(CountIn(ld.nd_residue, parked), 0u);
+}
+
 bool SameBytes(const PointCloud& a, const PointCloud& b) {
   return a.size() == b.size() && std::memcmp(a.points.data(), b.points.data(), a.size() * sizeof(PointXYZI)) == 0;
 }

@@ -181,6 +181,34 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
   }
 }
 
+// A thing one scan saw may have been moving: standing still is two keyframes of its own session
+// that met it at the same place (a hit: the pixel's return at the point's range). A cluster of
+// `seen` most of whose points no more than one of `own_voters` hit is a residue of a mover
+// whatever its size: a car driving ahead of the sensor when the session ended, or waiting beside
+// it when the session began, is seen at its last (first) place by one keyframe only; the keyframes before
+// (after) met it nearer, at its earlier (later) places, which they removed as HD. No keyframe of
+// the session came back to see through its place, so its own HD removal could not (marked in
+// *residue). Only for ring sensors: a scanner without rings samples other places in each scan,
+// so one hit there says nothing about motion.
+void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uint32_t>>& members,
+                  const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
+                  std::vector<bool>* residue) {
+  if (own_voters.empty() || !cfg.SensorResolved() || !cfg.sensor_model.ring_based) return;
+  RemovertConfig vcfg = cfg;
+  vcfg.submap_radius_m = cfg.ld_submap_radius_m;  // the voters LD picked (tiles: within this of the tile)
+  VisibilityOptions opt;
+  opt.within_beams = false;  // a keyframe that met it above the top beam met it too
+  const VisibilityVotes v = CountVisibility(seen, own_voters, cfg.ld_resolutions_deg, vcfg, threads, opt);
+  std::vector<int> hits(seen.size(), 0);
+  for (int l = 0; l < v.levels; ++l)
+    for (std::size_t i = 0; i < seen.size(); ++i) hits[i] = std::max(hits[i], int(v.Hit(l, i)));
+  for (const auto& m : members) {
+    const auto once = std::count_if(m.begin(), m.end(), [&](std::uint32_t i) { return hits[i] <= 1; });
+    if (2 * std::size_t(once) > m.size())
+      for (auto i : m) (*residue)[i] = true;
+  }
+}
+
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
 // of `own` map) split into clusters at ld_residue_gap_m. A cluster that fits in a mover's size,
 // ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
@@ -191,12 +219,15 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 // object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
 // that low is within the radius of the other session's ground, so no change at all; such a patch
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
-std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const RemovertConfig& cfg, int threads) {
+// So is a cluster its own session saw at its place from one keyframe only (MarkSeenOnce).
+std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const std::vector<WorldKeyframe>& own_voters,
+                           const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
   const auto members = geometry::EuclideanClusterMembers(seen, cfg.ld_residue_gap_m, threads);
-  std::vector<bool> small = FitAMover(seen, members, own, cfg);
-  UnmarkPiecesOfLargerOnes(seen, members, cfg.ld_residue_length_m, &small);
-  return small;
+  std::vector<bool> residue = FitAMover(seen, members, own, cfg);
+  UnmarkPiecesOfLargerOnes(seen, members, cfg.ld_residue_length_m, &residue);
+  MarkSeenOnce(seen, members, own_voters, cfg, threads, &residue);
+  return residue;
 }
 
 // Marks the points of `lower` within ld_residue_gap_m of a marked point of `body` (a residue's
@@ -216,8 +247,8 @@ std::vector<bool> LowerPartsOf(const PointCloud& body, const std::vector<bool>& 
 // changes the other session saw through (strong ND, weak PD): clustered without the lower parts
 // (kRawAboveTheirGround), which join the residue they touch.
 void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missing,
-                  const std::vector<WorldKeyframe>& others, bool nd, const RemovertConfig& cfg, int threads,
-                  std::vector<std::uint8_t>* label) {
+                  const std::vector<WorldKeyframe>& own_voters, const std::vector<WorldKeyframe>& others, bool nd,
+                  const RemovertConfig& cfg, int threads, std::vector<std::uint8_t>* label) {
   using namespace detail;
   std::vector<std::uint32_t> raw;
   for (std::size_t i = 0; i < missing.size(); ++i)
@@ -230,7 +261,7 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
   for (std::uint32_t i : raw)
     if ((*label)[i] == seen_label) (missing[i] == kRawAboveTheirGround ? lower : body).push_back(i);
   const PointCloud body_pts = own.select(body);
-  const std::vector<bool> residue = Residues(body_pts, own, cfg, threads);
+  const std::vector<bool> residue = Residues(body_pts, own, own_voters, cfg, threads);
   const std::vector<bool> residue_lower = LowerPartsOf(body_pts, residue, own.select(lower), cfg);
   for (std::size_t j = 0; j < body.size(); ++j)
     if (residue[j]) (*label)[body[j]] = kLdResidue;
@@ -257,9 +288,9 @@ LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, con
   const std::vector<std::uint8_t> nd = Missing(central_map, query_map, central_positions, query_positions, cfg, threads);
   const std::vector<std::uint8_t> pd = Missing(query_map, central_map, query_positions, central_positions, cfg, threads);
   // Weak ND preservation: ND the query never saw through stays in the map.
-  LabelChanges(central_map, nd, query_voters, true, cfg, threads, &out.central);
+  LabelChanges(central_map, nd, central_voters, query_voters, true, cfg, threads, &out.central);
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
-  LabelChanges(query_map, pd, central_voters, false, cfg, threads, &out.query);
+  LabelChanges(query_map, pd, query_voters, central_voters, false, cfg, threads, &out.query);
   return out;
 }
 
