@@ -11,6 +11,9 @@ LTM="$BUILD/apps/ltmapper"
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$ROOT"
 [ -x "$LTM" ] || { echo "demo: $LTM not found; run 'make build' first" >&2; exit 1; }
+# This script's own outputs go first: a run that stops half way leaves no report, figures or
+# pictures of an earlier run behind to be read as its own (the simulation is reused by its stamp).
+rm -rf "$OUT/eval" "$OUT/renders" "$OUT/snapshots" "$OUT/report.md" "$OUT/report.html"
 mkdir -p "$OUT/eval" "$OUT/renders"
 step() { printf '\n== %s\n' "$*"; }
 T0=$(date +%s)
