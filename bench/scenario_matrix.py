@@ -64,6 +64,7 @@ def hd_wall_per_keyframe(changes):
 def evaluate(ltm, sim, out, names):
     """Every evaluator on one scenario's run; returns the row's figures."""
     runp, ev = os.path.join(out, "run"), os.path.join(out, "eval")
+    subprocess.call(["rm", "-rf", ev])  # figures of an earlier run are never read as this one's
     os.makedirs(ev, exist_ok=True)
     aligned, changes = os.path.join(runp, "aligned"), os.path.join(runp, "changes")
     row = {"sa": [], "da": [], "da_own": [], "da_sep": [], "ld": [], "aligned": 0}
