@@ -185,8 +185,26 @@ TEST(Objects, SimTruthAndClusterFiles) {
     fs::create_directories(sd + "/labels");
     io::WritePly(sd + "/labels/000000.ply", scan);
   }
+  // The pair's change truth: object 3 seen through by the later session on 30 points, 10 it never
+  // saw (observed share 0.75); object 5 mostly in space the earlier session never observed (PD
+  // strong 30, weak 10: 0.25), a coverage difference by the rule.
+  PointCloud ch;
+  for (int k = 0; k < 80; ++k) {
+    ch.push_back(float(k), 0.f, 0.f);
+    ch.object.push_back(k < 40 ? 3 : 5);
+    const int j = k % 40;
+    ch.cls.push_back(k < 40 ? (j < 30 ? PointClass::kNDStrong : PointClass::kNDWeak)
+                            : (j < 30 ? PointClass::kPDStrong : PointClass::kPDWeak));
+  }
+  ch.session.assign(ch.size(), 0);
+  fs::create_directories(t + "/pair_00_01");
+  io::WritePly(t + "/pair_00_01/changes.ply", ch);
   const auto truth = LoadSimObjectTruth((dir / "sim").string(), "00_01", GlobalTruthMapping(Pose::Identity(), "identity"), Cfg());
   ASSERT_EQ(truth.size(), 2u);
+  EXPECT_EQ(truth[0].change_points, 30);  // strong ND only: what clustering can see
+  EXPECT_NEAR(truth[0].observed_share, 0.75, 1e-12);
+  EXPECT_EQ(truth[1].change_points, 40);
+  EXPECT_NEAR(truth[1].observed_share, 0.25, 1e-12);
   EXPECT_EQ(truth[0].id, 3);
   EXPECT_EQ(truth[0].session, 0);
   EXPECT_EQ(truth[0].pair, "00_01");
@@ -217,6 +235,11 @@ TEST(Objects, SimTruthAndClusterFiles) {
   EXPECT_TRUE(r.objects[0].found);
   EXPECT_TRUE(r.objects[1].found);  // IoU exactly 0.5
   EXPECT_NEAR(r.objects[1].best_iou, 0.5, 1e-12);
+  // Observable: the objects most of whose change the other session observed (object 3 only).
+  EXPECT_EQ(r.all.truth_objects, 2u);
+  EXPECT_EQ(r.observable.truth_objects, 1u);
+  EXPECT_EQ(r.observable.found, 1u);
+  EXPECT_EQ(r.observable.clusters, 2u);
   EXPECT_THROW(LoadSimObjectTruth((dir / "sim").string(), "00_05", GlobalTruthMapping(Pose::Identity(), "identity"), Cfg()), Error);
   fs::remove_all(dir);
 }

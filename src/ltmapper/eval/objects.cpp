@@ -189,6 +189,8 @@ void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const st
     if (s.scored) ++r.truth_objects, r.found += s.found ? 1 : 0;
   r.found_fraction = r.truth_objects ? double(r.found) / double(r.truth_objects) : kNaN;
   r.all = Slice("all", r, truth, [](const ObjectTruth&) { return true; }, [](const ClusterScore&) { return true; });
+  r.observable = Slice("observable", r, truth, [](const ObjectTruth& t) { return t.observed_share >= 0.5; },
+                       [](const ClusterScore&) { return true; });
   for (const auto& p : pairs)
     r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; },
                                [&](const ClusterScore& c) { return c.pair == p; }));
@@ -222,6 +224,7 @@ void ScoreTruth(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const s
     s.session = t.session;
     s.points = tp.cloud[i].size();
     s.change_points = t.change_points;
+    s.observed_share = t.observed_share;
     s.scored = s.points >= std::size_t(std::max(cfg.obj_min_truth_points, 1)) &&
                (t.change_points < 0 || t.change_points >= long(cfg.obj_min_change_points));
     for (const std::size_t k : used) {
@@ -361,11 +364,18 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
   if (!ply.empty() && fs::exists(ply)) {
     const PointCloud ch = io::ReadPly(ply);
     if (ch.cls.size() != ch.size() || ch.object.size() != ch.size()) throw Error(ply, 0, "needs 'class' and 'object' fields");
-    std::map<int, long> count;
-    for (std::size_t i = 0; i < ch.size(); ++i)
-      if (ch.cls[i] == PointClass::kPDStrong || ch.cls[i] == PointClass::kPDWeak || ch.cls[i] == PointClass::kNDStrong)
-        ++count[ch.object[i]];
-    for (auto& t : out) t.change_points = count.count(t.id) ? count[t.id] : 0;
+    std::map<int, long> count, observed, all;
+    for (std::size_t i = 0; i < ch.size(); ++i) {
+      const PointClass c = ch.cls[i];
+      if (c == PointClass::kPDStrong || c == PointClass::kPDWeak || c == PointClass::kNDStrong) ++count[ch.object[i]];
+      if (c == PointClass::kPDWeak || c == PointClass::kNDStrong) ++observed[ch.object[i]];
+      if (c == PointClass::kPDStrong || c == PointClass::kPDWeak || c == PointClass::kNDStrong || c == PointClass::kNDWeak)
+        ++all[ch.object[i]];
+    }
+    for (auto& t : out) {
+      t.change_points = count.count(t.id) ? count[t.id] : 0;
+      t.observed_share = all.count(t.id) ? double(observed[t.id]) / double(all[t.id]) : 0.0;
+    }
   }
   return out;
 }

@@ -25,6 +25,12 @@ struct ObjectTruth {
   // obj_min_change_points (e.g. occluded: weak ND only, or never seen by the other session)
   // are not scored.
   long change_points = -1;
+  // Share of all its change points in changes.ply (PD and ND of both strengths) that the other
+  // session observed changed: PD in space the reference saw free (weak PD), ND the later session
+  // saw through (strong ND). Under half, most of the change lies in space one of the sessions never
+  // observed (a structure revealed behind a removed wall, a car that left behind a hoarding): by
+  // the rule a coverage difference, not an object. NaN without the file.
+  double observed_share = kNaN;
 };
 struct ObjectCluster {
   std::string pair;       // step's "<reference>_<session>", 2 digits each
@@ -61,6 +67,7 @@ struct ObjectScore {
   std::size_t cluster_points = 0;  // its points after voxelisation
   double best_iou = 0.0;
   long change_points = -1;         // see ObjectTruth
+  double observed_share = kNaN;    // see ObjectTruth
   bool scored = true;              // false: too few truth points or change points
   bool found = false;              // scored and best_iou >= obj_min_iou
 };
@@ -73,6 +80,7 @@ struct ObjectsResult {
   std::vector<ObjectScore> objects;
   std::vector<ClusterScore> cluster_scores;  // clusters of the scored pairs
   ObjectsPrf all;                            // every scored pair and change type
+  ObjectsPrf observable;                     // all clusters; the scored truth objects with observed_share >= 0.5
   std::vector<ObjectsPrf> per_pair, per_change;
   std::vector<ObjectsPrf> per_class;         // "class car", ...: truth objects of the class, clusters overlapping them most
 };

@@ -210,6 +210,7 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
       .Number("recall", r.all.recall)
       .Number("f1", r.all.f1);
   WritePrf(w, r.all, "all");
+  WritePrf(w, r.observable, "observable");
   w.BeginArray("per_pair");
   for (const auto& p : r.per_pair) WritePrf(w, p);
   w.EndArray().BeginArray("per_change");
@@ -231,6 +232,7 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
         .Int("cluster_points", (long long)o.cluster_points)
         .Number("best_iou", o.best_iou)
         .Int("change_points", o.change_points)
+        .Number("observed_share", o.observed_share)
         .Bool("scored", o.scored)
         .Bool("found", o.found)
         .EndObject();
@@ -425,22 +427,25 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
      << "\nA cluster is a true object when a truth object of its pair reaches IoU >= " << Fmt(r.min_iou, 2)
      << ", else a false object. Precision = true clusters / clusters, recall = found / truth objects; "
         "change: appeared (PD clusters, objects of the pair's second session), disappeared (ND); class: the truth "
-        "objects of the class, and the clusters that overlap one of them most.\n\n"
+        "objects of the class, and the clusters that overlap one of them most; observable: the truth objects "
+        "most of whose change points (changes.ply) the other session observed changed (weak PD, strong ND), "
+        "against all clusters (the rest lies mostly in space one session never observed: coverage).\n\n"
      << Header({"slice", "truth objects", "found", "clusters", "true clusters", "precision", "recall", "F1"});
   std::vector<ObjectsPrf> rows = r.per_pair;
   rows.insert(rows.end(), r.per_change.begin(), r.per_change.end());
   rows.insert(rows.end(), r.per_class.begin(), r.per_class.end());
   rows.push_back(r.all);
+  rows.push_back(r.observable);
   for (const auto& p : rows)
     md << Row({p.name, std::to_string(p.truth_objects), std::to_string(p.found), std::to_string(p.clusters),
                std::to_string(p.true_clusters), Fmt(p.precision, 3), Fmt(p.recall, 3), Fmt(p.f1, 3)});
   md << "\n"
-     << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "best cluster", "cluster points",
-                "IoU", "found"});
+     << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "observed share",
+                "best cluster", "cluster points", "IoU", "found"});
   for (const auto& o : r.objects)
     md << Row({o.pair, std::to_string(o.id), o.cls, o.placement, std::to_string(o.session), std::to_string(o.points),
                o.change_points < 0 ? std::string("n/a") : std::to_string(o.change_points),
-               o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
+               std::isnan(o.observed_share) ? std::string("n/a") : Fmt(o.observed_share, 2), o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
                std::to_string(o.cluster_points), Fmt(o.best_iou, 3),
                !o.scored ? std::string("not scored") : o.found ? std::string("yes") : std::string("no")});
   md << "\n";
