@@ -375,8 +375,8 @@ TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
 }
 
 
-// A car driving 12 m ahead of the central's sensor in the next lane (its side in view, 4.5 m long:
-// no pedestrian-sized residue): each keyframe met it at another place, and
+// A truck driving 12 m ahead of the central's sensor in the next lane (2.5 m wide, 8 m long: no
+// pedestrian-sized residue from any view): each keyframe met it at another place, and
 // none came back to see through that place (the session's end, where its own HD removal has no
 // later keyframe). Each place was hit by one keyframe, so it may have been moving: a residue of a
 // mover (removed as HD, no object), though car-sized. The parked car, which many keyframes hit at
@@ -391,7 +391,7 @@ TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
     auto boxes = Common();
     boxes.push_back(parked);
     const double x = -20.0 + 2.0 * k + 12.0;
-    boxes.push_back(test::MakeBox(x, 2.0, 0.3, x + 4.5, 3.8, 1.5, 30));
+    boxes.push_back(test::MakeBox(x, 2.0, 0.3, x + 8.0, 4.5, 2.5, 30));
     auto scan = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
     kf.cloud = scan;
     central.push_back(kf);
@@ -400,13 +400,22 @@ TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
   RemovertConfig cfg = test::ConfigFor();
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
-  const test::Box lane = test::MakeBox(-8, 1.95, 0.4, 36.5, 3.85, 1.55, 30);  // every place of the lead car
+  const test::Box lane = test::MakeBox(-8, 1.95, 0.4, 40.05, 4.55, 2.55, 30);  // every place of the truck
   const std::size_t lead = CountIn(cmap, lane);
   ASSERT_GT(lead, 500u);
   EXPECT_GE(double(CountIn(ld.nd_residue, lane)), 0.9 * double(CountIn(ld.nd_residue, lane) + CountIn(ld.nd_strong, lane)));
   EXPECT_GE(double(CountIn(ld.nd_residue, lane) + CountIn(ld.nd_strong, lane)), 0.8 * double(lead));
   EXPECT_GE(double(CountIn(ld.nd_strong, parked)), 0.9 * double(CountIn(cmap, parked)));
   EXPECT_EQ(CountIn(ld.nd_residue, parked), 0u);
+  // A session of one scan had nothing in view twice: it cannot tell a standing thing from a moving
+  // one, so its seen-through changes stay changes (a revisit pair of single scans keeps its ND).
+  const std::vector<WorldKeyframe> last = {central.back()};
+  const PointCloud lmap = removert::BuildSessionMap(last, cfg, 2);
+  const auto one = removert::DetectLd(lmap, qmap, last, query, cfg, 2);
+  const test::Box ahead = test::MakeBox(31.95, 1.95, 0.4, 40.05, 4.55, 2.55, 30);  // its last place
+  ASSERT_GT(CountIn(lmap, ahead), 50u);
+  EXPECT_GE(double(CountIn(one.nd_strong, ahead)), 0.6 * double(CountIn(lmap, ahead)));
+  EXPECT_GT(CountIn(one.nd_strong, ahead), 4 * CountIn(one.nd_residue, ahead));  // a small piece or two by size
 }
 
 bool SameBytes(const PointCloud& a, const PointCloud& b) {
