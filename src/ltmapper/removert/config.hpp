@@ -11,6 +11,8 @@
 
 namespace ltm::removert {
 
+constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
+
 // Did a scan observe the surface of a point (LD "same surface": the other session has it, only
 // sampled more sparsely)? As the sim's beam truth asks (FORMATS.md): did one of the scan's beams
 // end on the point's surface near it? Judged in the point's column (col_deg wide, rows of
@@ -113,8 +115,8 @@ struct RemovertConfig {
   // the other session within ld.beam_tol_m of the point), and the rotation error brings a beam
   // nearer as often as it takes one away: one sigma, the expected offset.
   static constexpr double kLdRadiusSigmas = 3.0;
-  double LdRadiusRel() const { return std::tan(kLdRadiusSigmas * LdRotationSigmaDeg() * M_PI / 180.0); }
-  double LdBeamTolRel() const { return std::tan(LdRotationSigmaDeg() * M_PI / 180.0); }
+  double LdRadiusRel() const { return std::tan(kLdRadiusSigmas * LdRotationSigmaDeg() * kRadPerDeg); }
+  double LdBeamTolRel() const { return std::tan(LdRotationSigmaDeg() * kRadPerDeg); }
   double ld_rim_frac = 0.45;      // [-] a point whose neighbours are all beyond ld.radius_m and to one side of
                                   // it (centroid of the nearest 16 off it by more than this times r, along
                                   // their surface) is past the rim of the other session's coverage: a raw

@@ -17,7 +17,6 @@
 namespace ltm::removert::detail {
 
 constexpr float kPiF = 3.14159265358979323846f;
-constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
 
 // atan2 with |error| < 2e-5 rad (minimax polynomial of atan on [0, 1] plus octant folding).
 // Pixels are >= 0.1 deg = 1.7e-3 rad, so at most ~1 % of points on a pixel border can land in

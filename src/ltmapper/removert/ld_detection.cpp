@@ -183,14 +183,16 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 
 // A thing one scan saw may have been moving: standing still is two keyframes of its own session
 // that met it at the same place (a hit: the pixel's return at the point's range). A cluster of
-// `seen` most of whose points no more than one of `own_voters` hit, while at least two had them
-// in view (hit, seen through or met something nearer), is a residue of a mover whatever its size
-// (a session of one scan has no second view: nothing is judged there): a car driving ahead of the sensor when the session ended, or waiting beside
-// it when the session began, is seen at its last (first) place by one keyframe only; the keyframes before
-// (after) met it nearer, at its earlier (later) places, which they removed as HD. No keyframe of
-// the session came back to see through its place, so its own HD removal could not (marked in
-// *residue). Only for ring sensors: a scanner without rings samples other places in each scan,
-// so one hit there says nothing about motion.
+// `seen` most of whose points no more than one of `own_voters` hit, while at least two had them in
+// view (hit, seen through or met something nearer), is a residue of a mover whatever its size: a
+// car driving ahead of the sensor when the session ended, or waiting beside it when the session
+// began, is seen at its last (first) place by one keyframe only; the keyframes before (after) met
+// it nearer, at its earlier (later) places, which they removed as HD. No keyframe of the session
+// came back to see through its place, so its own HD removal could not (marked in *residue). A
+// session of one scan has no second view and judges nothing. Only for ring sensors: a scanner
+// without rings samples other places in each scan, so one hit there says nothing about motion.
+// The votes are the session's own, so they are counted as HD removal counts them (its window and
+// pose widening: hd.window_px, pose_sigma_deg), at LD's resolutions over LD's voters.
 void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uint32_t>>& members,
                   const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
                   std::vector<bool>* residue) {
@@ -204,12 +206,12 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
   std::vector<int> hits(seen.size(), 0), views(seen.size(), 0);
   for (int l = 0; l < v.levels; ++l)
     for (std::size_t i = 0; i < seen.size(); ++i) {
-      const std::size_t li = std::size_t(l) * v.points + i;
-      hits[i] = std::max(hits[i], int(v.hit[li]));
-      views[i] = std::max(views[i], int(v.see[li]) + int(v.hit[li]) + int(v.occ[li]));
+      hits[i] = std::max(hits[i], int(v.Hit(l, i)));
+      views[i] = std::max(views[i], int(v.See(l, i)) + int(v.Hit(l, i)) + int(v.Occ(l, i)));
     }
   for (const auto& m : members) {
-    const auto once = std::count_if(m.begin(), m.end(), [&](std::uint32_t i) { return hits[i] <= 1 && views[i] >= 2; });
+    const auto once =
+        std::count_if(m.begin(), m.end(), [&](std::uint32_t i) { return hits[i] <= 1 && views[i] >= 2; });
     if (2 * std::size_t(once) > m.size())
       for (auto i : m) (*residue)[i] = true;
   }

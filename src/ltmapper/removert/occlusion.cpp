@@ -114,7 +114,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
         const double o = v.SeeOwn(l, i);
         seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
       }
-      observed = observed || s + h + v.occ[std::size_t(l) * v.points + i] > 0;
+      observed = observed || s + h + v.Occ(l, i) > 0;
       if (!beams) hits = std::max(hits, int(h));
     }
     out.seen[i] = seen;

@@ -827,7 +827,7 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   // Without rings only where the point's own window has evidence: there the windows at yaw -+ it
   // may hold returns of the pattern's other passes, no ray near the point (evidence from nothing),
   // so they may only withdraw a see-through, never make one.
-  s.test.yaw_sigma = float(cfg.pose_sigma_deg * detail::kRadPerDeg);
+  s.test.yaw_sigma = float(cfg.pose_sigma_deg * kRadPerDeg);
   s.test.yaw_needs_own = cfg.SensorResolved() && !cfg.sensor_model.ring_based;
   s.beams = options.normals != nullptr && options.beams != nullptr;
   s.surface = options.normals != nullptr && (s.test.surface_max > 0.f || s.beams);

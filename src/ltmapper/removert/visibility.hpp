@@ -27,6 +27,7 @@ struct VisibilityVotes {
                                            // only with the beam test and count_own_see (its one reader)
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
+  std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
   std::uint16_t SeeOwn(int level, std::size_t i) const { return see_own[std::size_t(level) * points + i]; }
 };
 // Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit

@@ -480,6 +480,9 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
     if (a.aligned)
       for (const Pose& T : g.poses[s]) a.T_world_sensor.push_back(g.anchors[s] * T);
   }
+  // Per session also the RMS residual rotation of the accepted loops whose later side it is.
+  std::vector<double> sum_sq(res.sessions.size(), 0.0);
+  std::vector<std::size_t> n(res.sessions.size(), 0);
   for (const auto& l : loops) {
     for (int s : {l.a.session, l.b.session}) {
       SessionAlignment& a = res.sessions[s];
@@ -488,15 +491,11 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
       if (l.accepted) ++a.loops_accepted;
       if (l.accepted && l.source == "radius") ++a.radius_loops;
     }
-  }
-  // Per session: the RMS residual rotation of the accepted loops whose later side it is.
-  std::vector<double> sum_sq(res.sessions.size(), 0.0);
-  std::vector<std::size_t> n(res.sessions.size(), 0);
-  for (const auto& l : loops)
     if (l.accepted && l.residual_r_deg >= 0.0) {
       sum_sq[std::size_t(l.b.session)] += l.residual_r_deg * l.residual_r_deg;
       ++n[std::size_t(l.b.session)];
     }
+  }
   for (std::size_t s = 0; s < n.size(); ++s)
     if (n[s]) res.sessions[s].rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
   res.loops = loops;
