@@ -50,6 +50,8 @@ struct EvalConfig {
   int obj_keyframe_stride = 1;             // use every n-th labelled scan for the truth points
   int obj_min_change_points = 20;          // truth objects with fewer detectable change points
                                            // (pair changes.ply: PD, strong ND) are not scored
+  double obj_min_observed_share = 0.5;     // "observable" objects: at least this share of their change
+                                           // points observed changed by the other session (weak PD, strong ND)
   // Live / meta map content (new and removed cars); points match at ld_match_dist_m.
   double livemeta_min_fraction = 0.5;      // an object is "in" a map when at least this fraction of
                                            // its truth points has a map point within ld_match_dist_m
@@ -78,6 +80,7 @@ struct EvalConfig {
     v("objects.min_truth_points", obj_min_truth_points, "", 0, 100000000);
     v("objects.keyframe_stride", obj_keyframe_stride, "", 1, 1000000);
     v("objects.min_change_points", obj_min_change_points, "", 0, 100000000);
+    v("objects.min_observed_share", obj_min_observed_share, "", 0.0, 1.0);
     v("livemeta.min_fraction", livemeta_min_fraction, "", 0.0, 1.0);
   }
   // Range checks plus the cross-field rules (ld.bands_m strictly increasing); ltm::Error naming `where`.

@@ -184,12 +184,14 @@ ObjectsPrf Slice(const std::string& name, const ObjectsResult& r, const std::vec
   return s;
 }
 
-void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::set<std::string>& pairs) {
+void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::set<std::string>& pairs,
+               const EvalConfig& cfg) {
   for (const auto& s : r.objects)
     if (s.scored) ++r.truth_objects, r.found += s.found ? 1 : 0;
   r.found_fraction = r.truth_objects ? double(r.found) / double(r.truth_objects) : kNaN;
   r.all = Slice("all", r, truth, [](const ObjectTruth&) { return true; }, [](const ClusterScore&) { return true; });
-  r.observable = Slice("observable", r, truth, [](const ObjectTruth& t) { return t.observed_share >= 0.5; },
+  const double share = cfg.obj_min_observed_share;
+  r.observable = Slice("observable", r, truth, [&](const ObjectTruth& t) { return t.observed_share >= share; },
                        [](const ClusterScore&) { return true; });
   for (const auto& p : pairs)
     r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; },
@@ -276,7 +278,7 @@ ObjectsResult EvaluateObjects(const std::vector<ObjectTruth>& truth, const std::
   ParallelFor(truth.size(), threads, [&](std::size_t i) { tp.Set(i, truth[i].cloud, cfg.obj_voxel_m); });
   ScoreTruth(r, truth, clusters, used, tp, cp, cfg, threads);
   ScoreClusters(r, truth, clusters, used, tp, cp, cfg, threads);
-  Summarise(r, truth, pairs);
+  Summarise(r, truth, pairs, cfg);
   return r;
 }
 
@@ -364,13 +366,17 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
   if (!ply.empty() && fs::exists(ply)) {
     const PointCloud ch = io::ReadPly(ply);
     if (ch.cls.size() != ch.size() || ch.object.size() != ch.size()) throw Error(ply, 0, "needs 'class' and 'object' fields");
+    // Per object: change points the clustering can see (PD, strong ND), those the other session
+    // observed changed (weak PD, strong ND), and all of them (PD, ND).
     std::map<int, long> count, observed, all;
     for (std::size_t i = 0; i < ch.size(); ++i) {
       const PointClass c = ch.cls[i];
-      if (c == PointClass::kPDStrong || c == PointClass::kPDWeak || c == PointClass::kNDStrong) ++count[ch.object[i]];
+      const bool pd = c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+      const bool nd = c == PointClass::kNDStrong || c == PointClass::kNDWeak;
+      if (!pd && !nd) continue;
+      ++all[ch.object[i]];
+      if (pd || c == PointClass::kNDStrong) ++count[ch.object[i]];
       if (c == PointClass::kPDWeak || c == PointClass::kNDStrong) ++observed[ch.object[i]];
-      if (c == PointClass::kPDStrong || c == PointClass::kPDWeak || c == PointClass::kNDStrong || c == PointClass::kNDWeak)
-        ++all[ch.object[i]];
     }
     for (auto& t : out) {
       t.change_points = count.count(t.id) ? count[t.id] : 0;

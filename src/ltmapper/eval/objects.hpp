@@ -27,9 +27,10 @@ struct ObjectTruth {
   long change_points = -1;
   // Share of all its change points in changes.ply (PD and ND of both strengths) that the other
   // session observed changed: PD in space the reference saw free (weak PD), ND the later session
-  // saw through (strong ND). Under half, most of the change lies in space one of the sessions never
-  // observed (a structure revealed behind a removed wall, a car that left behind a hoarding): by
-  // the rule a coverage difference, not an object. NaN without the file.
+  // saw through (strong ND). Under objects.min_observed_share (half), most of the change lies in
+  // space one of the sessions never observed (a structure revealed behind a removed wall, a car
+  // that left behind a hoarding): by the rule a coverage difference, not an object. NaN
+  // without the file.
   double observed_share = kNaN;
 };
 struct ObjectCluster {
@@ -80,7 +81,8 @@ struct ObjectsResult {
   std::vector<ObjectScore> objects;
   std::vector<ClusterScore> cluster_scores;  // clusters of the scored pairs
   ObjectsPrf all;                            // every scored pair and change type
-  ObjectsPrf observable;                     // all clusters; the scored truth objects with observed_share >= 0.5
+  ObjectsPrf observable;                     // all clusters; the scored truth objects with observed_share >=
+                                             // objects.min_observed_share
   std::vector<ObjectsPrf> per_pair, per_change;
   std::vector<ObjectsPrf> per_class;         // "class car", ...: truth objects of the class, clusters overlapping them most
 };
