@@ -6,7 +6,8 @@ one table, worst HD SA first:
 
   scenario | sessions aligned | SA %% per session | DA %% per session (before the multi-session cleanup)
   [over the HD points farther than 0.1 m from every static truth point] | inter-session RMSE m / deg |
-  LD PD P/R, ND P/R per pair and strong / weak correct, against the beam truth (and the exact-ray truth) | changed objects found | HD wall s/kf | run wall s | peak MB of the run
+  LD PD P/R, ND P/R per pair {recall over the changed objects' points alone, PD/ND} and strong / weak correct,
+  against the beam truth (and the exact-ray truth) | changed objects found | HD wall s/kf | run wall s | peak MB of the run
 
 usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [scenario.yaml ...]
   --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
@@ -102,8 +103,9 @@ def evaluate(ltm, sim, out, names):
         timed([ltm, "eval", "ld", "--sim", sim, "--changes", changes, "--pair", pair, "--aligned", aligned,
              "--truth-from-scans", "--exact-ray", "--json", je, "--quiet"], je + ".log")
         le = load(je)["ld"]
+        objs = [l.get(k, {}).get("recall") for k in ("pd_objects", "nd_objects")]
         row["ld"].append((pair, l["pd"]["precision"], l["pd"]["recall"], l["nd"]["precision"], l["nd"]["recall"],
-                          l["pd_strength"]["accuracy"], l["nd_strength"]["accuracy"],
+                          objs[0], objs[1], l["pd_strength"]["accuracy"], l["nd_strength"]["accuracy"],
                           le["pd_strength"]["accuracy"], le["nd_strength"]["accuracy"]))
     objects = os.path.join(runp, "objects")
     row["objects"] = None
@@ -141,11 +143,12 @@ def fmt(v, scale=1.0, digits=2):
 
 def print_table(rows):
     print(("| scenario | aligned | SA %% per session | DA %% per session (own removal) [separable] | consistency m / deg | "
-          "LD pair: PD P/R, ND P/R; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
+          "LD pair: PD P/R, ND P/R {recall over changed objects PD/ND}; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
     print("|---|---|---|---|---|---|---|---:|---:|---:|")
     for r in sorted(rows, key=lambda r: min(r["sa"]) if r["sa"] else -1):
-        ld = "; ".join("%s: %s/%s, %s/%s; %s/%s (%s/%s)" % (p, fmt(a), fmt(b), fmt(c), fmt(d), fmt(e), fmt(f), fmt(g),
-                                                            fmt(h)) for p, a, b, c, d, e, f, g, h in r["ld"])
+        ld = "; ".join("%s: %s/%s, %s/%s {%s/%s}; %s/%s (%s/%s)" % (p, fmt(a), fmt(b), fmt(c), fmt(d), fmt(oa), fmt(ob),
+                                                                    fmt(e), fmt(f), fmt(g), fmt(h))
+                       for p, a, b, c, d, oa, ob, e, f, g, h in r["ld"])
         obj = "n/a" if not r["objects"] else "%d/%d (%s)" % (r["objects"][0], r["objects"][1], fmt(r["objects"][2]))
         print("| %s | %d/%d | %s | %s | %s / %s | %s | %s | %s | %.0f | %.0f |" % (
             r["name"], r["aligned"], r["sessions"], " ".join(fmt(x, 100) for x in r["sa"]),

@@ -1,10 +1,13 @@
 // eval metrics on hand-built cases with known answers: truth-as-output is perfect, corrupted
 // outputs give hand-computed numbers.
 #include "ltmapper/eval/eval.hpp"
+#include "ltmapper/io/io.hpp"
+#include "test_util.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <random>
 
 namespace ltm::eval {
@@ -339,6 +342,47 @@ TEST(Ld, DistanceBandsSplitByTheObservingTrajectory) {
   // ... whether or not bands are asked for: the config itself is wrong.
   EXPECT_THROW(EvaluateLd(t, p, nullptr, cfg), Error);
   EXPECT_THROW(cfg.Validate(), Error);
+}
+
+// Recall over the changed objects' points alone: the truth's objects_*.pcd (a subset of its
+// clouds) read from the pair folder, matched against every predicted point of the kind.
+TEST(Ld, RecallOverChangedObjectsApartFromCoverage) {
+  const ltm::test::TempDir tmp;
+  const std::string dir = tmp.str();
+  std::filesystem::create_directories(dir + "/truth");
+  std::filesystem::create_directories(dir + "/pred");
+  const ChangeClouds t = TruthChanges();  // rows 1 m apart: PD strong 10, PD weak 5, ND strong 8, ND weak 4
+  ChangeClouds objects;
+  objects.pd_strong = Row(4, 0.f);   // 4 of PD strong: an appeared object; the rest of PD is coverage
+  objects.nd_strong = Row(8, 20.f);  // the disappeared object: all of ND strong; ND weak is coverage
+  const std::pair<const char*, const PointCloud*> files[] = {
+      {"pd_strong", &t.pd_strong}, {"pd_weak", &t.pd_weak}, {"nd_strong", &t.nd_strong}, {"nd_weak", &t.nd_weak},
+      {"objects_pd_strong", &objects.pd_strong}, {"objects_pd_weak", &objects.pd_weak},
+      {"objects_nd_strong", &objects.nd_strong}};
+  for (const auto& [name, cloud] : files) io::WritePcd(dir + "/truth/" + name + ".pcd", *cloud);
+  ChangeClouds p;
+  p.pd_strong = Row(2, 0.f);        // half of the object, none of the coverage
+  p.nd_weak = Row(8, 20.f);         // the whole object, as weak: recall pools both strengths
+  for (const auto& [name, cloud] : {std::pair<const char*, const PointCloud*>{"pd_strong", &p.pd_strong},
+                                    {"pd_weak", &p.pd_weak}, {"nd_strong", &p.nd_strong}, {"nd_weak", &p.nd_weak}})
+    io::WritePcd(dir + "/pred/" + std::string(name) + ".pcd", *cloud);
+  // Three of four object files: the truth does not name its objects, no split.
+  EXPECT_FALSE(LoadLdCase(dir + "/truth", dir + "/pred", "").truth_objects.has_value());
+  io::WritePcd(dir + "/truth/objects_nd_weak.pcd", objects.nd_weak);
+  const LdCase c = LoadLdCase(dir + "/truth", dir + "/pred", "");
+  ASSERT_TRUE(c.truth_objects.has_value());
+  std::vector<std::pair<std::string, std::string>> inputs;
+  const LdResult r = ScoreLdCase(c, "", "", "", EvalConfig{}, 0, &inputs);
+  ASSERT_TRUE(r.objects_given);
+  EXPECT_EQ(r.pd_objects.truth, 4u);
+  EXPECT_DOUBLE_EQ(r.pd_objects.recall, 0.5);
+  EXPECT_NEAR(r.pd.recall, 2.0 / 15.0, 1e-12);
+  EXPECT_EQ(r.nd_objects.truth, 8u);
+  EXPECT_DOUBLE_EQ(r.nd_objects.recall, 1.0);
+  EXPECT_NEAR(r.nd.recall, 8.0 / 12.0, 1e-12);
+  EXPECT_TRUE(std::isnan(r.nd_objects.precision));
+  // Without the subset there is nothing to split.
+  EXPECT_FALSE(EvaluateLd(t, p, nullptr, EvalConfig{}).objects_given);
 }
 
 TEST(Ld, HandComputedCorruption) {

@@ -67,6 +67,15 @@ PrfStats Prf(const PointCloud& truth, const PointCloud& pred, const geometry::Kd
   return s;
 }
 
+// Recall alone: the truth points with a predicted point within `dist`.
+PrfStats Recall(const PointCloud& truth, const geometry::KdTree& pred_tree, double dist, tbb::task_arena& arena) {
+  PrfStats s;
+  s.truth = truth.size();
+  s.truth_matched = CountMatched(truth, pred_tree, dist, arena);
+  s.recall = Ratio(s.truth_matched, s.truth);
+  return s;
+}
+
 PointCloud Concat(const PointCloud& a, const PointCloud& b) {
   PointCloud c;
   c.points.reserve(a.size() + b.size());
@@ -299,7 +308,8 @@ PointCloud InBand(const PointCloud& c, const std::vector<float>& dist, double lo
 }  // namespace
 
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const PointCloud* kept_map,
-                    const EvalConfig& cfg, int threads, const LdTrajectories* trajectories) {
+                    const EvalConfig& cfg, int threads, const LdTrajectories* trajectories,
+                    const ChangeClouds* truth_objects) {
   cfg.Validate();
   auto arena = MakeArena(threads);
   const double d = cfg.ld_match_dist_m;
@@ -329,6 +339,11 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
   Strength(pred.nd_strong, pred.nd_weak, t_nd, truth.nd_strong.size(), d, arena, &r.nd_matched,
            &r.nd_strength_correct);
   r.nd_strength_accuracy = Ratio(r.nd_strength_correct, r.nd_matched);
+  if (truth_objects) {
+    r.objects_given = true;
+    r.pd_objects = Recall(Concat(truth_objects->pd_strong, truth_objects->pd_weak), p_pd, d, arena);
+    r.nd_objects = Recall(Concat(truth_objects->nd_strong, truth_objects->nd_weak), p_nd, d, arena);
+  }
 
   if (trajectories && !cfg.ld_bands_m.empty()) {
     std::vector<double> edges = cfg.ld_bands_m;  // strictly increasing (cfg.Validate)

@@ -227,6 +227,15 @@ ChangeClouds ReadChangeClouds(const std::string& dir) {
   return c;
 }
 
+std::optional<ChangeClouds> ReadObjectChangeClouds(const std::string& dir) {
+  const std::string names[4] = {"objects_pd_strong.pcd", "objects_pd_weak.pcd", "objects_nd_strong.pcd",
+                                "objects_nd_weak.pcd"};
+  for (const std::string& n : names)
+    if (!fs::exists(Join(dir, n))) return std::nullopt;
+  return ChangeClouds{io::ReadPcd(Join(dir, names[0])), io::ReadPcd(Join(dir, names[1])),
+                      io::ReadPcd(Join(dir, names[2])), io::ReadPcd(Join(dir, names[3]))};
+}
+
 ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T) {
   return {geometry::Transform(c.pd_strong, T), geometry::Transform(c.pd_weak, T),
           geometry::Transform(c.nd_strong, T), geometry::Transform(c.nd_weak, T)};

@@ -39,6 +39,11 @@ struct LdResult {
   double pd_strength_accuracy = kNaN;
   std::size_t nd_matched = 0, nd_strength_correct = 0;
   double nd_strength_accuracy = kNaN;
+  // Recall over the truth points of changed objects alone (where the truth names them:
+  // objects_*.pcd beside its clouds), matched against every predicted PD (ND) point; the rest of
+  // the truth is coverage (surfaces both sessions have that one of them never observed).
+  bool objects_given = false;
+  PrfStats pd_objects, nd_objects;  // truth, truth_matched, recall (nothing predicted: precision NaN)
 };
 // Keyframe positions of the pair's sessions, in the frame of the change clouds (for LdBand).
 struct LdTrajectories {
@@ -47,10 +52,11 @@ struct LdTrajectories {
 // Truth and prediction in the same frame. `kept_map` (may be null) is the map the method keeps
 // after the update (static / live map): weak-ND truth points within d of it count as kept.
 // With `trajectories` (may be null) the result holds the distance bands of cfg.ld_bands_m
-// (strictly increasing, else ltm::Error).
+// (strictly increasing, else ltm::Error). With `truth_objects` (may be null: the truth's points
+// of changed objects, a subset of `truth`) the result holds pd_objects / nd_objects.
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& predicted,
                     const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0,
-                    const LdTrajectories* trajectories = nullptr);
+                    const LdTrajectories* trajectories = nullptr, const ChangeClouds* truth_objects = nullptr);
 // Where the LD prediction is wrong, pooled per kind (PD vs PD, ND vs ND) at ld_match_dist_m:
 // predicted points with no truth point of their kind within d (false positives) and truth
 // points with no predicted point within d (false negatives). `cls` keeps each point's own class

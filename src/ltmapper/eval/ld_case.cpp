@@ -12,19 +12,16 @@ namespace {
 
 std::string Join(const std::string& a, const std::string& b) { return (std::filesystem::path(a) / b).string(); }
 
-// The pair's truth clouds (true world, PD from the query's static world, ND from the central's)
-// in the estimate frame.
-ChangeClouds SimTruth(const std::string& sim, const std::string& truth_dir, std::size_t c, std::size_t q,
-                      const TruthMapping& m, bool from_scans, const EvalConfig& cfg, int threads,
-                      std::vector<std::pair<std::string, std::string>>* inputs) {
-  const ChangeClouds w = ReadChangeClouds(truth_dir);
+// The pair's truth clouds `w` (true world, PD from the query's static world, ND from the
+// central's) in the estimate frame.
+ChangeClouds SimTruth(const std::string& sim, const ChangeClouds& w, std::size_t c, std::size_t q,
+                      const TruthMapping& m, bool from_scans, const EvalConfig& cfg, int threads) {
   if (!from_scans)
     return {m.Map(w.pd_strong, q, threads), m.Map(w.pd_weak, q, threads), m.Map(w.nd_strong, c, threads),
             m.Map(w.nd_weak, c, threads)};
   const double v = cfg.ld_match_dist_m;
   auto pd = ChangesFromLabelledScans(sim, q, {&w.pd_strong, &w.pd_weak}, m, v, threads);
   auto nd = ChangesFromLabelledScans(sim, c, {&w.nd_strong, &w.nd_weak}, m, v, threads);
-  inputs->push_back({"truth built from", fmt::format("labelled scans placed with the method's poses, voxel {} m", v)});
   return {std::move(pd[0]), std::move(pd[1]), std::move(nd[0]), std::move(nd[1])};
 }
 
@@ -34,7 +31,12 @@ LdCase LoadLdCase(const std::string& truth_dir, const std::string& pred_dir, con
   LdCase out;
   out.inputs = {{"truth", truth_dir}, {"prediction", pred_dir}};
   out.truth = ReadChangeClouds(truth_dir);
-  if (!truth_transform.empty()) out.truth = TransformChanges(out.truth, io::ReadTransform(truth_transform));
+  out.truth_objects = ReadObjectChangeClouds(truth_dir);
+  if (!truth_transform.empty()) {
+    const Pose T = io::ReadTransform(truth_transform);
+    out.truth = TransformChanges(out.truth, T);
+    if (out.truth_objects) out.truth_objects = TransformChanges(*out.truth_objects, T);
+  }
   out.pred = ReadChangeClouds(pred_dir);
   return out;
 }
@@ -47,7 +49,12 @@ LdCase LoadSimLdCase(const std::string& sim, const std::string& changes, const s
   out.inputs = {{"truth", truth_dir}, {"prediction", pred_dir}, {"truth mapping", mapping.description}};
   // Where each session's sensor was, in the output frame (LD distance bands).
   out.trajectories = LdTrajectories{SensorPositions(sim, c, mapping), SensorPositions(sim, q, mapping)};
-  out.truth = SimTruth(sim, truth_dir, c, q, mapping, from_scans, cfg, threads, &out.inputs);
+  out.truth = SimTruth(sim, ReadChangeClouds(truth_dir), c, q, mapping, from_scans, cfg, threads);
+  if (from_scans)
+    out.inputs.push_back({"truth built from", fmt::format("labelled scans placed with the method's poses, voxel {} m",
+                                                          cfg.ld_match_dist_m)});
+  if (const auto objects = ReadObjectChangeClouds(truth_dir))
+    out.truth_objects = SimTruth(sim, *objects, c, q, mapping, from_scans, cfg, threads);
   out.pred = ReadChangeClouds(pred_dir);
   if (find_central_static) {
     // The central session is the pair's first number, indexing the sim's sessions.
@@ -73,7 +80,8 @@ LdResult ScoreLdCase(const LdCase& c, const std::string& kept_map, const std::st
     inputs->push_back({"kept map", central_static + " minus predicted strong ND"});
   }
   const LdResult r = EvaluateLd(c.truth, c.pred, kept ? &*kept : nullptr, cfg, threads,
-                                c.trajectories ? &*c.trajectories : nullptr);
+                                c.trajectories ? &*c.trajectories : nullptr,
+                                c.truth_objects ? &*c.truth_objects : nullptr);
   if (!errors_dir.empty()) {
     const LdErrors e = LdErrorClouds(c.truth, c.pred, cfg, threads);
     io::MakeDirs(errors_dir);

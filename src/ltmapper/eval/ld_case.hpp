@@ -17,18 +17,20 @@ namespace ltm::eval {
 struct LdCase {
   std::vector<std::pair<std::string, std::string>> inputs;  // what was scored (name, path), for the report
   ChangeClouds truth, pred;
+  std::optional<ChangeClouds> truth_objects;   // the truth's points of changed objects, when it names them
   std::optional<LdTrajectories> trajectories;  // sim form: keyframe positions of the pair (LD bands)
   std::string central_static;                  // sim form: changes/<central>/static_map.pcd, when present
 };
 
-// Explicit form: {pd,nd}_{strong,weak}.pcd of both folders; `truth_transform` (a 3x4 / 4x4 file,
-// may be empty) is applied to the truth.
+// Explicit form: {pd,nd}_{strong,weak}.pcd of both folders (and the truth's objects_*.pcd when
+// all four are there); `truth_transform` (a 3x4 / 4x4 file, may be empty) is applied to the truth.
 LdCase LoadLdCase(const std::string& truth_dir, const std::string& pred_dir, const std::string& truth_transform);
 
 // Sim form, pair `central`_`query` (sim session indices; truth_dir / pred_dir: FindPairDir of the
 // sim's truth/ and of `changes`): the truth change clouds moved by `mapping` (PD by the query's
 // keyframes, ND by the central's) or, with `from_scans`, rebuilt from the labelled scans placed
-// with the method's poses (ChangesFromLabelledScans at ld_match_dist_m); the sessions' sensor
+// with the method's poses (ChangesFromLabelledScans at ld_match_dist_m), and so the truth's points
+// of changed objects (objects_*.pcd) when the pair folder has them; the sessions' sensor
 // positions for the LD bands. With `find_central_static`, central_static is the central's HD-free
 // map under `changes` when it exists (else a warning: weak-ND preservation is not scored).
 LdCase LoadSimLdCase(const std::string& sim, const std::string& changes, const std::string& truth_dir,

@@ -104,6 +104,10 @@ void WriteLd(io::json::Writer& w, const LdResult& l) {
   WritePrf(w, "nd_strong", l.nd_strong);
   WritePrf(w, "nd_weak", l.nd_weak);
   WritePrf(w, "nd", l.nd);
+  if (l.objects_given) {
+    WritePrf(w, "pd_objects", l.pd_objects);
+    WritePrf(w, "nd_objects", l.nd_objects);
+  }
   w.BeginArray("bands");
   for (const LdBand& b : l.bands) {
     w.BeginObject().Number("min_m", b.min_m).Number("max_m", b.max_m);  // last max_m +inf: written as null
@@ -365,7 +369,13 @@ void MdLd(std::ostringstream& md, const LdResult& l) {
                           : std::string("n/a (no kept map)"))
      << "\n- PD strength correct: " << l.pd_strength_correct << " / " << l.pd_matched << " = "
      << Fmt(l.pd_strength_accuracy, 4) << "\n- ND strength correct: " << l.nd_strength_correct << " / "
-     << l.nd_matched << " = " << Fmt(l.nd_strength_accuracy, 4) << "\n\n";
+     << l.nd_matched << " = " << Fmt(l.nd_strength_accuracy, 4) << "\n";
+  if (l.objects_given)
+    md << "- Recall over the changed objects' points alone (the rest of the truth is coverage: surfaces both "
+          "sessions have that one never observed): PD "
+       << l.pd_objects.truth_matched << " / " << l.pd_objects.truth << " = " << Fmt(l.pd_objects.recall, 4) << ", ND "
+       << l.nd_objects.truth_matched << " / " << l.nd_objects.truth << " = " << Fmt(l.nd_objects.recall, 4) << "\n";
+  md << "\n";
   if (l.bands.empty()) return;
   md << "By distance from the session that had to observe the place (PD: nearest central keyframe, ND: "
         "nearest query keyframe):\n\n"

@@ -7,6 +7,7 @@
 #include "ltmapper/eval/trajectory.hpp"
 
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,9 @@ std::size_t AddSimSessionTruth(HdEvaluator& ev, const std::string& sim_dir,
 Pose TruthToEstimateFrame(const std::string& sim_dir, const std::string& aligned_dir);
 // The four change clouds {pd_strong,pd_weak,nd_strong,nd_weak}.pcd of a pair folder.
 ChangeClouds ReadChangeClouds(const std::string& dir);
+// The truth's points of changed objects alone (objects_{pd,nd}_{strong,weak}.pcd, as the simulator
+// writes them beside the full clouds); nullopt when any of the four is missing.
+std::optional<ChangeClouds> ReadObjectChangeClouds(const std::string& dir);
 ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T);
 // A session's HD-free map after LT-removert's multi-session cleanup (paper Fig. 3(f)): its
 // <changes>/<session>/static_map.pcd minus the residues of movers that the pairs of report.json
