@@ -172,6 +172,15 @@ void BindEval(py::module_& m) {
   m.def(
       "read_change_clouds", [](const std::string& dir) { return ChangesToDict(eval::ReadChangeClouds(dir)); },
       py::arg("dir"), "The four change clouds {pd_strong, pd_weak, nd_strong, nd_weak}.pcd of a pair folder.");
+  m.def(
+      "read_object_change_clouds",
+      [](const std::string& dir) -> py::object {
+        const auto c = eval::ReadObjectChangeClouds(dir);
+        return c ? py::object(ChangesToDict(*c)) : py::object(py::none());
+      },
+      py::arg("dir"),
+      "The truth's points of changed objects (objects_{pd,nd}_{strong,weak}.pcd of a sim pair folder) as "
+      "read_change_clouds returns them; None when any of the four is missing.");
   m.def("find_pair_dir", &eval::FindPairDir, py::arg("root"), py::arg("pair"),
         "ROOT/pair_<pair> (\"00_01\" also finds pair_session_00_session_01 ...).");
   m.def(
@@ -206,7 +215,7 @@ void BindEval(py::module_& m) {
   m.def(
       "evaluate_ld",
       [](const py::object& truth, const py::object& predicted, const py::object& kept_map, const py::object& cfg_obj,
-         const py::object& trajectories, int threads) {
+         const py::object& trajectories, const py::object& truth_objects, int threads) {
         const eval::EvalConfig cfg = cfg_obj.is_none() ? eval::EvalConfig{} : py::cast<eval::EvalConfig>(cfg_obj);
         cfg.Validate("eval config");
         const eval::ChangeClouds t = ChangesFromPython(truth, "truth"), p = ChangesFromPython(predicted, "predicted");
@@ -218,18 +227,23 @@ void BindEval(py::module_& m) {
           if (tp.size() != 2) throw py::value_error("trajectories: (central positions, query positions)");
           traj = eval::LdTrajectories{CloudFromPython(tp[0], "central positions"), CloudFromPython(tp[1], "query positions")};
         }
+        std::optional<eval::ChangeClouds> objects;
+        if (!truth_objects.is_none()) objects = ChangesFromPython(truth_objects, "truth_objects");
         eval::Report r;
         {
           py::gil_scoped_release unlock;
-          r.ld = eval::EvaluateLd(t, p, kept ? &*kept : nullptr, cfg, threads, traj ? &*traj : nullptr);
+          r.ld = eval::EvaluateLd(t, p, kept ? &*kept : nullptr, cfg, threads, traj ? &*traj : nullptr,
+                                  objects ? &*objects : nullptr);
         }
         return Section(r, "ld");
       },
       py::arg("truth"), py::arg("predicted"), py::arg("kept_map") = py::none(), py::arg("cfg") = py::none(),
-      py::arg("trajectories") = py::none(), py::arg("threads") = 0,
+      py::arg("trajectories") = py::none(), py::arg("truth_objects") = py::none(), py::arg("threads") = 0,
       "P / R / F1 of PD and ND (`ltmapper eval ld`). truth / predicted: dicts of the four change clouds (as "
       "read_change_clouds returns), same frame; kept_map: the map kept after the update (weak-ND check); "
-      "trajectories: (central, query) keyframe positions (N,3) for the distance bands. Returns the \"ld\" dict.");
+      "trajectories: (central, query) keyframe positions (N,3) for the distance bands; truth_objects: the "
+      "truth's points of changed objects (read_object_change_clouds), for pd_objects / nd_objects. Returns the "
+      "\"ld\" dict.");
   m.def("sim_session_names", &eval::SimSessionNames, py::arg("sim_dir"));
   m.def("read_object_classes", &eval::ReadObjectClasses, py::arg("objects_csv"));
 }

@@ -261,6 +261,13 @@ def test_stages_store_eval():
     ld = ltmapper.evaluate_ld(truth_ld, pred, kept_map=kept)
     assert ld["pd"]["truth"] == len(truth_ld["pd_strong"]) + len(truth_ld["pd_weak"]) and ld["weak_nd_kept"]["kept_map_given"]
     raises(ValueError, ltmapper.evaluate_ld, {"pd_strong": pred["pd_strong"]}, pred)
+    assert "nd_objects" not in ld
+    objs = ltmapper.read_object_change_clouds(ltmapper.find_pair_dir(os.path.join(sim_dir(), "truth"), "00_01"))
+    lo = ltmapper.evaluate_ld(truth_ld, pred, truth_objects=objs)
+    assert lo["nd_objects"]["truth"] == len(objs["nd_strong"]) + len(objs["nd_weak"])
+    assert lo["pd_objects"]["truth"] == len(objs["pd_strong"]) + len(objs["pd_weak"])
+    assert lo["pd"]["recall"] == ld["pd"]["recall"] and lo["nd_objects"]["precision"] is None
+    assert ltmapper.read_object_change_clouds(changes) is None
     # The multi-session cleanup: the central's map minus the residues of movers its pair found.
     cleaned, note = ltmapper.cleaned_session_map(changes, "session_00")
     residue = ltmapper.read_cloud(os.path.join(ltmapper.find_pair_dir(changes, "00_01"), "nd_residue.pcd"))
