@@ -7,7 +7,7 @@ one table, worst HD SA first:
   scenario | sessions aligned | SA %% per session | DA %% per session (before the multi-session cleanup)
   [over the HD points farther than 0.1 m from every static truth point] | inter-session RMSE m / deg |
   LD PD P/R, ND P/R per pair {recall over the changed objects' points alone, PD/ND} and strong / weak correct,
-  against the beam truth (and the exact-ray truth) | changed objects found | HD wall s/kf | run wall s | peak MB of the run
+  against the beam truth (and the exact-ray truth) | changed objects found (precision) [found among the observable ones, eval objects' slice] | HD wall s/kf | run wall s | peak MB of the run
 
 usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [scenario.yaml ...]
   --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
@@ -114,7 +114,8 @@ def evaluate(ltm, sim, out, names):
         timed([ltm, "eval", "objects", "--sim", sim, "--objects", objects, "--aligned", aligned, "--json", j, "--quiet"],
             j + ".log")
         o = load(j)["objects"]
-        row["objects"] = (o["found"], o["truth_objects"], o["precision"])
+        ob = o.get("observable") or {}
+        row["objects"] = (o["found"], o["truth_objects"], o["precision"], ob.get("found"), ob.get("truth_objects"))
     row["hd_s_kf"] = hd_wall_per_keyframe(changes)
     return row
 
@@ -143,13 +144,15 @@ def fmt(v, scale=1.0, digits=2):
 
 def print_table(rows):
     print(("| scenario | aligned | SA %% per session | DA %% per session (own removal) [separable] | consistency m / deg | "
-          "LD pair: PD P/R, ND P/R {recall over changed objects PD/ND}; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
+          "LD pair: PD P/R, ND P/R {recall over changed objects PD/ND}; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) [observable found] | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
     print("|---|---|---|---|---|---|---|---:|---:|---:|")
     for r in sorted(rows, key=lambda r: min(r["sa"]) if r["sa"] else -1):
         ld = "; ".join("%s: %s/%s, %s/%s {%s/%s}; %s/%s (%s/%s)" % (p, fmt(a), fmt(b), fmt(c), fmt(d), fmt(oa), fmt(ob),
                                                                     fmt(e), fmt(f), fmt(g), fmt(h))
                        for p, a, b, c, d, oa, ob, e, f, g, h in r["ld"])
         obj = "n/a" if not r["objects"] else "%d/%d (%s)" % (r["objects"][0], r["objects"][1], fmt(r["objects"][2]))
+        if r["objects"] and r["objects"][4] is not None:
+            obj += " [%d/%d]" % (r["objects"][3], r["objects"][4])
         print("| %s | %d/%d | %s | %s | %s / %s | %s | %s | %s | %.0f | %.0f |" % (
             r["name"], r["aligned"], r["sessions"], " ".join(fmt(x, 100) for x in r["sa"]),
             " ".join("%s (%s) [%s]" % (fmt(x, 100), fmt(y, 100), fmt(z, 100))
