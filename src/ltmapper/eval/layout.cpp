@@ -6,6 +6,7 @@
 #include "ltmapper/io/json.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <filesystem>
 #include <fstream>
@@ -217,23 +218,27 @@ Pose TruthToEstimateFrame(const std::string& sim_dir, const std::string& aligned
   return io::ReadTransform(Join(Join(Join(sim_dir, "truth"), names.front()), "origin.txt")).inverse();
 }
 
+namespace {
+// The four change clouds' files of a pair folder, `prefix` + {pd,nd}_{strong,weak}.pcd.
+std::array<std::string, 4> ChangeFiles(const std::string& dir, const std::string& prefix) {
+  return {Join(dir, prefix + "pd_strong.pcd"), Join(dir, prefix + "pd_weak.pcd"), Join(dir, prefix + "nd_strong.pcd"),
+          Join(dir, prefix + "nd_weak.pcd")};
+}
+ChangeClouds ReadChangeFiles(const std::array<std::string, 4>& f) {
+  return {io::ReadPcd(f[0]), io::ReadPcd(f[1]), io::ReadPcd(f[2]), io::ReadPcd(f[3])};
+}
+}  // namespace
+
 ChangeClouds ReadChangeClouds(const std::string& dir) {
   if (!fs::is_directory(dir)) throw Error(dir, 0, "no such change directory");
-  ChangeClouds c;
-  c.pd_strong = io::ReadPcd(Join(dir, "pd_strong.pcd"));
-  c.pd_weak = io::ReadPcd(Join(dir, "pd_weak.pcd"));
-  c.nd_strong = io::ReadPcd(Join(dir, "nd_strong.pcd"));
-  c.nd_weak = io::ReadPcd(Join(dir, "nd_weak.pcd"));
-  return c;
+  return ReadChangeFiles(ChangeFiles(dir, ""));
 }
 
 std::optional<ChangeClouds> ReadObjectChangeClouds(const std::string& dir) {
-  const std::string names[4] = {"objects_pd_strong.pcd", "objects_pd_weak.pcd", "objects_nd_strong.pcd",
-                                "objects_nd_weak.pcd"};
-  for (const std::string& n : names)
-    if (!fs::exists(Join(dir, n))) return std::nullopt;
-  return ChangeClouds{io::ReadPcd(Join(dir, names[0])), io::ReadPcd(Join(dir, names[1])),
-                      io::ReadPcd(Join(dir, names[2])), io::ReadPcd(Join(dir, names[3]))};
+  const auto files = ChangeFiles(dir, "objects_");
+  for (const std::string& f : files)
+    if (!fs::exists(f)) return std::nullopt;
+  return ReadChangeFiles(files);
 }
 
 ChangeClouds TransformChanges(const ChangeClouds& c, const Pose& T) {
