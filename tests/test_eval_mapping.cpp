@@ -146,6 +146,17 @@ TEST(TruthMapping, ChangesFromLabelledScansPlaceEachScanWithItsEstimatedPose) {
     EXPECT_LT(d2, 1e-8f);
   }
   test::ExpectError([&] { ChangesFromLabelledScans(sim, 3, {&change}, m, 0.1); }, {"no sim session"});
+  // Overlapping clouds (a pair's changes and its objects' part): each point goes into every cloud
+  // that marks it, from one pass over the scans.
+  PointCloud half;
+  for (std::size_t i = 0; i < change.size(); i += 2) half.points.push_back(change.points[i]);
+  const auto both = ChangesFromLabelledScans(sim, 0, {&change, &half}, m, 0.1, 2);
+  ASSERT_EQ(both.size(), 2u);
+  EXPECT_EQ(both[0].size(), got[0].size());
+  EXPECT_GT(both[1].size(), 0u);
+  EXPECT_LT(both[1].size(), both[0].size());
+  const std::vector<const PointCloud*> nine(9, &change);
+  test::ExpectError([&] { ChangesFromLabelledScans(sim, 0, nine, m, 0.1); }, {"at most 8"});
 
   // Labelled scan folders: missing, wrong count, a scan without classes.
   test::ExpectError([&] { LabelledScanPaths(sim + "/truth/none", 4); }, {"none/labels", "no labelled scans"});

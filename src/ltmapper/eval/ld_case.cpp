@@ -12,17 +12,29 @@ namespace {
 
 std::string Join(const std::string& a, const std::string& b) { return (std::filesystem::path(a) / b).string(); }
 
-// The pair's truth clouds `w` (true world, PD from the query's static world, ND from the
-// central's) in the estimate frame.
-ChangeClouds SimTruth(const std::string& sim, const ChangeClouds& w, std::size_t c, std::size_t q,
-                      const TruthMapping& m, bool from_scans, const EvalConfig& cfg, int threads) {
-  if (!from_scans)
-    return {m.Map(w.pd_strong, q, threads), m.Map(w.pd_weak, q, threads), m.Map(w.nd_strong, c, threads),
-            m.Map(w.nd_weak, c, threads)};
-  const double v = cfg.ld_match_dist_m;
-  auto pd = ChangesFromLabelledScans(sim, q, {&w.pd_strong, &w.pd_weak}, m, v, threads);
-  auto nd = ChangesFromLabelledScans(sim, c, {&w.nd_strong, &w.nd_weak}, m, v, threads);
-  return {std::move(pd[0]), std::move(pd[1]), std::move(nd[0]), std::move(nd[1])};
+// The pair's truth change sets (true world, PD from the query's static world, ND from the
+// central's: the pair's clouds, and their changed objects' part when the truth names it) in the
+// estimate frame. From the scans, each session's labelled scans are read once for all the sets.
+std::vector<ChangeClouds> SimTruth(const std::string& sim, const std::vector<const ChangeClouds*>& sets, std::size_t c,
+                                   std::size_t q, const TruthMapping& m, bool from_scans, const EvalConfig& cfg,
+                                   int threads) {
+  std::vector<ChangeClouds> out;
+  if (!from_scans) {
+    for (const ChangeClouds* w : sets)
+      out.push_back({m.Map(w->pd_strong, q, threads), m.Map(w->pd_weak, q, threads), m.Map(w->nd_strong, c, threads),
+                     m.Map(w->nd_weak, c, threads)});
+    return out;
+  }
+  std::vector<const PointCloud*> pd_in, nd_in;
+  for (const ChangeClouds* w : sets) {
+    pd_in.insert(pd_in.end(), {&w->pd_strong, &w->pd_weak});
+    nd_in.insert(nd_in.end(), {&w->nd_strong, &w->nd_weak});
+  }
+  auto pd = ChangesFromLabelledScans(sim, q, pd_in, m, cfg.ld_match_dist_m, threads);
+  auto nd = ChangesFromLabelledScans(sim, c, nd_in, m, cfg.ld_match_dist_m, threads);
+  for (std::size_t k = 0; k < sets.size(); ++k)
+    out.push_back({std::move(pd[2 * k]), std::move(pd[2 * k + 1]), std::move(nd[2 * k]), std::move(nd[2 * k + 1])});
+  return out;
 }
 
 }  // namespace
@@ -49,12 +61,16 @@ LdCase LoadSimLdCase(const std::string& sim, const std::string& changes, const s
   out.inputs = {{"truth", truth_dir}, {"prediction", pred_dir}, {"truth mapping", mapping.description}};
   // Where each session's sensor was, in the output frame (LD distance bands).
   out.trajectories = LdTrajectories{SensorPositions(sim, c, mapping), SensorPositions(sim, q, mapping)};
-  out.truth = SimTruth(sim, ReadChangeClouds(truth_dir), c, q, mapping, from_scans, cfg, threads);
+  const ChangeClouds changes_world = ReadChangeClouds(truth_dir);
+  const std::optional<ChangeClouds> objects_world = ReadObjectChangeClouds(truth_dir);
+  std::vector<const ChangeClouds*> sets = {&changes_world};
+  if (objects_world) sets.push_back(&*objects_world);
+  std::vector<ChangeClouds> placed = SimTruth(sim, sets, c, q, mapping, from_scans, cfg, threads);
+  out.truth = std::move(placed[0]);
+  if (objects_world) out.truth_objects = std::move(placed[1]);
   if (from_scans)
     out.inputs.push_back({"truth built from", fmt::format("labelled scans placed with the method's poses, voxel {} m",
                                                           cfg.ld_match_dist_m)});
-  if (const auto objects = ReadObjectChangeClouds(truth_dir))
-    out.truth_objects = SimTruth(sim, *objects, c, q, mapping, from_scans, cfg, threads);
   out.pred = ReadChangeClouds(pred_dir);
   if (find_central_static) {
     // The central session is the pair's first number, indexing the sim's sessions.

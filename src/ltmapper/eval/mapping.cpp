@@ -138,10 +138,14 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
   const std::string tdir = SessionTruthDir(sim_dir, session);
   const std::vector<Pose> T_true = ReadPoses(Join(tdir, "poses_world.txt"));
   const auto files = LabelledScanPaths(tdir, T_true.size());
-  // Which static-world points are changes (each change point is one of them, at distance 0).
+  // Which static-world points are changes of which clouds (each change point is one of them, at
+  // distance 0): one bit per cloud, so clouds may overlap (a pair's changes and its objects' part).
+  constexpr std::size_t kMaxClouds = 8;
+  if (changes.size() > kMaxClouds)
+    throw Error("ChangesFromLabelledScans: " + std::to_string(changes.size()) + " change clouds, at most 8");
   auto world = std::make_shared<const PointCloud>(io::ReadCloud(Join(tdir, "static_world.pcd")));
   const geometry::KdTree tree(world);
-  std::vector<std::int8_t> label(world->size(), -1);
+  std::vector<std::uint8_t> label(world->size(), 0);
   // LD object truth is voxelised apart from the static world (a car's voxel there may also hold
   // ground points), so a change point marks its nearest static-world point within voxel_m / 2.
   const float same2 = float(0.25 * voxel_m * voxel_m);
@@ -149,7 +153,7 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
     for (const PointXYZI& p : changes[c]->points) {
       std::uint32_t j = 0;
       float d2 = 0.f;
-      if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= same2) label[j] = std::int8_t(c);
+      if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= same2) label[j] |= std::uint8_t(1u << c);
     }
   std::vector<PointCloud> out(changes.size());
   std::mutex out_mutex;
@@ -164,8 +168,9 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
         if (scan.cls[i] != PointClass::kStatic) continue;
         std::uint32_t j = 0;
         float d2 = 0.f;
-        if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] < 0) continue;
-        part[std::size_t(label[j])].points.push_back(scan.points[i]);
+        if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] == 0) continue;
+        for (std::size_t c = 0; c < part.size(); ++c)
+          if (label[j] >> c & 1u) part[c].points.push_back(scan.points[i]);
       }
       for (PointCloud& p : part) {
         geometry::TransformInPlace(p, T_est);

@@ -51,7 +51,8 @@ PointCloud SensorPositions(const std::string& sim_dir, std::size_t session, cons
 // change clouds, true world; each marks its nearest static-world point within voxel_m / 2), each
 // labelled with that cloud's class, then voxelised at `voxel_m`. Far from the trajectory the per-keyframe
 // mapping of MapTruthByKeyframes blurs by the sessions' relative rotation error times the
-// viewing distance; this truth has exactly the method's blur. Returns one cloud per input.
+// viewing distance; this truth has exactly the method's blur. Returns one cloud per input (at most
+// 8; the clouds may overlap: a point marked by several goes into each of them).
 std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
                                                  const std::vector<const PointCloud*>& changes,
                                                  const TruthMapping& mapping, double voxel_m, int threads = 0);
