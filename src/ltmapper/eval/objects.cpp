@@ -303,19 +303,14 @@ std::vector<SimObject> ReadSimObjects(const std::string& path) {
   return out;
 }
 
-std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair,
-                                            const TruthMapping& mapping, const EvalConfig& cfg, int threads) {
-  int a = -1, b = -1;
-  if (std::sscanf(pair.c_str(), "%d_%d", &a, &b) != 2 || a < 0 || b < 0)
-    throw Error("eval objects: pair '" + pair + "' is not CC_QQ");
-  const auto names = SimSessionNames(sim_dir);
-  if (std::size_t(std::max(a, b)) >= names.size())
-    throw Error(sim_dir, 0, "pair " + pair + ": the simulator has " + std::to_string(names.size()) + " sessions");
-  const std::string truth_dir = Join(sim_dir, "truth");
+namespace {
+// The objects present in exactly one of sessions a and b (truth/objects.csv), without points yet;
+// each matches the step pairs (a, j) whose session j already agrees with b about it.
+std::vector<ObjectTruth> ChangedObjects(const std::string& truth_dir, int a, int b) {
   std::vector<ObjectTruth> out;
   for (const auto& o : ReadSimObjects(Join(truth_dir, "objects.csv"))) {
-    const bool in_a = std::count(o.present_in.begin(), o.present_in.end(), a) > 0;
-    const bool in_b = std::count(o.present_in.begin(), o.present_in.end(), b) > 0;
+    const auto in = [&](int s) { return std::count(o.present_in.begin(), o.present_in.end(), s) > 0; };
+    const bool in_a = in(a), in_b = in(b);
     if (in_a == in_b) continue;
     ObjectTruth t;
     t.pair = PairName(a, b);
@@ -327,62 +322,83 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
     // The map may have applied the change at an earlier step j (a < j < b) whose session
     // already agrees with b about the object (removed / added there).
     for (int j = std::min(a, b) + 1; j < std::max(a, b); ++j)
-      if ((std::count(o.present_in.begin(), o.present_in.end(), j) > 0) == in_b) t.match_pairs.push_back(PairName(a, j));
+      if (in(j) == in_b) t.match_pairs.push_back(PairName(a, j));
     out.push_back(std::move(t));
   }
-  for (const int s : {a, b}) {
-    std::map<int, std::size_t> slot;  // object id -> position in out
-    for (std::size_t i = 0; i < out.size(); ++i)
-      if (out[i].session == s) slot[out[i].id] = i;
-    if (slot.empty()) continue;
-    const std::string sdir = Join(truth_dir, names[std::size_t(s)]);
-    const auto poses = ReadPoses(Join(sdir, "poses_world.txt"));
-    const auto files = LabelledScanPaths(sdir, poses.size());
-    std::vector<std::size_t> scans;
-    for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.obj_keyframe_stride)) scans.push_back(k);
-    // Per scan: points of each wanted object in the estimate frame; merged in scan order.
-    std::vector<std::map<int, PointCloud>> parts(scans.size());
-    ParallelFor(scans.size(), threads, [&](std::size_t j) {
-      const std::size_t k = scans[j];
-      const PointCloud scan = ReadLabelledScan(files[k]);
-      if (scan.object.size() != scan.size()) throw Error(files[k], 0, "labelled scan needs an 'object' field");
-      const Pose T = mapping.ScanPose(std::size_t(s), k, poses[k]);
-      for (std::size_t i = 0; i < scan.size(); ++i) {
-        if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
-        const Eigen::Vector3f p = (T * scan.points[i].xyz().cast<double>()).cast<float>();
-        parts[j][scan.object[i]].push_back(p.x(), p.y(), p.z(), scan.points[i].intensity);
-      }
-    });
-    for (auto& m : parts)
-      for (auto& [id, c] : m) out[slot[id]].cloud.append(c);
+  return out;
+}
+
+// The points of the objects of `out` that exist in session s, from its labelled scans (every
+// objects.keyframe_stride-th) placed by `mapping`; merged in scan order.
+void AddObjectPoints(const std::string& sdir, int s, const TruthMapping& mapping, const EvalConfig& cfg, int threads,
+                     std::vector<ObjectTruth>* out) {
+  std::map<int, std::size_t> slot;  // object id -> position in out
+  for (std::size_t i = 0; i < out->size(); ++i)
+    if ((*out)[i].session == s) slot[(*out)[i].id] = i;
+  if (slot.empty()) return;
+  const auto poses = ReadPoses(Join(sdir, "poses_world.txt"));
+  const auto files = LabelledScanPaths(sdir, poses.size());
+  std::vector<std::size_t> scans;
+  for (std::size_t k = 0; k < files.size(); k += std::size_t(cfg.obj_keyframe_stride)) scans.push_back(k);
+  std::vector<std::map<int, PointCloud>> parts(scans.size());
+  ParallelFor(scans.size(), threads, [&](std::size_t j) {
+    const std::size_t k = scans[j];
+    const PointCloud scan = ReadLabelledScan(files[k]);
+    if (scan.object.size() != scan.size()) throw Error(files[k], 0, "labelled scan needs an 'object' field");
+    const Pose T = mapping.ScanPose(std::size_t(s), k, poses[k]);
+    for (std::size_t i = 0; i < scan.size(); ++i) {
+      if (scan.cls[i] != PointClass::kStatic || !slot.count(scan.object[i])) continue;
+      const Eigen::Vector3f p = (T * scan.points[i].xyz().cast<double>()).cast<float>();
+      parts[j][scan.object[i]].push_back(p.x(), p.y(), p.z(), scan.points[i].intensity);
+    }
+  });
+  for (auto& m : parts)
+    for (auto& [id, c] : m) (*out)[slot[id]].cloud.append(c);
+}
+
+// Per object, from the pair's truth changes.ply: the change points the clustering can see (PD,
+// strong ND: change_points) and the share of all its change points (PD, ND) that the other
+// session observed changed (weak PD, strong ND: observed_share).
+void CountChangePoints(const std::string& ply, std::vector<ObjectTruth>* out) {
+  const PointCloud ch = io::ReadPly(ply);
+  if (ch.cls.size() != ch.size() || ch.object.size() != ch.size()) throw Error(ply, 0, "needs 'class' and 'object' fields");
+  std::map<int, long> count, observed, all;
+  for (std::size_t i = 0; i < ch.size(); ++i) {
+    const PointClass c = ch.cls[i];
+    const bool pd = c == PointClass::kPDStrong || c == PointClass::kPDWeak;
+    const bool nd = c == PointClass::kNDStrong || c == PointClass::kNDWeak;
+    if (!pd && !nd) continue;
+    ++all[ch.object[i]];
+    if (pd || c == PointClass::kNDStrong) ++count[ch.object[i]];
+    if (c == PointClass::kPDWeak || c == PointClass::kNDStrong) ++observed[ch.object[i]];
   }
+  for (auto& t : *out) {
+    t.change_points = count.count(t.id) ? count[t.id] : 0;
+    t.observed_share = all.count(t.id) ? double(observed[t.id]) / double(all[t.id]) : 0.0;
+  }
+}
+}  // namespace
+
+std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const std::string& pair,
+                                            const TruthMapping& mapping, const EvalConfig& cfg, int threads) {
+  int a = -1, b = -1;
+  if (std::sscanf(pair.c_str(), "%d_%d", &a, &b) != 2 || a < 0 || b < 0)
+    throw Error("eval objects: pair '" + pair + "' is not CC_QQ");
+  const auto names = SimSessionNames(sim_dir);
+  if (std::size_t(std::max(a, b)) >= names.size())
+    throw Error(sim_dir, 0, "pair " + pair + ": the simulator has " + std::to_string(names.size()) + " sessions");
+  const std::string truth_dir = Join(sim_dir, "truth");
+  std::vector<ObjectTruth> out = ChangedObjects(truth_dir, a, b);
+  for (const int s : {a, b}) AddObjectPoints(Join(truth_dir, names[std::size_t(s)]), s, mapping, cfg, threads, &out);
   for (auto& t : out) t.cloud = Downsample(t.cloud, cfg.obj_voxel_m);
-  // Detectable change points per object from the pair's truth changes.ply (when present).
+  // Change points per object from the pair's truth changes.ply, when the sim wrote one (older
+  // outputs have none: change_points stays -1, observed_share NaN, and every object is scored).
   std::string ply;
   try {
     ply = Join(FindPairDir(truth_dir, PairName(a, b)), "changes.ply");
   } catch (const Error&) {
   }
-  if (!ply.empty() && fs::exists(ply)) {
-    const PointCloud ch = io::ReadPly(ply);
-    if (ch.cls.size() != ch.size() || ch.object.size() != ch.size()) throw Error(ply, 0, "needs 'class' and 'object' fields");
-    // Per object: change points the clustering can see (PD, strong ND), those the other session
-    // observed changed (weak PD, strong ND), and all of them (PD, ND).
-    std::map<int, long> count, observed, all;
-    for (std::size_t i = 0; i < ch.size(); ++i) {
-      const PointClass c = ch.cls[i];
-      const bool pd = c == PointClass::kPDStrong || c == PointClass::kPDWeak;
-      const bool nd = c == PointClass::kNDStrong || c == PointClass::kNDWeak;
-      if (!pd && !nd) continue;
-      ++all[ch.object[i]];
-      if (pd || c == PointClass::kNDStrong) ++count[ch.object[i]];
-      if (c == PointClass::kPDWeak || c == PointClass::kNDStrong) ++observed[ch.object[i]];
-    }
-    for (auto& t : out) {
-      t.change_points = count.count(t.id) ? count[t.id] : 0;
-      t.observed_share = all.count(t.id) ? double(observed[t.id]) / double(all[t.id]) : 0.0;
-    }
-  }
+  if (!ply.empty() && fs::exists(ply)) CountChangePoints(ply, &out);
   return out;
 }
 

@@ -455,7 +455,8 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   for (const auto& o : r.objects)
     md << Row({o.pair, std::to_string(o.id), o.cls, o.placement, std::to_string(o.session), std::to_string(o.points),
                o.change_points < 0 ? std::string("n/a") : std::to_string(o.change_points),
-               std::isnan(o.observed_share) ? std::string("n/a") : Fmt(o.observed_share, 2), o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
+               std::isnan(o.observed_share) ? std::string("n/a") : Fmt(o.observed_share, 2),
+               o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
                std::to_string(o.cluster_points), Fmt(o.best_iou, 3),
                !o.scored ? std::string("not scored") : o.found ? std::string("yes") : std::string("no")});
   md << "\n";
