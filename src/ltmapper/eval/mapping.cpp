@@ -142,7 +142,8 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
   // distance 0): one bit per cloud, so clouds may overlap (a pair's changes and its objects' part).
   constexpr std::size_t kMaxClouds = 8;
   if (changes.size() > kMaxClouds)
-    throw Error("ChangesFromLabelledScans: " + std::to_string(changes.size()) + " change clouds, at most " + std::to_string(kMaxClouds));
+    throw Error("ChangesFromLabelledScans: " + std::to_string(changes.size()) + " change clouds, at most " +
+                std::to_string(kMaxClouds));
   auto world = std::make_shared<const PointCloud>(io::ReadCloud(Join(tdir, "static_world.pcd")));
   const geometry::KdTree tree(world);
   std::vector<std::uint8_t> label(world->size(), 0);
