@@ -790,6 +790,36 @@ TEST(MapObjects, AFarObjectsRowsAreOneCluster) {
   for (const auto& r : rejected) ADD_FAILURE() << "rejected " << r.rejected << " at " << r.centroid.transpose();
 }
 
+// Two parts of one far surface (60 m out, 4 rows) with a gap between them: the sensor samples a
+// column every 0.35 deg, so clustering joins columns up to 2 x 0.37 m apart there and one missed
+// line of samples leaves up to twice that: a part 1.0 m from the larger one joins it, one 2.0 m
+// away is an object of its own.
+TEST(MapObjects, PartsOneMissedSampleLineApartAreOneObject) {
+  MapConfig cfg = Cfg();
+  cfg.object_sensor_azimuth_step_deg = 0.35;
+  for (const float gap : {1.0f, 2.0f}) {
+    test::TempDir tmp;
+    Store s = Store::Create(tmp / "o.ltmap", cfg);
+    s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f))}});
+    KeyframeDelta d;
+    for (const float z : {0.3f, 0.9f, 1.5f, 2.1f}) {
+      for (int j = 0; j <= 30; ++j) d.pd_weak.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
+      for (int j = 0; j <= 15; ++j) d.pd_weak.push_back(60.f, 3.f + gap + 0.2f * float(j), z, 0.5f);
+    }
+    s.IntegrateSession({"s1"}, "s0", {d}, {});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    for (const auto& r : rejected) ADD_FAILURE() << "rejected " << r.rejected << " at " << r.centroid.transpose();
+    std::vector<std::size_t> points;
+    for (const auto& o : objs) points.push_back(o.points);
+    std::sort(points.begin(), points.end());
+    if (gap < 1.5f)
+      EXPECT_EQ(points, (std::vector<std::size_t>{4 * 47})) << "gap " << gap;
+    else
+      EXPECT_EQ(points, (std::vector<std::size_t>{4 * 16, 4 * 31})) << "gap " << gap;
+  }
+}
+
 TEST(MapObjects, MovedContainerAndStableIds) {
   test::TempDir tmp;
   KeyframeDelta d;

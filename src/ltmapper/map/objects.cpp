@@ -15,7 +15,7 @@
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
-//     object's box (MergeParts). A cluster also stands on change points of its group under it
+//     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster also stands on change points of its group under it
 //     (StandOnChangesBelow), and a disappeared one on its lower part the query did not see, which
 //     an object keeps (UnseenLowerParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
@@ -223,15 +223,20 @@ constexpr double kSampleGapsPerStep = 2.0;
 // Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
 // farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
 // of the range it was scanned from).
+// The sensor's sample gaps {horizontal, vertical} [m] that still join a cluster at `range_m`
+// (kSampleGapsPerStep times its steps there), before the cluster tolerance's floor.
+Eigen::Vector2f SensorGapsAt(double range_m, const MapConfig& cfg) {
+  return Eigen::Vector2f(float(cfg.object_sensor_azimuth_step_deg), float(cfg.object_sensor_step_deg)) *
+         float(kSampleGapsPerStep * kDegToRad * range_m);
+}
+
 std::vector<Eigen::Vector2f> SampleGaps(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
                                         const SensorRanges& ranges, const MapConfig& cfg) {
   const float tol = float(cfg.object_tolerance_m);
   std::vector<Eigen::Vector2f> gap(idx.size(), Eigen::Vector2f::Constant(tol));
-  const Eigen::Vector2f per_m = Eigen::Vector2f(float(cfg.object_sensor_azimuth_step_deg), float(cfg.object_sensor_step_deg)) *
-                                float(kSampleGapsPerStep * kDegToRad);
   if (!ranges.empty())
     for (std::size_t k = 0; k < idx.size(); ++k)
-      gap[k] = gap[k].cwiseMax(per_m * float(ranges.To(changes.points[idx[k]].xyz())));
+      gap[k] = gap[k].cwiseMax(SensorGapsAt(ranges.To(changes.points[idx[k]].xyz()), cfg));
   return gap;
 }
 
@@ -654,9 +659,33 @@ double InsideShare(const MapObject& part, const MapObject& whole, double margin)
   return double(n) / double(std::max<std::size_t>(seen, 1));
 }
 
-// Parts of one object split by an occlusion gap wider than the cluster tolerance: an accepted
-// cluster with at least object_merge_inside_fraction of its points inside the box (grown by the
-// tolerance) of a larger accepted cluster of the same change joins it.
+// Does `part` come within one missed line of the sensor's samples of `whole`? Clustering joins
+// samples up to SensorGapsAt apart (twice the sampling step: a surface seen at up to 60 deg
+// incidence), so where the sensor missed one line of samples between two parts of one surface (a
+// container's corner, a strip a thin occluder hid) they lie up to twice that apart, horizontally
+// and vertically, at the smaller of the two ranges (the finer sampling, as Cluster takes the
+// smaller gap). Near the sensor the cluster tolerance, larger there, stays the bound: no part
+// joins there that Cluster did not already join.
+bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
+  const Eigen::Vector2f reach = (2.f * SensorGapsAt(std::min(part.range_m, whole.range_m), cfg))
+                                    .cwiseMax(float(cfg.object_tolerance_m));
+  const Eigen::Vector3d grow(reach.x(), reach.x(), reach.y());
+  if (((part.lo - whole.hi).array() > grow.array()).any() || ((whole.lo - part.hi).array() > grow.array()).any())
+    return false;
+  const geometry::KdTree tree(whole.cloud);
+  for (const auto& p : part.cloud.points)
+    for (const auto& [j, d2] : tree.RadiusUnsorted(p.xyz(), reach.maxCoeff())) {
+      (void)d2;
+      const Eigen::Vector3f d = whole.cloud.points[j].xyz() - p.xyz();
+      if ((d.head<2>() / reach.x()).squaredNorm() + (d.z() / reach.y()) * (d.z() / reach.y()) < 1.f) return true;
+    }
+  return false;
+}
+
+// Parts of one object split by a gap wider than the cluster's: an accepted cluster with at least
+// object_merge_inside_fraction of its points inside the box (grown by the tolerance) of a larger
+// accepted cluster of the same change (an occlusion gap), or one missed line of samples from it
+// (OneLineApart), joins it.
 void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
   std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
@@ -664,7 +693,8 @@ void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
   for (auto& o : objects) {
     MapObject* whole = nullptr;
     for (auto& w : out)
-      if (w.change == o.change && InsideShare(o, w, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction) {
+      if (w.change == o.change && (InsideShare(o, w, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction ||
+                                   OneLineApart(o, w, cfg))) {
         whole = &w;
         break;
       }
