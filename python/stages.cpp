@@ -28,7 +28,7 @@ py::dict SlamToDict(const slam::SlamResult& r) {
     d["T_session_sensor"] = PosesToNumpy(s.T_session_sensor);
     d["T_world_sensor"] = PosesToNumpy(s.T_world_sensor);
     PutFields(d, s, LTM_KV(s, sc_candidates), LTM_KV(s, loops_verified), LTM_KV(s, loops_accepted),
-              LTM_KV(s, radius_loops));
+              LTM_KV(s, radius_loops), LTM_KV(s, own_loops));
     sessions.append(d);
   }
   py::list loops;

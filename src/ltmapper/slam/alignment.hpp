@@ -10,7 +10,8 @@
 namespace ltm::slam {
 
 struct LoopRecord {
-  NodeKey a, b;                   // a.session < b.session; keyframe = position in the session
+  NodeKey a, b;                   // a.session < b.session, or equal: a loop within one session
+                                  // (OwnLoop); keyframe = position in the session
   std::string source = "sc";      // sc | radius | given
   double sc_distance = -1.0;      // -1 when not from Scan Context
   double yaw_deg = 0.0;           // Scan Context yaw (initial guess)
@@ -25,6 +26,10 @@ struct LoopRecord {
   Matrix6d information = Matrix6d::Identity();        // order x y z rx ry rz
 };
 
+// A loop between two keyframes of one session (the radius search's, where its route came back):
+// it bends that session's trajectory and says nothing of its placement among the others.
+inline bool OwnLoop(const LoopRecord& l) { return l.a.session == l.b.session; }
+
 struct SessionAlignment {
   std::string name;
   bool aligned = false;            // central: always true
@@ -33,6 +38,7 @@ struct SessionAlignment {
   std::vector<Pose> T_session_sensor;  // optimised, in the session's own frame
   std::vector<Pose> T_world_sensor;    // A * T_session_sensor; empty when not aligned
   int sc_candidates = 0, loops_verified = 0, loops_accepted = 0, radius_loops = 0;
+  int own_loops = 0;  // accepted loops within the session (its route came back near itself)
   // [deg] the RMS residual rotation of the accepted loops tying it to earlier sessions (the loops'
   // later side) after the optimisation: the rotation uncertainty of its poses against theirs, which
   // LD's tolerances follow (io::ManifestSession::rotation_sigma_deg); 0 without such a loop

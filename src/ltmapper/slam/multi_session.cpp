@@ -519,8 +519,43 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
   }
 }
 
+// Radius-search candidates within aligned session s: every refine_stride-th keyframe j without an
+// accepted loop within s, paired with the nearest keyframe of s within `radius_m` (the overlap
+// reach, measured along the sessions' own routes) in the world frame whose route from j is longer
+// than that radius: farther along the route than keyframes still overlap, yet within that reach in
+// space, so the route turned or came back (a corner, a parallel street, a second pass) and only
+// the odometry's drift links the two while their scans overlap. Each pair tried once.
+void OwnRadiusCandidates(const std::vector<Session>& sessions, const SlamResult& res,
+                         const std::vector<LoopRecord>& loops, std::size_t s, const SlamConfig& cfg, double radius_m,
+                         std::set<std::pair<NodeKey, NodeKey>>& tried, std::vector<LoopRecord>* cand) {
+  const auto& W = res.sessions[s].T_world_sensor;
+  std::vector<Pose> odometry;
+  for (const Keyframe& kf : sessions[s].keyframes) odometry.push_back(kf.T_session_sensor);
+  const std::vector<double> route = PathLength(odometry);
+  std::vector<bool> has_loop(W.size(), false);
+  for (const auto& l : loops)
+    if (l.accepted && OwnLoop(l) && l.a.session == int(s)) has_loop[l.a.keyframe] = has_loop[l.b.keyframe] = true;
+  int eligible = 0, added = 0;
+  for (std::size_t j = 0; j < W.size() && added < cfg.refine_max_loops_per_pair; ++j) {
+    if (has_loop[j] || eligible++ % cfg.refine_stride != 0) continue;
+    int best = -1;
+    double best_d = radius_m;
+    for (std::size_t i = 0; i < W.size(); ++i) {
+      const double d = (W[i].translation() - W[j].translation()).norm();
+      if (std::abs(route[i] - route[j]) > radius_m && d <= best_d) best = int(i), best_d = d;
+    }
+    if (best < 0) continue;
+    const int a = std::min(best, int(j)), b = std::max(best, int(j));
+    const LoopRecord l = WorldLoop(res, int(s), a, int(s), b, W[std::size_t(b)], "radius");
+    if (!tried.insert({l.a, l.b}).second) continue;
+    cand->push_back(l);
+    ++added;
+  }
+}
+
 // Radius-search refinement: query keyframes without a loop look for keyframes of the other
-// session near them in the world frame, verified by GICP from the current estimate.
+// session near them in the world frame, and every aligned session's keyframes for its own where
+// its route came back (OwnRadiusCandidates), verified by GICP from the current estimate.
 void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
             const SlamConfig& cfg, double radius_m, int threads, StageCost& cost) {
   const std::size_t n = sessions.size();
@@ -532,6 +567,8 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
       for (std::size_t b = a + 1; b < n; ++b)
         if (res.sessions[a].aligned && res.sessions[b].aligned)
           RadiusCandidates(res, loops, a, b, cfg, radius_m, tried, &cand);
+    for (std::size_t a = 0; a < n; ++a)
+      if (res.sessions[a].aligned) OwnRadiusCandidates(sessions, res, loops, a, cfg, radius_m, tried, &cand);
     if (cand.empty()) break;
     const std::size_t ok =
         RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), cost);

@@ -71,15 +71,6 @@ double AngleDeg(const Eigen::Matrix3d& R) {
   return Eigen::AngleAxisd(R).angle() / kDeg;
 }
 
-// Cumulative path length along each session's keyframes (for drift-aware tolerances).
-std::vector<double> PathLength(const std::vector<Pose>& poses) {
-  std::vector<double> cum(poses.size(), 0.0);
-  for (std::size_t i = 1; i < poses.size(); ++i) {
-    cum[i] = cum[i - 1] + (poses[i].translation() - poses[i - 1].translation()).norm();
-  }
-  return cum;
-}
-
 struct Graph {
   const std::vector<Session>& sessions;
   const SlamConfig& cfg;
@@ -120,9 +111,16 @@ class GraphProblem {
     AddEdges(s, g_.sessions[s].loops, "loop");
   }
 
-  // An accepted inter-session loop through both sessions' anchors, with the robust loss.
+  // An accepted inter-session loop through both sessions' anchors, with the robust loss; a loop
+  // within one session (OwnLoop) between its two poses (the anchor cancels), with the same loss.
   void AddLoop(const LoopRecord& l) {
     const int sa = l.a.session, sb = l.b.session;
+    if (OwnLoop(l)) {
+      auto* cost = new ceres::AutoDiffCostFunction<detail::BetweenFactor, 6, 7, 7>(
+          new detail::BetweenFactor(l.T_a_b, SqrtInformation(l.information, "loop within a session")));
+      problem_.AddResidualBlock(cost, MakeLoss(g_.cfg), nodes_[sa][l.a.keyframe].data(), nodes_[sb][l.b.keyframe].data());
+      return;
+    }
     double* A = anchors_[sa].data();
     double* B = anchors_[sb].data();
     AddBlock(A);
@@ -255,6 +253,14 @@ void ValidateSessionGraphs(const std::vector<Session>& sessions) {
   }
 }
 
+std::vector<double> PathLength(const std::vector<Pose>& poses) {
+  std::vector<double> cum(poses.size(), 0.0);
+  for (std::size_t i = 1; i < poses.size(); ++i) {
+    cum[i] = cum[i - 1] + (poses[i].translation() - poses[i - 1].translation()).norm();
+  }
+  return cum;
+}
+
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
   // Paper: the ICP fitness score gives an adaptive covariance. Sigma is the configured value at
   // (or below) the fitness floor and grows with sqrt(fitness / floor) above it.
@@ -274,10 +280,10 @@ void CheckLoops(const std::vector<Session>& sessions, std::vector<LoopRecord>& l
   const std::size_t n = sessions.size();
   for (auto& l : loops) {
     if (l.a.session < 0 || l.b.session < 0 || l.a.session >= int(n) || l.b.session >= int(n) ||
-        l.a.session == l.b.session || l.a.keyframe < 0 || l.b.keyframe < 0 ||
+        (OwnLoop(l) && l.a.keyframe == l.b.keyframe) || l.a.keyframe < 0 || l.b.keyframe < 0 ||
         l.a.keyframe >= int(sessions[l.a.session].keyframes.size()) ||
         l.b.keyframe >= int(sessions[l.b.session].keyframes.size())) {
-      throw Error("slam: inter-session loop refers to a missing session or keyframe");
+      throw Error("slam: loop refers to a missing session or keyframe");
     }
     l.accepted = false;
     if (l.verified) l.status = "pending";
@@ -298,7 +304,7 @@ std::vector<Implied> ImpliedAnchors(const Graph& g, const std::vector<LoopRecord
   std::vector<Implied> cand;
   for (std::size_t i = 0; i < loops.size(); ++i) {
     const LoopRecord& l = loops[i];
-    if (!l.verified) continue;
+    if (!l.verified || OwnLoop(l)) continue;  // a loop within a session implies no anchor
     const Pose& z = l.T_a_b;
     if (l.b.session == int(s) && g.aligned[l.a.session]) {
       const Pose& xa = g.poses[l.a.session][l.a.keyframe];
@@ -452,7 +458,7 @@ bool DropUnderconstrained(Graph& g, const std::vector<LoopRecord>& loops, std::v
     if (!g.aligned[s]) continue;
     int count = 0;
     for (const auto& l : loops)
-      if (l.accepted && (l.a.session == int(s) || l.b.session == int(s))) ++count;
+      if (l.accepted && !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s))) ++count;
     if (count >= g.cfg.min_loops) continue;
     g.aligned[s] = false;
     reason[s] = "only " + std::to_string(count) + " loop(s) left after outlier rejection (need graph.min_loops = " +
@@ -484,6 +490,10 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
   std::vector<double> sum_sq(res.sessions.size(), 0.0);
   std::vector<std::size_t> n(res.sessions.size(), 0);
   for (const auto& l : loops) {
+    if (OwnLoop(l)) {  // no part of the sessions' alignment nor of their rotation uncertainty
+      if (l.accepted) ++res.sessions[std::size_t(l.a.session)].own_loops;
+      continue;
+    }
     for (int s : {l.a.session, l.b.session}) {
       SessionAlignment& a = res.sessions[s];
       if (l.source == "sc") ++a.sc_candidates;

@@ -111,7 +111,7 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
          << ", \"reason\": " << io::json::Quote(a.reason) << ", \"sc_candidates\": " << a.sc_candidates
          << ", \"loops_verified\": " << a.loops_verified
          << ", \"loops_accepted\": " << a.loops_accepted
-         << ", \"radius_loops_accepted\": " << a.radius_loops
+         << ", \"radius_loops_accepted\": " << a.radius_loops << ", \"own_loops_accepted\": " << a.own_loops
          << ", \"anchor\": " << (a.aligned ? PoseJson(a.anchor) : "null") << "}"
          << (s + 1 < n ? "," : "") << "\n";
     }
@@ -135,13 +135,13 @@ void WriteReportMd(const std::vector<Session>& sessions, const SlamResult& res, 
   io::WriteFileAtomic((fs::path(out_dir) / "report.md").string(), [&](std::ostream& os) {
     os << std::fixed << std::setprecision(2) << "# LT-SLAM report\n\nCentral session: `"
        << res.sessions[0].name << "` (world frame).\n\n"
-       << "| session | keyframes | aligned | SC candidates | verified | accepted | radius | "
-          "anchor x y z [m] | anchor yaw [deg] |\n|---|---|---|---|---|---|---|---|---|\n";
+       << "| session | keyframes | aligned | SC candidates | verified | accepted | radius | own loops | "
+          "anchor x y z [m] | anchor yaw [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n";
     for (std::size_t s = 0; s < n; ++s) {
       const auto& a = res.sessions[s];
       os << "| " << a.name << " | " << sessions[s].keyframes.size() << " | "
          << (a.aligned ? "yes" : "**NOT ALIGNED**") << " | " << a.sc_candidates << " | "
-         << a.loops_verified << " | " << a.loops_accepted << " | " << a.radius_loops << " | ";
+         << a.loops_verified << " | " << a.loops_accepted << " | " << a.radius_loops << " | " << a.own_loops << " | ";
       if (a.aligned) {
         os << a.anchor.translation().x() << " " << a.anchor.translation().y() << " "
            << a.anchor.translation().z() << " | " << YawDeg(a.anchor) << " |\n";
@@ -212,9 +212,9 @@ SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& s
   staging.Publish();
   for (const auto& a : res.sessions) {
     if (a.aligned) {
-      spdlog::info("slam: {} aligned: {} loops accepted ({} radius), anchor t = [{:.2f} {:.2f} "
+      spdlog::info("slam: {} aligned: {} loops accepted ({} radius), {} within itself, anchor t = [{:.2f} {:.2f} "
                    "{:.2f}] m, yaw {:.2f} deg",
-                   a.name, a.loops_accepted, a.radius_loops, a.anchor.translation().x(),
+                   a.name, a.loops_accepted, a.radius_loops, a.own_loops, a.anchor.translation().x(),
                    a.anchor.translation().y(), a.anchor.translation().z(), YawDeg(a.anchor));
     } else {
       spdlog::warn("slam: {} is NOT aligned: {}", a.name, a.reason);
