@@ -46,6 +46,7 @@ Session WorldReference(Session session, const std::vector<Pose>& T_world_sensor,
 SlamResult AlignToReference(const Session& reference, const Session& query, const SlamConfig& cfg, int threads) {
   SlamConfig c = cfg;
   c.use_g2o_information = true;  // the reference's stiffness is in its edges' information
+  c.central_own_loops = false;    // the reference's poses are the world: no loop may bend them
   // The query's own edges: the file's information when the user's config says so, else the
   // config's sigmas (AlignSessions reads has_information per edge).
   Session q = query;

@@ -74,6 +74,9 @@ struct SlamConfig {
   // reg_min_overlap (multi_session.cpp OverlapReach; reported as refine_radius_m).
   int refine_stride = 3;              // try every n-th query keyframe without a loop
   int refine_max_loops_per_pair = 100;
+  // Not a key: whether the central session's keyframes look for loops within it too (multi_session.cpp
+  // OwnRadiusCandidates); false where its poses are the world already (lifelong add's reference).
+  bool central_own_loops = true;
 
   template <class V>
   void Visit(V& v) {

@@ -568,7 +568,8 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
         if (res.sessions[a].aligned && res.sessions[b].aligned)
           RadiusCandidates(res, loops, a, b, cfg, radius_m, tried, &cand);
     for (std::size_t a = 0; a < n; ++a)
-      if (res.sessions[a].aligned) OwnRadiusCandidates(sessions, res, loops, a, cfg, radius_m, tried, &cand);
+      if (res.sessions[a].aligned && (a > 0 || cfg.central_own_loops))
+        OwnRadiusCandidates(sessions, res, loops, a, cfg, radius_m, tried, &cand);
     if (cand.empty()) break;
     const std::size_t ok =
         RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), cost);
