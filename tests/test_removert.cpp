@@ -161,8 +161,8 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   auto add = [&](const Eigen::Vector3f& q) { scan->push_back(q.x(), q.y(), q.z()); };
   add(at(0, 19, 0));       // A: a ring 1 m before it (and one 1.5 m beyond): observed
   add(at(0, 21.5, 0));
-  add(at(30, 19, 0.6));    // C: its beams hit a surface 0.6 m higher (a step, beyond the 0.4 m
-  add(at(30, 21.5, 0.6));  //    tolerance at 20 m): not C's surface
+  add(at(30, 19, 0.6));    // C: its beams hit a surface 0.6 m higher (a step, beyond the 0.3 m
+  add(at(30, 21.5, 0.6));  //    tolerance): not C's surface
   add(at(-30, 19, 0.5));   // B: the lower beam hits an object in front, the upper one lands 4 m
   add(at(-30, 24, 0));     //    beyond it: not observed
   add(at(60, 19.2, 0));    // D: the ground 0.8 m before it, no return above (beyond max range): observed
@@ -201,16 +201,18 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   ASSERT_EQ(v.beam_around.size(), pts.size());
   EXPECT_EQ(v.beam_around[4], 1);
   EXPECT_EQ(v.beam_around[1], 0);
-  // With a wider along-ray cap F's ring 3 m before it is near enough.
+  // With a wider along-ray cap (and a tolerance of 0.4 m, which its ray 0.31 m from F needs) F's
+  // ring 3 m before it is near enough.
   removert::BeamTest wide = beams;
   wide.grazing_max_m = 3.5;
+  wide.tol_m = 0.4;
   opt.beams = &wide;
   EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[4], 1);
   opt.beams = &beams;
   // E: a wall (y = 6 m) seen obliquely (8 deg, 43 m away), its beams 0.15 deg off E's azimuth in the
-  // same column and 0.45 deg above / below it (0.34 m off its ray, within 0.3 m + tan(0.1 deg, the
-  // scenes' rotation sigma) x 43 m = 0.375 m), so 0.8 m nearer in range (more than the tolerance,
-  // within its along-ray tolerance at that incidence): observed.
+  // same column and 0.35 deg above / below it (0.26 m off its ray, within the 0.3 m tolerance), so
+  // 0.8 m nearer in range (more than the tolerance, within its along-ray tolerance at that
+  // incidence): observed.
   removert::BeamTest defaults;
   const double col_scale = std::lround(360.0 / defaults.col_deg) / (2.0 * M_PI);
   const double yaw_e = M_PI - (std::floor((M_PI - 8.0 * M_PI / 180.0) * col_scale) + 0.5) / col_scale;
@@ -219,8 +221,8 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
     return Eigen::Vector3f(float(rho * std::cos(yaw)), 6.f, float(rho * std::tan(pitch_deg * M_PI / 180.0)));
   };
   const double off = 0.15 * M_PI / 180.0;
-  add(on_wall(yaw_e + off, 0.45));
-  add(on_wall(yaw_e + off, -0.45));
+  add(on_wall(yaw_e + off, 0.35));
+  add(on_wall(yaw_e + off, -0.35));
   const Eigen::Vector3f e = on_wall(yaw_e, 0.0);
   PointCloud wall;
   wall.push_back(e.x(), e.y(), e.z() + 1.8f);

@@ -238,7 +238,7 @@ TEST(RemovertLd, EachPairTakesItsQuerysRotationMeasure) {
   EXPECT_DOUBLE_EQ(cfg.ForQuery(1).LdRotationSigmaDeg(), 0.05);
   EXPECT_DOUBLE_EQ(cfg.ForQuery(2).LdRotationSigmaDeg(), 0.2);
   EXPECT_NEAR(cfg.ForQuery(2).LdRadiusRel(), std::tan(3 * 0.2 * M_PI / 180.0), 1e-12);
-  EXPECT_NEAR(cfg.ForQuery(2).LdBeamTolRel(), std::tan(0.2 * M_PI / 180.0), 1e-12);
+  EXPECT_NEAR(cfg.ForQuery(2).LdOwnTolRel(), std::tan(0.2 * M_PI / 180.0), 1e-12);
   test::ExpectError([&] { cfg.ForQuery(3); }, {"rotation measure", "position 3"});
   cfg.ld_rotation_sigma_deg = 0.1;  // set by the user: it wins
   EXPECT_DOUBLE_EQ(cfg.ForQuery(2).LdRotationSigmaDeg(), 0.1);

@@ -18,7 +18,7 @@ constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
 // end on the point's surface near it? Judged in the point's column (col_deg wide, rows of
 // row_deg) and the columns within asin(tol / range) of it (the truth counts a ray at any azimuth):
 // in each, the return of the point's row and the nearest returns above and below it (within
-// span_deg), one of them on the point's plane (within tol_m + tol_rel * range), its ray
+// span_deg), one of them on the point's plane (within tol_m), its ray
 // passing within that tolerance of the point and its return within the along-ray tolerance of
 // the point's place along it (tol / cos(incidence), at most grazing_max_m). A point between two
 // beams that met its surface farther away (far ground between rings) was not sampled: unobserved;
@@ -32,11 +32,10 @@ struct BeamTest {
   double col_deg = 0.4;         // [deg] column width (>= the scans' azimuth step)
   double row_deg = 0.1;         // [deg] row height (well below the beams' elevation spacing)
   double span_deg = 1.5;        // [deg] how far above / below the point's direction to look for the beams
-  double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface ...
-  double tol_rel = 0.0;         // [-] ... plus this times the range: not a key, the rotation uncertainty
-                                // between the sessions (RemovertConfig::LdBeamTolRel, set by ForSensor)
+  double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface, at any
+                                // range: the rotation error between the sessions brings a beam nearer
+                                // as often as it takes one away, so it widens nothing
   double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
-  double TolAt(double range) const { return tol_m + tol_rel * range; }  // [m] at `range` [m]
 };
 
 struct RemovertConfig {
@@ -116,7 +115,10 @@ struct RemovertConfig {
   // nearer as often as it takes one away: one sigma, the expected offset.
   static constexpr double kLdRadiusSigmas = 3.0;
   double LdRadiusRel() const { return std::tan(kLdRadiusSigmas * LdRotationSigmaDeg() * kRadPerDeg); }
-  double LdBeamTolRel() const { return std::tan(LdRotationSigmaDeg() * kRadPerDeg); }
+  // The own pixel's see-through (PD strength) counts where the pixel's half size at the point is
+  // within ld.beam_tol_m plus this times the range: where the other session's rotation error moves
+  // its rays by as much as the pixel is wide, a ray that passed the point's pixel passed the point.
+  double LdOwnTolRel() const { return std::tan(LdRotationSigmaDeg() * kRadPerDeg); }
   double ld_rim_frac = 0.45;      // [-] a point whose neighbours are all beyond ld.radius_m and to one side of
                                   // it (centroid of the nearest 16 off it by more than this times r, along
                                   // their surface) is past the rim of the other session's coverage: a raw

@@ -148,7 +148,7 @@ class MultiResImage {
 // the first returns above and below a direction are the two beams around it.
 constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2;  // ColumnImage::Observed
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells at least an azimuth step wide, rows
-// at most half the finest beam spacing, the tolerance growing by cfg.LdBeamTolRel() with range.
+// at most half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
 class ColumnImage {
  public:

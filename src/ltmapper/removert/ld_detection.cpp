@@ -342,10 +342,10 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   user_cfg.Validate();
   const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
   const auto t0 = std::chrono::steady_clock::now();
-  spdlog::info("LD: rotation uncertainty between the sessions {:.3f} deg ({}): kd radius {} m + {:.2f} %, beam "
-               "tolerance {} m + {:.2f} % of the distance", cfg.LdRotationSigmaDeg(),
+  spdlog::info("LD: rotation uncertainty between the sessions {:.3f} deg ({}): kd radius {} m + {:.2f} % of the "
+               "distance, beam tolerance {} m (own pixel + {:.2f} %)", cfg.LdRotationSigmaDeg(),
                cfg.ld_rotation_sigma_deg > 0.0 ? "ld.rotation_sigma_deg: measured by LT-SLAM, or set" : "pose_sigma_deg",
-               cfg.ld_radius_m, 100.0 * cfg.LdRadiusRel(), cfg.ld_beam.tol_m, 100.0 * cfg.LdBeamTolRel());
+               cfg.ld_radius_m, 100.0 * cfg.LdRadiusRel(), cfg.ld_beam.tol_m, 100.0 * cfg.LdOwnTolRel());
   const detail::LdLabels labels =
       detail::LabelLd(central_map, query_map, detail::Positions(central_keyframes), detail::Positions(query_keyframes),
                       central_keyframes, query_keyframes, cfg, threads);

@@ -130,7 +130,8 @@ struct VoteTest {
   std::uint8_t occluded = 0;  // kOcc when occluded points are counted, else 0
   std::uint8_t see_own = 0;   // kSeeOwn when the own pixel's see-through is counted, else 0
   // The own pixel's beam passed the point when the pixel's half size at the point's range is
-  // within this tolerance (the beam test's, BeamTest tol_m + tol_rel * range): a pixel wider than
+  // within this tolerance (the beam test's BeamTest tol_m, plus RemovertConfig::LdOwnTolRel times
+  // the range): a pixel wider than
   // that holds rays that went past beside or above the point, no sign its place was free.
   float own_tol_abs = std::numeric_limits<float>::infinity(), own_tol_rel = 0.f;
   float own_max_range = std::numeric_limits<float>::infinity();  // [m] per level (OwnReach)
@@ -564,10 +565,8 @@ void MultiResImage::PoolRows(Level& L) const {
 
 // The beam test's cells for the sensor: columns at least one azimuth step wide (else a column
 // may hold no return of a beam), rows at most half the finest beam spacing (else two beams share
-// a cell and the one above / below is lost). The tolerance grows with the range by the rotation
-// uncertainty between the sessions (RemovertConfig::LdBeamTolRel).
+// a cell and the one above / below is lost).
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test) {
-  test.tol_rel = cfg.LdBeamTolRel();
   if (!cfg.SensorResolved()) return test;
   const geometry::SensorModel& m = cfg.sensor_model;
   test.col_deg = std::max(test.col_deg, m.azimuth_step_deg);
@@ -652,7 +651,7 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
                                    const float* plane, bool want_around) const {
-  const float tol = float(test_.TolAt(range));
+  const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
   const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
@@ -694,7 +693,7 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
 
 bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps,
                          const float* plane) const {
-  const float tol = float(test_.TolAt(range));
+  const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const float* rc = range_.data() + column;
   const Eigen::Vector3f* qc = ret_.data() + column;
@@ -817,10 +816,9 @@ VoteSetup MakeSetup(const RemovertConfig& cfg, const detail::TileIndex& index, c
   s.test.surface_max = float(options.surface_max_m);
   s.test.occluded = options.count_occluded ? kOcc : 0;
   s.test.see_own = options.count_own_see ? detail::kSeeOwn : 0;
-  if (options.count_own_see && options.beams) {  // the beam test's tolerance, as ColumnImage resolves it
-    const BeamTest beams = detail::ForSensor(cfg, *options.beams);
-    s.test.own_tol_abs = float(beams.tol_m);
-    s.test.own_tol_rel = float(beams.tol_rel);
+  if (options.count_own_see && options.beams) {  // the beam test's tolerance, growing with the range
+    s.test.own_tol_abs = float(options.beams->tol_m);
+    s.test.own_tol_rel = float(cfg.LdOwnTolRel());
   }
   // A point's direction seen from another keyframe is off by the poses' relative rotation (yaw,
   // the odometry's largest error, moves it along the columns): the window is read there too.
