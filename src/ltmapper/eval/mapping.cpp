@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 
 namespace fs = std::filesystem;
@@ -140,13 +141,14 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
   const auto files = LabelledScanPaths(tdir, T_true.size());
   // Which static-world points are changes of which clouds (each change point is one of them, at
   // distance 0): one bit per cloud, so clouds may overlap (a pair's changes and its objects' part).
-  constexpr std::size_t kMaxClouds = 8;
+  using Label = std::uint8_t;
+  constexpr std::size_t kMaxClouds = std::numeric_limits<Label>::digits;
   if (changes.size() > kMaxClouds)
     throw Error("ChangesFromLabelledScans: " + std::to_string(changes.size()) + " change clouds, at most " +
                 std::to_string(kMaxClouds));
   auto world = std::make_shared<const PointCloud>(io::ReadCloud(Join(tdir, "static_world.pcd")));
   const geometry::KdTree tree(world);
-  std::vector<std::uint8_t> label(world->size(), 0);
+  std::vector<Label> label(world->size(), 0);
   // LD object truth is voxelised apart from the static world (a car's voxel there may also hold
   // ground points), so a change point marks its nearest static-world point within voxel_m / 2.
   const float same2 = float(0.25 * voxel_m * voxel_m);
@@ -154,7 +156,7 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
     for (const PointXYZI& p : changes[c]->points) {
       std::uint32_t j = 0;
       float d2 = 0.f;
-      if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= same2) label[j] |= std::uint8_t(1u << c);
+      if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= same2) label[j] |= Label(1u << c);
     }
   std::vector<PointCloud> out(changes.size());
   std::mutex out_mutex;

@@ -15,9 +15,10 @@
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
-//     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster also stands on change points of its group under it
-//     (StandOnChangesBelow), and a disappeared one on its lower part the query did not see, which
-//     an object keeps (UnseenLowerParts).
+//     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster
+//     also stands on change points of its group under it (StandOnChangesBelow), and a
+//     disappeared one on its lower part the query did not see, which an object keeps
+//     (UnseenLowerParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
@@ -220,15 +221,16 @@ class SensorRanges {
 // cluster.
 constexpr double kSampleGapsPerStep = 2.0;
 
-// Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
-// farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
-// of the range it was scanned from).
 // The sensor's sample gaps {horizontal, vertical} [m] that still join a cluster at `range_m`
 // (kSampleGapsPerStep times its steps there), before the cluster tolerance's floor.
 Eigen::Vector2f SensorGapsAt(double range_m, const MapConfig& cfg) {
   return Eigen::Vector2f(float(cfg.object_sensor_azimuth_step_deg), float(cfg.object_sensor_step_deg)) *
          float(kSampleGapsPerStep * kDegToRad * range_m);
 }
+
+// Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
+// farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
+// of the range it was scanned from).
 
 std::vector<Eigen::Vector2f> SampleGaps(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
                                         const SensorRanges& ranges, const MapConfig& cfg) {
@@ -674,9 +676,8 @@ bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig
     return false;
   const geometry::KdTree tree(whole.cloud);
   for (const auto& p : part.cloud.points)
-    for (const auto& [j, d2] : tree.RadiusUnsorted(p.xyz(), reach.maxCoeff())) {
-      (void)d2;
-      const Eigen::Vector3f d = whole.cloud.points[j].xyz() - p.xyz();
+    for (const auto& hit : tree.RadiusUnsorted(p.xyz(), reach.maxCoeff())) {
+      const Eigen::Vector3f d = whole.cloud.points[hit.first].xyz() - p.xyz();
       if ((d.head<2>() / reach.x()).squaredNorm() + (d.z() / reach.y()) * (d.z() / reach.y()) < 1.f) return true;
     }
   return false;

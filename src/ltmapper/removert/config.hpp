@@ -110,9 +110,8 @@ struct RemovertConfig {
   }
   double LdRotationSigmaDeg() const { return ld_rotation_sigma_deg > 0.0 ? ld_rotation_sigma_deg : pose_sigma_deg; }
   // The kd-tree radius must hold a surface both sessions have wherever the rotation error puts it:
-  // three sigma, as LT-SLAM's verification. The beam test asks what the change truth asks (a beam of
-  // the other session within ld.beam_tol_m of the point), and the rotation error brings a beam
-  // nearer as often as it takes one away: one sigma, the expected offset.
+  // three sigma, as LT-SLAM's verification. (The beam test asks what the change truth asks, a beam
+  // of the other session within ld.beam_tol_m of the point, and does not grow: BeamTest::tol_m.)
   static constexpr double kLdRadiusSigmas = 3.0;
   double LdRadiusRel() const { return std::tan(kLdRadiusSigmas * LdRotationSigmaDeg() * kRadPerDeg); }
   // The own pixel's see-through (PD strength) counts where the pixel's half size at the point is

@@ -131,8 +131,8 @@ struct VoteTest {
   std::uint8_t see_own = 0;   // kSeeOwn when the own pixel's see-through is counted, else 0
   // The own pixel's beam passed the point when the pixel's half size at the point's range is
   // within this tolerance (the beam test's BeamTest tol_m, plus RemovertConfig::LdOwnTolRel times
-  // the range): a pixel wider than
-  // that holds rays that went past beside or above the point, no sign its place was free.
+  // the range): a pixel wider than that holds rays that went past beside or above the point, no
+  // sign its place was free.
   float own_tol_abs = std::numeric_limits<float>::infinity(), own_tol_rel = 0.f;
   float own_max_range = std::numeric_limits<float>::infinity();  // [m] per level (OwnReach)
   float yaw_sigma = 0.f;      // [rad] the poses' angular uncertainty: the window is also read at yaw -+ it

@@ -10,6 +10,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -307,13 +308,15 @@ void RetryUnaligned(const std::vector<Session>& sessions, std::vector<PairCandid
   }
 }
 
-// Keyframe of the world poses W nearest to p within max_m (the last of equals), or -1.
-int NearestKeyframe(const std::vector<Pose>& W, const Eigen::Vector3d& p, double max_m) {
+// Keyframe of the world poses W nearest to p within max_m (the last of equals) among those
+// `eligible` accepts (all when empty), or -1.
+int NearestKeyframe(const std::vector<Pose>& W, const Eigen::Vector3d& p, double max_m,
+                    const std::function<bool(std::size_t)>& eligible = {}) {
   int best = -1;
   double best_d = max_m;
   for (std::size_t i = 0; i < W.size(); ++i) {
     const double d = (W[i].translation() - p).norm();
-    if (d <= best_d) best_d = d, best = int(i);
+    if (d <= best_d && (!eligible || eligible(i))) best_d = d, best = int(i);
   }
   return best;
 }
@@ -525,25 +528,18 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
 // than that radius: farther along the route than keyframes still overlap, yet within that reach in
 // space, so the route turned or came back (a corner, a parallel street, a second pass) and only
 // the odometry's drift links the two while their scans overlap. Each pair tried once.
-void OwnRadiusCandidates(const std::vector<Session>& sessions, const SlamResult& res,
-                         const std::vector<LoopRecord>& loops, std::size_t s, const SlamConfig& cfg, double radius_m,
+void OwnRadiusCandidates(const std::vector<double>& route, const SlamResult& res, const std::vector<LoopRecord>& loops,
+                         std::size_t s, const SlamConfig& cfg, double radius_m,
                          std::set<std::pair<NodeKey, NodeKey>>& tried, std::vector<LoopRecord>* cand) {
   const auto& W = res.sessions[s].T_world_sensor;
-  std::vector<Pose> odometry;
-  for (const Keyframe& kf : sessions[s].keyframes) odometry.push_back(kf.T_session_sensor);
-  const std::vector<double> route = PathLength(odometry);
   std::vector<bool> has_loop(W.size(), false);
   for (const auto& l : loops)
     if (l.accepted && OwnLoop(l) && l.a.session == int(s)) has_loop[l.a.keyframe] = has_loop[l.b.keyframe] = true;
   int eligible = 0, added = 0;
   for (std::size_t j = 0; j < W.size() && added < cfg.refine_max_loops_per_pair; ++j) {
     if (has_loop[j] || eligible++ % cfg.refine_stride != 0) continue;
-    int best = -1;
-    double best_d = radius_m;
-    for (std::size_t i = 0; i < W.size(); ++i) {
-      const double d = (W[i].translation() - W[j].translation()).norm();
-      if (std::abs(route[i] - route[j]) > radius_m && d <= best_d) best = int(i), best_d = d;
-    }
+    const int best = NearestKeyframe(W, W[j].translation(), radius_m,
+                                     [&](std::size_t i) { return std::abs(route[i] - route[j]) > radius_m; });
     if (best < 0) continue;
     const int a = std::min(best, int(j)), b = std::max(best, int(j));
     const LoopRecord l = WorldLoop(res, int(s), a, int(s), b, W[std::size_t(b)], "radius");
@@ -561,6 +557,12 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
+  std::vector<std::vector<double>> route(n);  // each session's distance along its odometry
+  for (std::size_t s = 0; s < n; ++s) {
+    std::vector<Pose> odometry;
+    for (const Keyframe& kf : sessions[s].keyframes) odometry.push_back(kf.T_session_sensor);
+    route[s] = PathLength(odometry);
+  }
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (std::size_t a = 0; a + 1 < n; ++a)
@@ -569,7 +571,7 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
           RadiusCandidates(res, loops, a, b, cfg, radius_m, tried, &cand);
     for (std::size_t a = 0; a < n; ++a)
       if (res.sessions[a].aligned && (a > 0 || cfg.central_own_loops))
-        OwnRadiusCandidates(sessions, res, loops, a, cfg, radius_m, tried, &cand);
+        OwnRadiusCandidates(route[a], res, loops, a, cfg, radius_m, tried, &cand);
     if (cand.empty()) break;
     const std::size_t ok =
         RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), cost);
