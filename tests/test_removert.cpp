@@ -237,6 +237,41 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   EXPECT_EQ(pixel.Hit(0, 0), 1);
 }
 
+// The beam test's columns are one azimuth step wide: a cell keeps its nearest return, so a column
+// two steps wide (0.4 deg for a VLP-16's 0.2 deg) would hold two returns of a beam and lose the
+// farther. Here the return that ended on the ground 1 m beyond a point 33 m away shares a 0.4 deg
+// column with its neighbour, which met a post at 20 m.
+TEST(RemovertVotes, BeamTestKeepsEveryReturnOfABeam) {
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.sensor = "vlp16";  // beams every 2 deg from +15 to -15, azimuth step 0.2 deg
+  cfg.sensor_elevations_deg.clear();
+  cfg.sensor_model = {};
+  cfg.fov_up_deg = cfg.fov_down_deg = 0.0;
+  cfg = removert::WithSensor(cfg, {});
+  ASSERT_DOUBLE_EQ(cfg.sensor_model.azimuth_step_deg, 0.2);
+  constexpr double kDeg = M_PI / 180.0, kHeight = 1.8, kBeam = -3.0 * kDeg;
+  // Yaws 19.7 and 19.9 deg: one 0.4 deg column (columns count from yaw 180 deg), two 0.2 deg ones.
+  const double yaw = 19.7 * kDeg, ring = kHeight / std::tan(-kBeam);  // the beam meets the ground 34.3 m out
+  auto scan = std::make_shared<PointCloud>();
+  auto add = [&](double az, double range) {
+    const Eigen::Vector3d d = test::Direction(kBeam, az) * range;
+    scan->push_back(float(d.x()), float(d.y()), float(d.z()));
+  };
+  add(yaw, ring / std::cos(kBeam));  // on the ground 1 m beyond the point
+  add(yaw + 0.2 * kDeg, 20.0);        // its neighbour: a post
+  WorldKeyframe kf;
+  kf.T_world_sensor = test::At(0, 0, kHeight);
+  kf.cloud = scan;
+  PointCloud pts;
+  pts.push_back(float((ring - 1.0) * std::cos(yaw)), float((ring - 1.0) * std::sin(yaw)), 0.f);
+  const std::vector<Eigen::Vector3f> up = {Eigen::Vector3f::UnitZ()};
+  removert::BeamTest beams;
+  removert::VisibilityOptions opt;
+  opt.normals = &up;
+  opt.beams = &beams;
+  EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[0], 1);
+}
+
 // The street scene: 21 keyframes 2 m apart along x.
 struct Street {
   std::vector<WorldKeyframe> kfs;

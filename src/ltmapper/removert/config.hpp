@@ -29,7 +29,8 @@ constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
 // The tolerances mirror the sim truth's (truth.visibility_tolerance_m, _grazing_max_m).
 // The defaults are those of RemovertConfig::ld_beam (config keys ld.beam_*).
 struct BeamTest {
-  double col_deg = 0.4;         // [deg] column width (>= the scans' azimuth step)
+  double col_deg = 0.4;         // [deg] column width where the sensor has no azimuth step (no rings);
+                                // else the azimuth step (ForSensor): a cell holds one return per beam
   double row_deg = 0.1;         // [deg] row height (well below the beams' elevation spacing)
   double span_deg = 1.5;        // [deg] how far above / below the point's direction to look for the beams
   double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface, at any
