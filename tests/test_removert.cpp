@@ -272,6 +272,54 @@ TEST(RemovertVotes, BeamTestKeepsEveryReturnOfABeam) {
   EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[0], 1);
 }
 
+// A ring sensor fires every beam at every azimuth step, so a beam that passed a point and has no
+// return there went on and met nothing: the point's place was free (an appeared structure's place,
+// the sky behind it). Not where the cells hold a return of any range (a truck 1.8 m from the
+// sensor, nearer than sensor.min_range_m, blocked the beam), nor at a lone empty cell (a dropped
+// return, its neighbours met a wall).
+TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.sensor = "vlp16";
+  cfg.sensor_elevations_deg.clear();
+  cfg.sensor_model = {};
+  cfg.fov_up_deg = cfg.fov_down_deg = 0.0;
+  cfg = removert::WithSensor(cfg, {});
+  constexpr double kDeg = M_PI / 180.0;
+  const double beam = 1.0 * kDeg, yaw = 10.1 * kDeg;  // the VLP-16's +1 deg beam
+  PointCloud pts;
+  const Eigen::Vector3d p = test::Direction(beam + 0.1 * kDeg, yaw) * 40.0;  // 0.07 m off the beam
+  pts.push_back(float(p.x()), float(p.y()), float(p.z() + 1.8));
+  const std::vector<Eigen::Vector3f> side = {-p.cast<float>().normalized()};  // an upright face
+  // Returns of the +1 deg beam every 0.2 deg of azimuth from 0 to 20 deg at 60 m, within 1 deg of
+  // the point at near_range (none where it is negative); with lone_gap all at 60 m but the one at
+  // 10.0 deg.
+  auto scan_with = [&](double near_range, bool lone_gap) {
+    auto scan = std::make_shared<PointCloud>();
+    for (int k = 0; k < 100; ++k) {
+      const double a = 0.2 * k;
+      const double r = lone_gap ? (k == 50 ? -1.0 : 60.0) : std::fabs(a - 10.1) < 1.0 ? near_range : 60.0;
+      if (r <= 0.0) continue;
+      const Eigen::Vector3d q = test::Direction(beam, a * kDeg) * r;
+      scan->push_back(float(q.x()), float(q.y()), float(q.z()));
+    }
+    return scan;
+  };
+  auto passed = [&](const std::shared_ptr<PointCloud>& scan) {
+    WorldKeyframe kf;
+    kf.T_world_sensor = test::At(0, 0, 1.8);
+    kf.cloud = scan;
+    removert::BeamTest beams;
+    removert::VisibilityOptions opt;
+    opt.normals = &side;
+    opt.beams = &beams;
+    opt.count_own_see = true;
+    return removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_passed.at(0);
+  };
+  EXPECT_EQ(passed(scan_with(-1.0, false)), 1);  // nothing within 1 deg of it: the sky
+  EXPECT_EQ(passed(scan_with(1.8, false)), 0);   // a truck beside the sensor
+  EXPECT_EQ(passed(scan_with(-1.0, true)), 0);   // one dropped return before a wall
+}
+
 // The street scene: 21 keyframes 2 m apart along x.
 struct Street {
   std::vector<WorldKeyframe> kfs;

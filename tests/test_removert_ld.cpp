@@ -227,6 +227,39 @@ TEST(RemovertLd, SparseFarGroundIsNotAChange) {
   EXPECT_LE(defaults.nd_strong.size() + defaults.pd_weak.size(), total(defaults) / 20 + 10);
 }
 
+// A sparse sensor (16 beams 2 deg apart) over the same world twice, the second drive 0.7 m to the
+// side: between its rings the ground has no point of the other drive within the kd radius, and
+// the pixels of a ring that passed over such a point at a grazing angle hold the ground farther
+// along, a see-through by the range test. A beam that ended on that level ground near the point
+// is its surface: no strong ND (the map would lose its ground), no weak PD.
+TEST(RemovertLd, GroundABeamEndedOnIsNotSeenThrough) {
+  const test::Lidar sparse{16, 15.0, -15.0, 1800, 100.0};
+  RemovertConfig cfg = test::ConfigFor(sparse);
+  cfg.ld_rotation_sigma_deg = 1e-9;  // no distance-dependent radius: the beam test alone
+  const auto boxes = Common();
+  auto drive = [&](double y) {
+    std::vector<WorldKeyframe> kfs;
+    for (int k = 0; k <= 20; ++k) {
+      WorldKeyframe kf;
+      kf.index = k;
+      kf.T_world_sensor = test::At(-20.0 + 2.0 * k, y, 1.8, 0.0);
+      kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, sparse));
+      kfs.push_back(kf);
+    }
+    return kfs;
+  };
+  const auto a = drive(0.0), b = drive(0.7);
+  const PointCloud ma = removert::BuildSessionMap(a, cfg, 2), mb = removert::BuildSessionMap(b, cfg, 2);
+  const auto ld = removert::DetectLd(ma, mb, a, b, cfg, 2);
+  auto ground = [](const PointCloud& c) {
+    return std::size_t(std::count_if(c.points.begin(), c.points.end(), [](const PointXYZI& p) { return p.z < 0.2f; }));
+  };
+  std::printf("ground: strong ND %zu, weak PD %zu; weak ND %zu, strong PD %zu; same ND %zu PD %zu (maps %zu + %zu)\n",
+              ground(ld.nd_strong), ground(ld.pd_weak), ground(ld.nd_weak), ground(ld.pd_strong), ld.stats.nd_same,
+              ld.stats.pd_same, ma.size(), mb.size());
+  EXPECT_GT(ld.stats.nd_same + ld.stats.pd_same, 100u);
+  EXPECT_LE(ground(ld.nd_strong) + ground(ld.pd_weak), 10u);
+}
 
 // Each LD pair takes its query session's rotation measure (from the run manifest) unless
 // ld.rotation_sigma_deg is set; a session without a measure is an error, not a silent fallback.

@@ -135,7 +135,8 @@ struct RemovertConfig {
                                       // the normal perpendicular to the line closest to vertical
   double ld_surface_max_m = 10.0;     // [m] a return on the point's plane at most this far from it in range is
                                       // a same-surface hit (grazing far ground; an occluder is off the plane)
-  int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through that this many of the other
+  int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through (with the beam test, or on
+                                  // level ground: see SeenThroughBy) that this many of the other
                                   // session's keyframes hit on its surface plane (surface hits, see
                                   // VisibilityOptions) is the same surface, sampled more sparsely:
                                   // no change (0 = off)

@@ -42,9 +42,12 @@ struct Visibility {
   std::vector<bool> seen, observed, same;
   std::vector<bool> seen_own;  // with own_pixel: seen, or seen through by an upright point's own pixel (PD strength)
 };
+// standing (optional, per point): the point stands on the other session's ground (a lower body,
+// Missing's kRawAboveTheirGround), whose plane its level normal may be: the level-ground rule of
+// `same` does not apply to it.
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                         int threads, bool own_pixel);
+                         int threads, bool own_pixel, const std::vector<bool>* standing = nullptr);
 
 // |normal z| below cos 45 deg: the surface is more upright than horizontal (a wall, a car's flank);
 // above it, more horizontal (ground, a roof).

@@ -146,7 +146,7 @@ class MultiResImage {
 // A scan's nearest return per (column, row) cell of BeamTest::col_deg x row_deg, stored column
 // by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
 // the first returns above and below a direction are the two beams around it.
-constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2;  // ColumnImage::Observed
+constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4;  // ColumnImage::Observed
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells at least an azimuth step wide, rows
 // at most half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
@@ -158,11 +158,19 @@ class ColumnImage {
   // gives them) on the plane n . x = off (plane[0..3], sensor frame): kBeamEnded when a beam of
   // its column or of the columns within asin(tol / range) of it ended on its surface near it;
   // with want_around, kBeamAround when its cell is empty and the
-  // beams around it met its surface farther away (Around); both bits or none.
+  // beams around it met its surface farther away (Around), and kBeamPassed when a beam passed it
+  // without a return (PassedWithoutReturn).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                         bool want_around) const;
+  // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
+  // within the tolerance of the point (at its range, inside the sensor's max range) and whose
+  // cells there and one step to each side hold no return went on past the point and met nothing
+  // (the sky, or beyond the range): its place was free. A lone empty cell is a dropped return,
+  // no evidence. False for sensors without rings or a known azimuth step.
+  bool PassedWithoutReturn(float range, float pitch, float yaw) const;
 
  private:
+  bool EmptyAround(int col, int row_top, int row_bottom) const;
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   std::pair<int, int> BeamsAround(const float* rc, int row) const;
   BeamTest test_;
@@ -172,6 +180,9 @@ class ColumnImage {
   float min_range_ = 0.f, max_range_ = 0.f;
   std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
+  std::vector<std::uint8_t> any_;     // 1 = a return at any range (PassedWithoutReturn)
+  std::vector<float> beam_el_;        // [rad] the beams' elevations (ring sensors with an azimuth step)
+  std::vector<float> beam_margin_;    // [rad] per beam: its returns lie within this of its elevation
 };
 
 }  // namespace ltm::removert::detail

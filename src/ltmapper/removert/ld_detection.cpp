@@ -261,7 +261,9 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
   std::vector<std::uint32_t> raw;
   for (std::size_t i = 0; i < missing.size(); ++i)
     if (missing[i] != kRawNone) raw.push_back(std::uint32_t(i));
-  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd), nd, cfg);
+  std::vector<bool> standing(raw.size());
+  for (std::size_t j = 0; j < raw.size(); ++j) standing[j] = missing[raw[j]] == kRawAboveTheirGround;
+  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd, &standing), nd, cfg);
   for (std::size_t j = 0; j < raw.size(); ++j)
     (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
   const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak;

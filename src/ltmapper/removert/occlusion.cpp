@@ -77,7 +77,7 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
 
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                         int threads, bool own_pixel) {
+                         int threads, bool own_pixel, const std::vector<bool>* standing) {
   Visibility out;
   out.seen.assign(points.size(), false);
   out.observed.assign(points.size(), false);
@@ -106,10 +106,12 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
   for (std::size_t i = 0; i < points.size(); ++i) {
     bool seen = false, observed = false, seen_own = false;
+    int see_max = 0;
     int hits = beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
+      see_max = std::max(see_max, int(s));
       if (own_pixel) {
         const double o = v.SeeOwn(l, i);
         seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
@@ -127,10 +129,19 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     if (own_pixel) {
       const bool upright = planar.empty() || !planar[i] || std::abs(normals[i].z()) < kUprightNormalZ;
       const bool around = beams && v.beam_around[i] > 0;
-      out.seen_own[i] = seen || (seen_own && upright && !around);
+      // A beam that passed it and met nothing (the sky beyond a tall thing) saw its place free;
+      // not at the edge of a surface the beams around it met (a facade's top against the sky).
+      const bool passed = beams && upright && !around && v.beam_passed[i] >= cfg.ld_min_votes;
+      out.seen_own[i] = seen || (seen_own && upright && !around) || passed;
+      observed = observed || passed;
     }
     out.observed[i] = observed;
-    out.same[i] = !seen && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
+    // A beam that ended on level ground (or a roof) near the point is its surface, even where the
+    // pixels say seen through: their rays passed over it at a grazing angle and met the same
+    // surface farther along. Not under a lower body standing on the other session's ground.
+    const bool level = beams && planar[i] && std::abs(normals[i].z()) >= kUprightNormalZ &&
+                       !(standing && (*standing)[i]);
+    out.same[i] = (!seen || (level && hits >= see_max)) && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
   }
   return out;
 }

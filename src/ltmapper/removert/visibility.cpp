@@ -590,17 +590,32 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     const double spacing = cfg.SensorResolved() ? cfg.sensor_model.SpacingAt(elevation) : 0.0;
     span_[std::size_t(r)] = std::max(1, int(std::lround(std::max(test.span_deg, kSpanSpacings * spacing) / test.row_deg)));
   }
+  if (cfg.SensorResolved() && cfg.sensor_model.ring_based && cfg.sensor_model.azimuth_step_deg > 0.0) {
+    // A beam's returns lie within 0.4 of the local spacing of its tabled elevation (the table is
+    // estimated; the other beams' lie beyond).
+    constexpr double kOwnBand = 0.4;
+    for (const double e : cfg.sensor_model.elevations_deg) {
+      beam_el_.push_back(float(e * kRadPerDeg));
+      beam_margin_.push_back(float(std::max(0.5 * test.row_deg, kOwnBand * cfg.sensor_model.SpacingAt(e)) * kRadPerDeg));
+    }
+  }
   down_ = float(cfg.fov_down_deg * kRadPerDeg);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
   ret_.assign(range_.size(), Eigen::Vector3f::Zero());
+  any_.assign(range_.size(), 0);
 }
 
 void ColumnImage::Build(const PointCloud& scan) {
   std::fill(range_.begin(), range_.end(), std::numeric_limits<float>::infinity());
+  std::fill(any_.begin(), any_.end(), 0);
+  // Every return marks its cell in any_ (a beam that met something, at any range); the range test
+  // reads those within [min_range, max_range].
   auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
     const std::size_t cell = std::size_t(grid_.Col(yaw)) * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
+    any_[cell] = 1;
+    if (r < min_range_ || r > max_range_) return;
     if (r < range_[cell]) {
       range_[cell] = r;
       ret_[cell] = Eigen::Vector3f(q.x, q.y, q.z);
@@ -610,7 +625,8 @@ void ColumnImage::Build(const PointCloud& scan) {
   const std::size_t n = scan.size();
 #if defined(__SSE2__)
   // Four points at a time through the angle kernel MultiResImage::Build uses.
-  const ScanBounds4 bd{_mm_set1_ps(grid_.up), _mm_set1_ps(down_), _mm_set1_ps(min_range_), _mm_set1_ps(max_range_)};
+  const ScanBounds4 bd{_mm_set1_ps(grid_.up), _mm_set1_ps(down_), _mm_set1_ps(1e-6f),
+                       _mm_set1_ps(std::numeric_limits<float>::infinity())};
   alignas(16) float rs[4], ps[4], ys[4];
   for (; i + 4 <= n; i += 4) {
     __m128 r, pt, yw;
@@ -627,7 +643,7 @@ void ColumnImage::Build(const PointCloud& scan) {
     const PointXYZI& q = scan.points[i];
     const float rxy2 = q.x * q.x + q.y * q.y;
     const float r = std::sqrt(rxy2 + q.z * q.z);
-    if (!(r > 1e-6f) || r < min_range_ || r > max_range_) continue;
+    if (!(r > 1e-6f)) continue;
     const float pitch = FastAtan2(q.z, std::sqrt(rxy2));
     if (pitch > grid_.up || pitch < down_) continue;
     put(r, pitch, FastAtan2(q.y, q.x), q);
@@ -689,7 +705,33 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
       int a = -1, b = -1;
       if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
     }
-  return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0));
+  const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
+  return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0));
+}
+
+bool ColumnImage::EmptyAround(int col, int row_top, int row_bottom) const {
+  for (int c = col - 1; c <= col + 1; ++c) {
+    const std::uint8_t* ac = any_.data() + std::size_t((c + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
+    for (int r = row_top; r <= row_bottom; ++r)
+      if (ac[r]) return false;
+  }
+  return true;
+}
+
+bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const {
+  const float tol = float(test_.tol_m);
+  if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
+  const float reach = std::asin(std::min(1.f, tol / range));
+  const int col = grid_.Col(yaw);
+  for (std::size_t b = 0; b < beam_el_.size(); ++b) {
+    const float e = beam_el_[b], d_el = e - pitch;
+    if (std::fabs(d_el) > reach) continue;
+    const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
+    const int cols = int(std::sqrt(reach * reach - d_el * d_el) * grid_.col_scale);
+    for (int d = -cols; d <= cols; ++d)
+      if (EmptyAround(col + d, row_top, row_bottom)) return true;
+  }
+  return false;
 }
 
 bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps,
@@ -910,7 +952,8 @@ struct VoteCounts {
   VoteCounts(const VoteSetup& s, std::size_t n)
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
-        beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0), locks(new std::mutex[s.index.tiles()]) {}
+        beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
+        beam_passed(beam_around.size(), 0), locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
     const std::lock_guard<std::mutex> lock(locks[tile]);
@@ -921,6 +964,8 @@ struct VoteCounts {
     if (!beam_around.empty()) {
       std::uint16_t* av = beam_around.data() + b;
       for (std::size_t i = 0; i < tn; ++i) av[i] = std::uint16_t(av[i] + ((sc.seen_beams[i] & detail::kBeamAround) >> 1));
+      std::uint16_t* pv = beam_passed.data() + b;
+      for (std::size_t i = 0; i < tn; ++i) pv[i] = std::uint16_t(pv[i] + ((sc.seen_beams[i] & detail::kBeamPassed) >> 2));
     }
     for (std::size_t l = 0; l < levels; ++l) {
       const std::uint8_t* vote = sc.votes.data() + l * tn;
@@ -945,6 +990,7 @@ struct VoteCounts {
   void ToInputOrder(const std::vector<std::uint32_t>& order, VisibilityVotes* out) const {
     for (std::size_t i = 0; i < beam_hits.size(); ++i) out->beam_hits[std::size_t(order[i])] = beam_hits[i];
     for (std::size_t i = 0; i < beam_around.size(); ++i) out->beam_around[std::size_t(order[i])] = beam_around[i];
+    for (std::size_t i = 0; i < beam_passed.size(); ++i) out->beam_passed[std::size_t(order[i])] = beam_passed[i];
     for (std::size_t l = 0; l < levels; ++l)
       for (std::size_t i = 0; i < n; ++i) {
         const std::size_t orig = std::size_t(order[i]);
@@ -956,7 +1002,7 @@ struct VoteCounts {
   }
 
   std::size_t n, levels;
-  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits, beam_around;
+  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits, beam_around, beam_passed;
   std::unique_ptr<std::mutex[]> locks;
 };
 
@@ -980,7 +1026,7 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   if (options.count_own_see) out.see_own.assign(n * levels, 0);
   if (options.normals != nullptr && options.beams != nullptr) {
     out.beam_hits.assign(n, 0);
-    if (options.count_own_see) out.beam_around.assign(n, 0);
+    if (options.count_own_see) out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
   }
   return out;
 }

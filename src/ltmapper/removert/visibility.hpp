@@ -25,6 +25,8 @@ struct VisibilityVotes {
   std::vector<std::uint16_t> beam_hits;  // [i] keyframes that observed the point's surface by the BeamTest
   std::vector<std::uint16_t> beam_around;  // [i] keyframes whose beams around it met its surface farther away;
                                            // only with the beam test and count_own_see (its one reader)
+  std::vector<std::uint16_t> beam_passed;  // [i] keyframes a beam of which passed it without a return
+                                           // (ColumnImage::PassedWithoutReturn); as beam_around
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
   std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
