@@ -274,9 +274,10 @@ TEST(RemovertVotes, BeamTestKeepsEveryReturnOfABeam) {
 
 // A ring sensor fires every beam at every azimuth step, so a beam that passed a point and has no
 // return there went on and met nothing: the point's place was free (an appeared structure's place,
-// the sky behind it). Not where the cells hold a return of any range (a truck 1.8 m from the
-// sensor, nearer than sensor.min_range_m, blocked the beam), nor at a lone empty cell (a dropped
-// return, its neighbours met a wall).
+// the sky behind it; the beams below met the ground). Not where the cells hold a return of any
+// range (a truck 1.8 m from the sensor, nearer than sensor.min_range_m, blocked the beam), nor at
+// a lone empty cell (a dropped return, its neighbours met a wall), nor where whole columns hold no
+// return (the seam where a deskewed sweep starts and ends).
 TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   RemovertConfig cfg = test::ConfigFor();
   cfg.sensor = "vlp16";
@@ -285,29 +286,34 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   cfg.fov_up_deg = cfg.fov_down_deg = 0.0;
   cfg = removert::WithSensor(cfg, {});
   constexpr double kDeg = M_PI / 180.0;
-  const double beam = 1.0 * kDeg, yaw = 10.1 * kDeg;  // the VLP-16's +1 deg beam
+  const double beam = 1.0 * kDeg, ground = -15.0 * kDeg;  // two of the VLP-16's beams
   PointCloud pts;
-  const Eigen::Vector3d p = test::Direction(beam + 0.1 * kDeg, yaw) * 40.0;  // 0.07 m off the beam
+  const Eigen::Vector3d p = test::Direction(beam + 0.1 * kDeg, 10.1 * kDeg) * 40.0;  // 0.07 m off the beam
   pts.push_back(float(p.x()), float(p.y()), float(p.z() + 1.8));
   const std::vector<Eigen::Vector3f> side = {-p.cast<float>().normalized()};  // an upright face
-  // Returns of the +1 deg beam every 0.2 deg of azimuth from 0 to 20 deg at 60 m, within 1 deg of
-  // the point at near_range (none where it is negative); with lone_gap all at 60 m but the one at
-  // 10.0 deg.
-  auto scan_with = [&](double near_range, bool lone_gap) {
+  enum Case { kSky, kTruck, kDropped, kSeam };
+  // Every 0.2 deg of azimuth from 0 to 20 deg: the -15 deg beam on the ground, the +1 deg beam on a
+  // wall 60 m away; within 1 deg of the point's azimuth the +1 deg beam meets nothing (sky, seam)
+  // or the truck; dropped: only its return at 10.0 deg is missing; seam: the ground's too.
+  auto scan_of = [&](Case what) {
     auto scan = std::make_shared<PointCloud>();
-    for (int k = 0; k < 100; ++k) {
-      const double a = 0.2 * k;
-      const double r = lone_gap ? (k == 50 ? -1.0 : 60.0) : std::fabs(a - 10.1) < 1.0 ? near_range : 60.0;
-      if (r <= 0.0) continue;
-      const Eigen::Vector3d q = test::Direction(beam, a * kDeg) * r;
+    auto add = [&](double el, double az, double r) {
+      const Eigen::Vector3d q = test::Direction(el, az) * r;
       scan->push_back(float(q.x()), float(q.y()), float(q.z()));
+    };
+    for (int k = 0; k < 100; ++k) {
+      const double a = 0.2 * k * kDeg;
+      const bool near = std::fabs(0.2 * k - 10.1) < 1.0;
+      if (!(what == kSeam && near)) add(ground, a, 1.8 / std::sin(-ground));
+      if (what == kDropped ? k != 50 : !near) add(beam, a, 60.0);
+      else if (what == kTruck) add(beam, a, 1.8);
     }
     return scan;
   };
-  auto passed = [&](const std::shared_ptr<PointCloud>& scan) {
+  auto passed = [&](Case what) {
     WorldKeyframe kf;
     kf.T_world_sensor = test::At(0, 0, 1.8);
-    kf.cloud = scan;
+    kf.cloud = scan_of(what);
     removert::BeamTest beams;
     removert::VisibilityOptions opt;
     opt.normals = &side;
@@ -315,9 +321,14 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
     opt.count_own_see = true;
     return removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_passed.at(0);
   };
-  EXPECT_EQ(passed(scan_with(-1.0, false)), 1);  // nothing within 1 deg of it: the sky
-  EXPECT_EQ(passed(scan_with(1.8, false)), 0);   // a truck beside the sensor
-  EXPECT_EQ(passed(scan_with(-1.0, true)), 0);   // one dropped return before a wall
+  EXPECT_EQ(passed(kSky), 1);
+  EXPECT_EQ(passed(kTruck), 0);
+  EXPECT_EQ(passed(kDropped), 0);
+  EXPECT_EQ(passed(kSeam), 0);
+  // Scans whose beams scatter about the table (deskewed sweeps: here 3 x 0.4 deg reaches halfway
+  // to the neighbours 2 deg away) cannot tell which beam is which: no evidence.
+  cfg.sensor_model.spread_deg = 0.4;
+  EXPECT_EQ(passed(kSky), 0);
 }
 
 // The street scene: 21 keyframes 2 m apart along x.

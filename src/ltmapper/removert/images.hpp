@@ -166,6 +166,7 @@ class ColumnImage {
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing
   // (the sky, or beyond the range): its place was free. A lone empty cell is a dropped return,
+  // and a column without any return is the seam of a deskewed sweep (where it starts and ends),
   // no evidence. False for sensors without rings or a known azimuth step.
   bool PassedWithoutReturn(float range, float pitch, float yaw) const;
 
@@ -181,6 +182,8 @@ class ColumnImage {
   std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
   std::vector<std::uint8_t> any_;     // 1 = a return at any range (PassedWithoutReturn)
+  std::vector<std::uint8_t> swept_;   // [cols] 1 = the column holds a return (deskewed sweeps leave
+                                      // a seam of empty columns where they start and end)
   std::vector<float> beam_el_;        // [rad] the beams' elevations (ring sensors with an azimuth step)
   std::vector<float> beam_margin_;    // [rad] per beam: its returns lie within this of its elevation
 };

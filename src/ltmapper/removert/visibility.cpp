@@ -592,11 +592,16 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   }
   if (cfg.SensorResolved() && cfg.sensor_model.ring_based && cfg.sensor_model.azimuth_step_deg > 0.0) {
     // A beam's returns lie within 0.4 of the local spacing of its tabled elevation (the table is
-    // estimated; the other beams' lie beyond).
-    constexpr double kOwnBand = 0.4;
-    for (const double e : cfg.sensor_model.elevations_deg) {
+    // estimated; the other beams' lie beyond), and within 3 x the scans' scatter about it (deskewed
+    // sweeps: the vehicle's motion during the sweep moves them). A beam whose scatter reaches
+    // halfway to its neighbours cannot be told from them: it gives no evidence.
+    constexpr double kOwnBand = 0.4, kScatter = 3.0;
+    const geometry::SensorModel& m = cfg.sensor_model;
+    for (const double e : m.elevations_deg) {
+      const double spacing = m.SpacingAt(e), scatter = kScatter * m.spread_deg;
+      if (scatter >= 0.5 * spacing) continue;
       beam_el_.push_back(float(e * kRadPerDeg));
-      beam_margin_.push_back(float(std::max(0.5 * test.row_deg, kOwnBand * cfg.sensor_model.SpacingAt(e)) * kRadPerDeg));
+      beam_margin_.push_back(float(std::max({0.5 * test.row_deg, kOwnBand * spacing, scatter}) * kRadPerDeg));
     }
   }
   down_ = float(cfg.fov_down_deg * kRadPerDeg);
@@ -605,16 +610,19 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
   ret_.assign(range_.size(), Eigen::Vector3f::Zero());
   any_.assign(range_.size(), 0);
+  swept_.assign(std::size_t(grid_.cols), 0);
 }
 
 void ColumnImage::Build(const PointCloud& scan) {
   std::fill(range_.begin(), range_.end(), std::numeric_limits<float>::infinity());
   std::fill(any_.begin(), any_.end(), 0);
+  std::fill(swept_.begin(), swept_.end(), 0);
   // Every return marks its cell in any_ (a beam that met something, at any range); the range test
   // reads those within [min_range, max_range].
   auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
-    const std::size_t cell = std::size_t(grid_.Col(yaw)) * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
+    const std::size_t col = std::size_t(grid_.Col(yaw)), cell = col * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
     any_[cell] = 1;
+    swept_[col] = 1;
     if (r < min_range_ || r > max_range_) return;
     if (r < range_[cell]) {
       range_[cell] = r;
@@ -711,7 +719,9 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
 
 bool ColumnImage::EmptyAround(int col, int row_top, int row_bottom) const {
   for (int c = col - 1; c <= col + 1; ++c) {
-    const std::uint8_t* ac = any_.data() + std::size_t((c + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
+    const std::size_t cc = std::size_t((c + grid_.cols) % grid_.cols);
+    if (!swept_[cc]) return false;  // no return in the whole column: the sweep's seam, not the sky
+    const std::uint8_t* ac = any_.data() + cc * std::size_t(grid_.rows);
     for (int r = row_top; r <= row_bottom; ++r)
       if (ac[r]) return false;
   }
