@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -733,7 +734,9 @@ bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const
   if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
   const float reach = std::asin(std::min(1.f, tol / range));
   const int col = grid_.Col(yaw);
-  for (std::size_t b = 0; b < beam_el_.size(); ++b) {
+  // The beams within reach of the pitch: beam_el_ runs top first.
+  const auto first = std::lower_bound(beam_el_.begin(), beam_el_.end(), pitch + reach, std::greater<float>());
+  for (std::size_t b = std::size_t(first - beam_el_.begin()); b < beam_el_.size() && beam_el_[b] >= pitch - reach; ++b) {
     const float e = beam_el_[b], d_el = e - pitch;
     if (std::fabs(d_el) > reach) continue;
     const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
