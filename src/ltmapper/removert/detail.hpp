@@ -40,7 +40,8 @@ using ltm::ParallelFor;  // core.hpp
 // of the point has a return beyond it (seen_own); the ND pass leaves it empty.
 struct Visibility {
   std::vector<bool> seen, observed, same;
-  std::vector<bool> seen_own;  // with own_pixel: seen, or seen through by an upright point's own pixel (PD strength)
+  std::vector<bool> seen_own;  // with own_pixel: seen, or seen through by an upright point's own pixel, or
+                               // passed by a beam that met nothing (PD strength)
 };
 // standing (optional, per point): the point stands on the other session's ground (a lower body,
 // Missing's kRawAboveTheirGround), whose plane its level normal may be: the level-ground rule of

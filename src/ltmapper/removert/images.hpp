@@ -147,8 +147,8 @@ class MultiResImage {
 // by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
 // the first returns above and below a direction are the two beams around it.
 constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4;  // ColumnImage::Observed
-// `test` as a ColumnImage for `cfg`'s sensor applies it: cells at least an azimuth step wide, rows
-// at most half the finest beam spacing.
+// `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
+// half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
 class ColumnImage {
  public:
