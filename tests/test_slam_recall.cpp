@@ -160,6 +160,32 @@ TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
   EXPECT_FALSE(AlignSessions(sessions, cfg, 2).sessions[1].aligned);
 }
 
+// A VLP-16 pitched 10 deg down (seed 3: its two drives share about a third of their routes, and
+// every Scan Context candidate is wrong): the first round of global placements verifies two, the
+// second none, the third enough to align. A round without a verified placement ends the fallback
+// only while none was ever verified; ending it there left this query unaligned.
+TEST(SlamRecall, GlobalFallbackGoesOnOnceAPlacementWasVerified) {
+  sim::SimConfig sc = TwoSessions(kKeyframes);
+  sc.seed = 3;
+  sc.lidar_preset = "vlp16";
+  sc.tilt_deg = 10.0;
+  sim::Simulator s(sc, 2);
+  const std::vector<Session> sessions = SimSessions(s);
+  SlamConfig cfg;
+  cfg.refine_rounds = 1;
+  const SlamResult r = AlignSessions(sessions, cfg, 2);
+  ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
+  int pairs = 0;
+  const double rmse = ConsistencyRmse(r, s, &pairs);
+  std::printf("tilted VLP-16, seed 3: %d global placements, %d accepted, %d loops in all, consistency RMSE %.3f m "
+              "over %d pairs, %.2f s\n",
+              LoopsFrom(r, "global", false), LoopsFrom(r, "global", true), r.sessions[1].loops_accepted, rmse, pairs,
+              r.time_total_s);
+  EXPECT_GT(LoopsFrom(r, "global", false), 2 * cfg.global_queries - 1);  // past the round that verified none
+  EXPECT_LT(rmse, kConsistencyM);
+  EXPECT_EQ(FalseLoops(r, s), 0);
+}
+
 // A query from another city (another seed's world): no placement survives verification and
 // consensus, so the query is not aligned (zero false alignments).
 TEST(SlamRecall, GlobalRegistrationPlacesNothingInAnotherCity) {

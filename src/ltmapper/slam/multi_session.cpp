@@ -380,7 +380,10 @@ std::vector<LoopRecord> GlobalCandidates(const SlamResult& res, int a, int b, co
 // registration in each aligned session's map (the central first), its placements verified by
 // GICP and the anchor consensus like any loop, until it aligns. A round that verified a placement
 // but not enough of them to align is followed by one placing keyframes between the earlier ones
-// (a route seen from a pitched sensor may match in few places); a round that verified none ends it.
+// (a route seen from a pitched sensor may match in few places). A round that verified none ends
+// it only while no round has verified one: once a placement was verified the routes overlap, and
+// a short overlap (a third of a route: four of twelve queries) may miss in one round and match in
+// the next.
 void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
                     CloudStore& store, const SlamConfig& cfg, int threads, StageCost& cost) {
   if (!cfg.global_enabled) return;
@@ -391,6 +394,7 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
       const GlobalMap map(WorldMap(res, int(a), store), cfg);  // a's world map and its features
       cost.registration_s += sw.Seconds();
       const int rounds = std::max(1, int(store.Keyframes(int(b))) / std::max(1, cfg.global_queries));
+      std::size_t verified_so_far = 0;
       for (int round = 0; round < rounds && !res.sessions[b].aligned; ++round) {
         sw = Stopwatch();
         std::vector<LoopRecord> cand = GlobalCandidates(res, int(a), int(b), map, store, cfg, round);
@@ -399,7 +403,8 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
           for (LoopRecord& l : cand) std::swap(l.a, l.b), l.T_a_b = l.T_a_b.inverse();
         const std::size_t verified = RegisterRound(cand, store, cfg, threads, "GICP global candidates", cost);
         SolveWith(sessions, cand, loops, res, cfg, threads, cost);
-        if (verified == 0) break;
+        verified_so_far += verified;
+        if (verified_so_far == 0) break;
       }
     }
 }
