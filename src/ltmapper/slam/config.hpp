@@ -75,7 +75,7 @@ struct SlamConfig {
   int refine_stride = 3;              // try every n-th query keyframe without a loop
   int refine_max_loops_per_pair = 100;
   // Not a key: whether the central session's keyframes look for loops within it too (multi_session.cpp
-  // OwnRadiusCandidates); false where its poses are the world already (lifelong add's reference).
+  // RadiusCandidates with a == b); false where its poses are the world already (lifelong add's reference).
   bool central_own_loops = true;
 
   template <class V>

@@ -67,8 +67,9 @@ void ValidateSessionGraphs(const std::vector<Session>& sessions);
 // fitness plus the registration's own (the inverse of its Fisher information; zero: none).
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg);
 // Cumulative path length [m] along a session's keyframe poses (drift-aware tolerances, loops
-// within a session).
+// within a session); of a session: along its odometry (the keyframes' session-frame poses).
 std::vector<double> PathLength(const std::vector<Pose>& poses);
+std::vector<double> PathLength(const Session& session);
 
 // ------------------------------------------------------------------- global registration (global.cpp)
 // An aligned session's map in the world frame with FPFH features, for placing submaps of a session

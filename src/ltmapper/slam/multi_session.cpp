@@ -10,9 +10,9 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <functional>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <list>
 #include <memory>
@@ -503,51 +503,35 @@ Reach OverlapReach(const std::vector<Session>& sessions, CloudStore& store, cons
   return r;
 }
 
-// Radius-search candidates of one refinement round for the aligned pair (a, b): every
-// refine_stride-th keyframe of b without an accepted loop to a, paired with the nearest keyframe
-// of a within `radius_m` (OverlapReach) in the world frame (each pair tried once).
+// Radius-search candidates between aligned sessions a <= b: every refine_stride-th keyframe j of b
+// without an accepted loop with a, paired with a's keyframe nearest to it in the world frame
+// within `radius_m` (OverlapReach). Within one session (a == b, `route` its distance along
+// its odometry) only keyframes whose route from j is longer than that radius qualify: farther
+// along the route than keyframes still overlap, yet within that reach in space, so the route
+// turned or came back (a corner, a parallel street, a second pass) and only the odometry's drift
+// links the two while their scans overlap. Each pair tried once.
 void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loops, std::size_t a, std::size_t b,
-                      const SlamConfig& cfg, double radius_m, std::set<std::pair<NodeKey, NodeKey>>& tried,
-                      std::vector<LoopRecord>* cand) {
+                      const SlamConfig& cfg, double radius_m, const std::vector<double>& route,
+                      std::set<std::pair<NodeKey, NodeKey>>& tried, std::vector<LoopRecord>* cand) {
   const auto& Wa = res.sessions[a].T_world_sensor;
   const auto& Wb = res.sessions[b].T_world_sensor;
+  const bool own = a == b;
   std::vector<bool> has_loop(Wb.size(), false);
   for (const auto& l : loops)
-    if (l.accepted && l.a.session == int(a) && l.b.session == int(b)) has_loop[l.b.keyframe] = true;
+    if (l.accepted && l.a.session == int(a) && l.b.session == int(b)) {
+      has_loop[l.b.keyframe] = true;
+      if (own) has_loop[l.a.keyframe] = true;
+    }
   int eligible = 0, added = 0;
   for (std::size_t j = 0; j < Wb.size() && added < cfg.refine_max_loops_per_pair; ++j) {
-    if (has_loop[j]) continue;
-    if (eligible++ % cfg.refine_stride != 0) continue;
-    const int best = NearestKeyframe(Wa, Wb[j].translation(), radius_m);
-    if (best < 0) continue;
-    const LoopRecord l = WorldLoop(res, int(a), best, int(b), int(j), Wb[j], "radius");
-    if (!tried.insert({l.a, l.b}).second) continue;
-    cand->push_back(l);
-    ++added;
-  }
-}
-
-// Radius-search candidates within aligned session s: every refine_stride-th keyframe j without an
-// accepted loop within s, paired with the nearest keyframe of s within `radius_m` (the overlap
-// reach, measured along the sessions' own routes) in the world frame whose route from j is longer
-// than that radius: farther along the route than keyframes still overlap, yet within that reach in
-// space, so the route turned or came back (a corner, a parallel street, a second pass) and only
-// the odometry's drift links the two while their scans overlap. Each pair tried once.
-void OwnRadiusCandidates(const std::vector<double>& route, const SlamResult& res, const std::vector<LoopRecord>& loops,
-                         std::size_t s, const SlamConfig& cfg, double radius_m,
-                         std::set<std::pair<NodeKey, NodeKey>>& tried, std::vector<LoopRecord>* cand) {
-  const auto& W = res.sessions[s].T_world_sensor;
-  std::vector<bool> has_loop(W.size(), false);
-  for (const auto& l : loops)
-    if (l.accepted && OwnLoop(l) && l.a.session == int(s)) has_loop[l.a.keyframe] = has_loop[l.b.keyframe] = true;
-  int eligible = 0, added = 0;
-  for (std::size_t j = 0; j < W.size() && added < cfg.refine_max_loops_per_pair; ++j) {
     if (has_loop[j] || eligible++ % cfg.refine_stride != 0) continue;
-    const int best = NearestKeyframe(W, W[j].translation(), radius_m,
-                                     [&](std::size_t i) { return std::abs(route[i] - route[j]) > radius_m; });
+    const int best = own ? NearestKeyframe(Wa, Wb[j].translation(), radius_m,
+                                           [&](std::size_t i) { return std::abs(route[i] - route[j]) > radius_m; })
+                         : NearestKeyframe(Wa, Wb[j].translation(), radius_m);
     if (best < 0) continue;
-    const int a = std::min(best, int(j)), b = std::max(best, int(j));
-    const LoopRecord l = WorldLoop(res, int(s), a, int(s), b, W[std::size_t(b)], "radius");
+    // Within one session the earlier keyframe is the loop's first.
+    const int ka = own ? std::min(best, int(j)) : best, kb = own ? std::max(best, int(j)) : int(j);
+    const LoopRecord l = WorldLoop(res, int(a), ka, int(b), kb, Wb[std::size_t(kb)], "radius");
     if (!tried.insert({l.a, l.b}).second) continue;
     cand->push_back(l);
     ++added;
@@ -556,27 +540,23 @@ void OwnRadiusCandidates(const std::vector<double>& route, const SlamResult& res
 
 // Radius-search refinement: query keyframes without a loop look for keyframes of the other
 // session near them in the world frame, and every aligned session's keyframes for its own where
-// its route came back (OwnRadiusCandidates), verified by GICP from the current estimate.
+// its route came back (RadiusCandidates with a == b), verified by GICP from the current estimate.
 void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
             const SlamConfig& cfg, double radius_m, int threads, StageCost& cost) {
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
   std::vector<std::vector<double>> route(n);  // each session's distance along its odometry
-  for (std::size_t s = 0; s < n; ++s) {
-    std::vector<Pose> odometry;
-    for (const Keyframe& kf : sessions[s].keyframes) odometry.push_back(kf.T_session_sensor);
-    route[s] = PathLength(odometry);
-  }
+  for (std::size_t s = 0; s < n; ++s) route[s] = PathLength(sessions[s]);
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (std::size_t a = 0; a + 1 < n; ++a)
       for (std::size_t b = a + 1; b < n; ++b)
         if (res.sessions[a].aligned && res.sessions[b].aligned)
-          RadiusCandidates(res, loops, a, b, cfg, radius_m, tried, &cand);
+          RadiusCandidates(res, loops, a, b, cfg, radius_m, route[a], tried, &cand);
     for (std::size_t a = 0; a < n; ++a)
       if (res.sessions[a].aligned && (a > 0 || cfg.central_own_loops))
-        OwnRadiusCandidates(route[a], res, loops, a, cfg, radius_m, tried, &cand);
+        RadiusCandidates(res, loops, a, a, cfg, radius_m, route[a], tried, &cand);
     if (cand.empty()) break;
     const std::size_t ok =
         RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), cost);

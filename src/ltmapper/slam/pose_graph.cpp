@@ -261,6 +261,12 @@ std::vector<double> PathLength(const std::vector<Pose>& poses) {
   return cum;
 }
 
+std::vector<double> PathLength(const Session& session) {
+  std::vector<Pose> poses;
+  for (const Keyframe& kf : session.keyframes) poses.push_back(kf.T_session_sensor);
+  return PathLength(poses);
+}
+
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
   // Paper: the ICP fitness score gives an adaptive covariance. Sigma is the configured value at
   // (or below) the fitness floor and grows with sqrt(fitness / floor) above it.
