@@ -171,7 +171,8 @@ class ColumnImage {
   bool PassedWithoutReturn(float range, float pitch, float yaw) const;
 
  private:
-  bool EmptyAround(int col, int row_top, int row_bottom) const;
+  // Column col (any, wrapped) holds no return in rows row_top..row_bottom, and is swept.
+  bool EmptyColumn(int col, int row_top, int row_bottom) const;
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   std::pair<int, int> BeamsAround(const float* rc, int row) const;
   BeamTest test_;

@@ -718,14 +718,12 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0));
 }
 
-bool ColumnImage::EmptyAround(int col, int row_top, int row_bottom) const {
-  for (int c = col - 1; c <= col + 1; ++c) {
-    const std::size_t cc = std::size_t((c + grid_.cols) % grid_.cols);
-    if (!swept_[cc]) return false;  // no return in the whole column: the sweep's seam, not the sky
-    const std::uint8_t* ac = any_.data() + cc * std::size_t(grid_.rows);
-    for (int r = row_top; r <= row_bottom; ++r)
-      if (ac[r]) return false;
-  }
+bool ColumnImage::EmptyColumn(int col, int row_top, int row_bottom) const {
+  const std::size_t c = std::size_t((col + grid_.cols) % grid_.cols);
+  if (!swept_[c]) return false;  // no return in the whole column: the sweep's seam, not the sky
+  const std::uint8_t* ac = any_.data() + c * std::size_t(grid_.rows);
+  for (int r = row_top; r <= row_bottom; ++r)
+    if (ac[r]) return false;
   return true;
 }
 
@@ -741,8 +739,13 @@ bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const
     if (std::fabs(d_el) > reach) continue;
     const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
     const int cols = int(std::sqrt(reach * reach - d_el * d_el) * grid_.col_scale);
-    for (int d = -cols; d <= cols; ++d)
-      if (EmptyAround(col + d, row_top, row_bottom)) return true;
+    // A column within `cols` of the point's whose neighbours on both sides are empty too: three
+    // empty columns in a row, centred within reach.
+    int run = 0;
+    for (int c = col - cols - 1; c <= col + cols + 1; ++c) {
+      run = EmptyColumn(c, row_top, row_bottom) ? run + 1 : 0;
+      if (run >= 3) return true;
+    }
   }
   return false;
 }
