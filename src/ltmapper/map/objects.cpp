@@ -231,7 +231,6 @@ Eigen::Vector2f SensorGapsAt(double range_m, const MapConfig& cfg) {
 // Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
 // farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
 // of the range it was scanned from).
-
 std::vector<Eigen::Vector2f> SampleGaps(const PointCloud& changes, const std::vector<std::uint32_t>& idx,
                                         const SensorRanges& ranges, const MapConfig& cfg) {
   const float tol = float(cfg.object_tolerance_m);
