@@ -75,6 +75,22 @@ PointCloud Corridor(unsigned seed) {
 }
 }  // namespace
 
+// ViewShare: a scan's points lie where the scan looked (share 1); a forward cone facing +x did not
+// look at points behind it (share 0), nor at points beyond the returns in their direction.
+TEST(SlamRegistration, ViewShareIsWhereTheTargetLooked) {
+  PointCloud cone;  // returns 20 m ahead, within 30 deg of +x
+  for (double az = -30.0; az <= 30.0; az += 1.0)
+    for (double el = -20.0; el <= 20.0; el += 1.0)
+      cone.push_back(float(20.0 * std::cos(el * kDeg) * std::cos(az * kDeg)),
+                     float(20.0 * std::cos(el * kDeg) * std::sin(az * kDeg)), float(20.0 * std::sin(el * kDeg)));
+  const Pose turned = test::MakePose(0, 0, 0, M_PI);  // the same cone facing -x
+  PointCloud beyond;                                  // the same directions, 30 m out
+  for (const auto& p : cone.points) beyond.push_back(1.5f * p.x, 1.5f * p.y, 1.5f * p.z);
+  EXPECT_DOUBLE_EQ(ViewShare(cone, cone, Pose::Identity(), 0.5), 1.0);
+  EXPECT_DOUBLE_EQ(ViewShare(cone, cone, turned, 0.5), 0.0);
+  EXPECT_DOUBLE_EQ(ViewShare(cone, beyond, Pose::Identity(), 0.5), 0.0);
+}
+
 TEST(SlamRegistration, LoopInformationFollowsWhatTheSurfacesConstrain) {
   SlamConfig cfg;
   const PointCloud a = geometry::VoxelDownsample(Corridor(1), cfg.reg_voxel_m);

@@ -19,6 +19,8 @@ struct LoopRecord {
   double fitness = -1.0;          // GICP fitness [m^2], -1 when not registered
   double overlap = -1.0;          // inlier ratio, -1 when not registered
   double inlier_rms_m = -1.0;     // RMS NN distance of the inliers, -1 when not registered
+  double view = -1.0;             // radius candidates between sessions: ViewShare at the predicted
+                                  // pose (could the scans overlap there); -1 when not measured
   bool verified = false;          // passed registration
   bool accepted = false;          // used in the final graph
   std::string status;             // accepted / why rejected

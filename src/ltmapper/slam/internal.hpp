@@ -60,6 +60,10 @@ GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pos
 // share of source points with a target point within InlierRadius, as the verification counts it.
 double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pose& T_target_source,
                     const SlamConfig& cfg);
+// The share of `source` under T_target_source that lies where the target's sensor looked: in a
+// direction (from the target's origin, 5 deg bins) in which the target has a return at least as
+// far, less slack_m. Whether the two scans could overlap at that pose, whatever they hold.
+double ViewShare(const PointCloud& target, const PointCloud& source, const Pose& T_target_source, double slack_m);
 
 // Throws ltm::Error for sessions without keyframes, edges to missing keyframes, non-finite poses.
 void ValidateSessionGraphs(const std::vector<Session>& sessions);

@@ -538,6 +538,17 @@ void RadiusCandidates(const SlamResult& res, const std::vector<LoopRecord>& loop
   }
 }
 
+// ViewShare of every candidate between two sessions at its predicted pose (keyframe scans, slack:
+// the inlier radius): whether the alignment says the two sensors looked at the same space.
+void MeasureViews(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads) {
+  const double slack_m = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
+  ParallelFor(cand.size(), threads, [&](std::size_t i) {
+    LoopRecord& l = cand[i];
+    if (OwnLoop(l)) return;
+    l.view = ViewShare(*store.Get(l.a.session, l.a.keyframe), *store.Get(l.b.session, l.b.keyframe), l.T_a_b, slack_m);
+  });
+}
+
 // Radius-search refinement: query keyframes without a loop look for keyframes of the other
 // session near them in the world frame, and every aligned session's keyframes for its own where
 // its route came back (RadiusCandidates with a == b), verified by GICP from the current estimate.
@@ -558,11 +569,54 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
       if (res.sessions[a].aligned && (a > 0 || cfg.central_own_loops))
         RadiusCandidates(res, loops, a, a, cfg, radius_m, route[a], tried, &cand);
     if (cand.empty()) break;
+    MeasureViews(cand, store, cfg, threads);
     const std::size_t ok =
         RegisterRound(cand, store, cfg, threads, "GICP radius loops, round " + std::to_string(round + 1), cost);
     spdlog::info("slam: refinement round {}: {} radius candidates, {} verified", round + 1, cand.size(), ok);
     SolveWith(sessions, cand, loops, res, cfg, threads, cost);
     if (ok == 0) break;
+  }
+}
+// An alignment predicts where its session's scans overlap the others'; the radius search tested
+// those predictions. A candidate whose scans looked at the same space at the predicted pose (view
+// >= registration.min_overlap) and failed verification contradicts the alignment; each accepted
+// loop between sessions supports it. As a placement must lead a rival (AnchorSession), the support
+// must lead the contradictions by graph.min_loops, else the session's loops between sessions are
+// rejected and it is not aligned: a scene repeated elsewhere (mirrored blocks seen by a narrow
+// forward cone) verifies where it repeats and fails wherever else the placement predicts overlap.
+// Returns the sessions dropped with their reasons.
+std::vector<std::pair<std::size_t, std::string>> DropContradicted(std::vector<LoopRecord>& loops, const SlamResult& res,
+                                                                  const SlamConfig& cfg) {
+  std::vector<std::pair<std::size_t, std::string>> dropped;
+  for (std::size_t s = 1; s < res.sessions.size(); ++s) {
+    if (!res.sessions[s].aligned) continue;
+    int support = 0, contra = 0;
+    const auto involves = [&](const LoopRecord& l) { return !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)); };
+    for (const LoopRecord& l : loops) {
+      if (!involves(l)) continue;
+      support += l.accepted;
+      contra += l.source == "radius" && !l.verified && l.view >= cfg.reg_min_overlap;
+    }
+    if (support >= contra + cfg.min_loops) continue;
+    const std::string why = "contradicted: " + std::to_string(contra) + " keyframe pair(s) its placement shows looking at "
+                            "the same space failed verification against " + std::to_string(support) +
+                            " accepted loop(s) (need a lead of graph.min_loops = " + std::to_string(cfg.min_loops) + ")";
+    for (LoopRecord& l : loops)
+      if (involves(l) && l.verified) l.verified = false, l.status = "rejected: alignment " + why;
+    dropped.push_back({s, why});
+  }
+  return dropped;
+}
+
+// DropContradicted, the graph solved again without the dropped sessions' loops.
+void CheckPredictions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
+                      const SlamConfig& cfg, int threads, StageCost& cost) {
+  const auto dropped = DropContradicted(loops, res, cfg);
+  if (dropped.empty()) return;
+  SolveWith(sessions, {}, loops, res, cfg, threads, cost);
+  for (const auto& [s, why] : dropped) {
+    spdlog::warn("slam: {} not aligned: {}", res.sessions[s].name, why);
+    if (!res.sessions[s].aligned) res.sessions[s].reason = why;
   }
 }
 }  // namespace
@@ -598,6 +652,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   RetryUnaligned(sessions, pairs, loops, res, store, cfg, threads, cost);
   GlobalFallback(sessions, loops, res, store, cfg, threads, cost);
   Refine(sessions, loops, res, store, cfg, reach.median_m, threads, cost);
+  CheckPredictions(sessions, loops, res, cfg, threads, cost);
   res.refine_radius_m = reach.median_m;
   res.max_translation_m = reach.farthest_m;
   res.time_descriptors_s = t_desc;

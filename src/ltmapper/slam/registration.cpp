@@ -16,6 +16,7 @@
 #include "ltmapper/slam/internal.hpp"
 #include "ltmapper/slam/registration.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -35,6 +36,10 @@ constexpr double kGaussianTail = 0.0027;  // P(|x| > 3 sigma), two-sided
 // The coarse stage's early rejection asks for this fraction of reg_min_overlap: at the coarse
 // voxel, before the fine stage, a true match overlaps at least half as well as at the end.
 constexpr double kCoarseOverlapFraction = 0.5;
+// ViewShare's direction bins: coarser than the widest gap between a sensor's directions (a VLP-16's
+// 2 deg between beams, a rosette's petals), so a bin inside the field of view holds a return, and
+// fine enough to draw a forward cone's edge.
+constexpr double kViewBinDeg = 5.0;
 }  // namespace
 
 double InlierRadius(double voxel_m, double range_noise_m) {
@@ -179,6 +184,29 @@ std::string Verdict(const RegistrationResult& r, const Pose& T_init, const SlamC
 double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pose& T_target_source,
                     const SlamConfig& cfg) {
   return OverlapWithin(target, source, T_target_source, InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m));
+}
+
+double ViewShare(const PointCloud& target, const PointCloud& source, const Pose& T_target_source, double slack_m) {
+  constexpr int kAz = int(360.0 / kViewBinDeg), kEl = int(180.0 / kViewBinDeg);
+  const auto bin = [&](const Eigen::Vector3d& p, double* range) {
+    *range = p.norm();
+    const double az = std::atan2(p.y(), p.x()) * 180.0 / M_PI + 180.0;
+    const double el = std::asin(std::clamp(p.z() / std::max(*range, 1e-9), -1.0, 1.0)) * 180.0 / M_PI + 90.0;
+    return std::min(kAz - 1, int(az / kViewBinDeg)) * kEl + std::min(kEl - 1, int(el / kViewBinDeg));
+  };
+  std::vector<double> farthest(std::size_t(kAz * kEl), -1.0);  // per direction bin, the farthest return
+  double r = 0.0;
+  for (const auto& p : target.points) {
+    const int b = bin(p.xyz().cast<double>(), &r);
+    farthest[std::size_t(b)] = std::max(farthest[std::size_t(b)], r);
+  }
+  if (source.empty()) return 0.0;
+  std::size_t seen = 0;
+  for (const auto& p : source.points) {
+    const int b = bin(T_target_source * p.xyz().cast<double>(), &r);
+    seen += r <= farthest[std::size_t(b)] + slack_m;
+  }
+  return double(seen) / double(source.size());
 }
 
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,

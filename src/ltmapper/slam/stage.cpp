@@ -74,7 +74,7 @@ void WriteJointGraph(const std::vector<Session>& sessions, const SlamResult& res
 void WriteLoopsCsv(const std::vector<Session>& sessions, const SlamResult& res, const std::string& out_dir) {
   io::WriteFileAtomic((fs::path(out_dir) / "loops.csv").string(), [&](std::ostream& os) {
     os << "pair,kf_a,kf_b,source,sc_dist,yaw_deg,fitness,inlier_ratio,inlier_rms_m,accepted,"
-          "residual_t_m,residual_r_deg,tx,ty,tz,qx,qy,qz,qw,status\n";
+          "residual_t_m,residual_r_deg,tx,ty,tz,qx,qy,qz,qw,view,status\n";
     os << std::setprecision(6);
     for (const LoopRecord& l : res.loops) {
       const Session& A = sessions[l.a.session];
@@ -87,7 +87,7 @@ void WriteLoopsCsv(const std::vector<Session>& sessions, const SlamResult& res, 
       const Eigen::Quaterniond q(l.T_a_b.linear());
       const Eigen::Vector3d t = l.T_a_b.translation();
       os << t.x() << "," << t.y() << "," << t.z() << "," << q.x() << "," << q.y() << "," << q.z()
-         << "," << q.w() << ",\"" << l.status << "\"\n";
+         << "," << q.w() << "," << l.view << ",\"" << l.status << "\"\n";
     }
   });
 
