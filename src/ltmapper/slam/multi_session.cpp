@@ -577,30 +577,55 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
     if (ok == 0) break;
   }
 }
+// How many places `at` (positions along a route [m]) cover: positions closer than `radius_m` to the
+// first of their place are one place.
+int Places(std::vector<double> at, double radius_m) {
+  std::sort(at.begin(), at.end());
+  int n = 0;
+  double start = 0.0;
+  for (double p : at)
+    if (n == 0 || p - start > radius_m) ++n, start = p;
+  return n;
+}
+
 // An alignment predicts where its session's scans overlap the others'; the radius search tested
 // those predictions. A candidate whose scans looked at the same space at the predicted pose (view
-// >= registration.min_overlap) and failed verification contradicts the alignment; each accepted
-// loop between sessions supports it. As a placement must lead a rival (AnchorSession), the support
-// must lead the contradictions by graph.min_loops, else the session's loops between sessions are
-// rejected and it is not aligned: a scene repeated elsewhere (mirrored blocks seen by a narrow
-// forward cone) verifies where it repeats and fails wherever else the placement predicts overlap.
+// >= registration.min_overlap) and failed verification contradicts the placement there; one that
+// was accepted confirms it. A placement is dropped (its session's loops between sessions
+// rejected, the session not aligned) when both balances go against it:
+//  - predictions: more of the tested ones failed than held;
+//  - places: loops whose keyframes lie within the overlap reach (`radius_m`) of each other along
+//    the session's route see one scene, one place of evidence however many loops (consecutive
+//    keyframes that match a repeated scene all agree); the predictions failed at as many places
+//    as the accepted loops hold at.
+// A scene repeated elsewhere (mirrored blocks seen by a narrow forward cone) verifies where it
+// repeats and fails wherever else the placement predicts overlap; a true placement over a short
+// shared stretch may fail at a place as often as it holds there, but its tested predictions hold.
 // Returns the sessions dropped with their reasons.
-std::vector<std::pair<std::size_t, std::string>> DropContradicted(std::vector<LoopRecord>& loops, const SlamResult& res,
-                                                                  const SlamConfig& cfg) {
+std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vector<Session>& sessions,
+                                                                  std::vector<LoopRecord>& loops, const SlamResult& res,
+                                                                  const SlamConfig& cfg, double radius_m) {
   std::vector<std::pair<std::size_t, std::string>> dropped;
   for (std::size_t s = 1; s < res.sessions.size(); ++s) {
     if (!res.sessions[s].aligned) continue;
-    int support = 0, contra = 0;
+    const std::vector<double> route = PathLength(sessions[s]);
+    std::vector<double> support, contra;
+    std::size_t confirmed = 0;
     const auto involves = [&](const LoopRecord& l) { return !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)); };
     for (const LoopRecord& l : loops) {
       if (!involves(l)) continue;
-      support += l.accepted;
-      contra += l.source == "radius" && !l.verified && l.view >= cfg.reg_min_overlap;
+      const double at = route[std::size_t(l.b.session == int(s) ? l.b.keyframe : l.a.keyframe)];
+      const bool tested = l.source == "radius" && l.view >= cfg.reg_min_overlap;
+      if (l.accepted) support.push_back(at);
+      if (tested && !l.verified) contra.push_back(at);
+      confirmed += tested && l.accepted;
     }
-    if (support >= contra + cfg.min_loops) continue;
-    const std::string why = "contradicted: " + std::to_string(contra) + " keyframe pair(s) its placement shows looking at "
-                            "the same space failed verification against " + std::to_string(support) +
-                            " accepted loop(s) (need a lead of graph.min_loops = " + std::to_string(cfg.min_loops) + ")";
+    const int held = Places(support, radius_m), failed = Places(contra, radius_m);
+    if (contra.size() <= confirmed || failed < held) continue;
+    const std::string why = "contradicted: " + std::to_string(contra.size()) + " keyframe pair(s) its placement shows looking "
+                            "at the same space failed verification (" + std::to_string(confirmed) + " held), at " +
+                            std::to_string(failed) + " place(s) of its route; its " + std::to_string(support.size()) +
+                            " loops hold at " + std::to_string(held);
     for (LoopRecord& l : loops)
       if (involves(l) && l.verified) l.verified = false, l.status = "rejected: alignment " + why;
     dropped.push_back({s, why});
@@ -610,8 +635,8 @@ std::vector<std::pair<std::size_t, std::string>> DropContradicted(std::vector<Lo
 
 // DropContradicted, the graph solved again without the dropped sessions' loops.
 void CheckPredictions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
-                      const SlamConfig& cfg, int threads, StageCost& cost) {
-  const auto dropped = DropContradicted(loops, res, cfg);
+                      const SlamConfig& cfg, double radius_m, int threads, StageCost& cost) {
+  const auto dropped = DropContradicted(sessions, loops, res, cfg, radius_m);
   if (dropped.empty()) return;
   SolveWith(sessions, {}, loops, res, cfg, threads, cost);
   for (const auto& [s, why] : dropped) {
@@ -652,7 +677,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   RetryUnaligned(sessions, pairs, loops, res, store, cfg, threads, cost);
   GlobalFallback(sessions, loops, res, store, cfg, threads, cost);
   Refine(sessions, loops, res, store, cfg, reach.median_m, threads, cost);
-  CheckPredictions(sessions, loops, res, cfg, threads, cost);
+  CheckPredictions(sessions, loops, res, cfg, reach.median_m, threads, cost);
   res.refine_radius_m = reach.median_m;
   res.max_translation_m = reach.farthest_m;
   res.time_descriptors_s = t_desc;
