@@ -552,13 +552,12 @@ void MeasureViews(std::vector<LoopRecord>& cand, CloudStore& store, const SlamCo
 // Radius-search refinement: query keyframes without a loop look for keyframes of the other
 // session near them in the world frame, and every aligned session's keyframes for its own where
 // its route came back (RadiusCandidates with a == b), verified by GICP from the current estimate.
-void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store,
-            const SlamConfig& cfg, double radius_m, int threads, StageCost& cost) {
+void Refine(const std::vector<Session>& sessions, const std::vector<std::vector<double>>& route,
+            std::vector<LoopRecord>& loops, SlamResult& res, CloudStore& store, const SlamConfig& cfg, double radius_m,
+            int threads, StageCost& cost) {
   const std::size_t n = sessions.size();
   std::set<std::pair<NodeKey, NodeKey>> tried;
   for (const auto& l : loops) tried.insert({l.a, l.b});
-  std::vector<std::vector<double>> route(n);  // each session's distance along its odometry
-  for (std::size_t s = 0; s < n; ++s) route[s] = PathLength(sessions[s]);
   for (int round = 0; round < cfg.refine_rounds; ++round) {
     std::vector<LoopRecord> cand;
     for (std::size_t a = 0; a + 1 < n; ++a)
@@ -577,6 +576,7 @@ void Refine(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops
     if (ok == 0) break;
   }
 }
+
 // How many places `at` (positions along a route [m]) cover: positions closer than `radius_m` to the
 // first of their place are one place.
 int Places(std::vector<double> at, double radius_m) {
@@ -602,13 +602,13 @@ int Places(std::vector<double> at, double radius_m) {
 // repeats and fails wherever else the placement predicts overlap; a true placement over a short
 // shared stretch may fail at a place as often as it holds there, but its tested predictions hold.
 // Returns the sessions dropped with their reasons.
-std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vector<Session>& sessions,
+std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vector<std::vector<double>>& routes,
                                                                   std::vector<LoopRecord>& loops, const SlamResult& res,
                                                                   const SlamConfig& cfg, double radius_m) {
   std::vector<std::pair<std::size_t, std::string>> dropped;
   for (std::size_t s = 1; s < res.sessions.size(); ++s) {
     if (!res.sessions[s].aligned) continue;
-    const std::vector<double> route = PathLength(sessions[s]);
+    const std::vector<double>& route = routes[s];
     std::vector<double> support, contra;
     std::size_t confirmed = 0;
     const auto involves = [&](const LoopRecord& l) { return !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)); };
@@ -634,9 +634,10 @@ std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vec
 }
 
 // DropContradicted, the graph solved again without the dropped sessions' loops.
-void CheckPredictions(const std::vector<Session>& sessions, std::vector<LoopRecord>& loops, SlamResult& res,
-                      const SlamConfig& cfg, double radius_m, int threads, StageCost& cost) {
-  const auto dropped = DropContradicted(sessions, loops, res, cfg, radius_m);
+void CheckPredictions(const std::vector<Session>& sessions, const std::vector<std::vector<double>>& routes,
+                      std::vector<LoopRecord>& loops, SlamResult& res, const SlamConfig& cfg, double radius_m, int threads,
+                      StageCost& cost) {
+  const auto dropped = DropContradicted(routes, loops, res, cfg, radius_m);
   if (dropped.empty()) return;
   SolveWith(sessions, {}, loops, res, cfg, threads, cost);
   for (const auto& [s, why] : dropped) {
@@ -676,8 +677,10 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   cost.optimisation_s = sw.Seconds();
   RetryUnaligned(sessions, pairs, loops, res, store, cfg, threads, cost);
   GlobalFallback(sessions, loops, res, store, cfg, threads, cost);
-  Refine(sessions, loops, res, store, cfg, reach.median_m, threads, cost);
-  CheckPredictions(sessions, loops, res, cfg, reach.median_m, threads, cost);
+  std::vector<std::vector<double>> routes;  // each session's distance along its odometry
+  for (const Session& s : sessions) routes.push_back(PathLength(s));
+  Refine(sessions, routes, loops, res, store, cfg, reach.median_m, threads, cost);
+  CheckPredictions(sessions, routes, loops, res, cfg, reach.median_m, threads, cost);
   res.refine_radius_m = reach.median_m;
   res.max_translation_m = reach.farthest_m;
   res.time_descriptors_s = t_desc;

@@ -187,24 +187,27 @@ double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pos
 }
 
 double ViewShare(const PointCloud& target, const PointCloud& source, const Pose& T_target_source, double slack_m) {
-  constexpr int kAz = int(360.0 / kViewBinDeg), kEl = int(180.0 / kViewBinDeg);
-  const auto bin = [&](const Eigen::Vector3d& p, double* range) {
-    *range = p.norm();
-    const double az = std::atan2(p.y(), p.x()) * 180.0 / M_PI + 180.0;
-    const double el = std::asin(std::clamp(p.z() / std::max(*range, 1e-9), -1.0, 1.0)) * 180.0 / M_PI + 90.0;
-    return std::min(kAz - 1, int(az / kViewBinDeg)) * kEl + std::min(kEl - 1, int(el / kViewBinDeg));
+  // The whole sphere in kViewBinDeg bins; a bin's farthest target return, -1 without one.
+  geometry::RangeImageConfig bins;
+  bins.fov_up_deg = 90.0;
+  bins.fov_down_deg = -90.0;
+  bins.rows = int(180.0 / kViewBinDeg);
+  bins.cols = int(360.0 / kViewBinDeg);
+  const geometry::RangeImage sphere(bins);
+  std::vector<float> farthest(std::size_t(bins.rows * bins.cols), -1.f);
+  const auto at = [&](const Eigen::Vector3f& p, float* range) -> float* {
+    int row = 0, col = 0;
+    return sphere.Project(p, &row, &col, range) ? &farthest[std::size_t(row * bins.cols + col)] : nullptr;
   };
-  std::vector<double> farthest(std::size_t(kAz * kEl), -1.0);  // per direction bin, the farthest return
-  double r = 0.0;
-  for (const auto& p : target.points) {
-    const int b = bin(p.xyz().cast<double>(), &r);
-    farthest[std::size_t(b)] = std::max(farthest[std::size_t(b)], r);
-  }
+  float r = 0.f;
+  for (const auto& p : target.points)
+    if (float* f = at(p.xyz(), &r)) *f = std::max(*f, r);
   if (source.empty()) return 0.0;
+  const Eigen::Isometry3f T = T_target_source.cast<float>();
   std::size_t seen = 0;
   for (const auto& p : source.points) {
-    const int b = bin(T_target_source * p.xyz().cast<double>(), &r);
-    seen += r <= farthest[std::size_t(b)] + slack_m;
+    const float* f = at(T * p.xyz(), &r);
+    seen += f && r <= *f + float(slack_m);
   }
   return double(seen) / double(source.size());
 }
