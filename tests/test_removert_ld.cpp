@@ -512,3 +512,77 @@ TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
 
 }  // namespace
 }  // namespace ltm
+
+namespace ltm {
+namespace {
+
+// Keyframes every 2 m along x from x0 at (y, z), scanning `boxes`; `drawn_dy` is added to the pose
+// the session records (its pose error; 0: the true pose).
+std::vector<WorldKeyframe> DriveAlong(const std::vector<test::Box>& boxes, double x0, int n, double y, double z,
+                                      const test::Lidar& lidar, double drawn_dy = 0.0) {
+  std::vector<WorldKeyframe> kfs;
+  for (int k = 0; k < n; ++k) {
+    WorldKeyframe kf;
+    kf.index = k;
+    kf.cloud = std::make_shared<PointCloud>(test::CastScan(test::At(x0 + 2.0 * k, y, z), boxes, lidar));
+    kf.T_world_sensor = test::At(x0 + 2.0 * k, y + drawn_dy, z);
+    kfs.push_back(kf);
+  }
+  return kfs;
+}
+
+// A car the central passed at 6 m is gone when the query passes 60 m away, its sensor 1 m higher
+// (a raised road), looking down at its place at 1-2 deg. The pixel windows of the car's lower
+// part also hold the ground there, which returns at the car's range (a hit, never a see-through):
+// by the pixels a quarter of the car stays weak ND. The query's beams crossed those surfaces
+// within a map voxel and went on to the wall behind: the beam truth's "observed absent", strong ND.
+TEST(RemovertLd, ACarTheQueryLookedDownOnFromAfarIsStrongNd) {
+  const test::Box car = test::MakeBox(-2, 34, 0.3, 2, 36, 1.8, 30);
+  const test::Box far_wall = test::MakeBox(-60, 50, 0, 60, 50.3, 8, 1);
+  const test::Lidar lidar;
+  RemovertConfig cfg = test::ConfigFor(lidar);
+  const auto central = DriveAlong({far_wall, car}, -20, 21, 28.0, 1.8, lidar);
+  const auto query = DriveAlong({far_wall}, -20, 21, -25.0, 2.8, lidar);
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  test::Box body = car;
+  body.lo.z() = 0.7;  // above the LD radius over the ground
+  const std::size_t in_map = CountIn(cmap, body), strong = CountIn(ld.nd_strong, body), weak = CountIn(ld.nd_weak, body);
+  std::printf("car seen from 60 m, looking down: %zu map points, strong ND %zu, weak ND %zu\n", in_map, strong, weak);
+  ASSERT_GT(in_map, 200u);
+  EXPECT_GE(double(strong), 0.85 * double(in_map));
+  // The far wall, in both sessions, stays unchanged.
+  EXPECT_LE(CountIn(ld.nd_strong, far_wall), CountIn(cmap, far_wall) / 50);
+}
+
+// The central drove the street twice, its second pass drawn 0.4 m off (a pose error the map keeps):
+// its map holds the wall twice, the copy 0.4 m in front of the true wall. The query's rays go
+// through the copy's place to the wall behind it, but the query's map holds that wall on the
+// copy's normal line, 0.4 m behind it: the same surface, displaced, not a thing that left. The
+// copy stays (weak ND), and a car that did leave is still strong ND.
+TEST(RemovertLd, ASurfaceItsOwnMapDrewTwiceIsNotSeenThrough) {
+  const test::Box wall = test::MakeBox(-40, 10, 0, 40, 10.3, 4, 1);
+  const test::Box car = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, 30);
+  const test::Lidar lidar;
+  RemovertConfig cfg = test::ConfigFor(lidar);
+  auto central = DriveAlong({wall, car}, -20, 21, 0.0, 1.8, lidar);
+  for (auto& kf : DriveAlong({wall, car}, -19, 20, 0.0, 1.8, lidar, -0.4)) {
+    kf.index = int(central.size());
+    central.push_back(kf);
+  }
+  const auto query = DriveAlong({wall}, -20, 21, 0.5, 1.8, lidar);
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box copy = test::MakeBox(-15, 9.5, 0.7, 15, 9.7, 4, 1);
+  const std::size_t in_map = CountIn(cmap, copy, 0.0), strong = CountIn(ld.nd_strong, copy, 0.0);
+  test::Box body = car;
+  body.lo.z() = 0.7;
+  std::printf("wall drawn twice: copy %zu map points, strong ND %zu, weak ND %zu; car strong ND %zu of %zu\n", in_map,
+              strong, CountIn(ld.nd_weak, copy, 0.0), CountIn(ld.nd_strong, body), CountIn(cmap, body));
+  ASSERT_GT(in_map, 500u);
+  EXPECT_LE(strong, in_map / 20);
+  EXPECT_GE(double(CountIn(ld.nd_strong, body)), 0.9 * double(CountIn(cmap, body)));
+}
+
+}  // namespace
+}  // namespace ltm

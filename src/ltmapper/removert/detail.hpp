@@ -46,9 +46,12 @@ struct Visibility {
 // standing (optional, per point): the point stands on the other session's ground (a lower body,
 // Missing's kRawAboveTheirGround), whose plane its level normal may be: the level-ground rule of
 // `same` does not apply to it.
+// other_map (optional, ND): the keyframes' session map; with it, a point its own map drew twice
+// (a displaced copy of a surface both maps hold) is not seen through.
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                         int threads, bool own_pixel, const std::vector<bool>* standing = nullptr);
+                         int threads, bool own_pixel, const std::vector<bool>* standing = nullptr,
+                         const PointCloud* other_map = nullptr);
 
 // |normal z| below cos 45 deg: the surface is more upright than horizontal (a wall, a car's flank);
 // above it, more horizontal (ground, a roof).
@@ -61,6 +64,7 @@ struct Neighbourhood {
   int n = 0;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   Eigen::Vector3d eigenvalues = Eigen::Vector3d::Zero();
+  double reach = 0.0;  // [m] the farthest neighbour's distance
   Eigen::Matrix3d eigenvectors = Eigen::Matrix3d::Identity();
 };
 Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& cloud, const Eigen::Vector3f& p,
@@ -70,9 +74,13 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
 // radius_m): the PCA normal of a planar neighbourhood; for a line-like one (a far ground ring,
 // a pole) the direction perpendicular to the line closest to vertical; +z with < 2 neighbours.
 // planar (optional): per point, whether its normal is a plane's (else a line's, or none).
+// rim (optional): per point of a plane, whether it lies at the rim of it: the mean of its
+// neighbours off it along the plane by more than kRimOffset of their reach (a straight edge puts
+// it at 4 / (3 pi) = 0.42 of it, a point inside a plane at 0; the bound lies halfway).
+constexpr double kRimOffset = 0.21;
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
                                              double radius_m, int threads,
-                                             std::vector<bool>* planar = nullptr);
+                                             std::vector<bool>* planar = nullptr, std::vector<bool>* rim = nullptr);
 
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);

@@ -146,7 +146,7 @@ class MultiResImage {
 // A scan's nearest return per (column, row) cell of BeamTest::col_deg x row_deg, stored column
 // by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
 // the first returns above and below a direction are the two beams around it.
-constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4;  // ColumnImage::Observed
+constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4, kBeamThrough = 8;  // ColumnImage::Observed
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
 // half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
@@ -159,7 +159,10 @@ class ColumnImage {
   // its column or of the columns within asin(tol / range) of it ended on its surface near it;
   // with want_around, kBeamAround when its cell is empty and the
   // beams around it met its surface farther away (Around), and kBeamPassed when a beam passed it
-  // without a return (PassedWithoutReturn).
+  // without a return (PassedWithoutReturn); without want_around, kBeamThrough when none ended near
+  // it, a beam of those columns crossed its plane within a map voxel of it and ended beyond by more
+  // than the along-ray tolerance (the beam truth's "observed absent"), and no return of the scan
+  // lies on its plane within ld.normal_radius_m of it (MetSurfaceNear).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                         bool want_around) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
@@ -175,11 +178,15 @@ class ColumnImage {
   bool EmptyColumn(int col, int row_top, int row_bottom) const;
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   std::pair<int, int> BeamsAround(const float* rc, int row) const;
+  // A return of the scan on the point's plane (within tol) within surface_reach_m_ of it.
+  bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
   BeamTest test_;
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams
   float down_ = 0.f;          // [rad]
   float min_range_ = 0.f, max_range_ = 0.f;
+  float through_m_ = 0.f;        // [m] kBeamThrough: the beam crossed the point's plane this close to it
+  float surface_reach_m_ = 0.f;  // [m] MetSurfaceNear's reach
   std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
   std::vector<std::uint8_t> any_;     // 1 = a return at any range (PassedWithoutReturn)

@@ -254,7 +254,7 @@ std::vector<bool> LowerPartsOf(const PointCloud& body, const std::vector<bool>& 
 // session's keyframes: same / strong / weak / unobserved (Split), then the residues among the
 // changes the other session saw through (strong ND, weak PD): clustered without the lower parts
 // (kRawAboveTheirGround), which join the residue they touch.
-void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missing,
+void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missing, const PointCloud& other,
                   const std::vector<WorldKeyframe>& own_voters, const std::vector<WorldKeyframe>& others, bool nd,
                   const RemovertConfig& cfg, int threads, std::vector<std::uint8_t>* label) {
   using namespace detail;
@@ -263,7 +263,7 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
     if (missing[i] != kRawNone) raw.push_back(std::uint32_t(i));
   std::vector<bool> standing(raw.size());
   for (std::size_t j = 0; j < raw.size(); ++j) standing[j] = missing[raw[j]] == kRawAboveTheirGround;
-  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd, &standing), nd, cfg);
+  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd, &standing, nd ? &other : nullptr), nd, cfg);
   for (std::size_t j = 0; j < raw.size(); ++j)
     (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
   const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak;
@@ -298,9 +298,9 @@ LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, con
   const std::vector<std::uint8_t> nd = Missing(central_map, query_map, central_positions, query_positions, cfg, threads);
   const std::vector<std::uint8_t> pd = Missing(query_map, central_map, query_positions, central_positions, cfg, threads);
   // Weak ND preservation: ND the query never saw through stays in the map.
-  LabelChanges(central_map, nd, central_voters, query_voters, true, cfg, threads, &out.central);
+  LabelChanges(central_map, nd, query_map, central_voters, query_voters, true, cfg, threads, &out.central);
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
-  LabelChanges(query_map, pd, query_voters, central_voters, false, cfg, threads, &out.query);
+  LabelChanges(query_map, pd, central_map, query_voters, central_voters, false, cfg, threads, &out.query);
   return out;
 }
 

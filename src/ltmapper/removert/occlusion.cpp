@@ -34,6 +34,7 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
     const Eigen::Vector3d q = (cloud.points[j].xyz() - p).cast<double>();
     sum += q;
     second += q * q.transpose();
+    nb.reach = std::max(nb.reach, std::sqrt(double(d2)));
     ++nb.n;
   }
   if (nb.n == 0) return nb;
@@ -45,9 +46,10 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
 }
 
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
-                                             double radius_m, int threads, std::vector<bool>* planar) {
+                                             double radius_m, int threads, std::vector<bool>* planar,
+                                             std::vector<bool>* rim) {
   std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
-  std::vector<std::uint8_t> plane(points.size(), 0);
+  std::vector<std::uint8_t> plane(points.size(), 0), edge(points.size(), 0);
   if (points.empty() || map.empty()) return normals;
   const geometry::KdTree tree(std::make_shared<const PointCloud>(map), threads);
   const std::size_t chunk = 2048;
@@ -63,6 +65,8 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
       if (nb.n >= 3 && ev(1) > 0.05 * ev(2)) {
         nrm = nb.eigenvectors.col(0);
         plane[i] = 1;
+        const Eigen::Vector3d along = nb.mean - nb.mean.dot(nrm) * nrm;
+        edge[i] = along.norm() > kRimOffset * nb.reach;
       } else {
         const Eigen::Vector3d line = nb.eigenvectors.col(2);
         nrm = Eigen::Vector3d::UnitZ() - line.z() * line;
@@ -72,12 +76,77 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
     }
   });
   if (planar) planar->assign(plane.begin(), plane.end());
+  if (rim) rim->assign(edge.begin(), edge.end());
   return normals;
 }
 
+namespace {
+
+// Per point where `want` holds: its own map drew its surface twice. The other session's map holds
+// at least ld.min_neighbors points on the point's normal line (within ld.beam_tol_m of it) within
+// ld.radius_max_m in front of or behind it (the most LD accepts between two samplings of one
+// surface), on a surface parallel to the point's (their normal within 45 deg of its), and its own
+// map holds them too (a point within ld.beam_tol_m of each): both sessions met that surface, and
+// this point is its own map's displaced copy of it (a pass of its session misaligned). A thing
+// that left in front of a wall is not: its own session did not see the wall behind it.
+constexpr float kParallelCos = 0.70710678f;  // two planes' normals within 45 deg: parallel
+
+// The points of `cloud` within r of a point of `around`.
+PointCloud Near(const PointCloud& cloud, const PointCloud& around, float r, int threads) {
+  if (around.empty() || cloud.empty()) return {};
+  const geometry::KdTree tree(around);
+  std::vector<std::uint8_t> near(cloud.size(), 0);
+  const std::size_t chunk = 8192;
+  ParallelFor((cloud.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
+    const std::size_t b = ch * chunk, e = std::min(cloud.size(), b + chunk);
+    for (std::size_t i = b; i < e; ++i) near[i] = tree.CountWithin(cloud.points[i].xyz(), r, 1) > 0;
+  });
+  return cloud.select(std::vector<bool>(near.begin(), near.end()));
+}
+
+std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::Vector3f>& normals,
+                             const std::vector<bool>& want, const PointCloud& own, const PointCloud& other,
+                             const RemovertConfig& cfg, int threads) {
+  std::vector<bool> out(points.size(), false);
+  if (other.empty() || std::find(want.begin(), want.end(), true) == want.end()) return out;
+  const float reach = float(cfg.ld_radius_max_m), tol = float(cfg.ld_beam.tol_m);
+  const float line = std::hypot(reach, tol), normal_r = float(cfg.ld_normal_radius_m);
+  // Only the maps' points these tests can reach (the maps are far larger than the points asked).
+  const PointCloud asked = points.select(want);
+  const PointCloud other_near = Near(other, asked, line + normal_r, threads), own_near = Near(own, asked, line + tol, threads);
+  if (other_near.empty()) return out;
+  const geometry::KdTree other_tree(std::make_shared<const PointCloud>(other_near), threads);
+  const geometry::KdTree own_tree(std::make_shared<const PointCloud>(own_near), threads);
+  const std::size_t k = std::size_t(cfg.ld_min_neighbors);
+  std::vector<std::uint8_t> twice(points.size(), 0);
+  const std::size_t chunk = 2048;
+  ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
+    const std::size_t b = ch * chunk, e = std::min(points.size(), b + chunk);
+    for (std::size_t i = b; i < e; ++i) {
+      if (!want[i]) continue;
+      const Eigen::Vector3f p = points.points[i].xyz();
+      std::size_t n = 0;
+      for (const auto& [j, d2] : other_tree.RadiusUnsorted(p, line)) {
+        const Eigen::Vector3f q = other_near.points[j].xyz(), d = q - p;
+        const float along = d.dot(normals[i]);
+        if (std::abs(along) > reach || d2 - along * along > tol * tol) continue;
+        if (own_tree.CountWithin(q, tol, 1) == 0) continue;
+        const Neighbourhood nb = FitNeighbourhood(other_tree, other_near, q, normal_r);
+        const bool parallel = nb.n >= 3 && std::abs(nb.eigenvectors.col(0).cast<float>().dot(normals[i])) >= kParallelCos;
+        if (parallel && ++n >= k) break;
+      }
+      twice[i] = n >= k;
+    }
+  });
+  out.assign(twice.begin(), twice.end());
+  return out;
+}
+
+}  // namespace
+
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                         int threads, bool own_pixel, const std::vector<bool>* standing) {
+                         int threads, bool own_pixel, const std::vector<bool>* standing, const PointCloud* other_map) {
   Visibility out;
   out.seen.assign(points.size(), false);
   out.observed.assign(points.size(), false);
@@ -94,9 +163,10 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   opt.count_own_see = own_pixel;
   std::vector<Eigen::Vector3f> normals;
   std::vector<bool> planar;  // normals[i] is a plane's (else a scan line's: orientation unknown)
+  std::vector<bool> rim;     // points[i] lies at the rim of its plane (EstimateNormals)
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
-    normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &planar);
+    normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &planar, &rim);
     opt.normals = &normals;
     if (beams)
       opt.beams = &cfg.ld_beam;
@@ -104,13 +174,33 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
       opt.surface_max_m = cfg.ld_surface_max_m;
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
+  // Seen through by the pixels: at some resolution, ld.min_votes keyframes and ld.min_ratio of
+  // those with evidence. Or by a beam of the other session that went through the point's place
+  // and ended beyond it, with no beam of it ending near the point: the beam truth's "observed
+  // absent" (a see-through the pixels miss where the other sensor looks down at a grazing angle:
+  // the ground in front of a thing that left counts as a hit in its pixel window).
+  std::vector<bool> seen_through(points.size(), false);
   for (std::size_t i = 0; i < points.size(); ++i) {
-    bool seen = false, observed = false, seen_own = false;
+    for (int l = 0; l < v.levels && !seen_through[i]; ++l) {
+      const double s = v.See(l, i), h = v.Hit(l, i);
+      seen_through[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
+    }
+    seen_through[i] = seen_through[i] || (!v.beam_through.empty() && planar[i] && !rim[i] &&
+                                          v.beam_through[i] >= cfg.ld_min_votes && v.beam_hits[i] == 0);
+  }
+  // Not where its own map drew the surface twice (DrawnTwice): those rays went past a displaced
+  // copy to the surface both sessions met.
+  if (other_map != nullptr && !normals.empty()) {
+    const std::vector<bool> displaced = DrawnTwice(points, normals, seen_through, own_map, *other_map, cfg, threads);
+    for (std::size_t i = 0; i < points.size(); ++i) seen_through[i] = seen_through[i] && !displaced[i];
+  }
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    bool observed = false, seen_own = false;
     int see_max = 0;
     int hits = beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
+    const bool seen = seen_through[i];
     for (int l = 0; l < v.levels; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
-      seen = seen || (s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h));
       see_max = std::max(see_max, int(s));
       if (own_pixel) {
         const double o = v.SeeOwn(l, i);

@@ -606,6 +606,8 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     }
   }
   down_ = float(cfg.fov_down_deg * kRadPerDeg);
+  through_m_ = float(cfg.map_voxel_m);
+  surface_reach_m_ = float(cfg.ld_normal_radius_m);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
@@ -715,7 +717,47 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
       if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
     }
   const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
-  return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0));
+  // Without a beam ending near it: a beam of those columns whose ray crossed the point's plane
+  // within a map voxel of it (the surface element the map point stands for) and whose return lies
+  // beyond the crossing by more than the along-ray tolerance went through its place. Not where
+  // the scan met the point's surface nearby (MetSurfaceNear): that ray passed an edge of it (a
+  // wall's top, a gap between fence panels) without crossing it.
+  auto went_beyond = [&](std::size_t c, int r) {
+    const float rr = range_[c + std::size_t(r)];
+    const Eigen::Vector3f u = ret_[c + std::size_t(r)] / rr;
+    const float cs = nrm.dot(u);
+    if (std::fabs(cs) < 1e-3f) return false;
+    const float t = nrm.dot(ps) / cs;
+    return t > 0.f && (t * u - ps).squaredNorm() <= through_m_ * through_m_ && rr - t > AlongRay(tol, std::fabs(cs), grazing_max);
+  };
+  bool through = false;
+  for (int d = -reach; d <= reach && !want_around && !ended && !through; ++d) {
+    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(rows);
+    const float* rc = range_.data() + c;
+    const auto [a, b] = BeamsAround(rc, row);
+    through = (std::isfinite(rc[row]) && went_beyond(c, row)) || (a >= 0 && went_beyond(c, a)) || (b >= 0 && went_beyond(c, b));
+  }
+  through = through && !MetSurfaceNear(range, pitch, yaw, ps, plane);
+  return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
+                      (through ? kBeamThrough : 0));
+}
+
+bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
+                                 const float* plane) const {
+  const float tol = float(test_.tol_m), reach_m = surface_reach_m_;
+  const float angle = std::asin(std::min(1.f, reach_m / range));
+  const int dc = std::min(grid_.cols / 2, int(std::ceil(angle * grid_.col_scale)));
+  const int r0 = std::max(0, grid_.Row(pitch + angle)), r1 = std::min(grid_.rows - 1, grid_.Row(pitch - angle));
+  const int col = grid_.Col(yaw);
+  for (int d = -dc; d <= dc; ++d) {
+    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
+    for (int r = r0; r <= r1; ++r) {
+      if (!std::isfinite(range_[c + std::size_t(r)])) continue;
+      const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
+      if (PlaneDistance(plane, q) <= tol && (q - ps).squaredNorm() <= reach_m * reach_m) return true;
+    }
+  }
+  return false;
 }
 
 bool ColumnImage::EmptyColumn(int col, int row_top, int row_bottom) const {
@@ -969,7 +1011,8 @@ struct VoteCounts {
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
-        beam_passed(beam_around.size(), 0), locks(new std::mutex[s.index.tiles()]) {}
+        beam_passed(beam_around.size(), 0), beam_through(s.beams && !s.options.count_own_see ? n : 0, 0),
+        locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
     const std::lock_guard<std::mutex> lock(locks[tile]);
@@ -982,6 +1025,10 @@ struct VoteCounts {
       for (std::size_t i = 0; i < tn; ++i) av[i] = std::uint16_t(av[i] + ((sc.seen_beams[i] & detail::kBeamAround) >> 1));
       std::uint16_t* pv = beam_passed.data() + b;
       for (std::size_t i = 0; i < tn; ++i) pv[i] = std::uint16_t(pv[i] + ((sc.seen_beams[i] & detail::kBeamPassed) >> 2));
+    }
+    if (!beam_through.empty()) {
+      std::uint16_t* tv = beam_through.data() + b;
+      for (std::size_t i = 0; i < tn; ++i) tv[i] = std::uint16_t(tv[i] + ((sc.seen_beams[i] & detail::kBeamThrough) >> 3));
     }
     for (std::size_t l = 0; l < levels; ++l) {
       const std::uint8_t* vote = sc.votes.data() + l * tn;
@@ -1007,6 +1054,7 @@ struct VoteCounts {
     for (std::size_t i = 0; i < beam_hits.size(); ++i) out->beam_hits[std::size_t(order[i])] = beam_hits[i];
     for (std::size_t i = 0; i < beam_around.size(); ++i) out->beam_around[std::size_t(order[i])] = beam_around[i];
     for (std::size_t i = 0; i < beam_passed.size(); ++i) out->beam_passed[std::size_t(order[i])] = beam_passed[i];
+    for (std::size_t i = 0; i < beam_through.size(); ++i) out->beam_through[std::size_t(order[i])] = beam_through[i];
     for (std::size_t l = 0; l < levels; ++l)
       for (std::size_t i = 0; i < n; ++i) {
         const std::size_t orig = std::size_t(order[i]);
@@ -1018,7 +1066,7 @@ struct VoteCounts {
   }
 
   std::size_t n, levels;
-  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits, beam_around, beam_passed;
+  std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits, beam_around, beam_passed, beam_through;
   std::unique_ptr<std::mutex[]> locks;
 };
 
@@ -1042,7 +1090,10 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   if (options.count_own_see) out.see_own.assign(n * levels, 0);
   if (options.normals != nullptr && options.beams != nullptr) {
     out.beam_hits.assign(n, 0);
-    if (options.count_own_see) out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
+    if (options.count_own_see)
+      out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
+    else
+      out.beam_through.assign(n, 0);
   }
   return out;
 }

@@ -27,6 +27,8 @@ struct VisibilityVotes {
                                            // only with the beam test and count_own_see (its one reader)
   std::vector<std::uint16_t> beam_passed;  // [i] keyframes a beam of which passed it without a return
                                            // (ColumnImage::PassedWithoutReturn); as beam_around
+  std::vector<std::uint16_t> beam_through;  // [i] keyframes a beam of which went through its place and
+                                            // none ended near it; with the beam test, without count_own_see
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
   std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
