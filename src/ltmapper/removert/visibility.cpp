@@ -719,16 +719,19 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
   // Without a beam ending near it: a beam of those columns whose ray crossed the point's plane
   // within a map voxel of it (the surface element the map point stands for) and whose return lies
-  // beyond the crossing by more than the along-ray tolerance went through its place. Not where
-  // the scan met the point's surface nearby (MetSurfaceNear): that ray passed an edge of it (a
-  // wall's top, a gap between fence panels) without crossing it.
+  // beyond the crossing by more than tol / cos(incidence) went through its place: past the band
+  // along the ray where it is within tol of the plane (not capped at grazing_max as for a beam
+  // that ended near: a ray grazing a facade ends on it a few metres on). Not where the scan met
+  // the point's surface nearby (MetSurfaceNear): that ray passed an edge of it (a wall's top, a
+  // gap between fence panels) without crossing it.
+  constexpr float kUncapped = std::numeric_limits<float>::infinity();
   auto went_beyond = [&](std::size_t c, int r) {
     const float rr = range_[c + std::size_t(r)];
     const Eigen::Vector3f u = ret_[c + std::size_t(r)] / rr;
     const float cs = nrm.dot(u);
     if (std::fabs(cs) < 1e-3f) return false;
     const float t = nrm.dot(ps) / cs;
-    return t > 0.f && (t * u - ps).squaredNorm() <= through_m_ * through_m_ && rr - t > AlongRay(tol, std::fabs(cs), grazing_max);
+    return t > 0.f && (t * u - ps).squaredNorm() <= through_m_ * through_m_ && rr - t > AlongRay(tol, std::fabs(cs), kUncapped);
   };
   bool through = false;
   for (int d = -reach; d <= reach && !want_around && !ended && !through; ++d) {
