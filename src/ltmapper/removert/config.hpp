@@ -36,7 +36,8 @@ struct BeamTest {
   double tol_m = 0.3;           // [m] a return this close to the point's plane is on its surface, at any
                                 // range: the rotation error between the sessions brings a beam nearer
                                 // as often as it takes one away, so it widens nothing
-  double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this
+  double grazing_max_m = 2.0;   // [m] the along-ray tolerance tol / cos(incidence) at most this (a beam
+                                // that ended near; one that went through must end beyond it uncapped)
 };
 
 struct RemovertConfig {
@@ -88,7 +89,8 @@ struct RemovertConfig {
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
   // ... plus LdRadiusRel() times the larger of the point's distances to either session's nearest keyframe
   // (the rotation error between the sessions moves a surface seen from afar by that much) ...
-  double ld_radius_max_m = 1.0;   // [m] ... at most this
+  double ld_radius_max_m = 1.0;   // [m] ... at most this; also how far a surface both sessions' maps hold
+                                  // may lie behind a displaced copy of it in one map (not seen through)
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
   // The rotation uncertainty between two sessions' poses at one place (1 sigma). 0: what LT-SLAM
   // measured for the pair's query session (ForQuery), else pose_sigma_deg.
@@ -124,7 +126,8 @@ struct RemovertConfig {
                                   // their surface) is past the rim of the other session's coverage: a raw
                                   // change for the beam test (0 = off)
   std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
-  int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD
+  int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD (for ND also
+                                  // keyframes a beam of which went through the point's surface: BeamTest)
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
   bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
   int ld_window_px = 1;           // [pixels] window half-size of the LD see-through test (0 = the pixel alone)
@@ -132,7 +135,9 @@ struct RemovertConfig {
                                       // is sampled sparsely: use the sensor's max range)
   double ld_normal_radius_m = 1.0;   // [m] neighbourhood (own map, at most 16 points) for the normals of
                                       // raw changes; a line-like neighbourhood (far ground rings) takes
-                                      // the normal perpendicular to the line closest to vertical
+                                      // the normal perpendicular to the line closest to vertical; also how
+                                      // near a scan's return on a point's plane makes a beam that went on
+                                      // past it a ray past the surface's edge, no see-through
   double ld_surface_max_m = 10.0;     // [m] a return on the point's plane at most this far from it in range is
                                       // a same-surface hit (grazing far ground; an occluder is off the plane)
   int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through (with the beam test, or on

@@ -88,7 +88,9 @@ namespace {
 // surface), on a surface parallel to the point's (their normal within 45 deg of its), and its own
 // map holds them too (a point within ld.beam_tol_m of each): both sessions met that surface, and
 // this point is its own map's displaced copy of it (a pass of its session misaligned). A thing
-// that left in front of a wall is not: its own session did not see the wall behind it.
+// that left in front of a wall is not: its own session did not see the wall behind it. Upright
+// points only: under a level one (a car's hood or roof) the ground both maps hold is what the
+// thing stood on (Missing's kRawAboveTheirGround), not a copy of it.
 constexpr float kParallelCos = 0.70710678f;  // two planes' normals within 45 deg: parallel
 
 // The points of `cloud` within r of a point of `around`.
@@ -123,7 +125,7 @@ std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
     const std::size_t b = ch * chunk, e = std::min(points.size(), b + chunk);
     for (std::size_t i = b; i < e; ++i) {
-      if (!want[i]) continue;
+      if (!want[i] || std::abs(normals[i].z()) >= kUprightNormalZ) continue;
       const Eigen::Vector3f p = points.points[i].xyz();
       std::size_t n = 0;
       for (const auto& [j, d2] : other_tree.RadiusUnsorted(p, line)) {
