@@ -144,6 +144,27 @@ std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::
   return out;
 }
 
+// Per point: seen through by the pixels (at some resolution, ld.min_votes keyframes and
+// ld.min_ratio of those with evidence), or by a beam of the other session that went through the
+// point's place and ended beyond it while none of its beams ended near the point: the beam truth's
+// "observed absent" (a see-through the pixels miss where the other sensor looks down at a grazing
+// angle: the ground in front of a thing that left counts as a hit in its pixel window). The beam
+// only at points inside a plane (planar, not at its rim: EstimateNormals): a ray that crossed the
+// plane within a voxel of a line's or an edge's point may have passed beside the surface.
+std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg, const std::vector<bool>& planar,
+                                   const std::vector<bool>& rim) {
+  std::vector<bool> seen(v.points, false);
+  for (std::size_t i = 0; i < v.points; ++i) {
+    for (int l = 0; l < v.levels && !seen[i]; ++l) {
+      const double s = v.See(l, i), h = v.Hit(l, i);
+      seen[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
+    }
+    seen[i] = seen[i] || (!v.beam_through.empty() && planar[i] && !rim[i] && v.beam_through[i] >= cfg.ld_min_votes &&
+                          v.beam_hits[i] == 0);
+  }
+  return seen;
+}
+
 }  // namespace
 
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
@@ -176,20 +197,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
       opt.surface_max_m = cfg.ld_surface_max_m;
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
-  // Seen through by the pixels: at some resolution, ld.min_votes keyframes and ld.min_ratio of
-  // those with evidence. Or by a beam of the other session that went through the point's place
-  // and ended beyond it, with no beam of it ending near the point: the beam truth's "observed
-  // absent" (a see-through the pixels miss where the other sensor looks down at a grazing angle:
-  // the ground in front of a thing that left counts as a hit in its pixel window).
-  std::vector<bool> seen_through(points.size(), false);
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    for (int l = 0; l < v.levels && !seen_through[i]; ++l) {
-      const double s = v.See(l, i), h = v.Hit(l, i);
-      seen_through[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
-    }
-    seen_through[i] = seen_through[i] || (!v.beam_through.empty() && planar[i] && !rim[i] &&
-                                          v.beam_through[i] >= cfg.ld_min_votes && v.beam_hits[i] == 0);
-  }
+  std::vector<bool> seen_through = SeenThroughVotes(v, cfg, planar, rim);
   // Not where its own map drew the surface twice (DrawnTwice): those rays went past a displaced
   // copy to the surface both sessions met.
   if (other_map != nullptr && !normals.empty()) {
