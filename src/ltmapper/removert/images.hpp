@@ -159,12 +159,12 @@ class ColumnImage {
   // its column or of the columns within asin(tol / range) of it ended on its surface near it;
   // with want_around, kBeamAround when its cell is empty and the
   // beams around it met its surface farther away (Around), and kBeamPassed when a beam passed it
-  // without a return (PassedWithoutReturn); without want_around, kBeamThrough when none ended near
+  // without a return (PassedWithoutReturn); with ask_through, kBeamThrough when none ended near
   // it, a beam of those columns crossed its plane within a map voxel of it and ended beyond the
   // crossing by more than tol / cos(incidence), uncapped (the beam truth's "observed absent"), and
   // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
-                        bool want_around) const;
+                        bool want_around, bool ask_through) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing

@@ -148,19 +148,16 @@ std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::
 // ld.min_ratio of those with evidence), or by a beam of the other session that went through the
 // point's place and ended beyond it while none of its beams ended near the point: the beam truth's
 // "observed absent" (a see-through the pixels miss where the other sensor looks down at a grazing
-// angle: the ground in front of a thing that left counts as a hit in its pixel window). The beam
-// only at points inside a plane (planar, not at its rim: EstimateNormals): a ray that crossed the
-// plane within a voxel of a line's or an edge's point may have passed beside the surface.
-std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg, const std::vector<bool>& planar,
-                                   const std::vector<bool>& rim) {
+// angle: the ground in front of a thing that left counts as a hit in its pixel window; asked only
+// where SeenThroughBy's `through_at` holds).
+std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg) {
   std::vector<bool> seen(v.points, false);
   for (std::size_t i = 0; i < v.points; ++i) {
     for (int l = 0; l < v.levels && !seen[i]; ++l) {
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
     }
-    seen[i] = seen[i] || (!v.beam_through.empty() && planar[i] && !rim[i] && v.beam_through[i] >= cfg.ld_min_votes &&
-                          v.beam_hits[i] == 0);
+    seen[i] = seen[i] || (!v.beam_through.empty() && v.beam_through[i] >= cfg.ld_min_votes && v.beam_hits[i] == 0);
   }
   return seen;
 }
@@ -187,17 +184,24 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   std::vector<Eigen::Vector3f> normals;
   std::vector<bool> planar;  // normals[i] is a plane's (else a scan line's: orientation unknown)
   std::vector<bool> rim;     // points[i] lies at the rim of its plane (EstimateNormals)
+  std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
     normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &planar, &rim);
     opt.normals = &normals;
-    if (beams)
-      opt.beams = &cfg.ld_beam;
-    else
-      opt.surface_max_m = cfg.ld_surface_max_m;
+    if (beams) opt.beams = &cfg.ld_beam;
+    // ND: a beam may have gone through the place of a point inside a plane (planar, not at its rim):
+    // a ray that crossed the plane within a voxel of a line's or an edge's point may have passed
+    // beside the surface.
+    if (beams && !own_pixel) {
+      through_at.resize(points.size());
+      for (std::size_t i = 0; i < points.size(); ++i) through_at[i] = planar[i] && !rim[i];
+      opt.through_at = &through_at;
+    }
+    if (!beams) opt.surface_max_m = cfg.ld_surface_max_m;
   }
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
-  std::vector<bool> seen_through = SeenThroughVotes(v, cfg, planar, rim);
+  std::vector<bool> seen_through = SeenThroughVotes(v, cfg);
   // Not where its own map drew the surface twice (DrawnTwice): those rays went past a displaced
   // copy to the surface both sessions met.
   if (other_map != nullptr && !normals.empty()) {

@@ -678,7 +678,7 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
 }
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                                   const float* plane, bool want_around) const {
+                                   const float* plane, bool want_around, bool ask_through) const {
   const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
@@ -734,7 +734,7 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
     return t > 0.f && (t * u - ps).squaredNorm() <= through_m_ * through_m_ && rr - t > AlongRay(tol, std::fabs(cs), kUncapped);
   };
   bool through = false;
-  for (int d = -reach; d <= reach && !want_around && !ended && !through; ++d) {
+  for (int d = -reach; d <= reach && ask_through && !ended && !through; ++d) {
     const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(rows);
     const float* rc = range_.data() + c;
     const auto [a, b] = BeamsAround(rc, row);
@@ -984,8 +984,9 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     pl[1] = ns.y();
     pl[2] = ns.z();
     pl[3] = ns.dot(ps);
+    const bool ask_through = s.options.through_at != nullptr && (*s.options.through_at)[ix.order()[i]];
     if (s.beams) sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl,
-                                                                       s.options.count_own_see);
+                                                                       s.options.count_own_see, ask_through);
   }
 }
 
@@ -1014,7 +1015,7 @@ struct VoteCounts {
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
-        beam_passed(beam_around.size(), 0), beam_through(s.beams && !s.options.count_own_see ? n : 0, 0),
+        beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.through_at ? n : 0, 0),
         locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
@@ -1093,10 +1094,8 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   if (options.count_own_see) out.see_own.assign(n * levels, 0);
   if (options.normals != nullptr && options.beams != nullptr) {
     out.beam_hits.assign(n, 0);
-    if (options.count_own_see)
-      out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
-    else
-      out.beam_through.assign(n, 0);
+    if (options.count_own_see) out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
+    if (options.through_at != nullptr) out.beam_through.assign(n, 0);
   }
   return out;
 }

@@ -28,7 +28,7 @@ struct VisibilityVotes {
   std::vector<std::uint16_t> beam_passed;  // [i] keyframes a beam of which passed it without a return
                                            // (ColumnImage::PassedWithoutReturn); as beam_around
   std::vector<std::uint16_t> beam_through;  // [i] keyframes a beam of which went through its place and
-                                            // none ended near it; with the beam test, without count_own_see
+                                            // none ended near it; with VisibilityOptions::through_at
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
   std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
@@ -53,6 +53,9 @@ struct VisibilityOptions {
   double surface_max_m = 0.0;  // [m]
   // With normals: the beam test per keyframe (BeamTest; VisibilityVotes::beam_hits).
   const BeamTest* beams = nullptr;
+  // With the beam test, without count_own_see: per point, whether a beam may have gone through its
+  // place (a point inside a plane of its map); only those are asked (VisibilityVotes::beam_through).
+  const std::vector<bool>* through_at = nullptr;
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
