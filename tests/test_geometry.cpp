@@ -616,5 +616,33 @@ TEST(Geometry, LowestGridIsTheGroundUnderABox) {
   EXPECT_TRUE(off.empty());
 }
 
+// WithinRadius against brute force: a few query points among many cloud points (the cells near
+// the query are marked first) and as many query points as cloud points (no marking), on one and
+// on three threads.
+TEST(RadiusIndex, WithinRadiusEqualsBruteForceOnAnyThreads) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-5.f, 5.f);
+  auto random_cloud = [&](std::size_t n) {
+    PointCloud c;
+    for (std::size_t i = 0; i < n; ++i) c.push_back(u(rng), u(rng), u(rng) * 0.2f);
+    return c;
+  };
+  const PointCloud cloud = random_cloud(20000);
+  for (std::size_t nq : {std::size_t(12), std::size_t(20000)}) {
+    const PointCloud query = random_cloud(nq);
+    const double r = 0.15;
+    const std::vector<bool> got = WithinRadius(cloud, query, r);
+    ASSERT_EQ(WithinRadius(cloud, query, r, 3), got);
+    std::size_t hits = 0;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      bool near = false;
+      for (const auto& q : query.points) near |= (q.xyz() - cloud.points[i].xyz()).squaredNorm() <= float(r * r);
+      ASSERT_EQ(got[i], near) << "point " << i << " with " << nq << " query points";
+      hits += near;
+    }
+    EXPECT_GT(hits, 0u);
+  }
+}
+
 }  // namespace
 }  // namespace ltm::geometry

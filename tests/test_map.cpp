@@ -1,5 +1,6 @@
 // LT-map: blob codec, composition / rollback, live vs meta, new keyframes, transactions, fsck.
 #include "ltmapper/map/map.hpp"
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
 #include "test_util.hpp"
@@ -184,37 +185,11 @@ TEST(MapBlob, RejectsPointsOutsideTheGrid) {
 // within `tolerance_m` of an ND point removed, the PD points appended): the independent oracle
 // the store's integer-grid composition is checked against.
 PointCloud Compose(const PointCloud& cloud, const PointCloud& nd, const PointCloud& pd, double tolerance_m) {
-  std::vector<bool> keep = WithinRadius(cloud, nd, tolerance_m);
+  std::vector<bool> keep = geometry::WithinRadius(cloud, nd, tolerance_m);
   keep.flip();
   PointCloud out = cloud.select(keep);
   out.append(pd);
   return out;
-}
-
-// WithinRadius against brute force: a few query points among many cloud points (the cells near
-// the query are marked first) and as many query points as cloud points (no marking).
-TEST(MapCompose, WithinRadiusEqualsBruteForce) {
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<float> u(-5.f, 5.f);
-  auto random_cloud = [&](std::size_t n) {
-    PointCloud c;
-    for (std::size_t i = 0; i < n; ++i) c.push_back(u(rng), u(rng), u(rng) * 0.2f);
-    return c;
-  };
-  const PointCloud cloud = random_cloud(20000);
-  for (std::size_t nq : {std::size_t(12), std::size_t(20000)}) {
-    const PointCloud query = random_cloud(nq);
-    const double r = 0.15;
-    const std::vector<bool> got = WithinRadius(cloud, query, r);
-    std::size_t hits = 0;
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      bool near = false;
-      for (const auto& q : query.points) near |= (q.xyz() - cloud.points[i].xyz()).squaredNorm() <= float(r * r);
-      ASSERT_EQ(got[i], near) << "point " << i << " with " << nq << " query points";
-      hits += near;
-    }
-    EXPECT_GT(hits, 0u);
-  }
 }
 
 TEST(MapCompose, SetDifferenceByNearestNeighbourAndUnion) {
@@ -304,7 +279,7 @@ TEST(MapStore, RestoreEverySessionFromLatest) {
   }
   const PointCloud restored = s.MapAt(0);
   ASSERT_EQ(restored.size(), world0.size());
-  const auto ab = WithinRadius(restored, world0, kRes), ba = WithinRadius(world0, restored, kRes);
+  const auto ab = geometry::WithinRadius(restored, world0, kRes), ba = geometry::WithinRadius(world0, restored, kRes);
   EXPECT_EQ(std::count(ab.begin(), ab.end(), true), long(ab.size()));
   EXPECT_EQ(std::count(ba.begin(), ba.end(), true), long(ba.size()));
   // Session classes travel with the points.

@@ -76,6 +76,44 @@ class KdTree {
   std::unique_ptr<Impl> impl_;
 };
 
+// ------------------------------------------------------------------------ points near a set
+// A set of 63-bit keys (open addressing, splitmix64 hash); all ones is never a key (keys pack
+// three 21-bit fields).
+class KeySet {
+ public:
+  explicit KeySet(std::size_t expected = 0);
+  void Insert(std::uint64_t key);
+  bool Contains(std::uint64_t key) const;
+  std::size_t size() const { return count_; }
+
+ private:
+  void Grow();
+  std::vector<std::uint64_t> slots_;  // all ones = empty
+  std::size_t mask_ = 0, count_ = 0;
+};
+
+// Whether a point lies within `radius` (inclusive, in the points' unit) of a set of points: the
+// set in a hash grid of radius-sized cells, a point asked looks at the 27 cells around its own.
+// `lookups` is about how many points will be asked: when the set occupies few cells against it
+// (a keyframe's changes against its map), the cells near the set are marked first, so that a point
+// far from the set costs one lookup instead of 27. The answer is the same either way. Near() is
+// const and may be called from several threads.
+class RadiusIndex {
+ public:
+  RadiusIndex(std::vector<Eigen::Vector3d> set, double radius, std::size_t lookups);
+  bool Near(const Eigen::Vector3d& p) const;
+
+ private:
+  std::uint64_t CellKey(const Eigen::Vector3d& p, int dx, int dy, int dz) const;
+  std::vector<Eigen::Vector3d> set_;
+  double cell_, r2_;
+  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid_;
+  bool prefilter_ = false;
+  KeySet near_cells_;
+};
+// The mask of `cloud`'s points within `radius_m` (inclusive) of a point of `query`.
+std::vector<bool> WithinRadius(const PointCloud& cloud, const PointCloud& query, double radius_m, int threads = 1);
+
 // ------------------------------------------------------------------------------- clusters
 // Euclidean clusters: points closer than `gap_m` [m] (strict, as KdTree::Radius) are in one
 // cluster, transitively. Returns each point's cluster number, 0 .. clusters - 1, numbered in the

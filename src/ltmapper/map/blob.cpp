@@ -34,15 +34,6 @@ std::uint64_t ChecksumBasis(std::uint16_t version) {
   return version == kVersionLegacyBasis ? kLegacyFnvBasis : kFnvOffsetBasis;
 }
 
-std::uint64_t Mix(std::uint64_t x) {  // splitmix64 finaliser
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  x ^= x >> 31;
-  return x;
-}
-
 template <class T>
 void Put(std::string& s, std::size_t off, T v) {
   std::memcpy(&s[off], &v, sizeof(T));
@@ -112,47 +103,6 @@ std::uint64_t Fnv1a64(const void* data, std::size_t size, std::uint64_t h) {
     h *= 1099511628211ull;
   }
   return h;
-}
-
-// ------------------------------------------------------------------------------------ KeySet
-// Keys use 63 bits (3 x 21), so all-ones never occurs and marks an empty slot.
-static constexpr std::uint64_t kEmpty = ~0ull;
-
-KeySet::KeySet(std::size_t expected) {
-  std::size_t cap = 16;
-  while (cap < expected * 2) cap <<= 1;
-  slots_.assign(cap, kEmpty);
-  mask_ = cap - 1;
-}
-
-void KeySet::Insert(std::uint64_t key) {
-  if ((count_ + 1) * 2 > slots_.size()) Grow();
-  std::size_t h = Mix(key) & mask_;
-  while (slots_[h] != kEmpty) {
-    if (slots_[h] == key) return;
-    h = (h + 1) & mask_;
-  }
-  slots_[h] = key;
-  ++count_;
-}
-
-bool KeySet::Contains(std::uint64_t key) const {
-  std::size_t h = Mix(key) & mask_;
-  while (slots_[h] != kEmpty) {
-    if (slots_[h] == key) return true;
-    h = (h + 1) & mask_;
-  }
-  return false;
-}
-
-void KeySet::Grow() {
-  std::vector<std::uint64_t> old;
-  old.swap(slots_);
-  slots_.assign(old.size() * 2, kEmpty);
-  mask_ = slots_.size() - 1;
-  count_ = 0;
-  for (std::uint64_t k : old)
-    if (k != kEmpty) Insert(k);
 }
 
 // ------------------------------------------------------------------------------ quantisation

@@ -1,6 +1,7 @@
 // Private to src/ltmapper/map: quantised clouds, blob codec and the integer-key composition.
 #pragma once
 
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/map.hpp"
 
 #include <cstdint>
@@ -40,20 +41,8 @@ inline std::uint64_t Key(const QPoint& p) {
          (std::uint64_t(std::uint32_t(p.z)) & m);
 }
 
-// Open-addressing set of 64-bit keys (linear probing); fast membership for composition.
-class KeySet {
- public:
-  explicit KeySet(std::size_t expected = 0);
-  void Insert(std::uint64_t key);
-  bool Contains(std::uint64_t key) const;
-  std::size_t size() const { return count_; }
-
- private:
-  void Grow();
-  std::vector<std::uint64_t> slots_;  // 0 = empty; keys are stored +1 shifted (see .cpp)
-  std::size_t mask_ = 0, count_ = 0;
-  bool has_zero_ = false;
-};
+// The composition key set (geometry::KeySet: the keys above never have all bits set).
+using geometry::KeySet;
 
 // Throws ltm::Error (naming `what` and the point) for non-finite or out-of-range points.
 QCloud Quantize(const PointCloud& cloud, double resolution_m, double intensity_step,

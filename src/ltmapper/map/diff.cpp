@@ -59,8 +59,8 @@ Agreement Agree(const PointCloud& got, const PointCloud& want, double radius_m) 
     for (bool b : m) n += b;
     return m.empty() ? 1.0 : double(n) / double(m.size());
   };
-  a.precision = share(WithinRadius(got, want, radius_m));
-  a.recall = share(WithinRadius(want, got, radius_m));
+  a.precision = share(geometry::WithinRadius(got, want, radius_m));
+  a.recall = share(geometry::WithinRadius(want, got, radius_m));
   return a;
 }
 

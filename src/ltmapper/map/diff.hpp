@@ -34,8 +34,4 @@ struct PairAgreement {
 };
 PairAgreement CompareWithLdPair(const MapDiff& diff, const std::string& pair_dir, double radius_m);
 
-// ------------------------------------------------------------------------------- composition
-// Mask of `cloud` points within `radius_m` of any point of `query` (spatial hash).
-std::vector<bool> WithinRadius(const PointCloud& cloud, const PointCloud& query, double radius_m);
-
 }  // namespace ltm::map

@@ -124,7 +124,7 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
   std::vector<bool> out(changes.size(), false);
   const PointCloud nearby = NearbyAboveGround(changes, idx, other, floor, cfg, r);
   if (nearby.empty()) return out;
-  const std::vector<bool> hit = WithinRadius(changes.select(idx), nearby, r);
+  const std::vector<bool> hit = geometry::WithinRadius(changes.select(idx), nearby, r);
   for (std::size_t j = 0; j < idx.size(); ++j) out[idx[j]] = hit[j];
   return out;
 }
@@ -493,7 +493,7 @@ double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double 
     if (!inside || !under(p)) other.push_back(p.x, p.y, p.z);
   }
   if (other.empty()) return 0.0;
-  const std::vector<bool> hit = WithinRadius(o.cloud, other, r);
+  const std::vector<bool> hit = geometry::WithinRadius(o.cloud, other, r);
   return double(std::count(hit.begin(), hit.end(), true)) / double(std::max<std::size_t>(o.points, 1));
 }
 

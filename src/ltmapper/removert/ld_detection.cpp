@@ -242,12 +242,7 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const 
 // lower part, which only the other session's ground was near).
 std::vector<bool> LowerPartsOf(const PointCloud& body, const std::vector<bool>& residue, const PointCloud& lower,
                                const RemovertConfig& cfg) {
-  std::vector<bool> out(lower.size(), false);
-  if (lower.empty() || std::find(residue.begin(), residue.end(), true) == residue.end()) return out;
-  const geometry::KdTree tree(body.select(residue));
-  for (std::size_t i = 0; i < lower.size(); ++i)
-    out[i] = tree.CountWithin(lower.points[i].xyz(), float(cfg.ld_residue_gap_m), 1) > 0;
-  return out;
+  return geometry::WithinRadius(lower, body.select(residue), cfg.ld_residue_gap_m);
 }
 
 // The labels of one map's points (`own`) given its raw changes (`missing`, Raw) and the other

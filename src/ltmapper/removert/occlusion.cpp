@@ -93,19 +93,6 @@ namespace {
 // thing stood on (Missing's kRawAboveTheirGround), not a copy of it.
 constexpr float kParallelCos = 0.70710678f;  // two planes' normals within 45 deg: parallel
 
-// The points of `cloud` within r of a point of `around`.
-PointCloud Near(const PointCloud& cloud, const PointCloud& around, float r, int threads) {
-  if (around.empty() || cloud.empty()) return {};
-  const geometry::KdTree tree(around);
-  std::vector<std::uint8_t> near(cloud.size(), 0);
-  const std::size_t chunk = 8192;
-  ParallelFor((cloud.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
-    const std::size_t b = ch * chunk, e = std::min(cloud.size(), b + chunk);
-    for (std::size_t i = b; i < e; ++i) near[i] = tree.CountWithin(cloud.points[i].xyz(), r, 1) > 0;
-  });
-  return cloud.select(std::vector<bool>(near.begin(), near.end()));
-}
-
 std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::Vector3f>& normals,
                              const std::vector<bool>& want, const PointCloud& own, const PointCloud& other,
                              const RemovertConfig& cfg, int threads) {
@@ -115,7 +102,8 @@ std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::
   const float line = std::hypot(reach, tol), normal_r = float(cfg.ld_normal_radius_m);
   // Only the maps' points these tests can reach (the maps are far larger than the points asked).
   const PointCloud asked = points.select(want);
-  const PointCloud other_near = Near(other, asked, line + normal_r, threads), own_near = Near(own, asked, line + tol, threads);
+  const PointCloud other_near = other.select(geometry::WithinRadius(other, asked, line + normal_r, threads));
+  const PointCloud own_near = own.select(geometry::WithinRadius(own, asked, line + tol, threads));
   if (other_near.empty()) return out;
   const geometry::KdTree other_tree(std::make_shared<const PointCloud>(other_near), threads);
   const geometry::KdTree own_tree(std::make_shared<const PointCloud>(own_near), threads);

@@ -350,12 +350,8 @@ Coverage ScannedByOther(Simulator& sim, int s, int o, const PointCloud& own, con
   for (std::size_t i = 0; i < own.size(); ++i) keep_own[i] = shared(own.object[i]);
   for (std::size_t i = 0; i < other.size(); ++i) keep_other[i] = shared(other.object[i]);
   Coverage c{own.select(keep_own), {}};
-  const geometry::KdTree tree(other.select(keep_other));
-  c.scanned.assign(c.pts.size(), 0);
-  const float radius = float(cfg.visibility_tolerance_m);
-  ParallelForChunks(c.pts.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) c.scanned[i] = tree.CountWithin(c.pts.points[i].xyz(), radius, 1) > 0;
-  });
+  const std::vector<bool> scanned = geometry::WithinRadius(c.pts, other.select(keep_other), cfg.visibility_tolerance_m, threads);
+  c.scanned.assign(scanned.begin(), scanned.end());
   return c;
 }
 
