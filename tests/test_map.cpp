@@ -601,6 +601,34 @@ TEST(MapObjects, LeftCarOverItsOwnRemnantsIsAnObjectPoleStripIsAFragment) {
   EXPECT_NEAR(rejected[0].centroid.x(), -8.0, 0.01);
 }
 
+// A fence that left: the query saw through the place of its front face (strong ND) but never
+// observed its back face 0.25 m behind (weak ND, stored where it lies under the strong points).
+// That back face is no surface the step saw unchanged: the front face is an object, not a
+// fragment of it. Where the back face stayed unchanged (no weak ND), the front face is a fragment.
+TEST(MapObjects, AThingsUnobservedPartIsNoSurfaceItIsAFragmentOf) {
+  const PointCloud fence = Car(-8, 6, 0.25f, 8, 2.25f);  // two faces: x = -8 and x = -7.75
+  for (const bool unobserved : {true, false}) {
+    test::TempDir tmp;
+    KeyframeDelta d;
+    for (const auto& p : fence.points) {
+      if (p.z < 0.5f) continue;  // its foot stays (LD's neighbour radius of the ground)
+      if (p.x < -7.9f) d.nd_strong.push_back(p.x, p.y, p.z, p.intensity);  // seen through
+      else if (unobserved) d.nd_weak.push_back(p.x, p.y, p.z, p.intensity);  // never observed
+    }
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, fence, d, &rejected);
+    if (unobserved) {
+      ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected" << (rejected.empty() ? "" : ", " + rejected[0].rejected);
+      EXPECT_EQ(objs[0].change, "disappeared");
+      EXPECT_LT(objs[0].attached_fraction, 0.5);
+    } else {
+      EXPECT_TRUE(objs.empty());
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "fragment");
+    }
+  }
+}
+
 // A cut tree whose trunk's top was not scanned: canopy and trunk are two clusters. The trunk
 // stands on the ground and holds the canopy up, so the canopy is an object; alone, it floats.
 TEST(MapObjects, CanopyHeldUpByItsTrunkIsNotFloating) {

@@ -129,6 +129,18 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
   return out;
 }
 
+// `unchanged` without the step's weak ND points (the same store grid points: within half a grid
+// step). The query did not observe those places, so they are no surface the step saw unchanged:
+// beside them, a disappeared thing's strong part (the panels of a fence the query's beams passed
+// through) is not a fragment of a surface that stayed.
+PointCloud WithoutUnseen(const PointCloud& unchanged, const PointCloud& changes, const MapConfig& cfg) {
+  std::vector<bool> unseen(changes.size());
+  for (std::size_t i = 0; i < changes.size(); ++i) unseen[i] = Unseen(changes.cls[i]);
+  std::vector<bool> keep = geometry::WithinRadius(unchanged, changes.select(unseen), 0.5 * cfg.resolution_m);
+  keep.flip();
+  return unchanged.select(keep);
+}
+
 // What a step's objects read from the maps before and after it, gathered as the store streams
 // them (memory: a batch of keyframes, the floor's cells and the surfaces near the changes, never
 // a map):
@@ -136,8 +148,8 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
 //    wider than the footprint an object hides from every view (a car's width), so that each cell
 //    holds some ground;
 //  - the surfaces the step left unchanged (points of the map after the step that existed before
-//    it), only those in the xy cells (object_tolerance_m wide) around a change point: the only
-//    ones NearbyAboveGround can return for any group of the changes.
+//    it, less its weak ND: WithoutUnseen), only those in the xy cells (object_tolerance_m wide)
+//    around a change point: the only ones NearbyAboveGround can return for any group of the changes.
 struct StepMaps {
   Floor floor;
   PointCloud unchanged_near;
@@ -178,6 +190,7 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
     });
     read_batch(after);
   }
+  m.unchanged_near = WithoutUnseen(m.unchanged_near, changes, cfg);
   return m;
 }
 
