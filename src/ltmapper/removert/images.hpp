@@ -162,19 +162,16 @@ class ColumnImage {
   // without a return (PassedWithoutReturn); with ask_through, kBeamThrough when none ended near
   // it, a beam of those columns crossed its plane within a map voxel of it and ended beyond the
   // crossing by more than tol / cos(incidence), uncapped (the beam truth's "observed absent"), and
-  // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
-  // ask_passed, kBeamThrough also when none ended near it and the beam of its own column passed it
-  // without a return (PassedWithoutReturn, centred), on the same MetSurfaceNear condition.
+  // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
-                        bool want_around, bool ask_through, bool ask_passed) const;
+                        bool want_around, bool ask_through) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing
   // (the sky, or beyond the range): its place was free. A lone empty cell is a dropped return,
   // and a column without any return is the seam of a deskewed sweep (where it starts and ends),
-  // no evidence. False for sensors without rings or a known azimuth step. `centred`: only the point's
-  // own column and its two neighbours count (else any three within reach).
-  bool PassedWithoutReturn(float range, float pitch, float yaw, bool centred) const;
+  // no evidence. False for sensors without rings or a known azimuth step.
+  bool PassedWithoutReturn(float range, float pitch, float yaw) const;
 
  private:
   // Column col (any, wrapped) holds no return in rows row_top..row_bottom, and is swept.

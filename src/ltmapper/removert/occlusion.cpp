@@ -137,8 +137,7 @@ std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::
 // point's place and ended beyond it while none of its beams ended near the point: the beam truth's
 // "observed absent" (a see-through the pixels miss where the other sensor looks down at a grazing
 // angle: the ground in front of a thing that left counts as a hit in its pixel window; asked only
-// where SeenThroughBy's `through_at` holds), or passed it without a return (the sky or beyond the
-// sensor's range behind it, where `passed_at` holds).
+// where SeenThroughBy's `through_at` holds).
 std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg) {
   std::vector<bool> seen(v.points, false);
   for (std::size_t i = 0; i < v.points; ++i) {
@@ -174,8 +173,6 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   std::vector<bool> planar;  // normals[i] is a plane's (else a scan line's: orientation unknown)
   std::vector<bool> rim;     // points[i] lies at the rim of its plane (EstimateNormals)
   std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
-  std::vector<bool> passed_at;   // ND: those on an upright plane, whose place a beam without a return may
-                                 // have gone through
   const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
   if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
     normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &planar, &rim);
@@ -184,18 +181,10 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     // ND: a beam may have gone through the place of a point inside a plane (planar, not at its rim):
     // a ray that crossed the plane within a voxel of a line's or an edge's point may have passed
     // beside the surface.
-    // And a beam that passed it without a return (to the sky, or past the sensor's range) went
-    // through the place of such a point on an upright plane: a level one it passed at a grazing
-    // angle, perhaps above the surface (as for the own pixel's PD below).
     if (beams && !own_pixel) {
       through_at.resize(points.size());
-      passed_at.resize(points.size());
-      for (std::size_t i = 0; i < points.size(); ++i) {
-        through_at[i] = planar[i] && !rim[i];
-        passed_at[i] = through_at[i] && std::abs(normals[i].z()) < kUprightNormalZ;
-      }
+      for (std::size_t i = 0; i < points.size(); ++i) through_at[i] = planar[i] && !rim[i];
       opt.through_at = &through_at;
-      opt.passed_at = &passed_at;
     }
     if (!beams) opt.surface_max_m = cfg.ld_surface_max_m;
   }

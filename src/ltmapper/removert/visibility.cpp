@@ -678,7 +678,7 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
 }
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                                   const float* plane, bool want_around, bool ask_through, bool ask_passed) const {
+                                   const float* plane, bool want_around, bool ask_through) const {
   const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
@@ -716,10 +716,7 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
       int a = -1, b = -1;
       if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
     }
-  const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw, false);
-  // ND's: the beam of the point's own column passed it (a ray to its side may have passed a convex
-  // surface's silhouette, a canopy's, while the point's own beam met the surface in front of it).
-  const bool passed_own = ask_passed && !ended && PassedWithoutReturn(range, pitch, yaw, true);
+  const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
   // Without a beam ending near it: a beam of those columns whose ray crossed the point's plane
   // within a map voxel of it (the surface element the map point stands for) and whose return lies
   // beyond the crossing by more than tol / cos(incidence) went through its place: past the band
@@ -743,9 +740,7 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
     const auto [a, b] = BeamsAround(rc, row);
     through = (std::isfinite(rc[row]) && went_beyond(c, row)) || (a >= 0 && went_beyond(c, a)) || (b >= 0 && went_beyond(c, b));
   }
-  // A beam that passed it and met nothing went through its place too (ND's ask_passed), where it
-  // did not pass an edge of the surface either.
-  through = (through || passed_own) && !MetSurfaceNear(range, pitch, yaw, ps, plane);
+  through = through && !MetSurfaceNear(range, pitch, yaw, ps, plane);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
                       (through ? kBeamThrough : 0));
 }
@@ -777,7 +772,7 @@ bool ColumnImage::EmptyColumn(int col, int row_top, int row_bottom) const {
   return true;
 }
 
-bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw, bool centred) const {
+bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const {
   const float tol = float(test_.tol_m);
   if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
   const float reach = std::asin(std::min(1.f, tol / range));
@@ -790,13 +785,7 @@ bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw, bool 
     const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
     const int cols = int(std::sqrt(reach * reach - d_el * d_el) * grid_.col_scale);
     // A column within `cols` of the point's whose neighbours on both sides are empty too: three
-    // empty columns in a row, centred within reach; `centred`: the point's own column.
-    if (centred) {
-      if (EmptyColumn(col - 1, row_top, row_bottom) && EmptyColumn(col, row_top, row_bottom) &&
-          EmptyColumn(col + 1, row_top, row_bottom))
-        return true;
-      continue;
-    }
+    // empty columns in a row, centred within reach.
     int run = 0;
     for (int c = col - cols - 1; c <= col + cols + 1; ++c) {
       run = EmptyColumn(c, row_top, row_bottom) ? run + 1 : 0;
@@ -995,10 +984,9 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     pl[1] = ns.y();
     pl[2] = ns.z();
     pl[3] = ns.dot(ps);
-    const auto asked = [&](const std::vector<bool>* at) { return at != nullptr && (*at)[ix.order()[i]]; };
-    if (s.beams)
-      sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
-                                                         asked(s.options.through_at), asked(s.options.passed_at));
+    const bool ask_through = s.options.through_at != nullptr && (*s.options.through_at)[ix.order()[i]];
+    if (s.beams) sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl,
+                                                                       s.options.count_own_see, ask_through);
   }
 }
 
@@ -1027,7 +1015,7 @@ struct VoteCounts {
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
-        beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.AsksThrough() ? n : 0, 0),
+        beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.through_at ? n : 0, 0),
         locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
@@ -1107,7 +1095,7 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   if (options.normals != nullptr && options.beams != nullptr) {
     out.beam_hits.assign(n, 0);
     if (options.count_own_see) out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
-    if (options.AsksThrough()) out.beam_through.assign(n, 0);
+    if (options.through_at != nullptr) out.beam_through.assign(n, 0);
   }
   return out;
 }

@@ -27,9 +27,8 @@ struct VisibilityVotes {
                                            // only with the beam test and count_own_see (its one reader)
   std::vector<std::uint16_t> beam_passed;  // [i] keyframes a beam of which passed it without a return
                                            // (ColumnImage::PassedWithoutReturn); as beam_around
-  std::vector<std::uint16_t> beam_through;  // [i] keyframes a beam of which went through its place (or, with
-                                            // VisibilityOptions::passed_at, passed it without a return)
-                                            // and none ended near it; with through_at or passed_at
+  std::vector<std::uint16_t> beam_through;  // [i] keyframes a beam of which went through its place and
+                                            // none ended near it; with VisibilityOptions::through_at
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
   std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
@@ -57,11 +56,6 @@ struct VisibilityOptions {
   // With the beam test, without count_own_see: per point, whether a beam may have gone through its
   // place (a point inside a plane of its map); only those are asked (VisibilityVotes::beam_through).
   const std::vector<bool>* through_at = nullptr;
-  // Likewise: per point, whether a beam that passed it without a return (PassedWithoutReturn: it
-  // went on to the sky or beyond the sensor's range) went through its place (an upright plane's
-  // inner point; a level one is passed at a grazing angle). Counts in beam_through.
-  const std::vector<bool>* passed_at = nullptr;
-  bool AsksThrough() const { return through_at != nullptr || passed_at != nullptr; }
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
