@@ -7,6 +7,7 @@
 #include "ltmapper/core/core.hpp"
 #include "ltmapper/geometry/sensor.hpp"  // SensorModel: beam tables, presets, estimation
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <unordered_map>
@@ -104,7 +105,9 @@ class RadiusIndex {
   bool Near(const Eigen::Vector3d& p) const;
 
  private:
-  std::uint64_t CellKey(const Eigen::Vector3d& p, int dx, int dy, int dz) const;
+  using Cell = std::array<std::int64_t, 3>;  // cell indices along x, y, z
+  Cell CellOf(const Eigen::Vector3d& p) const;
+  static std::uint64_t Key(const Cell& c, int dx, int dy, int dz);  // of the cell c + (dx, dy, dz)
   std::vector<Eigen::Vector3d> set_;
   double cell_, r2_;
   std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid_;

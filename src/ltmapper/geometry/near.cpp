@@ -68,30 +68,38 @@ RadiusIndex::RadiusIndex(std::vector<Eigen::Vector3d> set, double radius, std::s
   grid_.reserve(set_.size());
   std::vector<Eigen::Vector3d> firsts;  // a point of each occupied cell
   for (std::size_t k = 0; k < set_.size(); ++k) {
-    auto& slot = grid_[CellKey(set_[k], 0, 0, 0)];
+    auto& slot = grid_[Key(CellOf(set_[k]), 0, 0, 0)];
     if (slot.empty()) firsts.push_back(set_[k]);
     slot.push_back(std::uint32_t(k));
   }
   prefilter_ = firsts.size() * kAround < lookups;
   if (!prefilter_) return;
   near_cells_ = KeySet(firsts.size() * kAround);
-  for (const Eigen::Vector3d& p : firsts)
+  for (const Eigen::Vector3d& p : firsts) {
+    const Cell c = CellOf(p);
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) near_cells_.Insert(CellKey(p, dx, dy, dz));
+        for (int dz = -1; dz <= 1; ++dz) near_cells_.Insert(Key(c, dx, dy, dz));
+  }
 }
 
-std::uint64_t RadiusIndex::CellKey(const Eigen::Vector3d& p, int dx, int dy, int dz) const {
-  return Pack(std::int64_t(std::floor(p.x() / cell_)) + dx, std::int64_t(std::floor(p.y() / cell_)) + dy,
-              std::int64_t(std::floor(p.z() / cell_)) + dz);
+RadiusIndex::Cell RadiusIndex::CellOf(const Eigen::Vector3d& p) const {
+  return {std::int64_t(std::floor(p.x() / cell_)), std::int64_t(std::floor(p.y() / cell_)),
+          std::int64_t(std::floor(p.z() / cell_))};
+}
+
+std::uint64_t RadiusIndex::Key(const Cell& c, int dx, int dy, int dz) {
+  return Pack(c[0] + dx, c[1] + dy, c[2] + dz);
 }
 
 bool RadiusIndex::Near(const Eigen::Vector3d& p) const {
-  if (set_.empty() || (prefilter_ && !near_cells_.Contains(CellKey(p, 0, 0, 0)))) return false;
+  if (set_.empty()) return false;
+  const Cell c = CellOf(p);  // once: the 27 cells around it are offsets of it
+  if (prefilter_ && !near_cells_.Contains(Key(c, 0, 0, 0))) return false;
   for (int dx = -1; dx <= 1; ++dx)
     for (int dy = -1; dy <= 1; ++dy)
       for (int dz = -1; dz <= 1; ++dz) {
-        const auto it = grid_.find(CellKey(p, dx, dy, dz));
+        const auto it = grid_.find(Key(c, dx, dy, dz));
         if (it == grid_.end()) continue;
         for (std::uint32_t j : it->second)
           if ((set_[j] - p).squaredNorm() <= r2_) return true;

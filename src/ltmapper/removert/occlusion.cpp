@@ -150,6 +150,80 @@ std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfi
   return seen;
 }
 
+// The surfaces of the points asked and the vote options they enable: normals from the own map
+// (planar, rim), the beam test or surface hits, and for ND the points whose place a beam may have
+// gone through. `opt` points into this struct: it is filled in place, never moved.
+struct SurfaceSetup {
+  bool beams = false;  // ld.same_test beams
+  std::vector<Eigen::Vector3f> normals;
+  std::vector<bool> planar;      // normals[i] is a plane's (else a scan line's: orientation unknown)
+  std::vector<bool> rim;         // points[i] lies at the rim of its plane (EstimateNormals)
+  std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
+  VisibilityOptions opt;
+};
+
+void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const RemovertConfig& cfg, int threads,
+                   bool own_pixel, SurfaceSetup* s) {
+  s->opt.count_occluded = true;
+  s->opt.within_beams = false;
+  s->opt.count_own_see = own_pixel;
+  s->beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
+  if (cfg.ld_same_min_hits <= 0 || !(s->beams || cfg.ld_surface_max_m > 0.0)) return;
+  s->normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &s->planar, &s->rim);
+  s->opt.normals = &s->normals;
+  if (s->beams) s->opt.beams = &cfg.ld_beam;
+  // ND: a beam may have gone through the place of a point inside a plane (planar, not at its rim):
+  // a ray that crossed the plane within a voxel of a line's or an edge's point may have passed
+  // beside the surface.
+  if (s->beams && !own_pixel) {
+    s->through_at.resize(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) s->through_at[i] = s->planar[i] && !s->rim[i];
+    s->opt.through_at = &s->through_at;
+  }
+  if (!s->beams) s->opt.surface_max_m = cfg.ld_surface_max_m;
+}
+
+// Point i's labels from its votes: seen (through), seen_own (PD), observed, same.
+void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const SurfaceSetup& s, const RemovertConfig& cfg,
+                bool own_pixel, const std::vector<bool>* standing, Visibility* out) {
+  bool observed = false, seen_own = false;
+  int see_max = 0;
+  int hits = s.beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
+  for (int l = 0; l < v.levels; ++l) {
+    const double see = v.See(l, i), h = v.Hit(l, i);
+    see_max = std::max(see_max, int(see));
+    if (own_pixel) {
+      const double o = v.SeeOwn(l, i);
+      seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
+    }
+    observed = observed || see + h + v.Occ(l, i) > 0;
+    if (!s.beams) hits = std::max(hits, int(h));
+  }
+  out->seen[i] = seen;
+  // A beam going on past a surface more horizontal than vertical (ground, a roof) passed it at
+  // a grazing angle, no sign its place was free: the own pixel decides only on upright planes
+  // and on scan lines (a sparse sensor's rows on an upright side, orientation unknown).
+  // Nor is it where the beams around the point met its own surface farther away (BeamTest's
+  // "around": a surface the other session sampled only sparsely, which its own-pixel beam
+  // went on past).
+  if (own_pixel) {
+    const bool upright = s.planar.empty() || !s.planar[i] || std::abs(s.normals[i].z()) < kUprightNormalZ;
+    const bool around = s.beams && v.beam_around[i] > 0;
+    // A beam that passed it and met nothing (the sky beyond a tall thing) saw its place free;
+    // not at the edge of a surface the beams around it met (a facade's top against the sky).
+    const bool passed = s.beams && upright && !around && v.beam_passed[i] >= cfg.ld_min_votes;
+    out->seen_own[i] = seen || (seen_own && upright && !around) || passed;
+    observed = observed || passed;
+  }
+  out->observed[i] = observed;
+  // A beam that ended on level ground (or a roof) near the point is its surface, even where the
+  // pixels say seen through: their rays passed over it at a grazing angle and met the same
+  // surface farther along. Not under a lower body standing on the other session's ground.
+  const bool level = s.beams && s.planar[i] && std::abs(s.normals[i].z()) >= kUprightNormalZ &&
+                     !(standing && (*standing)[i]);
+  out->same[i] = (!seen || (level && hits >= see_max)) && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
+}
+
 }  // namespace
 
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
@@ -165,76 +239,19 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   vcfg.submap_radius_m = cfg.ld_submap_radius_m;
   vcfg.window_px = cfg.ld_window_px;
   vcfg.pose_sigma_deg = 0.0;  // LD's own windows (ld.window_px); HD's pose widening is not applied here
-  VisibilityOptions opt;
-  opt.count_occluded = true;
-  opt.within_beams = false;
-  opt.count_own_see = own_pixel;
-  std::vector<Eigen::Vector3f> normals;
-  std::vector<bool> planar;  // normals[i] is a plane's (else a scan line's: orientation unknown)
-  std::vector<bool> rim;     // points[i] lies at the rim of its plane (EstimateNormals)
-  std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
-  const bool beams = cfg.ld_same_min_hits > 0 && cfg.ld_same_test == "beams";
-  if (cfg.ld_same_min_hits > 0 && (beams || cfg.ld_surface_max_m > 0.0)) {
-    normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &planar, &rim);
-    opt.normals = &normals;
-    if (beams) opt.beams = &cfg.ld_beam;
-    // ND: a beam may have gone through the place of a point inside a plane (planar, not at its rim):
-    // a ray that crossed the plane within a voxel of a line's or an edge's point may have passed
-    // beside the surface.
-    if (beams && !own_pixel) {
-      through_at.resize(points.size());
-      for (std::size_t i = 0; i < points.size(); ++i) through_at[i] = planar[i] && !rim[i];
-      opt.through_at = &through_at;
-    }
-    if (!beams) opt.surface_max_m = cfg.ld_surface_max_m;
-  }
-  const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, opt);
+  SurfaceSetup surfaces;
+  SetUpSurfaces(points, own_map, cfg, threads, own_pixel, &surfaces);
+  const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, surfaces.opt);
   std::vector<bool> seen_through = SeenThroughVotes(v, cfg);
   // Not where its own map drew the surface twice (DrawnTwice): those rays went past a displaced
   // copy to the surface both sessions met.
-  if (other_map != nullptr && !normals.empty()) {
-    const std::vector<bool> displaced = DrawnTwice(points, normals, seen_through, own_map, *other_map, cfg, threads);
+  if (other_map != nullptr && !surfaces.normals.empty()) {
+    const std::vector<bool> displaced =
+        DrawnTwice(points, surfaces.normals, seen_through, own_map, *other_map, cfg, threads);
     for (std::size_t i = 0; i < points.size(); ++i) seen_through[i] = seen_through[i] && !displaced[i];
   }
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    bool observed = false, seen_own = false;
-    int see_max = 0;
-    int hits = beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
-    const bool seen = seen_through[i];
-    for (int l = 0; l < v.levels; ++l) {
-      const double s = v.See(l, i), h = v.Hit(l, i);
-      see_max = std::max(see_max, int(s));
-      if (own_pixel) {
-        const double o = v.SeeOwn(l, i);
-        seen_own = seen_own || (o >= cfg.ld_min_votes && o >= cfg.ld_min_ratio * (o + h));
-      }
-      observed = observed || s + h + v.Occ(l, i) > 0;
-      if (!beams) hits = std::max(hits, int(h));
-    }
-    out.seen[i] = seen;
-    // A beam going on past a surface more horizontal than vertical (ground, a roof) passed it at
-    // a grazing angle, no sign its place was free: the own pixel decides only on upright planes
-    // and on scan lines (a sparse sensor's rows on an upright side, orientation unknown).
-    // Nor is it where the beams around the point met its own surface farther away (BeamTest's
-    // "around": a surface the other session sampled only sparsely, which its own-pixel beam
-    // went on past).
-    if (own_pixel) {
-      const bool upright = planar.empty() || !planar[i] || std::abs(normals[i].z()) < kUprightNormalZ;
-      const bool around = beams && v.beam_around[i] > 0;
-      // A beam that passed it and met nothing (the sky beyond a tall thing) saw its place free;
-      // not at the edge of a surface the beams around it met (a facade's top against the sky).
-      const bool passed = beams && upright && !around && v.beam_passed[i] >= cfg.ld_min_votes;
-      out.seen_own[i] = seen || (seen_own && upright && !around) || passed;
-      observed = observed || passed;
-    }
-    out.observed[i] = observed;
-    // A beam that ended on level ground (or a roof) near the point is its surface, even where the
-    // pixels say seen through: their rays passed over it at a grazing angle and met the same
-    // surface farther along. Not under a lower body standing on the other session's ground.
-    const bool level = beams && planar[i] && std::abs(normals[i].z()) >= kUprightNormalZ &&
-                       !(standing && (*standing)[i]);
-    out.same[i] = (!seen || (level && hits >= see_max)) && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
-  }
+  for (std::size_t i = 0; i < points.size(); ++i)
+    JudgePoint(i, v, seen_through[i], surfaces, cfg, own_pixel, standing, &out);
   return out;
 }
 
