@@ -793,17 +793,24 @@ TEST(MapObjects, AFarObjectsRowsAreOneCluster) {
   for (const auto& r : rejected) ADD_FAILURE() << "rejected " << r.rejected << " at " << r.centroid.transpose();
 }
 
+// A store whose base is a flat 40 m ground around the keyframe and a far ground patch 54-66 m out,
+// seen by a sensor whose columns are 0.35 deg apart (clustering joins columns up to 2 x 0.37 m
+// apart at 60 m).
+Store FarScene(const test::TempDir& tmp, MapConfig cfg) {
+  cfg.object_sensor_azimuth_step_deg = 0.35;
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f))}});
+  return s;
+}
+
 // Two parts of one far surface (60 m out, 4 rows) with a gap between them: the sensor samples a
 // column every 0.35 deg, so clustering joins columns up to 2 x 0.37 m apart there and one missed
 // line of samples leaves up to twice that: a part 1.0 m from the larger one joins it, one 2.0 m
 // away is an object of its own.
 TEST(MapObjects, PartsOneMissedSampleLineApartAreOneObject) {
-  MapConfig cfg = Cfg();
-  cfg.object_sensor_azimuth_step_deg = 0.35;
   for (const float gap : {1.0f, 2.0f}) {
     test::TempDir tmp;
-    Store s = Store::Create(tmp / "o.ltmap", cfg);
-    s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f))}});
+    Store s = FarScene(tmp, Cfg());
     KeyframeDelta d;
     for (const float z : {0.3f, 0.9f, 1.5f, 2.1f}) {
       for (int j = 0; j <= 30; ++j) d.pd_weak.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
@@ -821,6 +828,87 @@ TEST(MapObjects, PartsOneMissedSampleLineApartAreOneObject) {
     else
       EXPECT_EQ(points, (std::vector<std::size_t>{4 * 16, 4 * 31})) << "gap " << gap;
   }
+}
+
+// A car 60 m out (4 rows) that a pole in front cut in two: the larger piece (2.4 m) is an object,
+// the smaller (1.2 m) is too short to be one alone ("small") and lies one missed line of samples
+// from it, so it is the car's other end and joins it. Two missed lines away (2.0 m) it is not.
+TEST(MapObjects, ASmallPieceOneMissedLineFromAnObjectIsPartOfIt) {
+  for (const float gap : {1.0f, 2.0f}) {
+    test::TempDir tmp;
+    Store s = FarScene(tmp, Cfg());
+    KeyframeDelta d;
+    for (const float z : {0.3f, 0.7f, 1.1f, 1.5f}) {
+      for (int j = 0; j <= 12; ++j) d.pd_weak.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
+      for (int j = 0; j <= 6; ++j) d.pd_weak.push_back(60.f, -0.6f + gap + 0.2f * float(j), z, 0.5f);
+    }
+    s.IntegrateSession({"s1"}, "s0", {d}, {});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    ASSERT_EQ(objs.size(), 1u) << "gap " << gap;
+    if (gap < 1.5f) {
+      EXPECT_EQ(objs[0].points, std::size_t(4 * (13 + 7)));
+      EXPECT_TRUE(rejected.empty());
+    } else {
+      EXPECT_EQ(objs[0].points, std::size_t(4 * 13));
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "small");
+    }
+  }
+}
+
+// A car that left, 60 m from the reference's keyframe (4 rows, a column every 0.2 m, a gap of
+// 0.6 m where a pole hid one column), with the step's route passing 5 m from it (a keyframe the
+// step created there, in new territory). Its points were scanned from 60 m, where columns 0.35
+// deg apart lie 0.37 m apart and clustering joins up to twice that: one object. The step's
+// keyframe beside it never scanned it: measured from there, the gap split the car in two.
+TEST(MapObjects, ADisappearedThingIsSampledFromTheSessionsThatScannedIt) {
+  MapConfig cfg = Cfg();
+  cfg.object_sensor_azimuth_step_deg = 0.35;
+  test::TempDir tmp;
+  PointCloud car;
+  for (const float z : {0.3f, 0.7f, 1.1f, 1.5f})
+    for (int j = 0; j <= 12; ++j) {
+      car.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
+      car.push_back(60.f, 0.f + 0.2f * float(j), z, 0.5f);
+    }
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f)), car)}});
+  KeyframeDelta d;
+  d.nd_strong = car;
+  const auto r = s.IntegrateSession({"s1"}, "s0", {d}, {{7, At(64, 5), Grid(-2, -2, 0, 16, 16, 0.25f)}});
+  ASSERT_EQ(r.keyframes_new, 1u);
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  for (const auto& o : rejected) ADD_FAILURE() << "rejected " << o.rejected << " at " << o.centroid.transpose();
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].change, "disappeared");
+  EXPECT_EQ(objs[0].points, car.size());
+  EXPECT_NEAR(objs[0].range_m, 60.0, 3.0);
+}
+
+// A fence 14 m long running at 45 deg to the map's axes and a car parked 1.6 m beside it, inside
+// the fence's axis-aligned box but not its oriented one: two objects, not a car merged into the
+// fence.
+TEST(MapObjects, ACarBesideADiagonalFenceIsNoPartOfIt) {
+  test::TempDir tmp;
+  KeyframeDelta d;
+  const float c = std::sqrt(0.5f);
+  for (float t = -7.f; t <= 7.f; t += 0.2f)
+    for (float z = 0.3f; z <= 2.0f; z += 0.25f) d.pd_weak.push_back(c * t, c * t, z, 0.5f);
+  // The car: 4 m along the fence, 1.8 m across, 1.6 m to 3.4 m from the fence's line.
+  // Fewer points than the fence: the smaller cluster is the one asked whether it is a part.
+  for (float u = -2.f; u <= 2.f; u += 0.5f)
+    for (float v = 1.6f; v <= 3.4f; v += 0.45f)
+      for (float z = 0.3f; z <= 1.5f; z += 0.3f) d.pd_weak.push_back(c * (u - v), c * (u + v), z, 0.5f);
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, PointCloud(), d, &rejected);
+  for (const auto& r : rejected) ADD_FAILURE() << "rejected " << r.rejected << " at " << r.centroid.transpose();
+  ASSERT_EQ(objs.size(), 2u);
+  std::vector<double> lengths = {objs[0].size.x(), objs[1].size.x()};
+  std::sort(lengths.begin(), lengths.end());
+  EXPECT_NEAR(lengths[0], 4.0, 0.3);
+  EXPECT_NEAR(lengths[1], 14.0, 0.3);
 }
 
 TEST(MapObjects, MovedContainerAndStableIds) {

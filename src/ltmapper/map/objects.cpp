@@ -303,6 +303,14 @@ void OrientedBox(MapObject& o) {
   o.size = Eigen::Vector3d(b.length, b.width, o.hi.z() - o.lo.z());
 }
 
+// Is q inside o's oriented box grown by `margin` across (xy) and `margin_z` in z?
+bool InOrientedBox(const MapObject& o, const Eigen::Vector3d& q, double margin, double margin_z) {
+  if (q.z() < o.lo.z() - margin_z || q.z() > o.hi.z() + margin_z) return false;
+  const double c = std::cos(o.yaw_rad), s = std::sin(o.yaw_rad);
+  const double dx = q.x() - o.box_center.x(), dy = q.y() - o.box_center.y();
+  return std::abs(c * dx + s * dy) <= 0.5 * o.size.x() + margin && std::abs(-s * dx + c * dy) <= 0.5 * o.size.y() + margin;
+}
+
 // Principal spreads (std along the 3D principal axes, ascending) and the smallest axis.
 struct Spread3 {
   Eigen::Vector3d sigma, normal;
@@ -362,7 +370,11 @@ const Eigen::Vector3d* Nearest(const std::vector<Eigen::Vector3d>& sensors, cons
 // Step context for the rules: sensor positions and the step's accepted disappeared objects.
 struct StepContext {
   std::vector<Eigen::Vector3d> reference_sensors;  // map keyframes as of the reference session
-  SensorRanges ranges;                             // to every map keyframe as of the step
+  // Where a change's points were scanned from: appeared (PD) by the step's session, so every map
+  // keyframe as of the step; disappeared (strong ND) by the sessions up to the reference, so their
+  // keyframes only (a keyframe the step's route created beside a far object never scanned it).
+  SensorRanges ranges, reference_ranges;
+  const SensorRanges& RangesOf(bool appeared) const { return appeared ? ranges : reference_ranges; }
   std::vector<const MapObject*> disappeared;       // accepted strong-ND objects of the step
 };
 
@@ -494,16 +506,12 @@ double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double 
       }
     return false;
   };
-  const double c = std::cos(o.yaw_rad), s = std::sin(o.yaw_rad);
   const Eigen::Vector3d lo = o.lo.array() - r, hi = o.hi.array() + r;
   PointCloud other;
   for (const auto& p : unchanged.points) {
     const Eigen::Vector3d q = p.xyz().cast<double>();
     if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) continue;
-    const double dx = q.x() - o.box_center.x(), dy = q.y() - o.box_center.y();
-    const bool inside =
-        std::abs(c * dx + s * dy) <= 0.5 * o.size.x() + edge && std::abs(-s * dx + c * dy) <= 0.5 * o.size.y() + edge;
-    if (!inside || !under(p)) other.push_back(p.x, p.y, p.z);
+    if (!InOrientedBox(o, q, edge, r) || !under(p)) other.push_back(p.x, p.y, p.z);
   }
   if (other.empty()) return 0.0;
   const std::vector<bool> hit = geometry::WithinRadius(o.cloud, other, r);
@@ -527,7 +535,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
-  o.range_m = ctx.ranges.To(o.centroid.cast<float>());
+  o.range_m = ctx.RangesOf(appeared).To(o.centroid.cast<float>());
   return o;
 }
 
@@ -659,15 +667,15 @@ void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   o.confidence = Confidence(o, cfg, width, MinWidth(o.range_m, cfg));
 }
 
-// Share of `part`'s points inside `whole`'s axis-aligned box grown by `margin` (of the points
-// seen: not of its unseen lower part).
+// Share of `part`'s points inside `whole`'s oriented box grown by `margin` (of the points seen: not
+// of its unseen lower part). The oriented box, not the axis-aligned one: a fence or wall that runs
+// diagonally to the map's axes has an axis-aligned box metres wide, and a car parked beside it
+// lies inside that.
 double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
-  const Eigen::Vector3d lo = whole.lo.array() - margin, hi = whole.hi.array() + margin;
   std::size_t n = 0, seen = 0;
   for (std::size_t i = 0; i < part.cloud.size(); ++i) {
     if (Unseen(part.cloud.cls[i])) continue;
-    const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
-    n += (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() ? 1 : 0;
+    n += InOrientedBox(whole, part.cloud.points[i].xyz().cast<double>(), margin, margin) ? 1 : 0;
     ++seen;
   }
   return double(n) / double(std::max<std::size_t>(seen, 1));
@@ -695,28 +703,44 @@ bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig
   return false;
 }
 
-// Parts of one object split by a gap wider than the cluster's: an accepted cluster with at least
-// object_merge_inside_fraction of its points inside the box (grown by the tolerance) of a larger
-// accepted cluster of the same change (an occlusion gap), or one missed line of samples from it
-// (OneLineApart), joins it.
-void MergeParts(std::deque<MapObject>& objects, const MapConfig& cfg) {
+// Is `part` a piece of `whole`: the same change, and at least object_merge_inside_fraction of its
+// points inside whole's box (grown by the tolerance: an occlusion gap) or one missed line of
+// samples from it (OneLineApart)?
+bool PieceOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
+  return whole.change == part.change &&
+         (InsideShare(part, whole, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction || OneLineApart(part, whole, cfg));
+}
+
+// Parts of one object split by a gap wider than the cluster's: an accepted cluster that is a piece
+// of a larger accepted one (PieceOf) joins it; so does a cluster rejected only for its length
+// ("small", from `rejected` from index `first` on): too short to be an object alone, it is the
+// part of one that an occluder cut off (a car behind a pole).
+void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, std::size_t first,
+                const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
   std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
   std::deque<MapObject> out;
-  for (auto& o : objects) {
-    MapObject* whole = nullptr;
+  const auto whole_of = [&](const MapObject& o) -> MapObject* {
     for (auto& w : out)
-      if (w.change == o.change && (InsideShare(o, w, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction ||
-                                   OneLineApart(o, w, cfg))) {
-        whole = &w;
-        break;
-      }
-    if (!whole) {
+      if (PieceOf(o, w, cfg)) return &w;
+    return nullptr;
+  };
+  for (auto& o : objects) {
+    if (MapObject* whole = whole_of(o))
+      Absorb(*whole, o.cloud);
+    else
       out.push_back(std::move(o));
-      continue;
-    }
-    Absorb(*whole, o.cloud);
   }
+  std::vector<MapObject> still;
+  for (std::size_t k = first; k < rejected.size(); ++k) {
+    MapObject* whole = rejected[k].rejected == "small" ? whole_of(rejected[k]) : nullptr;
+    if (whole)
+      Absorb(*whole, rejected[k].cloud);
+    else
+      still.push_back(std::move(rejected[k]));
+  }
+  rejected.resize(first);
+  for (auto& r : still) rejected.push_back(std::move(r));
   objects.swap(out);
 }
 
@@ -728,13 +752,14 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   const StepMaps maps = ReadStepMaps(store, step, changes, cfg);
   const Floor& floor = maps.floor;
   const PointCloud& unchanged = maps.unchanged_near;
+  const std::size_t first_rejected = rejected.size();
   std::deque<MapObject> step_kept;  // pointers in ctx.disappeared stay valid
   for (const bool appeared : {false, true}) {
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
     std::vector<MapObject> group;
-    for (const auto& sel : Cluster(changes, idx, ctx.ranges, cfg, store.threads()))
+    for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
     const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
@@ -755,7 +780,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
       if (!appeared) ctx.disappeared.push_back(&step_kept.back());
     }
   }
-  MergeParts(step_kept, cfg);
+  MergeParts(step_kept, rejected, first_rejected, cfg);
   for (auto& o : step_kept) kept.push_back(std::move(o));
 }
 
@@ -825,6 +850,7 @@ StepContext ContextOf(const SessionRecord& step, const std::vector<KeyframeRecor
     if (k.session <= step.reference) ctx.reference_sensors.push_back(k.T_world_sensor.translation());
   }
   ctx.ranges = SensorRanges(all);
+  ctx.reference_ranges = SensorRanges(ctx.reference_sensors);
   return ctx;
 }
 
