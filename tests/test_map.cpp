@@ -601,6 +601,28 @@ TEST(MapObjects, LeftCarOverItsOwnRemnantsIsAnObjectPoleStripIsAFragment) {
   EXPECT_NEAR(rejected[0].centroid.x(), -8.0, 0.01);
 }
 
+// A wall 6 m tall whose rows LD called seen through and unchanged by turns (a far query grazing
+// it): the unchanged rows between the seen-through ones, up the same columns, are the surface they
+// are a fragment of. Only unchanged points below a column's lowest changed point (or within the
+// cluster tolerance above it) are an object's own lower part. Before, every unchanged point under a
+// column's highest changed point was taken for that, and the wall's rows were an object.
+TEST(MapObjects, AWallsAlternatingRowsAreAFragmentNotAnObject) {
+  test::TempDir tmp;
+  PointCloud wall;
+  KeyframeDelta d;
+  for (float y = 0.f; y <= 4.f; y += 0.25f)
+    for (int row = 1; row <= 30; ++row) {
+      const float z = 0.2f * float(row);
+      wall.push_back(10.f, y, z, 0.5f);
+      if (row % 2 == 0) d.nd_strong.push_back(10.f, y, z, 0.5f);
+    }
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, wall, d, &rejected);
+  for (const auto& o : objs) ADD_FAILURE() << "object at " << o.centroid.transpose() << ", attached " << o.attached_fraction;
+  ASSERT_EQ(rejected.size(), 1u);
+  EXPECT_EQ(rejected[0].rejected, "fragment");
+}
+
 // A fence that left: the query saw through the place of its front face (strong ND) but never
 // observed its back face 0.25 m behind (weak ND, stored where it lies under the strong points).
 // That back face is no surface the step saw unchanged: the front face is an object, not a

@@ -486,23 +486,26 @@ struct Masks {
 
 // Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
 // not the object's own lower part. Unchanged points inside its oriented xy box (grown by `edge`:
-// the map's sample spacing, at least the store's quantisation step) with cluster points above them
-// (in the 3 x 3 cells of edge r around them) are that: a disappeared car's points within LD's
-// neighbour radius of the new session's ground matched that ground and stayed in the map, under
-// the body that was seen through. A fragment's surface lies beside it (the rest of a pole or trunk
-// a grazing ray cut a strip from) or above it (a wall whose lower band was seen through).
+// the map's sample spacing, at least the store's quantisation step) that lie below the cluster's
+// lowest point in their column, or less than r above it (the 3 x 3 cells of edge r around them),
+// are that: a disappeared car's points within LD's neighbour radius of the new session's ground
+// matched that ground and stayed in the map, under the body that was seen through. A fragment's
+// surface lies beside it (the rest of a pole or trunk a grazing ray cut a strip from), above it (a
+// wall whose lower band was seen through) or between its points up the same columns (a wall whose
+// rows were seen through and unchanged by turns): an object's lower part lies under it, not
+// interleaved with it.
 double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double r, double edge) {
-  std::unordered_map<CellKey, float, CellKeyHash> top;  // highest cluster point per xy cell
+  std::unordered_map<CellKey, float, CellKeyHash> bottom;  // lowest cluster point per xy cell
   for (const auto& p : o.cloud.points) {
-    auto [it, fresh] = top.try_emplace(KeyOf(p.xyz(), r), p.z);
-    if (!fresh) it->second = std::max(it->second, p.z);
+    auto [it, fresh] = bottom.try_emplace(KeyOf(p.xyz(), r), p.z);
+    if (!fresh) it->second = std::min(it->second, p.z);
   }
   auto under = [&](const PointXYZI& q) {
     const CellKey k = KeyOf(q.xyz(), r);
     for (std::int64_t dx = -1; dx <= 1; ++dx)
       for (std::int64_t dy = -1; dy <= 1; ++dy) {
-        const auto it = top.find({k.x + dx, k.y + dy});
-        if (it != top.end() && it->second > q.z) return true;
+        const auto it = bottom.find({k.x + dx, k.y + dy});
+        if (it != bottom.end() && q.z < it->second + float(r)) return true;
       }
     return false;
   };
