@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <initializer_list>
 #include <iterator>
 #include <filesystem>
 #include <map>
@@ -787,6 +788,14 @@ TEST(MapObjects, RevealedBehindARemovedObjectOnlyWhenItMovedThere) {
   }
 }
 
+// Rows of a far surface 60 m out (x = 60): at each height of `zs`, n columns 0.2 m apart from y0 on.
+PointCloud FarColumns(std::initializer_list<float> zs, float y0, int n) {
+  PointCloud c;
+  for (const float z : zs)
+    for (int j = 0; j < n; ++j) c.push_back(60.f, y0 + 0.2f * float(j), z, 0.5f);
+  return c;
+}
+
 // A container that appeared 60 m from the nearest keyframe, seen in four rows 0.6 m apart (the
 // sensor's 0.625 deg rows at that range): one object. Clustered at the 0.5 m tolerance alone, each
 // row was a cluster one sample wide, a "sliver" (container 13 of the scenario matrix, seen from
@@ -797,10 +806,7 @@ TEST(MapObjects, AFarObjectsRowsAreOneCluster) {
   Store s = Store::Create(tmp / "o.ltmap", Cfg());
   s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 64, 0.25f))}});
   KeyframeDelta d;
-  for (const float z : {0.3f, 0.9f, 1.5f, 2.1f})
-    for (int j = 0; j <= 30; ++j) d.pd_weak.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
-  for (const float z : {0.3f, 0.9f, 1.5f, 2.1f})
-    for (int j = 0; j <= 15; ++j) d.pd_weak.push_back(60.f, 4.5f + 0.2f * float(j), z, 0.5f);
+  d.pd_weak = Cat(FarColumns({0.3f, 0.9f, 1.5f, 2.1f}, -3.f, 31), FarColumns({0.3f, 0.9f, 1.5f, 2.1f}, 4.5f, 16));
   s.IntegrateSession({"s1"}, "s0", {d}, {});
   std::vector<MapObject> rejected;
   const auto objs = s.Objects(&rejected);
@@ -817,11 +823,12 @@ TEST(MapObjects, AFarObjectsRowsAreOneCluster) {
 
 // A store whose base is a flat 40 m ground around the keyframe and a far ground patch 54-66 m out,
 // seen by a sensor whose columns are 0.35 deg apart (clustering joins columns up to 2 x 0.37 m
-// apart at 60 m).
-Store FarScene(const test::TempDir& tmp, MapConfig cfg) {
+// apart at 60 m), holding `standing` too.
+Store FarScene(const test::TempDir& tmp, MapConfig cfg, const PointCloud& standing = PointCloud()) {
   cfg.object_sensor_azimuth_step_deg = 0.35;
   Store s = Store::Create(tmp / "o.ltmap", cfg);
-  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f))}});
+  s.IntegrateBase({"s0"},
+                  {{0, At(0, 0), Cat(Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f)), standing)}});
   return s;
 }
 
@@ -834,10 +841,7 @@ TEST(MapObjects, PartsOneMissedSampleLineApartAreOneObject) {
     test::TempDir tmp;
     Store s = FarScene(tmp, Cfg());
     KeyframeDelta d;
-    for (const float z : {0.3f, 0.9f, 1.5f, 2.1f}) {
-      for (int j = 0; j <= 30; ++j) d.pd_weak.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
-      for (int j = 0; j <= 15; ++j) d.pd_weak.push_back(60.f, 3.f + gap + 0.2f * float(j), z, 0.5f);
-    }
+    d.pd_weak = Cat(FarColumns({0.3f, 0.9f, 1.5f, 2.1f}, -3.f, 31), FarColumns({0.3f, 0.9f, 1.5f, 2.1f}, 3.f + gap, 16));
     s.IntegrateSession({"s1"}, "s0", {d}, {});
     std::vector<MapObject> rejected;
     const auto objs = s.Objects(&rejected);
@@ -860,10 +864,7 @@ TEST(MapObjects, ASmallPieceOneMissedLineFromAnObjectIsPartOfIt) {
     test::TempDir tmp;
     Store s = FarScene(tmp, Cfg());
     KeyframeDelta d;
-    for (const float z : {0.3f, 0.7f, 1.1f, 1.5f}) {
-      for (int j = 0; j <= 12; ++j) d.pd_weak.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
-      for (int j = 0; j <= 6; ++j) d.pd_weak.push_back(60.f, -0.6f + gap + 0.2f * float(j), z, 0.5f);
-    }
+    d.pd_weak = Cat(FarColumns({0.3f, 0.7f, 1.1f, 1.5f}, -3.f, 13), FarColumns({0.3f, 0.7f, 1.1f, 1.5f}, -0.6f + gap, 7));
     s.IntegrateSession({"s1"}, "s0", {d}, {});
     std::vector<MapObject> rejected;
     const auto objs = s.Objects(&rejected);
@@ -885,17 +886,9 @@ TEST(MapObjects, ASmallPieceOneMissedLineFromAnObjectIsPartOfIt) {
 // deg apart lie 0.37 m apart and clustering joins up to twice that: one object. The step's
 // keyframe beside it never scanned it: measured from there, the gap split the car in two.
 TEST(MapObjects, ADisappearedThingIsSampledFromTheSessionsThatScannedIt) {
-  MapConfig cfg = Cfg();
-  cfg.object_sensor_azimuth_step_deg = 0.35;
   test::TempDir tmp;
-  PointCloud car;
-  for (const float z : {0.3f, 0.7f, 1.1f, 1.5f})
-    for (int j = 0; j <= 12; ++j) {
-      car.push_back(60.f, -3.f + 0.2f * float(j), z, 0.5f);
-      car.push_back(60.f, 0.f + 0.2f * float(j), z, 0.5f);
-    }
-  Store s = Store::Create(tmp / "o.ltmap", cfg);
-  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(54, -8, 0, 48, 72, 0.25f)), car)}});
+  const PointCloud car = Cat(FarColumns({0.3f, 0.7f, 1.1f, 1.5f}, -3.f, 13), FarColumns({0.3f, 0.7f, 1.1f, 1.5f}, 0.f, 13));
+  Store s = FarScene(tmp, Cfg(), car);
   KeyframeDelta d;
   d.nd_strong = car;
   const auto r = s.IntegrateSession({"s1"}, "s0", {d}, {{7, At(64, 5), Grid(-2, -2, 0, 16, 16, 0.25f)}});

@@ -303,13 +303,23 @@ void OrientedBox(MapObject& o) {
   o.size = Eigen::Vector3d(b.length, b.width, o.hi.z() - o.lo.z());
 }
 
-// Is q inside o's oriented box grown by `margin` across (xy) and `margin_z` in z?
-bool InOrientedBox(const MapObject& o, const Eigen::Vector3d& q, double margin, double margin_z) {
-  if (q.z() < o.lo.z() - margin_z || q.z() > o.hi.z() + margin_z) return false;
-  const double c = std::cos(o.yaw_rad), s = std::sin(o.yaw_rad);
-  const double dx = q.x() - o.box_center.x(), dy = q.y() - o.box_center.y();
-  return std::abs(c * dx + s * dy) <= 0.5 * o.size.x() + margin && std::abs(-s * dx + c * dy) <= 0.5 * o.size.y() + margin;
-}
+// An object's oriented box grown by `margin` across (xy) and `margin_z` in z, its yaw's sine and
+// cosine taken once for every point asked.
+class InOrientedBox {
+ public:
+  InOrientedBox(const MapObject& o, double margin, double margin_z)
+      : o_(o), c_(std::cos(o.yaw_rad)), s_(std::sin(o.yaw_rad)), margin_(margin), margin_z_(margin_z) {}
+  bool operator()(const Eigen::Vector3d& q) const {
+    if (q.z() < o_.lo.z() - margin_z_ || q.z() > o_.hi.z() + margin_z_) return false;
+    const double dx = q.x() - o_.box_center.x(), dy = q.y() - o_.box_center.y();
+    return std::abs(c_ * dx + s_ * dy) <= 0.5 * o_.size.x() + margin_ &&
+           std::abs(-s_ * dx + c_ * dy) <= 0.5 * o_.size.y() + margin_;
+  }
+
+ private:
+  const MapObject& o_;
+  double c_, s_, margin_, margin_z_;
+};
 
 // Principal spreads (std along the 3D principal axes, ascending) and the smallest axis.
 struct Spread3 {
@@ -446,6 +456,9 @@ double MinWidth(double range_m, const MapConfig& cfg) {
   return sample * 0.5 * (rows_width(std::max(n - 1.0, 1.0)) + rows_width(n));
 }
 
+// Reject's reason for a cluster shorter than object_min_length_m (MergeParts asks for it too).
+constexpr const char* kSmall = "small";
+
 std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
   if (!Covered(o, ctx, cfg)) return "coverage";
   if (o.twin_fraction >= cfg.object_twin_max_fraction) return "ghost";
@@ -455,7 +468,7 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
   if (width_m < MinWidth(o.range_m, cfg)) return "sliver";
   if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
     return "flat";
-  if (o.size.x() < cfg.object_min_length_m) return "small";
+  if (o.size.x() < cfg.object_min_length_m) return kSmall;
   if (cfg.object_max_extent_m > 0.0 && o.size.x() > cfg.object_max_extent_m) return "extent";
   return "";
 }
@@ -510,11 +523,12 @@ double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double 
     return false;
   };
   const Eigen::Vector3d lo = o.lo.array() - r, hi = o.hi.array() + r;
+  const InOrientedBox in_box(o, edge, r);
   PointCloud other;
   for (const auto& p : unchanged.points) {
     const Eigen::Vector3d q = p.xyz().cast<double>();
     if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) continue;
-    if (!InOrientedBox(o, q, edge, r) || !under(p)) other.push_back(p.x, p.y, p.z);
+    if (!in_box(q) || !under(p)) other.push_back(p.x, p.y, p.z);
   }
   if (other.empty()) return 0.0;
   const std::vector<bool> hit = geometry::WithinRadius(o.cloud, other, r);
@@ -675,10 +689,11 @@ void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // diagonally to the map's axes has an axis-aligned box metres wide, and a car parked beside it
 // lies inside that.
 double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
+  const InOrientedBox in_box(whole, margin, margin);
   std::size_t n = 0, seen = 0;
   for (std::size_t i = 0; i < part.cloud.size(); ++i) {
     if (Unseen(part.cloud.cls[i])) continue;
-    n += InOrientedBox(whole, part.cloud.points[i].xyz().cast<double>(), margin, margin) ? 1 : 0;
+    n += in_box(part.cloud.points[i].xyz().cast<double>()) ? 1 : 0;
     ++seen;
   }
   return double(n) / double(std::max<std::size_t>(seen, 1));
@@ -715,11 +730,10 @@ bool PieceOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg
 }
 
 // Parts of one object split by a gap wider than the cluster's: an accepted cluster that is a piece
-// of a larger accepted one (PieceOf) joins it; so does a cluster rejected only for its length
-// ("small", from `rejected` from index `first` on): too short to be an object alone, it is the
-// part of one that an occluder cut off (a car behind a pole).
-void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, std::size_t first,
-                const MapConfig& cfg) {
+// of a larger accepted one (PieceOf) joins it; so does a cluster of `rejected` rejected only for its
+// length (kSmall): too short to be an object alone, it is the part of one that an occluder cut off
+// (a car behind a pole). What joined an object leaves `rejected`.
+void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
   std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
   std::deque<MapObject> out;
@@ -735,15 +749,13 @@ void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected
       out.push_back(std::move(o));
   }
   std::vector<MapObject> still;
-  for (std::size_t k = first; k < rejected.size(); ++k) {
-    MapObject* whole = rejected[k].rejected == "small" ? whole_of(rejected[k]) : nullptr;
-    if (whole)
-      Absorb(*whole, rejected[k].cloud);
+  for (auto& r : rejected) {
+    if (MapObject* whole = r.rejected == kSmall ? whole_of(r) : nullptr)
+      Absorb(*whole, r.cloud);
     else
-      still.push_back(std::move(rejected[k]));
+      still.push_back(std::move(r));
   }
-  rejected.resize(first);
-  for (auto& r : still) rejected.push_back(std::move(r));
+  rejected.swap(still);
   objects.swap(out);
 }
 
@@ -755,8 +767,8 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   const StepMaps maps = ReadStepMaps(store, step, changes, cfg);
   const Floor& floor = maps.floor;
   const PointCloud& unchanged = maps.unchanged_near;
-  const std::size_t first_rejected = rejected.size();
   std::deque<MapObject> step_kept;  // pointers in ctx.disappeared stay valid
+  std::vector<MapObject> step_rejected;
   for (const bool appeared : {false, true}) {
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
@@ -776,15 +788,16 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
       MapObject& o = group[k];
       if (!keep[k]) continue;
       if (!o.rejected.empty()) {
-        rejected.push_back(std::move(o));
+        step_rejected.push_back(std::move(o));
         continue;
       }
       step_kept.push_back(std::move(o));
       if (!appeared) ctx.disappeared.push_back(&step_kept.back());
     }
   }
-  MergeParts(step_kept, rejected, first_rejected, cfg);
+  MergeParts(step_kept, step_rejected, cfg);
   for (auto& o : step_kept) kept.push_back(std::move(o));
+  for (auto& o : step_rejected) rejected.push_back(std::move(o));
 }
 
 // Stable ids: objects ordered by step, change and centroid (x, then y).

@@ -152,8 +152,11 @@ std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfi
 
 // The surfaces of the points asked and the vote options they enable: normals from the own map
 // (planar, rim), the beam test or surface hits, and for ND the points whose place a beam may have
-// gone through. `opt` points into this struct: it is filled in place, never moved.
+// gone through. `opt` points into this struct: it is filled in place and never copied or moved.
 struct SurfaceSetup {
+  SurfaceSetup() = default;
+  SurfaceSetup(const SurfaceSetup&) = delete;
+  SurfaceSetup& operator=(const SurfaceSetup&) = delete;
   bool beams = false;  // ld.same_test beams
   std::vector<Eigen::Vector3f> normals;
   std::vector<bool> planar;      // normals[i] is a plane's (else a scan line's: orientation unknown)
@@ -183,9 +186,11 @@ void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const Re
   if (!s->beams) s->opt.surface_max_m = cfg.ld_surface_max_m;
 }
 
-// Point i's labels from its votes: seen (through), seen_own (PD), observed, same.
+// Point i's labels from its votes: seen (through), seen_own (PD: the own pixel's votes were
+// counted, VisibilityOptions::count_own_see), observed, same.
 void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const SurfaceSetup& s, const RemovertConfig& cfg,
-                bool own_pixel, const std::vector<bool>* standing, Visibility* out) {
+                const std::vector<bool>* standing, Visibility* out) {
+  const bool own_pixel = s.opt.count_own_see;
   bool observed = false, seen_own = false;
   int see_max = 0;
   int hits = s.beams ? int(v.beam_hits[i]) : 0;  // same-surface evidence: beam test, else pixel hits
@@ -251,7 +256,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
     for (std::size_t i = 0; i < points.size(); ++i) seen_through[i] = seen_through[i] && !displaced[i];
   }
   for (std::size_t i = 0; i < points.size(); ++i)
-    JudgePoint(i, v, seen_through[i], surfaces, cfg, own_pixel, standing, &out);
+    JudgePoint(i, v, seen_through[i], surfaces, cfg, standing, &out);
   return out;
 }
 
