@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 
 namespace ltm {
@@ -499,10 +500,11 @@ TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
   EXPECT_EQ(whole.stats.pd_same, tiled.stats.pd_same);
   EXPECT_EQ(whole.stats.nd_residue, tiled.stats.nd_residue);
 
-  // Without the residue rule the margin is the neighbourhoods' alone, and the labels still agree.
+  // Without the residue rule the margin is the neighbourhoods' alone (the other map's, the normals',
+  // the surface extent's: 10 beam tolerances), and the labels still agree.
   cfg.ld_residue_length_m = 0.0;
   cfg.tiles_max_map_points = 60000;
-  EXPECT_DOUBLE_EQ(removert::LdTileMarginM(cfg), std::max(cfg.ld_radius_max_m, cfg.ld_normal_radius_m));
+  EXPECT_DOUBLE_EQ(removert::LdTileMarginM(cfg), std::max({cfg.ld_radius_max_m, cfg.ld_normal_radius_m, 10.0 * cfg.ld_beam.tol_m}));
   const auto whole0 = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
   const auto tiled0 = removert::DetectLdTiled(cmap, qmap, central, query, cfg, 2);
   EXPECT_TRUE(SameBytes(whole0.nd_strong, tiled0.nd_strong));
@@ -553,6 +555,54 @@ TEST(RemovertLd, ACarTheQueryLookedDownOnFromAfarIsStrongNd) {
   EXPECT_GE(double(strong), 0.85 * double(in_map));
   // The far wall, in both sessions, stays unchanged.
   EXPECT_LE(CountIn(ld.nd_strong, far_wall), CountIn(cmap, far_wall) / 50);
+}
+
+// A board the central passed at 12 m (its sensor 3 m up: a raised road) is gone when the query
+// passes 60 m away, its sensor 1.8 m up, with nothing behind the board's place: every query ray
+// through its upper part went on to the sky (no return). No beam ended beyond it, so by the pixels
+// and by the beams that crossed its plane it stays weak ND; a ring sensor's beam that passed it
+// without a return and crossed the board inside its surface (PassedInside) saw its place free: the beam
+// truth's "observed absent", strong ND.
+TEST(RemovertLd, ABoardTheQuerySawAgainstTheSkyIsStrongNd) {
+  const test::Box board = test::MakeBox(-6, 34, 0.3, 6, 34.2, 3.2, 30);
+  const test::Lidar lidar;
+  const auto central = DriveAlong({board}, -20, 21, 22.0, 3.0, lidar);
+  const auto query = DriveAlong({}, -20, 21, -25.0, 1.8, lidar);
+  RemovertConfig cfg = test::ConfigFor(lidar);
+  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;  // a ring sensor that fires every beam each step
+  ASSERT_TRUE(cfg.sensor_model.ring_based);
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box inner = test::MakeBox(-5, 33.9, 2.0, 5, 34.3, 2.8, 30);  // above the query's sensor, off the rim
+  const std::size_t in_map = CountIn(cmap, inner), strong = CountIn(ld.nd_strong, inner), weak = CountIn(ld.nd_weak, inner);
+  std::printf("board seen against the sky from 60 m: %zu map points, strong ND %zu, weak ND %zu\n", in_map, strong, weak);
+  ASSERT_GT(in_map, 500u);
+  EXPECT_GE(double(strong), 0.9 * double(in_map));
+  // The ground both sessions scanned stays unchanged.
+  EXPECT_EQ(CountIn(ld.nd_strong, test::MakeBox(-20, 20, -0.1, 20, 33, 0.1, -1)), 0u);
+}
+
+// A wall 2.72 m tall stands in both sessions. The query, 60 m away with a sparse sensor (rows 2 deg
+// apart, 2 m there), met it with one row, 0.8 m up; its next beam up passed 0.05-0.1 m over the
+// wall's top and went on to the sky. The central's points of the wall's upper part have no query
+// point near them (raw ND), and that beam passed within the tolerance of those in the top 0.3 m
+// (inside the plane, not at its rim), but over the wall, not through it: the wall does not go on
+// above them (ColumnImage::PassedInside), so no beam that passed without a return makes them strong ND (without
+// that guard 234 of them were).
+TEST(RemovertLd, ABeamThatPassedOverAWallsTopDidNotSeeThroughIt) {
+  const test::Box wall = test::MakeBox(-6, 34, 0.0, 6, 34.2, 2.72, 30);
+  const test::Lidar sparse{16, 15.0, -15.0, 1800, 100.0};
+  const auto central = DriveAlong({wall}, -20, 21, 22.0, 3.0, sparse);
+  const auto query = DriveAlong({wall}, -20, 21, -25.0, 1.8, sparse);
+  RemovertConfig cfg = test::ConfigFor(sparse);
+  cfg.sensor_model.azimuth_step_deg = 360.0 / sparse.cols;
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box top = test::MakeBox(-6, 33.9, 2.0, 6, 34.3, 2.8, 30);
+  const std::size_t in_map = CountIn(cmap, top), strong = CountIn(ld.nd_strong, top), weak = CountIn(ld.nd_weak, top);
+  std::printf("standing wall's top: %zu map points, strong ND %zu, weak ND %zu\n", in_map, strong, weak);
+  ASSERT_GT(in_map, 50u);
+  EXPECT_EQ(strong, 0u);
 }
 
 // The central drove the street twice, its second pass drawn 0.4 m off (a pose error the map keeps):

@@ -127,7 +127,8 @@ struct RemovertConfig {
                                   // change for the beam test (0 = off)
   std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD (for ND also
-                                  // keyframes a beam of which went through the point's surface: BeamTest)
+                                  // keyframes a beam of which went through the point's surface, or passed
+                                  // it without a return: BeamTest)
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
   bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
   int ld_window_px = 1;           // [pixels] window half-size of the LD see-through test (0 = the pixel alone)

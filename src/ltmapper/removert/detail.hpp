@@ -78,6 +78,12 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
 // neighbours off it along the plane by more than kRimOffset of their reach (a straight edge puts
 // it at 4 / (3 pi) = 0.42 of it, a point inside a plane at 0; the bound lies halfway).
 constexpr double kRimOffset = 0.21;
+
+// SurfaceExtents (occlusion.cpp): how far around an ND point its upright surface goes on is
+// measured up to kSurfaceExtentTols x ld.beam_tol_m (a beam that passed within the tolerance of a
+// point seen at 84 deg incidence crosses its plane up to 10 tolerances from it), across gaps of at
+// most kSurfaceGapTols x ld.beam_tol_m (the rows of a surface scanned from afar).
+constexpr double kSurfaceExtentTols = 10.0, kSurfaceGapTols = 2.0;
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
                                              double radius_m, int threads,
                                              std::vector<bool>* planar = nullptr, std::vector<bool>* rim = nullptr);

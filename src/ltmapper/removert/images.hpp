@@ -3,6 +3,7 @@
 #pragma once
 
 #include "ltmapper/removert/config.hpp"
+#include "ltmapper/removert/visibility.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
 
@@ -162,9 +163,12 @@ class ColumnImage {
   // without a return (PassedWithoutReturn); with ask_through, kBeamThrough when none ended near
   // it, a beam of those columns crossed its plane within a map voxel of it and ended beyond the
   // crossing by more than tol / cos(incidence), uncapped (the beam truth's "observed absent"), and
-  // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear).
+  // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
+  // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
+  // ended near it and the beam of its own column passed it without a return crossing its surface
+  // inside that extent (PassedInside), on the same MetSurfaceNear condition.
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
-                        bool want_around, bool ask_through) const;
+                        bool want_around, bool ask_through, const SurfaceExtent* inside) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing
@@ -172,12 +176,22 @@ class ColumnImage {
   // and a column without any return is the seam of a deskewed sweep (where it starts and ends),
   // no evidence. False for sensors without rings or a known azimuth step.
   bool PassedWithoutReturn(float range, float pitch, float yaw) const;
+  // A beam of the point's own column (its neighbours on both sides empty too) that passed it without
+  // a return (as above), along its true direction (the column's firing azimuth, read off a return
+  // of that column; the table's elevation) within tol of the point, and that crossed the point's
+  // plane inside its surface: within `inside`'s extent (along `inside.up` and the level direction
+  // in the plane). A beam that passed within tol of a point but crossed the plane beyond the
+  // surface's edge passed beside it (over a canopy's top, past a fence seen edge-on).
+  bool PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
+                    const SurfaceExtent& inside) const;
 
  private:
   // Column col (any, wrapped) holds no return in rows row_top..row_bottom, and is swept.
   bool EmptyColumn(int col, int row_top, int row_bottom) const;
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   std::pair<int, int> BeamsAround(const float* rc, int row) const;
+  // The azimuth [rad, sensor frame] column col fired at: that of a return in it (NaN without one).
+  float FiringYaw(int col) const;
   // A return of the scan on the point's plane (within tol) within surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
   BeamTest test_;

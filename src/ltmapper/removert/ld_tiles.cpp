@@ -112,7 +112,8 @@ void MarkOutside(const PointCloud& window, const detail::VoxelBox& core, double 
 }  // namespace
 
 double LdTileMarginM(const RemovertConfig& cfg) {
-  const double points = std::max({cfg.ld_radius_m, cfg.ld_radius_max_m, cfg.ld_normal_radius_m});
+  const double points = std::max({cfg.ld_radius_m, cfg.ld_radius_max_m, cfg.ld_normal_radius_m,
+                                  detail::kSurfaceExtentTols * cfg.ld_beam.tol_m});
   const double l = cfg.ld_residue_length_m;
   const double clusters = l > 0.0 ? (2.0 + std::sqrt(2.0)) * l + 2.0 * cfg.ld_residue_gap_m : 0.0;
   return points + clusters;

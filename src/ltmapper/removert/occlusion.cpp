@@ -150,6 +150,58 @@ std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfi
   return seen;
 }
 
+// How far a point's surface goes on along one direction of its plane: the farthest of the
+// offsets (along it, ascending) reached from the point without a gap wider than `gap`.
+float Reach(std::vector<float>& along, float gap) {
+  std::sort(along.begin(), along.end());
+  float reached = 0.f;
+  for (const float a : along) {
+    if (a - reached > gap) break;
+    reached = std::max(reached, a);
+  }
+  return reached;
+}
+
+// Per point where `want` holds and that lies on an upright plane (normal within 45 deg of level):
+// how far its own map's surface goes on around it (SurfaceExtent), up to kSurfaceExtentTols x `tol`:
+// own-map points within tol of the plane and within tol of the line through the point up (or
+// across), with no gap wider than kSurfaceGapTols x tol (rows of a surface scanned from afar). All
+// zero elsewhere (not asked). A beam that passed within tol of the point and crossed the plane
+// inside that extent went through the surface (the beam truth's "observed absent"); one that
+// crossed it beyond (a canopy's top, a fence seen edge-on) passed beside it (ColumnImage::PassedInside).
+std::vector<SurfaceExtent> SurfaceExtents(const PointCloud& points, const PointCloud& map,
+                                          const std::vector<Eigen::Vector3f>& normals, const std::vector<bool>& want,
+                                          double tol_m, int threads) {
+  std::vector<SurfaceExtent> out(points.size());
+  if (map.empty() || std::find(want.begin(), want.end(), true) == want.end()) return out;
+  const float tol = float(tol_m), reach = float(kSurfaceExtentTols) * tol, gap = float(kSurfaceGapTols) * tol;
+  const PointCloud near = map.select(geometry::WithinRadius(map, points.select(want), reach, threads));
+  const geometry::KdTree tree(near);
+  const std::size_t chunk = 256;
+  ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
+    const std::size_t b = ch * chunk, e = std::min(points.size(), b + chunk);
+    std::vector<float> way[4];  // up, down, left, right
+    for (std::size_t i = b; i < e; ++i) {
+      const Eigen::Vector3f& n = normals[i];
+      if (!want[i] || std::abs(n.z()) >= kUprightNormalZ) continue;
+      const Eigen::Vector3f up = n.cross(Eigen::Vector3f::UnitZ().cross(n)).normalized(), side = up.cross(n);
+      const Eigen::Vector3f p = points.points[i].xyz();
+      for (auto& w : way) w.clear();
+      for (const auto& [j, d2] : tree.RadiusUnsorted(p, reach)) {
+        const Eigen::Vector3f d = near.points[j].xyz() - p;
+        if (std::abs(d.dot(n)) > tol) continue;
+        const float u = d.dot(up), v = d.dot(side);
+        if (std::abs(v) <= tol) way[u >= 0.f ? 0 : 1].push_back(std::abs(u));
+        if (std::abs(u) <= tol) way[v >= 0.f ? 2 : 3].push_back(std::abs(v));
+      }
+      SurfaceExtent& x = out[i];
+      x.up = up;
+      x.above = Reach(way[0], gap), x.below = Reach(way[1], gap), x.left = Reach(way[2], gap), x.right = Reach(way[3], gap);
+    }
+  });
+  return out;
+}
+
 // The surfaces of the points asked and the vote options they enable: normals from the own map
 // (planar, rim), the beam test or surface hits, and for ND the points whose place a beam may have
 // gone through. `opt` points into this struct: it is filled in place and never copied or moved.
@@ -162,6 +214,8 @@ struct SurfaceSetup {
   std::vector<bool> planar;      // normals[i] is a plane's (else a scan line's: orientation unknown)
   std::vector<bool> rim;         // points[i] lies at the rim of its plane (EstimateNormals)
   std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
+  std::vector<SurfaceExtent> extents;  // ND: how far the upright surface around a point goes on, for
+                                       // a beam that passed it without a return
   VisibilityOptions opt;
 };
 
@@ -182,6 +236,8 @@ void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const Re
     s->through_at.resize(points.size());
     for (std::size_t i = 0; i < points.size(); ++i) s->through_at[i] = s->planar[i] && !s->rim[i];
     s->opt.through_at = &s->through_at;
+    s->extents = SurfaceExtents(points, own_map, s->normals, s->through_at, cfg.ld_beam.tol_m, threads);
+    s->opt.passed_at = &s->extents;
   }
   if (!s->beams) s->opt.surface_max_m = cfg.ld_surface_max_m;
 }

@@ -84,7 +84,7 @@ HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const Remove
 
 // ---- LD tile by tile (ld_tiles.cpp)
 // A point's LD label (DetectLd) reads (a) the other map within ld.radius_max_m and its own map
-// within ld.normal_radius_m; (b) with residues on, the clusters of seen-through changes near it:
+// within ld.normal_radius_m and 10 ld.beam_tol_m (its surface's extent, detail::kSurfaceExtentTols); (b) with residues on, the clusters of seen-through changes near it:
 // a cluster that fits a mover (ld.residue_length_m L across, its box's diagonal >= its xy span) and
 // touches a core lies within L of it, the larger clusters that unmark it within 2 L, their ground
 // within 3 L; a cluster cut by the window's edge reaches from there to the edge, so with

@@ -678,7 +678,7 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
 }
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                                   const float* plane, bool want_around, bool ask_through) const {
+                                   const float* plane, bool want_around, bool ask_through, const SurfaceExtent* inside) const {
   const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
@@ -717,6 +717,9 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
       if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
     }
   const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
+  // ND's, with `inside`: the beam of the point's own column passed it without a return and crossed
+  // its surface inside (PassedInside), not beside its edge.
+  const bool passed_own = inside != nullptr && !ended && PassedInside(range, pitch, yaw, ps, plane, *inside);
   // Without a beam ending near it: a beam of those columns whose ray crossed the point's plane
   // within a map voxel of it (the surface element the map point stands for) and whose return lies
   // beyond the crossing by more than tol / cos(incidence) went through its place: past the band
@@ -740,7 +743,9 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
     const auto [a, b] = BeamsAround(rc, row);
     through = (std::isfinite(rc[row]) && went_beyond(c, row)) || (a >= 0 && went_beyond(c, a)) || (b >= 0 && went_beyond(c, b));
   }
-  through = through && !MetSurfaceNear(range, pitch, yaw, ps, plane);
+  // A beam that passed it and met nothing inside its surface went through its place too (ND's
+  // PassedInside), where it did not pass an edge of the surface either.
+  through = (through || passed_own) && !MetSurfaceNear(range, pitch, yaw, ps, plane);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
                       (through ? kBeamThrough : 0));
 }
@@ -793,6 +798,41 @@ bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const
     }
   }
   return false;
+}
+
+bool ColumnImage::PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
+                               const SurfaceExtent& inside) const {
+  const float tol = float(test_.tol_m);
+  if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
+  const int col = grid_.Col(yaw);
+  const float fired = FiringYaw(col);
+  if (!std::isfinite(fired)) return false;
+  const Eigen::Vector3f n(plane[0], plane[1], plane[2]);
+  const Eigen::Vector3f side = inside.up.cross(n).normalized();
+  const float reach = std::asin(std::min(1.f, tol / range));
+  const auto first = std::lower_bound(beam_el_.begin(), beam_el_.end(), pitch + reach, std::greater<float>());
+  for (std::size_t b = std::size_t(first - beam_el_.begin()); b < beam_el_.size() && beam_el_[b] >= pitch - reach; ++b) {
+    const float e = beam_el_[b];
+    const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
+    if (!EmptyColumn(col - 1, row_top, row_bottom) || !EmptyColumn(col, row_top, row_bottom) ||
+        !EmptyColumn(col + 1, row_top, row_bottom))
+      continue;
+    const Eigen::Vector3f u(std::cos(e) * std::cos(fired), std::cos(e) * std::sin(fired), std::sin(e));
+    if ((ps - ps.dot(u) * u).squaredNorm() > tol * tol) continue;  // the beam passed farther than tol
+    const float cs = n.dot(u);
+    if (std::fabs(cs) < 1e-3f) continue;  // along the plane: it crosses nowhere
+    const Eigen::Vector3f off = (plane[3] / cs) * u - ps;  // from the point to where it crossed the plane
+    const float a = off.dot(inside.up), s = off.dot(side);
+    if (a <= inside.above && -a <= inside.below && s <= inside.left && -s <= inside.right) return true;
+  }
+  return false;
+}
+
+float ColumnImage::FiringYaw(int col) const {
+  const std::size_t c = std::size_t((col + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
+  for (int r = 0; r < grid_.rows; ++r)
+    if (std::isfinite(range_[c + std::size_t(r)])) return std::atan2(ret_[c + std::size_t(r)].y(), ret_[c + std::size_t(r)].x());
+  return std::numeric_limits<float>::quiet_NaN();
 }
 
 bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps,
@@ -969,12 +1009,24 @@ void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matr
   for (std::size_t j = sc->valid; j < sc->valid + 3; ++j) sc->range[j] = sc->pitch[j] = sc->yaw[j] = 0.f;  // padding
 }
 
+// Point k's surface extent (VisibilityOptions::passed_at) in the sensor frame, in *out; null where
+// it is not asked.
+const SurfaceExtent* InsideOf(const VoteSetup& s, const Eigen::Matrix3f& Rt, std::size_t k, SurfaceExtent* out) {
+  if (s.options.passed_at == nullptr) return nullptr;
+  const SurfaceExtent& e = (*s.options.passed_at)[k];
+  if (e.above <= 0.f && e.below <= 0.f && e.left <= 0.f && e.right <= 0.f) return nullptr;
+  *out = e;
+  out->up = Rt * e.up;
+  return out;
+}
+
 // Each projected point's plane in the sensor frame: normal n_s = Rt n, offset n_s . (Rt (p - c)),
 // and with the beam test whether the beams saw it.
 void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, std::uint32_t b,
                   std::size_t tn, Scratch* sc) {
   if (s.beams) sc->seen_beams.assign(tn, 0);
   const auto& ix = s.index;
+  SurfaceExtent inside;
   for (std::size_t j = 0; j < sc->valid; ++j) {
     const std::size_t i = b + sc->idx[j];
     const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
@@ -984,9 +1036,10 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     pl[1] = ns.y();
     pl[2] = ns.z();
     pl[3] = ns.dot(ps);
-    const bool ask_through = s.options.through_at != nullptr && (*s.options.through_at)[ix.order()[i]];
-    if (s.beams) sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl,
-                                                                       s.options.count_own_see, ask_through);
+    const auto asked = [&](const std::vector<bool>* at) { return at != nullptr && (*at)[ix.order()[i]]; };
+    if (s.beams)
+      sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
+                                                         asked(s.options.through_at), InsideOf(s, Rt, ix.order()[i], &inside));
   }
 }
 
@@ -1015,7 +1068,7 @@ struct VoteCounts {
       : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
-        beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.through_at ? n : 0, 0),
+        beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.AsksThrough() ? n : 0, 0),
         locks(new std::mutex[s.index.tiles()]) {}
 
   void Add(std::uint32_t tile, std::uint32_t b, std::size_t tn, const Scratch& sc) {
@@ -1095,7 +1148,7 @@ VisibilityVotes ZeroVotes(std::size_t n, std::size_t levels, const VisibilityOpt
   if (options.normals != nullptr && options.beams != nullptr) {
     out.beam_hits.assign(n, 0);
     if (options.count_own_see) out.beam_around.assign(n, 0), out.beam_passed.assign(n, 0);
-    if (options.through_at != nullptr) out.beam_through.assign(n, 0);
+    if (options.AsksThrough()) out.beam_through.assign(n, 0);
   }
   return out;
 }

@@ -27,8 +27,9 @@ struct VisibilityVotes {
                                            // only with the beam test and count_own_see (its one reader)
   std::vector<std::uint16_t> beam_passed;  // [i] keyframes a beam of which passed it without a return
                                            // (ColumnImage::PassedWithoutReturn); as beam_around
-  std::vector<std::uint16_t> beam_through;  // [i] keyframes a beam of which went through its place and
-                                            // none ended near it; with VisibilityOptions::through_at
+  std::vector<std::uint16_t> beam_through;  // [i] keyframes a beam of which went through its place (or, with
+                                            // VisibilityOptions::passed_at, passed it without a return)
+                                            // and none ended near it; with through_at or passed_at
   std::uint16_t See(int level, std::size_t i) const { return see[std::size_t(level) * points + i]; }
   std::uint16_t Hit(int level, std::size_t i) const { return hit[std::size_t(level) * points + i]; }
   std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
@@ -39,6 +40,13 @@ struct VisibilityVotes {
 // plane within the tolerance) and at most surface_max_m from it in range: a surface seen at a
 // grazing angle (far ground) is sampled metres apart in range, so the plain range test misses
 // it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
+// How far a point's upright surface goes on from it in its plane [m]: up, down (along `up`, the
+// plane's steepest direction) and to either side (along up x normal).
+struct SurfaceExtent {
+  Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+  float above = 0.f, below = 0.f, left = 0.f, right = 0.f;
+};
+
 struct VisibilityOptions {
   bool count_occluded = false;
   // Also count, per level, the keyframes whose own pixel of the point has a return beyond it
@@ -56,6 +64,12 @@ struct VisibilityOptions {
   // With the beam test, without count_own_see: per point, whether a beam may have gone through its
   // place (a point inside a plane of its map); only those are asked (VisibilityVotes::beam_through).
   const std::vector<bool>* through_at = nullptr;
+  // Likewise: per point, how far its upright surface goes on around it (world frame; all extents 0 =
+  // not asked): a beam that passed it without a return (it went on to the sky or beyond the
+  // sensor's range) and crossed its plane within that extent went through its place
+  // (ColumnImage::PassedInside; a level surface is passed at a grazing angle). Counts in beam_through.
+  const std::vector<SurfaceExtent>* passed_at = nullptr;
+  bool AsksThrough() const { return through_at != nullptr || passed_at != nullptr; }
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
