@@ -175,7 +175,10 @@ std::vector<SurfaceExtent> SurfaceExtents(const PointCloud& points, const PointC
   std::vector<SurfaceExtent> out(points.size());
   if (map.empty() || std::find(want.begin(), want.end(), true) == want.end()) return out;
   const float tol = float(tol_m), reach = float(kSurfaceExtentTols) * tol, gap = float(kSurfaceGapTols) * tol;
-  const PointCloud near = map.select(geometry::WithinRadius(map, points.select(want), reach, threads));
+  // The map near the points asked, thinned to voxels of half the tolerance: the extents are read to
+  // within that, across gaps four times as wide.
+  const PointCloud near = geometry::VoxelDownsample(
+      map.select(geometry::WithinRadius(map, points.select(want), reach, threads)), 0.5 * tol_m, threads);
   const geometry::KdTree tree(near);
   const std::size_t chunk = 256;
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {

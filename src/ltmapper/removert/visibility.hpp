@@ -35,18 +35,20 @@ struct VisibilityVotes {
   std::uint16_t Occ(int level, std::size_t i) const { return occ[std::size_t(level) * points + i]; }
   std::uint16_t SeeOwn(int level, std::size_t i) const { return see_own[std::size_t(level) * points + i]; }
 };
-// Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit
-// when the nearest return of its own pixel lies on the point's surface plane (distance to the
-// plane within the tolerance) and at most surface_max_m from it in range: a surface seen at a
-// grazing angle (far ground) is sampled metres apart in range, so the plain range test misses
-// it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
+
 // How far a point's upright surface goes on from it in its plane [m]: up, down (along `up`, the
-// plane's steepest direction) and to either side (along up x normal).
+// plane's steepest direction) and to either side (along up x normal). `up` is in the points' frame
+// (world); ColumnImage::PassedInside reads it rotated into the sensor's.
 struct SurfaceExtent {
   Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
   float above = 0.f, below = 0.f, left = 0.f, right = 0.f;
 };
 
+// Optional per-point unit normals (world frame) enable surface hits: a point also counts as hit
+// when the nearest return of its own pixel lies on the point's surface plane (distance to the
+// plane within the tolerance) and at most surface_max_m from it in range: a surface seen at a
+// grazing angle (far ground) is sampled metres apart in range, so the plain range test misses
+// it, while an occluder in front of the point is off its plane (LD "same surface" test, revert).
 struct VisibilityOptions {
   bool count_occluded = false;
   // Also count, per level, the keyframes whose own pixel of the point has a return beyond it
