@@ -206,18 +206,25 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
   return idx;
 }
 
-// Distance from a point to the nearest map keyframe: a lower bound of the range it was scanned
-// from (the sampling of a cluster's surface: SampleGaps, MinWidth through MapObject::range_m).
+// The map keyframes' sensor positions: the nearest to a point (Covered's view of it), and its
+// distance, a lower bound of the range the point was scanned from (the sampling of a cluster's
+// surface: SampleGaps, MinWidth through MapObject::range_m).
 class SensorRanges {
  public:
   SensorRanges() = default;
-  explicit SensorRanges(const std::vector<Eigen::Vector3d>& sensors) {
-    if (sensors.empty()) return;
+  explicit SensorRanges(std::vector<Eigen::Vector3d> sensors) : at_(std::move(sensors)) {
+    if (at_.empty()) return;
     PointCloud at;
-    for (const auto& s : sensors) at.push_back(float(s.x()), float(s.y()), float(s.z()), 0.f);
+    for (const auto& s : at_) at.push_back(float(s.x()), float(s.y()), float(s.z()), 0.f);
     tree_ = std::make_shared<const geometry::KdTree>(at);
   }
   bool empty() const { return !tree_; }
+  // The sensor nearest to p (null without keyframes).
+  const Eigen::Vector3d* NearestTo(const Eigen::Vector3f& p) const {
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    return tree_ && tree_->Nearest(p, &j, &d2) ? &at_[j] : nullptr;
+  }
   double To(const Eigen::Vector3f& p) const {  // 0 without keyframes
     std::uint32_t j = 0;
     float d2 = 0.f;
@@ -225,6 +232,7 @@ class SensorRanges {
   }
 
  private:
+  std::vector<Eigen::Vector3d> at_;
   std::shared_ptr<const geometry::KdTree> tree_;
 };
 
@@ -370,16 +378,8 @@ bool SegmentHitsBox(const Eigen::Vector3d& p, const Eigen::Vector3d& q, Eigen::V
   return true;
 }
 
-const Eigen::Vector3d* Nearest(const std::vector<Eigen::Vector3d>& sensors, const Eigen::Vector3d& x) {
-  const Eigen::Vector3d* best = nullptr;
-  for (const auto& s : sensors)
-    if (!best || (s - x).squaredNorm() < (*best - x).squaredNorm()) best = &s;
-  return best;
-}
-
 // Step context for the rules: sensor positions and the step's accepted disappeared objects.
 struct StepContext {
-  std::vector<Eigen::Vector3d> reference_sensors;  // map keyframes as of the reference session
   // Where a change's points were scanned from: appeared (PD) by the step's session, so every map
   // keyframe as of the step; disappeared (strong ND) by the sessions up to the reference, so their
   // keyframes only (a keyframe the step's route created beside a far object never scanned it).
@@ -413,7 +413,7 @@ bool CouldHaveMoved(const MapObject& d, const MapObject& a, const MapConfig& cfg
 // difference, not an object (it was a false object on HDL-64E, OS1-128, Pandar64 and VLP-32C).
 bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   if (o.change == "disappeared" || o.observed_fraction >= cfg.object_min_observed_fraction) return true;
-  const Eigen::Vector3d* s = Nearest(ctx.reference_sensors, o.centroid);
+  const Eigen::Vector3d* s = ctx.reference_ranges.NearestTo(o.centroid.cast<float>());
   if (!s) return false;
   const auto blocks = [&](const MapObject* d) { return SegmentHitsBox(*s, o.centroid, d->lo, d->hi, cfg.object_tolerance_m); };
   const auto moved_here = [&](const MapObject* d) { return CouldHaveMoved(*d, o, cfg); };
@@ -859,14 +859,14 @@ void RequireSensorStep(const MapConfig& cfg) {
 // yet): a step's objects depend on the store up to that step only, so they can be kept.
 StepContext ContextOf(const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
   StepContext ctx;
-  std::vector<Eigen::Vector3d> all;
+  std::vector<Eigen::Vector3d> all, reference;
   for (const auto& k : keyframes) {
     if (k.session > step.order) continue;
     all.push_back(k.T_world_sensor.translation());
-    if (k.session <= step.reference) ctx.reference_sensors.push_back(k.T_world_sensor.translation());
+    if (k.session <= step.reference) reference.push_back(k.T_world_sensor.translation());
   }
-  ctx.ranges = SensorRanges(all);
-  ctx.reference_ranges = SensorRanges(ctx.reference_sensors);
+  ctx.ranges = SensorRanges(std::move(all));
+  ctx.reference_ranges = SensorRanges(std::move(reference));
   return ctx;
 }
 

@@ -82,8 +82,9 @@ constexpr double kRimOffset = 0.21;
 // SurfaceExtents (occlusion.cpp): how far around an ND point its upright surface goes on is
 // measured up to kSurfaceExtentTols x ld.beam_tol_m (a beam that passed within the tolerance of a
 // point seen at 84 deg incidence crosses its plane up to 10 tolerances from it), across gaps of at
-// most kSurfaceGapTols x ld.beam_tol_m (the rows of a surface scanned from afar).
-constexpr double kSurfaceExtentTols = 10.0, kSurfaceGapTols = 2.0;
+// most kSurfaceGapTols x ld.beam_tol_m (the rows of a surface scanned from afar), on the map thinned
+// to voxels of kSurfaceVoxelTols x ld.beam_tol_m (the extents are read to within that).
+constexpr double kSurfaceExtentTols = 10.0, kSurfaceGapTols = 2.0, kSurfaceVoxelTols = 0.5;
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
                                              double radius_m, int threads,
                                              std::vector<bool>* planar = nullptr, std::vector<bool>* rim = nullptr);

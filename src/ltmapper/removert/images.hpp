@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <vector>
 
@@ -178,7 +179,7 @@ class ColumnImage {
   bool PassedWithoutReturn(float range, float pitch, float yaw) const;
   // A beam of the point's own column (its neighbours on both sides empty too) that passed it without
   // a return (as above), along its true direction (the column's firing azimuth, read off a return
-  // of that column; the table's elevation) within tol of the point, and that crossed the point's
+  // of that column, fired_; the table's elevation) within tol of the point, and that crossed the point's
   // plane inside its surface: within `inside`'s extent (along `inside.up` and the level direction
   // in the plane). A beam that passed within tol of a point but crossed the plane beyond the
   // surface's edge passed beside it (over a canopy's top, past a fence seen edge-on).
@@ -190,8 +191,23 @@ class ColumnImage {
   bool EmptyColumn(int col, int row_top, int row_bottom) const;
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   std::pair<int, int> BeamsAround(const float* rc, int row) const;
-  // The azimuth [rad, sensor frame] column col fired at: that of a return in it (NaN without one).
-  float FiringYaw(int col) const;
+  // Calls f(elevation, reach, row_top, row_bottom) for each beam of the table whose elevation lies
+  // within reach = asin(tol / range) of `pitch` (its rows: its elevation +- its margin), until f
+  // returns true; false for sensors without rings or a known azimuth step, and outside
+  // [min_range, max_range - tol].
+  template <class F>
+  bool AnyBeamNear(float range, float pitch, F&& f) const {
+    const float tol = float(test_.tol_m);
+    if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
+    const float reach = std::asin(std::min(1.f, tol / range));
+    // beam_el_ runs top first.
+    const auto first = std::lower_bound(beam_el_.begin(), beam_el_.end(), pitch + reach, std::greater<float>());
+    for (auto b = std::size_t(first - beam_el_.begin()); b < beam_el_.size() && beam_el_[b] >= pitch - reach; ++b) {
+      const float e = beam_el_[b];
+      if (f(e, reach, grid_.Row(e + beam_margin_[b]), grid_.Row(e - beam_margin_[b]))) return true;
+    }
+    return false;
+  }
   // A return of the scan on the point's plane (within tol) within surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
   BeamTest test_;
@@ -204,8 +220,9 @@ class ColumnImage {
   std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
   std::vector<std::uint8_t> any_;     // 1 = a return at any range (PassedWithoutReturn)
-  std::vector<std::uint8_t> swept_;   // [cols] 1 = the column holds a return (deskewed sweeps leave
-                                      // a seam of empty columns where they start and end)
+  std::vector<float> fired_;          // [cols] the azimuth [rad] of the column's returns, the one its
+                                      // beams fired at (PassedInside); NaN = no return at all (deskewed
+                                      // sweeps leave a seam of empty columns where they start and end)
   std::vector<float> beam_el_;        // [rad] the beams' elevations (ring sensors with an azimuth step)
   std::vector<float> beam_margin_;    // [rad] per beam: its returns lie within this of its elevation
 };

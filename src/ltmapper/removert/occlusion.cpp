@@ -165,7 +165,8 @@ float Reach(std::vector<float>& along, float gap) {
 // Per point where `want` holds and that lies on an upright plane (normal within 45 deg of level):
 // how far its own map's surface goes on around it (SurfaceExtent), up to kSurfaceExtentTols x `tol`:
 // own-map points within tol of the plane and within tol of the line through the point up (or
-// across), with no gap wider than kSurfaceGapTols x tol (rows of a surface scanned from afar). All
+// across), with no gap wider than kSurfaceGapTols x tol (rows of a surface scanned from afar), on the
+// map thinned to voxels of kSurfaceVoxelTols x tol. All
 // zero elsewhere (not asked). A beam that passed within tol of the point and crossed the plane
 // inside that extent went through the surface (the beam truth's "observed absent"); one that
 // crossed it beyond (a canopy's top, a fence seen edge-on) passed beside it (ColumnImage::PassedInside).
@@ -175,10 +176,9 @@ std::vector<SurfaceExtent> SurfaceExtents(const PointCloud& points, const PointC
   std::vector<SurfaceExtent> out(points.size());
   if (map.empty() || std::find(want.begin(), want.end(), true) == want.end()) return out;
   const float tol = float(tol_m), reach = float(kSurfaceExtentTols) * tol, gap = float(kSurfaceGapTols) * tol;
-  // The map near the points asked, thinned to voxels of half the tolerance: the extents are read to
-  // within that, across gaps four times as wide.
+  // The map near the points asked, thinned (kSurfaceVoxelTols).
   const PointCloud near = geometry::VoxelDownsample(
-      map.select(geometry::WithinRadius(map, points.select(want), reach, threads)), 0.5 * tol_m, threads);
+      map.select(geometry::WithinRadius(map, points.select(want), reach, threads)), kSurfaceVoxelTols * tol_m, threads);
   const geometry::KdTree tree(near);
   const std::size_t chunk = 256;
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {

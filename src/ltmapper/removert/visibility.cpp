@@ -613,19 +613,19 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
   ret_.assign(range_.size(), Eigen::Vector3f::Zero());
   any_.assign(range_.size(), 0);
-  swept_.assign(std::size_t(grid_.cols), 0);
+  fired_.assign(std::size_t(grid_.cols), std::numeric_limits<float>::quiet_NaN());
 }
 
 void ColumnImage::Build(const PointCloud& scan) {
   std::fill(range_.begin(), range_.end(), std::numeric_limits<float>::infinity());
   std::fill(any_.begin(), any_.end(), 0);
-  std::fill(swept_.begin(), swept_.end(), 0);
+  std::fill(fired_.begin(), fired_.end(), std::numeric_limits<float>::quiet_NaN());
   // Every return marks its cell in any_ (a beam that met something, at any range); the range test
   // reads those within [min_range, max_range].
   auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
     const std::size_t col = std::size_t(grid_.Col(yaw)), cell = col * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
     any_[cell] = 1;
-    swept_[col] = 1;
+    fired_[col] = yaw;
     if (r < min_range_ || r > max_range_) return;
     if (r < range_[cell]) {
       range_[cell] = r;
@@ -770,7 +770,7 @@ bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eige
 
 bool ColumnImage::EmptyColumn(int col, int row_top, int row_bottom) const {
   const std::size_t c = std::size_t((col + grid_.cols) % grid_.cols);
-  if (!swept_[c]) return false;  // no return in the whole column: the sweep's seam, not the sky
+  if (!std::isfinite(fired_[c])) return false;  // no return in the whole column: the sweep's seam, not the sky
   const std::uint8_t* ac = any_.data() + c * std::size_t(grid_.rows);
   for (int r = row_top; r <= row_bottom; ++r)
     if (ac[r]) return false;
@@ -778,61 +778,41 @@ bool ColumnImage::EmptyColumn(int col, int row_top, int row_bottom) const {
 }
 
 bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const {
-  const float tol = float(test_.tol_m);
-  if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
-  const float reach = std::asin(std::min(1.f, tol / range));
   const int col = grid_.Col(yaw);
-  // The beams within reach of the pitch: beam_el_ runs top first.
-  const auto first = std::lower_bound(beam_el_.begin(), beam_el_.end(), pitch + reach, std::greater<float>());
-  for (std::size_t b = std::size_t(first - beam_el_.begin()); b < beam_el_.size() && beam_el_[b] >= pitch - reach; ++b) {
-    const float e = beam_el_[b], d_el = e - pitch;
-    if (std::fabs(d_el) > reach) continue;
-    const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
-    const int cols = int(std::sqrt(reach * reach - d_el * d_el) * grid_.col_scale);
-    // A column within `cols` of the point's whose neighbours on both sides are empty too: three
+  return AnyBeamNear(range, pitch, [&](float e, float reach, int row_top, int row_bottom) {
+    // A column within reach of the point's whose neighbours on both sides are empty too: three
     // empty columns in a row, centred within reach.
+    const float d_el = e - pitch;
+    const int cols = int(std::sqrt(std::max(0.f, reach * reach - d_el * d_el)) * grid_.col_scale);
     int run = 0;
     for (int c = col - cols - 1; c <= col + cols + 1; ++c) {
       run = EmptyColumn(c, row_top, row_bottom) ? run + 1 : 0;
       if (run >= 3) return true;
     }
-  }
-  return false;
+    return false;
+  });
 }
 
 bool ColumnImage::PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                                const SurfaceExtent& inside) const {
   const float tol = float(test_.tol_m);
-  if (beam_el_.empty() || range < min_range_ || range + tol > max_range_) return false;
   const int col = grid_.Col(yaw);
-  const float fired = FiringYaw(col);
+  const float fired = fired_[std::size_t(col)];
   if (!std::isfinite(fired)) return false;
   const Eigen::Vector3f n(plane[0], plane[1], plane[2]);
   const Eigen::Vector3f side = inside.up.cross(n).normalized();
-  const float reach = std::asin(std::min(1.f, tol / range));
-  const auto first = std::lower_bound(beam_el_.begin(), beam_el_.end(), pitch + reach, std::greater<float>());
-  for (std::size_t b = std::size_t(first - beam_el_.begin()); b < beam_el_.size() && beam_el_[b] >= pitch - reach; ++b) {
-    const float e = beam_el_[b];
-    const int row_top = grid_.Row(e + beam_margin_[b]), row_bottom = grid_.Row(e - beam_margin_[b]);
+  return AnyBeamNear(range, pitch, [&](float e, float, int row_top, int row_bottom) {
     if (!EmptyColumn(col - 1, row_top, row_bottom) || !EmptyColumn(col, row_top, row_bottom) ||
         !EmptyColumn(col + 1, row_top, row_bottom))
-      continue;
+      return false;
     const Eigen::Vector3f u(std::cos(e) * std::cos(fired), std::cos(e) * std::sin(fired), std::sin(e));
-    if ((ps - ps.dot(u) * u).squaredNorm() > tol * tol) continue;  // the beam passed farther than tol
+    if ((ps - ps.dot(u) * u).squaredNorm() > tol * tol) return false;  // the beam passed farther than tol
     const float cs = n.dot(u);
-    if (std::fabs(cs) < 1e-3f) continue;  // along the plane: it crosses nowhere
+    if (std::fabs(cs) < 1e-3f) return false;  // along the plane: it crosses nowhere
     const Eigen::Vector3f off = (plane[3] / cs) * u - ps;  // from the point to where it crossed the plane
-    const float a = off.dot(inside.up), s = off.dot(side);
-    if (a <= inside.above && -a <= inside.below && s <= inside.left && -s <= inside.right) return true;
-  }
-  return false;
-}
-
-float ColumnImage::FiringYaw(int col) const {
-  const std::size_t c = std::size_t((col + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
-  for (int r = 0; r < grid_.rows; ++r)
-    if (std::isfinite(range_[c + std::size_t(r)])) return std::atan2(ret_[c + std::size_t(r)].y(), ret_[c + std::size_t(r)].x());
-  return std::numeric_limits<float>::quiet_NaN();
+    const float up = off.dot(inside.up), across = off.dot(side);
+    return up <= inside.above && -up <= inside.below && across <= inside.left && -across <= inside.right;
+  });
 }
 
 bool ColumnImage::Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps,
