@@ -326,8 +326,15 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   EXPECT_EQ(passed(kDropped), 0);
   EXPECT_EQ(passed(kSeam), 0);
   // Scans whose beams scatter about the table (deskewed sweeps: here 3 x 0.4 deg reaches halfway
-  // to the neighbours 2 deg away) cannot tell which beam is which: no evidence.
+  // to the neighbours 2 deg away) cannot tell which beam is which: no evidence. Short of halfway
+  // (3 x 0.3 deg) they can.
+  using removert::detail::ColumnImage;
+  EXPECT_TRUE(ColumnImage::TellsItsReturns(cfg.sensor_model, 1.0));
+  cfg.sensor_model.spread_deg = 0.3;
+  EXPECT_TRUE(ColumnImage::TellsItsReturns(cfg.sensor_model, 1.0));
+  EXPECT_EQ(passed(kSky), 1);
   cfg.sensor_model.spread_deg = 0.4;
+  EXPECT_FALSE(ColumnImage::TellsItsReturns(cfg.sensor_model, 1.0));
   EXPECT_EQ(passed(kSky), 0);
 }
 

@@ -185,6 +185,11 @@ class ColumnImage {
   // surface's edge passed beside it (over a canopy's top, past a fence seen edge-on).
   bool PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                     const SurfaceExtent& inside) const;
+  // Whether the beam at elevation_deg of `m` can tell its returns from its neighbours': they
+  // scatter (3 x the scans' spread, SensorModel::spread_deg) short of halfway to the next beam.
+  // Only those beams are asked by PassedWithoutReturn and PassedInside; a deskewed sweep's spread
+  // (its near returns, bent by the sensor's motion) may leave none.
+  static bool TellsItsReturns(const geometry::SensorModel& m, double elevation_deg);
 
  private:
   // Column col (any, wrapped) holds no return in rows row_top..row_bottom, and is swept.

@@ -332,6 +332,25 @@ LdResult LdFromLabels(const PointCloud& central_map, const PointCloud& query_map
 
 }  // namespace detail
 
+namespace {
+
+// Says when some of a ring sensor's beams cannot tell their returns from their neighbours'
+// (ColumnImage::TellsItsReturns): a beam that passed a point without a return is evidence from
+// the others only. A deskewed sweep's near returns, bent by the sensor's motion, may leave none.
+void LogBeamsThatTellTheirReturns(const RemovertConfig& cfg) {
+  const geometry::SensorModel& m = cfg.sensor_model;
+  if (!cfg.SensorResolved() || !m.ring_based || m.azimuth_step_deg <= 0.0) return;
+  const auto n = std::count_if(m.elevations_deg.begin(), m.elevations_deg.end(),
+                               [&](double e) { return detail::ColumnImage::TellsItsReturns(m, e); });
+  if (n == m.beams()) return;
+  spdlog::warn("LD: {} of {} beams tell their returns from their neighbours' (the scans' elevations scatter {:.3f} deg "
+               "about their beams, 3 x that reaches halfway to the next beam: deskewed sweeps?); a beam that passed a "
+               "point without a return is evidence from those only",
+               n, m.beams(), m.spread_deg);
+}
+
+}  // namespace
+
 LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
                   const std::vector<WorldKeyframe>& central_keyframes,
                   const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg,
@@ -343,6 +362,7 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
                "distance, beam tolerance {} m (own pixel + {:.2f} %)", cfg.LdRotationSigmaDeg(),
                cfg.ld_rotation_sigma_deg > 0.0 ? "ld.rotation_sigma_deg: measured by LT-SLAM, or set" : "pose_sigma_deg",
                cfg.ld_radius_m, 100.0 * cfg.LdRadiusRel(), cfg.ld_beam.tol_m, 100.0 * cfg.LdOwnTolRel());
+  LogBeamsThatTellTheirReturns(cfg);
   const detail::LdLabels labels =
       detail::LabelLd(central_map, query_map, detail::Positions(central_keyframes), detail::Positions(query_keyframes),
                       central_keyframes, query_keyframes, cfg, threads);

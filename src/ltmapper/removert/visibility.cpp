@@ -568,6 +568,9 @@ void MultiResImage::PoolRows(Level& L) const {
 // finest beam spacing. A cell keeps its nearest return, so one that held two returns of a beam
 // (a column two steps wide) or two beams would lose the farther: on grazing ground the return
 // that ended near the point, 3 m behind its neighbour at 70 m.
+// A beam's returns lie within this many sigmas of the scans' elevation scatter about it.
+constexpr double kBeamScatterSigmas = 3.0;
+
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test) {
   if (!cfg.SensorResolved()) return test;
   const geometry::SensorModel& m = cfg.sensor_model;
@@ -595,12 +598,12 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     // A beam's returns lie within 0.4 of the local spacing of its tabled elevation (the table is
     // estimated; the other beams' lie beyond), and within 3 x the scans' scatter about it (deskewed
     // sweeps: the vehicle's motion during the sweep moves them). A beam whose scatter reaches
-    // halfway to its neighbours cannot be told from them: it gives no evidence.
-    constexpr double kOwnBand = 0.4, kScatter = 3.0;
+    // halfway to its neighbours cannot be told from them: it gives no evidence (TellsItsReturns).
+    constexpr double kOwnBand = 0.4;
     const geometry::SensorModel& m = cfg.sensor_model;
     for (const double e : m.elevations_deg) {
-      const double spacing = m.SpacingAt(e), scatter = kScatter * m.spread_deg;
-      if (scatter >= 0.5 * spacing) continue;
+      if (!TellsItsReturns(m, e)) continue;
+      const double spacing = m.SpacingAt(e), scatter = kBeamScatterSigmas * m.spread_deg;
       beam_el_.push_back(float(e * kRadPerDeg));
       beam_margin_.push_back(float(std::max({0.5 * test.row_deg, kOwnBand * spacing, scatter}) * kRadPerDeg));
     }
@@ -791,6 +794,10 @@ bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const
     }
     return false;
   });
+}
+
+bool ColumnImage::TellsItsReturns(const geometry::SensorModel& m, double elevation_deg) {
+  return kBeamScatterSigmas * m.spread_deg < 0.5 * m.SpacingAt(elevation_deg);
 }
 
 bool ColumnImage::PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
