@@ -272,6 +272,17 @@ TEST(RemovertVotes, BeamTestKeepsEveryReturnOfABeam) {
   EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[0], 1);
 }
 
+// test::ConfigFor's settings with the VLP-16 preset's sensor (16 beams 2 deg apart, 0.2 deg steps).
+RemovertConfig Vlp16Config() {
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.sensor = "vlp16";
+  cfg.sensor_elevations_deg.clear();
+  cfg.sensor_model = {};
+  cfg.fov_up_deg = cfg.fov_down_deg = 0.0;
+  cfg = removert::WithSensor(cfg, {});
+  return cfg;
+}
+
 // A ring sensor fires every beam at every azimuth step, so a beam that passed a point and has no
 // return there went on and met nothing: the point's place was free (an appeared structure's place,
 // the sky behind it; the beams below met the ground). Not where the cells hold a return of any
@@ -279,12 +290,7 @@ TEST(RemovertVotes, BeamTestKeepsEveryReturnOfABeam) {
 // a lone empty cell (a dropped return, its neighbours met a wall), nor where whole columns hold no
 // return (the seam where a deskewed sweep starts and ends).
 TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
-  RemovertConfig cfg = test::ConfigFor();
-  cfg.sensor = "vlp16";
-  cfg.sensor_elevations_deg.clear();
-  cfg.sensor_model = {};
-  cfg.fov_up_deg = cfg.fov_down_deg = 0.0;
-  cfg = removert::WithSensor(cfg, {});
+  RemovertConfig cfg = Vlp16Config();
   constexpr double kDeg = M_PI / 180.0;
   const double beam = 1.0 * kDeg, ground = -15.0 * kDeg;  // two of the VLP-16's beams
   PointCloud pts;
@@ -336,6 +342,42 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   cfg.sensor_model.spread_deg = 0.4;
   EXPECT_FALSE(ColumnImage::TellsItsReturns(cfg.sensor_model, 1.0));
   EXPECT_EQ(passed(kSky), 0);
+}
+
+// The beam truth calls a point observed only where a ray of the other session passed within the
+// tolerance of it. A sparse sensor's pixel between two of its beams holds what they met around the
+// point, behind it too (the sky over a facade's top, a wall behind a fence), so for ND its
+// see-through counts only from a keyframe a beam of which passed within the tolerance of the point
+// (ColumnImage::BeamNear, kBeamNear). Here the VLP-16's +1 and -1 deg beams meet a wall 60 m away
+// behind a point 40 m away: at 0 deg elevation no beam passed within 0.3 m of it (1 deg is 0.7 m
+// there), at +0.9 deg the +1 deg beam passed 0.07 m from it.
+TEST(RemovertVotes, NdSeeThroughCountsWhereABeamPassedThePoint) {
+  RemovertConfig cfg = Vlp16Config();
+  constexpr double kDeg = M_PI / 180.0;
+  WorldKeyframe kf;
+  kf.T_world_sensor = test::At(0, 0, 1.8);
+  auto scan = std::make_shared<PointCloud>();
+  for (int k = 0; k < 100; ++k)
+    for (const double el : {1.0, -1.0, -15.0}) {
+      const Eigen::Vector3d q = test::Direction(el * kDeg, 0.2 * k * kDeg) * (el < -10.0 ? 1.8 / std::sin(15.0 * kDeg) : 60.0);
+      scan->push_back(float(q.x()), float(q.y()), float(q.z()));
+    }
+  kf.cloud = scan;
+  auto see = [&](double el_deg, bool beam_test = true) {
+    PointCloud pts;
+    const Eigen::Vector3d p = test::Direction(el_deg * kDeg, 10.1 * kDeg) * 40.0;
+    pts.push_back(float(p.x()), float(p.y()), float(p.z() + 1.8));
+    const std::vector<Eigen::Vector3f> side = {-p.cast<float>().normalized()};  // an upright face
+    removert::BeamTest beams;
+    removert::VisibilityOptions opt;
+    opt.normals = &side;
+    opt.beams = beam_test ? &beams : nullptr;
+    const removert::VisibilityVotes v = removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt);
+    return int(v.See(0, 0));
+  };
+  EXPECT_EQ(see(0.0, false), 1);  // the pixel alone: seen through
+  EXPECT_EQ(see(0.0), 0);
+  EXPECT_EQ(see(0.9), 1);
 }
 
 // The street scene: 21 keyframes 2 m apart along x.

@@ -148,7 +148,8 @@ class MultiResImage {
 // A scan's nearest return per (column, row) cell of BeamTest::col_deg x row_deg, stored column
 // by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
 // the first returns above and below a direction are the two beams around it.
-constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4, kBeamThrough = 8;  // ColumnImage::Observed
+constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4, kBeamThrough = 8,
+                       kBeamNear = 16;  // ColumnImage::Observed
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
 // half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
@@ -167,7 +168,8 @@ class ColumnImage {
   // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
   // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
   // ended near it and the beam of its own column passed it without a return crossing its surface
-  // inside that extent (PassedInside), on the same MetSurfaceNear condition.
+  // inside that extent (PassedInside), on the same MetSurfaceNear condition. kBeamNear when a beam
+  // of the table passed within the tolerance of it (BeamNear).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                         bool want_around, bool ask_through, const SurfaceExtent* inside) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
@@ -190,6 +192,11 @@ class ColumnImage {
   // Only those beams are asked by PassedWithoutReturn and PassedInside; a deskewed sweep's spread
   // (its near returns, bent by the sensor's motion) may leave none.
   static bool TellsItsReturns(const geometry::SensorModel& m, double elevation_deg);
+  // Whether a beam of the sensor's table passed within the tolerance of a point at (range, pitch):
+  // its elevation within asin(tol / range) of the pitch, widened by 3 x the scans' scatter. Always
+  // for sensors without a beam table (no rings) or an azimuth step. The beam truth counts a point
+  // observed only where a ray passed within the tolerance of it.
+  bool BeamNear(float range, float pitch) const;
 
  private:
   // Column col (any, wrapped) holds no return in rows row_top..row_bottom, and is swept.
@@ -228,6 +235,9 @@ class ColumnImage {
   std::vector<float> fired_;          // [cols] the azimuth [rad] of the column's returns, the one its
                                       // beams fired at (PassedInside); NaN = no return at all (deskewed
                                       // sweeps leave a seam of empty columns where they start and end)
+  std::vector<float> table_el_;       // [rad] every beam's elevation, ascending (BeamNear; ring sensors
+                                      // with an azimuth step)
+  float table_reach_ = 0.f;           // [rad] BeamNear's widening: 3 x the scans' scatter
   std::vector<float> beam_el_;        // [rad] the beams' elevations (ring sensors with an azimuth step)
   std::vector<float> beam_margin_;    // [rad] per beam: its returns lie within this of its elevation
 };

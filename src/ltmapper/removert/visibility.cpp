@@ -601,6 +601,9 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     // halfway to its neighbours cannot be told from them: it gives no evidence (TellsItsReturns).
     constexpr double kOwnBand = 0.4;
     const geometry::SensorModel& m = cfg.sensor_model;
+    for (const double e : m.elevations_deg) table_el_.push_back(float(e * kRadPerDeg));
+    std::sort(table_el_.begin(), table_el_.end());
+    table_reach_ = float(kBeamScatterSigmas * m.spread_deg * kRadPerDeg);
     for (const double e : m.elevations_deg) {
       if (!TellsItsReturns(m, e)) continue;
       const double spacing = m.SpacingAt(e), scatter = kBeamScatterSigmas * m.spread_deg;
@@ -750,7 +753,7 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   // PassedInside), where it did not pass an edge of the surface either.
   through = (through || passed_own) && !MetSurfaceNear(range, pitch, yaw, ps, plane);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
-                      (through ? kBeamThrough : 0));
+                      (through ? kBeamThrough : 0) | (BeamNear(range, pitch) ? kBeamNear : 0));
 }
 
 bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
@@ -794,6 +797,13 @@ bool ColumnImage::PassedWithoutReturn(float range, float pitch, float yaw) const
     }
     return false;
   });
+}
+
+bool ColumnImage::BeamNear(float range, float pitch) const {
+  if (table_el_.empty()) return true;
+  const float reach = std::asin(std::min(1.f, float(test_.tol_m) / range)) + table_reach_;
+  const auto it = std::lower_bound(table_el_.begin(), table_el_.end(), pitch - reach);
+  return it != table_el_.end() && *it <= pitch + reach;
 }
 
 bool ColumnImage::TellsItsReturns(const geometry::SensorModel& m, double elevation_deg) {
@@ -1052,7 +1062,7 @@ void VoteTile(const VoteSetup& s, std::size_t tn, Scratch* sc) {
 // rarely want the same tile at the same time.
 struct VoteCounts {
   VoteCounts(const VoteSetup& s, std::size_t n)
-      : n(n), levels(s.levels), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
+      : n(n), levels(s.levels), see_needs_beam(s.beams && !s.options.count_own_see), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
         beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.AsksThrough() ? n : 0, 0),
@@ -1079,7 +1089,8 @@ struct VoteCounts {
       std::uint16_t* sv = see.data() + l * n + b;
       std::uint16_t* hv = hit.data() + l * n + b;
       for (std::size_t i = 0; i < tn; ++i) {
-        sv[i] = std::uint16_t(sv[i] + (vote[i] & kSee));
+        const bool see = (vote[i] & kSee) && (!see_needs_beam || (sc.seen_beams[i] & detail::kBeamNear));
+        sv[i] = std::uint16_t(sv[i] + (see ? 1 : 0));
         hv[i] = std::uint16_t(hv[i] + ((vote[i] & kHit) >> 1));
       }
       if (!occ.empty()) {
@@ -1110,6 +1121,11 @@ struct VoteCounts {
   }
 
   std::size_t n, levels;
+  // ND (the beam test, not the own pixel): a pixel's see-through counts only from a keyframe a beam
+  // of which passed within the tolerance of the point (kBeamNear). A sparse sensor's pixel between
+  // two beams also holds what lies behind a surface's edge; the beam truth calls the point
+  // observed only where a ray passed it.
+  bool see_needs_beam;
   std::vector<std::uint16_t> see, hit, occ, see_own, beam_hits, beam_around, beam_passed, beam_through;
   std::unique_ptr<std::mutex[]> locks;
 };
