@@ -168,8 +168,8 @@ class ColumnImage {
   // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
   // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
   // ended near it and the beam of its own column passed it without a return crossing its surface
-  // inside that extent (PassedInside), on the same MetSurfaceNear condition. kBeamNear when a beam
-  // of the table passed within the tolerance of it (BeamNear).
+  // inside that extent (PassedInside), on the same MetSurfaceNear condition. Without want_around
+  // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                         bool want_around, bool ask_through, const SurfaceExtent* inside) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes

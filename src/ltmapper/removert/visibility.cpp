@@ -564,13 +564,13 @@ void MultiResImage::PoolRows(Level& L) const {
       if (sides[q] != 3) L.pooled[q] = inf;
 }
 
+// A beam's returns lie within this many sigmas of the scans' elevation scatter about it.
+constexpr double kBeamScatterSigmas = 3.0;
+
 // The beam test's cells for the sensor: columns one azimuth step wide, rows at most half the
 // finest beam spacing. A cell keeps its nearest return, so one that held two returns of a beam
 // (a column two steps wide) or two beams would lose the farther: on grazing ground the return
 // that ended near the point, 3 m behind its neighbour at 70 m.
-// A beam's returns lie within this many sigmas of the scans' elevation scatter about it.
-constexpr double kBeamScatterSigmas = 3.0;
-
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test) {
   if (!cfg.SensorResolved()) return test;
   const geometry::SensorModel& m = cfg.sensor_model;
@@ -601,12 +601,13 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
     // halfway to its neighbours cannot be told from them: it gives no evidence (TellsItsReturns).
     constexpr double kOwnBand = 0.4;
     const geometry::SensorModel& m = cfg.sensor_model;
+    const double scatter = kBeamScatterSigmas * m.spread_deg;
     for (const double e : m.elevations_deg) table_el_.push_back(float(e * kRadPerDeg));
     std::sort(table_el_.begin(), table_el_.end());
-    table_reach_ = float(kBeamScatterSigmas * m.spread_deg * kRadPerDeg);
+    table_reach_ = float(scatter * kRadPerDeg);
     for (const double e : m.elevations_deg) {
       if (!TellsItsReturns(m, e)) continue;
-      const double spacing = m.SpacingAt(e), scatter = kBeamScatterSigmas * m.spread_deg;
+      const double spacing = m.SpacingAt(e);
       beam_el_.push_back(float(e * kRadPerDeg));
       beam_margin_.push_back(float(std::max({0.5 * test.row_deg, kOwnBand * spacing, scatter}) * kRadPerDeg));
     }
@@ -752,8 +753,10 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   // A beam that passed it and met nothing inside its surface went through its place too (ND's
   // PassedInside), where it did not pass an edge of the surface either.
   through = (through || passed_own) && !MetSurfaceNear(range, pitch, yaw, ps, plane);
+  // kBeamNear gates ND's pixel see-through (VoteCounts); PD (want_around) does not read it.
+  const bool near = !want_around && BeamNear(range, pitch);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
-                      (through ? kBeamThrough : 0) | (BeamNear(range, pitch) ? kBeamNear : 0));
+                      (through ? kBeamThrough : 0) | (near ? kBeamNear : 0));
 }
 
 bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
@@ -1062,7 +1065,8 @@ void VoteTile(const VoteSetup& s, std::size_t tn, Scratch* sc) {
 // rarely want the same tile at the same time.
 struct VoteCounts {
   VoteCounts(const VoteSetup& s, std::size_t n)
-      : n(n), levels(s.levels), see_needs_beam(s.beams && !s.options.count_own_see), see(n * s.levels, 0), hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
+      : n(n), levels(s.levels), see_needs_beam(s.beams && !s.options.count_own_see), see(n * s.levels, 0),
+        hit(n * s.levels, 0), occ(s.test.occluded ? n * s.levels : 0, 0),
         see_own(s.test.see_own ? n * s.levels : 0, 0),
         beam_hits(s.beams ? n : 0, 0), beam_around(s.beams && s.options.count_own_see ? n : 0, 0),
         beam_passed(beam_around.size(), 0), beam_through(s.beams && s.options.AsksThrough() ? n : 0, 0),
