@@ -154,6 +154,52 @@ TEST(Objects, PrecisionRecallF1PerPairChangeAndClass) {
   EXPECT_NE(ToMarkdown(rep).find("| 00_01 | 2 | 1 | 3 | 2 | 0.667 | 0.500 | 0.571 |"), std::string::npos);
 }
 
+// Moves: container 10 left one place, 11 is the same container at another (partners); two cars
+// came and went. A move is found when both its ends are found by clusters reported as moved,
+// linked when those clusters name each other; a cluster reported as moved is true when it finds
+// a move's end.
+TEST(Objects, MovedFoundLinkedAndPrecision) {
+  const auto cfg = Cfg();
+  std::vector<ObjectTruth> truth(4);
+  truth[0] = {"00_01", 10, "container", "open", 0, Grid(10, 10), {}};
+  truth[1] = {"00_01", 11, "container", "open", 1, Grid(10, 10, 20.f, 0.f), {}};
+  truth[2] = {"00_01", 7, "car", "open", 0, Grid(10, 10, 40.f, 0.f), {}};
+  truth[3] = {"00_01", 8, "car", "open", 1, Grid(10, 10, 60.f, 0.f), {}};
+  truth[0].partner = 11, truth[1].partner = 10;
+  std::vector<ObjectCluster> clusters(4);
+  clusters[0] = {"00_01", 0, Grid(10, 10), "disappeared", true, 1};
+  clusters[1] = {"00_01", 1, Grid(10, 10, 20.f, 0.f), "appeared", true, 0};
+  clusters[2] = {"00_01", 2, Grid(10, 10, 40.f, 0.f), "disappeared", true, 3};  // two cars: not a move
+  clusters[3] = {"00_01", 3, Grid(10, 10, 60.f, 0.f), "appeared", true, 2};
+  auto r = EvaluateObjects(truth, clusters, cfg, 2);
+  ASSERT_EQ(r.moved.size(), 2u);  // all, 00_01
+  const MovedPrf& m = r.moved[0];
+  EXPECT_EQ(m.name, "all");
+  EXPECT_EQ(m.truth_moves, 1u);
+  EXPECT_EQ(m.found, 1u);
+  EXPECT_EQ(m.linked, 1u);
+  EXPECT_EQ(m.reported, 4u);
+  EXPECT_EQ(m.true_reported, 2u);
+  EXPECT_NEAR(m.precision, 0.5, 1e-12);
+  EXPECT_NEAR(m.recall, 1.0, 1e-12);
+  EXPECT_EQ(r.moved[1].name, "00_01");
+  EXPECT_EQ(r.moved[1].found, 1u);
+  Report rep;
+  rep.objects = r;
+  EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.moved.0.precision"), 0.5, 1e-9);
+  EXPECT_NE(ToMarkdown(rep).find("| all | 1 | 1 | 1 | 4 | 2 | 0.500 | 1.000 |"), std::string::npos);
+  // Both ends reported as moved, each linked to a car: found, not linked.
+  clusters[0].partner = 3, clusters[3].partner = 0, clusters[1].partner = 2, clusters[2].partner = 1;
+  r = EvaluateObjects(truth, clusters, cfg, 2);
+  EXPECT_EQ(r.moved[0].found, 1u);
+  EXPECT_EQ(r.moved[0].linked, 0u);
+  // The container's new place reported as appeared: the move is not found.
+  clusters[1].moved = false, clusters[1].partner = -1;
+  r = EvaluateObjects(truth, clusters, cfg, 2);
+  EXPECT_EQ(r.moved[0].found, 0u);
+  EXPECT_NEAR(r.moved[0].recall, 0.0, 1e-12);
+}
+
 void WriteText(const std::string& path, const std::string& text) {
   fs::create_directories(fs::path(path).parent_path());
   std::ofstream(path) << text;
@@ -164,10 +210,10 @@ TEST(Objects, SimTruthAndClusterFiles) {
   fs::remove_all(dir);
   const std::string t = (dir / "sim" / "truth").string();
   WriteText(t + "/objects.csv",
-            "id,class,present_in,placement,centroid_x\n"
-            "3,car,0,open,0\n"       // only in 00: changed for 00_01
-            "4,fence,0;1,open,0\n"   // in both: not changed
-            "5,car,1,open,0\n");     // only in 01: changed
+            "id,class,present_in,placement,centroid_x,partner\n"
+            "3,car,0,open,0,5\n"     // only in 00: changed for 00_01; moved to 5
+            "4,fence,0;1,open,0,-1\n"  // in both: not changed
+            "5,car,1,open,0,3\n");   // only in 01: changed
   // One scan per session; session 01's true pose is shifted by +100 m in x.
   for (int s = 0; s < 2; ++s) {
     const std::string sd = t + "/session_0" + std::to_string(s);
@@ -206,6 +252,8 @@ TEST(Objects, SimTruthAndClusterFiles) {
   EXPECT_EQ(truth[1].change_points, 40);
   EXPECT_NEAR(truth[1].observed_share, 0.25, 1e-12);
   EXPECT_EQ(truth[0].id, 3);
+  EXPECT_EQ(truth[0].partner, 5);
+  EXPECT_EQ(truth[1].partner, 3);
   EXPECT_EQ(truth[0].session, 0);
   EXPECT_EQ(truth[0].pair, "00_01");
   EXPECT_EQ(truth[0].cloud.size(), 100u);  // HD points with the same id excluded
@@ -217,9 +265,9 @@ TEST(Objects, SimTruthAndClusterFiles) {
   // Clusters as `ltmapper map objects` writes them: object 0 = truth 3, object 1 = half of truth 5.
   const std::string od = (dir / "objects").string();
   WriteText(od + "/objects.csv",
-            "id,session,reference,class,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n"
-            "0,1,0,nd_strong,100,0,0,0,0,0,0,0,0,0\n"
-            "1,1,0,pd_strong,50,0,0,0,0,0,0,0,0,0\n");
+            "id,session,reference,class,change,partner,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n"
+            "0,1,0,nd_strong,moved,1,100,0,0,0,0,0,0,0,0,0\n"
+            "1,1,0,pd_strong,appeared,-1,50,0,0,0,0,0,0,0,0,0\n");
   PointCloud all = Grid(10, 10);
   all.append(Grid(5, 10, 100.f, 0.f));
   all.object.assign(all.size(), 0);
@@ -231,6 +279,10 @@ TEST(Objects, SimTruthAndClusterFiles) {
   EXPECT_EQ(clusters[0].change, "disappeared");  // from the class column
   EXPECT_EQ(clusters[1].change, "appeared");
   EXPECT_EQ(clusters[1].cloud.size(), 50u);
+  EXPECT_TRUE(clusters[0].moved);
+  EXPECT_EQ(clusters[0].partner, 1);
+  EXPECT_FALSE(clusters[1].moved);
+  EXPECT_EQ(clusters[1].partner, -1);
   const auto r = EvaluateObjects(truth, clusters, Cfg());
   EXPECT_TRUE(r.objects[0].found);
   EXPECT_TRUE(r.objects[1].found);  // IoU exactly 0.5

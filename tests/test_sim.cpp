@@ -9,6 +9,7 @@
 
 #include <array>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 
@@ -164,6 +165,39 @@ TEST_F(SimTruth, StaticWorldHasNoHdPointsAndOnlyPresentObjects) {
       }
     }
   }
+}
+
+// A moved container is two LD objects that name each other as partners: the same box, one present
+// up to the change session, the other from it on; no other object has a partner. The truth file
+// carries the column.
+TEST_F(SimTruth, MovedContainersNameEachOther) {
+  const SimConfig cfg;  // the default scenario: its lots hold the containers
+  Simulator sim(cfg, 1);
+  const auto& objects = sim.ld_objects();
+  std::size_t moves = 0;
+  for (const auto& o : objects) {
+    if (o.partner < 0) continue;
+    ASSERT_LT(std::size_t(o.partner), objects.size());
+    const auto& p = objects[std::size_t(o.partner)];
+    EXPECT_EQ(p.partner, o.id);
+    EXPECT_EQ(o.cls, "container");
+    EXPECT_EQ(p.cls, "container");
+    const auto extents = [](const LdObjectInfo& x) {  // longer, shorter xy side, height: lots face any street
+      const Eigen::Vector3d e = x.box_max - x.box_min;
+      return Eigen::Vector3d(std::max(e.x(), e.y()), std::min(e.x(), e.y()), e.z());
+    };
+    EXPECT_LT((extents(o) - extents(p)).norm(), 1e-3);
+    const auto& first = o.present_in.front() == 0 ? o : p;
+    const auto& second = o.present_in.front() == 0 ? p : o;
+    EXPECT_EQ(first.present_in.back() + 1, second.present_in.front());
+    EXPECT_EQ(second.present_in.back(), cfg.sessions - 1);
+    moves += o.id < o.partner;
+  }
+  EXPECT_EQ(moves, std::size_t(cfg.ld_containers));
+  std::ifstream csv(Out() + "/truth/objects.csv");
+  std::string header;
+  std::getline(csv, header);
+  EXPECT_EQ(header.substr(header.rfind(',') + 1), "partner");
 }
 
 TEST_F(SimTruth, LdObjectsSeenExactlyWhereTheyExist) {

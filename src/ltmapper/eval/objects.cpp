@@ -184,6 +184,44 @@ ObjectsPrf Slice(const std::string& name, const ObjectsResult& r, const std::vec
   return s;
 }
 
+// The moves of the truth objects and clusters of pair `pair` ("" = every pair), MovedPrf's rules.
+MovedPrf Moves(const std::string& pair, const ObjectsResult& r, const std::vector<ObjectTruth>& truth) {
+  MovedPrf m;
+  m.name = pair.empty() ? "all" : pair;
+  std::map<std::pair<std::string, int>, std::size_t> at;  // (pair, truth id) -> index
+  std::set<int> ends;                                      // truth ids that are an end of a move
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    at[{truth[i].pair, truth[i].id}] = i;
+    if (truth[i].partner >= 0) ends.insert(truth[i].id);
+  }
+  std::map<int, const ClusterScore*> cluster;  // cluster id -> score
+  for (const auto& c : r.cluster_scores) cluster[c.id] = &c;
+  const auto moved = [&](const ObjectScore& o) {
+    const auto it = cluster.find(o.best_cluster);
+    return o.found && it != cluster.end() && it->second->moved;
+  };
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    const ObjectTruth& t = truth[i];
+    if (t.partner < t.id || (!pair.empty() && t.pair != pair)) continue;  // each move once, from its lower id
+    const auto j = at.find({t.pair, t.partner});
+    if (j == at.end() || !r.objects[i].scored || !r.objects[j->second].scored) continue;
+    ++m.truth_moves;
+    const ObjectScore &a = r.objects[i], &b = r.objects[j->second];
+    if (!moved(a) || !moved(b)) continue;
+    ++m.found;
+    if (cluster.at(a.best_cluster)->partner == b.best_cluster && cluster.at(b.best_cluster)->partner == a.best_cluster)
+      ++m.linked;
+  }
+  for (const auto& c : r.cluster_scores) {
+    if (!c.moved || (!pair.empty() && c.pair != pair)) continue;
+    ++m.reported;
+    if (c.true_object && ends.count(c.best_truth)) ++m.true_reported;
+  }
+  if (m.reported) m.precision = double(m.true_reported) / double(m.reported);
+  if (m.truth_moves) m.recall = double(m.found) / double(m.truth_moves);
+  return m;
+}
+
 void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::set<std::string>& pairs,
                const EvalConfig& cfg) {
   for (const auto& s : r.objects)
@@ -196,6 +234,8 @@ void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const st
   for (const auto& p : pairs)
     r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; },
                                [&](const ClusterScore& c) { return c.pair == p; }));
+  r.moved.push_back(Moves("", r, truth));
+  for (const auto& p : pairs) r.moved.push_back(Moves(p, r, truth));
   for (const std::string ch : {"appeared", "disappeared"})
     r.per_change.push_back(Slice(ch, r, truth, [&](const ObjectTruth& t) { return TruthChange(t) == ch; },
                                  [&](const ClusterScore& c) { return c.change == ch; }));
@@ -247,6 +287,8 @@ void ScoreClusters(ObjectsResult& r, const std::vector<ObjectTruth>& truth, cons
     s.pair = clusters[k].pair;
     s.change = clusters[k].change;
     s.id = clusters[k].id;
+    s.moved = clusters[k].moved;
+    s.partner = clusters[k].partner;
     s.points = cp.cloud[k].size();
     for (std::size_t i = 0; i < truth.size(); ++i) {
       const double iou = PairIou(truth[i], i, tp, clusters[k], k, cp, cfg);
@@ -289,6 +331,7 @@ std::vector<SimObject> ReadSimObjects(const std::string& path) {
     o.id = ToInt(f[0], path, line);
     o.cls = f[1];
     o.placement = f[3];
+    o.partner = f[4].empty() ? -1 : ToInt(f[4], path, line);
     std::string cur;
     for (const char c : f[2] + ";") {
       if (c == ';') {
@@ -299,7 +342,7 @@ std::vector<SimObject> ReadSimObjects(const std::string& path) {
       }
     }
     out.push_back(std::move(o));
-  });
+  }, {"partner"});
   return out;
 }
 
@@ -308,6 +351,7 @@ namespace {
 // each matches the step pairs (a, j) whose session j already agrees with b about it.
 std::vector<ObjectTruth> ChangedObjects(const std::string& truth_dir, int a, int b) {
   std::vector<ObjectTruth> out;
+  std::map<int, int> partner;  // id -> truth/objects.csv's partner
   for (const auto& o : ReadSimObjects(Join(truth_dir, "objects.csv"))) {
     const auto in = [&](int s) { return std::count(o.present_in.begin(), o.present_in.end(), s) > 0; };
     const bool in_a = in(a), in_b = in(b);
@@ -323,8 +367,13 @@ std::vector<ObjectTruth> ChangedObjects(const std::string& truth_dir, int a, int
     // already agrees with b about the object (removed / added there).
     for (int j = std::min(a, b) + 1; j < std::max(a, b); ++j)
       if (in(j) == in_b) t.match_pairs.push_back(PairName(a, j));
+    partner[t.id] = o.partner;
     out.push_back(std::move(t));
   }
+  // A move's ends: both changed, on opposite sides of the pair.
+  for (auto& t : out)
+    for (const auto& u : out)
+      if (u.id == partner[t.id] && u.session != t.session) t.partner = u.id;
   return out;
 }
 
@@ -411,10 +460,12 @@ std::vector<ObjectCluster> ReadObjectClusters(const std::string& dir) {
     c.id = ToInt(f[0], csv, line);
     c.pair = PairName(ToInt(f[2], csv, line), ToInt(f[1], csv, line));
     c.change = f[3].rfind("pd", 0) == 0 ? "appeared" : f[3].rfind("nd", 0) == 0 ? "disappeared" : "";
+    c.moved = f[4] == "moved";
+    c.partner = f[5].empty() ? -1 : ToInt(f[5], csv, line);
     if (slot.count(c.id)) throw Error(csv, line, "duplicate object id " + f[0]);
     slot[c.id] = out.size();
     out.push_back(std::move(c));
-  }, {"class"});
+  }, {"class", "change", "partner"});
   if (out.empty()) return out;
   const PointCloud all = io::ReadPly(ply);
   if (all.object.size() != all.size()) throw Error(ply, 0, "no 'object' field");

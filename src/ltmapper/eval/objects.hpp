@@ -32,6 +32,10 @@ struct ObjectTruth {
   // that left behind a hoarding): by the rule a coverage difference, not an object. NaN
   // without the file.
   double observed_share = kNaN;
+  // A move's other end (truth/objects.csv's partner): the id of the same object at its other place
+  // when that place is a changed object of this pair on the other side (a container gone from
+  // one lot and new at another), else -1.
+  int partner = -1;
 };
 struct ObjectCluster {
   std::string pair;       // step's "<reference>_<session>", 2 digits each
@@ -40,6 +44,8 @@ struct ObjectCluster {
   // "appeared" (PD cluster) or "disappeared" (ND cluster), from objects.csv's class column;
   // "" when unknown (the cluster then counts in the per-pair rows only).
   std::string change;
+  bool moved = false;  // objects.csv's change column says "moved"
+  int partner = -1;    // moved: the other end's cluster id (objects.csv's partner column)
 };
 // A cluster against the truth objects of its pair: it is a true object when some truth object
 // eligible for its pair (ObjectTruth::match_pairs) reaches IoU >= obj_min_iou, else a false one.
@@ -50,6 +56,19 @@ struct ClusterScore {
   int best_truth = -1;             // truth object id with the highest IoU (-1: none overlaps)
   double best_iou = 0.0;
   bool true_object = false;
+  bool moved = false;              // see ObjectCluster
+  int partner = -1;
+};
+// Moves (ObjectTruth::partner) of one slice: the "moved objects reported as moved". A
+// truth move (both ends scored) is found when both its ends are found (ObjectScore::found) by
+// clusters reported as moved, and linked when those two clusters name each other as partners (two
+// identical containers that both moved may be paired the other way round). A cluster reported as
+// moved is true when it is a true object whose best truth object is an end of a move. Precision =
+// true reported / reported, recall = found / truth moves; NaN without any.
+struct MovedPrf {
+  std::string name;                // "all", "00_01", ...
+  std::size_t truth_moves = 0, found = 0, linked = 0, reported = 0, true_reported = 0;
+  double precision = kNaN, recall = kNaN;
 };
 // Precision = true clusters / clusters, recall = found / scored truth objects, F1 their harmonic
 // mean, for one slice (a pair, a change type or everything).
@@ -85,6 +104,7 @@ struct ObjectsResult {
                                              // objects.min_observed_share
   std::vector<ObjectsPrf> per_pair, per_change;
   std::vector<ObjectsPrf> per_class;         // "class car", ...: truth objects of the class, clusters overlapping them most
+  std::vector<MovedPrf> moved;               // "all", then one per pair
 };
 // Point IoU of two point sets after voxel-downsampling both to obj_voxel_m (same density, so
 // counts are comparable): a point of A matches when B has a point within obj_match_dist_m and
@@ -102,6 +122,7 @@ struct SimObject {
   int id = -1;
   std::string cls, placement;
   std::vector<int> present_in;
+  int partner = -1;  // the optional partner column: the same object at its other place, else -1
 };
 std::vector<SimObject> ReadSimObjects(const std::string& objects_csv);
 // Truth changed objects of pair "CC_QQ" (sim session indices): labelled scan points (class
@@ -112,7 +133,7 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
 // The clusters written by `ltmapper map objects` (objects.csv + objects.ply with object ids);
 // pair = reference and session columns (store session orders, = sim indices when the sessions
 // were integrated in sim order); change from the optional class column (pd_* appeared, nd_*
-// disappeared).
+// disappeared); moved and partner from the optional change and partner columns.
 std::vector<ObjectCluster> ReadObjectClusters(const std::string& objects_dir);
 
 }  // namespace ltm::eval

@@ -197,6 +197,8 @@ void WriteClusterScores(io::json::Writer& w, const ObjectsResult& r) {
         .Int("best_truth", c.best_truth)
         .Number("best_iou", c.best_iou)
         .Bool("true_object", c.true_object)
+        .Bool("moved", c.moved)
+        .Int("partner", c.partner)
         .EndObject();
   w.EndArray();
 }
@@ -221,6 +223,18 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
   for (const auto& p : r.per_change) WritePrf(w, p);
   w.EndArray().BeginArray("per_class");
   for (const auto& p : r.per_class) WritePrf(w, p);
+  w.EndArray().BeginArray("moved");
+  for (const auto& m : r.moved)
+    w.BeginObject()
+        .String("name", m.name)
+        .Int("truth_moves", (long long)m.truth_moves)
+        .Int("found", (long long)m.found)
+        .Int("linked", (long long)m.linked)
+        .Int("reported", (long long)m.reported)
+        .Int("true_reported", (long long)m.true_reported)
+        .Number("precision", m.precision)
+        .Number("recall", m.recall)
+        .EndObject();
   w.EndArray();
   WriteClusterScores(w, r);
   w.BeginArray("objects");
@@ -449,6 +463,13 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   for (const auto& p : rows)
     md << Row({p.name, std::to_string(p.truth_objects), std::to_string(p.found), std::to_string(p.clusters),
                std::to_string(p.true_clusters), Fmt(p.precision, 3), Fmt(p.recall, 3), Fmt(p.f1, 3)});
+  md << "\nMoved objects (truth/objects.csv's partner: the same object gone from one place and new at another "
+        "in the pair): a move is found when clusters reported as moved find both its ends, linked when those two "
+        "name each other as partners; a cluster reported as moved is true when it finds an end of a move.\n\n"
+     << Header({"slice", "truth moves", "found as moved", "linked", "clusters moved", "true", "precision", "recall"});
+  for (const auto& m : r.moved)
+    md << Row({m.name, std::to_string(m.truth_moves), std::to_string(m.found), std::to_string(m.linked),
+               std::to_string(m.reported), std::to_string(m.true_reported), Fmt(m.precision, 3), Fmt(m.recall, 3)});
   md << "\n"
      << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "observed share",
                 "best cluster", "cluster points", "IoU", "found"});

@@ -18,6 +18,7 @@ struct LdObjectInfo {
   std::string cls;                 // car, truck, tree, fence, container, structure, wall, hoarding
   std::vector<int> present_in;     // sorted session indices
   std::string placement;           // open | occluded | revealed
+  int partner = -1;                // the same object at its other place (a moved container), else -1
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  // world frame [m]
   Eigen::Vector3d box_min = Eigen::Vector3d::Zero(), box_max = Eigen::Vector3d::Zero();
 };

@@ -36,14 +36,15 @@ std::string SessionName(int s) { return "session_" + Num(s, 2); }
 
 void WriteObjectsCsv(const std::string& path, const std::vector<LdObjectInfo>& objects) {
   io::WriteFileAtomic(path, [&](std::ostream& os) {
-    os << "id,class,present_in,placement,centroid_x,centroid_y,centroid_z,min_x,min_y,min_z,max_x,max_y,max_z\n";
+    os << "id,class,present_in,placement,centroid_x,centroid_y,centroid_z,min_x,min_y,min_z,max_x,max_y,max_z,"
+          "partner\n";
     os << std::fixed << std::setprecision(3);
     for (const auto& o : objects) {
       os << o.id << ',' << o.cls << ',';
       for (std::size_t i = 0; i < o.present_in.size(); ++i) os << (i ? ";" : "") << o.present_in[i];
       os << ',' << o.placement;
       for (const auto* v : {&o.centroid, &o.box_min, &o.box_max}) os << ',' << v->x() << ',' << v->y() << ',' << v->z();
-      os << '\n';
+      os << ',' << o.partner << '\n';
     }
   });
 }

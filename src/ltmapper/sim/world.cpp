@@ -567,10 +567,13 @@ class LdPlacer {
       Lot* b = a ? NextLot(8.0, 6.0) : nullptr;
       if (!b) break;
       const int m = ChangeSession();
+      const int first = int(out_.size());
       for (auto [lot, present] : {std::make_pair(a, Range(0, m)), std::make_pair(b, Range(m, N_))}) {
         const Eigen::Vector2d c = lot->P(0.5 * lot->width, 4.0);
         Add("container", present, "open").AddBox(c, Gz(c) - 0.05, {6.06, 2.44, 2.64}, lot->yaw(), kMetal);
       }
+      out_[std::size_t(first)].info.partner = first + 1;
+      out_[std::size_t(first) + 1].info.partner = first;
     }
   }
 
