@@ -12,6 +12,7 @@ PACKAGES=(
   liblz4-dev             # FLANN's headers, compiled in with PCL's templates
   liblzf-dev             # binary_compressed PCDs
   libnanoflann-dev       # kd-tree for hot loops
+  libboost-dev           # Boost.Geometry's convex hull (objects' oriented boxes; headers only)
   libtbb-dev             # parallel_for / parallel_reduce
   libembree-dev          # ray casting (simulator)
   libsqlite3-dev         # map store

@@ -505,6 +505,30 @@ TEST(Geometry, EuclideanClustersAndHorizontalEdge) {
   EXPECT_TRUE(geometry::EuclideanClusters(PointCloud(), 0.5).empty());
 }
 
+// A 6.06 x 2.44 m container turned by 30 deg and scanned on two faces (an L of points along one
+// long and one short side): the box whose sides the points hug is the container's; the principal
+// axes' box is longer (the L's spread tilts its axis), and the smallest-area box of the L's
+// triangular hull may lie along its hypotenuse (a right triangle's two boxes have equal areas).
+TEST(Geometry, SidesBoxOfAnLShapedScan) {
+  const double yaw = 30.0 * M_PI / 180.0, L = 6.06, W = 2.44;
+  const Eigen::Vector2d u(std::cos(yaw), std::sin(yaw)), v(-u.y(), u.x()), c(10.0, -4.0);
+  PointCloud scan;
+  auto add = [&](const Eigen::Vector2d& p) { scan.push_back(float(p.x()), float(p.y()), 1.f); };
+  for (int i = 0; i <= 60; ++i) add(c + u * (L * (i / 60.0 - 0.5)) - v * (W / 2));   // long face
+  for (int i = 1; i <= 12; ++i) add(c + u * (L / 2) + v * (W * (i / 12.0 - 0.5)));   // short face
+  const geometry::HorizontalBox b = geometry::SidesBoxOf(scan);
+  EXPECT_NEAR(b.length, L, 1e-4);
+  EXPECT_NEAR(b.width, W, 1e-4);
+  EXPECT_NEAR(std::abs(std::sin(b.yaw_rad - yaw)), 0.0, 1e-4);  // along the long side, either way
+  EXPECT_NEAR((b.center - c).norm(), 0.0, 1e-4);
+  EXPECT_GT(geometry::HorizontalBoxOf(scan).length, L + 0.25);  // its axis tilted towards the short face
+  // Fewer than three points, or all on one spot: the principal axes' box.
+  EXPECT_NEAR(geometry::SidesBoxOf(scan, {0, 60}).length, L, 1e-4);
+  PointCloud spot;
+  for (int i = 0; i < 4; ++i) spot.push_back(1.f, 2.f, 0.f);
+  EXPECT_NEAR(geometry::SidesBoxOf(spot).length, 0.0, 1e-9);
+}
+
 // More points than one batch of the parallel neighbour search (64 x 1024), more than one kd-tree
 // block: the labels of every thread count equal those of a brute-force join of all close pairs.
 TEST(Geometry, EuclideanClustersOnManyCoresEqualOneCore) {

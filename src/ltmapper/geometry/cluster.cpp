@@ -3,6 +3,8 @@
 #include "ltmapper/geometry/geometry.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <boost/geometry.hpp>
+#include <boost/geometry/geometries/point_xy.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -116,6 +118,51 @@ HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::ui
   box.length = a1 - a0;
   box.width = b1 - b0;
   return box;
+}
+
+HorizontalBox SidesBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
+  namespace bg = boost::geometry;
+  using Point = bg::model::d2::point_xy<double>;
+  const std::size_t n = idx.empty() ? cloud.size() : idx.size();
+  if (n < 3) return HorizontalBoxOf(cloud, idx);
+  bg::model::multi_point<Point> pts;
+  pts.reserve(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const PointXYZI& p = cloud.points[idx.empty() ? k : idx[k]];
+    pts.emplace_back(double(p.x), double(p.y));
+  }
+  bg::model::ring<Point> hull;
+  bg::convex_hull(pts, hull);
+  HorizontalBox best;
+  double best_mean = std::numeric_limits<double>::infinity(), best_area = best_mean;
+  for (std::size_t e = 0; e + 1 < hull.size(); ++e) {
+    Eigen::Vector2d u(hull[e + 1].x() - hull[e].x(), hull[e + 1].y() - hull[e].y());
+    if (u.norm() < 1e-9) continue;
+    u.normalize();
+    const Eigen::Vector2d v(-u.y(), u.x());
+    double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
+    for (const Point& q : hull) {
+      const Eigen::Vector2d d(q.x(), q.y());
+      a0 = std::min(a0, d.dot(u)), a1 = std::max(a1, d.dot(u));
+      b0 = std::min(b0, d.dot(v)), b1 = std::max(b1, d.dot(v));
+    }
+    double sum = 0.0;  // each point's distance to its nearest side
+    for (const Point& q : pts) {
+      const Eigen::Vector2d d(q.x(), q.y());
+      const double a = d.dot(u), b = d.dot(v);
+      sum += std::min(std::min(a - a0, a1 - a), std::min(b - b0, b1 - b));
+    }
+    const double mean = sum / double(n), area = (a1 - a0) * (b1 - b0);
+    if (mean > best_mean || (mean == best_mean && area >= best_area)) continue;
+    best_mean = mean, best_area = area;
+    const Eigen::Vector2d major = a1 - a0 >= b1 - b0 ? u : v;
+    best.yaw_rad = std::atan2(major.y(), major.x());
+    best.center = u * (a0 + a1) / 2 + v * (b0 + b1) / 2;
+    best.length = std::max(a1 - a0, b1 - b0);
+    best.width = std::min(a1 - a0, b1 - b0);
+  }
+  if (!std::isfinite(best_mean)) return HorizontalBoxOf(cloud, idx);  // all points on one spot
+  return best;
 }
 
 double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {

@@ -141,7 +141,14 @@ struct HorizontalBox {
   double length = 0.0, width = 0.0;  // along the major / minor axis
 };
 HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx = {});
-// Its longest edge [m]; 0 for fewer than two points.
+// The xy rectangle around cloud[idx] (all points when idx is empty) whose sides the points lie
+// closest to: of the rectangles along the edges of the points' convex hull, the one with the least
+// mean distance from a point to its nearest side (ties: the smaller area); the major axis is the
+// longer side. A box scanned from outside has its points on one or two of its faces (an L): the
+// rectangle along those faces has them on its sides, where the principal axes of HorizontalBoxOf
+// run diagonal to the box and the smallest-area rectangle of an L's triangular hull may too.
+HorizontalBox SidesBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx = {});
+// HorizontalBoxOf's longest edge [m]; 0 for fewer than two points.
 double LongestHorizontalEdge(const PointCloud& cloud, const std::vector<std::uint32_t>& idx);
 
 // The lowest z per square xy cell of edge cell_m (cell floor(x / cell_m), floor(y / cell_m)) of

@@ -302,10 +302,11 @@ void Describe(MapObject& o) {
     if (n > best) best = n, o.cls = c;
 }
 
-// Oriented box: yaw of the main horizontal axis (geometry::HorizontalBoxOf), extents along it,
-// its normal and z.
+// Oriented box: the xy rectangle whose sides the points lie closest to (geometry::SidesBoxOf: a
+// box scanned on two faces has a diagonal principal axis, and that box is up to 1.5 x as wide),
+// yaw of its longer side, extents along it and across, and z.
 void OrientedBox(MapObject& o) {
-  const geometry::HorizontalBox b = geometry::HorizontalBoxOf(o.cloud);
+  const geometry::HorizontalBox b = geometry::SidesBoxOf(o.cloud);
   o.yaw_rad = b.yaw_rad;
   o.box_center = Eigen::Vector3d(b.center.x(), b.center.y(), (o.lo.z() + o.hi.z()) / 2);
   o.size = Eigen::Vector3d(b.length, b.width, o.hi.z() - o.lo.z());
