@@ -48,6 +48,7 @@ py::dict ObjectToDict(const map::MapObject& o) {
   d["lo"] = Vec3(o.lo);
   d["hi"] = Vec3(o.hi);
   PutFields(d, o, LTM_KV(o, change), LTM_KV(o, partner), LTM_KV(o, exists_in), LTM_KV(o, confidence));
+  PutFields(d, o, LTM_KV(o, track), LTM_KV(o, track_sessions));
   d["box_center"] = Vec3(o.box_center);
   d["size"] = Vec3(o.size);
   d["yaw_rad"] = o.yaw_rad;

@@ -200,6 +200,33 @@ TEST(Objects, MovedFoundLinkedAndPrecision) {
   EXPECT_NEAR(r.moved[0].recall, 0.0, 1e-12);
 }
 
+// Identity across steps: truth car 7 gone since session 0 is found by the clusters of steps 1
+// and 2; both in one track is right, car 8 of step 2 in that track too is wrong.
+TEST(Objects, IdentityAcrossSteps) {
+  const auto cfg = Cfg();
+  std::vector<ObjectTruth> truth(3);
+  truth[0] = {"00_01", 7, "car", "open", 0, Grid(10, 10), {}};
+  truth[1] = {"00_02", 7, "car", "open", 0, Grid(10, 10), {}};
+  truth[2] = {"00_02", 8, "car", "open", 2, Grid(10, 10, 40.f, 0.f), {}};
+  std::vector<ObjectCluster> clusters(3);
+  clusters[0] = {"00_01", 0, Grid(10, 10), "disappeared", false, -1, 0};
+  clusters[1] = {"00_02", 1, Grid(10, 10), "disappeared", false, -1, 0};
+  clusters[2] = {"00_02", 2, Grid(10, 10, 40.f, 0.f), "appeared", false, -1, 2};
+  auto r = EvaluateObjects(truth, clusters, cfg, 2);
+  EXPECT_EQ(r.identity.same, 1u);
+  EXPECT_EQ(r.identity.same_tracked, 1u);
+  EXPECT_EQ(r.identity.tracked, 1u);
+  EXPECT_EQ(r.identity.tracked_wrong, 0u);
+  clusters[1].track = 1, clusters[2].track = 0;  // step 2's rows swapped: car 8 in car 7's track
+  r = EvaluateObjects(truth, clusters, cfg, 2);
+  EXPECT_EQ(r.identity.same_tracked, 0u);
+  EXPECT_EQ(r.identity.tracked, 1u);
+  EXPECT_EQ(r.identity.tracked_wrong, 1u);
+  Report rep;
+  rep.objects = r;
+  EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.identity.tracked_wrong"), 1.0, 1e-9);
+}
+
 void WriteText(const std::string& path, const std::string& text) {
   fs::create_directories(fs::path(path).parent_path());
   std::ofstream(path) << text;
@@ -265,9 +292,9 @@ TEST(Objects, SimTruthAndClusterFiles) {
   // Clusters as `ltmapper map objects` writes them: object 0 = truth 3, object 1 = half of truth 5.
   const std::string od = (dir / "objects").string();
   WriteText(od + "/objects.csv",
-            "id,session,reference,class,change,partner,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n"
-            "0,1,0,nd_strong,moved,1,100,0,0,0,0,0,0,0,0,0\n"
-            "1,1,0,pd_strong,appeared,-1,50,0,0,0,0,0,0,0,0,0\n");
+            "id,session,reference,class,change,partner,track,points,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z\n"
+            "0,1,0,nd_strong,moved,1,0,100,0,0,0,0,0,0,0,0,0\n"
+            "1,1,0,pd_strong,appeared,-1,1,50,0,0,0,0,0,0,0,0,0\n");
   PointCloud all = Grid(10, 10);
   all.append(Grid(5, 10, 100.f, 0.f));
   all.object.assign(all.size(), 0);
@@ -283,6 +310,7 @@ TEST(Objects, SimTruthAndClusterFiles) {
   EXPECT_EQ(clusters[0].partner, 1);
   EXPECT_FALSE(clusters[1].moved);
   EXPECT_EQ(clusters[1].partner, -1);
+  EXPECT_EQ(clusters[1].track, 1);
   const auto r = EvaluateObjects(truth, clusters, Cfg());
   EXPECT_TRUE(r.objects[0].found);
   EXPECT_TRUE(r.objects[1].found);  // IoU exactly 0.5

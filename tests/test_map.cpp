@@ -954,6 +954,52 @@ TEST(MapObjects, MovedContainerAndStableIds) {
   }
 }
 
+// Identity across steps: car A, new in session 1, is found again by step 2, which sampled it 0.3 m
+// off (new points the map state did not hold yet): both rows are one track, existing in sessions 1
+// and 2; car B, new in session 2, and the container gone in session 1 are tracks of their own. A
+// move's two ends are one track.
+TEST(MapObjects, OneObjectFoundByTwoStepsIsOneTrack) {
+  test::TempDir tmp;
+  const PointCloud container = Car(8, 8, 2.4f, 6.0f, 2.5f);
+  KeyframeDelta d1, d2;
+  d1.nd_strong = container;
+  d1.pd_weak = Car(-12, -4, 2.f, 4.f, 1.5f);                                          // car A
+  d2.pd_weak = Cat(Car(-11.7f, -4, 2.f, 4.f, 1.5f), Car(10, -10, 2.f, 4.5f, 1.6f));  // car A again, car B
+  Store s = Store::Create(tmp / "o.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), container)}});
+  s.IntegrateSession({"s1"}, "s0", {d1}, {});
+  s.IntegrateSession({"s2"}, "s0", {d2}, {});
+  const auto objs = s.Objects();
+  ASSERT_EQ(objs.size(), 4u);
+  std::map<std::string, std::vector<const MapObject*>> at;  // rows by place
+  for (const auto& o : objs) {
+    EXPECT_EQ(o.partner, -1) << "no move: the boxes differ";
+    at[o.centroid.x() > 5 ? (o.centroid.y() > 0 ? "container" : "car B") : "car A"].push_back(&o);
+  }
+  ASSERT_EQ(at["container"].size(), 1u);
+  ASSERT_EQ(at["car A"].size(), 2u);
+  ASSERT_EQ(at["car B"].size(), 1u);
+  for (const auto& [place, rows] : at) {
+    EXPECT_EQ(rows.front()->track, rows.back()->track) << place;
+    EXPECT_EQ(rows.front()->track, std::min(rows.front()->id, rows.back()->id)) << place;
+  }
+  EXPECT_EQ(at["container"][0]->track_sessions, std::vector<int>({0}));
+  EXPECT_EQ(at["car A"][0]->track_sessions, std::vector<int>({1, 2}));
+  EXPECT_EQ(at["car B"][0]->track_sessions, std::vector<int>({2}));
+  EXPECT_NE(at["car A"][0]->track, at["car B"][0]->track);
+  EXPECT_NE(at["car A"][0]->track, at["container"][0]->track);
+  // A moved container: its two ends are one track.
+  test::TempDir tmp2;
+  KeyframeDelta d;
+  d.nd_strong = container;
+  d.pd_weak = Car(-12, -4, 2.4f, 6.0f, 2.5f);
+  const auto moved = StepObjects(tmp2, container, d, nullptr);
+  ASSERT_EQ(moved.size(), 2u);
+  EXPECT_EQ(moved[0].partner, moved[1].id);
+  EXPECT_EQ(moved[0].track, moved[1].track);
+  EXPECT_EQ(moved[0].track_sessions, std::vector<int>({0, 1}));
+}
+
 // Each step's objects are computed once and kept in the store: decoding them gives what computing
 // them gives (every field, every point), a new step computes only itself, and another object
 // config never reads what an earlier one stored.

@@ -222,6 +222,25 @@ MovedPrf Moves(const std::string& pair, const ObjectsResult& r, const std::vecto
   return m;
 }
 
+// IdentityScore over the true clusters of different steps (pairs).
+IdentityScore Identity(const ObjectsResult& r, const std::vector<ObjectTruth>& truth) {
+  std::set<std::pair<int, int>> moves;  // (truth id, its move's other end)
+  for (const auto& t : truth)
+    if (t.partner >= 0) moves.insert({t.id, t.partner});
+  IdentityScore s;
+  const auto& c = r.cluster_scores;
+  for (std::size_t i = 0; i < c.size(); ++i)
+    for (std::size_t j = i + 1; j < c.size(); ++j) {
+      if (!c[i].true_object || !c[j].true_object || c[i].pair == c[j].pair) continue;
+      const bool tracked = c[i].track >= 0 && c[i].track == c[j].track;
+      if (c[i].best_truth == c[j].best_truth) ++s.same, s.same_tracked += tracked ? 1 : 0;
+      if (!tracked) continue;
+      ++s.tracked;
+      if (c[i].best_truth != c[j].best_truth && !moves.count({c[i].best_truth, c[j].best_truth})) ++s.tracked_wrong;
+    }
+  return s;
+}
+
 void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const std::set<std::string>& pairs,
                const EvalConfig& cfg) {
   for (const auto& s : r.objects)
@@ -234,6 +253,7 @@ void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const st
   for (const auto& p : pairs)
     r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; },
                                [&](const ClusterScore& c) { return c.pair == p; }));
+  r.identity = Identity(r, truth);
   r.moved.push_back(Moves("", r, truth));
   for (const auto& p : pairs) r.moved.push_back(Moves(p, r, truth));
   for (const std::string ch : {"appeared", "disappeared"})
@@ -289,6 +309,7 @@ void ScoreClusters(ObjectsResult& r, const std::vector<ObjectTruth>& truth, cons
     s.id = clusters[k].id;
     s.moved = clusters[k].moved;
     s.partner = clusters[k].partner;
+    s.track = clusters[k].track;
     s.points = cp.cloud[k].size();
     for (std::size_t i = 0; i < truth.size(); ++i) {
       const double iou = PairIou(truth[i], i, tp, clusters[k], k, cp, cfg);
@@ -462,10 +483,11 @@ std::vector<ObjectCluster> ReadObjectClusters(const std::string& dir) {
     c.change = f[3].rfind("pd", 0) == 0 ? "appeared" : f[3].rfind("nd", 0) == 0 ? "disappeared" : "";
     c.moved = f[4] == "moved";
     c.partner = f[5].empty() ? -1 : ToInt(f[5], csv, line);
+    c.track = f[6].empty() ? -1 : ToInt(f[6], csv, line);
     if (slot.count(c.id)) throw Error(csv, line, "duplicate object id " + f[0]);
     slot[c.id] = out.size();
     out.push_back(std::move(c));
-  }, {"class", "change", "partner"});
+  }, {"class", "change", "partner", "track"});
   if (out.empty()) return out;
   const PointCloud all = io::ReadPly(ply);
   if (all.object.size() != all.size()) throw Error(ply, 0, "no 'object' field");

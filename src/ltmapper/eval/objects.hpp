@@ -46,6 +46,7 @@ struct ObjectCluster {
   std::string change;
   bool moved = false;  // objects.csv's change column says "moved"
   int partner = -1;    // moved: the other end's cluster id (objects.csv's partner column)
+  int track = -1;      // identity across steps (objects.csv's track column), -1 when absent
 };
 // A cluster against the truth objects of its pair: it is a true object when some truth object
 // eligible for its pair (ObjectTruth::match_pairs) reaches IoU >= obj_min_iou, else a false one.
@@ -58,6 +59,7 @@ struct ClusterScore {
   bool true_object = false;
   bool moved = false;              // see ObjectCluster
   int partner = -1;
+  int track = -1;
 };
 // Moves (ObjectTruth::partner) of one slice: the "moved objects reported as moved". A
 // truth move (both ends scored) is found when both its ends are found (ObjectScore::found) by
@@ -65,6 +67,13 @@ struct ClusterScore {
 // identical containers that both moved may be paired the other way round). A cluster reported as
 // moved is true when it is a true object whose best truth object is an end of a move. Precision =
 // true reported / reported, recall = found / truth moves; NaN without any.
+// Identity across steps (the "the same object seen in several sessions keeps one id"),
+// over pairs of true clusters of different steps: `same` find one truth object, `same_tracked` of
+// those share a track; `tracked` share a track, `tracked_wrong` of those find two truth objects
+// that are not one move's two ends.
+struct IdentityScore {
+  std::size_t same = 0, same_tracked = 0, tracked = 0, tracked_wrong = 0;
+};
 struct MovedPrf {
   std::string name;                // "all", "00_01", ...
   std::size_t truth_moves = 0, found = 0, linked = 0, reported = 0, true_reported = 0;
@@ -105,6 +114,7 @@ struct ObjectsResult {
   std::vector<ObjectsPrf> per_pair, per_change;
   std::vector<ObjectsPrf> per_class;         // "class car", ...: truth objects of the class, clusters overlapping them most
   std::vector<MovedPrf> moved;               // "all", then one per pair
+  IdentityScore identity;
 };
 // Point IoU of two point sets after voxel-downsampling both to obj_voxel_m (same density, so
 // counts are comparable): a point of A matches when B has a point within obj_match_dist_m and
@@ -133,7 +143,7 @@ std::vector<ObjectTruth> LoadSimObjectTruth(const std::string& sim_dir, const st
 // The clusters written by `ltmapper map objects` (objects.csv + objects.ply with object ids);
 // pair = reference and session columns (store session orders, = sim indices when the sessions
 // were integrated in sim order); change from the optional class column (pd_* appeared, nd_*
-// disappeared); moved and partner from the optional change and partner columns.
+// disappeared); moved, partner and track from the optional change, partner and track columns.
 std::vector<ObjectCluster> ReadObjectClusters(const std::string& objects_dir);
 
 }  // namespace ltm::eval

@@ -199,6 +199,7 @@ void WriteClusterScores(io::json::Writer& w, const ObjectsResult& r) {
         .Bool("true_object", c.true_object)
         .Bool("moved", c.moved)
         .Int("partner", c.partner)
+        .Int("track", c.track)
         .EndObject();
   w.EndArray();
 }
@@ -235,7 +236,13 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
         .Number("precision", m.precision)
         .Number("recall", m.recall)
         .EndObject();
-  w.EndArray();
+  w.EndArray()
+      .BeginObject("identity")
+      .Int("same", (long long)r.identity.same)
+      .Int("same_tracked", (long long)r.identity.same_tracked)
+      .Int("tracked", (long long)r.identity.tracked)
+      .Int("tracked_wrong", (long long)r.identity.tracked_wrong)
+      .EndObject();
   WriteClusterScores(w, r);
   w.BeginArray("objects");
   for (const auto& o : r.objects)
@@ -470,6 +477,10 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   for (const auto& m : r.moved)
     md << Row({m.name, std::to_string(m.truth_moves), std::to_string(m.found), std::to_string(m.linked),
                std::to_string(m.reported), std::to_string(m.true_reported), Fmt(m.precision, 3), Fmt(m.recall, 3)});
+  const IdentityScore& id = r.identity;
+  md << "\nIdentity across steps (objects.csv's track), over pairs of true clusters of different steps: "
+     << id.same_tracked << " of the " << id.same << " that find one truth object share a track; " << id.tracked_wrong
+     << " of the " << id.tracked << " that share a track find two objects that are not one move's ends.\n";
   md << "\n"
      << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "observed share",
                 "best cluster", "cluster points", "IoU", "found"});

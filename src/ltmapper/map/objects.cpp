@@ -32,6 +32,7 @@
 #include <iterator>
 #include <map>
 #include <memory>
+#include <numeric>
 #include <tuple>
 #include <unordered_map>
 #include <unordered_set>
@@ -833,6 +834,48 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
     if (o.partner >= 0) o.change = "moved";
 }
 
+// Rows a and b are one object at one place: found by different steps on the same side of the
+// change (PD: appeared, strong ND: disappeared; a move's end by its class), with a majority of the
+// smaller one's points within object_tolerance_m of the other's.
+bool SameObject(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
+  if (a.session == b.session || IsPd(a.cls) != IsPd(b.cls) || a.cloud.empty() || b.cloud.empty()) return false;
+  const double tol = cfg.object_tolerance_m;
+  if ((a.lo.array() > b.hi.array() + tol).any() || (b.lo.array() > a.hi.array() + tol).any()) return false;
+  const MapObject &small = a.points <= b.points ? a : b, &large = a.points <= b.points ? b : a;
+  const std::vector<bool> near = geometry::WithinRadius(small.cloud, large.cloud, tol);
+  return 2 * std::size_t(std::count(near.begin(), near.end(), true)) > near.size();
+}
+
+// Identity across steps (MapObject::track): rows that are one object (SameObject) and a move's two
+// ends are joined (union-find over the row ids, which AssignIds made their positions).
+void AssignTracks(std::vector<MapObject>& objects, const MapConfig& cfg) {
+  std::vector<std::size_t> root(objects.size());
+  std::iota(root.begin(), root.end(), std::size_t(0));
+  const auto find = [&](std::size_t i) {
+    while (root[i] != i) i = root[i] = root[root[i]];
+    return i;
+  };
+  const auto join = [&](std::size_t i, std::size_t j) {
+    const std::size_t a = find(i), b = find(j);
+    root[std::max(a, b)] = std::min(a, b);  // the lowest id leads
+  };
+  for (std::size_t i = 0; i < objects.size(); ++i) {
+    if (objects[i].partner >= 0) join(i, std::size_t(objects[i].partner));
+    for (std::size_t j = i + 1; j < objects.size(); ++j)
+      if (SameObject(objects[i], objects[j], cfg)) join(i, j);
+  }
+  std::map<std::size_t, std::vector<int>> sessions;  // track -> its rows' exists_in
+  for (std::size_t i = 0; i < objects.size(); ++i) sessions[find(i)].push_back(objects[i].exists_in);
+  for (auto& [t, s] : sessions) {
+    std::sort(s.begin(), s.end());
+    s.erase(std::unique(s.begin(), s.end()), s.end());
+  }
+  for (std::size_t i = 0; i < objects.size(); ++i) {
+    objects[i].track = int(find(i));
+    objects[i].track_sessions = sessions[find(i)];
+  }
+}
+
 }  // namespace
 
 MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
@@ -900,6 +943,7 @@ std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
   }
   AssignIds(out);
   LinkMoved(out, config());
+  AssignTracks(out, config());
   if (rejected) {
     for (std::size_t k = 0; k < dropped.size(); ++k) dropped[k].id = int(k);
     *rejected = std::move(dropped);

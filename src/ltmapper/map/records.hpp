@@ -112,6 +112,11 @@ struct MapObject {
   std::string change;  // "appeared" (PD), "disappeared" (strong ND), "moved" (either end of a move)
   int partner = -1;    // moved: id of the other end (same step), else -1
   int exists_in = 0;   // session whose scans hold the object (session for PD, reference for ND)
+  // Identity across steps (Store::Objects, not stored per step): the rows that are one object, the
+  // same thing at one place seen by several steps or a move's two ends, form one track; its id is
+  // the lowest row id in it, and track_sessions the sessions any of its rows exists in (ascending).
+  int track = -1;
+  std::vector<int> track_sessions;
   std::size_t points = 0;
   double confidence = 0.0;  // [0, 1] see objects.cpp Confidence()
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
