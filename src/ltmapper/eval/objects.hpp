@@ -67,17 +67,17 @@ struct ClusterScore {
 // identical containers that both moved may be paired the other way round). A cluster reported as
 // moved is true when it is a true object whose best truth object is an end of a move. Precision =
 // true reported / reported, recall = found / truth moves; NaN without any.
+struct MovedPrf {
+  std::string name;                // "all", "00_01", ...
+  std::size_t truth_moves = 0, found = 0, linked = 0, reported = 0, true_reported = 0;
+  double precision = kNaN, recall = kNaN;
+};
 // Identity across steps (the "the same object seen in several sessions keeps one id"),
 // over pairs of true clusters of different steps: `same` find one truth object, `same_tracked` of
 // those share a track; `tracked` share a track, `tracked_wrong` of those find two truth objects
 // that are not one move's two ends.
 struct IdentityScore {
   std::size_t same = 0, same_tracked = 0, tracked = 0, tracked_wrong = 0;
-};
-struct MovedPrf {
-  std::string name;                // "all", "00_01", ...
-  std::size_t truth_moves = 0, found = 0, linked = 0, reported = 0, true_reported = 0;
-  double precision = kNaN, recall = kNaN;
 };
 // Precision = true clusters / clusters, recall = found / scored truth objects, F1 their harmonic
 // mean, for one slice (a pair, a change type or everything).

@@ -304,8 +304,8 @@ void Describe(MapObject& o) {
 }
 
 // Oriented box: the xy rectangle whose sides the points lie closest to (geometry::SidesBoxOf: a
-// box scanned on two faces has a diagonal principal axis, and that box is up to 1.5 x as wide),
-// yaw of its longer side, extents along it and across, and z.
+// box scanned on two faces is an L of points, whose principal axis tilts towards the shorter
+// face), yaw of its longer side, extents along it and across, and z.
 void OrientedBox(MapObject& o) {
   const geometry::HorizontalBox b = geometry::SidesBoxOf(o.cloud);
   o.yaw_rad = b.yaw_rad;

@@ -572,6 +572,7 @@ class LdPlacer {
         const Eigen::Vector2d c = lot->P(0.5 * lot->width, 4.0);
         Add("container", present, "open").AddBox(c, Gz(c) - 0.05, {6.06, 2.44, 2.64}, lot->yaw(), kMetal);
       }
+      // The two places are one container: each names the other (truth objects.csv's partner).
       out_[std::size_t(first)].info.partner = first + 1;
       out_[std::size_t(first) + 1].info.partner = first;
     }
