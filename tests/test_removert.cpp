@@ -297,10 +297,12 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   const Eigen::Vector3d p = test::Direction(beam + 0.1 * kDeg, 10.1 * kDeg) * 40.0;  // 0.07 m off the beam
   pts.push_back(float(p.x()), float(p.y()), float(p.z() + 1.8));
   const std::vector<Eigen::Vector3f> side = {-p.cast<float>().normalized()};  // an upright face
-  enum Case { kSky, kTruck, kDropped, kSeam };
+  enum Case { kSky, kTruck, kDropped, kSeam, kBlind };
   // Every 0.2 deg of azimuth from 0 to 20 deg: the -15 deg beam on the ground, the +1 deg beam on a
   // wall 60 m away; within 1 deg of the point's azimuth the +1 deg beam meets nothing (sky, seam)
-  // or the truck; dropped: only its return at 10.0 deg is missing; seam: the ground's too.
+  // or the truck; dropped: only its return at 10.0 deg is missing; seam: the ground's too; blind: a
+  // car passing beside the sensor, which the -1 deg beam meets just beyond the minimum range and
+  // the +1 deg beam nearer than it (no return).
   auto scan_of = [&](Case what) {
     auto scan = std::make_shared<PointCloud>();
     auto add = [&](double el, double az, double r) {
@@ -313,6 +315,7 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
       if (!(what == kSeam && near)) add(ground, a, 1.8 / std::sin(-ground));
       if (what == kDropped ? k != 50 : !near) add(beam, a, 60.0);
       else if (what == kTruck) add(beam, a, 1.8);
+      if (what == kBlind && near) add(-1.0 * kDeg, a, cfg.min_range_m + 0.1);
     }
     return scan;
   };
@@ -331,6 +334,7 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   EXPECT_EQ(passed(kTruck), 0);
   EXPECT_EQ(passed(kDropped), 0);
   EXPECT_EQ(passed(kSeam), 0);
+  EXPECT_EQ(passed(kBlind), 0);
   // Scans whose beams scatter about the table (deskewed sweeps: here 3 x 0.4 deg reaches halfway
   // to the neighbours 2 deg away) cannot tell which beam is which: no evidence. Short of halfway
   // (3 x 0.3 deg) they can.

@@ -199,7 +199,8 @@ class ColumnImage {
   bool BeamNear(float range, float pitch) const;
 
  private:
-  // Column col (any, wrapped) holds no return in rows row_top..row_bottom, and is swept.
+  // Column col (any, wrapped) holds no return in rows row_top..row_bottom, is swept, and no beam
+  // within a row's span of them met a surface within the tolerance of the minimum range.
   bool EmptyColumn(int col, int row_top, int row_bottom) const;
   bool Around(float range, std::size_t column, int ra, int rb, const Eigen::Vector3f& ps, const float* plane) const;
   std::pair<int, int> BeamsAround(const float* rc, int row) const;
@@ -226,6 +227,8 @@ class ColumnImage {
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams
   float down_ = 0.f;          // [rad]
+  float blind_ = 0.f;  // min range + tol: a return nearer marks its cell in any_ kNearBlind
+  static constexpr std::uint8_t kNearBlind = 2;
   float min_range_ = 0.f, max_range_ = 0.f;
   float through_m_ = 0.f;        // [m] kBeamThrough: the beam crossed the point's plane this close to it
   float surface_reach_m_ = 0.f;  // [m] MetSurfaceNear's reach

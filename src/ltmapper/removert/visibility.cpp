@@ -617,6 +617,7 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   surface_reach_m_ = float(cfg.ld_normal_radius_m);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
+  blind_ = min_range_ + float(test.tol_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
   ret_.assign(range_.size(), Eigen::Vector3f::Zero());
   any_.assign(range_.size(), 0);
@@ -631,7 +632,7 @@ void ColumnImage::Build(const PointCloud& scan) {
   // reads those within [min_range, max_range].
   auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
     const std::size_t col = std::size_t(grid_.Col(yaw)), cell = col * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
-    any_[cell] = 1;
+    any_[cell] = std::max<std::uint8_t>(any_[cell], r < blind_ ? kNearBlind : 1);
     fired_[col] = yaw;
     if (r < min_range_ || r > max_range_) return;
     if (r < range_[cell]) {
@@ -783,6 +784,12 @@ bool ColumnImage::EmptyColumn(int col, int row_top, int row_bottom) const {
   const std::uint8_t* ac = any_.data() + c * std::size_t(grid_.rows);
   for (int r = row_top; r <= row_bottom; ++r)
     if (ac[r]) return false;
+  // A beam that met a surface nearer than the sensor's minimum range returns nothing either: where
+  // the beams around these rows met one within the tolerance of that range (a vehicle passing
+  // beside the sensor), the empty rows may be the blind zone, not free space.
+  const int span = span_[std::size_t(row_top)];
+  for (int r = std::max(0, row_top - span); r <= std::min(grid_.rows - 1, row_bottom + span); ++r)
+    if (ac[r] == kNearBlind) return false;
   return true;
 }
 
