@@ -186,6 +186,19 @@ void WritePrf(io::json::Writer& w, const ObjectsPrf& p, const char* key = nullpt
       .EndObject();
 }
 
+void WriteMoved(io::json::Writer& w, const MovedPrf& m) {
+  w.BeginObject()
+      .String("name", m.name)
+      .Int("truth_moves", (long long)m.truth_moves)
+      .Int("found", (long long)m.found)
+      .Int("linked", (long long)m.linked)
+      .Int("reported", (long long)m.reported)
+      .Int("true_reported", (long long)m.true_reported)
+      .Number("precision", m.precision)
+      .Number("recall", m.recall)
+      .EndObject();
+}
+
 void WriteClusterScores(io::json::Writer& w, const ObjectsResult& r) {
   w.BeginArray("clusters_scored");
   for (const auto& c : r.cluster_scores)
@@ -225,17 +238,7 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
   w.EndArray().BeginArray("per_class");
   for (const auto& p : r.per_class) WritePrf(w, p);
   w.EndArray().BeginArray("moved");
-  for (const auto& m : r.moved)
-    w.BeginObject()
-        .String("name", m.name)
-        .Int("truth_moves", (long long)m.truth_moves)
-        .Int("found", (long long)m.found)
-        .Int("linked", (long long)m.linked)
-        .Int("reported", (long long)m.reported)
-        .Int("true_reported", (long long)m.true_reported)
-        .Number("precision", m.precision)
-        .Number("recall", m.recall)
-        .EndObject();
+  for (const auto& m : r.moved) WriteMoved(w, m);
   w.EndArray()
       .BeginObject("identity")
       .Int("same", (long long)r.identity.same)

@@ -92,6 +92,27 @@ std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud
                                }));
 }
 
+namespace {
+// The box of the n points xy(k) along unit axis u (yaw, length) and u turned 90 deg counter-clockwise
+// (width), offsets taken from `origin` (a point near them: their mean keeps the sums exact).
+template <class F>
+HorizontalBox BoxAlong(const Eigen::Vector2d& u, std::size_t n, F xy, const Eigen::Vector2d& origin) {
+  const Eigen::Vector2d v(-u.y(), u.x());
+  double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Vector2d d = xy(k) - origin;
+    a0 = std::min(a0, d.dot(u)), a1 = std::max(a1, d.dot(u));
+    b0 = std::min(b0, d.dot(v)), b1 = std::max(b1, d.dot(v));
+  }
+  HorizontalBox box;
+  box.yaw_rad = std::atan2(u.y(), u.x());
+  box.center = origin + u * (a0 + a1) / 2 + v * (b0 + b1) / 2;
+  box.length = a1 - a0;
+  box.width = b1 - b0;
+  return box;
+}
+}  // namespace
+
 HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
   const std::size_t n = idx.empty() ? cloud.size() : idx.size();
   auto xy = [&](std::size_t k) {
@@ -105,19 +126,7 @@ HorizontalBox HorizontalBoxOf(const PointCloud& cloud, const std::vector<std::ui
   mean /= double(n);
   Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
   for (std::size_t k = 0; k < n; ++k) cov += (xy(k) - mean) * (xy(k) - mean).transpose();
-  const Eigen::Vector2d major = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvectors().col(1);
-  const Eigen::Vector2d minor(-major.y(), major.x());
-  double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
-  for (std::size_t k = 0; k < n; ++k) {
-    const Eigen::Vector2d d = xy(k) - mean;
-    a0 = std::min(a0, d.dot(major)), a1 = std::max(a1, d.dot(major));
-    b0 = std::min(b0, d.dot(minor)), b1 = std::max(b1, d.dot(minor));
-  }
-  box.yaw_rad = std::atan2(major.y(), major.x());
-  box.center = mean + major * (a0 + a1) / 2 + minor * (b0 + b1) / 2;
-  box.length = a1 - a0;
-  box.width = b1 - b0;
-  return box;
+  return BoxAlong(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvectors().col(1), n, xy, mean);
 }
 
 HorizontalBox SidesBoxOf(const PointCloud& cloud, const std::vector<std::uint32_t>& idx) {
@@ -133,33 +142,29 @@ HorizontalBox SidesBoxOf(const PointCloud& cloud, const std::vector<std::uint32_
   }
   bg::model::ring<Point> hull;
   bg::convex_hull(pts, hull);
+  const auto hull_at = [&](std::size_t k) { return Eigen::Vector2d(hull[k].x(), hull[k].y()); };
+  const Eigen::Vector2d origin = hull_at(0);
   HorizontalBox best;
   double best_mean = std::numeric_limits<double>::infinity(), best_area = best_mean;
   for (std::size_t e = 0; e + 1 < hull.size(); ++e) {
-    Eigen::Vector2d u(hull[e + 1].x() - hull[e].x(), hull[e + 1].y() - hull[e].y());
-    if (u.norm() < 1e-9) continue;
-    u.normalize();
-    const Eigen::Vector2d v(-u.y(), u.x());
-    double a0 = 1e300, a1 = -1e300, b0 = 1e300, b1 = -1e300;
-    for (const Point& q : hull) {
-      const Eigen::Vector2d d(q.x(), q.y());
-      a0 = std::min(a0, d.dot(u)), a1 = std::max(a1, d.dot(u));
-      b0 = std::min(b0, d.dot(v)), b1 = std::max(b1, d.dot(v));
-    }
+    const Eigen::Vector2d edge = hull_at(e + 1) - hull_at(e);
+    if (edge.norm() < 1e-9) continue;
+    const Eigen::Vector2d u = edge.normalized(), v(-u.y(), u.x());
+    const HorizontalBox b = BoxAlong(u, hull.size(), hull_at, origin);
+    const Eigen::Vector2d lo = b.center - u * b.length / 2 - v * b.width / 2;  // the box's (u, v) corner
     double sum = 0.0;  // each point's distance to its nearest side
     for (const Point& q : pts) {
-      const Eigen::Vector2d d(q.x(), q.y());
-      const double a = d.dot(u), b = d.dot(v);
-      sum += std::min(std::min(a - a0, a1 - a), std::min(b - b0, b1 - b));
+      const Eigen::Vector2d d = Eigen::Vector2d(q.x(), q.y()) - lo;
+      const double a = d.dot(u), c = d.dot(v);
+      sum += std::min(std::min(a, b.length - a), std::min(c, b.width - c));
     }
-    const double mean = sum / double(n), area = (a1 - a0) * (b1 - b0);
+    const double mean = sum / double(n), area = b.length * b.width;
     if (mean > best_mean || (mean == best_mean && area >= best_area)) continue;
-    best_mean = mean, best_area = area;
-    const Eigen::Vector2d major = a1 - a0 >= b1 - b0 ? u : v;
-    best.yaw_rad = std::atan2(major.y(), major.x());
-    best.center = u * (a0 + a1) / 2 + v * (b0 + b1) / 2;
-    best.length = std::max(a1 - a0, b1 - b0);
-    best.width = std::min(a1 - a0, b1 - b0);
+    best_mean = mean, best_area = area, best = b;
+    if (b.width > b.length) {  // the longer side is the major axis
+      best.yaw_rad = std::atan2(v.y(), v.x());
+      std::swap(best.length, best.width);
+    }
   }
   if (!std::isfinite(best_mean)) return HorizontalBoxOf(cloud, idx);  // all points on one spot
   return best;

@@ -227,14 +227,14 @@ class ColumnImage {
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams
   float down_ = 0.f;          // [rad]
-  float blind_ = 0.f;  // min range + tol: a return nearer marks its cell in any_ kNearBlind
-  static constexpr std::uint8_t kNearBlind = 2;
+  static constexpr std::uint8_t kNearBlind = 2;  // any_: a return within the tolerance of min range
   float min_range_ = 0.f, max_range_ = 0.f;
   float through_m_ = 0.f;        // [m] kBeamThrough: the beam crossed the point's plane this close to it
   float surface_reach_m_ = 0.f;  // [m] MetSurfaceNear's reach
   std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
-  std::vector<std::uint8_t> any_;     // 1 = a return at any range (PassedWithoutReturn)
+  std::vector<std::uint8_t> any_;     // 1 = a return at any range, kNearBlind = one nearer than min
+                                      // range + tol (EmptyColumn)
   std::vector<float> fired_;          // [cols] the azimuth [rad] of the column's returns, the one its
                                       // beams fired at (PassedInside); NaN = no return at all (deskewed
                                       // sweeps leave a seam of empty columns where they start and end)

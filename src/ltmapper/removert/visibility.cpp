@@ -617,7 +617,6 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   surface_reach_m_ = float(cfg.ld_normal_radius_m);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
-  blind_ = min_range_ + float(test.tol_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
   ret_.assign(range_.size(), Eigen::Vector3f::Zero());
   any_.assign(range_.size(), 0);
@@ -630,9 +629,10 @@ void ColumnImage::Build(const PointCloud& scan) {
   std::fill(fired_.begin(), fired_.end(), std::numeric_limits<float>::quiet_NaN());
   // Every return marks its cell in any_ (a beam that met something, at any range); the range test
   // reads those within [min_range, max_range].
+  const float blind = min_range_ + float(test_.tol_m);  // nearer: the blind zone's edge (EmptyColumn)
   auto put = [&](float r, float pitch, float yaw, const PointXYZI& q) {
     const std::size_t col = std::size_t(grid_.Col(yaw)), cell = col * std::size_t(grid_.rows) + std::size_t(grid_.Row(pitch));
-    any_[cell] = std::max<std::uint8_t>(any_[cell], r < blind_ ? kNearBlind : 1);
+    any_[cell] = std::max<std::uint8_t>(any_[cell], r < blind ? kNearBlind : 1);
     fired_[col] = yaw;
     if (r < min_range_ || r > max_range_) return;
     if (r < range_[cell]) {
