@@ -320,6 +320,17 @@ TEST(Objects, SimTruthAndClusterFiles) {
   EXPECT_EQ(r.observable.truth_objects, 1u);
   EXPECT_EQ(r.observable.found, 1u);
   EXPECT_EQ(r.observable.clusters, 2u);
+  // And per pair: the pair's clusters against its observable objects (recall 1 of 1, not 2 of 2
+  // with the coverage difference counted).
+  ASSERT_EQ(r.observable_per_pair.size(), 1u);
+  EXPECT_EQ(r.observable_per_pair[0].name, "00_01 observable");
+  EXPECT_EQ(r.observable_per_pair[0].truth_objects, 1u);
+  EXPECT_EQ(r.observable_per_pair[0].found, 1u);
+  EXPECT_EQ(r.observable_per_pair[0].clusters, 2u);
+  Report rep;
+  rep.objects = r;
+  EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.observable_per_pair.0.recall"), 1.0, 1e-9);
+  EXPECT_NE(ToMarkdown(rep).find("| 00_01 observable | 1 | 1 | 2 |"), std::string::npos);
   EXPECT_THROW(LoadSimObjectTruth((dir / "sim").string(), "00_05", GlobalTruthMapping(Pose::Identity(), "identity"), Cfg()), Error);
   fs::remove_all(dir);
 }

@@ -250,9 +250,13 @@ void Summarise(ObjectsResult& r, const std::vector<ObjectTruth>& truth, const st
   const double share = cfg.obj_min_observed_share;
   r.observable = Slice("observable", r, truth, [&](const ObjectTruth& t) { return t.observed_share >= share; },
                        [](const ClusterScore&) { return true; });
-  for (const auto& p : pairs)
-    r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; },
-                               [&](const ClusterScore& c) { return c.pair == p; }));
+  for (const auto& p : pairs) {
+    const auto in_pair = [&](const ClusterScore& c) { return c.pair == p; };
+    r.per_pair.push_back(Slice(p, r, truth, [&](const ObjectTruth& t) { return t.pair == p; }, in_pair));
+    r.observable_per_pair.push_back(Slice(
+        p + " observable", r, truth, [&](const ObjectTruth& t) { return t.pair == p && t.observed_share >= share; },
+        in_pair));
+  }
   r.identity = Identity(r, truth);
   r.moved.push_back(Moves("", r, truth));
   for (const auto& p : pairs) r.moved.push_back(Moves(p, r, truth));

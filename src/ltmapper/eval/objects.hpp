@@ -112,6 +112,7 @@ struct ObjectsResult {
   ObjectsPrf observable;                     // all clusters; the scored truth objects with observed_share >=
                                              // objects.min_observed_share
   std::vector<ObjectsPrf> per_pair, per_change;
+  std::vector<ObjectsPrf> observable_per_pair;  // "00_01 observable": the pair's observable truth objects, its clusters
   std::vector<ObjectsPrf> per_class;         // "class car", ...: truth objects of the class, clusters overlapping them most
   std::vector<MovedPrf> moved;               // "all", then one per pair
   IdentityScore identity;

@@ -233,6 +233,8 @@ void WriteObjectsResult(io::json::Writer& w, const ObjectsResult& r) {
   WritePrf(w, r.observable, "observable");
   w.BeginArray("per_pair");
   for (const auto& p : r.per_pair) WritePrf(w, p);
+  w.EndArray().BeginArray("observable_per_pair");
+  for (const auto& p : r.observable_per_pair) WritePrf(w, p);
   w.EndArray().BeginArray("per_change");
   for (const auto& p : r.per_change) WritePrf(w, p);
   w.EndArray().BeginArray("per_class");
@@ -463,9 +465,14 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
         "change: appeared (PD clusters, objects of the pair's second session), disappeared (ND); class: the truth "
         "objects of the class, and the clusters that overlap one of them most; observable: the truth objects "
         "most of whose change points (changes.ply) the other session observed changed (weak PD, strong ND), "
-        "against all clusters (the rest lies mostly in space one session never observed: coverage).\n\n"
+        "against all clusters (the rest lies mostly in space one session never observed: coverage), "
+        "per pair and over all pairs.\n\n"
      << Header({"slice", "truth objects", "found", "clusters", "true clusters", "precision", "recall", "F1"});
-  std::vector<ObjectsPrf> rows = r.per_pair;
+  std::vector<ObjectsPrf> rows;
+  for (std::size_t i = 0; i < r.per_pair.size(); ++i) {
+    rows.push_back(r.per_pair[i]);
+    if (i < r.observable_per_pair.size()) rows.push_back(r.observable_per_pair[i]);
+  }
   rows.insert(rows.end(), r.per_change.begin(), r.per_change.end());
   rows.insert(rows.end(), r.per_class.begin(), r.per_class.end());
   rows.push_back(r.all);
