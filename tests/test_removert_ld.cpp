@@ -409,6 +409,33 @@ TEST(RemovertLd, SmallSeenThroughClustersAreResiduesOfMovers) {
 }
 
 
+// A seen-through piece of a larger change is part of that object, not a mover's residue. A car
+// 6.5 m long that only the central has; the query drives up to x = 4 behind a wall of its own
+// (y = -3, x up to 5, higher than the car), so its beams reach only the car's end beyond the
+// wall's (x > ~5.4): a 1.1 m piece seen through (strong ND) beside a body the query never
+// observed (weak ND). The piece alone fits a pedestrian (1.2 m wide); with the weak body it is a car.
+TEST(RemovertLd, ASeenThroughPieceOfALargerChangeIsNoResidue) {
+  const test::Box car = test::MakeBox(0, -5.2, 0.3, 6.5, -4, 1.8, kCarCentral);
+  auto cb = Common();
+  cb.push_back(car);
+  auto qb = Common();
+  qb.push_back(test::MakeBox(-25, -3.1, 0, 5, -3.0, 2.5, kWallQuery));
+  const auto central = Drive(cb, 0.0, nullptr);
+  std::vector<WorldKeyframe> query;
+  for (const auto& kf : Drive(qb, 0.7, nullptr))
+    if (kf.T_world_sensor.translation().x() <= 4.0) query.push_back(kf);
+  RemovertConfig cfg = test::ConfigFor();
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box piece = test::MakeBox(5.6, -5.2, 0.3, 6.5, -4, 1.8, kCarCentral);
+  const test::Box body = test::MakeBox(0, -5.2, 0.8, 4.5, -4, 1.8, kCarCentral);  // above its ground's radius
+  ASSERT_GT(CountIn(cmap, piece), 50u);
+  EXPECT_EQ(CountIn(ld.nd_strong, body), 0u);  // never observed: weak, kept
+  EXPECT_GE(double(CountIn(ld.nd_weak, body)), 0.75 * double(CountIn(cmap, body)));
+  EXPECT_GE(double(CountIn(ld.nd_strong, piece)), 0.5 * double(CountIn(cmap, piece)));
+  EXPECT_EQ(CountIn(ld.nd_residue, car), 0u);
+}
+
 // A truck driving 12 m ahead of the central's sensor in the next lane (2.5 m wide, 8 m long: no
 // pedestrian-sized residue from any view): each keyframe met it at another place, and
 // none came back to see through that place (the session's end, where its own HD removal has no

@@ -218,7 +218,10 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
 }
 
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
-// of `own` map) split into clusters at ld_residue_gap_m. A cluster that fits in a mover's size,
+// of `own` map) split into clusters at ld_residue_gap_m, sized together with `unseen` (the same
+// map's changes on the same side that the other session did not see through): a thing whose end
+// the other session saw through and whose body it never observed is one thing, not a pedestrian
+// (a car new in the query had 257 of its weak PD points taken as residues). A cluster that fits in a mover's size,
 // ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
 // point of `own` within half that around it) to its top, and that no larger cluster comes that
 // close to, is a residue of a mover (marked in the result, per point of `seen`). A pole, a
@@ -228,12 +231,16 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
 // that low is within the radius of the other session's ground, so no change at all; such a patch
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
 // So is a cluster its own session saw at its place from one keyframe only (MarkSeenOnce).
-std::vector<bool> Residues(const PointCloud& seen, const PointCloud& own, const std::vector<WorldKeyframe>& own_voters,
-                           const RemovertConfig& cfg, int threads) {
+std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, const PointCloud& own,
+                           const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
+  PointCloud both = seen;
+  both.append(unseen);
+  const auto whole = geometry::EuclideanClusterMembers(both, cfg.ld_residue_gap_m, threads);
+  std::vector<bool> fit = FitAMover(both, whole, own, cfg);
+  UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
+  std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
   const auto members = geometry::EuclideanClusterMembers(seen, cfg.ld_residue_gap_m, threads);
-  std::vector<bool> residue = FitAMover(seen, members, own, cfg);
-  UnmarkPiecesOfLargerOnes(seen, members, cfg.ld_residue_length_m, &residue);
   MarkSeenOnce(seen, members, own_voters, cfg, threads, &residue);
   return residue;
 }
@@ -247,8 +254,9 @@ std::vector<bool> LowerPartsOf(const PointCloud& body, const std::vector<bool>& 
 
 // The labels of one map's points (`own`) given its raw changes (`missing`, Raw) and the other
 // session's keyframes: same / strong / weak / unobserved (Split), then the residues among the
-// changes the other session saw through (strong ND, weak PD): clustered without the lower parts
-// (kRawAboveTheirGround), which join the residue they touch.
+// changes the other session saw through (strong ND, weak PD), sized with those it did not (weak
+// ND, strong PD): clustered without the lower parts (kRawAboveTheirGround), which join the
+// residue they touch.
 void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missing, const PointCloud& other,
                   const std::vector<WorldKeyframe>& own_voters, const std::vector<WorldKeyframe>& others, bool nd,
                   const RemovertConfig& cfg, int threads, std::vector<std::uint8_t>* label) {
@@ -261,12 +269,14 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
   const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd, &standing, nd ? &other : nullptr), nd, cfg);
   for (std::size_t j = 0; j < raw.size(); ++j)
     (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
-  const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak;
-  std::vector<std::uint32_t> body, lower;
-  for (std::uint32_t i : raw)
+  const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak, unseen_label = nd ? kLdWeak : kLdStrong;
+  std::vector<std::uint32_t> body, lower, unseen;
+  for (std::uint32_t i : raw) {
     if ((*label)[i] == seen_label) (missing[i] == kRawAboveTheirGround ? lower : body).push_back(i);
+    if ((*label)[i] == unseen_label && missing[i] != kRawAboveTheirGround) unseen.push_back(i);
+  }
   const PointCloud body_pts = own.select(body);
-  const std::vector<bool> residue = Residues(body_pts, own, own_voters, cfg, threads);
+  const std::vector<bool> residue = Residues(body_pts, own.select(unseen), own, own_voters, cfg, threads);
   const std::vector<bool> residue_lower = LowerPartsOf(body_pts, residue, own.select(lower), cfg);
   for (std::size_t j = 0; j < body.size(); ++j)
     if (residue[j]) (*label)[body[j]] = kLdResidue;
