@@ -220,11 +220,11 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
 // of `own` map) split into clusters at ld_residue_gap_m, sized together with `unseen` (the same
 // map's changes on the same side that the other session did not see through): a thing whose end
-// the other session saw through and whose body it never observed is one thing, not a pedestrian
-// (a car new in the query had 257 of its weak PD points taken as residues). A cluster that fits in a mover's size,
-// ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
-// point of `own` within half that around it) to its top, and that no larger cluster comes that
-// close to, is a residue of a mover (marked in the result, per point of `seen`). A pole, a
+// the other session saw through and whose body it never observed is one thing, not a pedestrian.
+// A cluster that fits in a mover's size, ld_residue_length_m, along its longest horizontal edge
+// and from the ground under it (the lowest point of `own` within half that around it) to its top,
+// and that no larger cluster comes that close to, is a residue of a mover (marked in the result,
+// per point of `seen`). A pole, a
 // facade's edge or a lamp head that poses let the other session see past reaches higher; a short
 // piece beside a large one is part of that object (a trunk's foot under its canopy, a sparse
 // object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
