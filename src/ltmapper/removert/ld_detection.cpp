@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <utility>
 
 namespace ltm::removert {
 
@@ -230,7 +231,8 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
 // object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
 // that low is within the radius of the other session's ground, so no change at all; such a patch
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
-// So is a cluster its own session saw at its place from one keyframe only (MarkSeenOnce).
+// So is a thing its own session saw at its place from one keyframe only (MarkSeenOnce, over the
+// seen-through part of each cluster).
 std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, const PointCloud& own,
                            const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
@@ -240,7 +242,14 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
   std::vector<bool> fit = FitAMover(both, whole, own, cfg);
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
   std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
-  const auto members = geometry::EuclideanClusterMembers(seen, cfg.ld_residue_gap_m, threads);
+  // The same things' seen-through parts (`both` holds `seen` first) for MarkSeenOnce.
+  std::vector<std::vector<std::uint32_t>> members;
+  for (const auto& m : whole) {
+    std::vector<std::uint32_t> part;
+    for (std::uint32_t i : m)
+      if (i < seen.size()) part.push_back(i);
+    if (!part.empty()) members.push_back(std::move(part));
+  }
   MarkSeenOnce(seen, members, own_voters, cfg, threads, &residue);
   return residue;
 }
