@@ -1,5 +1,6 @@
 // LT-map: blob codec, composition / rollback, live vs meta, new keyframes, transactions, fsck.
 #include "ltmapper/map/map.hpp"
+#include "ltmapper/map/detail.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
@@ -622,6 +623,79 @@ TEST(MapObjects, AWallsAlternatingRowsAreAFragmentNotAnObject) {
   for (const auto& o : objs) ADD_FAILURE() << "object at " << o.centroid.transpose() << ", attached " << o.attached_fraction;
   ASSERT_EQ(rejected.size(), 1u);
   EXPECT_EQ(rejected[0].rejected, "fragment");
+}
+
+// A facade 100 m out, sampled in rows 0.6 m apart (farther apart than the cluster tolerance, closer
+// than the sensor's row gap there, so one cluster): grazing query rays passed every third row
+// (strong ND). Where the query saw the rows between stay (unchanged), the strip is no object: of
+// what the query observed in its box most stayed ("stayed"), though no strip point lies within the
+// cluster tolerance of them (no fragment). Where it never observed them (weak ND), the strip is an
+// object: nothing observed there contradicts it.
+TEST(MapObjects, AFacadeStripAmongRowsThatStayedIsNoObject) {
+  for (const bool stayed : {true, false}) {
+    test::TempDir tmp;
+    PointCloud wall = Grid(95, -5, 0, 40, 60, 0.25f);  // ground under and around it
+    KeyframeDelta d;
+    for (int row = 0; row < 13; ++row) {
+      const float z = 0.6f + 0.6f * float(row);
+      for (float y = 0.f; y <= 4.f; y += 0.25f) {
+        wall.push_back(100.f, y, z, 0.5f);
+        if (row % 3 == 0) d.nd_strong.push_back(100.f, y, z, 0.5f);
+        else if (!stayed) d.nd_weak.push_back(100.f, y, z, 0.5f);
+      }
+    }
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, wall, d, &rejected);
+    std::map<std::string, int> why;
+    for (const auto& r : rejected) ++why[r.rejected];
+    if (stayed) {
+      for (const auto& o : objs) ADD_FAILURE() << "object at " << o.centroid.transpose() << ", box seen " << o.box_seen_fraction;
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "stayed");
+      EXPECT_LT(rejected[0].attached_fraction, 0.5);
+      EXPECT_NEAR(rejected[0].box_seen_fraction, 5.0 / 13.0, 0.02);  // rows 0, 3, .., 12 of 13
+    } else {
+      ASSERT_EQ(objs.size(), 1u) << why.size() << " reasons, first " << (rejected.empty() ? "" : rejected[0].rejected);
+      EXPECT_EQ(objs[0].change, "disappeared");
+      EXPECT_EQ(objs[0].box_seen_fraction, 1.0);
+    }
+  }
+}
+
+// The store's object records round-trip box_seen_fraction (version 2); a version-1 record (a store
+// written before it) still decodes, without it, so fsck does not call it damaged.
+TEST(MapObjects, ObjectRecordsOfBothVersionsDecode) {
+  MapObject o;
+  o.change = "appeared";
+  o.points = 1;
+  o.attached_fraction = 0.25;
+  o.box_seen_fraction = 0.75;
+  o.cloud.push_back(1.f, 2.f, 3.f, 0.5f);
+  o.cloud.cls.assign(1, PointClass::kPDWeak);
+  o.cloud.session.assign(1, 1);
+  const std::string v2 = detail::EncodeObjects({o}, {});
+  std::vector<MapObject> kept, rejected;
+  detail::DecodeObjects(v2, "v2", &kept, &rejected);
+  ASSERT_EQ(kept.size(), 1u);
+  EXPECT_EQ(kept[0].box_seen_fraction, 0.75);
+  EXPECT_EQ(kept[0].attached_fraction, 0.25);
+  // Version 1: the same bytes less box_seen_fraction, which follows attached_fraction: after the
+  // counts (12 bytes), 3 ints, the class byte, two strings ("appeared", ""), points, confidence,
+  // five 3-vectors and eight doubles.
+  const std::size_t at = 12 + 3 * 4 + 1 + (4 + 8) + 4 + 8 + 8 + 5 * 3 * 8 + 8 * 8;
+  std::string v1 = v2.substr(0, at) + v2.substr(at + 8);
+  const std::uint32_t one = 1;
+  std::memcpy(&v1[0], &one, sizeof(one));
+  detail::DecodeObjects(v1, "v1", &kept, &rejected);
+  ASSERT_EQ(kept.size(), 1u);
+  EXPECT_EQ(kept[0].box_seen_fraction, 0.0);
+  EXPECT_EQ(kept[0].attached_fraction, 0.25);
+  ASSERT_EQ(kept[0].cloud.size(), 1u);
+  EXPECT_EQ(kept[0].cloud.points[0].z, 3.f);
+  std::string v3 = v2;
+  const std::uint32_t three = 3;
+  std::memcpy(&v3[0], &three, sizeof(three));
+  EXPECT_THROW(detail::DecodeObjects(v3, "v3", &kept, &rejected), Error);
 }
 
 // A fence that left: the query saw through the place of its front face (strong ND) but never

@@ -2,9 +2,10 @@
 //   u32 version, u32 kept count, u32 rejected count, then each object: i32 session, reference,
 //   exists_in; u8 class; string change, rejected (u32 length + bytes); u64 points; f64 confidence,
 //   centroid, lo, hi, box_center, size (3 each), yaw, ground_z, height_above_ground, clearance,
-//   range, observed, twin, attached fractions; u32 cloud points, then the arrays f32 x, y, z,
-//   intensity, u8 class, u16 session, each as byte planes (all lowest bytes first). Ids and partners are not stored: Store::Objects assigns
-//   them over all steps. The reader checks every length against the bytes left.
+//   range, observed, twin, attached, box seen (version 2; version 1 has none: 0) fractions; u32
+//   cloud points, then the arrays f32 x, y, z, intensity, u8 class, u16 session, each as byte
+//   planes (all lowest bytes first). Ids and partners are not stored: Store::Objects assigns them
+//   over all steps. The reader checks every length against the bytes left.
 #include "ltmapper/map/detail.hpp"
 
 #include <cstring>
@@ -12,7 +13,8 @@
 namespace ltm::map::detail {
 namespace {
 
-constexpr std::uint32_t kObjectsVersion = 1;
+constexpr std::uint32_t kObjectsVersion = 2;
+constexpr std::uint32_t kOldestObjectsVersion = 1;  // without box_seen_fraction
 
 class Writer {
  public:
@@ -111,7 +113,7 @@ void PutObject(Writer& w, const MapObject& o) {
   w.Put(o.confidence);
   for (const auto* v : {&o.centroid, &o.lo, &o.hi, &o.box_center, &o.size}) w.Put(*v);
   for (double d : {o.yaw_rad, o.ground_z, o.height_above_ground, o.clearance_m, o.range_m, o.observed_fraction,
-                   o.twin_fraction, o.attached_fraction})
+                   o.twin_fraction, o.attached_fraction, o.box_seen_fraction})
     w.Put(d);
   const PointCloud& c = o.cloud;
   w.Put(std::uint32_t(c.size()));
@@ -121,7 +123,7 @@ void PutObject(Writer& w, const MapObject& o) {
   w.PutPlanes(c.size(), [&](std::size_t i) { return c.session.empty() ? std::uint16_t(0) : c.session[i]; });
 }
 
-MapObject GetObject(Reader& r) {
+MapObject GetObject(Reader& r, std::uint32_t version) {
   MapObject o;
   o.session = r.Get<std::int32_t>(), o.reference = r.Get<std::int32_t>(), o.exists_in = r.Get<std::int32_t>();
   o.cls = PointClass(r.Get<std::uint8_t>());
@@ -132,6 +134,7 @@ MapObject GetObject(Reader& r) {
   for (double* d : {&o.yaw_rad, &o.ground_z, &o.height_above_ground, &o.clearance_m, &o.range_m,
                     &o.observed_fraction, &o.twin_fraction, &o.attached_fraction})
     *d = r.Get<double>();
+  if (version >= 2) o.box_seen_fraction = r.Get<double>();
   const std::size_t n = r.GetCount(kPointBytes);
   PointCloud& c = o.cloud;
   c.points.resize(n), c.cls.resize(n), c.session.resize(n);
@@ -158,12 +161,12 @@ void DecodeObjects(const std::string& raw, const std::string& what, std::vector<
                    std::vector<MapObject>* rejected) {
   Reader r(raw, what);
   const auto version = r.Get<std::uint32_t>();
-  if (version != kObjectsVersion)
+  if (version < kOldestObjectsVersion || version > kObjectsVersion)
     throw Error(what + ": object record version " + std::to_string(version) + ", expected " +
-                std::to_string(kObjectsVersion));
+                std::to_string(kOldestObjectsVersion) + " to " + std::to_string(kObjectsVersion));
   const std::size_t nk = r.Get<std::uint32_t>(), nr = r.Get<std::uint32_t>();
   kept->clear(), rejected->clear();
-  for (std::size_t k = 0; k < nk + nr; ++k) (k < nk ? kept : rejected)->push_back(GetObject(r));
+  for (std::size_t k = 0; k < nk + nr; ++k) (k < nk ? kept : rejected)->push_back(GetObject(r, version));
   if (!r.AtEnd()) throw Error(what + ": object record has trailing bytes");
 }
 

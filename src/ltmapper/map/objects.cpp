@@ -432,7 +432,11 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // points that are not its own lower part (AttachedFraction), so clustered with them it would be
 // one object that did not change (a strip of a pole or trunk seen through by grazing rays); a
 // removed or new object is surrounded by free space and ground, and stands on its own remnants
-// (its lower part, under the seen-through body). The sensor samples a surface at range r every
+// (its lower part, under the seen-through body). Nor is a thing that left or came still there:
+// of what the other session observed in its oriented box above its own lower part, less than
+// object_min_observed_fraction it saw changed (BoxSeenFraction), the rest it saw stay (rows of a
+// far facade between the rows grazing rays passed, farther apart than the cluster tolerance, so
+// no fragment), and the cluster "stayed". The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one scan row wide) spans fewer than object_min_samples rows across its middle
 // principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread; MinWidth). A cluster whose top is
@@ -465,6 +469,7 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
   if (!Covered(o, ctx, cfg)) return "coverage";
   if (o.twin_fraction >= cfg.object_twin_max_fraction) return "ghost";
   if (o.attached_fraction >= cfg.object_max_attached_fraction) return "fragment";
+  if (o.box_seen_fraction < cfg.object_min_observed_fraction) return "stayed";
   if (o.height_above_ground < cfg.object_min_height_m) return "low";
   if (cfg.object_max_clearance_m > 0.0 && o.clearance_m > cfg.object_max_clearance_m) return "floating";
   if (width_m < MinWidth(o.range_m, cfg)) return "sliver";
@@ -493,48 +498,95 @@ double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& se
 
 // What each cluster is judged against: per change point, whether it has a twin (other side within
 // object_twin_radius_m); the unchanged surfaces above ground near the change points
-// (NearbyAboveGround at the cluster tolerance), for each cluster's attached share.
+// (NearbyAboveGround at the cluster tolerance), for each cluster's attached share and
+// box share; the group's change points seen changed (SeenChanged), for the box share
+// (BoxSeenFraction).
 struct Masks {
   std::vector<bool> twin;
   PointCloud unchanged;
+  PointCloud seen;
 };
 
-// Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
-// not the object's own lower part. Unchanged points inside its oriented xy box (grown by `edge`:
-// the map's sample spacing, at least the store's quantisation step) that lie below the cluster's
-// lowest point in their column, or less than r above it (the 3 x 3 cells of edge r around them),
-// are that: a disappeared car's points within LD's neighbour radius of the new session's ground
-// matched that ground and stayed in the map, under the body that was seen through. A fragment's
-// surface lies beside it (the rest of a pole or trunk a grazing ray cut a strip from), above it (a
-// wall whose lower band was seen through) or between its points up the same columns (a wall whose
-// rows were seen through and unchanged by turns): an object's lower part lies under it, not
-// interleaved with it.
-double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double r, double edge) {
-  std::unordered_map<CellKey, float, CellKeyHash> bottom;  // lowest cluster point per xy cell
-  for (const auto& p : o.cloud.points) {
-    auto [it, fresh] = bottom.try_emplace(KeyOf(p.xyz(), r), p.z);
-    if (!fresh) it->second = std::min(it->second, p.z);
+// The group's change points (`idx`, above ground) the other session saw changed: strong ND for
+// the disappeared group (all of it), weak PD for the appeared one.
+PointCloud SeenChanged(const PointCloud& changes, const std::vector<std::uint32_t>& idx) {
+  std::vector<std::uint32_t> seen;
+  for (auto i : idx)
+    if (changes.cls[i] == PointClass::kNDStrong || changes.cls[i] == PointClass::kPDWeak) seen.push_back(i);
+  return changes.select(seen);
+}
+
+// The object's own lower part (AttachedFraction, BoxSeenFraction): points below the cluster's
+// lowest point in their column (xy cells `r` wide, with their eight neighbours), or less than
+// `margin` above it. A disappeared car's points within LD's neighbour radius of the new session's
+// ground matched that ground and stayed in the map, under the body that was seen through.
+class OwnLowerPart {
+ public:
+  OwnLowerPart(const MapObject& o, double r, double margin) : r_(r), margin_(float(margin)) {
+    for (const auto& p : o.cloud.points) {
+      auto [it, fresh] = bottom_.try_emplace(KeyOf(p.xyz(), r), p.z);
+      if (!fresh) it->second = std::min(it->second, p.z);
+    }
   }
-  auto under = [&](const PointXYZI& q) {
-    const CellKey k = KeyOf(q.xyz(), r);
+  bool operator()(const Eigen::Vector3f& q) const {
+    const CellKey k = KeyOf(q, r_);
     for (std::int64_t dx = -1; dx <= 1; ++dx)
       for (std::int64_t dy = -1; dy <= 1; ++dy) {
-        const auto it = bottom.find({k.x + dx, k.y + dy});
-        if (it != bottom.end() && q.z < it->second + float(r)) return true;
+        const auto it = bottom_.find({k.x + dx, k.y + dy});
+        if (it != bottom_.end() && q.z() < it->second + margin_) return true;
       }
     return false;
-  };
-  const Eigen::Vector3d lo = o.lo.array() - r, hi = o.hi.array() + r;
+  }
+
+ private:
+  double r_;
+  float margin_;
+  std::unordered_map<CellKey, float, CellKeyHash> bottom_;  // lowest cluster point per xy cell
+};
+
+// Whether q lies in o's axis-aligned box grown by r (a cheap test before the oriented box).
+bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
+  const Eigen::Vector3d d = q.cast<double>();
+  return !((d.array() < o.lo.array() - r).any() || (d.array() > o.hi.array() + r).any());
+}
+
+// Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
+// not the object's own lower part: unchanged points inside its oriented xy box (grown by `edge`:
+// the map's sample spacing, at least the store's quantisation step) that are its lower part
+// (OwnLowerPart) are not counted. A fragment's surface lies beside it (the rest of a pole or trunk
+// a grazing ray cut a strip from), above it (a wall whose lower band was seen through) or between
+// its points up the same columns (a wall whose rows were seen through and unchanged by turns): an
+// object's lower part lies under it, not interleaved with it.
+double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double r, double edge) {
+  const OwnLowerPart under(o, r, r);
   const InOrientedBox in_box(o, edge, r);
   PointCloud other;
   for (const auto& p : unchanged.points) {
-    const Eigen::Vector3d q = p.xyz().cast<double>();
-    if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) continue;
-    if (!in_box(q) || !under(p)) other.push_back(p.x, p.y, p.z);
+    if (!InGrownBox(o, p.xyz(), r)) continue;
+    if (!in_box(p.xyz().cast<double>()) || !under(p.xyz())) other.push_back(p.x, p.y, p.z);
   }
   if (other.empty()) return 0.0;
   const std::vector<bool> hit = geometry::WithinRadius(o.cloud, other, r);
   return double(std::count(hit.begin(), hit.end(), true)) / double(std::max<std::size_t>(o.points, 1));
+}
+
+// Of what the other session observed inside the object's oriented box above its own lower part
+// (OwnLowerPart), the share it saw changed (`seen`: strong ND for a disappeared object, weak PD for
+// an appeared one) against the unchanged map points (it saw them stay); 1 when it observed
+// nothing there. A thing that left or came is gone (new) wherever its box was observed; a strip of
+// a facade or crown that a few grazing rays passed lies among rows of that surface the other
+// session saw stay, above and between its points (a wall's lower band is its own lower part).
+double BoxSeenFraction(const MapObject& o, const PointCloud& seen, const PointCloud& unchanged, double r) {
+  const OwnLowerPart under(o, r, 0.0);
+  const InOrientedBox in_box(o, 0.0, 0.0);
+  const auto count = [&](const PointCloud& c) {
+    std::size_t n = 0;
+    for (const auto& p : c.points)
+      if (InGrownBox(o, p.xyz(), 0.0) && in_box(p.xyz().cast<double>()) && !under(p.xyz())) ++n;
+    return n;
+  };
+  const std::size_t n_seen = count(seen), total = n_seen + count(unchanged);
+  return total == 0 ? 1.0 : double(n_seen) / double(total);
 }
 
 MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
@@ -551,6 +603,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   OrientedBox(o);
   o.attached_fraction =
       AttachedFraction(o, masks.unchanged, cfg.object_tolerance_m, std::max(cfg.output_voxel_m, cfg.resolution_m));
+  o.box_seen_fraction = BoxSeenFraction(o, masks.seen, masks.unchanged, cfg.object_tolerance_m);
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
@@ -774,7 +827,8 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   for (const bool appeared : {false, true}) {
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
-                      NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m)};
+                      NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m),
+                      SeenChanged(changes, idx)};
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
