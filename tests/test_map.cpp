@@ -1028,6 +1028,43 @@ TEST(MapObjects, MovedContainerAndStableIds) {
   }
 }
 
+// Objects of two steps against session 0 (`standing` on the ground grid), one keyframe each.
+std::vector<MapObject> TwoStepObjects(const test::TempDir& tmp, const PointCloud& standing, const KeyframeDelta& d1,
+                                      const KeyframeDelta& d2) {
+  Store s = Store::Create(tmp / "o.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), standing)}});
+  s.IntegrateSession({"s1"}, "s0", {d1}, {});
+  s.IntegrateSession({"s2"}, "s0", {d2}, {});
+  return s.Objects();
+}
+
+// A container moved at step 1 (gone from A, come to B) and seen again at B by step 2, against the
+// same reference: step 2's row is an end of that move too ("moved", the partner step 1 paired),
+// while a car new at step 2 stays "appeared".
+TEST(MapObjects, AMovedThingSeenAgainByALaterStepIsTheMovesEnd) {
+  const PointCloud container = Car(8, 8, 2.4f, 6.0f, 2.5f);
+  test::TempDir tmp;
+  KeyframeDelta d1, d2;
+  d1.nd_strong = container;
+  d1.pd_weak = Car(-12, -4, 2.4f, 6.0f, 2.5f);                                               // at B
+  d2.pd_weak = Cat(Car(-11.7f, -4, 2.4f, 6.0f, 2.5f), Car(10, -10, 2.f, 4.5f, 1.6f));  // B again, a car
+  const auto objs = TwoStepObjects(tmp, container, d1, d2);
+  ASSERT_EQ(objs.size(), 4u);
+  const MapObject *gone = nullptr, *came = nullptr, *again = nullptr, *car = nullptr;
+  for (const auto& o : objs) {
+    if (o.centroid.x() > 5) (o.centroid.y() > 0 ? gone : car) = &o;
+    else (o.session == 1 ? came : again) = &o;
+  }
+  ASSERT_TRUE(gone && came && again && car);
+  EXPECT_EQ(gone->change, "moved");
+  EXPECT_EQ(came->partner, gone->id);
+  EXPECT_EQ(again->track, came->track);
+  EXPECT_EQ(again->change, "moved");
+  EXPECT_EQ(again->partner, gone->id);
+  EXPECT_EQ(car->change, "appeared");
+  EXPECT_EQ(car->partner, -1);
+}
+
 // Identity across steps: car A, new in session 1, is found again by step 2, which sampled it 0.3 m
 // off (new points the map state did not hold yet): both rows are one track, existing in sessions 1
 // and 2; car B, new in session 2, and the container gone in session 1 are tracks of their own. A
@@ -1039,11 +1076,7 @@ TEST(MapObjects, OneObjectFoundByTwoStepsIsOneTrack) {
   d1.nd_strong = container;
   d1.pd_weak = Car(-12, -4, 2.f, 4.f, 1.5f);                                          // car A
   d2.pd_weak = Cat(Car(-11.7f, -4, 2.f, 4.f, 1.5f), Car(10, -10, 2.f, 4.5f, 1.6f));  // car A again, car B
-  Store s = Store::Create(tmp / "o.ltmap", Cfg());
-  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), container)}});
-  s.IntegrateSession({"s1"}, "s0", {d1}, {});
-  s.IntegrateSession({"s2"}, "s0", {d2}, {});
-  const auto objs = s.Objects();
+  const auto objs = TwoStepObjects(tmp, container, d1, d2);
   ASSERT_EQ(objs.size(), 4u);
   std::map<std::string, std::vector<const MapObject*>> at;  // rows by place
   for (const auto& o : objs) {

@@ -930,6 +930,24 @@ void AssignTracks(std::vector<MapObject>& objects, const MapConfig& cfg) {
   }
 }
 
+
+// A later step's view of a moved object's end is that end too: a row of the same track, on the
+// same side of the change (PD: the place it came to, strong ND: the place it left) and against
+// the same reference session, as a row LinkMoved paired, is "moved" with that row's partner (the
+// container that came at step 1 seen from its other side at step 2: against the reference it was
+// still elsewhere, so at step 2 too it is a move's end, not a new object).
+void InheritMoves(std::vector<MapObject>& objects) {
+  std::map<std::tuple<int, bool, int>, int> moved_end;  // (track, PD side, reference) -> partner
+  for (const auto& o : objects)
+    if (o.change == "moved") moved_end.emplace(std::make_tuple(o.track, IsPd(o.cls), o.reference), o.partner);
+  for (auto& o : objects) {
+    if (o.change == "moved") continue;
+    const auto it = moved_end.find(std::make_tuple(o.track, IsPd(o.cls), o.reference));
+    if (it == moved_end.end()) continue;
+    o.change = "moved";
+    o.partner = it->second;
+  }
+}
 }  // namespace
 
 MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
@@ -998,6 +1016,7 @@ std::vector<MapObject> Store::Objects(std::vector<MapObject>* rejected) const {
   AssignIds(out);
   LinkMoved(out, config());
   AssignTracks(out, config());
+  InheritMoves(out);
   if (rejected) {
     for (std::size_t k = 0; k < dropped.size(); ++k) dropped[k].id = int(k);
     *rejected = std::move(dropped);
