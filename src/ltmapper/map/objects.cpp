@@ -930,7 +930,6 @@ void AssignTracks(std::vector<MapObject>& objects, const MapConfig& cfg) {
   }
 }
 
-
 // A later step's view of a moved object's end is that end too: a row of the same track, on the
 // same side of the change (PD: the place it came to, strong ND: the place it left) and against
 // the same reference session, as a row LinkMoved paired, is "moved" with that row's partner (the
@@ -948,6 +947,7 @@ void InheritMoves(std::vector<MapObject>& objects) {
     o.partner = it->second;
   }
 }
+
 }  // namespace
 
 MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {

@@ -130,7 +130,7 @@ struct MapObject {
   double observed_fraction = 0.0;     // share of see-through evidence (strong ND / weak PD)
   double twin_fraction = 0.0;         // share with a change of the other side within the twin radius
   double attached_fraction = 0.0;     // share with an unchanged surface within the cluster tolerance
-  double box_seen_fraction = 0.0;     // share of the points in its box (above its lower part) seen changed
+  double box_seen_fraction = 0.0;     // of what the other session observed in its box: the share seen changed
   std::string rejected;               // why it is not an object ("" = an object)
   PointCloud cloud;  // world frame, cls / session / object set
 };
