@@ -385,6 +385,39 @@ TEST(Ld, RecallOverChangedObjectsApartFromCoverage) {
   EXPECT_FALSE(EvaluateLd(t, p, nullptr, EvalConfig{}).objects_given);
 }
 
+// A change within the match distance of a surface the other session sampled cannot be told from it
+// (a new hoarding's foot 0.1 m above the ground the central saw): the separable truth leaves it
+// out, PD against the central's surfaces, ND against the query's, and the separable recall counts
+// the rest only.
+TEST(Ld, SeparableTruthLeavesOutChangesOnTheOtherSessionsSurfaces) {
+  ChangeClouds t;
+  t.pd_weak = Row(4, 0.f);       // x = 0..3 at y = 0.f
+  t.nd_strong = Row(3, 20.f);    // x = 0..2 at y = 20
+  PointCloud central_ground = Row(2, 0.f);  // under the first two PD points ...
+  for (auto& p : central_ground.points) p.z -= 0.1f;  // ... 0.1 m below them
+  PointCloud query_surface = Row(1, 20.f);  // on the first ND point
+  for (auto& p : query_surface.points) p.y += 0.5f;  // ... 0.5 m off: separable
+  const EvalConfig cfg;
+  const ChangeClouds s = SeparableTruth(t, central_ground, query_surface, cfg);
+  EXPECT_EQ(s.pd_weak.size(), 2u);
+  EXPECT_EQ(s.nd_strong.size(), 3u);
+  // Swapped: the query's surface says nothing of PD, the central's nothing of ND.
+  const ChangeClouds w = SeparableTruth(t, query_surface, central_ground, cfg);
+  EXPECT_EQ(w.pd_weak.size(), 4u);
+  EXPECT_EQ(w.nd_strong.size(), 3u);
+  ChangeClouds p;
+  p.pd_weak = Row(4, 0.f);
+  p.pd_weak.points.erase(p.pd_weak.points.begin(), p.pd_weak.points.begin() + 2);  // misses the two on the ground
+  const LdResult r = EvaluateLd(t, p, nullptr, cfg, 0, nullptr, nullptr, &s);
+  ASSERT_TRUE(r.separable_given);
+  EXPECT_DOUBLE_EQ(r.pd.recall, 0.5);
+  EXPECT_EQ(r.pd_separable.truth, 2u);
+  EXPECT_DOUBLE_EQ(r.pd_separable.recall, 1.0);
+  EXPECT_EQ(r.nd_separable.truth, 3u);
+  EXPECT_DOUBLE_EQ(r.nd_separable.recall, 0.0);
+  EXPECT_FALSE(EvaluateLd(t, p, nullptr, cfg).separable_given);
+}
+
 TEST(Ld, HandComputedCorruption) {
   const ChangeClouds t = TruthChanges();
   ChangeClouds p;

@@ -277,6 +277,8 @@ TEST(Cli, TruthAsOutputIsPerfectThroughEveryCommand) {
     EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".precision"), 1.0) << k;
     EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".recall"), 1.0) << k;
   }
+  for (const char* k : {"pd_separable", "nd_separable"})  // the sim form splits off the separable truth
+    EXPECT_DOUBLE_EQ(*JsonNumber(js, std::string("ld.") + k + ".recall"), 1.0) << k;
   {  // --exact-ray scores against truth/pair_*/exact_ray: an error naming it while it is missing.
     const std::string l = "eval ld --sim " + f.sim + " --changes " + f.changes + " --pair 00_01 --exact-ray --json " +
                           (dir / "le.json");

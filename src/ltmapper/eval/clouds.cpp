@@ -309,7 +309,7 @@ PointCloud InBand(const PointCloud& c, const std::vector<float>& dist, double lo
 
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const PointCloud* kept_map,
                     const EvalConfig& cfg, int threads, const LdTrajectories* trajectories,
-                    const ChangeClouds* truth_objects) {
+                    const ChangeClouds* truth_objects, const ChangeClouds* truth_separable) {
   cfg.Validate();
   auto arena = MakeArena(threads);
   const double d = cfg.ld_match_dist_m;
@@ -339,11 +339,15 @@ LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& pred, const P
   Strength(pred.nd_strong, pred.nd_weak, t_nd, truth.nd_strong.size(), d, arena, &r.nd_matched,
            &r.nd_strength_correct);
   r.nd_strength_accuracy = Ratio(r.nd_strength_correct, r.nd_matched);
-  if (truth_objects) {
-    r.objects_given = true;
-    r.pd_objects = Recall(Concat(truth_objects->pd_strong, truth_objects->pd_weak), p_pd, d, arena);
-    r.nd_objects = Recall(Concat(truth_objects->nd_strong, truth_objects->nd_weak), p_nd, d, arena);
-  }
+  // Recall over a subset of the truth, PD and ND, against every predicted point of the kind.
+  const auto recall_over = [&](const ChangeClouds& subset, PrfStats* pd, PrfStats* nd) {
+    *pd = Recall(Concat(subset.pd_strong, subset.pd_weak), p_pd, d, arena);
+    *nd = Recall(Concat(subset.nd_strong, subset.nd_weak), p_nd, d, arena);
+  };
+  r.objects_given = truth_objects != nullptr;
+  if (truth_objects) recall_over(*truth_objects, &r.pd_objects, &r.nd_objects);
+  r.separable_given = truth_separable != nullptr;
+  if (truth_separable) recall_over(*truth_separable, &r.pd_separable, &r.nd_separable);
 
   if (trajectories && !cfg.ld_bands_m.empty()) {
     std::vector<double> edges = cfg.ld_bands_m;  // strictly increasing (cfg.Validate)

@@ -44,6 +44,12 @@ struct LdResult {
   // the truth is coverage (surfaces both sessions have that one of them never observed).
   bool objects_given = false;
   PrfStats pd_objects, nd_objects;  // truth, truth_matched, recall (nothing predicted: precision NaN)
+  // Recall over the separable truth points alone (where given: the sim form, SeparableTruth): those
+  // farther than the match distance from every surface the other session sampled. Nearer, a change
+  // cannot be told from that surface at the match distance (a new hoarding's foot on the ground the
+  // central saw), as HD's "hd near static".
+  bool separable_given = false;
+  PrfStats pd_separable, nd_separable;
 };
 // Keyframe positions of the pair's sessions, in the frame of the change clouds (for LdBand).
 struct LdTrajectories {
@@ -53,10 +59,12 @@ struct LdTrajectories {
 // after the update (static / live map): weak-ND truth points within d of it count as kept.
 // With `trajectories` (may be null) the result holds the distance bands of cfg.ld_bands_m
 // (strictly increasing, else ltm::Error). With `truth_objects` (may be null: the truth's points
-// of changed objects, a subset of `truth`) the result holds pd_objects / nd_objects.
+// of changed objects, a subset of `truth`) the result holds pd_objects / nd_objects; likewise
+// `truth_separable` (may be null: its separable points) and pd_separable / nd_separable.
 LdResult EvaluateLd(const ChangeClouds& truth, const ChangeClouds& predicted,
                     const PointCloud* kept_map, const EvalConfig& cfg, int threads = 0,
-                    const LdTrajectories* trajectories = nullptr, const ChangeClouds* truth_objects = nullptr);
+                    const LdTrajectories* trajectories = nullptr, const ChangeClouds* truth_objects = nullptr,
+                    const ChangeClouds* truth_separable = nullptr);
 // Where the LD prediction is wrong, pooled per kind (PD vs PD, ND vs ND) at ld_match_dist_m:
 // predicted points with no truth point of their kind within d (false positives) and truth
 // points with no predicted point within d (false negatives). `cls` keeps each point's own class

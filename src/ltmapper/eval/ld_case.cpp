@@ -1,6 +1,7 @@
 // The inputs of `ltmapper eval ld` found from its folders, and their scores (ld_case.hpp).
 #include "ltmapper/eval/ld_case.hpp"
 #include "ltmapper/eval/truth_io.hpp"
+#include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
 #include <spdlog/spdlog.h>
@@ -12,17 +13,25 @@ namespace {
 
 std::string Join(const std::string& a, const std::string& b) { return (std::filesystem::path(a) / b).string(); }
 
-// The pair's truth change sets (true world, PD from the query's static world, ND from the
-// central's: the pair's clouds, and their changed objects' part when the truth names it) in the
-// estimate frame. From the scans, each session's labelled scans are read once for all the sets.
-std::vector<ChangeClouds> SimTruth(const std::string& sim, const std::vector<const ChangeClouds*>& sets, std::size_t c,
-                                   std::size_t q, const TruthMapping& m, bool from_scans, const EvalConfig& cfg,
-                                   int threads) {
-  std::vector<ChangeClouds> out;
+// The pair's truth in the estimate frame: its change sets (true world, PD from the query's static
+// world, ND from the central's: the pair's clouds, and their changed objects' part when the truth
+// names it) and what each session sampled of its surfaces (its static world). From the scans,
+// each session's labelled scans are read once for all of them.
+struct PlacedTruth {
+  std::vector<ChangeClouds> sets;
+  PointCloud central_surfaces, query_surfaces;
+};
+PlacedTruth SimTruth(const std::string& sim, const std::vector<const ChangeClouds*>& sets, std::size_t c,
+                     std::size_t q, const TruthMapping& m, bool from_scans, const EvalConfig& cfg, int threads) {
+  const PointCloud central_world = io::ReadCloud(StaticWorldFile(sim, c));
+  const PointCloud query_world = io::ReadCloud(StaticWorldFile(sim, q));
+  PlacedTruth out;
   if (!from_scans) {
     for (const ChangeClouds* w : sets)
-      out.push_back({m.Map(w->pd_strong, q, threads), m.Map(w->pd_weak, q, threads), m.Map(w->nd_strong, c, threads),
-                     m.Map(w->nd_weak, c, threads)});
+      out.sets.push_back({m.Map(w->pd_strong, q, threads), m.Map(w->pd_weak, q, threads),
+                          m.Map(w->nd_strong, c, threads), m.Map(w->nd_weak, c, threads)});
+    out.central_surfaces = m.Map(central_world, c, threads);
+    out.query_surfaces = m.Map(query_world, q, threads);
     return out;
   }
   std::vector<const PointCloud*> pd_in, nd_in;
@@ -30,14 +39,30 @@ std::vector<ChangeClouds> SimTruth(const std::string& sim, const std::vector<con
     pd_in.insert(pd_in.end(), {&w->pd_strong, &w->pd_weak});
     nd_in.insert(nd_in.end(), {&w->nd_strong, &w->nd_weak});
   }
+  pd_in.push_back(&query_world);  // every static-world point marks itself: the whole sampled surface
+  nd_in.push_back(&central_world);
   auto pd = ChangesFromLabelledScans(sim, q, pd_in, m, cfg.ld_match_dist_m, threads);
   auto nd = ChangesFromLabelledScans(sim, c, nd_in, m, cfg.ld_match_dist_m, threads);
   for (std::size_t k = 0; k < sets.size(); ++k)
-    out.push_back({std::move(pd[2 * k]), std::move(pd[2 * k + 1]), std::move(nd[2 * k]), std::move(nd[2 * k + 1])});
+    out.sets.push_back(
+        {std::move(pd[2 * k]), std::move(pd[2 * k + 1]), std::move(nd[2 * k]), std::move(nd[2 * k + 1])});
+  out.query_surfaces = std::move(pd.back());
+  out.central_surfaces = std::move(nd.back());
   return out;
 }
 
 }  // namespace
+
+ChangeClouds SeparableTruth(const ChangeClouds& truth, const PointCloud& central_surfaces,
+                            const PointCloud& query_surfaces, const EvalConfig& cfg, int threads) {
+  const auto apart = [&](const PointCloud& c, const PointCloud& other) {
+    std::vector<bool> keep = geometry::WithinRadius(c, other, cfg.ld_match_dist_m, threads);
+    keep.flip();
+    return c.select(keep);
+  };
+  return {apart(truth.pd_strong, central_surfaces), apart(truth.pd_weak, central_surfaces),
+          apart(truth.nd_strong, query_surfaces), apart(truth.nd_weak, query_surfaces)};
+}
 
 LdCase LoadLdCase(const std::string& truth_dir, const std::string& pred_dir, const std::string& truth_transform) {
   LdCase out;
@@ -65,9 +90,10 @@ LdCase LoadSimLdCase(const std::string& sim, const std::string& changes, const s
   const std::optional<ChangeClouds> objects_world = ReadObjectChangeClouds(truth_dir);
   std::vector<const ChangeClouds*> sets = {&changes_world};
   if (objects_world) sets.push_back(&*objects_world);
-  std::vector<ChangeClouds> placed = SimTruth(sim, sets, c, q, mapping, from_scans, cfg, threads);
-  out.truth = std::move(placed[0]);
-  if (objects_world) out.truth_objects = std::move(placed[1]);
+  PlacedTruth placed = SimTruth(sim, sets, c, q, mapping, from_scans, cfg, threads);
+  out.truth = std::move(placed.sets[0]);
+  if (objects_world) out.truth_objects = std::move(placed.sets[1]);
+  out.truth_separable = SeparableTruth(out.truth, placed.central_surfaces, placed.query_surfaces, cfg, threads);
   if (from_scans)
     out.inputs.push_back({"truth built from", fmt::format("labelled scans placed with the method's poses, voxel {} m",
                                                           cfg.ld_match_dist_m)});
@@ -97,7 +123,8 @@ LdResult ScoreLdCase(const LdCase& c, const std::string& kept_map, const std::st
   }
   const LdResult r = EvaluateLd(c.truth, c.pred, kept ? &*kept : nullptr, cfg, threads,
                                 c.trajectories ? &*c.trajectories : nullptr,
-                                c.truth_objects ? &*c.truth_objects : nullptr);
+                                c.truth_objects ? &*c.truth_objects : nullptr,
+                                c.truth_separable ? &*c.truth_separable : nullptr);
   if (!errors_dir.empty()) {
     const LdErrors e = LdErrorClouds(c.truth, c.pred, cfg, threads);
     io::MakeDirs(errors_dir);

@@ -18,9 +18,16 @@ struct LdCase {
   std::vector<std::pair<std::string, std::string>> inputs;  // what was scored (name, path), for the report
   ChangeClouds truth, pred;
   std::optional<ChangeClouds> truth_objects;   // the truth's points of changed objects, when it names them
+  std::optional<ChangeClouds> truth_separable; // sim form: its points apart from the other session's surfaces
   std::optional<LdTrajectories> trajectories;  // sim form: keyframe positions of the pair (LD bands)
   std::string central_static;                  // sim form: changes/<central>/static_map.pcd, when present
 };
+
+// The truth's separable points (LdResult::pd_separable): PD farther than ld_match_dist_m from every
+// point of `central_surfaces` (what the central sampled, in the truth's frame), ND from every
+// point of `query_surfaces`.
+ChangeClouds SeparableTruth(const ChangeClouds& truth, const PointCloud& central_surfaces,
+                            const PointCloud& query_surfaces, const EvalConfig& cfg, int threads = 0);
 
 // Explicit form: {pd,nd}_{strong,weak}.pcd of both folders (and the truth's objects_*.pcd when
 // all four are there); `truth_transform` (a 3x4 / 4x4 file, may be empty) is applied to the truth.
@@ -30,7 +37,8 @@ LdCase LoadLdCase(const std::string& truth_dir, const std::string& pred_dir, con
 // sim's truth/ and of `changes`): the truth change clouds moved by `mapping` (PD by the query's
 // keyframes, ND by the central's) or, with `from_scans`, rebuilt from the labelled scans placed
 // with the method's poses (ChangesFromLabelledScans at ld_match_dist_m), and so the truth's points
-// of changed objects (objects_*.pcd) when the pair folder has them; the sessions' sensor
+// of changed objects (objects_*.pcd) when the pair folder has them, and its separable points
+// (LdResult::pd_separable, from the sessions' static worlds placed alike); the sessions' sensor
 // positions for the LD bands. With `find_central_static`, central_static is the central's HD-free
 // map under `changes` when it exists (else a warning: weak-ND preservation is not scored).
 LdCase LoadSimLdCase(const std::string& sim, const std::string& changes, const std::string& truth_dir,

@@ -122,6 +122,10 @@ std::string SessionTruthDir(const std::string& sim_dir, std::size_t session) {
 }
 }  // namespace
 
+std::string StaticWorldFile(const std::string& sim_dir, std::size_t session) {
+  return Join(SessionTruthDir(sim_dir, session), "static_world.pcd");
+}
+
 PointCloud SensorPositions(const std::string& sim_dir, std::size_t session, const TruthMapping& mapping) {
   const std::vector<Pose> T_true = ReadPoses(Join(SessionTruthDir(sim_dir, session), "poses_world.txt"));
   PointCloud c;
@@ -146,7 +150,7 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
   if (changes.size() > kMaxClouds)
     throw Error("ChangesFromLabelledScans: " + std::to_string(changes.size()) + " change clouds, at most " +
                 std::to_string(kMaxClouds));
-  auto world = std::make_shared<const PointCloud>(io::ReadCloud(Join(tdir, "static_world.pcd")));
+  auto world = std::make_shared<const PointCloud>(io::ReadCloud(StaticWorldFile(sim_dir, session)));
   const geometry::KdTree tree(world);
   std::vector<Label> label(world->size(), 0);
   // LD object truth is voxelised apart from the static world (a car's voxel there may also hold

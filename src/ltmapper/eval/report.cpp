@@ -108,6 +108,10 @@ void WriteLd(io::json::Writer& w, const LdResult& l) {
     WritePrf(w, "pd_objects", l.pd_objects);
     WritePrf(w, "nd_objects", l.nd_objects);
   }
+  if (l.separable_given) {
+    WritePrf(w, "pd_separable", l.pd_separable);
+    WritePrf(w, "nd_separable", l.nd_separable);
+  }
   w.BeginArray("bands");
   for (const LdBand& b : l.bands) {
     w.BeginObject().Number("min_m", b.min_m).Number("max_m", b.max_m);  // last max_m +inf: written as null
@@ -401,6 +405,12 @@ void MdLd(std::ostringstream& md, const LdResult& l) {
           "sessions have that one never observed): PD "
        << l.pd_objects.truth_matched << " / " << l.pd_objects.truth << " = " << Fmt(l.pd_objects.recall, 4) << ", ND "
        << l.nd_objects.truth_matched << " / " << l.nd_objects.truth << " = " << Fmt(l.nd_objects.recall, 4) << "\n";
+  if (l.separable_given)
+    md << "- Recall over the separable truth points (farther than the match distance from every surface the "
+          "other session sampled; nearer, a change cannot be told from that surface): PD "
+       << l.pd_separable.truth_matched << " / " << l.pd_separable.truth << " = " << Fmt(l.pd_separable.recall, 4)
+       << ", ND " << l.nd_separable.truth_matched << " / " << l.nd_separable.truth << " = "
+       << Fmt(l.nd_separable.recall, 4) << "\n";
   md << "\n";
   if (l.bands.empty()) return;
   md << "By distance from the session that had to observe the place (PD: nearest central keyframe, ND: "

@@ -44,6 +44,9 @@ TruthMapping KeyframeTruthMapping(const std::string& sim_dir, const std::string&
 // placed by `mapping.ScanPose`, one point per keyframe (LdTrajectories); ltm::Error naming the
 // truth folder when there is no such session.
 PointCloud SensorPositions(const std::string& sim_dir, std::size_t session, const TruthMapping& mapping);
+// truth/<name>/static_world.pcd of sim session `session`: what its scans sampled of the surfaces
+// it has (permanent structure and its LD objects), true world; ltm::Error as SensorPositions.
+std::string StaticWorldFile(const std::string& sim_dir, std::size_t session);
 // LD truth rebuilt the way the method builds its maps: the labelled scans of sim session
 // `session` (truth/<name>/labels) placed with `mapping.ScanPose` (the estimated pose of each
 // keyframe), keeping the static points whose true-world position has, as its nearest point of the
