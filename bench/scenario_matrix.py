@@ -6,7 +6,8 @@ one table, worst HD SA first:
 
   scenario | sessions aligned | SA %% per session | DA %% per session (before the multi-session cleanup)
   [over the HD points farther than 0.1 m from every static truth point] | inter-session RMSE m / deg |
-  LD PD P/R, ND P/R per pair {recall over the changed objects' points alone, PD/ND} and strong / weak correct,
+  LD PD P/R, ND P/R per pair {recall over the changed objects' points alone, PD/ND} <recall over the
+  separable truth, PD/ND: farther than the match distance from what the other session sampled> and strong / weak correct,
   against the beam truth (and the exact-ray truth) | changed objects found (precision) [found among the observable ones, eval objects' slice] | HD wall s/kf | run wall s | peak MB of the run
 
 usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [scenario.yaml ...]
@@ -104,8 +105,9 @@ def evaluate(ltm, sim, out, names):
              "--truth-from-scans", "--exact-ray", "--json", je, "--quiet"], je + ".log")
         le = load(je)["ld"]
         objs = [l.get(k, {}).get("recall") for k in ("pd_objects", "nd_objects")]
+        sep = [l.get(k, {}).get("recall") for k in ("pd_separable", "nd_separable")]
         row["ld"].append((pair, l["pd"]["precision"], l["pd"]["recall"], l["nd"]["precision"], l["nd"]["recall"],
-                          objs[0], objs[1], l["pd_strength"]["accuracy"], l["nd_strength"]["accuracy"],
+                          objs[0], objs[1], sep[0], sep[1], l["pd_strength"]["accuracy"], l["nd_strength"]["accuracy"],
                           le["pd_strength"]["accuracy"], le["nd_strength"]["accuracy"]))
     objects = os.path.join(runp, "objects")
     row["objects"] = None
@@ -144,12 +146,13 @@ def fmt(v, scale=1.0, digits=2):
 
 def print_table(rows):
     print(("| scenario | aligned | SA %% per session | DA %% per session (own removal) [separable] | consistency m / deg | "
-          "LD pair: PD P/R, ND P/R {recall over changed objects PD/ND}; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) [observable found] | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
+          "LD pair: PD P/R, ND P/R {recall over changed objects PD/ND} <separable recall PD/ND>; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) [observable found] | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
     print("|---|---|---|---|---|---|---|---:|---:|---:|")
     for r in sorted(rows, key=lambda r: min(r["sa"]) if r["sa"] else -1):
-        ld = "; ".join("%s: %s/%s, %s/%s {%s/%s}; %s/%s (%s/%s)" % (p, fmt(a), fmt(b), fmt(c), fmt(d), fmt(oa), fmt(ob),
-                                                                    fmt(e), fmt(f), fmt(g), fmt(h))
-                       for p, a, b, c, d, oa, ob, e, f, g, h in r["ld"])
+        ld = "; ".join("%s: %s/%s, %s/%s {%s/%s} <%s/%s>; %s/%s (%s/%s)" % (
+                           p, fmt(a), fmt(b), fmt(c), fmt(d), fmt(oa), fmt(ob), fmt(sa), fmt(sb), fmt(e), fmt(f), fmt(g),
+                           fmt(h))
+                       for p, a, b, c, d, oa, ob, sa, sb, e, f, g, h in r["ld"])
         obj = "n/a" if not r["objects"] else "%d/%d (%s)" % (r["objects"][0], r["objects"][1], fmt(r["objects"][2]))
         if r["objects"] and r["objects"][4] is not None:
             obj += " [%d/%d]" % (r["objects"][3], r["objects"][4])
