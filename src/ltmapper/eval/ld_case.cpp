@@ -23,15 +23,13 @@ struct PlacedTruth {
 };
 PlacedTruth SimTruth(const std::string& sim, const std::vector<const ChangeClouds*>& sets, std::size_t c,
                      std::size_t q, const TruthMapping& m, bool from_scans, const EvalConfig& cfg, int threads) {
-  const PointCloud central_world = io::ReadCloud(StaticWorldFile(sim, c));
-  const PointCloud query_world = io::ReadCloud(StaticWorldFile(sim, q));
   PlacedTruth out;
   if (!from_scans) {
     for (const ChangeClouds* w : sets)
       out.sets.push_back({m.Map(w->pd_strong, q, threads), m.Map(w->pd_weak, q, threads),
                           m.Map(w->nd_strong, c, threads), m.Map(w->nd_weak, c, threads)});
-    out.central_surfaces = m.Map(central_world, c, threads);
-    out.query_surfaces = m.Map(query_world, q, threads);
+    out.central_surfaces = m.Map(io::ReadCloud(StaticWorldFile(sim, c)), c, threads);
+    out.query_surfaces = m.Map(io::ReadCloud(StaticWorldFile(sim, q)), q, threads);
     return out;
   }
   std::vector<const PointCloud*> pd_in, nd_in;
@@ -39,10 +37,8 @@ PlacedTruth SimTruth(const std::string& sim, const std::vector<const ChangeCloud
     pd_in.insert(pd_in.end(), {&w->pd_strong, &w->pd_weak});
     nd_in.insert(nd_in.end(), {&w->nd_strong, &w->nd_weak});
   }
-  pd_in.push_back(&query_world);  // every static-world point marks itself: the whole sampled surface
-  nd_in.push_back(&central_world);
-  auto pd = ChangesFromLabelledScans(sim, q, pd_in, m, cfg.ld_match_dist_m, threads);
-  auto nd = ChangesFromLabelledScans(sim, c, nd_in, m, cfg.ld_match_dist_m, threads);
+  auto pd = ChangesFromLabelledScans(sim, q, pd_in, m, cfg.ld_match_dist_m, threads, true);
+  auto nd = ChangesFromLabelledScans(sim, c, nd_in, m, cfg.ld_match_dist_m, threads, true);
   for (std::size_t k = 0; k < sets.size(); ++k)
     out.sets.push_back(
         {std::move(pd[2 * k]), std::move(pd[2 * k + 1]), std::move(nd[2 * k]), std::move(nd[2 * k + 1])});

@@ -139,7 +139,8 @@ PointCloud SensorPositions(const std::string& sim_dir, std::size_t session, cons
 
 std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
                                                  const std::vector<const PointCloud*>& changes,
-                                                 const TruthMapping& mapping, double voxel_m, int threads) {
+                                                 const TruthMapping& mapping, double voxel_m, int threads,
+                                                 bool sampled_surfaces) {
   const std::string tdir = SessionTruthDir(sim_dir, session);
   const std::vector<Pose> T_true = ReadPoses(Join(tdir, "poses_world.txt"));
   const auto files = LabelledScanPaths(tdir, T_true.size());
@@ -162,7 +163,8 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
       float d2 = 0.f;
       if (tree.Nearest(p.xyz(), &j, &d2) && d2 <= same2) label[j] |= Label(1u << c);
     }
-  std::vector<PointCloud> out(changes.size());
+  const std::size_t n_out = changes.size() + (sampled_surfaces ? 1 : 0);
+  std::vector<PointCloud> out(n_out);
   std::mutex out_mutex;
   ParallelForChunks(files.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k != end; ++k) {
@@ -170,13 +172,14 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
       const Pose T_est = mapping.ScanPose(session, k, T_true[k]);
       const Eigen::Matrix3f R = T_true[k].linear().cast<float>();
       const Eigen::Vector3f t = T_true[k].translation().cast<float>();
-      std::vector<PointCloud> part(changes.size());
+      std::vector<PointCloud> part(n_out);
       for (std::size_t i = 0; i < scan.size(); ++i) {
         if (scan.cls[i] != PointClass::kStatic) continue;
+        if (sampled_surfaces) part.back().points.push_back(scan.points[i]);
         std::uint32_t j = 0;
         float d2 = 0.f;
         if (!tree.Nearest(R * scan.points[i].xyz() + t, &j, &d2) || label[j] == 0) continue;
-        for (std::size_t c = 0; c < part.size(); ++c)
+        for (std::size_t c = 0; c < changes.size(); ++c)
           if (label[j] >> c & 1u) part[c].points.push_back(scan.points[i]);
       }
       for (PointCloud& p : part) {
@@ -184,7 +187,7 @@ std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std
         p = geometry::VoxelDownsample(p, voxel_m, 1);
       }
       const std::lock_guard<std::mutex> lock(out_mutex);
-      for (std::size_t c = 0; c < part.size(); ++c) out[c].append(part[c]);
+      for (std::size_t c = 0; c < n_out; ++c) out[c].append(part[c]);
     }
   });
   for (PointCloud& c : out) {

@@ -55,9 +55,12 @@ std::string StaticWorldFile(const std::string& sim_dir, std::size_t session);
 // labelled with that cloud's class, then voxelised at `voxel_m`. Far from the trajectory the per-keyframe
 // mapping of MapTruthByKeyframes blurs by the sessions' relative rotation error times the
 // viewing distance; this truth has exactly the method's blur. Returns one cloud per input (at most
-// 8; the clouds may overlap: a point marked by several goes into each of them).
+// 8; the clouds may overlap: a point marked by several goes into each of them); with
+// `sampled_surfaces` one more after them, every static point of the scans placed alike (what the
+// session sampled of its surfaces, LdResult::pd_separable).
 std::vector<PointCloud> ChangesFromLabelledScans(const std::string& sim_dir, std::size_t session,
                                                  const std::vector<const PointCloud*>& changes,
-                                                 const TruthMapping& mapping, double voxel_m, int threads = 0);
+                                                 const TruthMapping& mapping, double voxel_m, int threads = 0,
+                                                 bool sampled_surfaces = false);
 
 }  // namespace ltm::eval

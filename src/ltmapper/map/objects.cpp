@@ -65,6 +65,8 @@ CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
 bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
 // Weak ND in an object's cloud: its unseen lower part (UnseenLowerParts), not something seen.
 bool Unseen(PointClass c) { return c == PointClass::kNDWeak; }
+// A change the other session saw through its place (strong ND, weak PD): see-through evidence.
+bool SeenThrough(PointClass c) { return c == PointClass::kNDStrong || c == PointClass::kPDWeak; }
 // The change points objects are clustered from (GroupPoints): PD and strong ND, not weak ND.
 bool Grouped(PointClass c) { return IsPd(c) || c == PointClass::kNDStrong; }
 
@@ -293,7 +295,7 @@ void Describe(MapObject& o) {
     o.lo = o.lo.cwiseMin(p);
     o.hi = o.hi.cwiseMax(p);
     if (!Unseen(o.cloud.cls[i])) ++votes[o.cloud.cls[i]];
-    if (o.cloud.cls[i] == PointClass::kNDStrong || o.cloud.cls[i] == PointClass::kPDWeak) ++seen_through;
+    if (SeenThrough(o.cloud.cls[i])) ++seen_through;
   }
   o.points = o.cloud.size();
   o.centroid /= double(o.points);
@@ -512,35 +514,34 @@ struct Masks {
 PointCloud SeenChanged(const PointCloud& changes, const std::vector<std::uint32_t>& idx) {
   std::vector<std::uint32_t> seen;
   for (auto i : idx)
-    if (changes.cls[i] == PointClass::kNDStrong || changes.cls[i] == PointClass::kPDWeak) seen.push_back(i);
+    if (SeenThrough(changes.cls[i])) seen.push_back(i);
   return changes.select(seen);
 }
 
 // The object's own lower part (AttachedFraction, BoxSeenFraction): points below the cluster's
 // lowest point in their column (xy cells `r` wide, with their eight neighbours), or less than
-// `margin` above it. A disappeared car's points within LD's neighbour radius of the new session's
+// `margin` above it (Holds). A disappeared car's points within LD's neighbour radius of the new session's
 // ground matched that ground and stayed in the map, under the body that was seen through.
 class OwnLowerPart {
  public:
-  OwnLowerPart(const MapObject& o, double r, double margin) : r_(r), margin_(float(margin)) {
+  OwnLowerPart(const MapObject& o, double r) : r_(r) {
     for (const auto& p : o.cloud.points) {
       auto [it, fresh] = bottom_.try_emplace(KeyOf(p.xyz(), r), p.z);
       if (!fresh) it->second = std::min(it->second, p.z);
     }
   }
-  bool operator()(const Eigen::Vector3f& q) const {
+  bool Holds(const Eigen::Vector3f& q, double margin) const {
     const CellKey k = KeyOf(q, r_);
     for (std::int64_t dx = -1; dx <= 1; ++dx)
       for (std::int64_t dy = -1; dy <= 1; ++dy) {
         const auto it = bottom_.find({k.x + dx, k.y + dy});
-        if (it != bottom_.end() && q.z() < it->second + margin_) return true;
+        if (it != bottom_.end() && q.z() < it->second + float(margin)) return true;
       }
     return false;
   }
 
  private:
   double r_;
-  float margin_;
   std::unordered_map<CellKey, float, CellKeyHash> bottom_;  // lowest cluster point per xy cell
 };
 
@@ -553,17 +554,17 @@ bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
 // Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
 // not the object's own lower part: unchanged points inside its oriented xy box (grown by `edge`:
 // the map's sample spacing, at least the store's quantisation step) that are its lower part
-// (OwnLowerPart) are not counted. A fragment's surface lies beside it (the rest of a pole or trunk
+// (OwnLowerPart, within r above its lowest point in their column) are not counted. A fragment's surface lies beside it (the rest of a pole or trunk
 // a grazing ray cut a strip from), above it (a wall whose lower band was seen through) or between
 // its points up the same columns (a wall whose rows were seen through and unchanged by turns): an
 // object's lower part lies under it, not interleaved with it.
-double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double r, double edge) {
-  const OwnLowerPart under(o, r, r);
+double AttachedFraction(const MapObject& o, const OwnLowerPart& lower, const PointCloud& unchanged, double r,
+                        double edge) {
   const InOrientedBox in_box(o, edge, r);
   PointCloud other;
   for (const auto& p : unchanged.points) {
     if (!InGrownBox(o, p.xyz(), r)) continue;
-    if (!in_box(p.xyz().cast<double>()) || !under(p.xyz())) other.push_back(p.x, p.y, p.z);
+    if (!in_box(p.xyz().cast<double>()) || !lower.Holds(p.xyz(), r)) other.push_back(p.x, p.y, p.z);
   }
   if (other.empty()) return 0.0;
   const std::vector<bool> hit = geometry::WithinRadius(o.cloud, other, r);
@@ -571,18 +572,18 @@ double AttachedFraction(const MapObject& o, const PointCloud& unchanged, double 
 }
 
 // Of what the other session observed inside the object's oriented box above its own lower part
-// (OwnLowerPart), the share it saw changed (`seen`: strong ND for a disappeared object, weak PD for
+// (OwnLowerPart: below its lowest point in their column), the share it saw changed (`seen`: strong ND for a disappeared object, weak PD for
 // an appeared one) against the unchanged map points (it saw them stay); 1 when it observed
 // nothing there. A thing that left or came is gone (new) wherever its box was observed; a strip of
 // a facade or crown that a few grazing rays passed lies among rows of that surface the other
 // session saw stay, above and between its points (a wall's lower band is its own lower part).
-double BoxSeenFraction(const MapObject& o, const PointCloud& seen, const PointCloud& unchanged, double r) {
-  const OwnLowerPart under(o, r, 0.0);
+double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const PointCloud& seen,
+                       const PointCloud& unchanged) {
   const InOrientedBox in_box(o, 0.0, 0.0);
   const auto count = [&](const PointCloud& c) {
     std::size_t n = 0;
     for (const auto& p : c.points)
-      if (InGrownBox(o, p.xyz(), 0.0) && in_box(p.xyz().cast<double>()) && !under(p.xyz())) ++n;
+      if (InGrownBox(o, p.xyz(), 0.0) && in_box(p.xyz().cast<double>()) && !lower.Holds(p.xyz(), 0.0)) ++n;
     return n;
   };
   const std::size_t n_seen = count(seen), total = n_seen + count(unchanged);
@@ -601,9 +602,10 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.cloud = changes.select(sel);
   Describe(o);
   OrientedBox(o);
-  o.attached_fraction =
-      AttachedFraction(o, masks.unchanged, cfg.object_tolerance_m, std::max(cfg.output_voxel_m, cfg.resolution_m));
-  o.box_seen_fraction = BoxSeenFraction(o, masks.seen, masks.unchanged, cfg.object_tolerance_m);
+  const OwnLowerPart lower(o, cfg.object_tolerance_m);
+  o.attached_fraction = AttachedFraction(o, lower, masks.unchanged, cfg.object_tolerance_m,
+                                         std::max(cfg.output_voxel_m, cfg.resolution_m));
+  o.box_seen_fraction = BoxSeenFraction(o, lower, masks.seen, masks.unchanged);
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
