@@ -384,54 +384,6 @@ TEST(RemovertVotes, NdSeeThroughCountsWhereABeamPassedThePoint) {
   EXPECT_EQ(see(0.9), 1);
 }
 
-// The beam truth calls a point's place observed free where a ray of the other session passed within
-// the tolerance of it and went on. For PD (count_own_see) on an upright surface whose extent its
-// own map gives (VisibilityOptions::edge_at), a keyframe's see-through counts only where one of its
-// beams did that and crossed the point's plane inside the surface (ColumnImage::WentThroughSurface):
-// a beam that crossed it beyond the surface's edge passed over it (a static fence's top, which a
-// central scan saw over from afar, is no new thing). Here the VLP-16's +1 deg beam passes 0.07 m
-// above a point 40 m away and meets a wall at 60 m (or nothing: the sky); the point's surface goes
-// on 1 m above it, or it is the surface's top.
-TEST(RemovertVotes, PdSeeThroughCountsWhereABeamWentThroughTheSurface) {
-  const RemovertConfig cfg = Vlp16Config();
-  constexpr double kDeg = M_PI / 180.0;
-  const Eigen::Vector3d p = test::Direction(0.9 * kDeg, 10.1 * kDeg) * 40.0;
-  PointCloud pts;
-  pts.push_back(float(p.x()), float(p.y()), float(p.z() + 1.8));
-  const std::vector<Eigen::Vector3f> side = {-p.cast<float>().normalized()};  // an upright face
-  auto votes = [&](double above_m, bool sky) {
-    auto scan = std::make_shared<PointCloud>();
-    for (int k = 0; k < 100; ++k)
-      for (const double el : {1.0, -15.0}) {
-        if (sky && el > 0.0 && std::fabs(0.2 * k - 10.1) < 1.0) continue;  // the +1 deg beam met nothing there
-        const Eigen::Vector3d q = test::Direction(el * kDeg, 0.2 * k * kDeg) * (el < 0.0 ? 1.8 / std::sin(15.0 * kDeg) : 60.0);
-        scan->push_back(float(q.x()), float(q.y()), float(q.z()));
-      }
-    WorldKeyframe kf;
-    kf.T_world_sensor = test::At(0, 0, 1.8);
-    kf.cloud = scan;
-    removert::SurfaceExtent extent;
-    extent.above = float(above_m);
-    extent.below = extent.left = extent.right = 1.f;
-    const std::vector<removert::SurfaceExtent> extents = {extent};
-    removert::BeamTest beams;
-    removert::VisibilityOptions opt;
-    opt.normals = &side;
-    opt.beams = &beams;
-    opt.count_own_see = true;
-    opt.within_beams = false;
-    opt.edge_at = &extents;
-    return removert::CountVisibility(pts, {kf}, {0.6}, cfg, 1, opt);
-  };
-  const removert::VisibilityVotes inside = votes(1.0, false), top = votes(0.0, false);
-  EXPECT_EQ(inside.SeeOwn(0, 0), 1);
-  EXPECT_EQ(top.SeeOwn(0, 0), 0);
-  EXPECT_EQ(top.See(0, 0), 1);  // the window's see-through is not asked: on a sparse sensor it is
-                                // a thing's only evidence between two beams (see the README)
-  EXPECT_EQ(votes(1.0, true).beam_passed.at(0), 1);  // to the sky, through the surface
-  EXPECT_EQ(votes(0.0, true).beam_passed.at(0), 0);  // to the sky, over its top
-}
-
 // The street scene: 21 keyframes 2 m apart along x.
 struct Street {
   std::vector<WorldKeyframe> kfs;

@@ -149,7 +149,7 @@ class MultiResImage {
 // by column: rows far finer than the beam spacing, so the rows between two beams stay empty and
 // the first returns above and below a direction are the two beams around it.
 constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4, kBeamThrough = 8,
-                       kBeamNear = 16, kBeamBeside = 32;  // ColumnImage::Observed
+                       kBeamNear = 16;  // ColumnImage::Observed
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
 // half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
@@ -162,19 +162,16 @@ class ColumnImage {
   // its column or of the columns within asin(tol / range) of it ended on its surface near it;
   // with want_around, kBeamAround when its cell is empty and the
   // beams around it met its surface farther away (Around), and kBeamPassed when a beam passed it
-  // without a return (PassedWithoutReturn; with `edge`, PassedInside that extent); with ask_through, kBeamThrough when none ended near
+  // without a return (PassedWithoutReturn); with ask_through, kBeamThrough when none ended near
   // it, a beam of those columns crossed its plane within a map voxel of it and ended beyond the
   // crossing by more than tol / cos(incidence), uncapped (the beam truth's "observed absent"), and
   // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
   // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
   // ended near it and the beam of its own column passed it without a return crossing its surface
   // inside that extent (PassedInside), on the same MetSurfaceNear condition. Without want_around
-  // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear). With
-  // `edge` (PD: the point's surface extent; null = not asked), kBeamBeside when none ended near it
-  // and no beam of those columns went through its surface (WentThroughSurface).
+  // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
-                        bool want_around, bool ask_through, const SurfaceExtent* inside,
-                        const SurfaceExtent* edge = nullptr) const;
+                        bool want_around, bool ask_through, const SurfaceExtent* inside) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing
@@ -190,14 +187,6 @@ class ColumnImage {
   // surface's edge passed beside it (over a canopy's top, past a fence seen edge-on).
   bool PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                     const SurfaceExtent& inside) const;
-  // A beam of the columns within `reach` of the point's (its cell in the point's row, or the beams
-  // above and below it) passed within tol of the point, ended beyond it by more than tol, and crossed
-  // its plane inside `surface`'s extent: the beam truth's "observed absent" for a surface the other
-  // session never met. A beam that crossed the plane beyond the extent went over the surface's edge (a
-  // fence's top seen from afar); a pixel's return beyond the point from a beam farther than tol
-  // passed beside it.
-  bool WentThroughSurface(int reach, int row, int col, const Eigen::Vector3f& ps, const float* plane,
-                          const SurfaceExtent& surface) const;
   // Whether the beam at elevation_deg of `m` can tell its returns from its neighbours': they
   // scatter (3 x the scans' spread, SensorModel::spread_deg) short of halfway to the next beam.
   // Only those beams are asked by PassedWithoutReturn and PassedInside; a deskewed sweep's spread

@@ -217,9 +217,8 @@ struct SurfaceSetup {
   std::vector<bool> planar;      // normals[i] is a plane's (else a scan line's: orientation unknown)
   std::vector<bool> rim;         // points[i] lies at the rim of its plane (EstimateNormals)
   std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
-  std::vector<SurfaceExtent> extents;  // how far the upright surface around a point goes on, for a
-                                       // beam that passed it without a return (ND) or went on past
-                                       // it (PD)
+  std::vector<SurfaceExtent> extents;  // ND: how far the upright surface around a point goes on, for
+                                       // a beam that passed it without a return
   VisibilityOptions opt;
 };
 
@@ -242,14 +241,6 @@ void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const Re
     s->opt.through_at = &s->through_at;
     s->extents = SurfaceExtents(points, own_map, s->normals, s->through_at, cfg.ld_beam.tol_m, threads);
     s->opt.passed_at = &s->extents;
-  }
-  // PD on an upright plane (rim included): a keyframe's own pixel saw through the point only where
-  // one of its beams went through the surface its own map holds around it (WentThroughSurface); a
-  // pixel's return beyond it from a beam that passed over the surface's edge (a fence's top seen
-  // from afar) or farther than the tolerance from it is no sign that its place was free.
-  if (s->beams && own_pixel) {
-    s->extents = SurfaceExtents(points, own_map, s->normals, s->planar, cfg.ld_beam.tol_m, threads);
-    s->opt.edge_at = &s->extents;
   }
   if (!s->beams) s->opt.surface_max_m = cfg.ld_surface_max_m;
 }

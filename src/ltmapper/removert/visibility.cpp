@@ -686,8 +686,7 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
 }
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                                   const float* plane, bool want_around, bool ask_through, const SurfaceExtent* inside,
-                                   const SurfaceExtent* edge) const {
+                                   const float* plane, bool want_around, bool ask_through, const SurfaceExtent* inside) const {
   const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
@@ -725,10 +724,7 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
       int a = -1, b = -1;
       if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
     }
-  // PD's beam that passed without a return: with `edge`, one that crossed the point's surface inside
-  // the extent its own map holds (PassedInside), not one that went over its edge to the sky.
-  const bool passed = want_around && !ended &&
-                      (edge != nullptr ? PassedInside(range, pitch, yaw, ps, plane, *edge) : PassedWithoutReturn(range, pitch, yaw));
+  const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
   // ND's, with `inside`: the beam of the point's own column passed it without a return and crossed
   // its surface inside (PassedInside), not beside its edge.
   const bool passed_own = inside != nullptr && !ended && PassedInside(range, pitch, yaw, ps, plane, *inside);
@@ -760,10 +756,8 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
   through = (through || passed_own) && !MetSurfaceNear(range, pitch, yaw, ps, plane);
   // kBeamNear gates ND's pixel see-through (VoteCounts); PD (want_around) does not read it.
   const bool near = !want_around && BeamNear(range, pitch);
-  // kBeamBeside withdraws PD's own-pixel see-through (VoteCounts).
-  const bool beside = want_around && edge != nullptr && !ended && !WentThroughSurface(reach, row, col, ps, plane, *edge);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
-                      (through ? kBeamThrough : 0) | (near ? kBeamNear : 0) | (beside ? kBeamBeside : 0));
+                      (through ? kBeamThrough : 0) | (near ? kBeamNear : 0));
 }
 
 bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
@@ -826,49 +820,25 @@ bool ColumnImage::TellsItsReturns(const geometry::SensorModel& m, double elevati
   return kBeamScatterSigmas * m.spread_deg < 0.5 * m.SpacingAt(elevation_deg);
 }
 
-// Whether the ray along unit direction u (sensor frame) crosses the plane n . x = off (plane[0..3]) of
-// the point ps inside `e`'s extent around it (along e.up and the level direction in the plane); a
-// ray along the plane crosses it nowhere.
-static bool CrossesInside(const Eigen::Vector3f& u, const Eigen::Vector3f& ps, const float* plane, const SurfaceExtent& e) {
-  const Eigen::Vector3f n(plane[0], plane[1], plane[2]);
-  const float cs = n.dot(u);
-  if (std::fabs(cs) < 1e-3f) return false;
-  const Eigen::Vector3f off = (plane[3] / cs) * u - ps;  // from the point to where it crossed the plane
-  const float up = off.dot(e.up), across = off.dot(e.up.cross(n).normalized());
-  return up <= e.above && -up <= e.below && across <= e.left && -across <= e.right;
-}
-
-bool ColumnImage::WentThroughSurface(int reach, int row, int col, const Eigen::Vector3f& ps, const float* plane,
-                                     const SurfaceExtent& surface) const {
-  const float tol = float(test_.tol_m);
-  auto through = [&](std::size_t c, int r) {
-    const float rr = range_[c + std::size_t(r)];
-    const Eigen::Vector3f u = ret_[c + std::size_t(r)] / rr;
-    const float s = ps.dot(u);
-    return rr > s + tol && (ps - s * u).squaredNorm() <= tol * tol && CrossesInside(u, ps, plane, surface);
-  };
-  for (int d = -reach; d <= reach; ++d) {
-    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
-    const float* rc = range_.data() + c;
-    const auto [a, b] = BeamsAround(rc, row);
-    if ((std::isfinite(rc[row]) && through(c, row)) || (a >= 0 && through(c, a)) || (b >= 0 && through(c, b))) return true;
-  }
-  return false;
-}
-
 bool ColumnImage::PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                                const SurfaceExtent& inside) const {
   const float tol = float(test_.tol_m);
   const int col = grid_.Col(yaw);
   const float fired = fired_[std::size_t(col)];
   if (!std::isfinite(fired)) return false;
+  const Eigen::Vector3f n(plane[0], plane[1], plane[2]);
+  const Eigen::Vector3f side = inside.up.cross(n).normalized();
   return AnyBeamNear(range, pitch, [&](float e, float, int row_top, int row_bottom) {
     if (!EmptyColumn(col - 1, row_top, row_bottom) || !EmptyColumn(col, row_top, row_bottom) ||
         !EmptyColumn(col + 1, row_top, row_bottom))
       return false;
     const Eigen::Vector3f u(std::cos(e) * std::cos(fired), std::cos(e) * std::sin(fired), std::sin(e));
     if ((ps - ps.dot(u) * u).squaredNorm() > tol * tol) return false;  // the beam passed farther than tol
-    return CrossesInside(u, ps, plane, inside);
+    const float cs = n.dot(u);
+    if (std::fabs(cs) < 1e-3f) return false;  // along the plane: it crosses nowhere
+    const Eigen::Vector3f off = (plane[3] / cs) * u - ps;  // from the point to where it crossed the plane
+    const float up = off.dot(inside.up), across = off.dot(side);
+    return up <= inside.above && -up <= inside.below && across <= inside.left && -across <= inside.right;
   });
 }
 
@@ -1046,12 +1016,11 @@ void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matr
   for (std::size_t j = sc->valid; j < sc->valid + 3; ++j) sc->range[j] = sc->pitch[j] = sc->yaw[j] = 0.f;  // padding
 }
 
-// Point k's surface extent (VisibilityOptions::passed_at or edge_at, `at`) in the sensor frame, in
-// *out; null where it is not asked.
-const SurfaceExtent* ExtentOf(const std::vector<SurfaceExtent>* at, const Eigen::Matrix3f& Rt, std::size_t k,
-                              SurfaceExtent* out) {
-  if (at == nullptr) return nullptr;
-  const SurfaceExtent& e = (*at)[k];
+// Point k's surface extent (VisibilityOptions::passed_at) in the sensor frame, in *out; null where
+// it is not asked.
+const SurfaceExtent* InsideOf(const VoteSetup& s, const Eigen::Matrix3f& Rt, std::size_t k, SurfaceExtent* out) {
+  if (s.options.passed_at == nullptr) return nullptr;
+  const SurfaceExtent& e = (*s.options.passed_at)[k];
   if (e.above <= 0.f && e.below <= 0.f && e.left <= 0.f && e.right <= 0.f) return nullptr;
   *out = e;
   out->up = Rt * e.up;
@@ -1064,7 +1033,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
                   std::size_t tn, Scratch* sc) {
   if (s.beams) sc->seen_beams.assign(tn, 0);
   const auto& ix = s.index;
-  SurfaceExtent inside, edge;
+  SurfaceExtent inside;
   for (std::size_t j = 0; j < sc->valid; ++j) {
     const std::size_t i = b + sc->idx[j];
     const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
@@ -1077,9 +1046,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     const auto asked = [&](const std::vector<bool>* at) { return at != nullptr && (*at)[ix.order()[i]]; };
     if (s.beams)
       sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
-                                                         asked(s.options.through_at),
-                                                         ExtentOf(s.options.passed_at, Rt, ix.order()[i], &inside),
-                                                         ExtentOf(s.options.edge_at, Rt, ix.order()[i], &edge));
+                                                         asked(s.options.through_at), InsideOf(s, Rt, ix.order()[i], &inside));
   }
 }
 
@@ -1143,10 +1110,7 @@ struct VoteCounts {
       }
       if (!see_own.empty()) {
         std::uint16_t* ov = see_own.data() + l * n + b;
-        for (std::size_t i = 0; i < tn; ++i) {
-          const bool beside = !sc.seen_beams.empty() && (sc.seen_beams[i] & detail::kBeamBeside);
-          ov[i] = std::uint16_t(ov[i] + ((vote[i] & kSeeOwn) && !beside ? 1 : 0));
-        }
+        for (std::size_t i = 0; i < tn; ++i) ov[i] = std::uint16_t(ov[i] + ((vote[i] & kSeeOwn) >> 3));
       }
     }
   }

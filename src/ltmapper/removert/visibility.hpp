@@ -71,14 +71,6 @@ struct VisibilityOptions {
   // sensor's range) and crossed its plane within that extent went through its place
   // (ColumnImage::PassedInside; a level surface is passed at a grazing angle). Counts in beam_through.
   const std::vector<SurfaceExtent>* passed_at = nullptr;
-  // With the beam test and count_own_see (PD): per point, how far its upright surface goes on around
-  // it (all extents 0 = not asked). A keyframe none of whose beams went through that surface near
-  // the point (ColumnImage::WentThroughSurface: within the tolerance of it, on past it, crossing the
-  // plane inside the extent) saw past its edge or beside it: its own pixel's see-through is not
-  // counted (VisibilityVotes::see_own). A beam that passed it without a return counts (beam_passed)
-  // only where it crossed the plane inside the extent (ColumnImage::PassedInside), not where it went
-  // over the surface's top to the sky.
-  const std::vector<SurfaceExtent>* edge_at = nullptr;
   bool AsksThrough() const { return through_at != nullptr || passed_at != nullptr; }
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
