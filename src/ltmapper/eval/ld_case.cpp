@@ -37,8 +37,9 @@ PlacedTruth SimTruth(const std::string& sim, const std::vector<const ChangeCloud
     pd_in.insert(pd_in.end(), {&w->pd_strong, &w->pd_weak});
     nd_in.insert(nd_in.end(), {&w->nd_strong, &w->nd_weak});
   }
-  auto pd = ChangesFromLabelledScans(sim, q, pd_in, m, cfg.ld_match_dist_m, threads, true);
-  auto nd = ChangesFromLabelledScans(sim, c, nd_in, m, cfg.ld_match_dist_m, threads, true);
+  constexpr bool kSampledSurfaces = true;  // one more cloud after the sets: what the session sampled
+  auto pd = ChangesFromLabelledScans(sim, q, pd_in, m, cfg.ld_match_dist_m, threads, kSampledSurfaces);
+  auto nd = ChangesFromLabelledScans(sim, c, nd_in, m, cfg.ld_match_dist_m, threads, kSampledSurfaces);
   for (std::size_t k = 0; k < sets.size(); ++k)
     out.sets.push_back(
         {std::move(pd[2 * k]), std::move(pd[2 * k + 1]), std::move(nd[2 * k]), std::move(nd[2 * k + 1])});

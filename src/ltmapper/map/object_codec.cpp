@@ -15,6 +15,7 @@ namespace {
 
 constexpr std::uint32_t kObjectsVersion = 2;
 constexpr std::uint32_t kOldestObjectsVersion = 1;  // without box_seen_fraction
+constexpr std::uint32_t kBoxSeenSince = 2;          // the first version holding box_seen_fraction
 
 class Writer {
  public:
@@ -134,7 +135,7 @@ MapObject GetObject(Reader& r, std::uint32_t version) {
   for (double* d : {&o.yaw_rad, &o.ground_z, &o.height_above_ground, &o.clearance_m, &o.range_m,
                     &o.observed_fraction, &o.twin_fraction, &o.attached_fraction})
     *d = r.Get<double>();
-  if (version >= 2) o.box_seen_fraction = r.Get<double>();
+  if (version >= kBoxSeenSince) o.box_seen_fraction = r.Get<double>();
   const std::size_t n = r.GetCount(kPointBytes);
   PointCloud& c = o.cloud;
   c.points.resize(n), c.cls.resize(n), c.session.resize(n);

@@ -551,29 +551,38 @@ bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
   return !((d.array() < o.lo.array() - r).any() || (d.array() > o.hi.array() + r).any());
 }
 
+// The points of `c` in o's axis-aligned box grown by r: what AttachedFraction (at the cluster
+// tolerance) and BoxSeenFraction (inside the box) read of the unchanged map, gathered once per object.
+PointCloud InGrownBox(const MapObject& o, const PointCloud& c, double r) {
+  PointCloud out;
+  for (const auto& p : c.points)
+    if (InGrownBox(o, p.xyz(), r)) out.push_back(p.x, p.y, p.z);
+  return out;
+}
+
 // Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
-// not the object's own lower part: unchanged points inside its oriented xy box (grown by `edge`:
-// the map's sample spacing, at least the store's quantisation step) that are its lower part
-// (OwnLowerPart, within r above its lowest point in their column) are not counted. A fragment's surface lies beside it (the rest of a pole or trunk
-// a grazing ray cut a strip from), above it (a wall whose lower band was seen through) or between
-// its points up the same columns (a wall whose rows were seen through and unchanged by turns): an
-// object's lower part lies under it, not interleaved with it.
+// not the object's own lower part (`unchanged`: the unchanged points in its box grown by r).
+// Unchanged points inside its oriented xy box (grown by `edge`: the map's sample spacing, at least
+// the store's quantisation step) that are its lower part (OwnLowerPart, within r above its lowest
+// point in their column) are not counted. A fragment's surface lies beside it (the rest of a pole
+// or trunk a grazing ray cut a strip from), above it (a wall whose lower band was seen through) or
+// between its points up the same columns (a wall whose rows were seen through and unchanged by
+// turns): an object's lower part lies under it, not interleaved with it.
 double AttachedFraction(const MapObject& o, const OwnLowerPart& lower, const PointCloud& unchanged, double r,
                         double edge) {
   const InOrientedBox in_box(o, edge, r);
   PointCloud other;
-  for (const auto& p : unchanged.points) {
-    if (!InGrownBox(o, p.xyz(), r)) continue;
+  for (const auto& p : unchanged.points)
     if (!in_box(p.xyz().cast<double>()) || !lower.Holds(p.xyz(), r)) other.push_back(p.x, p.y, p.z);
-  }
   if (other.empty()) return 0.0;
   const std::vector<bool> hit = geometry::WithinRadius(o.cloud, other, r);
   return double(std::count(hit.begin(), hit.end(), true)) / double(std::max<std::size_t>(o.points, 1));
 }
 
 // Of what the other session observed inside the object's oriented box above its own lower part
-// (OwnLowerPart: below its lowest point in their column), the share it saw changed (`seen`: strong ND for a disappeared object, weak PD for
-// an appeared one) against the unchanged map points (it saw them stay); 1 when it observed
+// (OwnLowerPart: below its lowest point in their column), the share it saw changed (`seen`: strong
+// ND for a disappeared object, weak PD for an appeared one) against the unchanged map points
+// (`unchanged`, at least those in its box: it saw them stay); 1 when it observed
 // nothing there. A thing that left or came is gone (new) wherever its box was observed; a strip of
 // a facade or crown that a few grazing rays passed lies among rows of that surface the other
 // session saw stay, above and between its points (a wall's lower band is its own lower part).
@@ -603,9 +612,10 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   Describe(o);
   OrientedBox(o);
   const OwnLowerPart lower(o, cfg.object_tolerance_m);
-  o.attached_fraction = AttachedFraction(o, lower, masks.unchanged, cfg.object_tolerance_m,
-                                         std::max(cfg.output_voxel_m, cfg.resolution_m));
-  o.box_seen_fraction = BoxSeenFraction(o, lower, masks.seen, masks.unchanged);
+  const PointCloud unchanged = InGrownBox(o, masks.unchanged, cfg.object_tolerance_m);
+  o.attached_fraction =
+      AttachedFraction(o, lower, unchanged, cfg.object_tolerance_m, std::max(cfg.output_voxel_m, cfg.resolution_m));
+  o.box_seen_fraction = BoxSeenFraction(o, lower, masks.seen, unchanged);
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
   o.height_above_ground = o.hi.z() - o.ground_z;
