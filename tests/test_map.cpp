@@ -805,6 +805,32 @@ TEST(MapObjects, AFenceThatLeftStandsOnItsUnseenLowerHalf) {
   EXPECT_EQ(weak_far, 0u);
 }
 
+// A car that left: the new session saw through its lowest row and one side (strong ND); the rows
+// above the rest lay between its beams (weak ND, kept in the map).
+// Those rows are no surface the step saw stay: they are stored in the columns of the strong ND
+// (above it too) and counted neither as unchanged in the car's box (which would make it a strip
+// of something that "stayed") nor left out of its cloud (the object is the whole car).
+TEST(MapObjects, ACarThatLeftKeepsTheRowsBetweenItsSeenRows) {
+  const PointCloud car = Car(-6, -6);  // x -6 .. -4, y -6 .. -2, rows z 0.25 .. 1.5
+  KeyframeDelta d;
+  for (std::size_t i = 0; i < car.size(); ++i) {
+    const PointXYZI& p = car.points[i];
+    const bool seen = (p.z > 0.4f && p.z < 0.6f) || p.x < -5.9f;
+    (seen ? d.nd_strong : d.nd_weak).push_back(p.x, p.y, p.z, p.intensity);
+  }
+  test::TempDir tmp;
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, car, d, &rejected);
+  ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
+  std::size_t above_ground = 0, seen = 0;  // the lowest row lies in the ground band
+  for (const auto& p : car.points) above_ground += p.z > 0.3f;
+  for (const auto& p : d.nd_strong.points) seen += p.z > 0.3f;
+  EXPECT_EQ(objs[0].points, above_ground);
+  EXPECT_EQ(objs[0].change, "disappeared");
+  EXPECT_NEAR(objs[0].box_seen_fraction, 1.0, 1e-9);
+  EXPECT_NEAR(objs[0].observed_fraction, double(seen) / double(above_ground), 1e-9);
+}
+
 // A structure that came, seen as one cluster above 1.5 m (weak PD) and, lower, as scattered
 // points, each more than the cluster tolerance from the others (too few to be a cluster of their
 // own), one above the other within the tolerance down to the ground band: it stands on them, it

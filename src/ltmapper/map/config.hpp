@@ -15,7 +15,7 @@ struct MapConfig {
   // Integration.
   double nd_match_radius_m = 0.1;        // a keyframe point within this of an ND point is removed
   double new_keyframe_radius_m = 10.0;   // query keyframe with no map keyframe within -> new one
-  bool store_weak_nd = false;            // keep all weak ND points in deltas (else those under strong ND)
+  bool store_weak_nd = false;            // keep all weak ND points in deltas (else those in the columns of strong ND)
   // Outputs.
   double meta_carve_radius_m = 0.2;      // meta map: points this close to any strong ND are carved
   double output_voxel_m = 0.1;           // voxel size of written maps (0 = every point)

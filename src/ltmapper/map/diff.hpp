@@ -12,7 +12,7 @@ namespace ltm::map {
 // order), from the stored deltas alone (the paper's virtual LD): PD = points of the `to` state
 // the `from` state lacks (strong / weak as the step that added them said), ND = points of the
 // `from` state the `to` state lacks (removed as seen through). Weak ND are not changes of the
-// map (they stay in it; stored only under strong ND unless store_weak_nd), so they are not listed.
+// map (they stay in it; stored only in the columns of strong ND unless store_weak_nd), so they are not listed.
 // cls and session set (session = the state the point is in).
 struct MapDiff {
   PointCloud pd_strong, pd_weak, nd;

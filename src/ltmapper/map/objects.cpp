@@ -17,8 +17,8 @@
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
 //     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
-//     disappeared one on its lower part the query did not see, which an object keeps
-//     (UnseenLowerParts).
+//     disappeared one on its lower part the query did not see; an object keeps that part and
+//     the rows the query did not see inside its box (UnseenParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
@@ -63,7 +63,7 @@ CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
 
 
 bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
-// Weak ND in an object's cloud: its unseen lower part (UnseenLowerParts), not something seen.
+// Weak ND in an object's cloud: its unseen parts (UnseenParts), not something seen.
 bool Unseen(PointClass c) { return c == PointClass::kNDWeak; }
 // A change the other session saw through its place (strong ND, weak PD): see-through evidence.
 bool SeenThrough(PointClass c) { return c == PointClass::kNDStrong || c == PointClass::kPDWeak; }
@@ -135,7 +135,7 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
 // `unchanged` without the step's weak ND points (the same store grid points: within half a grid
 // step). The query did not observe those places, so they are no surface the step saw unchanged:
 // beside them, a disappeared thing's strong part (the panels of a fence the query's beams passed
-// through) is not a fragment of a surface that stayed.
+// through) is not a fragment of a surface that stayed, nor, in its box, what it left behind.
 PointCloud WithoutUnseen(const PointCloud& unchanged, const PointCloud& changes, const MapConfig& cfg) {
   std::vector<bool> unseen(changes.size());
   for (std::size_t i = 0; i < changes.size(); ++i) unseen[i] = Unseen(changes.cls[i]);
@@ -283,7 +283,7 @@ std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const
   return out;
 }
 
-// Centroid, axis-aligned box, class votes (of the changes seen, not of a joined unseen lower part)
+// Centroid, axis-aligned box, class votes (of the changes seen, not of joined unseen parts)
 // and see-through share.
 void Describe(MapObject& o) {
   std::map<PointClass, std::size_t> votes;
@@ -721,24 +721,33 @@ void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& change
     if (o.clearance_m > cfg.object_max_clearance_m) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
 }
 
-// A disappeared cluster's lower part that the query did not see through: weak ND of the step
-// (stored under strong ND, store.cpp) chained down from its bottom (ChainBelow), above the ground
-// band. The cluster's clearance is counted from its lowest point (a fence whose upper half the
-// query saw through while parked cars hid its lower half stands on the ground, it does not float;
-// a trunk that stayed under a cut crown is unchanged, no weak ND); the rules judge what was seen,
-// and an object keeps the lower part in its cloud. Returns per cluster the part's indices.
-std::vector<std::vector<std::uint32_t>> UnseenLowerParts(std::vector<MapObject>& group, const PointCloud& changes,
-                                                         const Floor& floor, const MapConfig& cfg) {
+// A disappeared cluster's parts that the query did not see through: weak ND of the step (stored
+// in the columns of strong ND, store.cpp) inside its oriented box (grown by the map's sample
+// spacing: rows between the rows its beams passed), and chained down from its bottom
+// (ChainBelow), above the ground band. The cluster's clearance is counted from its lowest point (a
+// fence whose upper half the query saw through while parked cars hid its lower half stands on the
+// ground, it does not float; a trunk that stayed under a cut crown is unchanged, no weak ND); the
+// rules judge what was seen, and an object keeps these parts in its cloud. Returns per cluster the
+// parts' indices.
+std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& changes,
+                                                    const Floor& floor, const MapConfig& cfg) {
   std::vector<std::vector<std::uint32_t>> parts(group.size());
   std::vector<std::uint32_t> weak;
   for (std::size_t i = 0; i < changes.size(); ++i)
     if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
   if (weak.empty() || floor.empty()) return parts;
   const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(weak));
+  const double edge = std::max(cfg.output_voxel_m, cfg.resolution_m);
   for (std::size_t k = 0; k < group.size(); ++k) {
-    for (std::uint32_t i : ChainBelow(group[k], changes, by_z, cfg.object_tolerance_m))
+    const MapObject& o = group[k];
+    const InOrientedBox in_box(o, edge, 0.0);
+    for (std::uint32_t i : by_z)
+      if (InGrownBox(o, changes.points[i].xyz(), edge) && in_box(changes.points[i].xyz().cast<double>()))
+        parts[k].push_back(i);
+    const std::vector<std::uint32_t> below = ChainBelow(o, changes, by_z, cfg.object_tolerance_m);
+    for (std::uint32_t i : below)
       if (AboveGround(changes.points[i].xyz(), floor, cfg)) parts[k].push_back(i);
-    StandOn(group[k], changes, parts[k], floor);
+    StandOn(group[k], changes, below, floor);
   }
   return parts;
 }
@@ -752,7 +761,7 @@ void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 }
 
 // Share of `part`'s points inside `whole`'s oriented box grown by `margin` (of the points seen: not
-// of its unseen lower part). The oriented box, not the axis-aligned one: a fence or wall that runs
+// of its unseen parts). The oriented box, not the axis-aligned one: a fence or wall that runs
 // diagonally to the map's axes has an axis-aligned box metres wide, and a car parked beside it
 // lies inside that.
 double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
@@ -846,10 +855,10 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
     const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
-                                : UnseenLowerParts(group, changes, floor, cfg);
+                                : UnseenParts(group, changes, floor, cfg);
     StandOnChangesBelow(group, changes, idx, floor, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
-    for (std::size_t k = 0; k < group.size(); ++k)  // an object keeps its unseen lower part
+    for (std::size_t k = 0; k < group.size(); ++k)  // an object keeps its unseen parts
       if (group[k].rejected.empty() && !lower[k].empty()) Absorb(group[k], changes.select(lower[k]));
     const std::vector<bool> keep = JoinHeldParts(group, holder);
     for (std::size_t k = 0; k < group.size(); ++k) {

@@ -768,25 +768,19 @@ class BlobReader {
   Stmt base_, deltas_;
 };
 
-// The weak ND points of a keyframe's delta that lie under one of its strong ND points (within
-// `radius_m` in xy, lower): the lower part of something that left which the query did not see
-// through (its view of the foot blocked). They change nothing in the map but are an object's part
-// (objects.cpp, UnseenLowerParts), so they are stored even without store_weak_nd.
-PointCloud WeakNdUnderStrongNd(const PointCloud& weak, const PointCloud& strong, double radius_m) {
+// The weak ND points of a keyframe's delta in the columns of its strong ND points (within
+// `radius_m` of one in xy, at any height): the parts of something that left which the query did
+// not see through, under, between and over the parts it saw through (its view of the foot blocked,
+// rows between its beams). They change nothing in the map but the objects stage reads them
+// (objects.cpp): the unseen parts of an object (UnseenParts), and no surface the step saw
+// unchanged in its box (WithoutUnseen). So they are stored even without store_weak_nd.
+PointCloud WeakNdInStrongNdColumns(const PointCloud& weak, const PointCloud& strong, double radius_m) {
   if (weak.empty() || strong.empty() || radius_m <= 0.0) return {};
-  PointCloud flat = strong;  // xy only: the strong points' heights are read from `strong`
+  PointCloud flat = strong;  // xy only
   for (auto& p : flat.points) p.z = 0.f;
-  const geometry::KdTree tree(std::move(flat));
-  std::vector<bool> keep(weak.size(), false);
-  for (std::size_t i = 0; i < weak.size(); ++i) {
-    const PointXYZI& w = weak.points[i];
-    for (const auto& [j, d2] : tree.RadiusUnsorted(Eigen::Vector3f(w.x, w.y, 0.f), float(radius_m)))
-      if (strong.points[j].z > w.z) {
-        keep[i] = true;
-        break;
-      }
-  }
-  return weak.select(keep);
+  PointCloud weak_flat = weak;
+  for (auto& p : weak_flat.points) p.z = 0.f;
+  return weak.select(geometry::WithinRadius(weak_flat, flat, radius_m));
 }
 
 // The keyframe's target state. A reference keyframe: its state at the reference's step minus the
@@ -806,9 +800,9 @@ QCloud TargetState(const Store::Impl& s, const Store::Impl::KfBlobs& in, const K
     if (delta) {
       nd_strong = quant(delta->nd_strong, PointClass::kNDStrong, "nd_strong");
       // Weak ND changes nothing in the map (occluded, kept); it is stored on request, else only
-      // under strong ND (an object's unseen lower part).
+      // in the columns of strong ND (the unseen parts of an object).
       *nd_weak = quant(s.cfg.store_weak_nd ? delta->nd_weak
-                                           : WeakNdUnderStrongNd(delta->nd_weak, delta->nd_strong, s.cfg.object_tolerance_m),
+                                           : WeakNdInStrongNdColumns(delta->nd_weak, delta->nd_strong, s.cfg.object_tolerance_m),
                        PointClass::kNDWeak, "nd_weak");
     }
     const std::vector<bool> matched = detail::WithinRadiusQ(ref_q, nd_strong, s.cfg.nd_match_radius_m / s.cfg.resolution_m);
