@@ -831,6 +831,25 @@ TEST(MapObjects, ACarThatLeftKeepsTheRowsBetweenItsSeenRows) {
   EXPECT_NEAR(objs[0].observed_fraction, double(seen) / double(above_ground), 1e-9);
 }
 
+// A container that left, its near side seen through by the new session only in its lower rows
+// (strong ND); the rows above lay outside the narrow cone of its scanner (weak ND). The object is
+// the whole side: the weak ND reaching up from the seen part's top, without a gap wider than the
+// cluster tolerance, joins it (the rosette's container, found only as its lower strip before).
+TEST(MapObjects, AContainerThatLeftKeepsItsUnseenUpperRows) {
+  const PointCloud side = Car(-6, -6, 0.f, 6.f, 2.5f);  // x -6, y -6 .. 0, rows z 0.25 .. 2.5
+  KeyframeDelta d;
+  for (const auto& p : side.points) (p.z < 1.1f ? d.nd_strong : d.nd_weak).push_back(p.x, p.y, p.z, p.intensity);
+  test::TempDir tmp;
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, side, d, &rejected);
+  ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
+  std::size_t above_ground = 0;  // the lowest row lies in the ground band
+  for (const auto& p : side.points) above_ground += p.z > 0.3f;
+  EXPECT_EQ(objs[0].points, above_ground);
+  EXPECT_NEAR(objs[0].hi.z(), 2.5, 0.01);
+  EXPECT_EQ(objs[0].cls, PointClass::kNDStrong);  // the class of what was seen
+}
+
 // A structure that came, seen as one cluster above 1.5 m (weak PD) and, lower, as scattered
 // points, each more than the cluster tolerance from the others (too few to be a cluster of their
 // own), one above the other within the tolerance down to the ground band: it stands on them, it

@@ -18,7 +18,7 @@
 //     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
 //     disappeared one on its lower part the query did not see; an object keeps that part and
-//     the rows the query did not see inside its box (UnseenParts).
+//     the rows the query did not see inside its box and over it (UnseenParts).
 //  5. Moved: a disappeared and an appeared object of one step with the same box size.
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
@@ -695,7 +695,25 @@ std::vector<std::uint32_t> ChainBelow(const MapObject& o, const PointCloud& chan
   return chain;
 }
 
-// `idx` sorted by z, highest first (for ChainBelow).
+// The points of `by_z` (highest first) over o's xy box grown by `tol` that reach up from its top
+// with no vertical gap wider than `tol`, lowest first (ChainBelow upside down).
+std::vector<std::uint32_t> ChainAbove(const MapObject& o, const PointCloud& changes,
+                                      const std::vector<std::uint32_t>& by_z, double tol) {
+  std::vector<std::uint32_t> chain;
+  double reached = o.hi.z();
+  for (auto it = by_z.rbegin(); it != by_z.rend(); ++it) {
+    const PointXYZI& p = changes.points[*it];
+    if (double(p.z) <= o.hi.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
+        double(p.y) < o.lo.y() - tol || double(p.y) > o.hi.y() + tol)
+      continue;
+    if (double(p.z) > reached + tol) break;
+    reached = double(p.z);
+    chain.push_back(*it);
+  }
+  return chain;
+}
+
+// `idx` sorted by z, highest first (for ChainBelow, ChainAbove).
 std::vector<std::uint32_t> ByZ(const PointCloud& changes, std::vector<std::uint32_t> idx) {
   std::sort(idx.begin(), idx.end(), [&](std::uint32_t a, std::uint32_t b) { return changes.points[a].z > changes.points[b].z; });
   return idx;
@@ -723,12 +741,13 @@ void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& change
 
 // A disappeared cluster's parts that the query did not see through: weak ND of the step (stored
 // in the columns of strong ND, store.cpp) inside its oriented box (grown by the map's sample
-// spacing: rows between the rows its beams passed), and chained down from its bottom
-// (ChainBelow), above the ground band. The cluster's clearance is counted from its lowest point (a
-// fence whose upper half the query saw through while parked cars hid its lower half stands on the
-// ground, it does not float; a trunk that stayed under a cut crown is unchanged, no weak ND); the
-// rules judge what was seen, and an object keeps these parts in its cloud. Returns per cluster the
-// parts' indices.
+// spacing: rows between the rows its beams passed), chained down from its bottom (ChainBelow),
+// above the ground band, and chained up from its top (ChainAbove: the rows over a scanner's cone,
+// or between its beams). The cluster's clearance is counted from its lowest point (a fence whose
+// upper half the query saw through while parked cars hid its lower half stands on the ground, it
+// does not float; a trunk that stayed under a cut crown is unchanged, no weak ND); the rules judge
+// what was seen, and an object keeps these parts in its cloud. Returns per cluster the parts'
+// indices.
 std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& changes,
                                                     const Floor& floor, const MapConfig& cfg) {
   std::vector<std::vector<std::uint32_t>> parts(group.size());
@@ -747,6 +766,7 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
     const std::vector<std::uint32_t> below = ChainBelow(o, changes, by_z, cfg.object_tolerance_m);
     for (std::uint32_t i : below)
       if (AboveGround(changes.points[i].xyz(), floor, cfg)) parts[k].push_back(i);
+    for (std::uint32_t i : ChainAbove(o, changes, by_z, cfg.object_tolerance_m)) parts[k].push_back(i);
     StandOn(group[k], changes, below, floor);
   }
   return parts;

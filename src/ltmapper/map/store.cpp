@@ -776,11 +776,11 @@ class BlobReader {
 // unchanged in its box (WithoutUnseen). So they are stored even without store_weak_nd.
 PointCloud WeakNdInStrongNdColumns(const PointCloud& weak, const PointCloud& strong, double radius_m) {
   if (weak.empty() || strong.empty() || radius_m <= 0.0) return {};
-  PointCloud flat = strong;  // xy only
-  for (auto& p : flat.points) p.z = 0.f;
-  PointCloud weak_flat = weak;
-  for (auto& p : weak_flat.points) p.z = 0.f;
-  return weak.select(geometry::WithinRadius(weak_flat, flat, radius_m));
+  const auto flat = [](PointCloud c) {  // xy only
+    for (auto& p : c.points) p.z = 0.f;
+    return c;
+  };
+  return weak.select(geometry::WithinRadius(flat(weak), flat(strong), radius_m));
 }
 
 // The keyframe's target state. A reference keyframe: its state at the reference's step minus the
