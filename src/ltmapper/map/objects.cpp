@@ -677,6 +677,12 @@ std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector
   return keep;
 }
 
+// Whether p lies over or under o's axis-aligned xy box grown by `tol` (ChainBelow, ChainAbove).
+bool InColumns(const MapObject& o, const PointXYZI& p, double tol) {
+  return double(p.x) >= o.lo.x() - tol && double(p.x) <= o.hi.x() + tol && double(p.y) >= o.lo.y() - tol &&
+         double(p.y) <= o.hi.y() + tol;
+}
+
 // The points of `by_z` (indices into `changes`, highest first) under o's xy box grown by `tol`
 // that reach down from its bottom with no vertical gap wider than `tol`, highest first.
 std::vector<std::uint32_t> ChainBelow(const MapObject& o, const PointCloud& changes,
@@ -685,9 +691,7 @@ std::vector<std::uint32_t> ChainBelow(const MapObject& o, const PointCloud& chan
   double reached = o.lo.z();
   for (std::uint32_t i : by_z) {
     const PointXYZI& p = changes.points[i];
-    if (double(p.z) >= o.lo.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
-        double(p.y) < o.lo.y() - tol || double(p.y) > o.hi.y() + tol)
-      continue;
+    if (double(p.z) >= o.lo.z() || !InColumns(o, p, tol)) continue;
     if (double(p.z) < reached - tol) break;
     reached = double(p.z);
     chain.push_back(i);
@@ -703,9 +707,7 @@ std::vector<std::uint32_t> ChainAbove(const MapObject& o, const PointCloud& chan
   double reached = o.hi.z();
   for (auto it = by_z.rbegin(); it != by_z.rend(); ++it) {
     const PointXYZI& p = changes.points[*it];
-    if (double(p.z) <= o.hi.z() || double(p.x) < o.lo.x() - tol || double(p.x) > o.hi.x() + tol ||
-        double(p.y) < o.lo.y() - tol || double(p.y) > o.hi.y() + tol)
-      continue;
+    if (double(p.z) <= o.hi.z() || !InColumns(o, p, tol)) continue;
     if (double(p.z) > reached + tol) break;
     reached = double(p.z);
     chain.push_back(*it);
@@ -763,11 +765,12 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
     for (std::uint32_t i : by_z)
       if (InGrownBox(o, changes.points[i].xyz(), edge) && in_box(changes.points[i].xyz().cast<double>()))
         parts[k].push_back(i);
-    const std::vector<std::uint32_t> below = ChainBelow(o, changes, by_z, cfg.object_tolerance_m);
-    for (std::uint32_t i : below)
-      if (AboveGround(changes.points[i].xyz(), floor, cfg)) parts[k].push_back(i);
+    std::vector<std::uint32_t> lower;
+    for (std::uint32_t i : ChainBelow(o, changes, by_z, cfg.object_tolerance_m))
+      if (AboveGround(changes.points[i].xyz(), floor, cfg)) lower.push_back(i);
+    parts[k].insert(parts[k].end(), lower.begin(), lower.end());
     for (std::uint32_t i : ChainAbove(o, changes, by_z, cfg.object_tolerance_m)) parts[k].push_back(i);
-    StandOn(group[k], changes, below, floor);
+    StandOn(group[k], changes, lower, floor);
   }
   return parts;
 }
