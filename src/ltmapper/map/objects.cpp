@@ -545,6 +545,10 @@ class OwnLowerPart {
   std::unordered_map<CellKey, float, CellKeyHash> bottom_;  // lowest cluster point per xy cell
 };
 
+// The map's sample spacing: the output voxel, at least the store's quantisation step. An object's
+// box grown by it holds the samples of its own surfaces (AttachedFraction, UnseenParts).
+double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m, cfg.resolution_m); }
+
 // Whether q lies in o's axis-aligned box grown by r (a cheap test before the oriented box).
 bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
   const Eigen::Vector3d d = q.cast<double>();
@@ -562,9 +566,8 @@ PointCloud InGrownBox(const MapObject& o, const PointCloud& c, double r) {
 
 // Share of the cluster's points within the cluster tolerance r of an unchanged surface that is
 // not the object's own lower part (`unchanged`: the unchanged points in its box grown by r).
-// Unchanged points inside its oriented xy box (grown by `edge`: the map's sample spacing, at least
-// the store's quantisation step) that are its lower part (OwnLowerPart, within r above its lowest
-// point in their column) are not counted. A fragment's surface lies beside it (the rest of a pole
+// Unchanged points inside its oriented xy box (grown by `edge`, SampleSpacing) that are its lower
+// part (OwnLowerPart, within r above its lowest point in their column) are not counted. A fragment's surface lies beside it (the rest of a pole
 // or trunk a grazing ray cut a strip from), above it (a wall whose lower band was seen through) or
 // between its points up the same columns (a wall whose rows were seen through and unchanged by
 // turns): an object's lower part lies under it, not interleaved with it.
@@ -614,7 +617,7 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   const OwnLowerPart lower(o, cfg.object_tolerance_m);
   const PointCloud unchanged = InGrownBox(o, masks.unchanged, cfg.object_tolerance_m);
   o.attached_fraction =
-      AttachedFraction(o, lower, unchanged, cfg.object_tolerance_m, std::max(cfg.output_voxel_m, cfg.resolution_m));
+      AttachedFraction(o, lower, unchanged, cfg.object_tolerance_m, SampleSpacing(cfg));
   o.box_seen_fraction = BoxSeenFraction(o, lower, masks.seen, unchanged);
   o.ground_z = o.lo.z();
   o.clearance_m = floor.empty() ? 0.0 : Clearance(o, floor);
@@ -758,7 +761,7 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
     if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
   if (weak.empty() || floor.empty()) return parts;
   const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(weak));
-  const double edge = std::max(cfg.output_voxel_m, cfg.resolution_m);
+  const double edge = SampleSpacing(cfg);
   for (std::size_t k = 0; k < group.size(); ++k) {
     const MapObject& o = group[k];
     const InOrientedBox in_box(o, edge, 0.0);
@@ -877,12 +880,12 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
-    const auto lower = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
-                                : UnseenParts(group, changes, floor, cfg);
+    const auto unseen = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
+                                 : UnseenParts(group, changes, floor, cfg);
     StandOnChangesBelow(group, changes, idx, floor, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
     for (std::size_t k = 0; k < group.size(); ++k)  // an object keeps its unseen parts
-      if (group[k].rejected.empty() && !lower[k].empty()) Absorb(group[k], changes.select(lower[k]));
+      if (group[k].rejected.empty() && !unseen[k].empty()) Absorb(group[k], changes.select(unseen[k]));
     const std::vector<bool> keep = JoinHeldParts(group, holder);
     for (std::size_t k = 0; k < group.size(); ++k) {
       MapObject& o = group[k];
