@@ -915,6 +915,34 @@ PointCloud FarColumns(std::initializer_list<float> zs, float y0, int n) {
   return c;
 }
 
+// A fence 36 m from the keyframe, seen by a 16-beam sensor (2 deg rows: samples 1.26 m apart
+// there). The map gathers its rows from keyframes at several ranges, in unequal shares: 6 % of its
+// points at 0.4 m, 44 % at 0.8 m and 1.2 m, 6 % at 1.6 m. Its width across its middle axis, between
+// the 5 % and 95 % quantiles, is 1.2 m: two rows and more, an object (1.5 standard deviations'
+// uniform extent, 0.97 m, made it a "sliver": fence 9 of seed 0's VLP-16 rows). A rim one row wide
+// with 2 % strays above it stays a sliver.
+TEST(MapObjects, AFenceWhoseRowsHoldUnequalSharesIsNoSliver) {
+  test::TempDir tmp;
+  MapConfig cfg = Cfg();
+  cfg.object_sensor_step_deg = 2.0;
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(30, -8, 0, 48, 112, 0.25f))}});
+  KeyframeDelta d;
+  for (const auto& [z, step] : {std::pair{0.4f, 8}, {0.8f, 1}, {1.2f, 1}, {1.6f, 8}})
+    for (int j = 0; j <= 80; j += step) d.pd_weak.push_back(36.f, -4.f + 0.1f * float(j), z, 0.5f);
+  for (int j = 0; j <= 80; ++j) d.pd_weak.push_back(36.f, 10.f + 0.1f * float(j), 0.5f, 0.5f);  // the rim
+  for (const float y : {12.f, 16.f}) d.pd_weak.push_back(36.f, y, 1.0f, 0.5f);                     // its strays
+  s.IntegrateSession({"s1"}, "s0", {d}, {});
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].points, 184u);
+  EXPECT_NEAR(objs[0].centroid.y(), 0.0, 0.01);
+  ASSERT_EQ(rejected.size(), 1u);
+  EXPECT_EQ(rejected[0].rejected, "sliver");
+  EXPECT_NEAR(rejected[0].centroid.y(), 14.0, 0.1);
+}
+
 // A container that appeared 60 m from the nearest keyframe, seen in four rows 0.6 m apart (the
 // sensor's 0.625 deg rows at that range): one object. Clustered at the 0.5 m tolerance alone, each
 // row was a cluster one sample wide, a "sliver" (container 13 of the scenario matrix, seen from

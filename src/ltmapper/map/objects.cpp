@@ -41,8 +41,9 @@ namespace ltm::map {
 namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
-// Extent of a uniform spread over a segment per standard deviation: L = sqrt(12) * std.
-const double kUniformExtentPerStd = std::sqrt(12.0);
+// Share of a cluster's points left out at each end of its middle axis when measuring its width: a
+// row of samples holding fewer (stray returns, a neighbour's edge) does not widen it.
+constexpr double kWidthTrimShare = 0.05;
 // Confidence margins reach 1 when a measure is this many times its minimum.
 constexpr double kFullMargin = 2.0;
 // Evidence of a revealed appeared cluster (blocked reference view, no see-through): half.
@@ -333,9 +334,9 @@ class InOrientedBox {
   double c_, s_, margin_, margin_z_;
 };
 
-// Principal spreads (std along the 3D principal axes, ascending) and the smallest axis.
+// Principal spreads (std along the 3D principal axes, ascending), the smallest axis and the middle one.
 struct Spread3 {
-  Eigen::Vector3d sigma, normal;
+  Eigen::Vector3d sigma, normal, middle;
 };
 Spread3 Spread(const MapObject& o) {
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
@@ -344,7 +345,25 @@ Spread3 Spread(const MapObject& o) {
     cov += d * d.transpose();
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov / double(o.points));
-  return {es.eigenvalues().cwiseMax(0.0).cwiseSqrt(), es.eigenvectors().col(0)};
+  return {es.eigenvalues().cwiseMax(0.0).cwiseSqrt(), es.eigenvectors().col(0), es.eigenvectors().col(1)};
+}
+
+// Width: the extent of the cluster's points along its middle principal axis between the
+// kWidthTrimShare and 1 - kWidthTrimShare quantiles. n rows of samples s apart span (n - 1) s
+// whatever share of the points each row holds (at least kWidthTrimShare): a map gathers a surface's
+// rows from keyframes at several ranges, so its rows rarely hold equal shares.
+double Width(const MapObject& o, const Eigen::Vector3d& middle) {
+  std::vector<double> along;
+  along.reserve(o.cloud.size());
+  for (const auto& p : o.cloud.points) along.push_back((p.xyz().cast<double>() - o.centroid).dot(middle));
+  if (along.empty()) return 0.0;
+  const auto at = [&](double q) {
+    const auto k = std::ptrdiff_t(std::lround(q * double(along.size() - 1)));
+    std::nth_element(along.begin(), along.begin() + k, along.end());
+    return along[std::size_t(k)];
+  };
+  const double lo = at(kWidthTrimShare);
+  return at(1.0 - kWidthTrimShare) - lo;
 }
 
 // Clearance of the cluster above the local ground: the smallest height of a point above the
@@ -441,7 +460,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // no fragment), and the cluster "stayed". The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one scan row wide) spans fewer than object_min_samples rows across its middle
-// principal axis (width = kUniformExtentPerStd * std, the extent of a uniform spread; MinWidth). A cluster whose top is
+// principal axis (Width, MinWidth). A cluster whose top is
 // below object_min_height_m above the local ground is a ground bump (kerb, misregistered
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
@@ -452,16 +471,13 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // longest horizontal edge is below object_min_length_m are smaller than the objects the map
 // tracks: at a pedestrian's footprint they are most likely residues of moving actors that HD
 // removal missed in one session.
-// The width below which a cluster at `range_m` spans fewer than object_min_samples rows of the
-// sensor's samples (r * object_sensor_step_deg, at least the output voxel). n rows a sample s apart
-// have the width (kUniformExtentPerStd * std) s * sqrt(n^2 - 1): 1.73 s for two rows, 2.83 s for
-// three. The bound lies halfway between n - 1 and n rows, so noise does not decide an n-row
-// cluster (a car seen in two rows of a VLP-16 is kept, a one-row rim is not).
+// The width (Width) below which a cluster at `range_m` spans fewer than object_min_samples rows of
+// the sensor's samples (r * object_sensor_step_deg, at least the output voxel). n rows a sample s
+// apart span (n - 1) s. The bound lies halfway between n - 1 and n rows, (n - 1.5) s, so noise does
+// not decide an n-row cluster (a car seen in two rows of a VLP-16 is kept, a one-row rim is not).
 double MinWidth(double range_m, const MapConfig& cfg) {
   const double sample = std::max(cfg.output_voxel_m, range_m * cfg.object_sensor_step_deg * kDegToRad);
-  const auto rows_width = [](double n) { return std::sqrt(std::max(0.0, n * n - 1.0)); };
-  const double n = cfg.object_min_samples;
-  return sample * 0.5 * (rows_width(std::max(n - 1.0, 1.0)) + rows_width(n));
+  return sample * std::max(0.0, cfg.object_min_samples - 1.5);
 }
 
 // Reject's reason for a cluster shorter than object_min_length_m (MergeParts asks for it too).
@@ -781,7 +797,7 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
 // The rules (Reject) and the confidence of a built cluster.
 void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   const Spread3 sp = Spread(o);
-  const double width = kUniformExtentPerStd * sp.sigma.y();
+  const double width = Width(o, sp.middle);
   o.rejected = Reject(o, ctx, cfg, width, sp);
   o.confidence = Confidence(o, cfg, width, MinWidth(o.range_m, cfg));
 }
