@@ -22,6 +22,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench"))
@@ -56,7 +57,10 @@ def simulate(ltm, yaml, sim, keyframes, seed):
 
 
 def hd_wall_per_keyframe(changes):
-    """HD removal wall seconds per keyframe (map + votes, all sessions) from changes/report.json."""
+    """HD removal wall seconds per keyframe (map + votes, all sessions) from changes/report.json
+    (None when the run stopped before LT-removert)."""
+    if not os.path.exists(os.path.join(changes, "report.json")):
+        return None
     rep = load(os.path.join(changes, "report.json"))
     total_s = sum(s["seconds_map"] + s["seconds_votes"] for s in rep["sessions"])
     kf = sum(s["keyframes"] for s in rep["sessions"])
@@ -132,7 +136,17 @@ def scenario(ltm, yaml, out_root, keyframes, seed, keep):
     names = [os.path.basename(s) for s in sessions]
     runp = os.path.join(out, "run")
     subprocess.call(["rm", "-rf", runp])
-    cpu, rss, wall = timed([ltm, "run", "--sessions"] + sessions + ["--out", runp], os.path.join(out, "run.log"))
+    log = os.path.join(out, "run.log")
+    t0 = time.time()
+    try:
+        cpu, rss, wall = timed([ltm, "run", "--sessions"] + sessions + ["--out", runp], log)
+    except RuntimeError:
+        # A run that aligned no query session stops after LT-SLAM (exit 1). It is a row of the
+        # table all the same ("1/N" aligned, no LD): the drives may share no view (eval traj's
+        # figures and the run's aligned/report.md tell), and a missing row would hide it.
+        if "no query session could be aligned" not in open(log).read():
+            raise
+        cpu, rss, wall = None, None, time.time() - t0
     row = evaluate(ltm, sim, out, names)
     row.update(name=name, sessions=len(names), cpu=cpu, rss=rss, wall=wall)
     if not keep:  # the run's clouds are large; the figures are in eval/
@@ -156,12 +170,12 @@ def print_table(rows):
         obj = "n/a" if not r["objects"] else "%d/%d (%s)" % (r["objects"][0], r["objects"][1], fmt(r["objects"][2]))
         if r["objects"] and r["objects"][4] is not None:
             obj += " [%d/%d]" % (r["objects"][3], r["objects"][4])
-        print("| %s | %d/%d | %s | %s | %s / %s | %s | %s | %s | %.0f | %.0f |" % (
+        print("| %s | %d/%d | %s | %s | %s / %s | %s | %s | %s | %s | %s |" % (
             r["name"], r["aligned"], r["sessions"], " ".join(fmt(x, 100) for x in r["sa"]),
             " ".join("%s (%s) [%s]" % (fmt(x, 100), fmt(y, 100), fmt(z, 100))
                      for x, y, z in zip(r["da"], r["da_own"], r["da_sep"])),
             fmt(r["rmse_m"], 1, 3), fmt(r["rmse_deg"], 1, 3), ld or "-", obj,
-            fmt(r["hd_s_kf"], 1, 3), r["wall"], r["rss"]))
+            fmt(r["hd_s_kf"], 1, 3), fmt(r["wall"], 1, 0), fmt(r["rss"], 1, 0)))
 
 
 def main():
