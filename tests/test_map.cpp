@@ -918,9 +918,9 @@ PointCloud FarColumns(std::initializer_list<float> zs, float y0, int n) {
 // A fence 36 m from the keyframe, seen by a 16-beam sensor (2 deg rows: samples 1.26 m apart
 // there). The map gathers its rows from keyframes at several ranges, in unequal shares: 6 % of its
 // points at 0.4 m, 44 % at 0.8 m and 1.2 m, 6 % at 1.6 m. Its width across its middle axis, between
-// the 5 % and 95 % quantiles, is 1.2 m: two rows and more, an object (1.5 standard deviations'
-// uniform extent, 0.97 m, made it a "sliver": fence 9 of seed 0's VLP-16 rows). A rim one row wide
-// with 2 % strays above it stays a sliver.
+// the 5 % and 95 % quantiles, is 1.2 m: more than one row, an object (sqrt(12) standard deviations,
+// 0.97 m, against the equal rows' bound of 1.09 m made it a "sliver", as fence 9 of seed 0's VLP-16
+// rows). A rim one row wide with 2 % strays above it stays a sliver.
 TEST(MapObjects, AFenceWhoseRowsHoldUnequalSharesIsNoSliver) {
   test::TempDir tmp;
   MapConfig cfg = Cfg();
