@@ -8,6 +8,7 @@
 #include "ltmapper/removert/removert.hpp"
 
 #include "ltmapper/removert/detail.hpp"  // white-box: fast projection vs geometry
+#include "ltmapper/removert/images.hpp"
 
 #include <gtest/gtest.h>
 
@@ -346,6 +347,77 @@ TEST(RemovertVotes, ABeamThatPassedWithoutAReturnSawThePlaceFree) {
   cfg.sensor_model.spread_deg = 0.4;
   EXPECT_FALSE(ColumnImage::TellsItsReturns(cfg.sensor_model, 1.0));
   EXPECT_EQ(passed(kSky), 0);
+}
+
+// A raw sweep of a 16-beam sensor (+15 .. -15 deg, 0.2 deg columns) turning once in 0.1 s while it
+// moves 8 m/s along x, inside a cylinder of 8 m radius over the ground 1.8 m below: each point in the
+// frame its column fired from, with its time (as a raw sweep file holds them). *deskewed: the same
+// points moved into the keyframe frame (io::Deskew).
+PointCloud RawSweepInACylinder(PointCloud* deskewed) {
+  constexpr double kDeg = M_PI / 180.0, kRadius = 8.0, kHeight = 1.8, kSweepS = 0.1;
+  const Eigen::Vector3d v(8.0, 0.0, 0.0);
+  constexpr int kColumns = 1800;
+  PointCloud raw;
+  for (int c = 0; c < kColumns; ++c) {
+    const double t = kSweepS * c / kColumns, az = (-180.0 + 0.2 * c) * kDeg;
+    const Eigen::Vector3d o = t * v;
+    for (int b = 0; b < 16; ++b) {
+      const double e = (15.0 - 2.0 * b) * kDeg;
+      const Eigen::Vector3d d(std::cos(e) * std::cos(az), std::cos(e) * std::sin(az), std::sin(e));
+      // The cylinder |o + s d|_xy = R (s > 0), or the ground first.
+      const double a = d.x() * d.x() + d.y() * d.y(), bb = 2.0 * (o.x() * d.x() + o.y() * d.y());
+      const double cc = o.x() * o.x() + o.y() * o.y() - kRadius * kRadius;
+      double s = (-bb + std::sqrt(bb * bb - 4.0 * a * cc)) / (2.0 * a);
+      if (d.z() < 0.0) s = std::min(s, -kHeight / d.z());
+      const Eigen::Vector3d p = s * d;  // in the firing frame (no turn: its axes are the keyframe's)
+      raw.push_back(float(p.x()), float(p.y()), float(p.z()), 1.f);
+      raw.time.push_back(float(t));
+      deskewed->push_back(float(p.x() + o.x()), float(p.y() + o.y()), float(p.z() + o.z()), 1.f);
+    }
+  }
+  return raw;
+}
+
+// A raw sweep's range images keep the beams' own elevations: the sensor estimated from it scatters
+// nothing about its beams, so every beam tells its returns from its neighbours' and a beam that
+// passed a point without a return is evidence (ColumnImage::TellsItsReturns). Deskewed into the
+// keyframe frame, the near ground's returns of the steep beams are bent by the sensor's travel
+// during the sweep (0.8 m): the beams cannot be told apart. A point asked
+// in the keyframe frame is asked in the frame its column fired from (SweepFrames::ToFiring).
+TEST(RemovertVotes, ARawSweepIsSeenFromWhereItsColumnsFired) {
+  PointCloud deskewed;
+  const PointCloud raw = RawSweepInACylinder(&deskewed);
+  SweepMotion motion;
+  motion.known = true;
+  motion.v_mps = Eigen::Vector3d(8.0, 0.0, 0.0);
+  const removert::detail::SweepFrames frames(raw, motion);
+  ASSERT_TRUE(frames.active());
+  std::size_t near = 0;
+  for (std::size_t i = 0; i < raw.size(); ++i)
+    near += (frames.ToFiring(deskewed.points[i].xyz(), nullptr) - raw.points[i].xyz()).norm() < 0.01f ? 1 : 0;
+  EXPECT_GT(double(near), 0.99 * double(raw.size()));  // all but the seam's, where the sweep begins and ends
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.sensor = "auto";
+  cfg.sensor_elevations_deg.clear();
+  cfg.sensor_model = {};
+  cfg.fov_up_deg = cfg.fov_down_deg = 0.0;  // not resolved: estimated from the scans
+  cfg.min_range_m = 1.0;
+  test::TempDir tmp;
+  WorldKeyframe kf;
+  kf.cloud_path = tmp / "000000.pcd";  // a raw sweep file: its points with their `time`
+  io::WritePcd(kf.cloud_path, raw);
+  kf.sweep = motion;
+  const geometry::SensorModel from_raw = removert::WithSensor(cfg, {kf}).sensor_model;
+  ASSERT_EQ(from_raw.beams(), 16);
+  EXPECT_LT(from_raw.spread_deg, 0.01);
+  using removert::detail::ColumnImage;
+  for (const double e : from_raw.elevations_deg) EXPECT_TRUE(ColumnImage::TellsItsReturns(from_raw, e)) << e;
+  kf.cloud_path = tmp / "000001.pcd";  // the same sweep deskewed (no `time`)
+  io::WritePcd(kf.cloud_path, deskewed);
+  const geometry::SensorModel from_deskewed = removert::WithSensor(cfg, {kf}).sensor_model;
+  bool all_tell = from_deskewed.ring_based;  // here the bent peaks blur: no rings found at all
+  for (const double e : from_deskewed.elevations_deg) all_tell = all_tell && ColumnImage::TellsItsReturns(from_deskewed, e);
+  EXPECT_FALSE(all_tell);
 }
 
 // The beam truth calls a point observed only where a ray of the other session passed within the

@@ -36,6 +36,29 @@ inline float FastAtan2(float y, float x) {
   return y < 0.f ? -r : r;
 }
 
+// A raw sweep's columns fired from the poses the sensor passed through while it turned (each point
+// of the file in the frame of its column's firing; io::Deskew moves it into the keyframe frame with
+// the session's SweepMotion: q = R(t) p + t v). Range images built from the raw points keep the beams'
+// own elevations (a deskewed sweep's are bent by up to the sweep's travel over the range); a point
+// asked in the keyframe frame is asked in the frame of the column that fired towards it (ToFiring).
+class SweepFrames {
+ public:
+  SweepFrames() = default;
+  // From the raw points' times per azimuth (inactive without times or a known motion).
+  SweepFrames(const PointCloud& raw, const SweepMotion& motion);
+  bool active() const { return !turn_.empty(); }
+  // q (keyframe frame) in the frame of the column fired towards it (two fixed-point steps over the
+  // column's time); *R (may be null) is that frame's rotation from the keyframe frame.
+  Eigen::Vector3f ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f* R) const;
+
+ private:
+  std::size_t Bin(float yaw) const;
+  // Per azimuth bin (kSweepBinDeg): the rotation from the keyframe frame to the frame its column
+  // fired from, and that frame's origin in the keyframe frame.
+  std::vector<Eigen::Matrix3f> turn_;
+  std::vector<Eigen::Vector3f> origin_;
+};
+
 // The range image of one resolution: square pixels of `pixel_deg`, same pixel rule as
 // geometry::RangeImage (row 0 = top of the FOV, column 0 at azimuth +180 deg, decreasing azimuth).
 geometry::RangeImageConfig LevelConfig(const RemovertConfig& cfg, double pixel_deg);

@@ -926,6 +926,54 @@ TileIndex::TileIndex(const PointCloud& cloud, double tile_m) : tile_m_(tile_m) {
   }
 }
 
+namespace {
+constexpr float kSweepBinDeg = 0.1f;  // azimuth bins of SweepFrames' times (finer than any column step)
+}  // namespace
+
+SweepFrames::SweepFrames(const PointCloud& raw, const SweepMotion& motion) {
+  if (raw.time.size() != raw.size() || raw.empty() || !motion.known) return;
+  const int bins = int(std::lround(360.f / kSweepBinDeg));
+  std::vector<double> sum(std::size_t(bins), 0.0);
+  std::vector<int> n(std::size_t(bins), 0);
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    const PointXYZI& p = raw.points[i];
+    const std::size_t b = std::size_t(std::clamp(int(std::floor((FastAtan2(p.y, p.x) * 180.f / kPiF + 180.f) / kSweepBinDeg)), 0, bins - 1));
+    sum[b] += raw.time[i];
+    ++n[b];
+  }
+  if (std::none_of(n.begin(), n.end(), [](int k) { return k > 0; })) return;
+  // A bin without a return takes the time of the nearest bin with one (around the circle).
+  std::vector<double> time(std::size_t(bins), 0.0);
+  for (int b = 0; b < bins; ++b)
+    for (int d = 0; d <= bins / 2; ++d) {
+      const std::size_t lo = std::size_t((b - d + bins) % bins), hi = std::size_t((b + d) % bins);
+      if (n[lo] || n[hi]) {
+        time[std::size_t(b)] = n[lo] ? sum[lo] / n[lo] : sum[hi] / n[hi];
+        break;
+      }
+    }
+  const double w = motion.w_radps.norm();
+  const Eigen::Vector3d axis = w > 0.0 ? Eigen::Vector3d(motion.w_radps / w) : Eigen::Vector3d::UnitZ();
+  for (const double t : time) {  // io::Deskew: q = R(t) p + t v, so p = R(t)^T (q - t v)
+    turn_.push_back(Eigen::AngleAxisd(t * w, axis).toRotationMatrix().transpose().cast<float>());
+    origin_.push_back((t * motion.v_mps).cast<float>());
+  }
+}
+
+std::size_t SweepFrames::Bin(float yaw) const {
+  const int bins = int(turn_.size());
+  return std::size_t(std::clamp(int(std::floor((yaw * 180.f / kPiF + 180.f) / kSweepBinDeg)), 0, bins - 1));
+}
+
+Eigen::Vector3f SweepFrames::ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f* R) const {
+  std::size_t b = Bin(FastAtan2(q.y(), q.x()));
+  Eigen::Vector3f p = turn_[b] * (q - origin_[b]);
+  b = Bin(FastAtan2(p.y(), p.x()));  // the column that fired towards q as its own frame sees q
+  p = turn_[b] * (q - origin_[b]);
+  if (R) *R = turn_[b];
+  return p;
+}
+
 // A scan read from its file must hold finite points (the stages' one check, as in LT-SLAM); a
 // cloud given in memory is the caller's (an empty one is "no returns", used by the tests).
 std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
@@ -936,6 +984,23 @@ std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
   geometry::RemoveNonFinite(*cloud);
   io::RequireScanPoints(*cloud, kf.cloud_path + " (keyframe " + std::to_string(kf.index) + ")");
   return cloud;
+}
+
+std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, SweepFrames* frames) {
+  *frames = SweepFrames();
+  if (!kf.sweep.known) return LoadScan(kf);
+  std::shared_ptr<const PointCloud> raw = kf.cloud;
+  if (!raw) {
+    if (kf.cloud_path.empty())
+      throw Error("removert: keyframe " + std::to_string(kf.index) + " has neither a cloud nor a path");
+    auto cloud = std::make_shared<PointCloud>(io::ReadCloud(kf.cloud_path));
+    geometry::RemoveNonFinite(*cloud);
+    io::RequireScanPoints(*cloud, kf.cloud_path + " (keyframe " + std::to_string(kf.index) + ")");
+    raw = cloud;
+  }
+  if (raw->time.empty()) return raw;
+  *frames = SweepFrames(*raw, kf.sweep);
+  return raw;
 }
 
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor) {
@@ -993,6 +1058,7 @@ struct Scratch {
   }
   detail::MultiResImage img;
   std::unique_ptr<detail::ColumnImage> columns;  // beam test
+  detail::SweepFrames frames;                    // the keyframe's raw sweep (images in its firing frames)
   std::vector<std::uint32_t> idx;
   std::vector<float> range, pitch, yaw, plane;
   std::size_t valid = 0;                 // projected points of the current tile
@@ -1013,6 +1079,14 @@ void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matr
   const auto& ix = s.index;
   sc->valid = sc->img.Project(ix.x() + b, ix.y() + b, ix.z() + b, tn, c, Rt, s.radius * s.radius, sc->idx.data(),
                               sc->range.data(), sc->pitch.data(), sc->yaw.data());
+  if (sc->frames.active())  // a raw sweep's images: each point seen from where its column fired
+    for (std::size_t j = 0; j < sc->valid; ++j) {
+      const std::size_t i = b + sc->idx[j];
+      const Eigen::Vector3f p = sc->frames.ToFiring(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c), nullptr);
+      sc->range[j] = p.norm();
+      sc->pitch[j] = detail::FastAtan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y()));
+      sc->yaw[j] = detail::FastAtan2(p.y(), p.x());
+    }
   for (std::size_t j = sc->valid; j < sc->valid + 3; ++j) sc->range[j] = sc->pitch[j] = sc->yaw[j] = 0.f;  // padding
 }
 
@@ -1036,8 +1110,14 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
   SurfaceExtent inside;
   for (std::size_t j = 0; j < sc->valid; ++j) {
     const std::size_t i = b + sc->idx[j];
-    const Eigen::Vector3f ps = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
-    const Eigen::Vector3f ns = Rt * (*s.options.normals)[ix.order()[i]];
+    Eigen::Vector3f ps = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
+    Eigen::Matrix3f R = Rt;  // world to the (firing) sensor frame
+    if (sc->frames.active()) {
+      Eigen::Matrix3f Rf;
+      ps = sc->frames.ToFiring(ps, &Rf);
+      R = Rf * Rt;
+    }
+    const Eigen::Vector3f ns = R * (*s.options.normals)[ix.order()[i]];
     float* pl = &sc->plane[4 * j];
     pl[0] = ns.x();
     pl[1] = ns.y();
@@ -1046,7 +1126,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     const auto asked = [&](const std::vector<bool>* at) { return at != nullptr && (*at)[ix.order()[i]]; };
     if (s.beams)
       sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
-                                                         asked(s.options.through_at), InsideOf(s, Rt, ix.order()[i], &inside));
+                                                         asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside));
   }
 }
 
@@ -1189,7 +1269,7 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
     if (!near) return;
     Scratch& sc = scratch.local();
     {
-      const auto scan = detail::LoadScan(kf);
+      const auto scan = detail::LoadVoterScan(kf, &sc.frames);
       sc.img.Build(*scan);
       if (setup.beams) sc.columns->Build(*scan);
     }
