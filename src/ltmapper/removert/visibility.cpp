@@ -974,32 +974,29 @@ Eigen::Vector3f SweepFrames::ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f*
   return p;
 }
 
-// A scan read from its file must hold finite points (the stages' one check, as in LT-SLAM); a
-// cloud given in memory is the caller's (an empty one is "no returns", used by the tests).
-std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
-  if (kf.cloud) return kf.cloud;
+namespace {
+// The keyframe's scan file, deskewed with its session's motion (io::ReadScan) or as read (raw).
+std::shared_ptr<const PointCloud> ReadKeyframeFile(const WorldKeyframe& kf, bool deskew) {
   if (kf.cloud_path.empty())
     throw Error("removert: keyframe " + std::to_string(kf.index) + " has neither a cloud nor a path");
-  auto cloud = std::make_shared<PointCloud>(io::ReadScan(kf.cloud_path, kf.sweep));
+  auto cloud = std::make_shared<PointCloud>(deskew ? io::ReadScan(kf.cloud_path, kf.sweep) : io::ReadCloud(kf.cloud_path));
   geometry::RemoveNonFinite(*cloud);
   io::RequireScanPoints(*cloud, kf.cloud_path + " (keyframe " + std::to_string(kf.index) + ")");
   return cloud;
 }
+}  // namespace
+
+// A scan read from its file must hold finite points (the stages' one check, as in LT-SLAM); a
+// cloud given in memory is the caller's (an empty one is "no returns", used by the tests).
+std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
+  return kf.cloud ? kf.cloud : ReadKeyframeFile(kf, true);
+}
 
 std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, SweepFrames* frames) {
   *frames = SweepFrames();
-  if (!kf.sweep.known) return LoadScan(kf);
-  std::shared_ptr<const PointCloud> raw = kf.cloud;
-  if (!raw) {
-    if (kf.cloud_path.empty())
-      throw Error("removert: keyframe " + std::to_string(kf.index) + " has neither a cloud nor a path");
-    auto cloud = std::make_shared<PointCloud>(io::ReadCloud(kf.cloud_path));
-    geometry::RemoveNonFinite(*cloud);
-    io::RequireScanPoints(*cloud, kf.cloud_path + " (keyframe " + std::to_string(kf.index) + ")");
-    raw = cloud;
-  }
-  if (raw->time.empty()) return raw;
-  *frames = SweepFrames(*raw, kf.sweep);
+  if (!kf.sweep.known) return LoadScan(kf);  // a raw sweep then is an error (io::ReadScan says so)
+  std::shared_ptr<const PointCloud> raw = kf.cloud ? kf.cloud : ReadKeyframeFile(kf, false);
+  if (!raw->time.empty()) *frames = SweepFrames(*raw, kf.sweep);
   return raw;
 }
 
@@ -1059,6 +1056,8 @@ struct Scratch {
   detail::MultiResImage img;
   std::unique_ptr<detail::ColumnImage> columns;  // beam test
   detail::SweepFrames frames;                    // the keyframe's raw sweep (images in its firing frames)
+  std::vector<Eigen::Vector3f> fired_at;         // with frames: per projected point, itself in its
+  std::vector<Eigen::Matrix3f> fired_turn;       // column's firing frame, and that frame's rotation
   std::vector<std::uint32_t> idx;
   std::vector<float> range, pitch, yaw, plane;
   std::size_t valid = 0;                 // projected points of the current tile
@@ -1079,14 +1078,18 @@ void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matr
   const auto& ix = s.index;
   sc->valid = sc->img.Project(ix.x() + b, ix.y() + b, ix.z() + b, tn, c, Rt, s.radius * s.radius, sc->idx.data(),
                               sc->range.data(), sc->pitch.data(), sc->yaw.data());
-  if (sc->frames.active())  // a raw sweep's images: each point seen from where its column fired
+  if (sc->frames.active()) {  // a raw sweep's images: each point seen from where its column fired
+    sc->fired_at.resize(sc->valid);
+    sc->fired_turn.resize(sc->valid);
     for (std::size_t j = 0; j < sc->valid; ++j) {
       const std::size_t i = b + sc->idx[j];
-      const Eigen::Vector3f p = sc->frames.ToFiring(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c), nullptr);
+      const Eigen::Vector3f& p = sc->fired_at[j] =
+          sc->frames.ToFiring(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c), &sc->fired_turn[j]);
       sc->range[j] = p.norm();
       sc->pitch[j] = detail::FastAtan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y()));
       sc->yaw[j] = detail::FastAtan2(p.y(), p.x());
     }
+  }
   for (std::size_t j = sc->valid; j < sc->valid + 3; ++j) sc->range[j] = sc->pitch[j] = sc->yaw[j] = 0.f;  // padding
 }
 
@@ -1110,13 +1113,9 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
   SurfaceExtent inside;
   for (std::size_t j = 0; j < sc->valid; ++j) {
     const std::size_t i = b + sc->idx[j];
-    Eigen::Vector3f ps = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
-    Eigen::Matrix3f R = Rt;  // world to the (firing) sensor frame
-    if (sc->frames.active()) {
-      Eigen::Matrix3f Rf;
-      ps = sc->frames.ToFiring(ps, &Rf);
-      R = Rf * Rt;
-    }
+    const bool fired = sc->frames.active();  // world to the (firing) sensor frame: ProjectTile's
+    const Eigen::Vector3f ps = fired ? sc->fired_at[j] : Eigen::Vector3f(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c));
+    const Eigen::Matrix3f R = fired ? Eigen::Matrix3f(sc->fired_turn[j] * Rt) : Rt;
     const Eigen::Vector3f ns = R * (*s.options.normals)[ix.order()[i]];
     float* pl = &sc->plane[4 * j];
     pl[0] = ns.x();
