@@ -143,8 +143,13 @@ def scenario(ltm, yaml, out_root, keyframes, seed, keep):
     except RuntimeError:
         # A run that aligned no query session stops after LT-SLAM (exit 1). It is a row of the
         # table all the same ("1/N" aligned, no LD): the drives may share no view (eval traj's
-        # figures and the run's aligned/report.md tell), and a missing row would hide it.
-        if "no query session could be aligned" not in open(log).read():
+        # figures and the run's aligned/report.md tell), and a missing row would hide it. Told by
+        # LT-SLAM's report (every query session not aligned), not by the log's wording.
+        rep = os.path.join(runp, "aligned", "report.json")
+        if not os.path.exists(rep):
+            raise
+        slam = load(rep)
+        if any(x["aligned"] for x in slam["sessions"] if x["name"] != slam["central"]):
             raise
         cpu, rss, wall = None, None, time.time() - t0
     row = evaluate(ltm, sim, out, names)

@@ -777,18 +777,21 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
     if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
   if (weak.empty() || floor.empty()) return parts;
   const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(weak));
-  const double edge = SampleSpacing(cfg);
+  const double edge = SampleSpacing(cfg), tol = cfg.object_tolerance_m;
   for (std::size_t k = 0; k < group.size(); ++k) {
     const MapObject& o = group[k];
-    const InOrientedBox in_box(o, edge, 0.0);
+    std::vector<std::uint32_t> columns;  // the step's weak ND over and under o (one pass), highest first
     for (std::uint32_t i : by_z)
+      if (InColumns(o, changes.points[i], std::max(edge, tol))) columns.push_back(i);
+    const InOrientedBox in_box(o, edge, 0.0);
+    for (std::uint32_t i : columns)
       if (InGrownBox(o, changes.points[i].xyz(), edge) && in_box(changes.points[i].xyz().cast<double>()))
         parts[k].push_back(i);
     std::vector<std::uint32_t> lower;
-    for (std::uint32_t i : ChainBelow(o, changes, by_z, cfg.object_tolerance_m))
+    for (std::uint32_t i : ChainBelow(o, changes, columns, tol))
       if (AboveGround(changes.points[i].xyz(), floor, cfg)) lower.push_back(i);
     parts[k].insert(parts[k].end(), lower.begin(), lower.end());
-    for (std::uint32_t i : ChainAbove(o, changes, by_z, cfg.object_tolerance_m)) parts[k].push_back(i);
+    for (std::uint32_t i : ChainAbove(o, changes, columns, tol)) parts[k].push_back(i);
     StandOn(group[k], changes, lower, floor);
   }
   return parts;

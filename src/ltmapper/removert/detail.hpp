@@ -28,8 +28,9 @@ namespace ltm::removert::detail {
 std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf);
 class SweepFrames;
 // The scan a keyframe's votes are counted on: a raw sweep (per-point time, its session's motion
-// known) as read, each point in the frame its column fired from, with *frames mapping the keyframe
-// frame there (SweepFrames); any other scan as LoadScan gives it (*frames inactive).
+// known) as read, each point in the frame its column fired from, with *frames (when asked for)
+// mapping the keyframe frame there (SweepFrames); any other scan as LoadScan gives it (*frames
+// inactive).
 std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, SweepFrames* frames);
 // The keyframes' sensor positions (world frame), one point per keyframe, in keyframe order.
 PointCloud Positions(const std::vector<WorldKeyframe>& keyframes);

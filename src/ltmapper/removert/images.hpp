@@ -52,8 +52,7 @@ class SweepFrames {
   Eigen::Vector3f ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f* R) const;
 
  private:
-  std::size_t Bin(float yaw) const;
-  // Per azimuth bin (kSweepBinDeg): the rotation from the keyframe frame to the frame its column
+  // Per azimuth bin (kSweepBinDeg, visibility.cpp): the rotation from the keyframe frame to the frame its column
   // fired from, and that frame's origin in the keyframe frame.
   std::vector<Eigen::Matrix3f> turn_;
   std::vector<Eigen::Vector3f> origin_;

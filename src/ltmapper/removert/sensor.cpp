@@ -1,6 +1,5 @@
 // The sensor model of a removert run: resolved once from the config or the scans.
 #include "ltmapper/removert/detail.hpp"
-#include "ltmapper/removert/images.hpp"
 
 #include "ltmapper/io/io.hpp"
 
@@ -63,9 +62,8 @@ RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyf
     const std::size_t n = std::min(kEstimateScans, keyframes.size());
     // The scans as the range images see them (a raw sweep's in its firing frames: the beams' own
     // elevations; LoadVoterScan).
-    detail::SweepFrames frames;
     for (std::size_t k = 0; k < n; ++k)
-      scans.push_back(*detail::LoadVoterScan(keyframes[k * keyframes.size() / n], &frames));
+      scans.push_back(*detail::LoadVoterScan(keyframes[k * keyframes.size() / n], nullptr));
   }
   RemovertConfig out = cfg;
   out.sensor_model = geometry::ResolveSensor(cfg.sensor, cfg.sensor_elevations_deg, scans, "sensor");
