@@ -273,16 +273,18 @@ TEST(RemovertVotes, BeamTestKeepsEveryReturnOfABeam) {
   EXPECT_EQ(removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt).beam_hits[0], 1);
 }
 
-// test::ConfigFor's settings with the VLP-16 preset's sensor (16 beams 2 deg apart, 0.2 deg steps).
-RemovertConfig Vlp16Config() {
+// test::ConfigFor's settings with `sensor` (a preset, or auto) not yet resolved (WithSensor).
+RemovertConfig UnresolvedConfig(const std::string& sensor) {
   RemovertConfig cfg = test::ConfigFor();
-  cfg.sensor = "vlp16";
+  cfg.sensor = sensor;
   cfg.sensor_elevations_deg.clear();
   cfg.sensor_model = {};
   cfg.fov_up_deg = cfg.fov_down_deg = 0.0;
-  cfg = removert::WithSensor(cfg, {});
   return cfg;
 }
+
+// test::ConfigFor's settings with the VLP-16 preset's sensor (16 beams 2 deg apart, 0.2 deg steps).
+RemovertConfig Vlp16Config() { return removert::WithSensor(UnresolvedConfig("vlp16"), {}); }
 
 // A ring sensor fires every beam at every azimuth step, so a beam that passed a point and has no
 // return there went on and met nothing: the point's place was free (an appeared structure's place,
@@ -378,6 +380,21 @@ PointCloud RawSweepInACylinder(PointCloud* deskewed) {
   return raw;
 }
 
+// The motion of RawSweepInACylinder's sensor: 8 m/s along x, no turn.
+SweepMotion CylinderSweepMotion() {
+  SweepMotion m;
+  m.known = true;
+  m.v_mps = Eigen::Vector3d(8.0, 0.0, 0.0);
+  return m;
+}
+
+// A config whose sensor is estimated from the scans, returns from 1 m on.
+RemovertConfig SensorFromTheScans() {
+  RemovertConfig cfg = UnresolvedConfig("auto");
+  cfg.min_range_m = 1.0;
+  return cfg;
+}
+
 // A raw sweep's range images keep the beams' own elevations: the sensor estimated from it scatters
 // nothing about its beams, so every beam tells its returns from its neighbours' and a beam that
 // passed a point without a return is evidence (ColumnImage::TellsItsReturns). Deskewed into the
@@ -387,21 +404,14 @@ PointCloud RawSweepInACylinder(PointCloud* deskewed) {
 TEST(RemovertVotes, ARawSweepIsSeenFromWhereItsColumnsFired) {
   PointCloud deskewed;
   const PointCloud raw = RawSweepInACylinder(&deskewed);
-  SweepMotion motion;
-  motion.known = true;
-  motion.v_mps = Eigen::Vector3d(8.0, 0.0, 0.0);
+  const SweepMotion motion = CylinderSweepMotion();
   const removert::detail::SweepFrames frames(raw, motion);
   ASSERT_TRUE(frames.active());
   std::size_t near = 0;
   for (std::size_t i = 0; i < raw.size(); ++i)
     near += (frames.ToFiring(deskewed.points[i].xyz(), nullptr) - raw.points[i].xyz()).norm() < 0.01f ? 1 : 0;
   EXPECT_GT(double(near), 0.99 * double(raw.size()));  // all but the seam's, where the sweep begins and ends
-  RemovertConfig cfg = test::ConfigFor();
-  cfg.sensor = "auto";
-  cfg.sensor_elevations_deg.clear();
-  cfg.sensor_model = {};
-  cfg.fov_up_deg = cfg.fov_down_deg = 0.0;  // not resolved: estimated from the scans
-  cfg.min_range_m = 1.0;
+  const RemovertConfig cfg = SensorFromTheScans();
   test::TempDir tmp;
   WorldKeyframe kf;
   kf.cloud_path = tmp / "000000.pcd";  // a raw sweep file: its points with their `time`
@@ -412,12 +422,55 @@ TEST(RemovertVotes, ARawSweepIsSeenFromWhereItsColumnsFired) {
   EXPECT_LT(from_raw.spread_deg, 0.01);
   using removert::detail::ColumnImage;
   for (const double e : from_raw.elevations_deg) EXPECT_TRUE(ColumnImage::TellsItsReturns(from_raw, e)) << e;
-  kf.cloud_path = tmp / "000001.pcd";  // the same sweep deskewed (no `time`)
+  kf.cloud_path = tmp / "000001.pcd";  // the same sweep deskewed (no `time`), its motion unknown
   io::WritePcd(kf.cloud_path, deskewed);
-  const geometry::SensorModel from_deskewed = removert::WithSensor(cfg, {kf}).sensor_model;
+  kf.sweep = SweepMotion{};
+  const RemovertConfig unknown = removert::WithSensor(cfg, {kf});
+  EXPECT_FALSE(unknown.sweep_timing.known);
+  const geometry::SensorModel& from_deskewed = unknown.sensor_model;
   bool all_tell = from_deskewed.ring_based;  // here the bent peaks blur: no rings found at all
   for (const double e : from_deskewed.elevations_deg) all_tell = all_tell && ColumnImage::TellsItsReturns(from_deskewed, e);
   EXPECT_FALSE(all_tell);
+}
+
+// A sweep saved deskewed in a session with keyframe times (its motion known) is put back into the
+// frames its columns fired from. io::Reskew with the sweep's timing (azimuth rising from -180 deg
+// through one turn in 0.1 s, stamped at its start) gives the raw sweep back; the timing is
+// estimated from the deskewed scan alone (EstimateSweepTiming); WithSensor re-skews with it, so
+// the sensor estimated from the scan is the raw sweep's: 16 beams, each telling its returns.
+TEST(RemovertVotes, ADeskewedSweepIsPutBackWhereItsColumnsFired) {
+  PointCloud deskewed;
+  const PointCloud raw = RawSweepInACylinder(&deskewed);
+  const SweepMotion motion = CylinderSweepMotion();
+  const SweepTiming truth{true, 0.1, -M_PI, -1, 0.0};
+  const PointCloud back = io::Reskew(deskewed, motion, truth);
+  ASSERT_EQ(back.time.size(), raw.size());
+  std::size_t near = 0;
+  for (std::size_t i = 0; i < raw.size(); ++i)
+    near += (back.points[i].xyz() - raw.points[i].xyz()).norm() < 0.01f && std::fabs(back.time[i] - raw.time[i]) < 1e-3f;
+  EXPECT_GT(double(near), 0.99 * double(raw.size()));  // all but the seam's
+  const SweepTiming est = removert::detail::EstimateSweepTiming({deskewed}, {motion}, 1.0);
+  ASSERT_TRUE(est.known);
+  EXPECT_EQ(est.turn, -1);
+  EXPECT_NEAR(est.period_s, 0.1, 0.005);
+  EXPECT_NEAR(std::fabs(std::remainder(est.start_rad, 2.0 * M_PI)), M_PI, 2.0 * M_PI / 180.0);
+  EXPECT_NEAR(est.stamp_share, 0.0, 0.03);
+  const RemovertConfig cfg = SensorFromTheScans();
+  test::TempDir tmp;
+  WorldKeyframe kf;
+  kf.cloud_path = tmp / "000000.pcd";
+  io::WritePcd(kf.cloud_path, deskewed);
+  kf.sweep = motion;
+  const RemovertConfig resolved = removert::WithSensor(cfg, {kf});
+  EXPECT_TRUE(resolved.sweep_timing.known);
+  const geometry::SensorModel& m = resolved.sensor_model;
+  ASSERT_EQ(m.beams(), 16);
+  EXPECT_EQ(removert::detail::ColumnImage::BeamsThatTell(m), 16);
+  // The votes read it re-skewed, with the frames to ask its points in.
+  removert::detail::SweepFrames frames;
+  const auto voter = removert::detail::LoadVoterScan(kf, resolved.sweep_timing, &frames);
+  EXPECT_TRUE(frames.active());
+  EXPECT_EQ(voter->time.size(), deskewed.size());
 }
 
 // The beam truth calls a point observed only where a ray of the other session passed within the

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -122,6 +123,24 @@ struct SweepMotion {
   bool known = false;                          // false: the session has no keyframe times
   Eigen::Vector3d v_mps = Eigen::Vector3d::Zero();
   Eigen::Vector3d w_radps = Eigen::Vector3d::Zero();
+};
+
+// When each column of a spinning sensor's sweep fired, for scans saved deskewed (their per-point
+// times dropped): the column at azimuth a [rad] of its own firing frame fired
+//   t(a) = period_s * (frac(turn * (start_rad - a) / 2 pi) - stamp_share)
+// seconds after the scan's timestamp. Estimated by removert from the scans (WithSensor); io::Reskew
+// puts a deskewed scan back into its firing frames with it.
+struct SweepTiming {
+  bool known = false;        // false: the scans are raw sweeps or not re-skewed
+  double period_s = 0.0;     // [s] one turn
+  double start_rad = 0.0;    // [rad] azimuth of the sweep's first column
+  int turn = 1;              // +1: azimuth decreasing with time (clockwise seen from above); -1: increasing
+  double stamp_share = 0.0;  // [-] share of the sweep fired before the timestamp (0: it stamps the start)
+  double TimeAt(double azimuth_rad) const {
+    constexpr double kTwoPi = 6.283185307179586;
+    const double u = double(turn) * (start_rad - azimuth_rad) / kTwoPi;
+    return period_s * (u - std::floor(u) - stamp_share);
+  }
 };
 
 struct Keyframe {

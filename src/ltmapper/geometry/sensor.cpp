@@ -124,13 +124,19 @@ std::vector<Cluster> Clusters(const ElevationHistogram& h) {
     c.width += b - last > 2 ? 1 : b - last;
     last = b;
   }
-  // Stray points (a few between beams) form tiny clusters: drop those far below the typical beam.
+  // Stray points (a few between beams) form tiny clusters: drop those far below the typical beam,
+  // the cluster that holds the median point (strays may outnumber the beams, never their points).
+  if (out.empty()) return out;
+  double total = 0.0;
+  for (const Cluster& c : out) total += c.n;
   std::vector<double> counts;
   for (const Cluster& c : out) counts.push_back(c.n);
-  if (counts.empty()) return out;
-  std::nth_element(counts.begin(), counts.begin() + counts.size() / 2, counts.end());
-  constexpr double kStrayShare = 0.01;  // [-] of the median cluster's count
-  const double floor = kStrayShare * counts[counts.size() / 2];
+  std::sort(counts.begin(), counts.end());
+  double below = 0.0;
+  std::size_t typical = 0;
+  while (typical + 1 < counts.size() && below + counts[typical] < 0.5 * total) below += counts[typical++];
+  constexpr double kStrayShare = 0.01;  // [-] of the typical beam's count
+  const double floor = kStrayShare * counts[typical];
   out.erase(std::remove_if(out.begin(), out.end(), [&](const Cluster& c) { return c.n < floor; }), out.end());
   return out;
 }

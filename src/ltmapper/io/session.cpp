@@ -457,6 +457,27 @@ void Deskew(PointCloud& cloud, const SweepMotion& motion) {
   cloud.time.clear();
 }
 
+PointCloud Reskew(const PointCloud& deskewed, const SweepMotion& motion, const SweepTiming& timing) {
+  if (!motion.known || !timing.known || !deskewed.time.empty()) return deskewed;
+  const double w = motion.w_radps.norm();
+  const Eigen::Vector3d axis = w > 0.0 ? Eigen::Vector3d(motion.w_radps / w) : Eigen::Vector3d::UnitZ();
+  PointCloud out = deskewed;
+  out.time.resize(out.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    PointXYZI& p = out.points[i];
+    const Eigen::Vector3d q(p.x, p.y, p.z);
+    Eigen::Vector3d fired = q;
+    double t = 0.0;
+    for (int step = 0; step < 2; ++step) {  // q = R(t) p + t v with t the time of p's own column
+      t = timing.TimeAt(std::atan2(fired.y(), fired.x()));
+      fired = Eigen::AngleAxisd(t * w, axis).toRotationMatrix().transpose() * (q - t * motion.v_mps);
+    }
+    p.x = float(fired.x()), p.y = float(fired.y()), p.z = float(fired.z());
+    out.time[i] = float(t);
+  }
+  return out;
+}
+
 PointCloud ReadScan(const std::string& path, const SweepMotion& motion, CloudReadStats* stats) {
   PointCloud cloud = ReadCloud(path, stats);
   DeskewRaw(cloud, motion, path);

@@ -63,6 +63,10 @@ void WriteSession(const std::string& dir, const Session& session,
 // the scan. KITTI .bin scans carry no time field and are read as they are.
 // Moves each point of a raw sweep into the frame of its scan's timestamp and drops `time`.
 void Deskew(PointCloud& cloud, const SweepMotion& motion);
+// The inverse of Deskew for a scan saved deskewed: each point moved back into the frame its column
+// fired from (SweepTiming::TimeAt of its azimuth there, found in two fixed-point steps), with that
+// `time`. Returns the scan unchanged when `motion` or `timing` is unknown or it already has times.
+PointCloud Reskew(const PointCloud& deskewed, const SweepMotion& motion, const SweepTiming& timing);
 // ReadCloud, then Deskew when the scan has per-point times (ltm::Error when `motion` is unknown).
 PointCloud ReadScan(const std::string& path, const SweepMotion& motion, CloudReadStats* stats = nullptr);
 // Loads the cloud of a keyframe (from memory or its path; a raw sweep is deskewed).

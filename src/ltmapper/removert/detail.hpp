@@ -29,9 +29,15 @@ std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf);
 class SweepFrames;
 // The scan a keyframe's votes are counted on: a raw sweep (per-point time, its session's motion
 // known) as read, each point in the frame its column fired from, with *frames (when asked for)
-// mapping the keyframe frame there (SweepFrames); any other scan as LoadScan gives it (*frames
-// inactive).
-std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, SweepFrames* frames);
+// mapping the keyframe frame there (SweepFrames); a deskewed scan put back there the same way when
+// `timing` is known (io::Reskew); any other scan as LoadScan gives it (*frames inactive).
+std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, const SweepTiming& timing,
+                                                SweepFrames* frames);
+// When the columns of deskewed scans fired, from how tightly their returns, re-skewed with it,
+// fall on beams (sweep_timing.cpp; scans[i] swept with motions[i], returns beyond min_range_m);
+// unknown when no timing piles them up more tightly than they are.
+SweepTiming EstimateSweepTiming(const std::vector<PointCloud>& scans, const std::vector<SweepMotion>& motions,
+                                double min_range_m);
 // The keyframes' sensor positions (world frame), one point per keyframe, in keyframe order.
 PointCloud Positions(const std::vector<WorldKeyframe>& keyframes);
 

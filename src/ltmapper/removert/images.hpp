@@ -214,6 +214,8 @@ class ColumnImage {
   // Only those beams are asked by PassedWithoutReturn and PassedInside; a deskewed sweep's spread
   // (its near returns, bent by the sensor's motion) may leave none.
   static bool TellsItsReturns(const geometry::SensorModel& m, double elevation_deg);
+  // How many of a ring sensor's beams tell their returns (0 without rings).
+  static int BeamsThatTell(const geometry::SensorModel& m);
   // Whether a beam of the sensor's table passed within the tolerance of a point at (range, pitch):
   // its elevation within asin(tol / range) of the pitch, widened by 3 x the scans' scatter. Always
   // for sensors without a beam table (no rings) or an azimuth step. The beam truth counts a point

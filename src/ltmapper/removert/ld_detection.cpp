@@ -359,12 +359,11 @@ namespace {
 void LogBeamsThatTellTheirReturns(const RemovertConfig& cfg) {
   const geometry::SensorModel& m = cfg.sensor_model;
   if (!cfg.SensorResolved() || !m.ring_based || m.azimuth_step_deg <= 0.0) return;
-  const auto n = std::count_if(m.elevations_deg.begin(), m.elevations_deg.end(),
-                               [&](double e) { return detail::ColumnImage::TellsItsReturns(m, e); });
+  const int n = detail::ColumnImage::BeamsThatTell(m);
   if (n == m.beams()) return;
   spdlog::warn("LD: {} of {} beams tell their returns from their neighbours' (the scans' elevations scatter {:.3f} deg "
-               "about their beams, 3 x that reaches halfway to the next beam: deskewed sweeps?); a beam that passed a "
-               "point without a return is evidence from those only",
+               "about their beams, 3 x that reaches halfway to the next beam: deskewed sweeps without keyframe times?); "
+               "a beam that passed a point without a return is evidence from those only",
                n, m.beams(), m.spread_deg);
 }
 

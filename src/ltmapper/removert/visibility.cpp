@@ -820,6 +820,12 @@ bool ColumnImage::TellsItsReturns(const geometry::SensorModel& m, double elevati
   return kBeamScatterSigmas * m.spread_deg < 0.5 * m.SpacingAt(elevation_deg);
 }
 
+int ColumnImage::BeamsThatTell(const geometry::SensorModel& m) {
+  if (!m.ring_based) return 0;
+  return int(std::count_if(m.elevations_deg.begin(), m.elevations_deg.end(),
+                           [&](double e) { return TellsItsReturns(m, e); }));
+}
+
 bool ColumnImage::PassedInside(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
                                const SurfaceExtent& inside) const {
   const float tol = float(test_.tol_m);
@@ -996,10 +1002,12 @@ std::shared_ptr<const PointCloud> LoadScan(const WorldKeyframe& kf) {
   return kf.cloud ? kf.cloud : ReadKeyframeFile(kf, true);
 }
 
-std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, SweepFrames* frames) {
+std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, const SweepTiming& timing,
+                                                SweepFrames* frames) {
   if (frames) *frames = SweepFrames();
   if (!kf.sweep.known) return LoadScan(kf);  // a raw sweep then is an error (io::ReadScan says so)
   std::shared_ptr<const PointCloud> raw = kf.cloud ? kf.cloud : ReadKeyframeFile(kf, false);
+  if (raw->time.empty() && timing.known) raw = std::make_shared<const PointCloud>(io::Reskew(*raw, kf.sweep, timing));
   if (frames && !raw->time.empty()) *frames = SweepFrames(*raw, kf.sweep);
   return raw;
 }
@@ -1272,7 +1280,7 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
     if (!near) return;
     Scratch& sc = scratch.local();
     {
-      const auto scan = detail::LoadVoterScan(kf, &sc.frames);
+      const auto scan = detail::LoadVoterScan(kf, cfg.sweep_timing, &sc.frames);
       sc.img.Build(*scan);
       if (setup.beams) sc.columns->Build(*scan);
     }
