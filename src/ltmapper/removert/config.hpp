@@ -55,7 +55,8 @@ struct RemovertConfig {
   double fov_down_deg = 0.0;      // [deg] lower edge
   // And, for scans saved deskewed in sessions with keyframe times, when their columns fired: the
   // votes then see each scan from there, as a raw sweep's (detail::LoadVoterScan). Unknown when
-  // the scans are raw sweeps, or when re-skewing them makes no more beams tell their returns.
+  // the scans are raw sweeps, or when re-skewing them makes no larger share of the beams tell their
+  // returns.
   SweepTiming sweep_timing;
   double min_range_m = 2.0;       // [m] scan returns closer than this are ignored (ego vehicle)
   double max_range_m = 100.0;     // [m] scan returns farther than this are ignored

@@ -57,12 +57,14 @@ PointCloud detail::Positions(const std::vector<WorldKeyframe>& keyframes) {
 namespace {
 constexpr std::size_t kEstimateScans = 8;  // enough points for every beam's peak
 
-// The beams that tell their returns on a sensor estimated from `scans` (0 when none can be).
-int BeamsThatTell(const std::vector<PointCloud>& scans) {
+// The sensor estimated from `scans`; none (no beams) when they hold too few points to show them.
+geometry::SensorModel EstimatedOrNone(const std::vector<PointCloud>& scans) {
   try {
-    return detail::ColumnImage::BeamsThatTell(geometry::EstimateSensor(scans));
-  } catch (const Error&) {  // too few points to show beams
-    return 0;
+    return geometry::EstimateSensor(scans);
+  } catch (const Error&) {
+    geometry::SensorModel none;
+    none.ring_based = false;
+    return none;
   }
 }
 
@@ -80,13 +82,17 @@ SweepTiming TimingOf(const std::vector<const WorldKeyframe*>& picks, double min_
   if (!t.known) return {};
   std::vector<PointCloud> reskewed;
   for (std::size_t k = 0; k < picks.size(); ++k) reskewed.push_back(io::Reskew((*scans)[k], motions[k], t));
-  const int before = BeamsThatTell(*scans), after = BeamsThatTell(reskewed);
+  // Compared as shares of the beams found: a few returns at the seam mistimed may add clusters
+  // of their own, "beams" that tell.
+  const geometry::SensorModel as_is = EstimatedOrNone(*scans), back = EstimatedOrNone(reskewed);
+  const int before = detail::ColumnImage::BeamsThatTell(as_is), after = detail::ColumnImage::BeamsThatTell(back);
+  const bool better = double(after) * double(std::max(1, as_is.beams())) > double(before) * double(std::max(1, back.beams()));
   spdlog::info("removert sweep timing of the deskewed scans estimated: period {:.3f} s, first column at {:+.1f} deg, "
-               "azimuth {} with time, timestamp after {:.2f} of the sweep; re-skewed, {} beams tell their returns "
-               "(as deskewed {}){}",
-               t.period_s, t.start_rad * 180.0 / 3.141592653589793, t.turn > 0 ? "decreasing" : "increasing",
-               t.stamp_share, after, before, after > before ? "" : ": not used");
-  if (after <= before) return {};
+               "azimuth {} with time, timestamp after {:.2f} of the sweep; re-skewed, {} of {} beams tell their "
+               "returns, spread {:.3f} deg (as deskewed {} of {}, {:.3f} deg){}",
+               t.period_s, t.start_rad / kRadPerDeg, t.turn > 0 ? "decreasing" : "increasing", t.stamp_share, after,
+               back.beams(), back.spread_deg, before, as_is.beams(), as_is.spread_deg, better ? "" : ": not used");
+  if (!better) return {};
   *scans = std::move(reskewed);
   return t;
 }

@@ -8,7 +8,8 @@
 // searched over the turn's direction, the first column's azimuth, the period and the timestamp's
 // place in the sweep, on a coarse grid (each return's elevation moved at its rate, linear in the
 // firing moment) and then finer around the best (each return re-skewed). The caller keeps the
-// result only when the scans re-skewed with it (io::Reskew) make more beams tell their returns.
+// result only when the scans re-skewed with it (io::Reskew) make a larger share of their beams
+// tell their returns.
 #include "ltmapper/removert/detail.hpp"
 
 #include <algorithm>
@@ -20,8 +21,7 @@
 namespace ltm::removert::detail {
 namespace {
 
-constexpr double kTwoPi = 6.283185307179586;
-constexpr double kRadToDeg = 57.29577951308232;
+constexpr double kTwoPi = 360.0 * kRadPerDeg;
 // Elevation histogram bin [deg]: well below the beam spacing of any ring sensor (0.1 deg or more)
 // and near the elevation precision of one return.
 constexpr double kBinDeg = 0.02;
@@ -29,7 +29,7 @@ constexpr double kBinDeg = 0.02;
 constexpr double kMinPeriodS = 0.02, kMaxPeriodS = 0.3;
 // The returns the search reads: enough for every beam's peak, few enough for thousands of
 // candidates (the coarse grid reads a share of them).
-constexpr std::size_t kMaxSamples = 10000, kCoarseSamples = 8000;
+constexpr std::size_t kMaxSamples = 12000, kCoarseSamples = 8000;
 
 // One return: where it is deskewed, and its velocity in the timestamp's frame (it was at
 // q - t u when its column fired t after the stamp: the motion's v + w x q); its elevation [deg],
@@ -40,7 +40,7 @@ struct Sample {
 };
 
 float ElevationDeg(const Eigen::Vector3f& p) {
-  return FastAtan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y())) * float(kRadToDeg);
+  return FastAtan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y())) / float(kRadPerDeg);
 }
 
 // Every k-th of `all`, at most n.
@@ -52,7 +52,9 @@ std::vector<Sample> Spread(const std::vector<Sample>& all, std::size_t n) {
   return out;
 }
 
-// The returns beyond min_range_m whose elevation a timing can move by a histogram bin at least.
+// The returns beyond min_range_m. Those a timing hardly moves (far, or seen sideways) count too:
+// they hold the beams' own elevations, which the moved ones must come back to (without them, a
+// wrong timing that moves the near returns alike piles them up as tightly, off their beams).
 std::vector<Sample> Samples(const std::vector<PointCloud>& scans, const std::vector<SweepMotion>& motions,
                             double min_range_m) {
   constexpr float kStepS = 1e-3f;  // [s] finite difference of the rate
@@ -64,7 +66,6 @@ std::vector<Sample> Samples(const std::vector<PointCloud>& scans, const std::vec
       if (!q.allFinite() || double(q.norm()) < min_range_m) continue;
       const Eigen::Vector3f u = v + w.cross(q);
       const float e = ElevationDeg(q), rate = (ElevationDeg(q - kStepS * u) - e) / kStepS;
-      if (std::fabs(rate) * float(kMaxPeriodS) < float(kBinDeg)) continue;
       all.push_back({q, u, e, rate, FastAtan2(q.y(), q.x())});
     }
   }
@@ -77,15 +78,11 @@ std::vector<Sample> Samples(const std::vector<PointCloud>& scans, const std::vec
 // at its rate (fast, for the coarse grid).
 class Score {
  public:
-  Score(std::vector<Sample> samples, bool exact) : samples_(std::move(samples)), exact_(exact), share_(samples_.size()) {
-    float lo = 90.f, hi = -90.f;
-    for (const Sample& s : samples_) {
-      const float reach = std::fabs(s.rate) * float(kMaxPeriodS);
-      lo = std::min(lo, s.elevation - reach), hi = std::max(hi, s.elevation + reach);
-    }
-    lo_ = lo - float(kBinDeg);
-    counts_.assign(2 * (std::size_t(std::max(0.f, (hi - lo_) / float(kBinDeg))) + 3), 0);
-  }
+  // The histogram spans every elevation: a return re-skewed far off its linear reach (a near one,
+  // at the seam) must not pile up in an edge bin.
+  Score(std::vector<Sample> samples, bool exact)
+      : samples_(std::move(samples)), exact_(exact), share_(samples_.size()),
+        counts_(2 * (std::size_t(180.0 / kBinDeg) + 2), 0) {}
   // Sets the turn and first column's azimuth: each return's share of the sweep fired before it.
   void Turn(int turn, double start_rad) {
     timing_.turn = turn, timing_.start_rad = start_rad, timing_.period_s = 1.0, timing_.stamp_share = 0.0;
@@ -93,16 +90,21 @@ class Score {
   }
   // The score for that turn with the period and the timestamp's share; as deskewed for period 0.
   double operator()(double period_s, double stamp_share) {
-    std::fill(counts_.begin(), counts_.end(), 0);
     const std::size_t half = counts_.size() / 2;
     const float p = float(period_s), h = float(stamp_share), top = float(half - 1);
+    std::size_t lo = half, hi = 0;  // the bins touched (of the first grid)
     for (std::size_t i = 0; i < samples_.size(); ++i) {
-      const float x = (Elevation(i, p, h) - lo_) / float(kBinDeg);
-      ++counts_[std::size_t(std::clamp(x, 0.f, top))];
-      ++counts_[half + std::size_t(std::clamp(x + 0.5f, 0.f, top))];
+      const float x = (Elevation(i, p, h) + 90.f) / float(kBinDeg);
+      const auto b = std::size_t(std::clamp(x, 0.f, top)), b2 = std::size_t(std::clamp(x + 0.5f, 0.f, top));
+      ++counts_[b];
+      ++counts_[half + b2];
+      lo = std::min(lo, b), hi = std::max(hi, b2);
     }
     double total = 0.0;
-    for (const std::int64_t c : counts_) total += double(c * c);
+    for (std::size_t b = lo; b <= hi && lo <= hi; ++b) {  // summed and cleared for the next timing
+      total += double(counts_[b] * counts_[b]) + double(counts_[half + b] * counts_[half + b]);
+      counts_[b] = counts_[half + b] = 0;
+    }
     return total;
   }
 
@@ -120,29 +122,49 @@ class Score {
   bool exact_;
   std::vector<float> share_;  // per sample, for the current turn
   SweepTiming timing_;        // the current turn and start
-  float lo_ = 0.f;
   std::vector<std::int64_t> counts_;
 };
 
 // The best of the timings around `best` (start, period and share each within +- span at `steps`
-// steps a side), both turns when `turns`.
+// steps a side; the turn as it is).
 SweepTiming Refine(Score& score, SweepTiming best, double* best_score, double start_span, double period_span,
-                   double share_span, int steps, bool turns) {
+                   double share_span, int steps) {
   const SweepTiming centre = best;
-  for (const int turn : turns ? std::vector<int>{1, -1} : std::vector<int>{centre.turn})
-    for (int a = -steps; a <= steps; ++a) {
-      SweepTiming t = centre;
-      t.turn = turn;
-      t.start_rad = std::remainder(centre.start_rad + start_span * a / steps, kTwoPi);
-      score.Turn(t.turn, t.start_rad);
-      for (int p = -steps; p <= steps; ++p)
-        for (int h = -steps; h <= steps; ++h) {
-          t.period_s = std::clamp(centre.period_s + period_span * p / steps, kMinPeriodS, kMaxPeriodS);
-          t.stamp_share = std::clamp(centre.stamp_share + share_span * h / steps, 0.0, 1.0);
-          const double s = score(t.period_s, t.stamp_share);
-          if (s > *best_score) *best_score = s, best = t;
-        }
+  for (int a = -steps; a <= steps; ++a) {
+    SweepTiming t = centre;
+    t.start_rad = std::remainder(centre.start_rad + start_span * a / steps, kTwoPi);
+    score.Turn(t.turn, t.start_rad);
+    for (int p = -steps; p <= steps; ++p)
+      for (int h = -steps; h <= steps; ++h) {
+        t.period_s = std::clamp(centre.period_s + period_span * p / steps, kMinPeriodS, kMaxPeriodS);
+        t.stamp_share = std::clamp(centre.stamp_share + share_span * h / steps, 0.0, 1.0);
+        const double s = score(t.period_s, t.stamp_share);
+        if (s > *best_score) *best_score = s, best = t;
+      }
+  }
+  return best;
+}
+
+// The first column's azimuth and the period trade off: a shorter sweep whose seam lies a little
+// further on fires most columns at nearly the same moments, and only the returns at the seam tell
+// them apart. Both on a fine grid together around `best`: the seam within +- kSeamSpanRad at
+// kSeamStepRad, the period within +- kSeamPeriodSpan of it at kSeamPeriodStep.
+constexpr double kSeamSpanRad = 5.0 * kTwoPi / 360.0, kSeamStepRad = 0.25 * kTwoPi / 360.0;
+constexpr double kSeamPeriodSpan = 0.04, kSeamPeriodStep = 0.005;  // [-] of the period
+SweepTiming AlongTheSeam(Score& score, SweepTiming best, double* best_score) {
+  const SweepTiming centre = best;
+  const int seams = int(std::lround(kSeamSpanRad / kSeamStepRad));
+  const int periods = int(std::lround(kSeamPeriodSpan / kSeamPeriodStep));
+  for (int a = -seams; a <= seams; ++a) {
+    SweepTiming t = centre;
+    t.start_rad = std::remainder(centre.start_rad + a * kSeamStepRad, kTwoPi);
+    score.Turn(t.turn, t.start_rad);
+    for (int p = -periods; p <= periods; ++p) {
+      t.period_s = std::clamp(centre.period_s * (1.0 + p * kSeamPeriodStep), kMinPeriodS, kMaxPeriodS);
+      const double s = score(t.period_s, t.stamp_share);
+      if (s > *best_score) *best_score = s, best = t;
     }
+  }
   return best;
 }
 
@@ -169,14 +191,16 @@ SweepTiming EstimateSweepTiming(const std::vector<PointCloud>& scans, const std:
         }
     }
   if (!best.known || best_score <= as_deskewed) return {};
-  // Finer around it, re-skewing each return: each level a third of the last one's steps, down to
-  // about 0.1 deg, 0.3 ms and 0.003 of the sweep.
+  // Finer around it, re-skewing each return: the coarse neighbourhood at a third of its steps,
+  // then the seam and the period together (AlongTheSeam), then the last digits.
   Score fine(Spread(samples, kMaxSamples), true);
   fine.Turn(best.turn, best.start_rad);
   best_score = fine(best.period_s, best.stamp_share);
-  double start = kStartStep, period = kPeriodStep, share = kShareStep;
-  for (int level = 0; level < 5; ++level) {
-    best = Refine(fine, best, &best_score, start, period, share, 3, level == 0);
+  best = Refine(fine, best, &best_score, kStartStep, kPeriodStep, kShareStep, 3);
+  best = AlongTheSeam(fine, best, &best_score);
+  double start = kSeamStepRad, period = kSeamPeriodStep * best.period_s, share = kShareStep / 3;
+  for (int level = 0; level < 2; ++level) {
+    best = Refine(fine, best, &best_score, start, period, share, 3);
     start /= 3, period /= 3, share /= 3;
   }
   return best;
