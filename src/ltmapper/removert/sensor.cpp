@@ -69,8 +69,8 @@ geometry::SensorModel EstimatedOrNone(const std::vector<PointCloud>& scans) {
 }
 
 // When the columns of the deskewed `scans` of `picks` fired (detail::EstimateSweepTiming), kept
-// when the scans re-skewed with it make more beams tell their returns than as they are; *scans
-// are then re-skewed. Unknown for raw sweeps and sessions without keyframe times.
+// when the scans re-skewed with it make a larger share of the beams found tell their returns than
+// as they are; *scans are then re-skewed. Unknown for raw sweeps and sessions without keyframe times.
 SweepTiming TimingOf(const std::vector<const WorldKeyframe*>& picks, double min_range_m,
                      std::vector<PointCloud>* scans) {
   std::vector<SweepMotion> motions;
@@ -86,7 +86,8 @@ SweepTiming TimingOf(const std::vector<const WorldKeyframe*>& picks, double min_
   // of their own, "beams" that tell.
   const geometry::SensorModel as_is = EstimatedOrNone(*scans), back = EstimatedOrNone(reskewed);
   const int before = detail::ColumnImage::BeamsThatTell(as_is), after = detail::ColumnImage::BeamsThatTell(back);
-  const bool better = double(after) * double(std::max(1, as_is.beams())) > double(before) * double(std::max(1, back.beams()));
+  const bool better =
+      double(after) * double(std::max(1, as_is.beams())) > double(before) * double(std::max(1, back.beams()));
   spdlog::info("removert sweep timing of the deskewed scans estimated: period {:.3f} s, first column at {:+.1f} deg, "
                "azimuth {} with time, timestamp after {:.2f} of the sweep; re-skewed, {} of {} beams tell their "
                "returns, spread {:.3f} deg (as deskewed {} of {}, {:.3f} deg){}",
