@@ -72,6 +72,17 @@ std::vector<Sample> Samples(const std::vector<PointCloud>& scans, const std::vec
   return all;
 }
 
+// For the seam: every return within `reach` of azimuth `seam` (the few that tell where the sweep
+// begins and ends), and `n` of the others spread over the rest (the beams' elevations).
+std::vector<Sample> AtTheSeam(const std::vector<Sample>& all, double seam, double reach, std::size_t n) {
+  std::vector<Sample> near, rest;
+  for (const Sample& s : all)
+    (std::fabs(std::remainder(double(s.azimuth) - seam, kTwoPi)) <= reach ? near : rest).push_back(s);
+  std::vector<Sample> out = Spread(rest, n);
+  out.insert(out.end(), near.begin(), near.end());
+  return out;
+}
+
 // The histogram's concentration for timings: the sum of squared counts over two grids half a
 // bin apart (a peak split by a bin edge counts in the other). `exact`: each return re-skewed
 // (its column found from its own firing frame, one fixed-point step); else its elevation moved
@@ -191,16 +202,20 @@ SweepTiming EstimateSweepTiming(const std::vector<PointCloud>& scans, const std:
         }
     }
   if (!best.known || best_score <= as_deskewed) return {};
-  // Finer around it, re-skewing each return: the coarse neighbourhood at a third of its steps,
-  // then the seam and the period together (AlongTheSeam), then the last digits.
+  // Finer around it, re-skewing each return: the coarse neighbourhood at a third of its steps;
+  // then the seam and the period together (AlongTheSeam) and the last digits, on every return near
+  // the seam (AtTheSeam: on a sparse sensor a share of them leaves the seam degrees off).
   Score fine(Spread(samples, kMaxSamples), true);
   fine.Turn(best.turn, best.start_rad);
   best_score = fine(best.period_s, best.stamp_share);
   best = Refine(fine, best, &best_score, kStartStep, kPeriodStep, kShareStep, 3);
-  best = AlongTheSeam(fine, best, &best_score);
+  Score seam(AtTheSeam(samples, best.start_rad, kSeamSpanRad + kStartStep / 3, kMaxSamples), true);
+  seam.Turn(best.turn, best.start_rad);
+  best_score = seam(best.period_s, best.stamp_share);
+  best = AlongTheSeam(seam, best, &best_score);
   double start = kSeamStepRad, period = kSeamPeriodStep * best.period_s, share = kShareStep / 3;
   for (int level = 0; level < 2; ++level) {
-    best = Refine(fine, best, &best_score, start, period, share, 3);
+    best = Refine(seam, best, &best_score, start, period, share, 3);
     start /= 3, period /= 3, share /= 3;
   }
   return best;
