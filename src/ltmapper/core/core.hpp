@@ -123,6 +123,12 @@ struct SweepMotion {
   bool known = false;                          // false: the session has no keyframe times
   Eigen::Vector3d v_mps = Eigen::Vector3d::Zero();
   Eigen::Vector3d w_radps = Eigen::Vector3d::Zero();
+  // R(t): the turn over t seconds, so that x' = R(t) x + t v.
+  Eigen::Matrix3d RotationAt(double t) const {
+    const double w = w_radps.norm();
+    if (!(w > 0.0)) return Eigen::Matrix3d::Identity();
+    return Eigen::AngleAxisd(t * w, Eigen::Vector3d(w_radps / w)).toRotationMatrix();
+  }
 };
 
 // When each column of a spinning sensor's sweep fired, for scans saved deskewed (their per-point

@@ -438,15 +438,13 @@ std::shared_ptr<const PointCloud> KeyframeCloud(const Keyframe& kf, CloudReadSta
 }
 
 void Deskew(PointCloud& cloud, const SweepMotion& motion) {
-  const double w = motion.w_radps.norm();
-  const Eigen::Vector3d axis = w > 0.0 ? Eigen::Vector3d(motion.w_radps / w) : Eigen::Vector3d::UnitZ();
   float last_t = std::numeric_limits<float>::quiet_NaN();
   Eigen::Matrix3f R = Eigen::Matrix3f::Identity();
   Eigen::Vector3f d = Eigen::Vector3f::Zero();
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     const float t = cloud.time[i];
     if (t != last_t) {  // a column's points share their time
-      R = Eigen::AngleAxisd(t * w, axis).toRotationMatrix().cast<float>();
+      R = motion.RotationAt(t).cast<float>();
       d = (double(t) * motion.v_mps).cast<float>();
       last_t = t;
     }
@@ -459,8 +457,6 @@ void Deskew(PointCloud& cloud, const SweepMotion& motion) {
 
 PointCloud Reskew(const PointCloud& deskewed, const SweepMotion& motion, const SweepTiming& timing) {
   if (!motion.known || !timing.known || !deskewed.time.empty()) return deskewed;
-  const double w = motion.w_radps.norm();
-  const Eigen::Vector3d axis = w > 0.0 ? Eigen::Vector3d(motion.w_radps / w) : Eigen::Vector3d::UnitZ();
   PointCloud out = deskewed;
   out.time.resize(out.size());
   for (std::size_t i = 0; i < out.size(); ++i) {
@@ -470,7 +466,7 @@ PointCloud Reskew(const PointCloud& deskewed, const SweepMotion& motion, const S
     double t = 0.0;
     for (int step = 0; step < 2; ++step) {  // q = R(t) p + t v with t the time of p's own column
       t = timing.TimeAt(std::atan2(fired.y(), fired.x()));
-      fired = Eigen::AngleAxisd(t * w, axis).toRotationMatrix().transpose() * (q - t * motion.v_mps);
+      fired = motion.RotationAt(t).transpose() * (q - t * motion.v_mps);
     }
     p.x = float(fired.x()), p.y = float(fired.y()), p.z = float(fired.z());
     out.time[i] = float(t);

@@ -956,7 +956,6 @@ SweepFrames::SweepFrames(const PointCloud& raw, const SweepMotion& motion) {
     sum[b] += raw.time[i];
     ++n[b];
   }
-  if (std::none_of(n.begin(), n.end(), [](int k) { return k > 0; })) return;
   // A bin without a return takes the time of the nearest bin with one (around the circle).
   std::vector<double> time(std::size_t(bins), 0.0);
   for (int b = 0; b < bins; ++b)
@@ -967,10 +966,8 @@ SweepFrames::SweepFrames(const PointCloud& raw, const SweepMotion& motion) {
         break;
       }
     }
-  const double w = motion.w_radps.norm();
-  const Eigen::Vector3d axis = w > 0.0 ? Eigen::Vector3d(motion.w_radps / w) : Eigen::Vector3d::UnitZ();
   for (const double t : time) {  // io::Deskew: q = R(t) p + t v, so p = R(t)^T (q - t v)
-    turn_.push_back(Eigen::AngleAxisd(t * w, axis).toRotationMatrix().transpose().cast<float>());
+    turn_.push_back(motion.RotationAt(t).transpose().cast<float>());
     origin_.push_back((t * motion.v_mps).cast<float>());
   }
 }
