@@ -395,6 +395,58 @@ RemovertConfig SensorFromTheScans() {
   return cfg;
 }
 
+// The votes take four points at a time (SweepFrames::ToFiring4): each lane is the one-point
+// ToFiring bit for bit, its rotation and its angles too, so a point's pixels do not depend on
+// its neighbours in the tile. Every point of the sweep, seam included.
+TEST(RemovertVotes, FourPointsAreSeenFromWhereTheirColumnsFiredAsOne) {
+  PointCloud deskewed;
+  const PointCloud raw = RawSweepInACylinder(&deskewed);
+  const removert::detail::SweepFrames frames(raw, CylinderSweepMotion());
+  ASSERT_TRUE(frames.active());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i + 4 <= deskewed.size(); i += 4) {
+    float q[12], p[12], range[4], pitch[4], yaw[4];
+    const Eigen::Matrix3f* turn[4];
+    for (std::size_t k = 0; k < 4; ++k)
+      for (int a = 0; a < 3; ++a) q[4 * a + int(k)] = deskewed.points[i + k].xyz()(a);
+    frames.ToFiring4(q, p, turn, range, pitch, yaw);
+    for (std::size_t k = 0; k < 4; ++k) {
+      Eigen::Matrix3f R;
+      const Eigen::Vector3f one = frames.ToFiring(deskewed.points[i + k].xyz(), &R);
+      const Eigen::Vector3f four(p[k], p[4 + k], p[8 + k]);
+      const bool same = one == four && R == *turn[k] && range[k] == one.norm() &&
+                        pitch[k] == removert::detail::FastAtan2(one.z(), std::sqrt(one.x() * one.x() + one.y() * one.y())) &&
+                        yaw[k] == removert::detail::FastAtan2(one.y(), one.x());
+      differ += same ? 0 : 1;
+    }
+  }
+  EXPECT_EQ(differ, 0u);
+}
+
+// A run resolves the central session's sensor in each stage; the estimate is remembered by the
+// scans' contents, never by their paths: a file rewritten in between is estimated again.
+TEST(RemovertSensor, AScanRewrittenBetweenTwoResolutionsIsEstimatedAgain) {
+  PointCloud deskewed;
+  const PointCloud raw = RawSweepInACylinder(&deskewed);
+  PointCloud half;  // every other beam (the cylinder sweep's points run beam by beam per column)
+  for (std::size_t i = 0; i < raw.size(); i += 2) {
+    half.points.push_back(raw.points[i]);
+    half.time.push_back(raw.time[i]);
+  }
+  test::TempDir tmp;
+  WorldKeyframe kf;
+  kf.cloud_path = tmp / "000000.pcd";
+  kf.sweep = CylinderSweepMotion();
+  io::WritePcd(kf.cloud_path, raw);
+  EXPECT_EQ(removert::WithSensor(SensorFromTheScans(), {kf}).sensor_model.beams(), 16);
+  io::WritePcd(kf.cloud_path, half);
+  EXPECT_EQ(removert::WithSensor(SensorFromTheScans(), {kf}).sensor_model.beams(), 8);
+  io::WritePcd(kf.cloud_path, raw);  // resolved before: the same model
+  const geometry::SensorModel again = removert::WithSensor(SensorFromTheScans(), {kf}).sensor_model;
+  EXPECT_EQ(again.beams(), 16);
+  EXPECT_EQ(again.elevations_deg, removert::WithSensor(SensorFromTheScans(), {kf}, 1).sensor_model.elevations_deg);
+}
+
 // A raw sweep's range images keep the beams' own elevations: the sensor estimated from it scatters
 // nothing about its beams, so every beam tells its returns from its neighbours' and a beam that
 // passed a point without a return is evidence (ColumnImage::TellsItsReturns). Deskewed into the
@@ -449,8 +501,11 @@ TEST(RemovertVotes, ADeskewedSweepIsPutBackWhereItsColumnsFired) {
   for (std::size_t i = 0; i < raw.size(); ++i)
     near += (back.points[i].xyz() - raw.points[i].xyz()).norm() < 0.01f && std::fabs(back.time[i] - raw.time[i]) < 1e-3f;
   EXPECT_GT(double(near), 0.99 * double(raw.size()));  // all but the seam's
-  const SweepTiming est = removert::detail::EstimateSweepTiming({deskewed}, {motion}, 1.0);
+  const SweepTiming est = removert::detail::EstimateSweepTiming({deskewed}, {motion}, 1.0, 2);
   ASSERT_TRUE(est.known);
+  const SweepTiming one = removert::detail::EstimateSweepTiming({deskewed}, {motion}, 1.0, 1);  // the same on one worker
+  EXPECT_TRUE(one.period_s == est.period_s && one.start_rad == est.start_rad && one.turn == est.turn &&
+              one.stamp_share == est.stamp_share);
   EXPECT_EQ(est.turn, -1);
   EXPECT_NEAR(est.period_s, 0.1, 0.005);
   EXPECT_NEAR(std::fabs(std::remainder(est.start_rad, 2.0 * M_PI)), M_PI, 2.0 * M_PI / 180.0);

@@ -160,7 +160,7 @@ AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std
   t = std::chrono::steady_clock::now();
   io::WriteRunManifest(p.aligned, m);  // the store reads the session order from it
   Integrate(p, sc.map, rep.session, threads);
-  ExportMaps(p, sc, m.sessions[0].dir, cfg.export_maps);
+  ExportMaps(p, sc, m.sessions[0].dir, cfg.export_maps, threads);
   MarkGrownRun(cfg, sc, p, m);
   rep.seconds_map = Since(t);
 

@@ -37,7 +37,8 @@ std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
                                    const std::vector<std::string>& session_dirs);
 
 // live.pcd, meta.pcd and objects/ from the store (objects with the central session's sensor).
-void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps);
+void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps,
+                int threads);
 struct MapFigures {
   std::uint64_t store_bytes = 0;
   std::size_t live = 0, meta = 0, objects = 0;

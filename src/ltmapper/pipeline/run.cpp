@@ -73,14 +73,15 @@ std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
 // live.pcd, meta.pcd and objects/ from the store; objects/ is replaced whole (StagingDir), so no
 // object of an earlier run survives. Without export, those of an earlier run are removed.
 // The object rules' sampling step comes from the sensor LT-removert used (the central session's).
-void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps) {
+void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps,
+                int threads) {
   if (!export_maps) {
     for (const auto& f : {p.live, p.meta}) fs::remove(f);
     if (fs::exists(fs::path(p.objects) / "objects.csv")) fs::remove_all(p.objects);
     return;
   }
   const Session central = io::LoadSession(central_dir);
-  const removert::RemovertConfig resolved = removert::WithSensor(sc.removert, removert::KeyframesOf(central));
+  const removert::RemovertConfig resolved = removert::WithSensor(sc.removert, removert::KeyframesOf(central), threads);
   const map::MapConfig map_cfg = map::WithSensorStep(sc.map, resolved.sensor_model);
   map::Store store = map::Store::Open(p.store, map_cfg);
   // Each step's objects are computed once and kept in the store: an add computes its own step only.
@@ -263,7 +264,7 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   Stage(2, first, markers[2], keys[2], "LT-map", &report, [&] {
     spdlog::info("run [3/3] LT-map: -> {}", p.store);
     BuildStore(p, map_cfg, report, threads);
-    ExportMaps(p, sc, session_dirs[0], cfg.export_maps);
+    ExportMaps(p, sc, session_dirs[0], cfg.export_maps, threads);
   });
   const MapFigures fig = ReadMapFigures(p, map_cfg, cfg.export_maps);
   FinishReport(report, fig, t_run);

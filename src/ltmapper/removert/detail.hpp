@@ -35,9 +35,10 @@ std::shared_ptr<const PointCloud> LoadVoterScan(const WorldKeyframe& kf, const S
                                                 SweepFrames* frames);
 // When the columns of deskewed scans fired, from how tightly their returns, re-skewed with it,
 // fall on beams (sweep_timing.cpp; scans[i] swept with motions[i], returns beyond min_range_m);
-// unknown when no timing piles them up more tightly than they are.
+// unknown when no timing piles them up more tightly than they are. On `threads` workers (0: all
+// cores), with the result of one.
 SweepTiming EstimateSweepTiming(const std::vector<PointCloud>& scans, const std::vector<SweepMotion>& motions,
-                                double min_range_m);
+                                double min_range_m, int threads);
 // The keyframes' sensor positions (world frame), one point per keyframe, in keyframe order.
 PointCloud Positions(const std::vector<WorldKeyframe>& keyframes);
 

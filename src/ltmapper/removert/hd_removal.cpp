@@ -340,7 +340,7 @@ namespace detail {
 HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& user_cfg,
                     int threads) {
   user_cfg.Validate();
-  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes, threads);
   const VisibilityVotes votes = CountVisibility(map, keyframes, cfg.remove_resolutions_deg, cfg, threads);
   const Candidates cand = FindCandidates(votes, map.size(), cfg);
   const std::vector<bool> reverted = Revert(map, cand, keyframes, cfg, threads);

@@ -50,12 +50,22 @@ class SweepFrames {
   // q (keyframe frame) in the frame of the column fired towards it (two fixed-point steps over the
   // column's time); *R (may be null) is that frame's rotation from the keyframe frame.
   Eigen::Vector3f ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f* R) const;
+  // ToFiring of four points, lane by lane with the same float operations (SSE2 where built with
+  // it): q and p hold x[4], y[4], z[4]; turn[k] is point k's *R. range / pitch / yaw[4] are p's
+  // angles as MultiResImage's images take them.
+  void ToFiring4(const float* q, float* p, const Eigen::Matrix3f** turn, float* range, float* pitch,
+                 float* yaw) const;
 
  private:
+  std::size_t FiringBin(const Eigen::Vector3f& q) const;  // the bin of the column fired towards q
   // Per azimuth bin (kSweepBinDeg, visibility.cpp): the rotation from the keyframe frame to the frame its column
   // fired from, and that frame's origin in the keyframe frame.
   std::vector<Eigen::Matrix3f> turn_;
   std::vector<Eigen::Vector3f> origin_;
+  struct alignas(16) Rows {  // a bin's turn_ row by row, each followed by origin_'s coordinate
+    float row[3][4];
+  };
+  std::vector<Rows> rows_;  // per bin, for ToFiring4
 };
 
 // The range image of one resolution: square pixels of `pixel_deg`, same pixel rule as

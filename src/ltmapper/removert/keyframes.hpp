@@ -30,7 +30,8 @@ std::vector<WorldKeyframe> LoadWorldKeyframes(const std::string& session_dir, co
 
 // The config with its sensor resolved (sensor_model, fov_*_deg): the preset or table, else
 // estimated from up to 8 of the keyframes' scans (spread over the session). A resolved config is
-// returned unchanged; every entry point below calls it, so callers may pass either.
-RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes);
+// returned unchanged; every entry point below calls it, so callers may pass either. The estimates
+// run on `threads` workers (0: all cores).
+RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes, int threads = 0);
 
 }  // namespace ltm::removert

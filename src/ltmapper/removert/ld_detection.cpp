@@ -374,7 +374,7 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
                   const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg,
                   int threads) {
   user_cfg.Validate();
-  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
+  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes, threads);
   const auto t0 = std::chrono::steady_clock::now();
   spdlog::info("LD: rotation uncertainty between the sessions {:.3f} deg ({}): kd radius {} m + {:.2f} % of the "
                "distance, beam tolerance {} m (own pixel + {:.2f} %)", cfg.LdRotationSigmaDeg(),

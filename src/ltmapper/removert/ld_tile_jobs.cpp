@@ -209,7 +209,7 @@ std::size_t RunLdTileJobs(const std::string& plan_dir, std::vector<std::size_t> 
   const LdTilePlanFile f = ReadLdTilePlan(plan_dir);
   // The pair's sessions and the sensor (the central's scans) once for every tile.
   const PairSessions p = LoadPair(f.central_plan, f.query_plan);
-  const RemovertConfig cfg = WithSensor(f.cfg, p.central_kfs);
+  const RemovertConfig cfg = WithSensor(f.cfg, p.central_kfs, threads);
   return detail::RunUndoneTiles(plan_dir, std::move(tiles), f.plan.tiles.size(), force, [&](std::size_t tile,
                                                                                           const std::string& dir) {
     const detail::VoxelBox window = detail::LdWindowBox(f.plan, tile);

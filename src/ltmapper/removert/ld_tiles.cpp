@@ -171,7 +171,7 @@ detail::LdLabels detail::LabelTile(const LdTilePlan& plan, std::size_t tile, con
 LdResult DetectLdTile(const LdTilePlan& plan, std::size_t tile, const PointCloud& central_window,
                       const PointCloud& query_window, const std::vector<WorldKeyframe>& central_keyframes,
                       const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg, int threads) {
-  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
+  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes, threads);
   const auto t0 = std::chrono::steady_clock::now();
   const detail::LdLabels w =
       detail::LabelTile(plan, tile, central_window, query_window, detail::Positions(central_keyframes),
@@ -190,7 +190,7 @@ LdResult DetectLdTiled(const PointCloud& central_map, const PointCloud& query_ma
                        const std::vector<WorldKeyframe>& central_keyframes,
                        const std::vector<WorldKeyframe>& query_keyframes, const RemovertConfig& user_cfg, int threads) {
   user_cfg.Validate();
-  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes);
+  const RemovertConfig cfg = central_keyframes.empty() ? user_cfg : WithSensor(user_cfg, central_keyframes, threads);
   const auto t0 = std::chrono::steady_clock::now();
   LdCellCounts counts(cfg);
   counts.Add(central_map);

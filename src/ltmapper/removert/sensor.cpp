@@ -6,7 +6,12 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <deque>
 #include <filesystem>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <string_view>
 
 namespace ltm::removert {
 
@@ -71,14 +76,14 @@ geometry::SensorModel EstimatedOrNone(const std::vector<PointCloud>& scans) {
 // When the columns of the deskewed `scans` of `picks` fired (detail::EstimateSweepTiming), kept
 // when the scans re-skewed with it make a larger share of the beams found tell their returns than
 // as they are; *scans are then re-skewed. Unknown for raw sweeps and sessions without keyframe times.
-SweepTiming TimingOf(const std::vector<const WorldKeyframe*>& picks, double min_range_m,
+SweepTiming TimingOf(const std::vector<const WorldKeyframe*>& picks, double min_range_m, int threads,
                      std::vector<PointCloud>* scans) {
   std::vector<SweepMotion> motions;
   for (std::size_t k = 0; k < picks.size(); ++k) {
     if (!picks[k]->sweep.known || !(*scans)[k].time.empty()) return {};
     motions.push_back(picks[k]->sweep);
   }
-  const SweepTiming t = detail::EstimateSweepTiming(*scans, motions, min_range_m);
+  const SweepTiming t = detail::EstimateSweepTiming(*scans, motions, min_range_m, threads);
   if (!t.known) return {};
   std::vector<PointCloud> reskewed;
   for (std::size_t k = 0; k < picks.size(); ++k) reskewed.push_back(io::Reskew((*scans)[k], motions[k], t));
@@ -97,9 +102,70 @@ SweepTiming TimingOf(const std::vector<const WorldKeyframe*>& picks, double min_
   *scans = std::move(reskewed);
   return t;
 }
+
+// The sensors resolved in this process, by their inputs: a run resolves the central session's in
+// each stage (HD, LD, the map's objects), the same function of the same scans. The key hashes the
+// config's sensor keys and each scan's bytes and motion; the last kRemembered are kept.
+struct Resolved {
+  std::size_t key = 0;
+  SweepTiming timing;
+  geometry::SensorModel model;
+};
+constexpr std::size_t kRemembered = 8;
+std::mutex remembered_mutex;
+std::deque<Resolved> remembered;
+
+template <class T>
+std::size_t HashBytes(const std::vector<T>& v) {
+  return std::hash<std::string_view>()(std::string_view(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T)));
+}
+std::size_t KeyOf(const RemovertConfig& cfg, const std::vector<const WorldKeyframe*>& picks,
+                  const std::vector<PointCloud>& scans) {
+  std::size_t key = std::hash<std::string>()(cfg.sensor);
+  const auto mix = [&](std::size_t h) { key ^= h + 0x9e3779b97f4a7c15ull + (key << 6) + (key >> 2); };
+  mix(HashBytes(cfg.sensor_elevations_deg));
+  mix(std::hash<double>()(cfg.min_range_m));
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    mix(HashBytes(scans[k].points));
+    mix(HashBytes(scans[k].time));
+    const SweepMotion& m = picks[k]->sweep;
+    mix(HashBytes(std::vector<double>{double(m.known), m.v_mps.x(), m.v_mps.y(), m.v_mps.z(), m.w_radps.x(),
+                                      m.w_radps.y(), m.w_radps.z()}));
+  }
+  return key;
+}
+std::optional<Resolved> Remembered(std::size_t key) {
+  std::lock_guard<std::mutex> lock(remembered_mutex);
+  for (const Resolved& r : remembered)
+    if (r.key == key) return r;
+  return std::nullopt;
+}
+void Remember(const Resolved& r) {
+  std::lock_guard<std::mutex> lock(remembered_mutex);
+  remembered.push_back(r);
+  if (remembered.size() > kRemembered) remembered.pop_front();
+}
+
+// The timing and the sensor of the picks' `scans` as LoadVoterScan reads them (none: the preset or
+// table alone), or those resolved before from the same (*before).
+Resolved Resolve(const RemovertConfig& cfg, const std::vector<const WorldKeyframe*>& picks, bool timed,
+                 std::vector<PointCloud> scans, int threads, bool* before) {
+  const bool estimated = !scans.empty();
+  const std::size_t key = estimated ? KeyOf(cfg, picks, scans) : 0;
+  if (std::optional<Resolved> r = estimated ? Remembered(key) : std::nullopt) {
+    *before = true;
+    return *r;
+  }
+  Resolved r{key, {}, {}};
+  if (timed && !picks.empty()) r.timing = TimingOf(picks, cfg.min_range_m, threads, &scans);
+  if (cfg.sensor != "auto") scans.clear();
+  r.model = geometry::ResolveSensor(cfg.sensor, cfg.sensor_elevations_deg, scans, "sensor");
+  if (estimated) Remember(r);
+  return r;
+}
 }  // namespace
 
-RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes) {
+RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyframe>& keyframes, int threads) {
   if (cfg.SensorResolved()) return cfg;
   std::vector<const WorldKeyframe*> picks;  // spread over the session
   const std::size_t n = std::min(kEstimateScans, keyframes.size());
@@ -111,14 +177,15 @@ RemovertConfig WithSensor(const RemovertConfig& cfg, const std::vector<WorldKeyf
   if (cfg.sensor == "auto" || timed)
     for (const WorldKeyframe* kf : picks) scans.push_back(*detail::LoadVoterScan(*kf, SweepTiming{}, nullptr));
   RemovertConfig out = cfg;
-  if (timed && !picks.empty()) out.sweep_timing = TimingOf(picks, cfg.min_range_m, &scans);
-  if (cfg.sensor != "auto") scans.clear();
-  out.sensor_model = geometry::ResolveSensor(cfg.sensor, cfg.sensor_elevations_deg, scans, "sensor");
+  bool before = false;
+  const Resolved r = Resolve(cfg, picks, timed, std::move(scans), threads, &before);
+  out.sweep_timing = r.timing;
+  out.sensor_model = r.model;
   const geometry::SensorModel& m = out.sensor_model;
   // One beam spacing beyond the outer beams: their returns land inside the images.
   out.fov_up_deg = std::min(89.9, m.fov_up_deg + m.SpacingAt(m.fov_up_deg));
   out.fov_down_deg = std::max(-89.9, m.fov_down_deg - m.SpacingAt(m.fov_down_deg));
-  spdlog::info("removert sensor {}", m.Describe());
+  spdlog::info("removert sensor {}{}", m.Describe(), before ? " (resolved before, from the same scans)" : "");
   return out;
 }
 

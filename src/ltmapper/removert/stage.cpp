@@ -267,7 +267,7 @@ StageReport RunRemovertStage(const RemovertConfig& user_cfg, const std::vector<s
     keyframes[s] = sd[s].kfs.size();
   }
   // One sensor for every session (the central session's scans when estimated).
-  const RemovertConfig cfg = WithSensor(user_cfg, sd[0].kfs);
+  const RemovertConfig cfg = WithSensor(user_cfg, sd[0].kfs, threads);
   for (std::size_t q = 1; q < ns; ++q) rep.pairs.emplace_back(PairCentral(cfg, int(q)), int(q));
 
   if (cfg.tiles_stage) {  // memory bounded by the tile, not the sessions (stage_tiles.cpp)
@@ -313,7 +313,7 @@ StageReport AddToRemovertStage(const RemovertConfig& user_cfg, const std::vector
   const int qi = int(session_dirs.size()) - 1, ci = PairCentral(user_cfg, qi);
   SessionData central, c, q;
   central.kfs = LoadWorldKeyframes(session_dirs[0], poses_files[0], &central.name);
-  const RemovertConfig cfg = WithSensor(user_cfg, central.kfs);  // as the batch: the central's sensor
+  const RemovertConfig cfg = WithSensor(user_cfg, central.kfs, threads);  // as the batch: the central's sensor
   c.kfs = ci == 0 ? std::move(central.kfs) : LoadWorldKeyframes(session_dirs[std::size_t(ci)],
                                                                 poses_files[std::size_t(ci)], &c.name);
   if (ci == 0) c.name = central.name;

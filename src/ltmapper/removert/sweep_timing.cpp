@@ -12,6 +12,8 @@
 // tell their returns.
 #include "ltmapper/removert/detail.hpp"
 
+#include "ltmapper/core/core.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -86,14 +88,13 @@ std::vector<Sample> AtTheSeam(const std::vector<Sample>& all, double seam, doubl
 // The histogram's concentration for timings: the sum of squared counts over two grids half a
 // bin apart (a peak split by a bin edge counts in the other). `exact`: each return re-skewed
 // (its column found from its own firing frame, one fixed-point step); else its elevation moved
-// at its rate (fast, for the coarse grid).
+// at its rate (fast, for the coarse grid). One per worker: the samples are shared, read only.
 class Score {
  public:
   // The histogram spans every elevation: a return re-skewed far off its linear reach (a near one,
   // at the seam) must not pile up in an edge bin.
-  Score(std::vector<Sample> samples, bool exact)
-      : samples_(std::move(samples)), exact_(exact), share_(samples_.size()),
-        counts_(2 * (std::size_t(180.0 / kBinDeg) + 2), 0) {}
+  Score(const std::vector<Sample>& samples, bool exact)
+      : samples_(samples), exact_(exact), share_(samples_.size()), counts_(2 * (std::size_t(180.0 / kBinDeg) + 2), 0) {}
   // Sets the turn and first column's azimuth: each return's share of the sweep fired before it.
   void Turn(int turn, double start_rad) {
     timing_.turn = turn, timing_.start_rad = start_rad, timing_.period_s = 1.0, timing_.stamp_share = 0.0;
@@ -129,19 +130,43 @@ class Score {
     return ElevationDeg(s.q - period * (u - std::floor(u) - share) * s.u);
   }
 
-  std::vector<Sample> samples_;
+  const std::vector<Sample>& samples_;
   bool exact_;
   std::vector<float> share_;  // per sample, for the current turn
   SweepTiming timing_;        // the current turn and start
   std::vector<std::int64_t> counts_;
 };
 
+// The best timing of n starts (a turn and first column's azimuth each), start k tried by
+// try_start(k, score, &best, &best_score) with a Score of its own on the `threads` workers. Kept
+// in k order, ties to the first: the result of trying them all in one loop.
+template <class TryStart>
+void BestOfStarts(const std::vector<Sample>& samples, bool exact, std::size_t n, int threads,
+                  const TryStart& try_start, SweepTiming* best, double* best_score) {
+  std::vector<SweepTiming> bests(n, *best);
+  std::vector<double> scores(n, *best_score);
+  ParallelFor(n, threads, [&](std::size_t k) {
+    Score score(samples, exact);
+    try_start(k, score, &bests[k], &scores[k]);
+  });
+  for (std::size_t k = 0; k < n; ++k)
+    if (scores[k] > *best_score) *best_score = scores[k], *best = bests[k];
+}
+
+// The score of `best` itself, on `samples`.
+double ScoreOf(const std::vector<Sample>& samples, bool exact, const SweepTiming& best) {
+  Score score(samples, exact);
+  score.Turn(best.turn, best.start_rad);
+  return score(best.period_s, best.stamp_share);
+}
+
 // The best of the timings around `best` (start, period and share each within +- span at `steps`
-// steps a side; the turn as it is).
-SweepTiming Refine(Score& score, SweepTiming best, double* best_score, double start_span, double period_span,
-                   double share_span, int steps) {
+// steps a side; the turn as it is), on `samples` re-skewed.
+SweepTiming Refine(const std::vector<Sample>& samples, SweepTiming best, double* best_score, double start_span,
+                   double period_span, double share_span, int steps, int threads) {
   const SweepTiming centre = best;
-  for (int a = -steps; a <= steps; ++a) {
+  const auto try_start = [&](std::size_t k, Score& score, SweepTiming* out, double* out_score) {
+    const int a = int(k) - steps;
     SweepTiming t = centre;
     t.start_rad = std::remainder(centre.start_rad + start_span * a / steps, kTwoPi);
     score.Turn(t.turn, t.start_rad);
@@ -150,9 +175,10 @@ SweepTiming Refine(Score& score, SweepTiming best, double* best_score, double st
         t.period_s = std::clamp(centre.period_s + period_span * p / steps, kMinPeriodS, kMaxPeriodS);
         t.stamp_share = std::clamp(centre.stamp_share + share_span * h / steps, 0.0, 1.0);
         const double s = score(t.period_s, t.stamp_share);
-        if (s > *best_score) *best_score = s, best = t;
+        if (s > *out_score) *out_score = s, *out = t;
       }
-  }
+  };
+  BestOfStarts(samples, true, std::size_t(2 * steps + 1), threads, try_start, &best, best_score);
   return best;
 }
 
@@ -162,60 +188,66 @@ SweepTiming Refine(Score& score, SweepTiming best, double* best_score, double st
 // kSeamStepRad, the period within +- kSeamPeriodSpan of it at kSeamPeriodStep.
 constexpr double kSeamSpanRad = 5.0 * kTwoPi / 360.0, kSeamStepRad = 0.25 * kTwoPi / 360.0;
 constexpr double kSeamPeriodSpan = 0.04, kSeamPeriodStep = 0.005;  // [-] of the period
-SweepTiming AlongTheSeam(Score& score, SweepTiming best, double* best_score) {
+SweepTiming AlongTheSeam(const std::vector<Sample>& samples, SweepTiming best, double* best_score, int threads) {
   const SweepTiming centre = best;
   const int seams = int(std::lround(kSeamSpanRad / kSeamStepRad));
   const int periods = int(std::lround(kSeamPeriodSpan / kSeamPeriodStep));
-  for (int a = -seams; a <= seams; ++a) {
+  const auto try_start = [&](std::size_t k, Score& score, SweepTiming* out, double* out_score) {
     SweepTiming t = centre;
-    t.start_rad = std::remainder(centre.start_rad + a * kSeamStepRad, kTwoPi);
+    t.start_rad = std::remainder(centre.start_rad + (int(k) - seams) * kSeamStepRad, kTwoPi);
     score.Turn(t.turn, t.start_rad);
     for (int p = -periods; p <= periods; ++p) {
       t.period_s = std::clamp(centre.period_s * (1.0 + p * kSeamPeriodStep), kMinPeriodS, kMaxPeriodS);
       const double s = score(t.period_s, t.stamp_share);
-      if (s > *best_score) *best_score = s, best = t;
+      if (s > *out_score) *out_score = s, *out = t;
     }
-  }
+  };
+  BestOfStarts(samples, true, std::size_t(2 * seams + 1), threads, try_start, &best, best_score);
   return best;
+}
+
+// Coarse: the whole space (start every 10 deg, period every 0.02 s, share every quarter, both
+// turns), each return's elevation moved at its rate. Unknown when nothing beats the scans as
+// they are (*best_score: their score).
+constexpr double kStartStep = kTwoPi / 36.0, kPeriodStep = 0.02, kShareStep = 0.25;
+SweepTiming Coarse(const std::vector<Sample>& samples, int threads) {
+  double best_score = ScoreOf(samples, false, SweepTiming{true, 0.0, 0.0, 1, 0.0});  // period 0: as deskewed
+  const double as_deskewed = best_score;
+  const auto try_start = [&](std::size_t k, Score& score, SweepTiming* out, double* out_score) {
+    const int turn = k < 36 ? 1 : -1;
+    const double start = double(k % 36) * kStartStep - kTwoPi / 2;
+    score.Turn(turn, start);
+    for (double p = kMinPeriodS; p <= kMaxPeriodS + 1e-9; p += kPeriodStep)
+      for (double h = 0.0; h <= 1.0 + 1e-9; h += kShareStep) {
+        const double s = score(p, h);
+        if (s > *out_score) *out_score = s, *out = SweepTiming{true, p, start, turn, h};
+      }
+  };
+  SweepTiming best;
+  BestOfStarts(samples, false, 72, threads, try_start, &best, &best_score);
+  return best.known && best_score > as_deskewed ? best : SweepTiming{};
 }
 
 }  // namespace
 
 SweepTiming EstimateSweepTiming(const std::vector<PointCloud>& scans, const std::vector<SweepMotion>& motions,
-                                double min_range_m) {
+                                double min_range_m, int threads) {
   const std::vector<Sample> samples = Samples(scans, motions, min_range_m);
   if (samples.empty()) return {};
-  // Coarse: the whole space (start every 10 deg, period every 0.02 s, share every quarter).
-  Score coarse(Spread(samples, kCoarseSamples), false);
-  double best_score = coarse(0.0, 0.0);
-  const double as_deskewed = best_score;
-  constexpr double kStartStep = kTwoPi / 36.0, kPeriodStep = 0.02, kShareStep = 0.25;
-  SweepTiming best;
-  for (const int turn : {1, -1})
-    for (int a = 0; a < 36; ++a) {
-      const double start = a * kStartStep - kTwoPi / 2;
-      coarse.Turn(turn, start);
-      for (double p = kMinPeriodS; p <= kMaxPeriodS + 1e-9; p += kPeriodStep)
-        for (double h = 0.0; h <= 1.0 + 1e-9; h += kShareStep) {
-          const double s = coarse(p, h);
-          if (s > best_score) best_score = s, best = SweepTiming{true, p, start, turn, h};
-        }
-    }
-  if (!best.known || best_score <= as_deskewed) return {};
+  SweepTiming best = Coarse(Spread(samples, kCoarseSamples), threads);
+  if (!best.known) return {};
   // Finer around it, re-skewing each return: the coarse neighbourhood at a third of its steps;
   // then the seam and the period together (AlongTheSeam) and the last digits, on every return near
   // the seam (AtTheSeam: on a sparse sensor a share of them leaves the seam degrees off).
-  Score fine(Spread(samples, kMaxSamples), true);
-  fine.Turn(best.turn, best.start_rad);
-  best_score = fine(best.period_s, best.stamp_share);
-  best = Refine(fine, best, &best_score, kStartStep, kPeriodStep, kShareStep, 3);
-  Score seam(AtTheSeam(samples, best.start_rad, kSeamSpanRad + kStartStep / 3, kMaxSamples), true);
-  seam.Turn(best.turn, best.start_rad);
-  best_score = seam(best.period_s, best.stamp_share);
-  best = AlongTheSeam(seam, best, &best_score);
+  const std::vector<Sample> fine = Spread(samples, kMaxSamples);
+  double best_score = ScoreOf(fine, true, best);
+  best = Refine(fine, best, &best_score, kStartStep, kPeriodStep, kShareStep, 3, threads);
+  const std::vector<Sample> seam = AtTheSeam(samples, best.start_rad, kSeamSpanRad + kStartStep / 3, kMaxSamples);
+  best_score = ScoreOf(seam, true, best);
+  best = AlongTheSeam(seam, best, &best_score, threads);
   double start = kSeamStepRad, period = kSeamPeriodStep * best.period_s, share = kShareStep / 3;
   for (int level = 0; level < 2; ++level) {
-    best = Refine(seam, best, &best_score, start, period, share, 3);
+    best = Refine(seam, best, &best_score, start, period, share, 3, threads);
     start /= 3, period /= 3, share /= 3;
   }
   return best;

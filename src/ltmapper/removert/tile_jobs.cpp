@@ -157,7 +157,7 @@ std::size_t RunTileJobs(const std::string& plan_dir, std::vector<std::size_t> ti
   // The session and the sensor once for every tile.
   const std::vector<WorldKeyframe> kfs = LoadWorldKeyframes(f.session_dir, f.poses_file);
   const RemovertConfig cfg = WithSensor(
-      f.cfg, f.sensor_session_dir.empty() ? kfs : LoadWorldKeyframes(f.sensor_session_dir, ""));
+      f.cfg, f.sensor_session_dir.empty() ? kfs : LoadWorldKeyframes(f.sensor_session_dir, ""), threads);
   return detail::RunUndoneTiles(plan_dir, std::move(tiles), f.plan.tiles.size(), force, [&](std::size_t tile,
                                                                                           const std::string& dir) {
     const HdResult res = RemoveHdTile(f.plan, tile, kfs, cfg, threads);

@@ -295,7 +295,7 @@ TilePlan PlanTiles(const std::vector<WorldKeyframe>& keyframes, const RemovertCo
 
 HdResult RemoveHdTile(const TilePlan& plan, std::size_t tile, const std::vector<WorldKeyframe>& keyframes,
                       const RemovertConfig& user_cfg, int threads) {
-  const RemovertConfig cfg = WithSensor(user_cfg, keyframes);
+  const RemovertConfig cfg = WithSensor(user_cfg, keyframes, threads);
   CheckPlan(plan, tile, keyframes, cfg);
   const Tile& t = plan.tiles[tile];
   std::vector<WorldKeyframe> kfs;
@@ -350,7 +350,7 @@ HdResult MergeTiles(const TilePlan& plan, std::vector<HdResult> parts) {
 
 HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& user_cfg, int threads) {
   user_cfg.Validate();
-  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes, threads);
   const TilePlan plan = PlanTiles(keyframes, cfg, threads);
   TileMerger merger(plan.voxel_m);
   for (std::size_t t = 0; t < plan.tiles.size(); ++t) merger.Add(plan.tiles[t], RemoveHdTile(plan, t, keyframes, cfg, threads));

@@ -969,16 +969,84 @@ SweepFrames::SweepFrames(const PointCloud& raw, const SweepMotion& motion) {
   for (const double t : time) {  // io::Deskew: q = R(t) p + t v, so p = R(t)^T (q - t v)
     turn_.push_back(motion.RotationAt(t).transpose().cast<float>());
     origin_.push_back((t * motion.v_mps).cast<float>());
+    Rows& r = rows_.emplace_back();
+    for (int a = 0; a < 3; ++a) {
+      for (int b2 = 0; b2 < 3; ++b2) r.row[a][b2] = turn_.back()(a, b2);
+      r.row[a][3] = origin_.back()(a);
+    }
   }
 }
 
+std::size_t SweepFrames::FiringBin(const Eigen::Vector3f& q) const {
+  const std::size_t b = SweepBin(FastAtan2(q.y(), q.x()));
+  const Eigen::Vector3f p = turn_[b] * (q - origin_[b]);
+  return SweepBin(FastAtan2(p.y(), p.x()));  // the column that fired towards q as its own frame sees q
+}
+
 Eigen::Vector3f SweepFrames::ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f* R) const {
-  std::size_t b = SweepBin(FastAtan2(q.y(), q.x()));
-  Eigen::Vector3f p = turn_[b] * (q - origin_[b]);
-  b = SweepBin(FastAtan2(p.y(), p.x()));  // the column that fired towards q as its own frame sees q
-  p = turn_[b] * (q - origin_[b]);
+  const std::size_t b = FiringBin(q);
   if (R) *R = turn_[b];
-  return p;
+  return turn_[b] * (q - origin_[b]);
+}
+
+#if defined(__SSE2__)
+namespace {
+// SweepBin of four azimuths [rad], lane by lane. The quotient is negative only by rounding, where
+// truncation and floor both clamp to bin 0.
+inline __m128i SweepBin4(__m128 yaw) {
+  const __m128 deg = _mm_div_ps(_mm_mul_ps(yaw, _mm_set1_ps(180.f)), _mm_set1_ps(kPiF));
+  __m128i b = _mm_cvttps_epi32(_mm_div_ps(_mm_add_ps(deg, _mm_set1_ps(180.f)), _mm_set1_ps(kSweepBinDeg)));
+  b = _mm_andnot_si128(_mm_cmplt_epi32(b, _mm_setzero_si128()), b);
+  const __m128i last = _mm_set1_epi32(kSweepBins - 1);
+  const __m128i past = _mm_cmpgt_epi32(b, last);
+  return _mm_or_si128(_mm_and_si128(past, last), _mm_andnot_si128(past, b));
+}
+
+// One step of SweepFrames::ToFiring for four points q (x, y, z lanes): each lane's bin from the
+// azimuth of `at`, then p = turn[bin] (q - origin[bin]) in Eigen's association (as Project). Each
+// bin's 12 floats in `rows` (turn's rows, each followed by origin's coordinate: 16-byte aligned) are
+// transposed into lanes.
+void FiringStep4(const float* rows, const __m128* q, __m128 at_x, __m128 at_y, __m128* p,
+                 std::int32_t* bin) {
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(bin), SweepBin4(FastAtan2x4(at_y, at_x)));
+  __m128 m[3][4];  // [row][column 0..2 of turn, origin]
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 4; ++k) m[r][k] = _mm_load_ps(rows + 12 * bin[k] + 4 * r);
+    _MM_TRANSPOSE4_PS(m[r][0], m[r][1], m[r][2], m[r][3]);
+  }
+  const __m128 d[3] = {_mm_sub_ps(q[0], m[0][3]), _mm_sub_ps(q[1], m[1][3]), _mm_sub_ps(q[2], m[2][3])};
+  for (int r = 0; r < 3; ++r)
+    p[r] = _mm_add_ps(_mm_mul_ps(m[r][0], d[0]), _mm_add_ps(_mm_mul_ps(m[r][1], d[1]), _mm_mul_ps(m[r][2], d[2])));
+}
+}  // namespace
+#endif
+
+void SweepFrames::ToFiring4(const float* q, float* p, const Eigen::Matrix3f** turn, float* range, float* pitch,
+                            float* yaw) const {
+#if defined(__SSE2__)
+  const __m128 qv[3] = {_mm_loadu_ps(q), _mm_loadu_ps(q + 4), _mm_loadu_ps(q + 8)};
+  __m128 pv[3];
+  std::int32_t bin[4];
+  const float* rows = rows_.front().row[0];
+  FiringStep4(rows, qv, qv[0], qv[1], pv, bin);
+  FiringStep4(rows, qv, pv[0], pv[1], pv, bin);
+  for (int k = 0; k < 4; ++k) turn[k] = &turn_[std::size_t(bin[k])];
+  const __m128 x2 = _mm_mul_ps(pv[0], pv[0]), y2 = _mm_mul_ps(pv[1], pv[1]), z2 = _mm_mul_ps(pv[2], pv[2]);
+  _mm_storeu_ps(range, _mm_sqrt_ps(_mm_add_ps(x2, _mm_add_ps(y2, z2))));  // Eigen's norm()
+  _mm_storeu_ps(pitch, FastAtan2x4(pv[2], _mm_sqrt_ps(_mm_add_ps(x2, y2))));
+  _mm_storeu_ps(yaw, FastAtan2x4(pv[1], pv[0]));
+  for (int a = 0; a < 3; ++a) _mm_storeu_ps(p + 4 * a, pv[a]);
+#else
+  for (int k = 0; k < 4; ++k) {
+    const std::size_t b = FiringBin(Eigen::Vector3f(q[k], q[4 + k], q[8 + k]));
+    const Eigen::Vector3f pk = ToFiring(Eigen::Vector3f(q[k], q[4 + k], q[8 + k]), nullptr);
+    turn[k] = &turn_[b];
+    range[k] = pk.norm();
+    pitch[k] = FastAtan2(pk.z(), std::sqrt(pk.x() * pk.x() + pk.y() * pk.y()));
+    yaw[k] = FastAtan2(pk.y(), pk.x());
+    for (int a = 0; a < 3; ++a) p[4 * a + k] = pk(a);
+  }
+#endif
 }
 
 namespace {
@@ -1074,6 +1142,33 @@ struct Scratch {
   std::vector<std::uint8_t> seen_beams;  // [position in the tile]
 };
 
+// A raw sweep's images: each projected point of the tile from b seen from where its column fired
+// (SweepFrames::ToFiring4, four at a time; the last group repeats its last point).
+void FiringAngles(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, std::uint32_t b,
+                  Scratch* sc) {
+  const auto& ix = s.index;
+  sc->fired_at.resize(sc->valid);
+  sc->fired_turn.resize(sc->valid);
+  float q[12], p[12], range[4], pitch[4], yaw[4];
+  const Eigen::Matrix3f* turn[4];
+  for (std::size_t j0 = 0; j0 < sc->valid; j0 += 4) {
+    const std::size_t m = std::min<std::size_t>(4, sc->valid - j0);
+    for (std::size_t k = 0; k < 4; ++k) {
+      const std::size_t i = b + sc->idx[j0 + std::min(k, m - 1)];
+      const Eigen::Vector3f v = Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c);
+      for (std::size_t a = 0; a < 3; ++a) q[4 * a + k] = v(Eigen::Index(a));
+    }
+    sc->frames.ToFiring4(q, p, turn, range, pitch, yaw);
+    for (std::size_t k = 0; k < m; ++k) {
+      sc->fired_at[j0 + k] = Eigen::Vector3f(p[k], p[4 + k], p[8 + k]);
+      sc->fired_turn[j0 + k] = *turn[k];
+      sc->range[j0 + k] = range[k];
+      sc->pitch[j0 + k] = pitch[k];
+      sc->yaw[j0 + k] = yaw[k];
+    }
+  }
+}
+
 // The tile's points [b, b + tn) in the keyframe's images (sensor at c, R^T = Rt): sc->valid.
 void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matrix3f& Rt, std::uint32_t b,
                  std::size_t tn, Scratch* sc) {
@@ -1087,18 +1182,7 @@ void ProjectTile(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Matr
   const auto& ix = s.index;
   sc->valid = sc->img.Project(ix.x() + b, ix.y() + b, ix.z() + b, tn, c, Rt, s.radius * s.radius, sc->idx.data(),
                               sc->range.data(), sc->pitch.data(), sc->yaw.data());
-  if (sc->frames.active()) {  // a raw sweep's images: each point seen from where its column fired
-    sc->fired_at.resize(sc->valid);
-    sc->fired_turn.resize(sc->valid);
-    for (std::size_t j = 0; j < sc->valid; ++j) {
-      const std::size_t i = b + sc->idx[j];
-      const Eigen::Vector3f& p = sc->fired_at[j] =
-          sc->frames.ToFiring(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c), &sc->fired_turn[j]);
-      sc->range[j] = p.norm();
-      sc->pitch[j] = detail::FastAtan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y()));
-      sc->yaw[j] = detail::FastAtan2(p.y(), p.x());
-    }
-  }
+  if (sc->frames.active()) FiringAngles(s, c, Rt, b, sc);
   for (std::size_t j = sc->valid; j < sc->valid + 3; ++j) sc->range[j] = sc->pitch[j] = sc->yaw[j] = 0.f;  // padding
 }
 
@@ -1260,7 +1344,7 @@ VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<Worl
                                 const std::vector<double>& resolutions_deg,
                                 const RemovertConfig& user_cfg, int threads,
                                 const VisibilityOptions& options) {
-  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes);
+  const RemovertConfig cfg = keyframes.empty() ? user_cfg : WithSensor(user_cfg, keyframes, threads);
   CheckVisibilityInput(points, keyframes, options);
   VisibilityVotes out = ZeroVotes(points.size(), resolutions_deg.size(), options);
   if (points.empty() || resolutions_deg.empty() || keyframes.empty()) return out;
