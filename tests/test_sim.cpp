@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 
 namespace ltm::sim {
@@ -395,6 +396,64 @@ TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
   }
   EXPECT_GT(observed, 100u);
   EXPECT_GT(report_->pairs[0].nd_weak, report_->pairs[0].objects_nd_weak);
+}
+
+// "Observed" means a ray of the other session ended on the point's own surface near it. A ray
+// cast straight at a point that ends on another surface within the along-ray band (the side of a
+// box passed at a grazing angle, in front of a point on its back; a kerb before the road behind
+// it) did not observe it. Central static points (their surface normal from a central ray that hit
+// them) that every query keyframe's straight ray reaches only that way are weak ND in the
+// exact-ray truth.
+TEST_F(SimTruth, ARayEndingOnAnotherSurfaceDidNotObserveThePoint) {
+  const SimConfig cfg = TinyConfig();
+  Simulator sim(cfg, 2);
+  const auto weak = PointSet(io::ReadPcd(io::layout::ExactRayTruthDir(Out() + "/truth/pair_00_01") + "/nd_weak.pcd"));
+  const PointCloud central = io::ReadPly(Out() + "/truth/session_00/static_world.ply");
+  const PointCloud query = io::ReadPly(Out() + "/truth/session_01/static_world.ply");
+  const geometry::KdTree scanned(query);
+  const double tol = cfg.visibility_tolerance_m;
+  // A straight ray from keyframe k of session s at p: its hit, or none when p is out of range / FOV.
+  auto cast = [&](int s, int k, const Eigen::Vector3f& p, double* r) -> std::optional<RayHit> {
+    const Pose& T = sim.T_world_sensor(s)[std::size_t(k)];
+    const Eigen::Vector3d d = p.cast<double>() - T.translation();
+    *r = d.norm();
+    const Eigen::Vector3d ds = T.linear().transpose() * d;
+    const double el = std::atan2(ds.z(), std::hypot(ds.x(), ds.y())) * 180.0 / M_PI;
+    if (*r < cfg.min_range_m || *r > cfg.max_range_m || el < cfg.fov_down_deg || el > cfg.fov_up_deg) return std::nullopt;
+    return sim.CastRays(s, k, T.translation(), {d.normalized().cast<float>()})[0];
+  };
+  std::size_t other_surface_only = 0;
+  for (std::size_t i = 0; i < central.size(); i += 5) {
+    const Eigen::Vector3f p = central.points[i].xyz();
+    if (central.object[i] >= 0 || scanned.CountWithin(p, float(tol), 1) > 0) continue;
+    // Its surface: the normal where central rays hit it, the same from every one (not an edge).
+    Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    bool edge = false;
+    for (int k = 0; k < cfg.keyframes; ++k) {
+      double r = 0.0;
+      const auto h = cast(0, k, p, &r);
+      if (!h || !h->hit || std::abs(h->range - r) > tol) continue;
+      edge = edge || (!n.isZero() && std::abs(n.dot(h->normal)) < 0.95f);
+      n = h->normal;
+    }
+    if (n.isZero() || edge) continue;
+    bool own = false, other = false, unsure = false;
+    for (int k = 0; k < cfg.keyframes && !own; ++k) {
+      double r = 0.0;
+      const auto h = cast(1, k, p, &r);
+      if (!h || !h->hit || h->cls == PointClass::kHD || h->object >= 0) continue;
+      const double band = std::max(tol, std::min(tol / std::max(double(h->cos_incidence), 1e-6), cfg.visibility_grazing_max_m));
+      if (std::abs(h->range - r) > band) continue;
+      const Eigen::Vector3f at = sim.T_world_sensor(1)[std::size_t(k)].translation().cast<float>() +
+                                 h->range * (p.cast<double>() - sim.T_world_sensor(1)[std::size_t(k)].translation()).normalized().cast<float>();
+      const double off = std::abs(n.dot(at - p));  // clearly off its plane (a facet's normal is not the point's)
+      (off <= tol ? own : off > tol + 0.1 ? other : unsure) = true;
+    }
+    if (own || unsure || !other) continue;
+    ++other_surface_only;
+    EXPECT_TRUE(weak.count({p.x(), p.y(), p.z()})) << p.transpose();
+  }
+  EXPECT_GT(other_surface_only, 0u);
 }
 
 TEST(Sim, SameSeedSameBytesAnyThreadsOtherSeedDiffers) {

@@ -212,7 +212,8 @@ struct Simulator::Impl {
 
   // Label and intensity of a hit.
   void Resolve(int session, unsigned inst, unsigned prim, const Eigen::Vector3f& ng, const Eigen::Vector3f& dir,
-               PointClass* cls, int* object, float* intensity, float* cos_incidence = nullptr) const {
+               PointClass* cls, int* object, float* intensity, float* cos_incidence = nullptr,
+               Eigen::Vector3f* normal = nullptr) const {
     const SessionScene& ss = sessions[std::size_t(session)];
     const InstanceKind k = ss.inst[inst];
     const detail::Mesh* mesh = &sc.static_mesh;
@@ -233,6 +234,7 @@ struct Simulator::Impl {
     const float cosine = nn > 0 ? std::abs(n.dot(dir)) / nn : 1.0f;
     *intensity = 100.0f * detail::Reflectivity(mesh->mat[prim]) * cosine;
     if (cos_incidence) *cos_incidence = cosine;
+    if (normal) *normal = nn > 0 ? Eigen::Vector3f(n / nn) : Eigen::Vector3f::Zero();
   }
 };
 
@@ -487,7 +489,7 @@ std::vector<RayHit> Simulator::CastRays(int session, int keyframe, const std::ve
       h.range = rh.ray.tfar;
       float intensity;
       I.Resolve(session, rh.hit.instID[0], rh.hit.primID, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, dirs[i],
-                &h.cls, &h.object, &intensity, &h.cos_incidence);
+                &h.cls, &h.object, &intensity, &h.cos_incidence, &h.normal);
     }
   });
   I.Check("casting rays");

@@ -67,6 +67,7 @@ struct RayHit {
   PointClass cls = PointClass::kUnknown;     // kStatic (also LD objects) or kHD
   int object = -1;                           // LD object id, HD actor id, -1 permanent static
   float cos_incidence = 1.f;                 // |cos| of the angle between ray and surface normal
+  Eigen::Vector3f normal = Eigen::Vector3f::Zero();  // unit surface normal at the hit (world; either side)
 };
 
 // The scenario and its Embree scenes in memory (for tests and benchmarks; Simulate uses it).

@@ -201,10 +201,11 @@ std::pair<double, double> SweepSpread(const std::vector<Pose>& sweep, const Pose
 // column's sweep pose; noise-free, cast in that session's world with its HD actors at that
 // keyframe) that pass within truth.visibility_tolerance_m of each world point (perpendicular
 // distance, at a distance `along` the ray within [min_range, max_range - tol]): decide(point,
-// first hit, along) marks the point done. Keyframes coarse to fine (CoarseToFine); a point done
+// first hit, along, where the ray hit) marks the point done. Keyframes coarse to fine (CoarseToFine); a point done
 // (on entry or by a ray) is not tested again. Returns the number of rays cast.
 std::size_t BeamRays(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg, int threads,
-                     std::vector<char>* done, const std::function<bool(std::size_t, const RayHit&, float)>& decide) {
+                     std::vector<char>* done,
+                     const std::function<bool(std::size_t, const RayHit&, float, const Eigen::Vector3f&)>& decide) {
   const std::size_t n = pts.size();
   std::size_t cast = 0;
   const double tol = cfg.visibility_tolerance_m;
@@ -252,8 +253,9 @@ std::size_t BeamRays(Simulator& sim, int session, const PointCloud& pts, const S
     const auto hits = sim.CastRays(session, int(j), o, v);
     cast += rays.size();
     for (const Pass& q : passes) {
-      const RayHit& h = hits[std::size_t(std::lower_bound(rays.begin(), rays.end(), q.ray) - rays.begin())];
-      if (decide(q.point, h, q.along)) (*done)[q.point] = 1;
+      const std::size_t m = std::size_t(std::lower_bound(rays.begin(), rays.end(), q.ray) - rays.begin());
+      const RayHit& h = hits[m];
+      if (decide(q.point, h, q.along, o[m] + h.range * v[m])) (*done)[q.point] = 1;
     }
   }
   return cast;
@@ -266,8 +268,65 @@ std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud&
   std::vector<char> seen(pts.size(), 0);
   const double tol = cfg.visibility_tolerance_m;
   BeamRays(sim, session, pts, cfg, threads, &seen,
-           [&](std::size_t, const RayHit& h, float along) { return !h.hit || double(h.range) > double(along) + tol; });
+           [&](std::size_t, const RayHit& h, float along, const Eigen::Vector3f&) {
+             return !h.hit || double(h.range) > double(along) + tol;
+           });
   return seen;
+}
+
+// The surface normal at each point of session `owner`'s HD-free world that is not yet `done`
+// (unit, world frame; zero where not found): where a ray cast straight at it from the owner's
+// keyframes that hold it in range and FOV, nearest first (in that keyframe's world), first hits
+// within truth.visibility_tolerance_m of it. Adds the rays to *rays.
+std::vector<Eigen::Vector3f> SurfaceNormals(Simulator& sim, int owner, const PointCloud& pts,
+                                            const std::vector<char>& done, const SimConfig& cfg, std::size_t* rays) {
+  const auto& poses = sim.T_world_sensor(owner);
+  PointCloud at;
+  for (const Pose& T : poses) at.push_back(float(T.translation().x()), float(T.translation().y()), float(T.translation().z()));
+  const geometry::KdTree tree(at);
+  std::vector<std::vector<std::uint32_t>> tries(pts.size());  // keyframes to cast from, nearest first
+  for (std::size_t i = 0; i < pts.size() && !poses.empty(); ++i) {
+    if (done[i]) continue;
+    for (const auto& [j, d2] : tree.Knn(pts.points[i].xyz(), poses.size())) {
+      const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - poses[j].translation();
+      const double r = d.norm();
+      if (r >= cfg.min_range_m && r <= cfg.max_range_m && InFieldOfView(cfg, poses[j].linear().transpose() * d))
+        tries[i].push_back(j);
+    }
+  }
+  std::vector<Eigen::Vector3f> normals(pts.size(), Eigen::Vector3f::Zero());
+  std::size_t most = 0;
+  for (const auto& t : tries) most = std::max(most, t.size());
+  for (std::size_t k = 0; k < most; ++k) {
+    std::vector<std::vector<std::uint32_t>> from(poses.size());  // points whose k-th keyframe is j
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      if (normals[i].isZero() && tries[i].size() > k) from[tries[i][k]].push_back(std::uint32_t(i));
+    for (std::size_t j = 0; j < poses.size(); ++j) {
+      if (from[j].empty()) continue;
+      const Eigen::Vector3d o = poses[j].translation();
+      std::vector<Eigen::Vector3f> dirs;
+      std::vector<float> ranges;
+      for (const std::uint32_t i : from[j]) {
+        const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - o;
+        ranges.push_back(float(d.norm()));
+        dirs.push_back((d / d.norm()).cast<float>());
+      }
+      const auto hits = sim.CastRays(owner, int(j), o, dirs);
+      *rays += dirs.size();
+      for (std::size_t m = 0; m < hits.size(); ++m)
+        if (hits[m].hit && std::abs(double(hits[m].range) - ranges[m]) <= cfg.visibility_tolerance_m)
+          normals[from[j][m]] = hits[m].normal;
+    }
+  }
+  return normals;
+}
+
+// A ray's first hit `at` lies on the surface of point p (normal n; zero: unknown, any surface
+// counts): within truth.visibility_tolerance_m of p's plane. A ray that ended on another surface
+// within the along-ray band of p (a car's side passed at a grazing angle, in front of the point
+// on its back) did not observe p's surface.
+bool OnItsSurface(const Eigen::Vector3f& n, const Eigen::Vector3f& p, const Eigen::Vector3f& at, const SimConfig& cfg) {
+  return n.isZero() || double(std::abs(n.dot(at - p))) <= cfg.visibility_tolerance_m;
 }
 
 // Did session `session` observe the surface of each point (a point of session `owner`'s
@@ -277,8 +336,8 @@ std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud&
 // structure or an LD object present in both sessions within the along-ray tolerance of the
 // point (RayTolerance). Points already marked observed are skipped; a point stops being tested
 // once observed. Returns the number of rays cast.
-std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pts, const SimConfig& cfg,
-                    std::vector<char>* observed) {
+std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pts,
+                    const std::vector<Eigen::Vector3f>& normals, const SimConfig& cfg, std::vector<char>* observed) {
   const std::size_t n = pts.size();
   std::vector<int> tested(n, 0);
   std::size_t rays = 0;
@@ -318,7 +377,10 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
       ++tested[i];
       const RayHit& h = hits[m];
       const bool same = h.hit && h.cls != PointClass::kHD && (h.object < 0 || sim.IsPresent(h.object, owner));
-      if (same && std::abs(double(h.range) - ranges[m]) <= RayTolerance(cfg, h.cos_incidence)) (*observed)[i] = 1;
+      const Eigen::Vector3f at = o.cast<float>() + h.range * dirs[m];
+      if (same && std::abs(double(h.range) - ranges[m]) <= RayTolerance(cfg, h.cos_incidence) &&
+          OnItsSurface(normals[i], pts.points[i].xyz(), at, cfg))
+        (*observed)[i] = 1;
     }
   }
   return rays;
@@ -328,12 +390,16 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
 // (BeamRays) end on the surface of each point of session `owner`'s HD-free world: its first hit
 // permanent structure or an LD object present in both sessions, within the along-ray tolerance
 // of the point (RayTolerance)? Points already marked observed are skipped.
-std::size_t BeamObserve(Simulator& sim, int session, int owner, const PointCloud& pts, const SimConfig& cfg,
-                        int threads, std::vector<char>* observed) {
-  return BeamRays(sim, session, pts, cfg, threads, observed, [&](std::size_t, const RayHit& h, float along) {
-    const bool same = h.hit && h.cls != PointClass::kHD && (h.object < 0 || sim.IsPresent(h.object, owner));
-    return same && std::abs(double(h.range) - double(along)) <= RayTolerance(cfg, h.cos_incidence);
-  });
+std::size_t BeamObserve(Simulator& sim, int session, int owner, const PointCloud& pts,
+                        const std::vector<Eigen::Vector3f>& normals, const SimConfig& cfg, int threads,
+                        std::vector<char>* observed) {
+  return BeamRays(sim, session, pts, cfg, threads, observed,
+                  [&](std::size_t i, const RayHit& h, float along, const Eigen::Vector3f& at) {
+                    const bool same =
+                        h.hit && h.cls != PointClass::kHD && (h.object < 0 || sim.IsPresent(h.object, owner));
+                    return same && std::abs(double(h.range) - double(along)) <= RayTolerance(cfg, h.cos_incidence) &&
+                           OnItsSurface(normals[i], pts.points[i].xyz(), at, cfg);
+                  });
 }
 
 // The surfaces of `own` (session `s`'s HD-free world: permanent structure and LD objects
@@ -365,7 +431,9 @@ Coverage ScannedByOther(Simulator& sim, int s, int o, const PointCloud& own, con
 PointCloud Unobserved(Simulator& sim, int s, int o, const Coverage& c, const SimConfig& cfg, int threads, bool exact,
                       std::size_t* rays) {
   std::vector<char> observed = c.scanned;
-  *rays += exact ? Observe(sim, o, s, c.pts, cfg, &observed) : BeamObserve(sim, o, s, c.pts, cfg, threads, &observed);
+  const std::vector<Eigen::Vector3f> normals = SurfaceNormals(sim, s, c.pts, observed, cfg, rays);
+  *rays += exact ? Observe(sim, o, s, c.pts, normals, cfg, &observed)
+                 : BeamObserve(sim, o, s, c.pts, normals, cfg, threads, &observed);
   std::vector<bool> un(c.pts.size());
   for (std::size_t i = 0; i < c.pts.size(); ++i) un[i] = !observed[i];
   return c.pts.select(un);
