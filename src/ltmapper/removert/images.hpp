@@ -58,14 +58,15 @@ class SweepFrames {
 
  private:
   std::size_t FiringBin(const Eigen::Vector3f& q) const;  // the bin of the column fired towards q
-  // Per azimuth bin (kSweepBinDeg, visibility.cpp): the rotation from the keyframe frame to the frame its column
-  // fired from, and that frame's origin in the keyframe frame.
+  Eigen::Vector3f Origin(std::size_t bin) const;         // the bin's firing frame's origin
+  // Per azimuth bin (kSweepBinDeg, visibility.cpp): the rotation from the keyframe frame to the
+  // frame its column fired from, and (rows_) the same row by row, each row followed by one
+  // coordinate of that frame's origin in the keyframe frame (16-byte aligned, for ToFiring4).
   std::vector<Eigen::Matrix3f> turn_;
-  std::vector<Eigen::Vector3f> origin_;
-  struct alignas(16) Rows {  // a bin's turn_ row by row, each followed by origin_'s coordinate
+  struct alignas(16) Rows {
     float row[3][4];
   };
-  std::vector<Rows> rows_;  // per bin, for ToFiring4
+  std::vector<Rows> rows_;
 };
 
 // The range image of one resolution: square pixels of `pixel_deg`, same pixel rule as

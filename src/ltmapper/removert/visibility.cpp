@@ -968,25 +968,30 @@ SweepFrames::SweepFrames(const PointCloud& raw, const SweepMotion& motion) {
     }
   for (const double t : time) {  // io::Deskew: q = R(t) p + t v, so p = R(t)^T (q - t v)
     turn_.push_back(motion.RotationAt(t).transpose().cast<float>());
-    origin_.push_back((t * motion.v_mps).cast<float>());
+    const Eigen::Vector3f origin = (t * motion.v_mps).cast<float>();
     Rows& r = rows_.emplace_back();
     for (int a = 0; a < 3; ++a) {
-      for (int b2 = 0; b2 < 3; ++b2) r.row[a][b2] = turn_.back()(a, b2);
-      r.row[a][3] = origin_.back()(a);
+      for (int c = 0; c < 3; ++c) r.row[a][c] = turn_.back()(a, c);
+      r.row[a][3] = origin(a);
     }
   }
 }
 
+Eigen::Vector3f SweepFrames::Origin(std::size_t bin) const {
+  const Rows& r = rows_[bin];
+  return Eigen::Vector3f(r.row[0][3], r.row[1][3], r.row[2][3]);
+}
+
 std::size_t SweepFrames::FiringBin(const Eigen::Vector3f& q) const {
   const std::size_t b = SweepBin(FastAtan2(q.y(), q.x()));
-  const Eigen::Vector3f p = turn_[b] * (q - origin_[b]);
+  const Eigen::Vector3f p = turn_[b] * (q - Origin(b));
   return SweepBin(FastAtan2(p.y(), p.x()));  // the column that fired towards q as its own frame sees q
 }
 
 Eigen::Vector3f SweepFrames::ToFiring(const Eigen::Vector3f& q, Eigen::Matrix3f* R) const {
   const std::size_t b = FiringBin(q);
   if (R) *R = turn_[b];
-  return turn_[b] * (q - origin_[b]);
+  return turn_[b] * (q - Origin(b));
 }
 
 #if defined(__SSE2__)

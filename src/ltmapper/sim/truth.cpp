@@ -201,8 +201,9 @@ std::pair<double, double> SweepSpread(const std::vector<Pose>& sweep, const Pose
 // column's sweep pose; noise-free, cast in that session's world with its HD actors at that
 // keyframe) that pass within truth.visibility_tolerance_m of each world point (perpendicular
 // distance, at a distance `along` the ray within [min_range, max_range - tol]): decide(point,
-// first hit, along, where the ray hit) marks the point done. Keyframes coarse to fine (CoarseToFine); a point done
-// (on entry or by a ray) is not tested again. Returns the number of rays cast.
+// first hit, along, where the ray hit) marks the point done. Keyframes coarse to fine
+// (CoarseToFine); a point done (on entry or by a ray) is not tested again. Returns the number of
+// rays cast.
 std::size_t BeamRays(Simulator& sim, int session, const PointCloud& pts, const SimConfig& cfg, int threads,
                      std::vector<char>* done,
                      const std::function<bool(std::size_t, const RayHit&, float, const Eigen::Vector3f&)>& decide) {
@@ -274,26 +275,36 @@ std::vector<char> BeamSeenThrough(Simulator& sim, int session, const PointCloud&
   return seen;
 }
 
-// The surface normal at each point of session `owner`'s HD-free world that is not yet `done`
-// (unit, world frame; zero where not found): where a ray cast straight at it from the owner's
-// keyframes that hold it in range and FOV, nearest first (in that keyframe's world), first hits
-// within truth.visibility_tolerance_m of it. Adds the rays to *rays.
-std::vector<Eigen::Vector3f> SurfaceNormals(Simulator& sim, int owner, const PointCloud& pts,
-                                            const std::vector<char>& done, const SimConfig& cfg, std::size_t* rays) {
+// Per point of session `owner`'s HD-free world not yet `done`: the owner's keyframes that hold it
+// in range and FOV, nearest first.
+std::vector<std::vector<std::uint32_t>> KeyframesInView(Simulator& sim, int owner, const PointCloud& pts,
+                                                        const std::vector<char>& done, const SimConfig& cfg) {
   const auto& poses = sim.T_world_sensor(owner);
+  std::vector<std::vector<std::uint32_t>> in_view(pts.size());
+  if (poses.empty()) return in_view;
   PointCloud at;
   for (const Pose& T : poses) at.push_back(float(T.translation().x()), float(T.translation().y()), float(T.translation().z()));
   const geometry::KdTree tree(at);
-  std::vector<std::vector<std::uint32_t>> tries(pts.size());  // keyframes to cast from, nearest first
-  for (std::size_t i = 0; i < pts.size() && !poses.empty(); ++i) {
+  for (std::size_t i = 0; i < pts.size(); ++i) {
     if (done[i]) continue;
     for (const auto& [j, d2] : tree.Knn(pts.points[i].xyz(), poses.size())) {
       const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - poses[j].translation();
       const double r = d.norm();
       if (r >= cfg.min_range_m && r <= cfg.max_range_m && InFieldOfView(cfg, poses[j].linear().transpose() * d))
-        tries[i].push_back(j);
+        in_view[i].push_back(j);
     }
   }
+  return in_view;
+}
+
+// The surface normal at each point of session `owner`'s HD-free world that is not yet `done`
+// (unit, world frame; zero where not found): where a ray cast straight at it from the owner's
+// keyframes that hold it in view (KeyframesInView, nearest first, each in its keyframe's world)
+// first hits within truth.visibility_tolerance_m of it. Adds the rays cast to *rays.
+std::vector<Eigen::Vector3f> SurfaceNormals(Simulator& sim, int owner, const PointCloud& pts,
+                                            const std::vector<char>& done, const SimConfig& cfg, std::size_t* rays) {
+  const auto& poses = sim.T_world_sensor(owner);
+  const std::vector<std::vector<std::uint32_t>> tries = KeyframesInView(sim, owner, pts, done, cfg);
   std::vector<Eigen::Vector3f> normals(pts.size(), Eigen::Vector3f::Zero());
   std::size_t most = 0;
   for (const auto& t : tries) most = std::max(most, t.size());
@@ -334,8 +345,9 @@ bool OnItsSurface(const Eigen::Vector3f& n, const Eigen::Vector3f& p, const Eige
 // it (range within [lidar.min_range_m, lidar.max_range_m], elevation inside the vertical FOV,
 // cast in the world of `session` with its HD actors at that keyframe) first hits permanent
 // structure or an LD object present in both sessions within the along-ray tolerance of the
-// point (RayTolerance). Points already marked observed are skipped; a point stops being tested
-// once observed. Returns the number of rays cast.
+// point (RayTolerance), on the point's own surface (OnItsSurface with `normals`). Points already
+// marked observed are skipped; a point stops being tested once observed. Returns the number of
+// rays cast.
 std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pts,
                     const std::vector<Eigen::Vector3f>& normals, const SimConfig& cfg, std::vector<char>* observed) {
   const std::size_t n = pts.size();
@@ -389,7 +401,8 @@ std::size_t Observe(Simulator& sim, int session, int owner, const PointCloud& pt
 // Beam truth of surfaces both sessions have: did one of the very rays of `session`'s scans
 // (BeamRays) end on the surface of each point of session `owner`'s HD-free world: its first hit
 // permanent structure or an LD object present in both sessions, within the along-ray tolerance
-// of the point (RayTolerance)? Points already marked observed are skipped.
+// of the point (RayTolerance), on its own surface (OnItsSurface with `normals`)? Points already
+// marked observed are skipped.
 std::size_t BeamObserve(Simulator& sim, int session, int owner, const PointCloud& pts,
                         const std::vector<Eigen::Vector3f>& normals, const SimConfig& cfg, int threads,
                         std::vector<char>* observed) {
@@ -405,20 +418,23 @@ std::size_t BeamObserve(Simulator& sim, int session, int owner, const PointCloud
 // The surfaces of `own` (session `s`'s HD-free world: permanent structure and LD objects
 // present in both sessions) that session `o` may not have observed, and which of them it surely
 // did: `o`'s HD-free world has a point of the same kind within truth.visibility_tolerance_m
-// (`o` scanned that surface; the first test of both truths, Unobserved).
+// (`o` scanned that surface; the first test of both truths, Unobserved); and the others' surface
+// normals (SurfaceNormals, adding its rays to *rays).
 struct Coverage {
   PointCloud pts;
   std::vector<char> scanned;
+  std::vector<Eigen::Vector3f> normals;
 };
 Coverage ScannedByOther(Simulator& sim, int s, int o, const PointCloud& own, const PointCloud& other,
-                        const SimConfig& cfg, int threads) {
+                        const SimConfig& cfg, int threads, std::size_t* rays) {
   auto shared = [&](int obj) { return obj < 0 || (sim.IsPresent(obj, s) && sim.IsPresent(obj, o)); };
   std::vector<bool> keep_own(own.size()), keep_other(other.size());
   for (std::size_t i = 0; i < own.size(); ++i) keep_own[i] = shared(own.object[i]);
   for (std::size_t i = 0; i < other.size(); ++i) keep_other[i] = shared(other.object[i]);
-  Coverage c{own.select(keep_own), {}};
+  Coverage c{own.select(keep_own), {}, {}};
   const std::vector<bool> scanned = geometry::WithinRadius(c.pts, other.select(keep_other), cfg.visibility_tolerance_m, threads);
   c.scanned.assign(scanned.begin(), scanned.end());
+  c.normals = SurfaceNormals(sim, s, c.pts, c.scanned, cfg, rays);
   return c;
 }
 
@@ -431,9 +447,8 @@ Coverage ScannedByOther(Simulator& sim, int s, int o, const PointCloud& own, con
 PointCloud Unobserved(Simulator& sim, int s, int o, const Coverage& c, const SimConfig& cfg, int threads, bool exact,
                       std::size_t* rays) {
   std::vector<char> observed = c.scanned;
-  const std::vector<Eigen::Vector3f> normals = SurfaceNormals(sim, s, c.pts, observed, cfg, rays);
-  *rays += exact ? Observe(sim, o, s, c.pts, normals, cfg, &observed)
-                 : BeamObserve(sim, o, s, c.pts, normals, cfg, threads, &observed);
+  *rays += exact ? Observe(sim, o, s, c.pts, c.normals, cfg, &observed)
+                 : BeamObserve(sim, o, s, c.pts, c.normals, cfg, threads, &observed);
   std::vector<bool> un(c.pts.size());
   for (std::size_t i = 0; i < c.pts.size(); ++i) un[i] = !observed[i];
   return c.pts.select(un);
@@ -697,8 +712,9 @@ PairTruthCounts WritePairTruth(Simulator& sim, const SimConfig& cfg, int q, cons
   // Each truth with its own rays: the scans' (beam) or one straight at each point (exact).
   const std::string pdir = truth + "/pair_00_" + Num(q, 2);
   PairTruthCounts exact;
-  const Coverage central_side = ScannedByOther(sim, 0, q, central.static_world, query.static_world, cfg, threads);
-  const Coverage query_side = ScannedByOther(sim, q, 0, query.static_world, central.static_world, cfg, threads);
+  const Coverage central_side =
+      ScannedByOther(sim, 0, q, central.static_world, query.static_world, cfg, threads, &counts.rays);
+  const Coverage query_side = ScannedByOther(sim, q, 0, query.static_world, central.static_world, cfg, threads, &counts.rays);
   for (const bool exact_rays : {false, true}) {
     PointCloud snd = Unobserved(sim, 0, q, central_side, cfg, threads, exact_rays, &counts.rays);
     PointCloud spd = Unobserved(sim, q, 0, query_side, cfg, threads, exact_rays, &counts.rays);
