@@ -287,7 +287,7 @@ std::vector<std::vector<std::uint32_t>> KeyframesInView(Simulator& sim, int owne
   const geometry::KdTree tree(at);
   for (std::size_t i = 0; i < pts.size(); ++i) {
     if (done[i]) continue;
-    for (const auto& [j, d2] : tree.Knn(pts.points[i].xyz(), poses.size())) {
+    for (const auto& [j, d2] : tree.Radius(pts.points[i].xyz(), float(cfg.max_range_m))) {
       const Eigen::Vector3d d = pts.points[i].xyz().cast<double>() - poses[j].translation();
       const double r = d.norm();
       if (r >= cfg.min_range_m && r <= cfg.max_range_m && InFieldOfView(cfg, poses[j].linear().transpose() * d))
