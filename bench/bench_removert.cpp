@@ -2,7 +2,9 @@
 // Targets (issue 5): HD removal < 0.05 s per keyframe per core; whole stage < 60 s on 2 cores.
 //
 //   bench_removert [--benchmark_filter=...]       env: LTM_BENCH_DIR (sim cache, default
-//   /tmp/ltm_bench_removert), LTM_BENCH_THREADS (default 2), LTM_BENCH_KEYFRAMES (default 500)
+//   /tmp/ltm_bench_removert, or /tmp/ltm_bench_removert_SWEEP), LTM_BENCH_THREADS (default 2),
+//   LTM_BENCH_KEYFRAMES (default 500), LTM_BENCH_SWEEP (lidar.sweep: instant, the default;
+//   distorted: raw sweeps; deskewed: the same saved deskewed, their timing estimated)
 //
 // CPU seconds come from getrusage (all threads), so "per keyframe per core" = CPU s / keyframes.
 // BM_Votes times the hot loop alone (CountVisibility at the removal resolutions over a session
@@ -44,12 +46,15 @@ double CpuSeconds() {
 // Simulates the bench scenario once (cached on disk).
 const std::string& SimDir() {
   static const std::string dir = [] {
-    const std::string d = Env("LTM_BENCH_DIR", "/tmp/ltm_bench_removert");
+    const std::string sweep = Env("LTM_BENCH_SWEEP", "instant");
+    const std::string d =
+        Env("LTM_BENCH_DIR", sweep == "instant" ? "/tmp/ltm_bench_removert" : ("/tmp/ltm_bench_removert_" + sweep).c_str());
     const int kf = std::stoi(Env("LTM_BENCH_KEYFRAMES", "500"));
     if (!fs::exists(d + "/truth/session_01/poses_world.txt")) {
       ltm::sim::SimConfig cfg;
       cfg.sessions = 2;
       cfg.keyframes = kf;
+      cfg.sweep = sweep;
       std::fprintf(stderr, "simulating 2 sessions x %d keyframes into %s ...\n", kf, d.c_str());
       ltm::sim::Simulate(cfg, d, 0);
     }
@@ -63,14 +68,8 @@ std::vector<ltm::removert::WorldKeyframe> Keyframes(int s) {
   std::snprintf(name, sizeof(name), "session_%02d", s);
   const ltm::Session sess = ltm::io::LoadSession(SimDir() + "/sessions/" + name);
   const auto poses = ltm::io::ReadKittiPoses(SimDir() + "/truth/" + name + "/poses_world.txt");
-  std::vector<ltm::removert::WorldKeyframe> out;
-  for (std::size_t k = 0; k < poses.size(); ++k) {
-    ltm::removert::WorldKeyframe w;
-    w.index = sess.keyframes[k].index;
-    w.T_world_sensor = poses[k];
-    w.cloud_path = sess.keyframes[k].cloud_path;
-    out.push_back(w);
-  }
+  std::vector<ltm::removert::WorldKeyframe> out = ltm::removert::KeyframesOf(sess);  // with each sweep's motion
+  for (std::size_t k = 0; k < poses.size(); ++k) out[k].T_world_sensor = poses[k];
   return out;
 }
 
