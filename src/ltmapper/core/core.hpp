@@ -142,11 +142,13 @@ struct SweepTiming {
   double start_rad = 0.0;    // [rad] azimuth of the sweep's first column
   int turn = 1;              // +1: azimuth decreasing with time (clockwise seen from above); -1: increasing
   double stamp_share = 0.0;  // [-] share of the sweep fired before the timestamp (0: it stamps the start)
-  double TimeAt(double azimuth_rad) const {
+  // The share of the sweep fired before the column at `azimuth_rad` [0, 1): frac(turn (start - a) / 2 pi).
+  double ShareAt(double azimuth_rad) const {
     constexpr double kTwoPi = 6.283185307179586;
     const double u = double(turn) * (start_rad - azimuth_rad) / kTwoPi;
-    return period_s * (u - std::floor(u) - stamp_share);
+    return u - std::floor(u);
   }
+  double TimeAt(double azimuth_rad) const { return period_s * (ShareAt(azimuth_rad) - stamp_share); }
 };
 
 struct Keyframe {

@@ -97,8 +97,8 @@ class Score {
       : samples_(samples), exact_(exact), share_(samples_.size()), counts_(2 * (std::size_t(180.0 / kBinDeg) + 2), 0) {}
   // Sets the turn and first column's azimuth: each return's share of the sweep fired before it.
   void Turn(int turn, double start_rad) {
-    timing_.turn = turn, timing_.start_rad = start_rad, timing_.period_s = 1.0, timing_.stamp_share = 0.0;
-    for (std::size_t i = 0; i < samples_.size(); ++i) share_[i] = float(timing_.TimeAt(samples_[i].azimuth));
+    timing_.turn = turn, timing_.start_rad = start_rad;
+    for (std::size_t i = 0; i < samples_.size(); ++i) share_[i] = float(timing_.ShareAt(samples_[i].azimuth));
   }
   // The score for that turn with the period and the timestamp's share; as deskewed for period 0.
   double operator()(double period_s, double stamp_share) {
@@ -126,6 +126,7 @@ class Score {
     const float t = period * (share_[i] - share);
     if (!exact_) return s.elevation + s.rate * t;
     const Eigen::Vector3f fired = s.q - t * s.u;  // the column it fired in, as its own frame sees it
+    // SweepTiming::ShareAt of its azimuth there, in float (the search's hot loop).
     const float u = float(timing_.turn) * (float(timing_.start_rad) - FastAtan2(fired.y(), fired.x())) / float(kTwoPi);
     return ElevationDeg(s.q - period * (u - std::floor(u) - share) * s.u);
   }
@@ -133,7 +134,7 @@ class Score {
   const std::vector<Sample>& samples_;
   bool exact_;
   std::vector<float> share_;  // per sample, for the current turn
-  SweepTiming timing_;        // the current turn and start
+  SweepTiming timing_;        // the current turn and start (ShareAt)
   std::vector<std::int64_t> counts_;
 };
 

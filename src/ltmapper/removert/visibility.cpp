@@ -1139,7 +1139,7 @@ struct Scratch {
   std::unique_ptr<detail::ColumnImage> columns;  // beam test
   detail::SweepFrames frames;                    // the keyframe's raw sweep (images in its firing frames)
   std::vector<Eigen::Vector3f> fired_at;         // with frames: per projected point, itself in its
-  std::vector<Eigen::Matrix3f> fired_turn;       // column's firing frame, and that frame's rotation
+  std::vector<const Eigen::Matrix3f*> fired_turn;  // column's firing frame, and that frame's rotation (SweepFrames')
   std::vector<std::uint32_t> idx;
   std::vector<float> range, pitch, yaw, plane;
   std::size_t valid = 0;                 // projected points of the current tile
@@ -1166,7 +1166,7 @@ void FiringAngles(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     sc->frames.ToFiring4(q, p, turn, range, pitch, yaw);
     for (std::size_t k = 0; k < m; ++k) {
       sc->fired_at[j0 + k] = Eigen::Vector3f(p[k], p[4 + k], p[8 + k]);
-      sc->fired_turn[j0 + k] = *turn[k];
+      sc->fired_turn[j0 + k] = turn[k];
       sc->range[j0 + k] = range[k];
       sc->pitch[j0 + k] = pitch[k];
       sc->yaw[j0 + k] = yaw[k];
@@ -1213,7 +1213,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     const std::size_t i = b + sc->idx[j];
     const bool fired = sc->frames.active();  // world to the (firing) sensor frame: ProjectTile's
     const Eigen::Vector3f ps = fired ? sc->fired_at[j] : Eigen::Vector3f(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c));
-    const Eigen::Matrix3f R = fired ? Eigen::Matrix3f(sc->fired_turn[j] * Rt) : Rt;
+    const Eigen::Matrix3f R = fired ? Eigen::Matrix3f(*sc->fired_turn[j] * Rt) : Rt;
     const Eigen::Vector3f ns = R * (*s.options.normals)[ix.order()[i]];
     float* pl = &sc->plane[4 * j];
     pl[0] = ns.x();
