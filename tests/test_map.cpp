@@ -15,6 +15,7 @@
 #include <fstream>
 #include <initializer_list>
 #include <iterator>
+#include <limits>
 #include <filesystem>
 #include <map>
 #include <random>
@@ -1099,6 +1100,38 @@ TEST(MapObjects, MovedContainerAndStableIds) {
     EXPECT_EQ(b[k].points, a[k].points);
     EXPECT_EQ(b[k].partner, a[k].partner);
   }
+}
+
+// Two containers of one step moved, each a short way; their boxes alike within the size tolerance.
+// Paired by size, each would go to the other's place (the sizes of the far ends agree exactly); the
+// pairing that moves them least in all links each to its own near end.
+TEST(MapObjects, AlikeObjectsThatMovedArePairedByTheLeastTotalDisplacement) {
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.nd_strong = Cat(Car(8, 8, 2.4f, 6.0f, 2.5f), Car(-14, 10, 2.4f, 5.5f, 2.5f));  // gone: A1, A2
+  d.pd_weak = Cat(Car(8, -6, 2.4f, 5.5f, 2.5f), Car(-14, -8, 2.4f, 6.0f, 2.5f));  // came: B1 near A1, B2 near A2
+  const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr);
+  ASSERT_EQ(objs.size(), 4u);
+  for (const auto& o : objs) {
+    ASSERT_EQ(o.change, "moved") << o.centroid.transpose();
+    const MapObject& other = objs[std::size_t(o.partner)];
+    EXPECT_EQ(other.partner, o.id);
+    EXPECT_EQ(o.centroid.x() > 0.0, other.centroid.x() > 0.0) << o.centroid.transpose() << " paired with "
+                                                              << other.centroid.transpose();
+  }
+}
+
+TEST(MapObjectsAssignment, MostPairsFirstThenLeastTotalCost) {
+  const double no = std::numeric_limits<double>::infinity();
+  using Pairs = std::vector<std::pair<std::size_t, std::size_t>>;
+  // Greedy on the cheapest pair (0,0) would leave row 1 alone; two pairs come first.
+  EXPECT_EQ(detail::LeastCostPairs({{1.0, 2.0}, {3.0, no}}), (Pairs{{0, 1}, {1, 0}}));
+  // Least total: 4 + 4 < 1 + 10.
+  EXPECT_EQ(detail::LeastCostPairs({{1.0, 4.0}, {4.0, 10.0}}), (Pairs{{0, 1}, {1, 0}}));
+  // More rows than columns, and a row with no allowed column.
+  EXPECT_EQ(detail::LeastCostPairs({{no, no}, {5.0, 1.0}, {2.0, 9.0}}), (Pairs{{1, 1}, {2, 0}}));
+  EXPECT_TRUE(detail::LeastCostPairs({{no}}).empty());
+  EXPECT_TRUE(detail::LeastCostPairs({}).empty());
 }
 
 // Objects of two steps against session 0 (`standing` on the ground grid), one keyframe each.

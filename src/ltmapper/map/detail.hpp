@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace ltm::map::detail {
@@ -84,5 +85,10 @@ QCloud MakeDelta(const QCloud& latest, const QCloud& target, const KeySet& chang
 QCloud Unmatched(const QCloud& cloud, const QCloud& other);
 // Mask of `cloud` points within `radius_units` (grid units) of any `query` point.
 std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double radius_units);
+
+// Pairs (row, column) of a cost matrix (cost[row][column], every row the same length), each row
+// and column in at most one pair: as many pairs as the allowed costs (finite) permit, and of
+// those the least total cost. Forbidden pairs: non-finite costs. Sorted by row. (assignment.cpp)
+std::vector<std::pair<std::size_t, std::size_t>> LeastCostPairs(const std::vector<std::vector<double>>& cost);
 
 }  // namespace ltm::map::detail

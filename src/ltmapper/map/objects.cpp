@@ -19,7 +19,8 @@
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
 //     disappeared one on its lower part the query did not see; an object keeps that part and
 //     the rows the query did not see inside its box and over it (UnseenParts).
-//  5. Moved: a disappeared and an appeared object of one step with the same box size.
+//  5. Moved: a disappeared and an appeared object of one step with the same box size; of such
+//     pairings, the one that moves the objects least in all (LinkMoved).
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
@@ -30,6 +31,7 @@
 #include <cmath>
 #include <deque>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <memory>
 #include <numeric>
@@ -934,21 +936,32 @@ void AssignIds(std::vector<MapObject>& objects) {
   }
 }
 
-// Moved: a disappeared and an appeared object of the same step that could be one (CouldHaveMoved);
-// best size matches first, each object in at most one pair.
+// Moved: a disappeared and an appeared object of the same step that could be one (CouldHaveMoved),
+// each object in at most one pair. Objects alike in shape (two containers, or cars) are told apart
+// by nothing their boxes hold: the size differences of one object's two views and of two such
+// objects overlap. So of the pairings with the most moves, the one that moves the objects least in
+// all (LeastCostPairs over the centroids' displacement): the likeliest, as moves are more often
+// short than long.
 void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
-  std::vector<std::tuple<double, std::size_t, std::size_t>> cand;
-  for (std::size_t i = 0; i < objects.size(); ++i)
-    for (std::size_t j = 0; j < objects.size(); ++j) {
-      const MapObject &d = objects[i], &a = objects[j];
-      if (d.session != a.session || d.change != "disappeared" || a.change != "appeared") continue;
-      if (CouldHaveMoved(d, a, cfg)) cand.emplace_back(SizeDifference(d, a), i, j);
+  std::map<int, std::pair<std::vector<std::size_t>, std::vector<std::size_t>>> ends;  // step -> gone, came
+  for (std::size_t i = 0; i < objects.size(); ++i) {
+    auto& [gone, came] = ends[objects[i].session];
+    if (objects[i].change == "disappeared") gone.push_back(i);
+    if (objects[i].change == "appeared") came.push_back(i);
+  }
+  const double forbidden = std::numeric_limits<double>::infinity();
+  for (const auto& [step, e] : ends) {
+    const auto& [gone, came] = e;
+    std::vector<std::vector<double>> cost(gone.size(), std::vector<double>(came.size(), forbidden));
+    for (std::size_t r = 0; r < gone.size(); ++r)
+      for (std::size_t c = 0; c < came.size(); ++c) {
+        const MapObject &d = objects[gone[r]], &a = objects[came[c]];
+        if (CouldHaveMoved(d, a, cfg)) cost[r][c] = (d.centroid - a.centroid).norm();
+      }
+    for (const auto& [r, c] : detail::LeastCostPairs(cost)) {
+      objects[gone[r]].partner = objects[came[c]].id;
+      objects[came[c]].partner = objects[gone[r]].id;
     }
-  std::sort(cand.begin(), cand.end());
-  for (const auto& [diff, i, j] : cand) {
-    if (objects[i].partner >= 0 || objects[j].partner >= 0) continue;
-    objects[i].partner = objects[j].id;
-    objects[j].partner = objects[i].id;
   }
   for (auto& o : objects)
     if (o.partner >= 0) o.change = "moved";
