@@ -120,9 +120,10 @@ TEST(SlamAlign, ARouteThatComesBackIsClosedWithinItsSession) {
     }
     return w;
   };
-  SlamConfig off = FastConfig();
+  SlamConfig off = FastConfig(), on = FastConfig();
   off.refine_rounds = 0;
-  const SlamResult without = AlignSessions({s}, off, 2), with = AlignSessions({s}, FastConfig(), 2);
+  off.reg_steps = on.reg_steps = false;  // the loops alone (registered steps: the next test)
+  const SlamResult without = AlignSessions({s}, off, 2), with = AlignSessions({s}, on, 2);
   const double before = worst(without.sessions[0].T_world_sensor), after = worst(with.sessions[0].T_world_sensor);
   std::printf("out and back: worst yaw between a place's two passes %.3f deg without, %.3f deg with %d loops within "
               "the session\n", before, after, with.sessions[0].own_loops);
@@ -130,6 +131,34 @@ TEST(SlamAlign, ARouteThatComesBackIsClosedWithinItsSession) {
   EXPECT_GT(with.sessions[0].own_loops, 0);
   EXPECT_GT(before, 3.0);
   EXPECT_LT(after, 0.5);
+}
+
+// One session's odometry drifts 0.2 deg in yaw per keyframe (3.6 deg over its 19 keyframes), no
+// loop anywhere. Each keyframe registered onto the one before (registration.steps) holds the
+// heading: the turn between the first and every later keyframe stays within a tenth of a degree.
+TEST(SlamAlign, RegisteredStepsHoldTheHeadingTheOdometryDrifts) {
+  const PointCloud world = test::SynthWorld(41);
+  std::vector<Pose> truth;
+  const Session s = test::SynthSession(world, "c", Pose::Identity(), -36, 36, 4.0, 0.2 * kDeg, 1, &truth);
+  auto worst = [&](const SessionAlignment& a) {
+    double w = 0;
+    for (std::size_t k = 1; k < truth.size(); ++k) {
+      const Pose e = (truth[0].inverse() * truth[k]).inverse() * (a.T_world_sensor[0].inverse() * a.T_world_sensor[k]);
+      w = std::max(w, Eigen::AngleAxisd(e.linear()).angle() / kDeg);
+    }
+    return w;
+  };
+  SlamConfig off = FastConfig(), on = FastConfig();
+  off.refine_rounds = on.refine_rounds = 0;
+  off.reg_steps = false;
+  const SlamResult without = AlignSessions({s}, off, 2), with = AlignSessions({s}, on, 2);
+  const double before = worst(without.sessions[0]), after = worst(with.sessions[0]);
+  std::printf("odometry drifting 0.2 deg a keyframe: worst heading from the first keyframe %.3f deg, %.3f deg with %zu "
+              "registered steps\n", before, after, with.sessions[0].registered.size());
+  EXPECT_TRUE(without.sessions[0].registered.empty());
+  EXPECT_EQ(with.sessions[0].registered.size(), truth.size() - 1);
+  EXPECT_GT(before, 3.0);
+  EXPECT_LT(after, 0.1);
 }
 
 TEST(SlamAlign, SessionsWithoutOverlapAreNotAligned) {

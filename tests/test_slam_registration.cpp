@@ -118,6 +118,34 @@ TEST(SlamRegistration, LoopInformationFollowsWhatTheSurfacesConstrain) {
   for (int k = 0; k < 6; ++k) EXPECT_GT(town(k, k), 0.8 * town_fit(k, k)) << k;
 }
 
+// A registered step's (and a loop's added) information is on the turn about the vertical alone:
+// the registration's variance of that turn (g^T F^-1 g, g = (0, up)) and nothing in the other five
+// directions but a negligible prior, whatever the sensor's tilt (`up` in its frame).
+TEST(SlamRegistration, HeadingInformationIsOnTheTurnAboutTheVerticalAlone) {
+  SlamConfig cfg;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  Eigen::Matrix<double, 6, 6> J;
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) J(i, j) = N(rng);
+  const Matrix6d fisher = 1e4 * (J * J.transpose() + 0.1 * Matrix6d::Identity());
+  const Eigen::Vector3d up = Eigen::Vector3d(0.0, std::sin(20 * kDeg), std::cos(20 * kDeg));  // pitched 20 deg
+  const Matrix6d H = HeadingInformation(fisher, up, cfg);
+  Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
+  g.tail<3>() = up;
+  const double var = g.dot(fisher.inverse() * g);
+  EXPECT_NEAR(g.dot(H * g), 1.0 / var, 1e-3 / var);
+  // Perpendicular turns and translations: the prior alone, a millionth of the odometry's.
+  const double odometry_r = 1.0 / std::pow(cfg.odom_sigma_r_deg * kDeg, 2), odometry_t = 1.0 / std::pow(cfg.odom_sigma_t_m, 2);
+  const Eigen::Vector3d across = up.cross(Eigen::Vector3d::UnitX()).normalized();
+  Eigen::Matrix<double, 6, 1> turn = Eigen::Matrix<double, 6, 1>::Zero(), shift = turn;
+  turn.tail<3>() = across;
+  shift(0) = 1.0;
+  EXPECT_LE(turn.dot(H * turn), 1.01e-6 * odometry_r);
+  EXPECT_LE(shift.dot(H * shift), 1.01e-6 * odometry_t);
+  EXPECT_GT(Eigen::SelfAdjointEigenSolver<Matrix6d>(H).eigenvalues().minCoeff(), 0.0);
+}
+
 TEST(SlamRegistrationReal, GicpPairMatchesReference) {
   LTM_REQUIRE_REAL_DATA(data);
   const std::string dir = data + "/gicp_pair";

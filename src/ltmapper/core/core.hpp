@@ -166,6 +166,9 @@ struct Session {
   std::vector<Keyframe> keyframes;  // sorted by index
   std::vector<Edge> odometry;       // |to - from| == 1
   std::vector<Edge> loops;          // intra-session loops
+  // LT-SLAM's: keyframe k + 1 registered onto keyframe k, with the registration's own information
+  // (always used, whatever graph.use_g2o_information says of the file's edges)
+  std::vector<Edge> registered;
   // Position in `keyframes` of the keyframe with this index, or -1.
   int Find(int index) const;
 };

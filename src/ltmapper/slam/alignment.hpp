@@ -41,6 +41,7 @@ struct SessionAlignment {
   std::vector<Pose> T_world_sensor;    // A * T_session_sensor; empty when not aligned
   int sc_candidates = 0, loops_verified = 0, loops_accepted = 0, radius_loops = 0;
   int own_loops = 0;  // accepted loops within the session (its route came back near itself)
+  std::vector<Edge> registered;  // its keyframe steps registered (Session::registered), in joint.g2o
   // [deg] the RMS residual rotation of the accepted loops tying it to earlier sessions (the loops'
   // later side) after the optimisation: the rotation uncertainty of its poses against theirs, which
   // LD's tolerances follow (io::ManifestSession::rotation_sigma_deg); 0 without such a loop

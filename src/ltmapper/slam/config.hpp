@@ -52,6 +52,7 @@ struct SlamConfig {
   double loop_sigma_t_m = 0.1;        // loop std-dev at fitness <= reg_fitness_floor
   double loop_sigma_r_deg = 0.5;
   double reg_fitness_floor = 0.02;    // [m^2]; sigma grows with sqrt(fitness / floor) above it
+  bool reg_steps = true;              // register each keyframe onto the one before (WithRegisteredSteps)
 
   // --- pose graph (Ceres)
   double odom_sigma_t_m = 0.05;       // odometry std-dev when the g2o carries no information
@@ -110,6 +111,7 @@ struct SlamConfig {
     v("registration.loop_sigma_t_m", loop_sigma_t_m, "m", 1e-4, 100.0);
     v("registration.loop_sigma_r_deg", loop_sigma_r_deg, "deg", 1e-4, 180.0);
     v("registration.fitness_floor", reg_fitness_floor, "m^2", 1e-6, 100.0);
+    v("registration.steps", reg_steps);
     v("graph.odom_sigma_t_m", odom_sigma_t_m, "m", 1e-5, 100.0);
     v("graph.odom_sigma_r_deg", odom_sigma_r_deg, "deg", 1e-5, 180.0);
     v("graph.use_g2o_information", use_g2o_information);

@@ -17,6 +17,7 @@
 #include <list>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 
 namespace ltm::slam {
@@ -51,6 +52,7 @@ class CloudStore {
     for (const Session& s : sessions) slots_.emplace_back(s.keyframes.size());
   }
   std::size_t Keyframes(int s) const { return sessions_[std::size_t(s)].keyframes.size(); }
+  const Keyframe& KeyframeOf(int s, int k) const { return sessions_[std::size_t(s)].keyframes[std::size_t(k)]; }
   // Loads a keyframe's raw scan; empty scans are an error.
   std::shared_ptr<const PointCloud> Raw(int s, int k) const {
     const Session& ses = sessions_[s];
@@ -236,8 +238,15 @@ std::vector<LoopRecord> NextBatch(PairCandidates& p, const SlamConfig& cfg) {
   return batch;
 }
 
+// The vertical in a keyframe's sensor frame: the z axis of its session's odometry frame (inertial
+// odometry keeps that frame's z against gravity; the add's reference holds world poses).
+Eigen::Vector3d Up(const Keyframe& kf) { return kf.T_session_sensor.linear().transpose() * Eigen::Vector3d::UnitZ(); }
+
 // Every candidate goes through the coarse stage, radius ones too: a query that ran far without
-// loops has an estimate metres off where it comes back.
+// loops has an estimate metres off where it comes back. A verified loop's information is the
+// paper's adaptive one (LoopInformation) plus the registration's own on the turn about the
+// vertical (HeadingInformation): the heading is where the sessions' poses drift apart between the
+// loops, and there the registration's measure is far finer than the fitness-scaled sigma.
 void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
               const std::string& label) {
   Progress progress(label, cand.size());
@@ -253,6 +262,7 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     l.verified = r.accepted;
     l.status = r.accepted ? "verified" : "rejected: " + r.reason;
     l.information = LoopInformation(r.fitness, r.accepted ? r.fisher : Matrix6d::Zero(), cfg);
+    if (r.accepted) l.information += HeadingInformation(r.fisher, Up(store.KeyframeOf(l.b.session, l.b.keyframe)), cfg);
     progress.Tick();
   });
   progress.Done();
@@ -647,6 +657,44 @@ void CheckPredictions(const std::vector<Session>& sessions, const std::vector<st
 }
 }  // namespace
 
+// The odometry refined by registration: each keyframe k + 1 of a session registered onto keyframe
+// k, single scans from the odometry's relative pose, fine stage only (the odometry is centimetres
+// off, not the metres a loop's guess may be). A verified step joins the session's graph beside its
+// odometry edge (Session::registered) with the registration's information on the heading
+// (HeadingInformation), far tighter there than an odometry that drifts. Sessions whose poses are
+// the world (the add's reference: central_own_loops off) are left as they are. Returns the sessions
+// with their steps; the registrations tried are added to *tried.
+std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg,
+                                         int threads, int* tried) {
+  std::vector<Session> out = sessions;
+  if (!cfg.reg_steps) return out;
+  SlamConfig fine = cfg;
+  fine.reg_coarse_correspondence_m = 0.0;
+  for (std::size_t s = 0; s < out.size(); ++s) {
+    const auto& kfs = out[s].keyframes;
+    if (kfs.size() < 2 || (s == 0 && !cfg.central_own_loops)) continue;
+    std::vector<std::optional<Edge>> steps(kfs.size() - 1);
+    *tried += int(steps.size());
+    ParallelFor(steps.size(), threads, [&](std::size_t k) {
+      const Pose guess = kfs[k].T_session_sensor.inverse() * kfs[k + 1].T_session_sensor;
+      const RegistrationResult r = RegisterGicp(*store.Get(int(s), int(k)), *store.Get(int(s), int(k + 1)), guess, fine);
+      if (!r.accepted) return;
+      Edge e;
+      e.from = kfs[k].index;
+      e.to = kfs[k + 1].index;
+      e.T_from_to = r.T_target_source;
+      e.information = HeadingInformation(r.fisher, Up(kfs[k + 1]), cfg);
+      e.has_information = true;
+      steps[k] = e;
+    });
+    for (const auto& e : steps)
+      if (e) out[s].registered.push_back(*e);
+    spdlog::info("slam: session {}: {} of {} keyframe steps registered", out[s].name, out[s].registered.size(),
+                 steps.size());
+  }
+  return out;
+}
+
 SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig& cfg_in, int threads) {
   ValidateConfig(cfg_in, "slam config");
   ValidateSessionGraphs(sessions);
@@ -664,23 +712,28 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   SlamConfig cfg = cfg_in;
   cfg.reg_max_translation_m = reach.farthest_m;
   sw = Stopwatch();
+  int steps_tried = 0;
+  const std::vector<Session> refined = WithRegisteredSteps(sessions, store, cfg, threads, &steps_tried);
+  const double t_steps = sw.Seconds();
+  sw = Stopwatch();
   std::vector<LoopRecord> loops;
   std::vector<PairCandidates> pairs = RetrieveCandidates(sessions, sc, cfg, threads, &loops);
   const double t_retr = sw.Seconds();
   StageCost cost;  // registration of the Scan Context candidates, back end, retries, refinement
   sw = Stopwatch();
   Register(loops, store, cfg, threads, "GICP scan context loops");
-  cost.registrations = static_cast<int>(loops.size());
-  cost.registration_s = sw.Seconds();
+  cost.registrations = static_cast<int>(loops.size()) + steps_tried;
+  cost.registration_s = sw.Seconds() + t_steps;
   sw = Stopwatch();
-  SlamResult res = OptimizeSessions(sessions, loops, cfg, threads);
+  SlamResult res = OptimizeSessions(refined, loops, cfg, threads);
   cost.optimisation_s = sw.Seconds();
-  RetryUnaligned(sessions, pairs, loops, res, store, cfg, threads, cost);
-  GlobalFallback(sessions, loops, res, store, cfg, threads, cost);
+  RetryUnaligned(refined, pairs, loops, res, store, cfg, threads, cost);
+  GlobalFallback(refined, loops, res, store, cfg, threads, cost);
   std::vector<std::vector<double>> routes;  // each session's distance along its odometry
   for (const Session& s : sessions) routes.push_back(PathLength(s));
-  Refine(sessions, routes, loops, res, store, cfg, reach.median_m, threads, cost);
-  CheckPredictions(sessions, routes, loops, res, cfg, reach.median_m, threads, cost);
+  Refine(refined, routes, loops, res, store, cfg, reach.median_m, threads, cost);
+  CheckPredictions(refined, routes, loops, res, cfg, reach.median_m, threads, cost);
+  for (std::size_t s = 0; s < refined.size(); ++s) res.sessions[s].registered = refined[s].registered;
   res.refine_radius_m = reach.median_m;
   res.max_translation_m = reach.farthest_m;
   res.time_descriptors_s = t_desc;

@@ -48,7 +48,7 @@ void WriteJointGraph(const std::vector<Session>& sessions, const SlamResult& res
   }
   for (std::size_t s = 0; s < n; ++s) {
     if (offset[s] < 0) continue;
-    for (const auto* edges : {&sessions[s].odometry, &sessions[s].loops}) {
+    for (const auto* edges : {&sessions[s].odometry, &sessions[s].loops, &res.sessions[s].registered}) {
       for (Edge e : *edges) {
         e.from = offset[s] + sessions[s].Find(e.from);
         e.to = offset[s] + sessions[s].Find(e.to);
@@ -112,6 +112,7 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
          << ", \"loops_verified\": " << a.loops_verified
          << ", \"loops_accepted\": " << a.loops_accepted
          << ", \"radius_loops_accepted\": " << a.radius_loops << ", \"own_loops_accepted\": " << a.own_loops
+         << ", \"registered_steps\": " << a.registered.size()
          << ", \"anchor\": " << (a.aligned ? PoseJson(a.anchor) : "null") << "}"
          << (s + 1 < n ? "," : "") << "\n";
     }
@@ -135,11 +136,11 @@ void WriteReportMd(const std::vector<Session>& sessions, const SlamResult& res, 
   io::WriteFileAtomic((fs::path(out_dir) / "report.md").string(), [&](std::ostream& os) {
     os << std::fixed << std::setprecision(2) << "# LT-SLAM report\n\nCentral session: `"
        << res.sessions[0].name << "` (world frame).\n\n"
-       << "| session | keyframes | aligned | SC candidates | verified | accepted | radius | own loops | "
-          "anchor x y z [m] | anchor yaw [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n";
+       << "| session | keyframes | registered steps | aligned | SC candidates | verified | accepted | radius | own loops | "
+          "anchor x y z [m] | anchor yaw [deg] |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (std::size_t s = 0; s < n; ++s) {
       const auto& a = res.sessions[s];
-      os << "| " << a.name << " | " << sessions[s].keyframes.size() << " | "
+      os << "| " << a.name << " | " << sessions[s].keyframes.size() << " | " << a.registered.size() << " | "
          << (a.aligned ? "yes" : "**NOT ALIGNED**") << " | " << a.sc_candidates << " | "
          << a.loops_verified << " | " << a.loops_accepted << " | " << a.radius_loops << " | " << a.own_loops << " | ";
       if (a.aligned) {
