@@ -136,6 +136,7 @@ TEST(SlamAlign, ARouteThatComesBackIsClosedWithinItsSession) {
 // One session's odometry drifts 0.2 deg in yaw per keyframe (3.6 deg over its 19 keyframes), no
 // loop anywhere. Each keyframe registered onto the one before (registration.steps) holds the
 // heading: the turn between the first and every later keyframe stays within a tenth of a degree.
+// The same drive with an odometry that does not drift gets no steps: they are no finer than it.
 TEST(SlamAlign, RegisteredStepsHoldTheHeadingTheOdometryDrifts) {
   const PointCloud world = test::SynthWorld(41);
   std::vector<Pose> truth;
@@ -151,6 +152,7 @@ TEST(SlamAlign, RegisteredStepsHoldTheHeadingTheOdometryDrifts) {
   SlamConfig off = FastConfig(), on = FastConfig();
   off.refine_rounds = on.refine_rounds = 0;
   off.reg_steps = false;
+  on.reg_steps = true;
   const SlamResult without = AlignSessions({s}, off, 2), with = AlignSessions({s}, on, 2);
   const double before = worst(without.sessions[0]), after = worst(with.sessions[0]);
   std::printf("odometry drifting 0.2 deg a keyframe: worst heading from the first keyframe %.3f deg, %.3f deg with %zu "
@@ -159,6 +161,9 @@ TEST(SlamAlign, RegisteredStepsHoldTheHeadingTheOdometryDrifts) {
   EXPECT_EQ(with.sessions[0].registered.size(), truth.size() - 1);
   EXPECT_GT(before, 3.0);
   EXPECT_LT(after, 0.1);
+  // An odometry that does not drift is as fine as the steps: they are left out.
+  const Session exact = test::SynthSession(world, "c", Pose::Identity(), -36, 36, 4.0, 0.0, 1, nullptr);
+  EXPECT_TRUE(AlignSessions({exact}, on, 2).sessions[0].registered.empty());
 }
 
 TEST(SlamAlign, SessionsWithoutOverlapAreNotAligned) {

@@ -163,11 +163,7 @@ TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
 // A VLP-16 pitched 10 deg down (seed 3: its two drives share about a third of their routes, and
 // every Scan Context candidate is wrong): the first round of global placements verifies two, the
 // second none, the third enough to align. A round without a verified placement ends the fallback
-// only while none was ever verified; ending it there left this query unaligned. The placements
-// depend on the central's map, so on its poses: with its keyframe steps registered
-// (registration.steps) the first round's 12 placements all land 5-120 m off and the fallback ends
-// there (the same scenes written to files and aligned by `ltmapper slam` align in two rounds). The
-// steps are off here to keep the sequence this rule is about.
+// only while none was ever verified; ending it there left this query unaligned.
 TEST(SlamRecall, GlobalFallbackGoesOnOnceAPlacementWasVerified) {
   sim::SimConfig sc = TwoSessions(kKeyframes);
   sc.seed = 3;
@@ -177,7 +173,6 @@ TEST(SlamRecall, GlobalFallbackGoesOnOnceAPlacementWasVerified) {
   const std::vector<Session> sessions = SimSessions(s);
   SlamConfig cfg;
   cfg.refine_rounds = 1;
-  cfg.reg_steps = false;
   const SlamResult r = AlignSessions(sessions, cfg, 2);
   ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
   int pairs = 0;

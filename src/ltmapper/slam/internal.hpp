@@ -70,8 +70,12 @@ void ValidateSessionGraphs(const std::vector<Session>& sessions);
 // Diagonal information of independent translation and rotation std-devs [m], [rad].
 Matrix6d DiagInformation(double sigma_t, double sigma_r);
 // Information of a registered step or loop on the turn about the vertical alone (`up`, in the
-// source keyframe's frame), from the registration's Fisher information (pose_graph.cpp).
-Matrix6d HeadingInformation(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg);
+// source keyframe's frame), from the registration's Fisher information (pose_graph.cpp), its
+// variance (HeadingVariance) times `variance_scale`.
+Matrix6d HeadingInformation(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg,
+                            double variance_scale = 1.0);
+// The variance [rad^2] of that turn the Fisher information implies.
+double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg);
 // Information of an inter-session loop: the paper's adaptive covariance from the registration
 // fitness plus the registration's own (the inverse of its Fisher information; zero: none).
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg);

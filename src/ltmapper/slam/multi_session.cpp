@@ -244,9 +244,10 @@ Eigen::Vector3d Up(const Keyframe& kf) { return kf.T_session_sensor.linear().tra
 
 // Every candidate goes through the coarse stage, radius ones too: a query that ran far without
 // loops has an estimate metres off where it comes back. A verified loop's information is the
-// paper's adaptive one (LoopInformation) plus the registration's own on the turn about the
-// vertical (HeadingInformation): the heading is where the sessions' poses drift apart between the
-// loops, and there the registration's measure is far finer than the fitness-scaled sigma.
+// paper's adaptive one (LoopInformation); with registration.steps, plus the registration's own on
+// the turn about the vertical (HeadingInformation): the steps hold each session's heading, and the
+// loops must then tie the sessions' headings as finely, or their residuals (the rotation sigma LD
+// reads) measure the loops' own error.
 void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
               const std::string& label) {
   Progress progress(label, cand.size());
@@ -262,7 +263,8 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     l.verified = r.accepted;
     l.status = r.accepted ? "verified" : "rejected: " + r.reason;
     l.information = LoopInformation(r.fitness, r.accepted ? r.fisher : Matrix6d::Zero(), cfg);
-    if (r.accepted) l.information += HeadingInformation(r.fisher, Up(store.KeyframeOf(l.b.session, l.b.keyframe)), cfg);
+    if (r.accepted && cfg.reg_steps)
+      l.information += HeadingInformation(r.fisher, Up(store.KeyframeOf(l.b.session, l.b.keyframe)), cfg);
     progress.Tick();
   });
   progress.Done();
@@ -657,40 +659,101 @@ void CheckPredictions(const std::vector<Session>& sessions, const std::vector<st
 }
 }  // namespace
 
+// The turn about `up` of the rotation from `a` to `b` [rad] (its axis is the same in either frame).
+double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up) {
+  const Eigen::AngleAxisd e(a.linear().transpose() * b.linear());
+  return e.angle() * e.axis().dot(up.normalized());
+}
+
+// What a session's registered steps say of their own heading, and of the odometry's:
+//  - closures: each pair of verified steps k, k + 1 is closed by registering keyframe k + 2 onto k
+//    directly. The two-step turn differs from the sum of the two steps' turns by the three
+//    registrations' errors, so a step's heading variance is a third of the closures' mean square
+//    (step_var), and the closures' mean squared ratio to the variances the Fisher information gives
+//    them is how far it understates them (scale, at least 1);
+//  - against the odometry: a step's turn minus the odometry's over the same step holds both their
+//    errors, so the odometry's heading error (mean square: a gyro's bias counts) is that mean square
+//    less the step's variance (odom_var).
+struct StepHeading {
+  double step_var = 0.0, odom_var = 0.0, scale = 1.0;  // [rad^2], [rad^2], [-]
+  std::size_t closures = 0;
+};
+StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResult>>& steps,
+                               const std::vector<std::optional<RegistrationResult>>& skips,
+                               const std::vector<Keyframe>& kfs, const SlamConfig& cfg) {
+  StepHeading h;
+  double closure = 0.0, ratio = 0.0, sum_sq = 0.0;
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < steps.size(); ++k) {
+    if (!steps[k]) continue;
+    const Pose odometry = kfs[k].T_session_sensor.inverse() * kfs[k + 1].T_session_sensor;
+    const double d = TurnAbout(odometry, steps[k]->T_target_source, Up(kfs[k + 1]));
+    sum_sq += d * d, ++n;
+    if (k + 1 >= steps.size() || !steps[k + 1] || !skips[k]) continue;
+    const Eigen::Vector3d up = Up(kfs[k + 2]);
+    const double c = TurnAbout(skips[k]->T_target_source, steps[k]->T_target_source * steps[k + 1]->T_target_source, up);
+    const double var = HeadingVariance(steps[k]->fisher, Up(kfs[k + 1]), cfg) +
+                       HeadingVariance(steps[k + 1]->fisher, up, cfg) + HeadingVariance(skips[k]->fisher, up, cfg);
+    closure += c * c, ratio += c * c / var, ++h.closures;
+  }
+  if (!h.closures || n < 2) return h;
+  h.step_var = closure / double(h.closures) / 3.0;
+  h.scale = std::max(1.0, ratio / double(h.closures));
+  h.odom_var = std::max(0.0, sum_sq / double(n) - h.step_var);
+  return h;
+}
+
 // The odometry refined by registration: each keyframe k + 1 of a session registered onto keyframe
 // k, single scans from the odometry's relative pose, fine stage only (the odometry is centimetres
-// off, not the metres a loop's guess may be). A verified step joins the session's graph beside its
-// odometry edge (Session::registered) with the registration's information on the heading
-// (HeadingInformation), far tighter there than an odometry that drifts. Sessions whose poses are
-// the world (the add's reference: central_own_loops off) are left as they are. Returns the sessions
-// with their steps; the registrations tried are added to *tried.
+// off, not the metres a loop's guess may be). Where the steps' heading is finer than the
+// odometry's (MeasureStepHeading, both measured on the session itself), each verified step joins
+// the session's graph beside its odometry edge (Session::registered) with the registration's
+// information on the heading (HeadingInformation), its variance scaled as the closures show. A
+// scanner whose consecutive scans share little (a forward cone that samples other places each
+// sweep) gives steps no finer than the odometry, and biased: they are left out. Sessions whose poses
+// are the world (the add's reference: central_own_loops off) are left as they are. Returns the
+// sessions with their steps; the registrations tried are added to *tried.
 std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg,
                                          int threads, int* tried) {
   std::vector<Session> out = sessions;
   if (!cfg.reg_steps) return out;
   SlamConfig fine = cfg;
   fine.reg_coarse_correspondence_m = 0.0;
+  const auto registered = [&](int s, std::size_t from, std::size_t to) -> std::optional<RegistrationResult> {
+    const auto& kfs = out[std::size_t(s)].keyframes;
+    const Pose guess = kfs[from].T_session_sensor.inverse() * kfs[to].T_session_sensor;
+    RegistrationResult r = RegisterGicp(*store.Get(s, int(from)), *store.Get(s, int(to)), guess, fine);
+    if (!r.accepted) return std::nullopt;
+    return r;
+  };
   for (std::size_t s = 0; s < out.size(); ++s) {
     const auto& kfs = out[s].keyframes;
     if (kfs.size() < 2 || (s == 0 && !cfg.central_own_loops)) continue;
-    std::vector<std::optional<Edge>> steps(kfs.size() - 1);
-    *tried += int(steps.size());
-    ParallelFor(steps.size(), threads, [&](std::size_t k) {
-      const Pose guess = kfs[k].T_session_sensor.inverse() * kfs[k + 1].T_session_sensor;
-      const RegistrationResult r = RegisterGicp(*store.Get(int(s), int(k)), *store.Get(int(s), int(k + 1)), guess, fine);
-      if (!r.accepted) return;
+    const std::size_t n = kfs.size() - 1;
+    std::vector<std::optional<RegistrationResult>> steps(n), skips(n);
+    *tried += int(n + (n - 1));
+    ParallelFor(2 * n - 1, threads, [&](std::size_t i) {
+      if (i < n) steps[i] = registered(int(s), i, i + 1);
+      else skips[i - n] = registered(int(s), i - n, i - n + 2);
+    });
+    const StepHeading h = MeasureStepHeading(steps, skips, kfs, cfg);
+    const bool finer = h.closures > 0 && h.step_var < h.odom_var;
+    constexpr double kRadToDeg = 180.0 / M_PI;
+    spdlog::info("slam: session {}: {} of {} keyframe steps verified; heading sigma {:.4f} deg a step (two-step "
+                 "closures: {}), the odometry's {:.4f} deg: {}",
+                 out[s].name, std::count_if(steps.begin(), steps.end(), [](const auto& r) { return bool(r); }), n,
+                 std::sqrt(h.step_var) * kRadToDeg, h.closures, std::sqrt(h.odom_var) * kRadToDeg,
+                 finer ? "registered" : "not finer than the odometry, left out");
+    for (std::size_t k = 0; k < n && finer; ++k) {
+      if (!steps[k]) continue;
       Edge e;
       e.from = kfs[k].index;
       e.to = kfs[k + 1].index;
-      e.T_from_to = r.T_target_source;
-      e.information = HeadingInformation(r.fisher, Up(kfs[k + 1]), cfg);
+      e.T_from_to = steps[k]->T_target_source;
+      e.information = HeadingInformation(steps[k]->fisher, Up(kfs[k + 1]), cfg, h.scale);
       e.has_information = true;
-      steps[k] = e;
-    });
-    for (const auto& e : steps)
-      if (e) out[s].registered.push_back(*e);
-    spdlog::info("slam: session {}: {} of {} keyframe steps registered", out[s].name, out[s].registered.size(),
-                 steps.size());
+      out[s].registered.push_back(e);
+    }
   }
   return out;
 }

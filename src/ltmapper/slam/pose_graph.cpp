@@ -285,13 +285,28 @@ constexpr double kNegligiblePrior = 1e-6;
 // and its roll and pitch carry the bias of the ground's rings, which move with the sensor: on the
 // default scene -0.24 and -0.37 % of the step along it and -0.003 deg of pitch a step, summed over a
 // session by the chain of steps (README, "Registered steps hold the heading").
-Matrix6d HeadingInformation(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg) {
-  const Matrix6d prior = kNegligiblePrior * DiagInformation(cfg.odom_sigma_t_m, cfg.odom_sigma_r_deg * M_PI / 180.0);
-  const Matrix6d F = 0.5 * (fisher + fisher.transpose()) + prior;
+namespace {
+Matrix6d NegligiblePrior(const SlamConfig& cfg) {
+  return kNegligiblePrior * DiagInformation(cfg.odom_sigma_t_m, cfg.odom_sigma_r_deg * M_PI / 180.0);
+}
+// The turn about `up` as a direction of the pose graph's residual (x y z rx ry rz).
+Eigen::Matrix<double, 6, 1> TurnDirection(const Eigen::Vector3d& up) {
   Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
   g.tail<3>() = up.normalized();
-  const double var = g.dot(F.ldlt().solve(g));
-  return g * g.transpose() / var + prior;
+  return g;
+}
+}  // namespace
+
+Matrix6d HeadingInformation(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg,
+                            double variance_scale) {
+  const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
+  return g * g.transpose() / (HeadingVariance(fisher, up, cfg) * variance_scale) + NegligiblePrior(cfg);
+}
+
+double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg) {
+  const Matrix6d F = 0.5 * (fisher + fisher.transpose()) + NegligiblePrior(cfg);
+  const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
+  return g.dot(F.ldlt().solve(g));
 }
 
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
