@@ -10,8 +10,11 @@ one table, worst HD SA first:
   separable truth, PD/ND: farther than the match distance from what the other session sampled> and strong / weak correct,
   against the beam truth (and the exact-ray truth) | changed objects found (precision) [found among the observable ones, eval objects' slice] | HD wall s/kf | run wall s | peak MB of the run
 
-usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [scenario.yaml ...]
+usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S]
+                               [--slam-config F] [--removert-config F] [--map-config F] [scenario.yaml ...]
   --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
+  --slam-config / --removert-config / --map-config go to `ltmapper run` (e.g. a slam YAML with
+  `registration: {steps: true}`); without them every stage runs with its defaults.
   A scenario's sim folder is reused when it is there and its config unchanged (delete --out to redo).
   Exit status 0 even when a row misses a target: this prints figures, the tests judge.
 """
@@ -126,7 +129,7 @@ def evaluate(ltm, sim, out, names):
     return row
 
 
-def scenario(ltm, yaml, out_root, keyframes, seed, keep):
+def scenario(ltm, yaml, out_root, keyframes, seed, keep, run_args):
     name = os.path.splitext(os.path.basename(yaml))[0]
     out = os.path.join(out_root, name)
     sim = os.path.join(out, "sim")
@@ -139,7 +142,7 @@ def scenario(ltm, yaml, out_root, keyframes, seed, keep):
     log = os.path.join(out, "run.log")
     t0 = time.time()
     try:
-        cpu, rss, wall = timed([ltm, "run", "--sessions"] + sessions + ["--out", runp], log)
+        cpu, rss, wall = timed([ltm, "run", "--sessions"] + sessions + ["--out", runp] + run_args, log)
     except RuntimeError:
         # A run that aligned no query session stops after LT-SLAM (exit 1). It is a row of the
         # table all the same ("1/N" aligned, no LD): the drives may share no view (eval traj's
@@ -190,13 +193,20 @@ def main():
     ap.add_argument("--keyframes", type=int, default=0, help="route.keyframes of every scenario (0 = the scenario's)")
     ap.add_argument("--seed", type=int, default=None, help="simulator seed of every scenario (default: the scenario's)")
     ap.add_argument("--keep", action="store_true", help="keep each run's changes/ and map store")
+    for stage in ("slam", "removert", "map"):
+        ap.add_argument("--%s-config" % stage, default=None, help="`ltmapper run --%s-config` (default: none)" % stage)
     ap.add_argument("scenarios", nargs="*")
     a = ap.parse_args()
+    run_args = []
+    for stage in ("slam", "removert", "map"):
+        f = getattr(a, "%s_config" % stage)
+        if f:
+            run_args += ["--%s-config" % stage, os.path.abspath(f)]
     yamls = a.scenarios or sorted(glob.glob(os.path.join(ROOT, "config", "scenarios", "*.yaml")))
     rows = []
     for y in yamls:
         try:
-            rows.append(scenario(a.ltmapper, y, a.out, a.keyframes, a.seed, a.keep))
+            rows.append(scenario(a.ltmapper, y, a.out, a.keyframes, a.seed, a.keep, run_args))
             print("done %s (%.0f s)" % (rows[-1]["name"], rows[-1]["wall"]), file=sys.stderr, flush=True)
         except RuntimeError as e:
             print("scenario %s: %s" % (y, e), file=sys.stderr, flush=True)
