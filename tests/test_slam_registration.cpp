@@ -130,7 +130,7 @@ TEST(SlamRegistration, HeadingInformationIsOnTheTurnAboutTheVerticalAlone) {
     for (int j = 0; j < 6; ++j) J(i, j) = N(rng);
   const Matrix6d fisher = 1e4 * (J * J.transpose() + 0.1 * Matrix6d::Identity());
   const Eigen::Vector3d up = Eigen::Vector3d(0.0, std::sin(20 * kDeg), std::cos(20 * kDeg));  // pitched 20 deg
-  const Matrix6d H = HeadingInformation(fisher, up, cfg);
+  const Matrix6d H = HeadingInformation(HeadingVariance(fisher, up, cfg), up, cfg);
   Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
   g.tail<3>() = up;
   const double var = g.dot(fisher.inverse() * g);

@@ -69,13 +69,11 @@ double ViewShare(const PointCloud& target, const PointCloud& source, const Pose&
 void ValidateSessionGraphs(const std::vector<Session>& sessions);
 // Diagonal information of independent translation and rotation std-devs [m], [rad].
 Matrix6d DiagInformation(double sigma_t, double sigma_r);
-// Information of a registered step or loop on the turn about the vertical alone (`up`, in the
-// source keyframe's frame), from the registration's Fisher information (pose_graph.cpp), its
-// variance (HeadingVariance) times `variance_scale`.
-Matrix6d HeadingInformation(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg,
-                            double variance_scale = 1.0);
-// The variance [rad^2] of that turn the Fisher information implies.
+// The variance [rad^2] of the turn about the vertical (`up`, in the source keyframe's frame) that a
+// registration's Fisher information implies (pose_graph.cpp).
 double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg);
+// Information of a registered step or loop on that turn alone, of the given variance [rad^2].
+Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg);
 // Information of an inter-session loop: the paper's adaptive covariance from the registration
 // fitness plus the registration's own (the inverse of its Fisher information; zero: none).
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg);

@@ -263,8 +263,10 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     l.verified = r.accepted;
     l.status = r.accepted ? "verified" : "rejected: " + r.reason;
     l.information = LoopInformation(r.fitness, r.accepted ? r.fisher : Matrix6d::Zero(), cfg);
-    if (r.accepted && cfg.reg_steps)
-      l.information += HeadingInformation(r.fisher, Up(store.KeyframeOf(l.b.session, l.b.keyframe)), cfg);
+    if (r.accepted && cfg.reg_steps) {
+      const Eigen::Vector3d up = Up(store.KeyframeOf(l.b.session, l.b.keyframe));
+      l.information += HeadingInformation(HeadingVariance(r.fisher, up, cfg), up, cfg);
+    }
     progress.Tick();
   });
   progress.Done();
@@ -677,11 +679,15 @@ double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up) {
 struct StepHeading {
   double step_var = 0.0, odom_var = 0.0, scale = 1.0;  // [rad^2], [rad^2], [-]
   std::size_t closures = 0;
+  std::vector<double> variance;  // per verified step, the Fisher information's (HeadingVariance) [rad^2]
 };
 StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResult>>& steps,
                                const std::vector<std::optional<RegistrationResult>>& skips,
                                const std::vector<Keyframe>& kfs, const SlamConfig& cfg) {
   StepHeading h;
+  h.variance.assign(steps.size(), 0.0);
+  for (std::size_t k = 0; k < steps.size(); ++k)
+    if (steps[k]) h.variance[k] = HeadingVariance(steps[k]->fisher, Up(kfs[k + 1]), cfg);
   double closure = 0.0, ratio = 0.0, sum_sq = 0.0;
   std::size_t n = 0;
   for (std::size_t k = 0; k < steps.size(); ++k) {
@@ -692,8 +698,7 @@ StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResul
     if (k + 1 >= steps.size() || !steps[k + 1] || !skips[k]) continue;
     const Eigen::Vector3d up = Up(kfs[k + 2]);
     const double c = TurnAbout(skips[k]->T_target_source, steps[k]->T_target_source * steps[k + 1]->T_target_source, up);
-    const double var = HeadingVariance(steps[k]->fisher, Up(kfs[k + 1]), cfg) +
-                       HeadingVariance(steps[k + 1]->fisher, up, cfg) + HeadingVariance(skips[k]->fisher, up, cfg);
+    const double var = h.variance[k] + h.variance[k + 1] + HeadingVariance(skips[k]->fisher, up, cfg);
     closure += c * c, ratio += c * c / var, ++h.closures;
   }
   if (!h.closures || n < 2) return h;
@@ -750,7 +755,7 @@ std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, C
       e.from = kfs[k].index;
       e.to = kfs[k + 1].index;
       e.T_from_to = steps[k]->T_target_source;
-      e.information = HeadingInformation(steps[k]->fisher, Up(kfs[k + 1]), cfg, h.scale);
+      e.information = HeadingInformation(h.variance[k] * h.scale, Up(kfs[k + 1]), cfg);
       e.has_information = true;
       out[s].registered.push_back(e);
     }

@@ -271,23 +271,10 @@ Matrix6d DiagInformation(double sigma_t, double sigma_r) {
 }
 
 namespace {
-// A prior this far below the odometry's information keeps a step's information invertible.
+// A prior this far below the odometry's information keeps a heading's information invertible.
 constexpr double kNegligiblePrior = 1e-6;
-}  // namespace
-
-// The information of a registered step or loop on the turn about the vertical alone (`up`, in
-// the source keyframe's frame), from the registration's Fisher information `fisher` (pose graph
-// order x y z rx ry rz, source frame): g g^T / var(g^T r), g = (0, up), var from the inverse of the
-// Fisher information. A prior far below the odometry's (kNegligiblePrior of it) is added to the
-// Fisher information before it is inverted and to the result, so both are invertible. A step
-// measures the heading change far better than an odometry integrates it (the heading is what
-// drifts; inertial odometry holds roll and pitch to gravity), while its translation along the road
-// and its roll and pitch carry the bias of the ground's rings, which move with the sensor: on the
-// default scene -0.24 and -0.37 % of the step along it and -0.003 deg of pitch a step, summed over a
-// session by the chain of steps (README, "Registered steps hold the heading").
-namespace {
 Matrix6d NegligiblePrior(const SlamConfig& cfg) {
-  return kNegligiblePrior * DiagInformation(cfg.odom_sigma_t_m, cfg.odom_sigma_r_deg * M_PI / 180.0);
+  return kNegligiblePrior * DiagInformation(cfg.odom_sigma_t_m, cfg.odom_sigma_r_deg * kDeg);
 }
 // The turn about `up` as a direction of the pose graph's residual (x y z rx ry rz).
 Eigen::Matrix<double, 6, 1> TurnDirection(const Eigen::Vector3d& up) {
@@ -297,16 +284,26 @@ Eigen::Matrix<double, 6, 1> TurnDirection(const Eigen::Vector3d& up) {
 }
 }  // namespace
 
-Matrix6d HeadingInformation(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg,
-                            double variance_scale) {
-  const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
-  return g * g.transpose() / (HeadingVariance(fisher, up, cfg) * variance_scale) + NegligiblePrior(cfg);
-}
-
+// The variance of the turn about `up` (g^T r, g = (0, up)) that a registration's Fisher information
+// `fisher` implies (pose graph order x y z rx ry rz, source frame): g^T F^-1 g, F the Fisher
+// information plus a prior far below the odometry's (kNegligiblePrior of it), so that it inverts
+// where the surfaces leave a direction unconstrained.
 double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg) {
   const Matrix6d F = 0.5 * (fisher + fisher.transpose()) + NegligiblePrior(cfg);
   const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
   return g.dot(F.ldlt().solve(g));
+}
+
+// The information of a registered step or loop on the turn about the vertical alone: g g^T /
+// variance, plus the same negligible prior so that it inverts. A step measures the heading change
+// far better than an odometry integrates it (the heading is what drifts; inertial odometry holds
+// roll and pitch to gravity), while its translation along the road and its roll and pitch carry
+// the bias of the ground's rings, which move with the sensor: on the default scene -0.24 and
+// -0.37 % of the step along it and -0.003 deg of pitch a step, summed over a session by the chain
+// of steps (README, "Registered steps hold the heading").
+Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg) {
+  const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
+  return g * g.transpose() / variance + NegligiblePrior(cfg);
 }
 
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
