@@ -163,7 +163,11 @@ TEST(SlamRecall, GlobalRegistrationAlignsWithoutScanContext) {
 // A VLP-16 pitched 10 deg down (seed 3: its two drives share about a third of their routes, and
 // every Scan Context candidate is wrong): the first round of global placements verifies two, the
 // second none, the third enough to align. A round without a verified placement ends the fallback
-// only while none was ever verified; ending it there left this query unaligned.
+// only while none was ever verified; ending it there left this query unaligned. The placements
+// depend on the central's map, so on its poses, and the poses on registration.steps (RANSAC on
+// FPFH matches of a sparse, tilted scan: a small change of the map changes which placements
+// verify; with the steps the query aligns after two rounds here, without the round that verified
+// none). The steps are off here to keep the sequence this rule is about.
 TEST(SlamRecall, GlobalFallbackGoesOnOnceAPlacementWasVerified) {
   sim::SimConfig sc = TwoSessions(kKeyframes);
   sc.seed = 3;
@@ -173,6 +177,7 @@ TEST(SlamRecall, GlobalFallbackGoesOnOnceAPlacementWasVerified) {
   const std::vector<Session> sessions = SimSessions(s);
   SlamConfig cfg;
   cfg.refine_rounds = 1;
+  cfg.reg_steps = false;
   const SlamResult r = AlignSessions(sessions, cfg, 2);
   ASSERT_TRUE(r.sessions[1].aligned) << r.sessions[1].reason;
   int pairs = 0;

@@ -146,6 +146,49 @@ TEST(SlamRegistration, HeadingInformationIsOnTheTurnAboutTheVerticalAlone) {
   EXPECT_GT(Eigen::SelfAdjointEigenSolver<Matrix6d>(H).eigenvalues().minCoeff(), 0.0);
 }
 
+// VarianceScale: squared errors of variance s v over v give s back, whatever the v; one in fifty
+// of them gross (a wrong loop's cycle) moves it by a few percent.
+TEST(SlamRegistration, VarianceScaleIsTheErrorsMedianRatioToTheModelsVariance) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> N(0.0, 1.0);
+  std::uniform_real_distribution<double> U(0.5, 5.0);
+  for (const double s : {0.06, 1.0, 12.0}) {
+    std::vector<double> ratio;
+    for (int i = 0; i < 8000; ++i) {
+      const double v = U(rng) * 1e-8, e = N(rng) * std::sqrt(s * v);
+      ratio.push_back((i % 50 == 0 ? 1e4 * e * e : e * e) / v);
+    }
+    EXPECT_NEAR(VarianceScale(ratio), s, 0.12 * s) << s;
+  }
+  EXPECT_EQ(VarianceScale({}), 1.0);
+}
+
+// OffTheGround: a scan of flat ground with a wall beside the road and a pole on it (from 1 m up),
+// from a sensor 1.8 m up and pitched 10 deg: the ground goes, the wall and the pole stay.
+TEST(SlamRegistration, OffTheGroundKeepsWhatStandsOnIt) {
+  SlamConfig cfg;
+  const Eigen::AngleAxisd pitch(10 * kDeg, Eigen::Vector3d::UnitY());
+  PointCloud scan;
+  std::vector<bool> ground;
+  const auto add = [&](double x, double y, double z, bool on_ground) {
+    const Eigen::Vector3d p = pitch.inverse() * Eigen::Vector3d(x, y, z - 1.8);  // world (sensor at 1.8 m) to sensor
+    scan.points.push_back(PointXYZI{float(p.x()), float(p.y()), float(p.z()), 0.f});
+    ground.push_back(on_ground);
+  };
+  for (double x = -20; x <= 20; x += 0.5)
+    for (double y = -6; y <= 9; y += 0.5) add(x, y, 0.0, true);
+  for (double x = -20; x <= 20; x += 0.5)
+    for (double z = 1.0; z <= 6.0; z += 0.5) add(x, 7.0, z, false);
+  for (double z = 1.0; z <= 5.0; z += 0.25) add(5.0, -4.0, z, false);
+  const PointCloud off = OffTheGround(scan, pitch.inverse() * Eigen::Vector3d::UnitZ(), cfg);
+  const std::size_t standing = std::size_t(std::count(ground.begin(), ground.end(), false));
+  EXPECT_EQ(off.size(), standing);
+  for (const auto& p : off.points) {
+    const Eigen::Vector3d w = pitch * p.xyz().cast<double>();
+    EXPECT_GT(w.z() + 1.8, cfg.reg_voxel_m) << w.transpose();
+  }
+}
+
 TEST(SlamRegistrationReal, GicpPairMatchesReference) {
   LTM_REQUIRE_REAL_DATA(data);
   const std::string dir = data + "/gicp_pair";
@@ -246,4 +289,49 @@ TEST(SlamRegistrationReal, Kitti08RevisitAcceptedAndAnotherPlaceRejected) {
   std::printf("KITTI 08 720<-00 0 (another place): ratio %.3f, inlier RMS %.3f m: %s\n", w.overlap, w.inlier_rms_m,
               w.accepted ? "accepted" : w.reason.c_str());
   EXPECT_FALSE(w.accepted);
+}
+
+// LoopHeadingScale: two parallel drives 2 m apart, each keyframe tied to its neighbour by a
+// registered step (heading variance 1e-12 rad^2) and to the other drive's by a loop whose heading
+// is off by N(0, 9 v), v its declared variance. The cycles of consecutive loops give 9 back. With
+// the odometry alone (the config's 0.2 deg a step, far coarser than the loops) no cycle measures.
+TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
+  SlamConfig cfg;
+  constexpr int kKeyframes = 400;
+  constexpr double kLoopVar = 1e-8, kScale = 9.0;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> N(0.0, std::sqrt(kScale * kLoopVar));
+  std::vector<Session> sessions(2);
+  for (int s = 0; s < 2; ++s) {
+    sessions[std::size_t(s)].name = "s" + std::to_string(s);
+    for (int k = 0; k < kKeyframes; ++k) {
+      Keyframe kf;
+      kf.index = k;
+      kf.T_session_sensor.translation() = Eigen::Vector3d(k, 0, 0);
+      sessions[std::size_t(s)].keyframes.push_back(kf);
+      if (k == 0) continue;
+      Edge e;
+      e.from = k - 1, e.to = k;
+      e.T_from_to.translation() = Eigen::Vector3d(1, 0, 0);
+      sessions[std::size_t(s)].odometry.push_back(e);
+      e.information = HeadingInformation(1e-12, Eigen::Vector3d::UnitZ(), cfg);
+      e.has_information = true;
+      sessions[std::size_t(s)].registered.push_back(e);
+    }
+  }
+  std::vector<LoopRecord> loops;
+  for (int k = 0; k < kKeyframes; ++k) {
+    LoopRecord l;
+    l.a = {0, k}, l.b = {1, k};
+    l.T_a_b = Pose(Eigen::AngleAxisd(N(rng), Eigen::Vector3d::UnitZ()));
+    l.T_a_b.translation() = Eigen::Vector3d(0, 2, 0);
+    l.verified = true;
+    l.heading_variance = kLoopVar;
+    loops.push_back(l);
+  }
+  const LoopHeading h = LoopHeadingScale(sessions, loops, cfg);
+  EXPECT_EQ(h.cycles, kKeyframes - 1);
+  EXPECT_NEAR(h.scale, kScale, 0.3 * kScale);
+  for (Session& s : sessions) s.registered.clear();
+  EXPECT_EQ(LoopHeadingScale(sessions, loops, cfg).cycles, 0);
 }

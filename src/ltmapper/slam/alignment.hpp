@@ -26,6 +26,10 @@ struct LoopRecord {
   std::string status;             // accepted / why rejected
   double residual_t_m = -1.0, residual_r_deg = -1.0;  // final unweighted residual
   Matrix6d information = Matrix6d::Identity();        // order x y z rx ry rz
+  // With registration.steps: the variance of the turn about the vertical that the registration's
+  // Fisher information gives (HeadingVariance) [rad^2]; the graph scales it as the loops' cycles
+  // show (LoopHeadingScale) and adds that information on the heading. 0: none.
+  double heading_variance = 0.0;
 };
 
 // A loop between two keyframes of one session (the radius search's, where its route came back):
@@ -59,6 +63,10 @@ struct SlamResult {
   bool solution_usable = true;
   double initial_cost = 0, final_cost = 0;
   int solver_iterations = 0;
+  // The loops' heading (LoopHeadingScale): cycles measured, and how far the Fisher information
+  // misstates the loops' heading variance (1 when no cycle measured it).
+  int heading_cycles = 0;
+  double loop_heading_scale = 1.0;
 };
 
 // Back end alone: anchor initialisation from `loops` (verified ones), consistency gating,

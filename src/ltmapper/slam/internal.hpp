@@ -65,6 +65,13 @@ double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pos
 // far, less slack_m. Whether the two scans could overlap at that pose, whatever they hold.
 double ViewShare(const PointCloud& target, const PointCloud& source, const Pose& T_target_source, double slack_m);
 
+// The points of `cloud` (a downsampled scan in its sensor frame, `up` the vertical in that frame)
+// off the ground: levelled, those more than a registration voxel above the lowest point of their
+// column (cells of two voxels; a voxel's centroid lies within one voxel of the ground it samples).
+// The ground says nothing of the turn about the vertical, and a ring sensor samples it in rings
+// that travel with the sensor: they pull a registration of two of its scans toward standing still,
+// along the route and, through the structures beside it, in heading (registration.cpp).
+PointCloud OffTheGround(const PointCloud& cloud, const Eigen::Vector3d& up, const SlamConfig& cfg);
 // Throws ltm::Error for sessions without keyframes, edges to missing keyframes, non-finite poses.
 void ValidateSessionGraphs(const std::vector<Session>& sessions);
 // Diagonal information of independent translation and rotation std-devs [m], [rad].
@@ -74,6 +81,30 @@ Matrix6d DiagInformation(double sigma_t, double sigma_r);
 double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const SlamConfig& cfg);
 // Information of a registered step or loop on that turn alone, of the given variance [rad^2].
 Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg);
+// The vertical in a keyframe's sensor frame: the z axis of its session's odometry frame (inertial
+// odometry keeps that frame's z against gravity; the add's reference holds world poses).
+Eigen::Vector3d Up(const Keyframe& kf);
+// The turn about `up` of the rotation from `a` to `b` [rad] (its axis is the same in either frame).
+double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up);
+// How far the variances a model gives understate (> 1) or overstate (< 1) the errors, from the
+// ratios (squared error over the model's variance) of errors measured one degree of freedom each:
+// their median over a chi-square's of one degree, which a few gross errors (a wrong loop, a step
+// through a moving truck) do not move; 1 without ratios (pose_graph.cpp).
+double VarianceScale(std::vector<double> ratio);
+// How far the loops' heading variances (LoopRecord::heading_variance) misstate their errors,
+// measured on the loops themselves (pose_graph.cpp): two verified loops between the same sessions,
+// next to each other along the first session's route, close a cycle through each session's edges
+// between their keyframes (of a registered step and the odometry edge, the finer in heading). Its turn
+// about the vertical is the two loops' errors plus the edges'. Where the edges' variance (from
+// their information) is below the two loops', the cycle measures the loops: the scale is the median
+// over those cycles of (turn^2 - edges' variance) / (the two loops' variances), over the median of
+// a chi-square of one degree (VarianceScale).
+struct LoopHeading {
+  int cycles = 0;
+  double scale = 1.0;
+};
+LoopHeading LoopHeadingScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
+                             const SlamConfig& cfg);
 // Information of an inter-session loop: the paper's adaptive covariance from the registration
 // fitness plus the registration's own (the inverse of its Fisher information; zero: none).
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg);

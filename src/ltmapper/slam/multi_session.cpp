@@ -238,16 +238,12 @@ std::vector<LoopRecord> NextBatch(PairCandidates& p, const SlamConfig& cfg) {
   return batch;
 }
 
-// The vertical in a keyframe's sensor frame: the z axis of its session's odometry frame (inertial
-// odometry keeps that frame's z against gravity; the add's reference holds world poses).
-Eigen::Vector3d Up(const Keyframe& kf) { return kf.T_session_sensor.linear().transpose() * Eigen::Vector3d::UnitZ(); }
-
 // Every candidate goes through the coarse stage, radius ones too: a query that ran far without
 // loops has an estimate metres off where it comes back. A verified loop's information is the
-// paper's adaptive one (LoopInformation); with registration.steps, plus the registration's own on
-// the turn about the vertical (HeadingInformation): the steps hold each session's heading, and the
-// loops must then tie the sessions' headings as finely, or their residuals (the rotation sigma LD
-// reads) measure the loops' own error.
+// paper's adaptive one (LoopInformation); with registration.steps, the graph adds the registration's
+// own on the turn about the vertical, scaled as the loops' cycles show (LoopHeadingScale): the steps
+// hold each session's heading, and the loops must then tie the sessions' headings as finely, or
+// their residuals (the rotation sigma LD reads) measure the loops' own error.
 void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig& cfg, int threads,
               const std::string& label) {
   Progress progress(label, cand.size());
@@ -263,10 +259,8 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     l.verified = r.accepted;
     l.status = r.accepted ? "verified" : "rejected: " + r.reason;
     l.information = LoopInformation(r.fitness, r.accepted ? r.fisher : Matrix6d::Zero(), cfg);
-    if (r.accepted && cfg.reg_steps) {
-      const Eigen::Vector3d up = Up(store.KeyframeOf(l.b.session, l.b.keyframe));
-      l.information += HeadingInformation(HeadingVariance(r.fisher, up, cfg), up, cfg);
-    }
+    l.heading_variance =
+        r.accepted && cfg.reg_steps ? HeadingVariance(r.fisher, Up(store.KeyframeOf(l.b.session, l.b.keyframe)), cfg) : 0.0;
     progress.Tick();
   });
   progress.Done();
@@ -661,23 +655,21 @@ void CheckPredictions(const std::vector<Session>& sessions, const std::vector<st
 }
 }  // namespace
 
-// The turn about `up` of the rotation from `a` to `b` [rad] (its axis is the same in either frame).
-double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up) {
-  const Eigen::AngleAxisd e(a.linear().transpose() * b.linear());
-  return e.angle() * e.axis().dot(up.normalized());
-}
-
 // What a session's registered steps say of their own heading, and of the odometry's:
 //  - closures: each pair of verified steps k, k + 1 is closed by registering keyframe k + 2 onto k
 //    directly. The two-step turn differs from the sum of the two steps' turns by the three
-//    registrations' errors, so a step's heading variance is a third of the closures' mean square
-//    (step_var), and the closures' mean squared ratio to the variances the Fisher information gives
-//    them is how far it understates them (scale, at least 1);
-//  - against the odometry: a step's turn minus the odometry's over the same step holds both their
-//    errors, so the odometry's heading error (mean square: a gyro's bias counts) is that mean square
-//    less the step's variance (odom_var).
+//    registrations' errors. A turn each registration of a scan pair makes of its own (a scene not
+//    symmetric about the route: b, the same for a step and a two-step) survives in the closure as
+//    b + b - b: the closures' mean is the steps' bias (bias; on seed 11's HDL-32E -0.0005 and
+//    -0.0017 deg a step against the truth's -0.0006 and -0.0020). Their variance about it is three
+//    steps' (step_var), and their squared ratios to the variances the Fisher information gives them
+//    say how far it misstates those (scale, VarianceScale: off the ground it overstates a step's
+//    heading variance about 16 times there);
+//  - against the odometry: a step's turn, its bias taken off, minus the odometry's over the same
+//    step holds both their errors, so the odometry's heading error (mean square: a gyro's bias
+//    counts) is that mean square less the step's variance (odom_var).
 struct StepHeading {
-  double step_var = 0.0, odom_var = 0.0, scale = 1.0;  // [rad^2], [rad^2], [-]
+  double bias = 0.0, step_var = 0.0, odom_var = 0.0, scale = 1.0;  // [rad], [rad^2], [rad^2], [-]
   std::size_t closures = 0;
   std::vector<double> variance;  // per verified step, the Fisher information's (HeadingVariance) [rad^2]
 };
@@ -688,32 +680,72 @@ StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResul
   h.variance.assign(steps.size(), 0.0);
   for (std::size_t k = 0; k < steps.size(); ++k)
     if (steps[k]) h.variance[k] = HeadingVariance(steps[k]->fisher, Up(kfs[k + 1]), cfg);
-  double closure = 0.0, ratio = 0.0, sum_sq = 0.0;
+  std::vector<double> closure, var;
+  for (std::size_t k = 0; k + 1 < steps.size(); ++k) {
+    if (!steps[k] || !steps[k + 1] || !skips[k]) continue;
+    const Eigen::Vector3d up = Up(kfs[k + 2]);
+    closure.push_back(TurnAbout(skips[k]->T_target_source, steps[k]->T_target_source * steps[k + 1]->T_target_source, up));
+    var.push_back(h.variance[k] + h.variance[k + 1] + HeadingVariance(skips[k]->fisher, up, cfg));
+  }
+  h.closures = closure.size();
+  if (h.closures < 2) return h;
+  double sum = 0.0, sum_sq = 0.0;
+  for (double c : closure) sum += c;
+  h.bias = sum / double(h.closures);
+  std::vector<double> ratio;
+  for (std::size_t i = 0; i < h.closures; ++i) {
+    const double c = closure[i] - h.bias;
+    sum_sq += c * c, ratio.push_back(c * c / var[i]);
+  }
+  h.step_var = sum_sq / double(h.closures - 1) / 3.0;
+  h.scale = VarianceScale(std::move(ratio));
+  double odom_sq = 0.0;
   std::size_t n = 0;
   for (std::size_t k = 0; k < steps.size(); ++k) {
     if (!steps[k]) continue;
     const Pose odometry = kfs[k].T_session_sensor.inverse() * kfs[k + 1].T_session_sensor;
-    const double d = TurnAbout(odometry, steps[k]->T_target_source, Up(kfs[k + 1]));
-    sum_sq += d * d, ++n;
-    if (k + 1 >= steps.size() || !steps[k + 1] || !skips[k]) continue;
-    const Eigen::Vector3d up = Up(kfs[k + 2]);
-    const double c = TurnAbout(skips[k]->T_target_source, steps[k]->T_target_source * steps[k + 1]->T_target_source, up);
-    const double var = h.variance[k] + h.variance[k + 1] + HeadingVariance(skips[k]->fisher, up, cfg);
-    closure += c * c, ratio += c * c / var, ++h.closures;
+    const double d = TurnAbout(odometry, steps[k]->T_target_source, Up(kfs[k + 1])) - h.bias;
+    odom_sq += d * d, ++n;
   }
-  if (!h.closures || n < 2) return h;
-  h.step_var = closure / double(h.closures) / 3.0;
-  h.scale = std::max(1.0, ratio / double(h.closures));
-  h.odom_var = std::max(0.0, sum_sq / double(n) - h.step_var);
+  h.odom_var = std::max(0.0, odom_sq / double(n) - h.step_var);
   return h;
 }
 
+// Keyframe k + 1 registered onto k (*steps, k < n) and k + 2 onto k (*skips, k < n - 1) of a
+// session's keyframes `kfs`, scans from `scan` (downsampled, sensor frame), from the odometry's
+// relative pose, off the ground (OffTheGround: the steps measure the heading alone);
+// a registration not accepted is left empty. In blocks of keyframes, each scan's ground found once
+// per block.
+void RegisterSteps(const std::vector<Keyframe>& kfs, const std::function<std::shared_ptr<const PointCloud>(std::size_t)>& scan,
+                   const SlamConfig& cfg, int threads, std::vector<std::optional<RegistrationResult>>* steps,
+                   std::vector<std::optional<RegistrationResult>>* skips) {
+  constexpr std::size_t kBlock = 256;  // keyframes whose scans off the ground are held at once
+  const std::size_t n = kfs.size() - 1;
+  for (std::size_t b = 0; b < n; b += kBlock) {
+    const std::size_t e = std::min(n, b + kBlock), last = std::min(kfs.size() - 1, e + 1);
+    std::vector<PointCloud> off(last - b + 1);  // off the ground
+    ParallelFor(off.size(), threads, [&](std::size_t i) { off[i] = OffTheGround(*scan(b + i), Up(kfs[b + i]), cfg); });
+    const auto registered = [&](std::size_t from, std::size_t to) -> std::optional<RegistrationResult> {
+      const Pose guess = kfs[from].T_session_sensor.inverse() * kfs[to].T_session_sensor;
+      RegistrationResult r = RegisterGicp(off[from - b], off[to - b], guess, cfg);
+      if (!r.accepted) return std::nullopt;
+      return r;
+    };
+    ParallelFor(2 * (e - b), threads, [&](std::size_t i) {
+      const std::size_t k = b + i / 2;
+      if (i % 2 == 0) (*steps)[k] = registered(k, k + 1);
+      else if (k + 2 < kfs.size()) (*skips)[k] = registered(k, k + 2);
+    });
+  }
+}
+
 // The odometry refined by registration: each keyframe k + 1 of a session registered onto keyframe
-// k, single scans from the odometry's relative pose, fine stage only (the odometry is centimetres
-// off, not the metres a loop's guess may be). Where the steps' heading is finer than the
-// odometry's (MeasureStepHeading, both measured on the session itself), each verified step joins
-// the session's graph beside its odometry edge (Session::registered) with the registration's
-// information on the heading (HeadingInformation), its variance scaled as the closures show. A
+// k, single scans off the ground from the odometry's relative pose, fine stage only (the odometry
+// is centimetres off, not the metres a loop's guess may be; RegisterSteps). Where the steps'
+// heading is finer than the odometry's (MeasureStepHeading, both measured on the session itself),
+// each verified step, the closures' bias turned back, joins the session's graph beside its
+// odometry edge (Session::registered) with the registration's information on the heading
+// (HeadingInformation), its variance scaled as the closures show. A
 // scanner whose consecutive scans share little (a forward cone that samples other places each
 // sweep) gives steps no finer than the odometry, and biased: they are left out. Sessions whose poses
 // are the world (the add's reference: central_own_loops off) are left as they are. Returns the
@@ -724,37 +756,27 @@ std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, C
   if (!cfg.reg_steps) return out;
   SlamConfig fine = cfg;
   fine.reg_coarse_correspondence_m = 0.0;
-  const auto registered = [&](int s, std::size_t from, std::size_t to) -> std::optional<RegistrationResult> {
-    const auto& kfs = out[std::size_t(s)].keyframes;
-    const Pose guess = kfs[from].T_session_sensor.inverse() * kfs[to].T_session_sensor;
-    RegistrationResult r = RegisterGicp(*store.Get(s, int(from)), *store.Get(s, int(to)), guess, fine);
-    if (!r.accepted) return std::nullopt;
-    return r;
-  };
   for (std::size_t s = 0; s < out.size(); ++s) {
     const auto& kfs = out[s].keyframes;
     if (kfs.size() < 2 || (s == 0 && !cfg.central_own_loops)) continue;
     const std::size_t n = kfs.size() - 1;
     std::vector<std::optional<RegistrationResult>> steps(n), skips(n);
     *tried += int(n + (n - 1));
-    ParallelFor(2 * n - 1, threads, [&](std::size_t i) {
-      if (i < n) steps[i] = registered(int(s), i, i + 1);
-      else skips[i - n] = registered(int(s), i - n, i - n + 2);
-    });
+    RegisterSteps(kfs, [&](std::size_t k) { return store.Get(int(s), int(k)); }, fine, threads, &steps, &skips);
     const StepHeading h = MeasureStepHeading(steps, skips, kfs, cfg);
-    const bool finer = h.closures > 0 && h.step_var < h.odom_var;
+    const bool finer = h.closures > 1 && h.step_var < h.odom_var;
     constexpr double kRadToDeg = 180.0 / M_PI;
-    spdlog::info("slam: session {}: {} of {} keyframe steps verified; heading sigma {:.4f} deg a step (two-step "
-                 "closures: {}), the odometry's {:.4f} deg: {}",
+    spdlog::info("slam: session {}: {} of {} keyframe steps verified; heading sigma {:.4f} deg a step, bias {:.4f} "
+                 "(two-step closures: {}), the odometry's {:.4f} deg: {}",
                  out[s].name, std::count_if(steps.begin(), steps.end(), [](const auto& r) { return bool(r); }), n,
-                 std::sqrt(h.step_var) * kRadToDeg, h.closures, std::sqrt(h.odom_var) * kRadToDeg,
+                 std::sqrt(h.step_var) * kRadToDeg, h.bias * kRadToDeg, h.closures, std::sqrt(h.odom_var) * kRadToDeg,
                  finer ? "registered" : "not finer than the odometry, left out");
     for (std::size_t k = 0; k < n && finer; ++k) {
       if (!steps[k]) continue;
       Edge e;
       e.from = kfs[k].index;
       e.to = kfs[k + 1].index;
-      e.T_from_to = steps[k]->T_target_source;
+      e.T_from_to = steps[k]->T_target_source * Pose(Eigen::AngleAxisd(-h.bias, Up(kfs[k + 1])));
       e.information = HeadingInformation(h.variance[k] * h.scale, Up(kfs[k + 1]), cfg);
       e.has_information = true;
       out[s].registered.push_back(e);
@@ -810,6 +832,9 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   res.time_optimisation_s = cost.optimisation_s;
   res.time_total_s = total.Seconds();
   res.registrations = cost.registrations;
+  if (res.heading_cycles > 0)
+    spdlog::info("slam: the loops' heading, measured on {} cycles of two loops: {:.1f} x the variance their "
+                 "registrations' Fisher information gives", res.heading_cycles, res.loop_heading_scale);
   spdlog::info("slam: time per phase: descriptors {:.2f} s, retrieval {:.2f} s, registration {:.2f} s "
                "({} GICP), optimisation {:.2f} s, total {:.2f} s",
                t_desc, t_retr, cost.registration_s, cost.registrations, cost.optimisation_s, res.time_total_s);

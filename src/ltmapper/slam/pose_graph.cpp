@@ -11,10 +11,12 @@
 #include <array>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <sstream>
 #include <thread>
+#include <tuple>
 
 namespace ltm::slam {
 
@@ -64,12 +66,20 @@ double AngleDeg(const Eigen::Matrix3d& R) {
   return Eigen::AngleAxisd(R).angle() / kDeg;
 }
 
+// A session edge's information in the graph: its own (`own_information`: registered steps), or
+// the file's when graph.use_g2o_information says so, else the config's odometry sigmas.
+Matrix6d EdgeInformation(const Edge& e, const SlamConfig& cfg, bool own_information) {
+  if ((cfg.use_g2o_information || own_information) && e.has_information) return e.information;
+  return DiagInformation(cfg.odom_sigma_t_m, cfg.odom_sigma_r_deg * kDeg);
+}
+
 struct Graph {
   const std::vector<Session>& sessions;
   const SlamConfig& cfg;
   std::vector<std::vector<Pose>> poses;  // current estimate, session frame
   std::vector<Pose> anchors;
   std::vector<bool> aligned;
+  LoopHeading heading;  // how far the loops' heading variances misstate their errors (LoopHeadingScale)
 };
 
 struct SolveStats {
@@ -109,9 +119,10 @@ class GraphProblem {
   // within one session (OwnLoop) between its two poses (the anchor cancels), with the same loss.
   void AddLoop(const LoopRecord& l) {
     const int sa = l.a.session, sb = l.b.session;
+    const Matrix6d info = LoopGraphInformation(l);
     if (OwnLoop(l)) {
       auto* cost = new ceres::AutoDiffCostFunction<detail::BetweenFactor, 6, 7, 7>(
-          new detail::BetweenFactor(l.T_a_b, SqrtInformation(l.information, "loop within a session")));
+          new detail::BetweenFactor(l.T_a_b, SqrtInformation(info, "loop within a session")));
       problem_.AddResidualBlock(cost, MakeLoss(g_.cfg), nodes_[sa][l.a.keyframe].data(), nodes_[sb][l.b.keyframe].data());
       return;
     }
@@ -120,7 +131,7 @@ class GraphProblem {
     AddBlock(A);
     AddBlock(B);
     auto* cost = new ceres::AutoDiffCostFunction<detail::AnchorLoopFactor, 6, 7, 7, 7, 7>(
-        new detail::AnchorLoopFactor(l.T_a_b, SqrtInformation(l.information, "inter-session loop")));
+        new detail::AnchorLoopFactor(l.T_a_b, SqrtInformation(info, "inter-session loop")));
     problem_.AddResidualBlock(cost, MakeLoss(g_.cfg), A, nodes_[sa][l.a.keyframe].data(), B,
                               nodes_[sb][l.b.keyframe].data());
   }
@@ -159,6 +170,14 @@ class GraphProblem {
     if (!problem_.HasParameterBlock(b)) problem_.AddParameterBlock(b, 7, manifold_);
   }
 
+  // A loop's information: the paper's, plus its registration's on the heading scaled as the loops'
+  // cycles show, where they measured it (registration.steps).
+  Matrix6d LoopGraphInformation(const LoopRecord& l) const {
+    if (l.heading_variance <= 0.0 || g_.heading.cycles == 0) return l.information;
+    const Keyframe& kb = g_.sessions[std::size_t(l.b.session)].keyframes[std::size_t(l.b.keyframe)];
+    return l.information + HeadingInformation(l.heading_variance * g_.heading.scale, Up(kb), g_.cfg);
+  }
+
   // Edges of session s; `own_information`: each edge's information, else the file's only when
   // graph.use_g2o_information says so (else the config's odometry sigmas).
   void AddEdges(std::size_t s, const std::vector<Edge>& edges, const char* kind, bool own_information = false) {
@@ -167,9 +186,7 @@ class GraphProblem {
       const int a = ses.Find(e.from), b = ses.Find(e.to);
       const std::string what =
           "session " + ses.name + " " + kind + " edge " + std::to_string(e.from) + "-" + std::to_string(e.to);
-      const Matrix6d info = ((g_.cfg.use_g2o_information || own_information) && e.has_information)
-                                ? e.information
-                                : DiagInformation(g_.cfg.odom_sigma_t_m, g_.cfg.odom_sigma_r_deg * kDeg);
+      const Matrix6d info = EdgeInformation(e, g_.cfg, own_information);
       auto* cost = new ceres::AutoDiffCostFunction<detail::BetweenFactor, 6, 7, 7>(
           new detail::BetweenFactor(e.T_from_to, SqrtInformation(info, what)));
       problem_.AddResidualBlock(cost, nullptr, nodes_[s][a].data(), nodes_[s][b].data());
@@ -304,6 +321,94 @@ double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const 
 Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg) {
   const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
   return g * g.transpose() / variance + NegligiblePrior(cfg);
+}
+
+Eigen::Vector3d Up(const Keyframe& kf) { return kf.T_session_sensor.linear().transpose() * Eigen::Vector3d::UnitZ(); }
+
+double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up) {
+  const Eigen::AngleAxisd e(a.linear().transpose() * b.linear());
+  return e.angle() * e.axis().dot(up.normalized());
+}
+
+double VarianceScale(std::vector<double> ratio) {
+  constexpr double kChiSquare1Median = 0.45493642;
+  if (ratio.empty()) return 1.0;
+  const auto mid = ratio.begin() + std::ptrdiff_t(ratio.size() / 2);
+  std::nth_element(ratio.begin(), mid, ratio.end());
+  return *mid > 0.0 ? *mid / kChiSquare1Median : 1.0;
+}
+
+namespace {
+
+// The edges a loops' cycle runs through in one session: per keyframe position k, the edge from k to
+// k + 1 (the finer in heading of its registered step and its odometry edge) and the variance of its
+// turn about the vertical [rad^2] (infinite without an edge).
+struct CycleEdges {
+  std::vector<Pose> T;
+  std::vector<double> var;
+};
+CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
+  const std::size_t n = s.keyframes.empty() ? 0 : s.keyframes.size() - 1;
+  CycleEdges c{std::vector<Pose>(n, Pose::Identity()), std::vector<double>(n, std::numeric_limits<double>::infinity())};
+  const auto put = [&](const std::vector<Edge>& edges, bool own_information) {
+    for (const Edge& e : edges) {
+      const int a = s.Find(e.from), b = s.Find(e.to);
+      if (a < 0 || b != a + 1) continue;
+      const Eigen::Matrix<double, 6, 1> g = TurnDirection(Up(s.keyframes[std::size_t(b)]));
+      const double var = 1.0 / g.dot(EdgeInformation(e, cfg, own_information) * g);
+      if (var < c.var[std::size_t(a)]) c.T[std::size_t(a)] = e.T_from_to, c.var[std::size_t(a)] = var;
+    }
+  };
+  put(s.odometry, false);
+  put(s.registered, true);
+  return c;
+}
+
+// The pose of keyframe position j in the frame of position i through the edges, and the variance of
+// its turn (their sum); false where an edge is missing.
+bool Through(const CycleEdges& c, int i, int j, Pose* T, double* var) {
+  *T = Pose::Identity();
+  *var = 0.0;
+  for (int k = std::min(i, j); k < std::max(i, j); ++k) {
+    if (!std::isfinite(c.var[std::size_t(k)])) return false;
+    *T = *T * c.T[std::size_t(k)];
+    *var += c.var[std::size_t(k)];
+  }
+  if (j < i) *T = T->inverse();
+  return true;
+}
+}  // namespace
+
+LoopHeading LoopHeadingScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
+                             const SlamConfig& cfg) {
+  std::vector<const LoopRecord*> ls;
+  for (const LoopRecord& l : loops)
+    if (l.verified && !OwnLoop(l) && l.heading_variance > 0.0) ls.push_back(&l);
+  const auto key = [](const LoopRecord* l) { return std::tie(l->a.session, l->b.session, l->a.keyframe, l->b.keyframe); };
+  std::sort(ls.begin(), ls.end(), [&](const LoopRecord* x, const LoopRecord* y) { return key(x) < key(y); });
+  std::vector<CycleEdges> edges;
+  for (const Session& s : sessions) edges.push_back(EdgesOf(s, cfg));
+  std::vector<double> ratio;
+  for (std::size_t i = 1; i < ls.size(); ++i) {
+    const LoopRecord &l1 = *ls[i - 1], &l2 = *ls[i];
+    if (l1.a.session != l2.a.session || l1.b.session != l2.b.session) continue;
+    Pose A, B;
+    double va = 0.0, vb = 0.0;
+    if (!Through(edges[std::size_t(l1.a.session)], l1.a.keyframe, l2.a.keyframe, &A, &va) ||
+        !Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B, &vb))
+      continue;
+    const double v = l1.heading_variance + l2.heading_variance;
+    if (va + vb >= v) continue;  // the cycle would measure the edges, not the loops
+    // Both T1 B and A T2 map keyframe b2 into keyframe a1.
+    const Keyframe& b2 = sessions[std::size_t(l2.b.session)].keyframes[std::size_t(l2.b.keyframe)];
+    const double c = TurnAbout(A * l2.T_a_b, l1.T_a_b * B, Up(b2));
+    ratio.push_back((c * c - va - vb) / v);
+  }
+  LoopHeading out;
+  if (ratio.empty()) return out;
+  out.cycles = int(ratio.size());
+  out.scale = VarianceScale(std::move(ratio));
+  return out;
 }
 
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
@@ -554,6 +659,8 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
   for (std::size_t s = 0; s < n.size(); ++s)
     if (n[s]) res.sessions[s].rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
   res.loops = loops;
+  res.heading_cycles = g.heading.cycles;
+  res.loop_heading_scale = g.heading.scale;
   return res;
 }
 }  // namespace
@@ -564,13 +671,14 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
   ValidateSessionGraphs(sessions);
   const std::size_t n = sessions.size();
   Graph g{sessions, cfg, std::vector<std::vector<Pose>>(n), std::vector<Pose>(n, Pose::Identity()),
-          std::vector<bool>(n, false)};
+          std::vector<bool>(n, false), LoopHeading{}};
   std::vector<std::vector<double>> path(n);
   for (std::size_t s = 0; s < n; ++s) {
     for (const Keyframe& kf : sessions[s].keyframes) g.poses[s].push_back(kf.T_session_sensor);
     path[s] = PathLength(g.poses[s]);
   }
   CheckLoops(sessions, loops);
+  g.heading = LoopHeadingScale(sessions, loops, cfg);
   std::vector<std::string> reason(n);
   g.aligned[0] = true;
   InitialiseAnchors(g, loops, path, reason);

@@ -212,6 +212,23 @@ double ViewShare(const PointCloud& target, const PointCloud& source, const Pose&
   return double(seen) / double(source.size());
 }
 
+PointCloud OffTheGround(const PointCloud& cloud, const Eigen::Vector3d& up, const SlamConfig& cfg) {
+  const Eigen::Quaterniond level = Eigen::Quaterniond::FromTwoVectors(up.normalized(), Eigen::Vector3d::UnitZ());
+  PointCloud levelled = cloud;
+  for (auto& p : levelled.points) {
+    const Eigen::Vector3d v = level * p.xyz().cast<double>();
+    p.x = float(v.x()), p.y = float(v.y()), p.z = float(v.z());
+  }
+  geometry::LowestGrid lowest(2.0 * cfg.reg_voxel_m);
+  lowest.Add(levelled);
+  std::vector<bool> keep(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    float z = 0.f;
+    keep[i] = !lowest.At(levelled.points[i].xyz(), &z) || levelled.points[i].z > z + cfg.reg_voxel_m;
+  }
+  return cloud.select(keep);
+}
+
 RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
                                 const Pose& T_target_source_init, const SlamConfig& cfg) {
   RegistrationResult r;
