@@ -314,10 +314,11 @@ double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const 
 // The information of a registered step or loop on the turn about the vertical alone: g g^T /
 // variance, plus the same negligible prior so that it inverts. A step measures the heading change
 // far better than an odometry integrates it (the heading is what drifts; inertial odometry holds
-// roll and pitch to gravity), while its translation along the road and its roll and pitch carry
-// the bias of the ground's rings, which move with the sensor: on the default scene -0.24 and
-// -0.37 % of the step along it and -0.003 deg of pitch a step, summed over a session by the chain
-// of steps (README, "Registered steps hold the heading").
+// roll and pitch to gravity). Its other directions it measures worse than that odometry, summed
+// over a session by the chain of steps: registered with the ground, the ground's rings, which move
+// with the sensor, biased them (on the default scene -0.24 and -0.37 % of the step along the road,
+// -0.003 deg of pitch a step); registered off it (OffTheGround), nothing holds height, roll and
+// pitch (README, "Registered steps hold the heading").
 Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg) {
   const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
   return g * g.transpose() / variance + NegligiblePrior(cfg);

@@ -213,12 +213,8 @@ double ViewShare(const PointCloud& target, const PointCloud& source, const Pose&
 }
 
 PointCloud OffTheGround(const PointCloud& cloud, const Eigen::Vector3d& up, const SlamConfig& cfg) {
-  const Eigen::Quaterniond level = Eigen::Quaterniond::FromTwoVectors(up.normalized(), Eigen::Vector3d::UnitZ());
-  PointCloud levelled = cloud;
-  for (auto& p : levelled.points) {
-    const Eigen::Vector3d v = level * p.xyz().cast<double>();
-    p.x = float(v.x()), p.y = float(v.y()), p.z = float(v.z());
-  }
+  const PointCloud levelled =
+      geometry::Transform(cloud, Pose(Eigen::Quaterniond::FromTwoVectors(up.normalized(), Eigen::Vector3d::UnitZ())));
   geometry::LowestGrid lowest(2.0 * cfg.reg_voxel_m);
   lowest.Add(levelled);
   std::vector<bool> keep(cloud.size());
