@@ -11,6 +11,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <cmath>
+#include <functional>
 #include <random>
 
 using namespace ltm;
@@ -334,4 +335,105 @@ TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
   EXPECT_NEAR(h.scale, kScale, 0.3 * kScale);
   for (Session& s : sessions) s.registered.clear();
   EXPECT_EQ(LoopHeadingScale(sessions, loops, cfg).cycles, 0);
+}
+
+// SquaresWithin: errors of the model pass but about one time in a thousand; errors 1.5 times wider
+// fail.
+TEST(SlamRegistration, SquaresWithinFailsTheRareAndTheWider) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  const double var = 4e-6;
+  const auto failed = [&](double sigma_scale) {
+    int fails = 0;
+    for (int trial = 0; trial < 2000; ++trial) {
+      double sum_sq = 0.0;
+      for (int i = 0; i < 120; ++i) sum_sq += std::pow(sigma_scale * std::sqrt(var) * N(rng), 2);
+      fails += !SquaresWithin(sum_sq, 120, var);
+    }
+    return fails / 2000.0;
+  };
+  EXPECT_LT(failed(1.0), 0.01);
+  EXPECT_GT(failed(1.5), 0.95);
+  EXPECT_TRUE(SquaresWithin(0.0, 0, var));
+}
+
+namespace {
+// A session of 121 keyframes 1.5 m apart turning 1 deg a keyframe, its odometry turned off the
+// truth by `odometry_bias` [rad] plus N(0, 0.05 deg) a step (stated: graph.odom_sigma_r_deg, no
+// information in the file), and
+// registered steps and two-steps whose turns are off the truth by `step_error(k)` and
+// `skip_error(k)` [rad], with a Fisher information of 0.01 deg on the heading.
+struct StepScene {
+  Session session;
+  std::vector<std::optional<RegistrationResult>> steps, skips;
+};
+StepScene MakeStepScene(const std::function<double(std::size_t)>& step_error,
+                        const std::function<double(std::size_t)>& skip_error, double odometry_bias = 0.0) {
+  constexpr std::size_t kKeyframes = 121;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> N(0.0, 0.05 * kDeg);
+  const auto turn = [](double rad) { return Pose(Eigen::AngleAxisd(rad, Eigen::Vector3d::UnitZ())); };
+  std::vector<Pose> truth(kKeyframes);
+  for (std::size_t k = 0; k < kKeyframes; ++k)
+    truth[k] = k == 0 ? Pose::Identity() : truth[k - 1] * Pose(Eigen::Translation3d(1.5, 0, 0)) * turn(kDeg);
+  StepScene s;
+  Pose odometry = Pose::Identity();
+  for (std::size_t k = 0; k < kKeyframes; ++k) {
+    if (k > 0) odometry = odometry * truth[k - 1].inverse() * truth[k] * turn(odometry_bias + N(rng));
+    Keyframe kf;
+    kf.index = int(k);
+    kf.T_session_sensor = odometry;
+    s.session.keyframes.push_back(kf);
+  }
+  Matrix6d fisher = Matrix6d::Zero();
+  fisher.diagonal() << 1e6, 1e6, 1e6, 1e6, 1e6, 1.0 / std::pow(0.01 * kDeg, 2);
+  const auto registered = [&](std::size_t from, std::size_t to, double error) {
+    RegistrationResult r;
+    r.T_target_source = truth[from].inverse() * truth[to] * turn(error);
+    r.fisher = fisher;
+    r.accepted = true;
+    return std::optional<RegistrationResult>(r);
+  };
+  for (std::size_t k = 0; k + 1 < kKeyframes; ++k) {
+    s.steps.push_back(registered(k, k + 1, step_error(k)));
+    s.skips.push_back(k + 2 < kKeyframes ? registered(k, k + 2, skip_error(k)) : std::nullopt);
+  }
+  return s;
+}
+}  // namespace
+
+// MeasureStepHeading admits steps finer than the odometry whose differences from it their own and
+// the odometry's stated variances explain, also against an odometry biased 0.1 deg a step (a
+// gyro's bias). Steps that err together (each scan's own turn, which a closure cancels) pass the
+// closures and fail against the odometry.
+TEST(SlamRegistration, StepsTheOdometryDisagreesWithAreLeftOut) {
+  SlamConfig cfg;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> N(0.0, 0.01 * kDeg);
+  std::vector<double> noise(240);
+  for (double& e : noise) e = N(rng);
+  const double bias = 0.003 * kDeg;
+  const StepScene good = MakeStepScene([&](std::size_t k) { return bias + noise[k]; },
+                                       [&](std::size_t k) { return bias + noise[120 + k]; });
+  const StepHeading g = MeasureStepHeading(good.steps, good.skips, good.session, cfg);
+  EXPECT_NEAR(g.bias, bias, 0.003 * kDeg);
+  EXPECT_NEAR(std::sqrt(g.odom_var), 0.05 * kDeg, 0.015 * kDeg);
+  EXPECT_NEAR(std::sqrt(g.stated_var), cfg.odom_sigma_r_deg * kDeg, 1e-9);
+  EXPECT_TRUE(g.finer);
+  EXPECT_TRUE(g.explained);
+
+  std::vector<double> own(121);  // each scan's own turn, 0.3 deg
+  for (double& e : own) e = 30.0 * N(rng);
+  const StepScene together = MakeStepScene([&](std::size_t k) { return own[k + 1] - own[k] + noise[k]; },
+                                           [&](std::size_t k) { return own[k + 2] - own[k] + noise[120 + k]; });
+  const StepHeading t = MeasureStepHeading(together.steps, together.skips, together.session, cfg);
+  EXPECT_TRUE(t.finer);
+  EXPECT_FALSE(t.explained);
+
+  const StepScene gyro = MakeStepScene([&](std::size_t k) { return bias + noise[k]; },
+                                      [&](std::size_t k) { return bias + noise[120 + k]; }, 0.1 * kDeg);
+  const StepHeading y = MeasureStepHeading(gyro.steps, gyro.skips, gyro.session, cfg);
+  EXPECT_NEAR(y.odom_mean, -0.1 * kDeg, 0.015 * kDeg);
+  EXPECT_TRUE(y.finer);
+  EXPECT_TRUE(y.explained);
 }

@@ -52,7 +52,7 @@ struct SlamConfig {
   double loop_sigma_t_m = 0.1;        // loop std-dev at fitness <= reg_fitness_floor
   double loop_sigma_r_deg = 0.5;
   double reg_fitness_floor = 0.02;    // [m^2]; sigma grows with sqrt(fitness / floor) above it
-  bool reg_steps = false;             // register each keyframe onto the one before (WithRegisteredSteps)
+  bool reg_steps = true;              // register each keyframe onto the one before (WithRegisteredSteps)
 
   // --- pose graph (Ceres)
   double odom_sigma_t_m = 0.05;       // odometry std-dev when the g2o carries no information

@@ -653,29 +653,24 @@ void CheckPredictions(const std::vector<Session>& sessions, const std::vector<st
     if (!res.sessions[s].aligned) res.sessions[s].reason = why;
   }
 }
+
+// Per keyframe position k of a session, the variance of the turn about the vertical that its
+// odometry edge k -> k + 1 states (TurnVariance; the config's sigmas where the edge is missing).
+std::vector<double> StatedOdometry(const Session& s, const SlamConfig& cfg) {
+  const std::size_t n = s.keyframes.size() - 1;
+  std::vector<double> var(n, std::pow(cfg.odom_sigma_r_deg * M_PI / 180.0, 2));
+  for (const Edge& e : s.odometry) {
+    const int a = s.Find(e.from), b = s.Find(e.to);
+    if (a >= 0 && b == a + 1) var[std::size_t(a)] = TurnVariance(e, Up(s.keyframes[std::size_t(b)]), cfg, false);
+  }
+  return var;
+}
 }  // namespace
 
-// What a session's registered steps say of their own heading, and of the odometry's:
-//  - closures: each pair of verified steps k, k + 1 is closed by registering keyframe k + 2 onto k
-//    directly. The two-step turn differs from the sum of the two steps' turns by the three
-//    registrations' errors. A turn each registration of a scan pair makes of its own (a scene not
-//    symmetric about the route: b, the same for a step and a two-step) survives in the closure as
-//    b + b - b: the closures' mean is the steps' bias (bias; on seed 11's HDL-32E -0.0005 and
-//    -0.0017 deg a step against the truth's -0.0006 and -0.0020). Their variance about it is three
-//    steps' (step_var), and their squared ratios to the variances the Fisher information gives them
-//    say how far it misstates those (scale, VarianceScale: off the ground it overstates a step's
-//    heading variance about 16 times there);
-//  - against the odometry: a step's turn, its bias taken off, minus the odometry's over the same
-//    step holds both their errors, so the odometry's heading error (mean square: a gyro's bias
-//    counts) is that mean square less the step's variance (odom_var).
-struct StepHeading {
-  double bias = 0.0, step_var = 0.0, odom_var = 0.0, scale = 1.0;  // [rad], [rad^2], [rad^2], [-]
-  std::size_t closures = 0;
-  std::vector<double> variance;  // per verified step, the Fisher information's (HeadingVariance) [rad^2]
-};
 StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResult>>& steps,
-                               const std::vector<std::optional<RegistrationResult>>& skips,
-                               const std::vector<Keyframe>& kfs, const SlamConfig& cfg) {
+                               const std::vector<std::optional<RegistrationResult>>& skips, const Session& session,
+                               const SlamConfig& cfg) {
+  const std::vector<Keyframe>& kfs = session.keyframes;
   StepHeading h;
   h.variance.assign(steps.size(), 0.0);
   for (std::size_t k = 0; k < steps.size(); ++k)
@@ -699,15 +694,20 @@ StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResul
   }
   h.step_var = sum_sq / double(h.closures - 1) / 3.0;
   h.scale = VarianceScale(std::move(ratio));
-  double odom_sq = 0.0;
-  std::size_t n = 0;
+  const std::vector<double> stated = StatedOdometry(session, cfg);
+  double odom_sum = 0.0, odom_sq = 0.0, stated_sum = 0.0;
   for (std::size_t k = 0; k < steps.size(); ++k) {
     if (!steps[k]) continue;
     const Pose odometry = kfs[k].T_session_sensor.inverse() * kfs[k + 1].T_session_sensor;
     const double d = TurnAbout(odometry, steps[k]->T_target_source, Up(kfs[k + 1])) - h.bias;
-    odom_sq += d * d, ++n;
+    odom_sum += d, odom_sq += d * d, stated_sum += stated[k], ++h.compared;
   }
-  h.odom_var = std::max(0.0, odom_sq / double(n) - h.step_var);
+  const double n = double(h.compared);
+  h.odom_var = std::max(0.0, odom_sq / n - h.step_var);
+  h.odom_mean = odom_sum / n;
+  h.stated_var = stated_sum / n;
+  h.finer = h.step_var < h.odom_var;
+  h.explained = SquaresWithin(odom_sq, h.compared, h.step_var + h.stated_var);
   return h;
 }
 
@@ -741,13 +741,14 @@ void RegisterSteps(const std::vector<Keyframe>& kfs, const std::function<std::sh
 
 // The odometry refined by registration: each keyframe k + 1 of a session registered onto keyframe
 // k, single scans off the ground from the odometry's relative pose, fine stage only (the odometry
-// is centimetres off, not the metres a loop's guess may be; RegisterSteps). Where the steps'
-// heading is finer than the odometry's (MeasureStepHeading, both measured on the session itself),
-// each verified step, the closures' bias turned back, joins the session's graph beside its
-// odometry edge (Session::registered) with the registration's information on the heading
-// (HeadingInformation), its variance scaled as the closures show. A
-// scanner whose consecutive scans share little (a forward cone that samples other places each
-// sweep) gives steps no finer than the odometry, and biased: they are left out. Sessions whose poses
+// is centimetres off, not the metres a loop's guess may be; RegisterSteps). Where the steps are
+// admitted (MeasureStepHeading: finer in heading than the odometry, and their turns against it
+// within both's variances, the odometry's as it states), each verified step, the closures' bias
+// turned back, joins the session's graph beside its odometry edge (Session::registered) with the
+// registration's information on the heading (HeadingInformation), its variance scaled as the
+// closures show. A scanner whose consecutive scans share little (a forward cone that samples
+// other places each sweep) gives steps no finer than the odometry, or steps whose shared errors
+// the closures cancel and the odometry shows: they are left out. Sessions whose poses
 // are the world (the add's reference: central_own_loops off) are left as they are. Returns the
 // sessions with their steps; the registrations tried are added to *tried.
 std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg,
@@ -763,15 +764,18 @@ std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, C
     std::vector<std::optional<RegistrationResult>> steps(n), skips(n);
     *tried += int(n + (n - 1));
     RegisterSteps(kfs, [&](std::size_t k) { return store.Get(int(s), int(k)); }, fine, threads, &steps, &skips);
-    const StepHeading h = MeasureStepHeading(steps, skips, kfs, cfg);
-    const bool finer = h.closures > 1 && h.step_var < h.odom_var;
+    const StepHeading h = MeasureStepHeading(steps, skips, out[s], cfg);
+    const bool admitted = h.finer && h.explained;
     constexpr double kRadToDeg = 180.0 / M_PI;
     spdlog::info("slam: session {}: {} of {} keyframe steps verified; heading sigma {:.4f} deg a step, bias {:.4f} "
-                 "(two-step closures: {}), the odometry's {:.4f} deg: {}",
+                 "(two-step closures: {}), the odometry's {:.4f} deg (mean {:.4f}; it states {:.4f}): {}",
                  out[s].name, std::count_if(steps.begin(), steps.end(), [](const auto& r) { return bool(r); }), n,
-                 std::sqrt(h.step_var) * kRadToDeg, h.bias * kRadToDeg, h.closures, std::sqrt(h.odom_var) * kRadToDeg,
-                 finer ? "registered" : "not finer than the odometry, left out");
-    for (std::size_t k = 0; k < n && finer; ++k) {
+                 std::sqrt(h.step_var) * kRadToDeg, h.bias * kRadToDeg, h.closures,
+                 std::sqrt(h.odom_var) * kRadToDeg, h.odom_mean * kRadToDeg, std::sqrt(h.stated_var) * kRadToDeg,
+                 admitted ? "registered"
+                 : !h.finer ? "not finer than the odometry, left out"
+                            : "steps and odometry disagree beyond both their variances, left out");
+    for (std::size_t k = 0; k < n && admitted; ++k) {
       if (!steps[k]) continue;
       Edge e;
       e.from = kfs[k].index;

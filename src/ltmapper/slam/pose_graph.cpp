@@ -331,6 +331,18 @@ double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up) {
   return e.angle() * e.axis().dot(up.normalized());
 }
 
+double TurnVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg, bool own_information) {
+  const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
+  return 1.0 / g.dot(EdgeInformation(e, cfg, own_information) * g);
+}
+
+bool SquaresWithin(double sum_sq, std::size_t n, double variance) {
+  constexpr double kZ = 3.09;  // the standard normal's 0.999 quantile
+  if (n == 0) return true;
+  const double dof = double(n), a = 2.0 / (9.0 * dof);
+  return sum_sq <= variance * dof * std::pow(1.0 - a + kZ * std::sqrt(a), 3);  // Wilson-Hilferty
+}
+
 double VarianceScale(std::vector<double> ratio) {
   constexpr double kChiSquare1Median = 0.45493642;
   if (ratio.empty()) return 1.0;
@@ -355,8 +367,7 @@ CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
     for (const Edge& e : edges) {
       const int a = s.Find(e.from), b = s.Find(e.to);
       if (a < 0 || b != a + 1) continue;
-      const Eigen::Matrix<double, 6, 1> g = TurnDirection(Up(s.keyframes[std::size_t(b)]));
-      const double var = 1.0 / g.dot(EdgeInformation(e, cfg, own_information) * g);
+      const double var = TurnVariance(e, Up(s.keyframes[std::size_t(b)]), cfg, own_information);
       if (var < c.var[std::size_t(a)]) c.T[std::size_t(a)] = e.T_from_to, c.var[std::size_t(a)] = var;
     }
   };
