@@ -100,6 +100,22 @@ struct BetweenFactor : RelativePoseResidual {
   }
 };
 
+// Gravity: a keyframe's vertical (the session frame's z in its sensor frame) stays where the
+// odometry put it, r = (R(q)^T z - up) / sigma: inertial odometry holds roll and pitch to gravity,
+// they do not drift. Its component along `up` is second order, so the residual is the tilt.
+struct GravityFactor {
+  Eigen::Vector3d up;
+  double inv_sigma;  // [1/rad]
+  template <typename T>
+  bool operator()(const T* x, T* residual) const {
+    const Se3<T> p = Load(x);
+    const Eigen::Matrix<T, 3, 1> u = p.q.normalized().conjugate() * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1));
+    Eigen::Map<Eigen::Matrix<T, 3, 1>> out(residual);
+    out = (u - up.cast<T>()) * T(inv_sigma);
+    return true;
+  }
+};
+
 // Inter-session loop through the anchors (paper eq. 2):
 //   r = sqrt_info * Log( z^-1 * (A_a * x_a)^-1 * (A_b * x_b) ).
 struct AnchorLoopFactor : RelativePoseResidual {
