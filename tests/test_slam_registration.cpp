@@ -295,7 +295,8 @@ TEST(SlamRegistrationReal, Kitti08RevisitAcceptedAndAnotherPlaceRejected) {
 // LoopHeadingScale: two parallel drives 2 m apart, each keyframe tied to its neighbour by a
 // registered step (heading variance 1e-12 rad^2) and to the other drive's by a loop whose heading
 // is off by N(0, 9 v), v its declared variance. The cycles of consecutive loops give 9 back. With
-// the odometry alone (the config's 0.2 deg a step, far coarser than the loops) no cycle measures.
+// the odometry alone (the config's 0.2 deg a step, far coarser than the loops) no cycle measures,
+// nor where loops declared coarser close cycles whose turns hide within the odometry's variance.
 TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
   SlamConfig cfg;
   constexpr int kKeyframes = 400;
@@ -334,6 +335,10 @@ TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
   EXPECT_EQ(h.cycles, kKeyframes - 1);
   EXPECT_NEAR(h.scale, kScale, 0.3 * kScale);
   for (Session& s : sessions) s.registered.clear();
+  EXPECT_EQ(LoopHeadingScale(sessions, loops, cfg).cycles, 0);
+  // Loops declared coarser than the odometry (0.6 deg) close cycles through it, but their errors
+  // (as above) hide within its variance: the cycles do not measure them, no heading information.
+  for (LoopRecord& l : loops) l.heading_variance = 1e-4;
   EXPECT_EQ(LoopHeadingScale(sessions, loops, cfg).cycles, 0);
 }
 

@@ -135,7 +135,8 @@ double VarianceScale(std::vector<double> ratio);
 // about the vertical is the two loops' errors plus the edges'. Where the edges' variance (from
 // their information) is below the two loops', the cycle measures the loops: the scale is the median
 // over those cycles of (turn^2 - edges' variance) / (the two loops' variances), over the median of
-// a chi-square of one degree (VarianceScale).
+// a chi-square of one degree (VarianceScale). Where that median is not positive the cycles do not
+// measure the loops (cycles 0: no heading information).
 struct LoopHeading {
   int cycles = 0;
   double scale = 1.0;

@@ -433,8 +433,12 @@ LoopHeading LoopHeadingScale(const std::vector<Session>& sessions, const std::ve
     const double c = TurnAbout(A * l2.T_a_b, l1.T_a_b * B, Up(b2));
     ratio.push_back((c * c - va - vb) / v);
   }
+  // The median ratio is positive where more than half are: else the loops' errors lie within what
+  // the edges' variance hides (the odometry's, where a session has no steps), and the cycles do not
+  // measure them: no heading information, as without a cycle.
   LoopHeading out;
-  if (ratio.empty()) return out;
+  const auto positive = std::count_if(ratio.begin(), ratio.end(), [](double r) { return r > 0.0; });
+  if (2 * std::size_t(positive) <= ratio.size()) return out;
   out.cycles = int(ratio.size());
   out.scale = VarianceScale(std::move(ratio));
   return out;
