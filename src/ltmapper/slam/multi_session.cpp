@@ -658,7 +658,7 @@ void CheckPredictions(const std::vector<Session>& sessions, const std::vector<st
 // odometry edge k -> k + 1 states (TurnVariance; the config's sigmas where the edge is missing).
 std::vector<double> StatedOdometry(const Session& s, const SlamConfig& cfg) {
   const std::size_t n = s.keyframes.size() - 1;
-  std::vector<double> var(n, std::pow(cfg.odom_sigma_r_deg * M_PI / 180.0, 2));
+  std::vector<double> var(n, TurnVariance(Edge{}, Eigen::Vector3d::UnitZ(), cfg, false));
   for (const Edge& e : s.odometry) {
     const int a = s.Find(e.from), b = s.Find(e.to);
     if (a >= 0 && b == a + 1) var[std::size_t(a)] = TurnVariance(e, Up(s.keyframes[std::size_t(b)]), cfg, false);

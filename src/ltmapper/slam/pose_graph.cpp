@@ -198,16 +198,34 @@ class GraphProblem {
   // holds roll and pitch: a few hundredths of a degree that steps and loops disagree in heading
   // then escape into tilt, where roll and pitch of ~2 deg along a stretch turn the heading by their
   // product (the demo's sessions tilted 3.6 deg, key off 0.02). Each keyframe's vertical is held
-  // where the inertial odometry put it (GravityFactor), at the odometry's rotation sigma, which
-  // for a tilt held to gravity does not add up along the session.
+  // where the inertial odometry put it (GravityFactor), at the tilt sigma its edges state
+  // (TiltVariances), which for a tilt held to gravity does not add up along the session.
   void AddGravity(std::size_t s) {
     const Session& ses = g_.sessions[s];
-    const double inv_sigma = 1.0 / (g_.cfg.odom_sigma_r_deg * kDeg);
+    const std::vector<double> tilt = TiltVariances(ses);
     for (std::size_t k = 0; k < ses.keyframes.size(); ++k) {
       auto* cost = new ceres::AutoDiffCostFunction<detail::GravityFactor, 3, 7>(
-          new detail::GravityFactor{Up(ses.keyframes[k]), inv_sigma});
+          new detail::GravityFactor{Up(ses.keyframes[k]), 1.0 / std::sqrt(tilt[k])});
       problem_.AddResidualBlock(cost, nullptr, nodes_[s][k].data());
     }
+  }
+
+  // Per keyframe, the variance of roll or pitch (the coarser) that the odometry states of the edge
+  // into it (into keyframe 1 for keyframe 0), as the graph reads its information (EdgeInformation).
+  std::vector<double> TiltVariances(const Session& ses) const {
+    const std::size_t n = ses.keyframes.size();
+    const auto tilt = [&](const Edge& e, const Keyframe& kf) {
+      const Eigen::Vector3d up = Up(kf).normalized();
+      const Eigen::Vector3d x = up.unitOrthogonal(), y = up.cross(x);
+      return std::max(TurnVariance(e, x, g_.cfg, false), TurnVariance(e, y, g_.cfg, false));
+    };
+    std::vector<double> var(n, tilt(Edge{}, n > 0 ? ses.keyframes[0] : Keyframe{}));
+    for (const Edge& e : ses.odometry) {
+      const int a = ses.Find(e.from), b = ses.Find(e.to);
+      if (a >= 0 && b == a + 1) var[std::size_t(b)] = tilt(e, ses.keyframes[std::size_t(b)]);
+      if (a == 0 && b == 1) var[0] = var[1];
+    }
+    return var;
   }
 
   const Graph& g_;
