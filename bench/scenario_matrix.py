@@ -15,7 +15,7 @@ usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyfram
   --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
   --slam-config / --removert-config / --map-config go to `ltmapper run` (e.g. a slam YAML with
   `registration: {steps: true}`); without them every stage runs with its defaults.
-  A scenario's sim folder is reused when it is there and its config unchanged (delete --out to redo).
+  A scenario's sim folder is reused when a finished sim of the same config is there (delete --out to redo).
   Exit status 0 even when a row misses a target: this prints figures, the tests judge.
 """
 import argparse
@@ -50,13 +50,18 @@ def simulate(ltm, yaml, sim, keyframes, seed):
     want = text + "\n# seed %s\n# %s\n" % (seed, version)
     if os.path.exists(os.path.join(sim, "truth", "objects.csv")) and os.path.exists(cfg) and open(cfg).read() == want:
         return
-    subprocess.call(["rm", "-rf", sim])
-    with open(cfg, "w") as f:
+    # The config under its own name is the mark of a finished sim: it is written to a temporary
+    # name, simulated from there, and renamed only when the sim succeeded, so a killed or failed
+    # run is simulated again instead of reused half-written.
+    subprocess.call(["rm", "-rf", sim, cfg])
+    pending = cfg + ".pending"
+    with open(pending, "w") as f:
         f.write(want)
-    cmd = [ltm, "sim", "--config", cfg, "--out", sim, "--quiet"]
+    cmd = [ltm, "sim", "--config", pending, "--out", sim, "--quiet"]
     if seed is not None:
         cmd += ["--seed", str(seed)]
     timed(cmd, sim + ".log")
+    os.replace(pending, cfg)
 
 
 def hd_wall_per_keyframe(changes):
