@@ -37,17 +37,22 @@ void RunRemovert(const RemovertArgs& a) {
     return;
   }
   std::vector<std::string> poses = a.poses;
+  removert::RemovertConfig run_cfg = cfg;
   if (!a.aligned.empty()) {
+    std::vector<std::string> names;
     for (const auto& s : a.sessions) {
       const std::string name = std::filesystem::path(s).lexically_normal().filename().string();
-      poses.push_back(io::layout::PosesWorldFile(
-          a.aligned, name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name));
+      names.push_back(name.empty() ? std::filesystem::path(s).parent_path().filename().string() : name);
+      poses.push_back(io::layout::PosesWorldFile(a.aligned, names.back()));
     }
+    // LT-SLAM's rotation measures of these sessions, as a run of all of them reads them (an
+    // aligned folder without a manifest measures nothing: pose_sigma_deg).
+    if (io::HasRunManifest(a.aligned)) run_cfg = removert::WithAlignment(cfg, io::ReadRunManifest(a.aligned), names);
   }
   if (poses.size() != a.sessions.size())
     throw Error("need one pose file per session: " + std::to_string(a.sessions.size()) +
                 " sessions, " + std::to_string(poses.size()) + " pose files");
-  Report(removert::RunRemovertStage(cfg, a.sessions, poses, a.out, a.common.threads), a.out);
+  Report(removert::RunRemovertStage(run_cfg, a.sessions, poses, a.out, a.common.threads), a.out);
 }
 
 void Report(const removert::StageReport& rep, const std::string& out) {

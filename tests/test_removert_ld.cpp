@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 namespace ltm {
@@ -262,20 +263,39 @@ TEST(RemovertLd, GroundABeamEndedOnIsNotSeenThrough) {
   EXPECT_LE(ground(ld.nd_strong) + ground(ld.pd_weak), 10u);
 }
 
-// Each LD pair takes its query session's rotation measure (from the run manifest) unless
-// ld.rotation_sigma_deg is set; a session without a measure is an error, not a silent fallback.
-TEST(RemovertLd, EachPairTakesItsQuerysRotationMeasure) {
+// Each LD pair takes its sessions' rotation measures against the central (from the run manifest),
+// combined as independent errors, unless ld.rotation_sigma_deg is set; a position without a
+// measure is an error, not a silent fallback; a session not measured leaves the prior.
+TEST(RemovertLd, EachPairTakesItsSessionsRotationMeasures) {
   RemovertConfig cfg = test::ConfigFor();
   cfg.ld_rotation_sigma_deg = 0.0;
-  EXPECT_DOUBLE_EQ(cfg.ForQuery(1).LdRotationSigmaDeg(), cfg.pose_sigma_deg);  // no measures: the prior
-  cfg.session_rotation_sigma_deg = {0.0, 0.05, 0.2};
-  EXPECT_DOUBLE_EQ(cfg.ForQuery(1).LdRotationSigmaDeg(), 0.05);
-  EXPECT_DOUBLE_EQ(cfg.ForQuery(2).LdRotationSigmaDeg(), 0.2);
-  EXPECT_NEAR(cfg.ForQuery(2).LdRadiusRel(), std::tan(3 * 0.2 * M_PI / 180.0), 1e-12);
-  EXPECT_NEAR(cfg.ForQuery(2).LdOwnTolRel(), std::tan(0.2 * M_PI / 180.0), 1e-12);
-  test::ExpectError([&] { cfg.ForQuery(3); }, {"rotation measure", "position 3"});
+  EXPECT_DOUBLE_EQ(cfg.ForPair(0, 1).LdRotationSigmaDeg(), cfg.pose_sigma_deg);  // no measures: the prior
+  cfg.session_rotation_sigma_deg = {0.0, 0.05, 0.2, std::nan("")};
+  EXPECT_DOUBLE_EQ(cfg.ForPair(0, 1).LdRotationSigmaDeg(), 0.05);
+  EXPECT_DOUBLE_EQ(cfg.ForPair(0, 2).LdRotationSigmaDeg(), 0.2);
+  EXPECT_NEAR(cfg.ForPair(1, 2).LdRotationSigmaDeg(), std::hypot(0.05, 0.2), 1e-12);  // consecutive pairs
+  EXPECT_DOUBLE_EQ(cfg.ForPair(0, 3).LdRotationSigmaDeg(), cfg.pose_sigma_deg);      // not measured
+  EXPECT_NEAR(cfg.ForPair(0, 2).LdRadiusRel(), std::tan(3 * 0.2 * M_PI / 180.0), 1e-12);
+  EXPECT_NEAR(cfg.ForPair(0, 2).LdOwnTolRel(), std::tan(0.2 * M_PI / 180.0), 1e-12);
+  test::ExpectError([&] { cfg.ForPair(0, 4); }, {"rotation measure", "position 4"});
   cfg.ld_rotation_sigma_deg = 0.1;  // set by the user: it wins
-  EXPECT_DOUBLE_EQ(cfg.ForQuery(2).LdRotationSigmaDeg(), 0.1);
+  EXPECT_DOUBLE_EQ(cfg.ForPair(0, 2).LdRotationSigmaDeg(), 0.1);
+}
+
+// The sessions of a removert run on some of an LT-SLAM run's sessions, in any order, take the
+// manifest's measures by name: the run's central is the reference (0), a session the manifest does
+// not hold or did not measure has none (NaN), so its pairs keep the prior.
+TEST(RemovertLd, SessionsTakeTheManifestsMeasuresByName) {
+  io::RunManifest m;
+  m.sessions = {{"a", "/a", true, "", 0.0}, {"b", "/b", true, "", 0.05}, {"c", "/c", true, "", 0.2},
+                {"d", "/d", false, "no loops", 0.0}, {"e", "/e", true, "", 0.0}};
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.ld_rotation_sigma_deg = 0.0;
+  const RemovertConfig sub = WithAlignment(cfg, m, {"b", "c"});
+  EXPECT_NEAR(sub.ForPair(0, 1).LdRotationSigmaDeg(), std::hypot(0.05, 0.2), 1e-12);
+  EXPECT_DOUBLE_EQ(WithAlignment(cfg, m, {"a", "c"}).ForPair(0, 1).LdRotationSigmaDeg(), 0.2);
+  for (const std::string other : {"d", "e", "z"})
+    EXPECT_DOUBLE_EQ(WithAlignment(cfg, m, {"a", other}).ForPair(0, 1).LdRotationSigmaDeg(), cfg.pose_sigma_deg) << other;
 }
 
 // The query sampled a wall only up to x = -0.1 m (its coverage ends there), the central the whole

@@ -91,12 +91,8 @@ void PublishAlignment(const RunPaths& p, const slam::SessionAlignment& a) {
 
 // LT-removert for the new session (last in the manifest's aligned sessions).
 void AddChanges(const io::RunManifest& m, const RunPaths& p, const removert::RemovertConfig& cfg, int threads) {
-  std::vector<std::string> dirs, poses;
-  for (const auto& s : m.Aligned()) {
-    dirs.push_back(s.dir);
-    poses.push_back(io::layout::PosesWorldFile(p.aligned, s.name));
-  }
-  removert::AddToRemovertStage(removert::WithAlignment(cfg, m.Aligned()), dirs, poses, p.changes, threads);
+  const removert::RunSessions run = removert::SessionsOfRun(m, p.aligned);
+  removert::AddToRemovertStage(removert::WithAlignment(cfg, m, run.names), run.dirs, run.poses, p.changes, threads);
 }
 
 void Integrate(const RunPaths& p, const map::MapConfig& cfg, const std::string& name, int threads) {

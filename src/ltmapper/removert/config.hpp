@@ -98,22 +98,28 @@ struct RemovertConfig {
                                   // may lie behind a displaced copy of it in one map (not seen through)
   int ld_min_neighbors = 1;       // [points] fewer neighbours than this = change
   // The rotation uncertainty between two sessions' poses at one place (1 sigma). 0: what LT-SLAM
-  // measured for the pair's query session (ForQuery), else pose_sigma_deg.
+  // measured for the pair's sessions (ForPair), else pose_sigma_deg.
   double ld_rotation_sigma_deg = 0.0;  // [deg]
   // Not a key: LT-SLAM's measures per session position, from the run manifest
-  // (io::ManifestSession::rotation_sigma_deg); empty or 0 = none (poses given).
+  // (io::ManifestSession::rotation_sigma_deg, WithAlignment): each session's rotation uncertainty
+  // against the run's central, 0 for the central itself, NaN where not measured; empty = none
+  // (poses given).
   std::vector<double> session_rotation_sigma_deg;  // [deg]
-  // The config of the LD pairs whose query is session position q: ld.rotation_sigma_deg, left 0,
-  // takes LT-SLAM's measure for that session.
-  // Measures given for fewer sessions than q + 1 are an ltm::Error (a run's manifest lists every
-  // aligned session).
-  RemovertConfig ForQuery(std::size_t q) const {
+  // The config of the LD pair (c, q) (session positions): ld.rotation_sigma_deg, left 0, takes the
+  // two sessions' measures against the central, independent errors: sqrt(sigma_c^2 + sigma_q^2)
+  // (the central's is 0, so a pair with the central takes its query's). Where either is not
+  // measured, or both are 0, pose_sigma_deg stays. Measures given for fewer sessions than a
+  // position needs are an ltm::Error (a run's manifest lists every aligned session).
+  RemovertConfig ForPair(std::size_t c, std::size_t q) const {
     RemovertConfig out = *this;
     if (session_rotation_sigma_deg.empty()) return out;
-    if (q >= session_rotation_sigma_deg.size())
-      throw Error("removert: no rotation measure for session position " + std::to_string(q) + " (" +
-                  std::to_string(session_rotation_sigma_deg.size()) + " given)");
-    if (out.ld_rotation_sigma_deg <= 0.0) out.ld_rotation_sigma_deg = session_rotation_sigma_deg[q];
+    for (const std::size_t s : {c, q})
+      if (s >= session_rotation_sigma_deg.size())
+        throw Error("removert: no rotation measure for session position " + std::to_string(s) + " (" +
+                    std::to_string(session_rotation_sigma_deg.size()) + " given)");
+    const double sc = session_rotation_sigma_deg[c], sq = session_rotation_sigma_deg[q];
+    const double pair = std::sqrt(sc * sc + sq * sq);  // NaN when either is not measured
+    if (out.ld_rotation_sigma_deg <= 0.0 && pair > 0.0) out.ld_rotation_sigma_deg = pair;
     return out;
   }
   double LdRotationSigmaDeg() const { return ld_rotation_sigma_deg > 0.0 ? ld_rotation_sigma_deg : pose_sigma_deg; }

@@ -147,7 +147,7 @@ LdTilePlan WriteLdTilePlan(const std::string& plan_dir, const std::string& centr
   const PairSessions p = LoadPair(f.central_plan, f.query_plan);
   detail::DoneTiles(f.central_plan, p.central.plan.tiles.size());
   detail::DoneTiles(f.query_plan, p.query.plan.tiles.size());
-  // The central's config (its sensor), with the LD tolerance of the query's plan (ForQuery).
+  // The central's config (its sensor), with the LD tolerance of the query's plan (ForPair).
   RemovertConfig pair_cfg = p.central.cfg;
   pair_cfg.ld_rotation_sigma_deg = p.query.cfg.ld_rotation_sigma_deg;
   f.cfg = WithSensor(pair_cfg, p.central_kfs);

@@ -17,12 +17,14 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <iomanip>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -178,7 +180,7 @@ std::vector<std::array<std::size_t, detail::kKeyframeClouds>> Counts(const Keyfr
 std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const SessionData& q, int ci, int qi,
                                                 const std::string& dir, const RemovertConfig& cfg, int threads) {
   spdlog::info("removert: LD {} vs {}", c.name, q.name);
-  const RemovertConfig pair_cfg = cfg.ForQuery(std::size_t(qi));
+  const RemovertConfig pair_cfg = cfg.ForPair(std::size_t(ci), std::size_t(qi));
   const LdResult ld = cfg.tiles_stage ? DetectLdTiled(c.static_map, q.static_map, c.kfs, q.kfs, pair_cfg, threads)
                                       : DetectLd(c.static_map, q.static_map, c.kfs, q.kfs, pair_cfg, threads);
   spdlog::info("removert: {}: ND strong {} weak {} (unobserved {}), PD strong {} weak {} (unobserved {}); residues of "
@@ -341,22 +343,38 @@ StageReport AddToRemovertStage(const RemovertConfig& user_cfg, const std::vector
   return rep;
 }
 
-RemovertConfig WithAlignment(const RemovertConfig& cfg, const std::vector<io::ManifestSession>& aligned) {
+RemovertConfig WithAlignment(const RemovertConfig& cfg, const io::RunManifest& manifest,
+                             const std::vector<std::string>& names) {
   RemovertConfig out = cfg;
   out.session_rotation_sigma_deg.clear();
-  for (const auto& s : aligned) out.session_rotation_sigma_deg.push_back(s.rotation_sigma_deg);
+  const std::vector<io::ManifestSession> aligned = manifest.Aligned();
+  for (const std::string& name : names) {
+    const auto it = std::find_if(aligned.begin(), aligned.end(), [&](const io::ManifestSession& s) { return s.name == name; });
+    double sigma = std::numeric_limits<double>::quiet_NaN();  // not in the run, or not measured
+    if (it == aligned.begin())
+      sigma = 0.0;  // the run's central: the others are measured against it
+    else if (it != aligned.end() && it->rotation_sigma_deg > 0.0)
+      sigma = it->rotation_sigma_deg;
+    out.session_rotation_sigma_deg.push_back(sigma);
+  }
+  return out;
+}
+
+RunSessions SessionsOfRun(const io::RunManifest& manifest, const std::string& aligned_dir) {
+  RunSessions out;
+  for (const auto& s : manifest.Aligned()) {
+    out.dirs.push_back(s.dir);
+    out.poses.push_back(io::layout::PosesWorldFile(aligned_dir, s.name));
+    out.names.push_back(s.name);
+  }
   return out;
 }
 
 StageReport RunRemovertStageOnRun(const RemovertConfig& cfg, const std::string& aligned_dir,
                                   const std::string& out_dir, int threads) {
-  std::vector<std::string> dirs, poses;
   const io::RunManifest m = io::ReadRunManifest(aligned_dir);
-  for (const auto& s : m.Aligned()) {
-    dirs.push_back(s.dir);
-    poses.push_back(io::layout::PosesWorldFile(aligned_dir, s.name));
-  }
-  return RunRemovertStage(WithAlignment(cfg, m.Aligned()), dirs, poses, out_dir, threads);
+  const RunSessions run = SessionsOfRun(m, aligned_dir);
+  return RunRemovertStage(WithAlignment(cfg, m, run.names), run.dirs, run.poses, out_dir, threads);
 }
 
 }  // namespace ltm::removert

@@ -26,10 +26,19 @@ struct StageReport {
 StageReport RunRemovertStage(const RemovertConfig& cfg, const std::vector<std::string>& session_dirs,
                              const std::vector<std::string>& poses_files, const std::string& out_dir,
                              int threads = 0);
-// `cfg` with the rotation uncertainty of each session's poses that LT-SLAM measured, in run order
-// (io::ManifestSession::rotation_sigma_deg of the aligned sessions), which LD's tolerances follow
-// (RemovertConfig::ForQuery, LdRotationSigmaDeg).
-RemovertConfig WithAlignment(const RemovertConfig& cfg, const std::vector<io::ManifestSession>& aligned);
+// `cfg` with the rotation uncertainty of each session's poses that LT-SLAM measured, for the
+// sessions `names` in the stage's order (any of the run's aligned sessions, in any order): the
+// manifest's io::ManifestSession::rotation_sigma_deg, against the run's central (0 for it). LD's
+// tolerances follow them (RemovertConfig::ForPair, LdRotationSigmaDeg); a session the manifest
+// does not measure leaves its pairs at pose_sigma_deg.
+RemovertConfig WithAlignment(const RemovertConfig& cfg, const io::RunManifest& manifest,
+                             const std::vector<std::string>& names);
+// The aligned sessions of a run manifest, in run order: their input folders, their
+// aligned_dir/<session>/poses_world.txt and their names.
+struct RunSessions {
+  std::vector<std::string> dirs, poses, names;
+};
+RunSessions SessionsOfRun(const io::RunManifest& manifest, const std::string& aligned_dir);
 // The stage on an LT-SLAM output: the aligned sessions of `aligned_dir`'s run manifest
 // (io::ReadRunManifest), in run order, with their aligned/<session>/poses_world.txt and the
 // manifest's rotation uncertainty (WithAlignment). Pair folder

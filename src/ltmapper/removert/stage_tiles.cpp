@@ -138,8 +138,12 @@ void RunStageFromTiles(const RemovertConfig& cfg, const std::vector<std::string>
   auto hd_plan = [&](std::size_t s) { return work + "/hd_" + std::to_string(s); };
   for (std::size_t s = 0; s < session_dirs.size(); ++s) {
     spdlog::info("removert: HD removal of {} ({} keyframes), tile by tile from files", names[s], kfs[s].size());
-    // The session's plan carries its LD tolerance (ForQuery): its pairs' LD plans read it there.
-    WriteTilePlan(hd_plan(s), session_dirs[s], poses_files[s], cfg.ForQuery(s), threads, session_dirs[0]);
+    // The session's plan carries the LD tolerance of the pair it is the query of (ForPair; a
+    // session is the query of one pair at most): its pairs' LD plans read it there.
+    std::size_t central = s;
+    for (const auto& [c, q] : rep->pairs)
+      if (std::size_t(q) == s) central = std::size_t(c);
+    WriteTilePlan(hd_plan(s), session_dirs[s], poses_files[s], cfg.ForPair(central, s), threads, session_dirs[0]);
     RunTileJobs(hd_plan(s), {}, threads);
     rep->hd.push_back(MergeTileJobs(hd_plan(s), hd_plan(s) + "_out"));
     MoveFiles(hd_plan(s) + "_out", io::layout::SessionChangesDir(out, names[s]),
