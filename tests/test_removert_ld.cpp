@@ -7,6 +7,7 @@
 #include "test_util.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/removert/detail.hpp"
 #include "ltmapper/removert/removert.hpp"
 
 #include <gtest/gtest.h>
@@ -150,10 +151,11 @@ TEST(RemovertLd, NdPdStrongWeak) {
 // query's. Their lowest 0.3 m lie within LD's neighbour radius of the other session's ground, so
 // the kd-tree alone keeps them as unchanged: the car that left would leave its lower body in the
 // map, the car that came would be reported without it. Points off that ground's plane by more
-// than a map voxel, with the ground all around under them, are raw changes for the beam test:
-// without that 0 of 106 / 0 of 54 points of the band were ND / PD, with it 59 / 35 (the rest the
-// beam test calls the same surface: their normal, from 1 m around them, is the ground's, whose
-// plane they lie within ld.beam_tol_m of); the ground itself is no change.
+// than a map voxel plus the rotation's 3-sigma shift at their distance, with the ground all
+// around under them, are raw changes for the beam test, which takes no same-surface evidence for
+// them (the other session's beams that ended near them met that ground): without that 0 of 106 /
+// 0 of 54 points of the band were ND / PD, with it 58 / 33 (the rest are no raw change here:
+// ld.same_min_hits = 0 leaves both counts as they are); the ground itself is no change.
 TEST(RemovertLd, TheLowerBodyOfACarStandingOnTheOtherSessionsGroundIsAChange) {
   const test::Box left = test::MakeBox(3, -6, 0, 7, -4, 1.5, 20), came = test::MakeBox(-7, -6, 0, -3, -4, 1.5, 21);
   auto cb = Common(), qb = Common();
@@ -182,6 +184,39 @@ TEST(RemovertLd, TheLowerBodyOfACarStandingOnTheOtherSessionsGroundIsAChange) {
                                      CountIn(ld.pd_strong, ground(came), 0.0) + CountIn(ld.pd_weak, ground(came), 0.0);
   std::printf("ground around the cars reported as changes: %zu\n", ground_changes);
   EXPECT_LE(ground_changes, 10u);
+}
+
+// A low flat thing, 0.2 m above the ground 30-32 m beside the central's drive (a pallet's top),
+// that only the query's map holds. The central's beams reach it at a grazing angle: they pass
+// within ld.beam_tol_m of it and end on the ground just beyond, within that of its level plane,
+// and its pixels hold nearer ground, so nothing is seen through it. Judged as a surface of its
+// own, the central met it (same, the rule for sparse far ground). Standing on the central's
+// ground (Missing's kRawAboveTheirGround), it takes no same-surface evidence: those beams met the
+// ground, below it by more than two samplings of one surface can be apart. (Before, only seen
+// through points were spared this; at 10 m the pixels see through it, at 30 m not: 420 of 420 were
+// the same surface.)
+TEST(RemovertLd, ALowerBodyStandingOnTheOtherSessionsGroundIsNotItsSurface) {
+  const auto central = Drive({}, 0.0, nullptr);
+  const RemovertConfig cfg = test::ConfigFor();
+  PointCloud lower, own_map;
+  for (double x = -1.0; x <= 1.0; x += 0.1)
+    for (double y = 30.0; y <= 32.0; y += 0.1) {
+      lower.push_back(float(x), float(y), 0.2f);
+      own_map.push_back(float(x), float(y), 0.2f);
+    }
+  for (double x = -3.0; x <= 3.0; x += 0.1)  // the query's ground around it
+    for (double y = 28.0; y <= 34.0; y += 0.1)
+      if (std::abs(x) > 1.05 || y < 29.95 || y > 32.05) own_map.push_back(float(x), float(y), 0.f);
+  auto same = [&](bool standing_on_ground) {
+    const std::vector<bool> standing(lower.size(), standing_on_ground);
+    const auto v = removert::detail::SeenThroughBy(lower, own_map, central, cfg, 2, true, &standing, nullptr);
+    return std::size_t(std::count(v.same.begin(), v.same.end(), true));
+  };
+  const std::size_t judged_alone = same(false), standing = same(true);
+  std::printf("low thing 30 m away: %zu of %zu the same surface judged alone, %zu standing on the ground\n",
+              judged_alone, lower.size(), standing);
+  EXPECT_GT(judged_alone, lower.size() / 2);  // the scene does what the rule is for
+  EXPECT_EQ(standing, 0u);
 }
 
 TEST(RemovertLd, IdenticalSessionsHaveNoChanges) {

@@ -41,10 +41,11 @@ bool PastTheirRim(const detail::Neighbourhood& nb, float r, const RemovertConfig
 // The other session's neighbours of a point (none within a map voxel) are one plane of ground
 // (thinner than kPlaneMaxThickness map voxels, normal more vertical than horizontal), around the
 // point (not to one side as at a kerb's edge, PastTheirRim's rule) and below it by more than a map
-// voxel: two samplings of one surface at the map voxel lie within a voxel of each other's plane,
-// so the point is another surface standing on that ground (the lower body of a car that left or
-// came).
-bool AboveTheirGround(const detail::Neighbourhood& nb, float r, const RemovertConfig& cfg) {
+// voxel plus `shift` (what the sessions' rotation error can put between two samplings of one
+// surface at the point's distance): two samplings of one surface lie within that of each other's
+// plane, so the point is another surface standing on that ground (the lower body of a car that
+// left or came).
+bool AboveTheirGround(const detail::Neighbourhood& nb, float r, float shift, const RemovertConfig& cfg) {
   if (nb.n < 3) return false;
   const double voxel = cfg.map_voxel_m;
   const double thick = std::sqrt(std::max(nb.eigenvalues.x(), 0.0));
@@ -54,7 +55,7 @@ bool AboveTheirGround(const detail::Neighbourhood& nb, float r, const RemovertCo
   if (up.z() < 0.0) up = -up;
   if (up.z() < detail::kUprightNormalZ) return false;  // not ground
   if (LateralOffset(nb, up) > cfg.ld_rim_frac * r) return false;  // beside it, not under it
-  return -up.dot(nb.mean) > voxel;
+  return -up.dot(nb.mean) > voxel + double(shift);
 }
 
 // Per point: kRawMissing when points[i] has fewer than k neighbours within r_i in `other`, where
@@ -100,7 +101,7 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
       const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
       if (beyond_r0 && PastTheirRim(nb, r, cfg))
         m[i] = kRawMissing;
-      else if (beyond_voxel && AboveTheirGround(nb, r, cfg))
+      else if (beyond_voxel && AboveTheirGround(nb, r, r - r0, cfg))
         m[i] = kRawAboveTheirGround;
     }
   });

@@ -282,10 +282,14 @@ void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const Surfac
   out->observed[i] = observed;
   // A beam that ended on level ground (or a roof) near the point is its surface, even where the
   // pixels say seen through: their rays passed over it at a grazing angle and met the same
-  // surface farther along. Not under a lower body standing on the other session's ground.
-  const bool level = s.beams && s.planar[i] && std::abs(s.normals[i].z()) >= kUprightNormalZ &&
-                     !(standing && (*standing)[i]);
-  out->same[i] = (!seen || (level && hits >= see_max)) && cfg.ld_same_min_hits > 0 && hits >= cfg.ld_same_min_hits;
+  // surface farther along. Not for a lower body standing on the other session's ground: the
+  // other session's surface near it is that ground, below it by more than the two samplings of
+  // one surface can be apart (AboveTheirGround), so its beams that ended within ld.beam_tol_m
+  // of it met the ground, not its surface.
+  const bool on_their_ground = standing && (*standing)[i];
+  const bool level = s.beams && s.planar[i] && std::abs(s.normals[i].z()) >= kUprightNormalZ;
+  out->same[i] = !on_their_ground && (!seen || (level && hits >= see_max)) && cfg.ld_same_min_hits > 0 &&
+                 hits >= cfg.ld_same_min_hits;
 }
 
 }  // namespace
