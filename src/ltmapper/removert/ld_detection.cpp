@@ -58,12 +58,23 @@ bool AboveTheirGround(const detail::Neighbourhood& nb, float r, float shift, con
   return -up.dot(nb.mean) > voxel + double(shift);
 }
 
+// The plane AboveTheirGround found under p is the other session's ground there, not a ledge, a
+// wall's top or a car's roof: the other map's lowest point around p (`lowest`: cells
+// ld.radius_max_m wide, p's and the eight around it) lies within p's kd radius r plus a map voxel
+// below p. A lower body stands on the ground; a point standing on a raised surface is as often a
+// displaced copy of something on it (where the poses err more than LT-SLAM measured), and the kd
+// radius decides it.
+bool OnTheirGround(const geometry::LowestGrid& lowest, const Eigen::Vector3f& p, float r, float voxel) {
+  constexpr int kAround = 1;
+  return p.z() - lowest.Under(p, p, kAround) <= r + voxel;
+}
+
 // Per point: kRawMissing when points[i] has fewer than k neighbours within r_i in `other`, where
 // r_i = ld_radius_m + LdRadiusRel() * (the larger distance from the point to the nearest keyframe
 // of either session): a surface seen from afar carries the sessions' rotation error times that
 // distance; or when it lies past the rim of the other's coverage (PastTheirRim, with ld.rim_frac);
 // kRawAboveTheirGround when its neighbours there are the other session's ground under it
-// (AboveTheirGround); else kRawNone. Either raw change goes on to the beam test, which decides.
+// (AboveTheirGround, OnTheirGround); else kRawNone. Either raw change goes on to the beam test, which decides.
 std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
                                   const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
@@ -78,6 +89,8 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
   const float r0 = float(cfg.ld_radius_m), rr = float(cfg.LdRadiusRel());
   const float r_max = float(cfg.ld_radius_max_m), voxel = float(cfg.map_voxel_m);
   const bool rim = cfg.ld_rim_frac > 0.0;
+  geometry::LowestGrid lowest(cfg.ld_radius_max_m);
+  lowest.Add(other);
   std::vector<std::uint8_t> m(points.size(), kRawMissing);
   const std::size_t chunk = 4096;
   detail::ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t c) {
@@ -101,7 +114,7 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
       const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
       if (beyond_r0 && PastTheirRim(nb, r, cfg))
         m[i] = kRawMissing;
-      else if (beyond_voxel && AboveTheirGround(nb, r, r - r0, cfg))
+      else if (beyond_voxel && AboveTheirGround(nb, r, r - r0, cfg) && OnTheirGround(lowest, p, r, voxel))
         m[i] = kRawAboveTheirGround;
     }
   });
