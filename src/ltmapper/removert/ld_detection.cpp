@@ -74,7 +74,8 @@ bool OnTheirGround(const geometry::LowestGrid& lowest, const Eigen::Vector3f& p,
 // of either session): a surface seen from afar carries the sessions' rotation error times that
 // distance; or when it lies past the rim of the other's coverage (PastTheirRim, with ld.rim_frac);
 // kRawAboveTheirGround when its neighbours there are the other session's ground under it
-// (AboveTheirGround, OnTheirGround); else kRawNone. Either raw change goes on to the beam test, which decides.
+// (AboveTheirGround, OnTheirGround); else kRawNone. Either raw change goes on to the beam test,
+// which decides.
 std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
                                   const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
