@@ -89,6 +89,15 @@ double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up);
 // The variance [rad^2] of a session edge's turn about `up` as the graph reads its information
 // (EdgeInformation: the file's or the config's odometry sigmas; a registered step's own).
 double TurnVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg, bool own_information);
+// Calls f(a, e) for each edge e of `edges` (a session's odometry or registered steps) that is a
+// step, from keyframe position a to a + 1; edges between other keyframes are skipped.
+template <class F>
+void ForEachStep(const Session& s, const std::vector<Edge>& edges, F&& f) {
+  for (const Edge& e : edges) {
+    const int a = s.Find(e.from), b = s.Find(e.to);
+    if (a >= 0 && b == a + 1) f(std::size_t(a), e);
+  }
+}
 // Whether n errors' sum of squares fits errors of the given variance: within what such errors
 // exceed one time in a thousand (a chi-square's upper tail, Wilson-Hilferty's approximation).
 bool SquaresWithin(double sum_sq, std::size_t n, double variance);

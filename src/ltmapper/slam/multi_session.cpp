@@ -659,10 +659,8 @@ void CheckPredictions(const std::vector<Session>& sessions, const std::vector<st
 std::vector<double> StatedOdometry(const Session& s, const SlamConfig& cfg) {
   const std::size_t n = s.keyframes.size() - 1;
   std::vector<double> var(n, TurnVariance(Edge{}, Eigen::Vector3d::UnitZ(), cfg, false));
-  for (const Edge& e : s.odometry) {
-    const int a = s.Find(e.from), b = s.Find(e.to);
-    if (a >= 0 && b == a + 1) var[std::size_t(a)] = TurnVariance(e, Up(s.keyframes[std::size_t(b)]), cfg, false);
-  }
+  ForEachStep(s, s.odometry,
+              [&](std::size_t a, const Edge& e) { var[a] = TurnVariance(e, Up(s.keyframes[a + 1]), cfg, false); });
   return var;
 }
 }  // namespace

@@ -220,11 +220,10 @@ class GraphProblem {
       return std::max(TurnVariance(e, x, g_.cfg, false), TurnVariance(e, y, g_.cfg, false));
     };
     std::vector<double> var(n, tilt(Edge{}, n > 0 ? ses.keyframes[0] : Keyframe{}));
-    for (const Edge& e : ses.odometry) {
-      const int a = ses.Find(e.from), b = ses.Find(e.to);
-      if (a >= 0 && b == a + 1) var[std::size_t(b)] = tilt(e, ses.keyframes[std::size_t(b)]);
-      if (a == 0 && b == 1) var[0] = var[1];
-    }
+    ForEachStep(ses, ses.odometry, [&](std::size_t a, const Edge& e) {
+      var[a + 1] = tilt(e, ses.keyframes[a + 1]);
+      if (a == 0) var[0] = var[1];
+    });
     return var;
   }
 
@@ -399,12 +398,10 @@ CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
   const std::size_t n = s.keyframes.empty() ? 0 : s.keyframes.size() - 1;
   CycleEdges c{std::vector<Pose>(n, Pose::Identity()), std::vector<double>(n, std::numeric_limits<double>::infinity())};
   const auto put = [&](const std::vector<Edge>& edges, bool own_information) {
-    for (const Edge& e : edges) {
-      const int a = s.Find(e.from), b = s.Find(e.to);
-      if (a < 0 || b != a + 1) continue;
-      const double var = TurnVariance(e, Up(s.keyframes[std::size_t(b)]), cfg, own_information);
-      if (var < c.var[std::size_t(a)]) c.T[std::size_t(a)] = e.T_from_to, c.var[std::size_t(a)] = var;
-    }
+    ForEachStep(s, edges, [&](std::size_t a, const Edge& e) {
+      const double var = TurnVariance(e, Up(s.keyframes[a + 1]), cfg, own_information);
+      if (var < c.var[a]) c.T[a] = e.T_from_to, c.var[a] = var;
+    });
   };
   put(s.odometry, false);
   put(s.registered, true);
