@@ -1102,14 +1102,38 @@ TEST(MapObjects, MovedContainerAndStableIds) {
   }
 }
 
-// Two containers of one step moved, each a short way; their boxes alike within the size tolerance.
-// Paired by size, each would go to the other's place (the sizes of the far ends agree exactly); the
-// pairing that moves them least in all links each to its own near end.
+// A car gone and another, 0.5 m longer, come: no move where the sensor samples both finely enough
+// to tell the lengths apart (the test sensor's columns are exact: its views fall short of nothing),
+// one move where its columns are 1 deg apart: 13 m out, each end of a view may then miss a sample
+// 0.45 m wide (twice the step there at 60 deg incidence), and the boxes may differ by 0.9 m.
+TEST(MapObjects, LookAlikesAreOneMovedObjectOnlyWithinTheSensorsSampling) {
+  KeyframeDelta d;
+  d.nd_strong = Car(8, 8, 2.f, 4.f, 1.5f);
+  d.pd_weak = Car(-12, -4, 2.f, 4.5f, 1.5f);
+  for (const double azimuth_step_deg : {0.0, 1.0}) {
+    test::TempDir tmp;
+    MapConfig cfg = Cfg();
+    cfg.object_sensor_azimuth_step_deg = azimuth_step_deg;
+    Store s = Store::Create(tmp / "o.ltmap", cfg);
+    s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), d.nd_strong)}});
+    s.IntegrateSession({"s1"}, "s0", {d}, {});
+    const auto objs = s.Objects(nullptr);
+    ASSERT_EQ(objs.size(), 2u);
+    for (const auto& o : objs) {
+      EXPECT_EQ(o.change, azimuth_step_deg > 0.0 ? "moved" : o.cls == PointClass::kNDStrong ? "disappeared" : "appeared")
+          << azimuth_step_deg << " deg: " << o.centroid.transpose() << " " << o.size.transpose();
+    }
+  }
+}
+
+// Two containers of one step moved, each a short way; their boxes alike. Paired by size, each
+// might go to the other's place (all four sizes agree); the pairing that moves them least in all
+// links each to its own near end.
 TEST(MapObjects, AlikeObjectsThatMovedArePairedByTheLeastTotalDisplacement) {
   test::TempDir tmp;
   KeyframeDelta d;
-  d.nd_strong = Cat(Car(8, 8, 2.4f, 6.0f, 2.5f), Car(-14, 10, 2.4f, 5.5f, 2.5f));  // gone: A1, A2
-  d.pd_weak = Cat(Car(8, -6, 2.4f, 5.5f, 2.5f), Car(-14, -8, 2.4f, 6.0f, 2.5f));  // came: B1 near A1, B2 near A2
+  d.nd_strong = Cat(Car(8, 8, 2.4f, 6.0f, 2.5f), Car(-14, 10, 2.4f, 6.0f, 2.5f));  // gone: A1, A2
+  d.pd_weak = Cat(Car(8, -6, 2.4f, 6.0f, 2.5f), Car(-14, -8, 2.4f, 6.0f, 2.5f));  // came: B1 near A1, B2 near A2
   const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr);
   ASSERT_EQ(objs.size(), 4u);
   for (const auto& o : objs) {

@@ -43,7 +43,6 @@ struct MapConfig {
   double object_twin_max_fraction = 0.5; // clusters with at least this share of such points are ghosts
   double object_max_attached_fraction = 0.5;  // clusters mostly touching unchanged surfaces are fragments
   double object_merge_inside_fraction = 0.5;  // a cluster this much inside a larger one's box joins it
-  double object_moved_size_tol = 0.2;    // relative box-size difference of a moved object's two ends
   double object_moved_min_dist_m = 1.0;  // ends closer than this are one object re-scanned, not moved
 
   template <class V>
@@ -75,7 +74,6 @@ struct MapConfig {
     v("object_twin_max_fraction", object_twin_max_fraction, "", 0.0, 1.0);
     v("object_max_attached_fraction", object_max_attached_fraction, "", 0.0, 1.0);
     v("object_merge_inside_fraction", object_merge_inside_fraction, "", 0.0, 1.0);
-    v("object_moved_size_tol", object_moved_size_tol, "", 0.0, 10.0);
     v("object_moved_min_dist_m", object_moved_min_dist_m, "m", 0.0, 10000.0);
   }
 };

@@ -19,8 +19,9 @@
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
 //     disappeared one on its lower part the query did not see; an object keeps that part and
 //     the rows the query did not see inside its box and over it (UnseenParts).
-//  5. Moved: a disappeared and an appeared object of one step with the same box size; of such
-//     pairings, the one that moves the objects least in all (LinkMoved).
+//  5. Moved: a disappeared and an appeared object of one step whose box sizes agree within what
+//     the sensor's sampling lets each view fall short (SizesAgree); of such pairings, the one
+//     that moves the objects least in all (LinkMoved).
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
@@ -413,20 +414,31 @@ struct StepContext {
   std::vector<const MapObject*> disappeared;       // accepted strong-ND objects of the step
 };
 
-// Largest relative difference of two oriented-box sizes (length, width, height).
-double SizeDifference(const MapObject& a, const MapObject& b) {
-  double d = 0.0;
-  for (int k = 0; k < 3; ++k) {
-    const double m = std::max(a.size[k], b.size[k]);
-    if (m > 0.0) d = std::max(d, std::abs(a.size[k] - b.size[k]) / m);
-  }
-  return d;
+// The map's sample spacing: the output voxel, at least the store's quantisation step. An object's
+// box grown by it holds the samples of its own surfaces (AttachedFraction, UnseenParts).
+double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m, cfg.resolution_m); }
+
+// How far short of an object's size (length, width, height) a view's box may fall: its extremes
+// are the samples nearest the object's ends, so each edge may miss up to one sample gap at either
+// end: the sensor's clustering gap at the view's range (SensorGapsAt: columns for the horizontal
+// edges, rows for the height; a side seen obliquely is sampled sparser), at least the map's sample
+// spacing (SampleSpacing). A view is never larger than the object.
+Eigen::Vector3d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
+  const Eigen::Vector2d gap = SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
+  return 2.0 * Eigen::Vector3d(gap.x(), gap.x(), gap.y());
 }
 
-// Disappeared object d and appeared object a could be one object that moved: their boxes agree in
-// size within object_moved_size_tol and their centroids are at least object_moved_min_dist_m apart.
+// Whether views a and b can be of one object: neither box exceeds the other by more than the other
+// may have fallen short (ViewShortfall). A far view may be much smaller than a near one, not larger.
+bool SizesAgree(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
+  const Eigen::Vector3d d = a.size - b.size;
+  return (d.array() <= ViewShortfall(b, cfg).array()).all() && ((-d).array() <= ViewShortfall(a, cfg).array()).all();
+}
+
+// Disappeared object d and appeared object a could be one object that moved: their sizes agree
+// (SizesAgree) and their centroids are at least object_moved_min_dist_m apart.
 bool CouldHaveMoved(const MapObject& d, const MapObject& a, const MapConfig& cfg) {
-  return SizeDifference(d, a) <= cfg.object_moved_size_tol && (d.centroid - a.centroid).norm() >= cfg.object_moved_min_dist_m;
+  return SizesAgree(d, a, cfg) && (d.centroid - a.centroid).norm() >= cfg.object_moved_min_dist_m;
 }
 
 // Coverage rule (step 3 above) for an appeared cluster: its space was observed free by the
@@ -562,10 +574,6 @@ class OwnLowerPart {
   double r_;
   std::unordered_map<CellKey, float, CellKeyHash> bottom_;  // lowest cluster point per xy cell
 };
-
-// The map's sample spacing: the output voxel, at least the store's quantisation step. An object's
-// box grown by it holds the samples of its own surfaces (AttachedFraction, UnseenParts).
-double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m, cfg.resolution_m); }
 
 // Whether q lies in o's axis-aligned box grown by r (a cheap test before the oriented box).
 bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
