@@ -202,16 +202,6 @@ std::int64_t CellKey(float x, float y, double cell_m) {
   return PackCell(std::int64_t(std::floor(double(x) / cell_m)), std::int64_t(std::floor(double(y) / cell_m)), 0);
 }
 
-// Per 2D cell of `cell_m`: the lowest map point's z (the local ground, where the ground was seen).
-std::unordered_map<std::int64_t, float> LowestPerCell(const PointCloud& map, double cell_m) {
-  std::unordered_map<std::int64_t, float> low;
-  for (const PointXYZI& p : map.points) {
-    const auto [it, added] = low.try_emplace(CellKey(p.x, p.y, cell_m), p.z);
-    if (!added) it->second = std::min(it->second, p.z);
-  }
-  return low;
-}
-
 // Per map point: 1 when it is not in `dynamic`, more than clearance_m above the local ground (the
 // lowest map point within about radius_m in xy) and under a foot of `bodies` (a point at most
 // reach_m above the local ground, within radius_m of it in xy). A mover's lowest parts, next to
@@ -224,14 +214,11 @@ std::vector<std::uint8_t> GroundwardMask(const PointCloud& map, const std::vecto
                                          double clearance_m, int threads) {
   std::vector<std::uint8_t> grow(map.size(), 0);
   if (bodies.empty() || radius_m <= 0.0) return grow;
-  const auto low = LowestPerCell(map, radius_m);
-  auto ground_near = [&](const PointXYZI& p) {
-    float g = p.z;
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        if (auto it = low.find(CellKey(p.x + float(dx * radius_m), p.y + float(dy * radius_m), radius_m)); it != low.end())
-          g = std::min(g, it->second);
-    return g;
+  geometry::LowestGrid low(radius_m);
+  low.Add(map);
+  auto ground_near = [&](const PointXYZI& p) {  // the lowest map point of p's cell and the 8 around it
+    const Eigen::Vector3f q(p.x, p.y, p.z);
+    return std::min(p.z, low.Under(q, q, 1));
   };
   std::unordered_map<std::int64_t, std::vector<std::uint32_t>> body_cells;  // the bodies' feet
   for (std::size_t j = 0; j < bodies.size(); ++j) {
