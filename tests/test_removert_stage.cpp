@@ -163,6 +163,30 @@ TEST(RemovertStage, RunManifestOrderAndNoStaleFolders) {
   EXPECT_EQ(test::ReadText(tmp / "mine/notes.txt"), "user data");
 }
 
+// `removert --aligned DIR --sessions ...` (some of a run's sessions) takes each session's rotation
+// measure from the run's manifest by its name: the LD log names the measure, not the 0.3 deg prior
+// it fell back to before (pair 00_02 of the demo rerun so: PD recall 0.886 against the run's 0.946).
+// A session the manifest does not measure keeps the prior.
+TEST(RemovertStage, CliSessionsOfARunTakeTheManifestsRotationMeasure) {
+  if (!fs::exists(LTM_EXE)) GTEST_SKIP() << "ltmapper executable not built";
+  test::TempDir tmp;
+  const std::string zs = tmp / "z_first", as = tmp / "a_second";
+  const std::string aligned = tmp / "aligned";
+  io::WriteKittiPoses(io::layout::PosesWorldFile(aligned, "z_first"), WriteStreetSession(zs, -10.0, 4, true));
+  io::WriteKittiPoses(io::layout::PosesWorldFile(aligned, "a_second"), WriteStreetSession(as, -10.0, 4, false));
+  const std::string cmd = "removert --threads 2 --aligned " + aligned + " --sessions " + zs + " " + as + " --out ";
+  for (const double sigma : {0.07, 0.0}) {
+    io::RunManifest m;
+    m.sessions = {{"z_first", zs, true, ""}, {"a_second", as, true, "", sigma}};
+    io::WriteRunManifest(aligned, m);
+    std::string out;
+    ASSERT_EQ(test::RunCli(cmd + tmp / (sigma > 0.0 ? "measured" : "prior"), &out), 0) << out;
+    const std::string said = sigma > 0.0 ? "rotation uncertainty between the sessions 0.070 deg (ld.rotation_sigma_deg"
+                                         : "rotation uncertainty between the sessions 0.300 deg (pose_sigma_deg)";
+    EXPECT_NE(out.find(said), std::string::npos) << out;
+  }
+}
+
 TEST(RemovertStage, BadInputsAreErrors) {
   test::TempDir tmp;
   const std::string s0 = tmp / "s0";
