@@ -435,19 +435,17 @@ TEST(MapStore, LiveHasWeakPdMetaDoesNot) {
   EXPECT_EQ(count(ch, PointClass::kNDStrong), car);
   EXPECT_EQ(count(ch, PointClass::kNDWeak), 0);  // not stored by default (changes nothing)
   // Objects: the parked car (weak PD) and the removed car (strong ND), the same box: one car
-  // moved. Car points in the ground band (z = 0.25 m) are ground; so is the wall (strong PD, a
-  // line 1.1 m up) where its xy cells hold no other point (their lowest point), and the removed
-  // car's row at y = 6 m, whose cell's lowest point is the car's own (0.25 m): 9 points.
+  // moved. Car points in the ground band (z = 0.25 m, and the removed car's row at y = 6 m,
+  // whose cell's lowest point is the car's own) are not clustered, but they are each car's foot
+  // (KeepFeet): every point of both cars is in its object. The wall (strong PD, a line 1.1 m up)
+  // is ground where its xy cells hold no other point (their lowest point).
   std::vector<MapObject> rejected;
   const auto objs = s.Objects(&rejected);
   ASSERT_EQ(objs.size(), 2u);
-  const auto above = [](const PointCloud& c) {
-    return std::size_t(std::count_if(c.points.begin(), c.points.end(), [](const PointXYZI& p) { return p.z > 0.26f; }));
-  };
   int pdw = 0, nds = 0;
   for (const auto& o : objs) {
-    pdw += o.cls == PointClass::kPDWeak && o.points == above(Car(-4, -4));
-    nds += o.cls == PointClass::kNDStrong && o.points == above(Car(2, 2)) - 9;
+    pdw += o.cls == PointClass::kPDWeak && o.points == Car(-4, -4).size();
+    nds += o.cls == PointClass::kNDStrong && o.points == Car(2, 2).size();
     EXPECT_EQ(o.session, 1);
     EXPECT_EQ(o.change, "moved");
     EXPECT_EQ(o.partner, objs[o.id == 0 ? 1 : 0].id);
@@ -517,11 +515,10 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
   }
   const auto objects = s.Objects();
   ASSERT_EQ(objects.size(), 1u);
-  const auto above = std::count_if(car.points.begin(), car.points.end(), [](const PointXYZI& p) { return p.z > 0.26f; });
-  // The lowest layer is in the ground band; where the car's cells hold no ground (beyond the
-  // keyframe's 6 m grid) its own lowest layer is the cell's ground and the next layer is too.
-  EXPECT_LT(objects[0].points, std::size_t(above));
-  EXPECT_GT(objects[0].points, car.size() / 2);
+  // The lowest layer is in the ground band, and where the car's cells hold no ground (beyond the
+  // keyframe's 6 m grid) its own lowest layer is the cell's ground and the next layer is too: not
+  // clustered, but the car's foot (KeepFeet).
+  EXPECT_EQ(objects[0].points, car.size());
   EXPECT_EQ(objects[0].change, "appeared");
   EXPECT_EQ(objects[0].exists_in, 1);
 }
@@ -530,8 +527,8 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
 // One step on a flat 40 m x 40 m ground keyframe holding `standing` (strong ND removes map
 // points, so what disappears must be in it); `d0` is keyframe 0's delta.
 std::vector<MapObject> StepObjects(const test::TempDir& tmp, const PointCloud& standing, const KeyframeDelta& d0,
-                                   std::vector<MapObject>* rejected) {
-  Store s = Store::Create(tmp / "o.ltmap", Cfg());
+                                   std::vector<MapObject>* rejected, const MapConfig& cfg = Cfg()) {
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
   s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), standing)}});
   s.IntegrateSession({"s1"}, "s0", {d0}, {});
   return s.Objects(rejected);
@@ -552,12 +549,26 @@ TEST(MapObjects, GroundSliverRejectedCarKept) {
   const auto objs = StepObjects(tmp, Car(8, 8), d, &rejected);
   ASSERT_EQ(objs.size(), 1u);
   EXPECT_EQ(objs[0].change, "appeared");
-  EXPECT_NEAR(objs[0].size.z(), 1.0, 0.01);  // oriented box: z 0.5 .. 1.5 (0.25 is in the ground band)
+  EXPECT_NEAR(objs[0].size.z(), 1.25, 0.01);  // oriented box: z 0.25 (its foot, in the ground band) .. 1.5
   EXPECT_NEAR(std::max(objs[0].size.x(), objs[0].size.y()), 4.0, 0.01);
   EXPECT_NEAR(objs[0].height_above_ground, 1.5, 0.01);
   EXPECT_GT(objs[0].confidence, 0.9);
   ASSERT_EQ(rejected.size(), 2u);
   for (const auto& r : rejected) EXPECT_EQ(r.rejected, "low");  // both below object_min_height_m
+}
+
+// An appeared car's lowest row lies in the ground band, like the new kerb stone 1 m beside it:
+// neither is clustered. The row under the car is its foot (KeepFeet), the stone is no part of it.
+TEST(MapObjects, AnObjectKeepsItsFootNotTheGroundChangesBesideIt) {
+  test::TempDir tmp;
+  KeyframeDelta d;
+  d.pd_weak = Car(-6, -6);                                         // x -6 .. -4, z 0.25 .. 1.5
+  d.pd_weak.append(WithZ(Grid(-3, -6, 0, 2, 16, 0.25f), 0.2f));   // x -3 .. -2.75, z 0.2
+  const auto objs = StepObjects(tmp, Car(8, 8), d, nullptr);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].points, Car(-6, -6).size());
+  EXPECT_NEAR(objs[0].lo.z(), 0.25, 1e-6);
+  EXPECT_NEAR(objs[0].hi.x(), -4.0, 1e-6);
 }
 
 TEST(MapObjects, RulesFromGeometry) {
@@ -765,12 +776,10 @@ TEST(MapObjects, APartHeldUpByAnotherIsOneObjectWithIt) {
   std::vector<MapObject> rejected;
   const auto objs = StepObjects(tmp, d.nd_strong, d, &rejected);
   ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected";
-  std::size_t lower_above_ground = 0;  // the lowest row lies in the ground band
-  for (const auto& p : lower.points) lower_above_ground += p.z > 0.3f;
-  EXPECT_EQ(objs[0].points, lower_above_ground + upper.size());
+  EXPECT_EQ(objs[0].points, lower.size() + upper.size());  // with its foot, the row in the ground band
   EXPECT_EQ(objs[0].change, "disappeared");
   EXPECT_NEAR(objs[0].hi.z(), 4.5, 0.01);
-  EXPECT_NEAR(objs[0].lo.z(), 0.5, 0.01);
+  EXPECT_NEAR(objs[0].lo.z(), 0.25, 0.01);
   EXPECT_TRUE(rejected.empty());
 }
 
@@ -823,13 +832,15 @@ TEST(MapObjects, ACarThatLeftKeepsTheRowsBetweenItsSeenRows) {
   std::vector<MapObject> rejected;
   const auto objs = StepObjects(tmp, car, d, &rejected);
   ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
-  std::size_t above_ground = 0, seen = 0;  // the lowest row lies in the ground band
+  // The lowest row lies in the ground band: its seen points are the car's foot (KeepFeet), its
+  // unseen ones are not kept (unseen parts reach down to the band only).
+  std::size_t above_ground = 0, foot = 0;
   for (const auto& p : car.points) above_ground += p.z > 0.3f;
-  for (const auto& p : d.nd_strong.points) seen += p.z > 0.3f;
-  EXPECT_EQ(objs[0].points, above_ground);
+  for (const auto& p : d.nd_strong.points) foot += p.z < 0.3f;
+  EXPECT_EQ(objs[0].points, above_ground + foot);
   EXPECT_EQ(objs[0].change, "disappeared");
   EXPECT_NEAR(objs[0].box_seen_fraction, 1.0, 1e-9);
-  EXPECT_NEAR(objs[0].observed_fraction, double(seen) / double(above_ground), 1e-9);
+  EXPECT_NEAR(objs[0].observed_fraction, double(d.nd_strong.size()) / double(above_ground + foot), 1e-9);
 }
 
 // A container that left, its near side seen through by the new session only in its lower rows
@@ -844,9 +855,7 @@ TEST(MapObjects, AContainerThatLeftKeepsItsUnseenUpperRows) {
   std::vector<MapObject> rejected;
   const auto objs = StepObjects(tmp, side, d, &rejected);
   ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
-  std::size_t above_ground = 0;  // the lowest row lies in the ground band
-  for (const auto& p : side.points) above_ground += p.z > 0.3f;
-  EXPECT_EQ(objs[0].points, above_ground);
+  EXPECT_EQ(objs[0].points, side.size());  // with its foot, the lowest row (ground band, seen)
   EXPECT_NEAR(objs[0].hi.z(), 2.5, 0.01);
   EXPECT_EQ(objs[0].cls, PointClass::kNDStrong);  // the class of what was seen
 }
@@ -898,6 +907,17 @@ TEST(MapObjects, RevealedBehindARemovedObjectOnlyWhenItMovedThere) {
     if (same_shape) {
       ASSERT_EQ(objs.size(), 2u);
       for (const auto& o : objs) EXPECT_EQ(o.change, "moved");
+      // Seen in rows 2 deg apart, 19 m out, the revealed car may fall short of 2.7 m in height: its
+      // size agrees with the car that left without showing it, and it is coverage.
+      test::TempDir tmp2;
+      MapConfig coarse = Cfg();
+      coarse.object_sensor_step_deg = 2.0;
+      std::vector<MapObject> rejected2;
+      const auto objs2 = StepObjects(tmp2, left, d, &rejected2, coarse);
+      ASSERT_EQ(objs2.size(), 1u);
+      EXPECT_EQ(objs2[0].change, "disappeared");
+      ASSERT_EQ(rejected2.size(), 1u);
+      EXPECT_EQ(rejected2[0].rejected, "coverage");
     } else {
       ASSERT_EQ(objs.size(), 1u);
       EXPECT_EQ(objs[0].change, "disappeared");
@@ -1114,10 +1134,7 @@ TEST(MapObjects, LookAlikesAreOneMovedObjectOnlyWithinTheSensorsSampling) {
     test::TempDir tmp;
     MapConfig cfg = Cfg();
     cfg.object_sensor_azimuth_step_deg = azimuth_step_deg;
-    Store s = Store::Create(tmp / "o.ltmap", cfg);
-    s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), d.nd_strong)}});
-    s.IntegrateSession({"s1"}, "s0", {d}, {});
-    const auto objs = s.Objects(nullptr);
+    const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr, cfg);
     ASSERT_EQ(objs.size(), 2u);
     for (const auto& o : objs) {
       EXPECT_EQ(o.change, azimuth_step_deg > 0.0 ? "moved" : o.cls == PointClass::kNDStrong ? "disappeared" : "appeared")

@@ -18,10 +18,11 @@
 //     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
 //     disappeared one on its lower part the query did not see; an object keeps that part and
-//     the rows the query did not see inside its box and over it (UnseenParts).
-//  5. Moved: a disappeared and an appeared object of one step whose box sizes agree within what
-//     the sensor's sampling lets each view fall short (SizesAgree); of such pairings, the one
-//     that moves the objects least in all (LinkMoved).
+//     the rows the query did not see inside its box and over it (UnseenParts), and every object
+//     its foot, the changes of its side in the ground band under it (KeepFeet).
+//  5. Moved: a disappeared and an appeared object of one step whose box lengths and heights agree
+//     within what the sensor's sampling lets each view fall short (SizesAgree); of such pairings,
+//     the one that moves the objects least in all (LinkMoved).
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
@@ -418,20 +419,22 @@ struct StepContext {
 // box grown by it holds the samples of its own surfaces (AttachedFraction, UnseenParts).
 double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m, cfg.resolution_m); }
 
-// How far short of an object's size (length, width, height) a view's box may fall: its extremes
-// are the samples nearest the object's ends, so each edge may miss up to one sample gap at either
-// end: the sensor's clustering gap at the view's range (SensorGapsAt: columns for the horizontal
-// edges, rows for the height; a side seen obliquely is sampled sparser), at least the map's sample
-// spacing (SampleSpacing). A view is never larger than the object.
-Eigen::Vector3d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
-  const Eigen::Vector2d gap = SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
-  return 2.0 * Eigen::Vector3d(gap.x(), gap.x(), gap.y());
+// How far short of an object's length and height a view's box may fall: its extremes are the
+// samples nearest the object's ends, so each edge may miss up to one sample gap at either end: the
+// sensor's clustering gap at the view's range (SensorGapsAt: its columns for the length, its rows
+// for the height; a side seen obliquely is sampled sparser), at least the map's sample spacing
+// (SampleSpacing). A view is never larger than the object.
+Eigen::Vector2d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
+  return 2.0 * SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
 }
 
-// Whether views a and b can be of one object: neither box exceeds the other by more than the other
-// may have fallen short (ViewShortfall). A far view may be much smaller than a near one, not larger.
+// Whether views a and b can be of one object: neither box's length nor height exceeds the other's
+// by more than the other may have fallen short (ViewShortfall); a far view may be much smaller than
+// a near one, not larger. Their widths say nothing: a view sees an object's depth only as far as
+// the object lets it (a container's side seen across the street is 0.2 m wide, at an angle 1.3 m
+// of its 2.4 m), so both are lower bounds of the same width.
 bool SizesAgree(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
-  const Eigen::Vector3d d = a.size - b.size;
+  const Eigen::Vector2d d(a.size.x() - b.size.x(), a.size.z() - b.size.z());
   return (d.array() <= ViewShortfall(b, cfg).array()).all() && ((-d).array() <= ViewShortfall(a, cfg).array()).all();
 }
 
@@ -441,19 +444,27 @@ bool CouldHaveMoved(const MapObject& d, const MapObject& a, const MapConfig& cfg
   return SizesAgree(d, a, cfg) && (d.centroid - a.centroid).norm() >= cfg.object_moved_min_dist_m;
 }
 
+// Whether view o shows the shape of object d: it may fall short (ViewShortfall) by less than d's
+// length and height. A view that may miss a whole edge of d agrees with d's size without showing it
+// (seed 7's VLP-16 saw a patch 58 m out in rows 2 m apart: "the tree 5.6 m tall moved there").
+bool ShowsTheShapeOf(const MapObject& o, const MapObject& d, const MapConfig& cfg) {
+  return (ViewShortfall(o, cfg).array() < Eigen::Array2d(d.size.x(), d.size.z())).all();
+}
+
 // Coverage rule (step 3 above) for an appeared cluster: its space was observed free by the
 // reference (majority of weak PD), or the reference's view of it was blocked by an object the
 // step removed (the segment from the nearest reference sensor to the centroid crosses the box of
-// a disappeared object, grown by the cluster tolerance) and it has the shape of an object the
-// step removed (CouldHaveMoved): that object moved there (LinkMoved pairs them). Anything else behind a blocked view the
-// reference never observed: a facade or fence revealed behind a car that left is a coverage
-// difference, not an object (it was a false object on HDL-64E, OS1-128, Pandar64 and VLP-32C).
+// a disappeared object, grown by the cluster tolerance) and it shows the shape of an object the
+// step removed (CouldHaveMoved, ShowsTheShapeOf): that object moved there (LinkMoved pairs them).
+// Anything else behind a blocked view the reference never observed: a facade or fence revealed
+// behind a car that left is a coverage difference, not an object (it was a false object on
+// HDL-64E, OS1-128, Pandar64 and VLP-32C).
 bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   if (o.change == "disappeared" || o.observed_fraction >= cfg.object_min_observed_fraction) return true;
   const Eigen::Vector3d* s = ctx.reference_ranges.NearestTo(o.centroid.cast<float>());
   if (!s) return false;
   const auto blocks = [&](const MapObject* d) { return SegmentHitsBox(*s, o.centroid, d->lo, d->hi, cfg.object_tolerance_m); };
-  const auto moved_here = [&](const MapObject* d) { return CouldHaveMoved(*d, o, cfg); };
+  const auto moved_here = [&](const MapObject* d) { return CouldHaveMoved(*d, o, cfg) && ShowsTheShapeOf(o, *d, cfg); };
   return std::any_of(ctx.disappeared.begin(), ctx.disappeared.end(), blocks) &&
          std::any_of(ctx.disappeared.begin(), ctx.disappeared.end(), moved_here);
 }
@@ -890,6 +901,40 @@ void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected
   objects.swap(out);
 }
 
+// An object's foot: the change points of its side in the ground band (GroupPoints leaves them out,
+// as they would glue objects to the ground and to each other) inside its oriented box grown by the
+// map's sample spacing, from its bottom down with no vertical gap wider than the cluster tolerance
+// (those as high as its bottom too: where a cell holds no ground, its band reaches higher). A
+// container's lowest rows and a car's wheels are the object's own surfaces: its cloud keeps them,
+// each point in the first object that claims it. The rules judged the object without them.
+void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg) {
+  std::vector<std::uint32_t> band;
+  for (std::size_t i = 0; i < changes.size(); ++i)
+    if (Grouped(changes.cls[i]) && !AboveGround(changes.points[i].xyz(), floor, cfg)) band.push_back(std::uint32_t(i));
+  if (band.empty()) return;
+  const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(band));
+  std::unordered_set<std::uint32_t> taken;
+  const double edge = SampleSpacing(cfg);
+  for (MapObject& o : kept) {
+    const InOrientedBox in_box(o, edge, std::numeric_limits<double>::infinity());
+    std::vector<std::uint32_t> side;  // the band's points of o's side in its box's columns, highest first
+    for (std::uint32_t i : by_z)
+      if (IsPd(changes.cls[i]) == IsPd(o.cls) && !taken.count(i) && in_box(changes.points[i].xyz().cast<double>()))
+        side.push_back(i);
+    std::vector<std::uint32_t> foot;
+    double reached = o.lo.z();
+    for (std::uint32_t i : side) {
+      const double z = changes.points[i].z;
+      if (z < reached - cfg.object_tolerance_m) break;
+      reached = std::min(reached, z);
+      foot.push_back(i);
+    }
+    if (foot.empty()) continue;
+    taken.insert(foot.begin(), foot.end());
+    Absorb(o, changes.select(foot));
+  }
+}
+
 // One step's objects (disappeared first: they can reveal appeared ones) and rejected clusters.
 void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx, std::vector<MapObject>& kept,
                  std::vector<MapObject>& rejected) {
@@ -928,6 +973,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     }
   }
   MergeParts(step_kept, step_rejected, cfg);
+  KeepFeet(step_kept, changes, floor, cfg);
   for (auto& o : step_kept) kept.push_back(std::move(o));
   for (auto& o : step_rejected) rejected.push_back(std::move(o));
 }
