@@ -17,7 +17,6 @@ usage: bench/objects_matrix.py [--ltmapper BIN] [--out DIR] [--map-config F] ROW
 """
 import argparse
 import glob
-import json
 import os
 import shutil
 import sys
@@ -25,6 +24,7 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench"))
 from benchrun import timed  # noqa: E402
+from scenario_matrix import eval_objects, objects_cell  # noqa: E402
 
 
 def run_row(ltm, row, out, map_config):
@@ -40,22 +40,17 @@ def run_row(ltm, row, out, map_config):
     objects = os.path.join(out, "objects")
     timed([ltm, "map", "objects", "--store", copy, "--out", objects, "--session", sessions[-1],
            "--config", map_config, "--quiet"], os.path.join(out, "objects.log"))
-    j = os.path.join(out, "objects.json")
-    timed([ltm, "eval", "objects", "--sim", os.path.join(row, "sim"), "--objects", objects, "--aligned",
-           os.path.join(row, "run", "aligned"), "--json", j, "--quiet"], j + ".log")
-    with open(j) as f:
-        return json.load(f)["objects"]
+    return eval_objects(ltm, os.path.join(row, "sim"), objects, os.path.join(row, "run", "aligned"),
+                        os.path.join(out, "objects.json"))
 
 
 def summary(name, o):
     """One table row's figures from eval objects' JSON."""
-    ob = o["observable"]
     moves = [m for m in o["moved"] if m["name"] == "all"][0]
     ious = [t["best_iou"] for t in o["objects"] if t["scored"] and t["best_cluster"] >= 0]
     return {
         "name": name, "precision": o["precision"] if o["clusters"] else 1.0,
-        "objects": "%d/%d (%.2f) [%d/%d]" % (o["found"], o["truth_objects"], o["precision"] or 0.0,
-                                             ob["found"], ob["truth_objects"]),
+        "objects": objects_cell(o),
         "moves": "%d/%d, %d" % (moves["found"], moves["truth_moves"], moves["linked"]),
         "moved": "%d (%d)" % (moves["reported"], moves["true_reported"]),
         "iou": "%.3f" % (sum(ious) / len(ious)) if ious else "-",

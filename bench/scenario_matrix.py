@@ -64,6 +64,22 @@ def simulate(ltm, yaml, sim, keyframes, seed):
     os.replace(pending, cfg)
 
 
+def eval_objects(ltm, sim, objects, aligned, j):
+    """`ltmapper eval objects` of an objects folder into the JSON file j; returns its "objects"."""
+    timed([ltm, "eval", "objects", "--sim", sim, "--objects", objects, "--aligned", aligned, "--json", j, "--quiet"],
+          j + ".log")
+    return load(j)["objects"]
+
+
+def objects_cell(o):
+    """The table's objects cell: found / truth objects (precision) [found / truth among the observable]."""
+    cell = "%d/%d (%s)" % (o["found"], o["truth_objects"], fmt(o["precision"]))
+    ob = o.get("observable")
+    if ob:
+        cell += " [%d/%d]" % (ob["found"], ob["truth_objects"])
+    return cell
+
+
 def hd_wall_per_keyframe(changes):
     """HD removal wall seconds per keyframe (map + votes, all sessions) from changes/report.json
     (None when the run stopped before LT-removert)."""
@@ -124,12 +140,7 @@ def evaluate(ltm, sim, out, names):
     objects = os.path.join(runp, "objects")
     row["objects"] = None
     if os.path.exists(os.path.join(objects, "objects.csv")):
-        j = os.path.join(ev, "objects.json")
-        timed([ltm, "eval", "objects", "--sim", sim, "--objects", objects, "--aligned", aligned, "--json", j, "--quiet"],
-            j + ".log")
-        o = load(j)["objects"]
-        ob = o.get("observable") or {}
-        row["objects"] = (o["found"], o["truth_objects"], o["precision"], ob.get("found"), ob.get("truth_objects"))
+        row["objects"] = objects_cell(eval_objects(ltm, sim, objects, aligned, os.path.join(ev, "objects.json")))
     row["hd_s_kf"] = hd_wall_per_keyframe(changes)
     return row
 
@@ -180,9 +191,7 @@ def print_table(rows):
                            p, fmt(a), fmt(b), fmt(c), fmt(d), fmt(oa), fmt(ob), fmt(sa), fmt(sb), fmt(e), fmt(f), fmt(g),
                            fmt(h))
                        for p, a, b, c, d, oa, ob, sa, sb, e, f, g, h in r["ld"])
-        obj = "n/a" if not r["objects"] else "%d/%d (%s)" % (r["objects"][0], r["objects"][1], fmt(r["objects"][2]))
-        if r["objects"] and r["objects"][4] is not None:
-            obj += " [%d/%d]" % (r["objects"][3], r["objects"][4])
+        obj = r["objects"] or "n/a"
         print("| %s | %d/%d | %s | %s | %s / %s | %s | %s | %s | %s | %s |" % (
             r["name"], r["aligned"], r["sessions"], " ".join(fmt(x, 100) for x in r["sa"]),
             " ".join("%s (%s) [%s]" % (fmt(x, 100), fmt(y, 100), fmt(z, 100))

@@ -425,7 +425,8 @@ double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m,
 // for the height; a side seen obliquely is sampled sparser), at least the map's sample spacing
 // (SampleSpacing). A view is never larger than the object.
 Eigen::Vector2d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
-  return 2.0 * SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
+  constexpr double kEnds = 2.0;  // an edge's two ends
+  return kEnds * SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
 }
 
 // Whether views a and b can be of one object: neither box's length nor height exceeds the other's
@@ -903,8 +904,8 @@ void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected
 
 // An object's foot: the change points of its side in the ground band (GroupPoints leaves them out,
 // as they would glue objects to the ground and to each other) inside its oriented box grown by the
-// map's sample spacing, from its bottom down with no vertical gap wider than the cluster tolerance
-// (those as high as its bottom too: where a cell holds no ground, its band reaches higher). A
+// map's sample spacing: those as high as its bottom or higher (where a cell holds no ground, its
+// band reaches up there) and those chained down from its bottom (ChainBelow). A
 // container's lowest rows and a car's wheels are the object's own surfaces: its cloud keeps them,
 // each point in the first object that claims it. The rules judged the object without them.
 void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg) {
@@ -917,18 +918,15 @@ void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floo
   const double edge = SampleSpacing(cfg);
   for (MapObject& o : kept) {
     const InOrientedBox in_box(o, edge, std::numeric_limits<double>::infinity());
-    std::vector<std::uint32_t> side;  // the band's points of o's side in its box's columns, highest first
-    for (std::uint32_t i : by_z)
-      if (IsPd(changes.cls[i]) == IsPd(o.cls) && !taken.count(i) && in_box(changes.points[i].xyz().cast<double>()))
-        side.push_back(i);
-    std::vector<std::uint32_t> foot;
-    double reached = o.lo.z();
-    for (std::uint32_t i : side) {
-      const double z = changes.points[i].z;
-      if (z < reached - cfg.object_tolerance_m) break;
-      reached = std::min(reached, z);
-      foot.push_back(i);
+    std::vector<std::uint32_t> side, foot;  // the band's points of o's side in its box's columns, highest first
+    for (std::uint32_t i : by_z) {
+      if (IsPd(changes.cls[i]) != IsPd(o.cls) || taken.count(i) || !in_box(changes.points[i].xyz().cast<double>()))
+        continue;
+      side.push_back(i);
+      if (double(changes.points[i].z) >= o.lo.z()) foot.push_back(i);
     }
+    const std::vector<std::uint32_t> below = ChainBelow(o, changes, side, cfg.object_tolerance_m);
+    foot.insert(foot.end(), below.begin(), below.end());
     if (foot.empty()) continue;
     taken.insert(foot.begin(), foot.end());
     Absorb(o, changes.select(foot));
