@@ -860,6 +860,29 @@ TEST(MapObjects, AContainerThatLeftKeepsItsUnseenUpperRows) {
   EXPECT_EQ(objs[0].cls, PointClass::kNDStrong);  // the class of what was seen
 }
 
+// A disappeared object's confidence weighs what the query saw through against all it is, its
+// unseen rows included (Rate): the container seen gone up to 1.1 m, its upper rows unseen, is less
+// certain than the same container seen gone to its top, and no more than the cube root of its
+// see-through share.
+TEST(MapObjects, AnUnseenPartCountsAgainstAnObjectsConfidence) {
+  const PointCloud side = Car(-6, -6, 0.f, 6.f, 2.5f);
+  double confidence[2] = {0.0, 0.0};
+  for (const bool all_seen : {false, true}) {
+    KeyframeDelta d;
+    for (const auto& p : side.points)
+      (all_seen || p.z < 1.1f ? d.nd_strong : d.nd_weak).push_back(p.x, p.y, p.z, p.intensity);
+    test::TempDir tmp;
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, side, d, &rejected);
+    ASSERT_EQ(objs.size(), 1u);
+    const double seen = double(d.nd_strong.size()) / double(side.size());
+    EXPECT_NEAR(objs[0].observed_fraction, seen, 1e-9);
+    EXPECT_LE(objs[0].confidence, std::cbrt(seen) + 1e-9);
+    confidence[all_seen] = objs[0].confidence;
+  }
+  EXPECT_LT(confidence[0], confidence[1] - 0.1);
+}
+
 // A structure that came, seen as one cluster above 1.5 m (weak PD) and, lower, as scattered
 // points, each more than the cluster tolerance from the others (too few to be a cluster of their
 // own), one above the other within the tolerance down to the ground band: it stands on them, it

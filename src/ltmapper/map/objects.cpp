@@ -827,6 +827,14 @@ void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   o.confidence = Confidence(o, cfg, width, MinWidth(o.range_m, cfg));
 }
 
+// An object's confidence over its final cloud: the parts it took after the rules judged what was
+// seen (the unseen parts of a disappeared one, parts joined, its feet) count in its see-through
+// evidence. A disappeared object the query saw through over a few rows at a facade's foot, and
+// that took the rows of the facade above it that the query never saw, is 2 % evidence.
+void Rate(MapObject& o, const MapConfig& cfg) {
+  o.confidence = Confidence(o, cfg, Width(o, Spread(o).middle), MinWidth(o.range_m, cfg));
+}
+
 // Share of `part`'s points inside `whole`'s oriented box grown by `margin` (of the points seen: not
 // of its unseen parts). The oriented box, not the axis-aligned one: a fence or wall that runs
 // diagonally to the map's axes has an axis-aligned box metres wide, and a car parked beside it
@@ -972,6 +980,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   }
   MergeParts(step_kept, step_rejected, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
+  for (auto& o : step_kept) Rate(o, cfg);
   for (auto& o : step_kept) kept.push_back(std::move(o));
   for (auto& o : step_rejected) rejected.push_back(std::move(o));
 }
