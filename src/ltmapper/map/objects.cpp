@@ -822,15 +822,13 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
 // The rules (Reject) and the confidence of a built cluster.
 void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   const Spread3 sp = Spread(o);
-  const double width = Width(o, sp.middle);
-  o.rejected = Reject(o, ctx, cfg, width, sp);
-  o.confidence = Confidence(o, cfg, width, MinWidth(o.range_m, cfg));
+  o.rejected = Reject(o, ctx, cfg, Width(o, sp.middle), sp);
 }
 
-// An object's confidence over its final cloud: the parts it took after the rules judged what was
-// seen (the unseen parts of a disappeared one, parts joined, its feet) count in its see-through
-// evidence. A disappeared object the query saw through over a few rows at a facade's foot, and
-// that took the rows of the facade above it that the query never saw, is 2 % evidence.
+// A cluster's confidence over its final cloud: the parts an object took after the rules judged
+// what was seen (the unseen parts of a disappeared one, parts joined, its feet) count in its
+// see-through evidence. A disappeared object the query saw through over a few rows at a facade's
+// foot, and that took the rows of the facade above it that the query never saw, is 2 % evidence.
 void Rate(MapObject& o, const MapConfig& cfg) {
   o.confidence = Confidence(o, cfg, Width(o, Spread(o).middle), MinWidth(o.range_m, cfg));
 }
@@ -980,9 +978,8 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   }
   MergeParts(step_kept, step_rejected, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
-  for (auto& o : step_kept) Rate(o, cfg);
-  for (auto& o : step_kept) kept.push_back(std::move(o));
-  for (auto& o : step_rejected) rejected.push_back(std::move(o));
+  for (auto& o : step_kept) Rate(o, cfg), kept.push_back(std::move(o));
+  for (auto& o : step_rejected) Rate(o, cfg), rejected.push_back(std::move(o));
 }
 
 // Stable ids: objects ordered by step, change and centroid (x, then y).
