@@ -19,7 +19,8 @@
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
 //     disappeared one on its lower part the query did not see; an object keeps that part and
 //     the rows the query did not see inside its box and over it (UnseenParts), and every object
-//     its foot, the changes of its side in the ground band under it (KeepFeet).
+//     its foot, the changes of its side in the ground band under it (KeepFeet). Its confidence
+//     is rated over all it then holds (Rate).
 //  5. Moved: a disappeared and an appeared object of one step whose box lengths and heights agree
 //     within what the sensor's sampling lets each view fall short (SizesAgree); of such pairings,
 //     the one that moves the objects least in all (LinkMoved).
@@ -819,7 +820,7 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
   return parts;
 }
 
-// The rules (Reject) and the confidence of a built cluster.
+// The rules (Reject) of a built cluster, on what was seen of it (its confidence is Rate's).
 void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
   const Spread3 sp = Spread(o);
   o.rejected = Reject(o, ctx, cfg, Width(o, sp.middle), sp);
@@ -978,8 +979,14 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   }
   MergeParts(step_kept, step_rejected, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
-  for (auto& o : step_kept) Rate(o, cfg), kept.push_back(std::move(o));
-  for (auto& o : step_rejected) Rate(o, cfg), rejected.push_back(std::move(o));
+  for (auto& o : step_kept) {
+    Rate(o, cfg);
+    kept.push_back(std::move(o));
+  }
+  for (auto& o : step_rejected) {
+    Rate(o, cfg);
+    rejected.push_back(std::move(o));
+  }
 }
 
 // Stable ids: objects ordered by step, change and centroid (x, then y).

@@ -118,7 +118,7 @@ struct MapObject {
   int track = -1;
   std::vector<int> track_sessions;
   std::size_t points = 0;
-  double confidence = 0.0;  // [0, 1] see objects.cpp Confidence()
+  double confidence = 0.0;  // [0, 1] over its final cloud: objects.cpp Rate(), Confidence()
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();  // axis-aligned box
   // Oriented box: yaw of the longest horizontal axis, centre, size = length, width, height [m].
