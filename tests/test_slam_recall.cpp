@@ -221,6 +221,29 @@ TEST(SlamRecall, APlacementItsPredictedOverlapsContradictIsDropped) {
   }
 }
 
+// A Livox-like forward cone in the city of identical blocks (config/params_sim_repetitive.yaml),
+// seed 1: the query drove the central's street the other way, and where the central started, its
+// view ahead looks like the central's own view ahead from there. Six Scan Context loops verify,
+// turned 180 deg, and the radius search's predictions near that start hold too, since the street
+// repeats. At both places the loops hold at, keyframes look like other places of their drives
+// (the central's keyframes 2, 6 and 10 verify against its own 52, 56 and 60, a block on), and one
+// move of the placement (50 m) fits both: it is ambiguous and dropped, and the query is not
+// aligned rather than placed 80 m wrong.
+TEST(SlamRecall, APlacementOnLookAlikePlacesIsDropped) {
+  sim::SimConfig sc = TwoSessions(kKeyframes);
+  sc.seed = 1;
+  sc.scenario = "repetitive";
+  sc.lidar_pattern = "rosette";
+  sim::Simulator s(sc, 2);
+  const SlamResult r = AlignSessions(SimSessions(s), SlamConfig(), 2);
+  std::printf("rosette, repetitive city, seed 1: %s %s, %d loops accepted (%d false)\n",
+              r.sessions[1].aligned ? "aligned" : "not aligned:", r.sessions[1].reason.c_str(),
+              r.sessions[1].loops_accepted, FalseLoops(r, s));
+  EXPECT_EQ(FalseLoops(r, s), 0);
+  EXPECT_FALSE(r.sessions[1].aligned);
+  EXPECT_NE(r.sessions[1].reason.find("ambiguous"), std::string::npos) << r.sessions[1].reason;
+}
+
 // A query from another city (another seed's world): no placement survives verification and
 // consensus, so the query is not aligned (zero false alignments).
 TEST(SlamRecall, GlobalRegistrationPlacesNothingInAnotherCity) {

@@ -15,8 +15,10 @@
 #include <functional>
 #include <limits>
 #include <list>
+#include <map>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <optional>
 #include <set>
 
@@ -585,15 +587,26 @@ void Refine(const std::vector<Session>& sessions, const std::vector<std::vector<
   }
 }
 
-// How many places `at` (positions along a route [m]) cover: positions closer than `radius_m` to the
-// first of their place are one place.
-int Places(std::vector<double> at, double radius_m) {
-  std::sort(at.begin(), at.end());
+// The place of each of `at` (positions along a route [m]), numbered from the route's start:
+// positions closer than `radius_m` to the first of their place are one place.
+std::vector<int> PlaceOf(const std::vector<double>& at, double radius_m) {
+  std::vector<std::size_t> order(at.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return at[x] < at[y]; });
+  std::vector<int> place(at.size(), 0);
   int n = 0;
   double start = 0.0;
-  for (double p : at)
-    if (n == 0 || p - start > radius_m) ++n, start = p;
-  return n;
+  for (std::size_t i : order) {
+    if (n == 0 || at[i] - start > radius_m) ++n, start = at[i];
+    place[i] = n - 1;
+  }
+  return place;
+}
+
+// How many places `at` covers (PlaceOf).
+int Places(const std::vector<double>& at, double radius_m) {
+  const std::vector<int> place = PlaceOf(at, radius_m);
+  return place.empty() ? 0 : *std::max_element(place.begin(), place.end()) + 1;
 }
 
 // An alignment predicts where its session's scans overlap the others'; the radius search tested
@@ -641,13 +654,176 @@ std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vec
   return dropped;
 }
 
-// DropContradicted, the graph solved again without the dropped sessions' loops.
-void CheckPredictions(const std::vector<Session>& sessions, const std::vector<std::vector<double>>& routes,
-                      std::vector<LoopRecord>& loops, SlamResult& res, const SlamConfig& cfg, double radius_m, int threads,
-                      StageCost& cost) {
-  const auto dropped = DropContradicted(routes, loops, res, cfg, radius_m);
+// What the checks of the placements read besides the loops: the drives, their Scan Contexts, their
+// routes (distance along the odometry), the pairs' Scan Context gates, the clouds, and how far
+// apart keyframes still overlap.
+struct Drives {
+  const std::vector<Session>& sessions;
+  const std::vector<std::vector<ScanContext>>& sc;
+  const std::vector<std::vector<double>>& routes;
+  const std::vector<PairCandidates>& pairs;
+  CloudStore& store;
+  Reach reach;
+};
+
+// Candidates for a look-alike of keyframe n in its own drive: keyframes j whose Scan Context is as
+// close to n's as a loop candidate of n's session's pairs must be, lying farther than any two
+// keyframes still overlap (along the route and at the odometry's poses, so not a revisit); up to
+// sc_per_query, closest first (a = {s, j}, b = n, the Scan Context's yaw as the guess).
+std::vector<LoopRecord> LookAlikeCandidates(const NodeKey& n, const Drives& d, const SlamConfig& cfg) {
+  const std::size_t s = std::size_t(n.session), k = std::size_t(n.keyframe);
+  const std::vector<Keyframe>& kfs = d.sessions[s].keyframes;
+  const std::vector<double>& route = d.routes[s];
+  const double far_m = d.reach.farthest_m;
+  double gate = 0.0;
+  for (const PairCandidates& p : d.pairs)
+    if (p.a == n.session || p.b == n.session) gate = std::max(gate, p.gate);
+  std::vector<LoopRecord> out;
+  for (std::size_t j = 0; j < kfs.size(); ++j) {
+    const double apart = (kfs[j].T_session_sensor.translation() - kfs[k].T_session_sensor.translation()).norm();
+    if (std::abs(route[j] - route[k]) <= far_m || apart <= far_m) continue;
+    const ScMatch m = CompareScanContexts(d.sc[s][j], d.sc[s][k], cfg);
+    if (m.distance >= gate) continue;
+    LoopRecord l;
+    l.a = {n.session, int(j)};
+    l.b = n;
+    l.source = "look-alike";
+    l.sc_distance = m.distance;
+    l.T_a_b = Pose(Eigen::AngleAxisd(m.yaw_rad, Eigen::Vector3d::UnitZ()));
+    out.push_back(l);
+  }
+  std::sort(out.begin(), out.end(), [](const LoopRecord& x, const LoopRecord& y) { return x.sc_distance < y.sc_distance; });
+  if (int(out.size()) > cfg.sc_per_query) out.resize(std::size_t(cfg.sc_per_query));
+  return out;
+}
+
+// A place session s's accepted loops between sessions hold at (PlaceOf along its route, the
+// overlap reach apart): its loop keyframes (both ends), each with its best loop there (highest
+// inlier ratio), the place's position along s's route and a world position of it.
+struct LoopPlace {
+  std::map<NodeKey, const LoopRecord*> best;
+  double route_m = 0.0;
+  Eigen::Vector3d where = Eigen::Vector3d::Zero();
+};
+std::vector<LoopPlace> LoopPlaces(const Drives& d, const std::vector<LoopRecord>& loops, const SlamResult& res,
+                                  std::size_t s) {
+  std::vector<double> at;
+  std::vector<const LoopRecord*> which;
+  for (const LoopRecord& l : loops)
+    if (l.accepted && !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)))
+      at.push_back(d.routes[s][std::size_t(l.b.session == int(s) ? l.b.keyframe : l.a.keyframe)]), which.push_back(&l);
+  const std::vector<int> place = PlaceOf(at, d.reach.median_m);
+  std::vector<LoopPlace> out(std::size_t(Places(at, d.reach.median_m)));
+  for (std::size_t i = 0; i < which.size(); ++i) {
+    LoopPlace& p = out[std::size_t(place[i])];
+    if (p.best.empty()) {
+      const NodeKey& own = which[i]->b.session == int(s) ? which[i]->b : which[i]->a;
+      p.route_m = at[i], p.where = res.sessions[s].T_world_sensor[std::size_t(own.keyframe)].translation();
+    }
+    for (const NodeKey& n : {which[i]->a, which[i]->b}) {
+      const LoopRecord*& best = p.best[n];
+      if (!best || which[i]->overlap > best->overlap) best = which[i];
+    }
+  }
+  return out;
+}
+
+// Where a look-alike `e` of an end of loop l (e.b that end, e.a its look-alike) would put session
+// s: the world transform from where the placement puts s's keyframes to where they would be if
+// that end were its look-alike. The other session's keyframe o looking like o': s's keyframe m of
+// l would sit at W(o') T_o'o T_om instead of W(m). s's own m looking like m': m' would sit where
+// the loop put m, at W(m) T_m'm^-1 instead of W(m').
+Pose Shift(const SlamResult& res, const LoopRecord& l, std::size_t s, const LoopRecord& e) {
+  const bool own_b = l.b.session == int(s);
+  const NodeKey m = own_b ? l.b : l.a, o = own_b ? l.a : l.b;
+  const Pose T_o_m = own_b ? l.T_a_b : l.T_a_b.inverse();
+  const auto W = [&](const NodeKey& k) { return res.sessions[std::size_t(k.session)].T_world_sensor[std::size_t(k.keyframe)]; };
+  if (e.b == o) return W(e.a) * e.T_a_b * T_o_m * W(m).inverse();
+  return W(m) * e.T_a_b.inverse() * W(e.a).inverse();
+}
+
+// Why session s's placement is ambiguous, "" when it is not. A placement rests on the places its
+// loops hold at (LoopPlaces). A loop keyframe that verifies against another place of its own drive
+// (a row of identical blocks; a street that looks the same both ways to a forward cone) could as
+// well be at that look-alike, which would move the placement (Shift). When one such move fits every
+// place (within the consensus gates, the drift's share growing with the route between them),
+// another placement explains all the loops as well, and nothing fixes this one. It takes two
+// places at least: one look-alike alone may be chance (scans mostly of flat ground verify
+// anywhere flat), one move that fits independent places is a repeated scene. Places without
+// candidates settle it at no cost; the others are registered fewest candidates first.
+std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, const SlamResult& res, std::size_t s,
+                      const SlamConfig& cfg, int threads, StageCost& cost) {
+  struct Place {
+    LoopPlace at;
+    std::vector<LoopRecord> cand;
+    std::vector<Pose> shifts;  // of the verified look-alikes
+  };
+  std::vector<Place> places;
+  for (LoopPlace& at : LoopPlaces(d, loops, res, s)) {
+    Place p{std::move(at), {}, {}};
+    for (const auto& [n, best] : p.at.best) {
+      const std::vector<LoopRecord> mine = LookAlikeCandidates(n, d, cfg);
+      p.cand.insert(p.cand.end(), mine.begin(), mine.end());
+    }
+    if (p.cand.empty()) return "";
+    places.push_back(std::move(p));
+  }
+  if (places.size() < 2) return "";
+  std::sort(places.begin(), places.end(), [](const Place& x, const Place& y) { return x.cand.size() < y.cand.size(); });
+  for (Place& p : places) {
+    RegisterRound(p.cand, d.store, cfg, threads, "GICP look-alike places", cost);
+    for (const LoopRecord& e : p.cand)
+      if (e.verified) p.shifts.push_back(Shift(res, *p.at.best.at(e.b), s, e));
+    if (p.shifts.empty()) return "";
+  }
+  const auto agree = [&](const Pose& x, const Place& px, const Pose& y, const Place& py) {
+    const double tol_t = cfg.consensus_t_m + cfg.consensus_drift_ratio * std::abs(px.at.route_m - py.at.route_m);
+    return (x * px.at.where - y * px.at.where).norm() <= tol_t && (x * py.at.where - y * py.at.where).norm() <= tol_t &&
+           Eigen::AngleAxisd(x.linear().transpose() * y.linear()).angle() * 180.0 / M_PI <= cfg.consensus_r_deg;
+  };
+  for (const Pose& x : places.front().shifts) {
+    const bool fits = std::all_of(places.begin() + 1, places.end(), [&](const Place& p) {
+      return std::any_of(p.shifts.begin(), p.shifts.end(), [&](const Pose& y) { return agree(x, places.front(), y, p); });
+    });
+    if (!fits) continue;
+    char moved[96];
+    std::snprintf(moved, sizeof moved, "%.1f m, %.0f deg", (x * places.front().at.where - places.front().at.where).norm(),
+                  Eigen::AngleAxisd(x.linear()).angle() * 180.0 / M_PI);
+    return "ambiguous: another placement (" + std::string(moved) + " away) fits all " + std::to_string(places.size()) +
+           " place(s) its loops hold at, where keyframes look like other places of their own drives";
+  }
+  return "";
+}
+
+// Ambiguity of every aligned session not in `skip`; an ambiguous one's loops between sessions are
+// rejected, as DropContradicted does. Returns the sessions dropped with their reasons.
+std::vector<std::pair<std::size_t, std::string>> DropAmbiguous(const Drives& d, std::vector<LoopRecord>& loops,
+                                                               const SlamResult& res, const std::set<std::size_t>& skip,
+                                                               const SlamConfig& cfg, int threads, StageCost& cost) {
+  std::vector<std::pair<std::size_t, std::string>> dropped;
+  for (std::size_t s = 1; s < res.sessions.size(); ++s) {
+    if (!res.sessions[s].aligned || skip.count(s)) continue;
+    const std::string why = Ambiguity(d, loops, res, s, cfg, threads, cost);
+    if (why.empty()) continue;
+    for (LoopRecord& l : loops)
+      if (!OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)) && l.verified)
+        l.verified = false, l.status = "rejected: alignment " + why;
+    dropped.push_back({s, why});
+  }
+  return dropped;
+}
+
+// DropContradicted, then DropAmbiguous on the sessions left; the graph solved again without the
+// dropped sessions' loops.
+void CheckPlacements(const Drives& d, std::vector<LoopRecord>& loops, SlamResult& res, const SlamConfig& cfg, int threads,
+                     StageCost& cost) {
+  auto dropped = DropContradicted(d.routes, loops, res, cfg, d.reach.median_m);
+  std::set<std::size_t> skip;
+  for (const auto& x : dropped) skip.insert(x.first);
+  const auto ambiguous = DropAmbiguous(d, loops, res, skip, cfg, threads, cost);
+  dropped.insert(dropped.end(), ambiguous.begin(), ambiguous.end());
   if (dropped.empty()) return;
-  SolveWith(sessions, {}, loops, res, cfg, threads, cost);
+  SolveWith(d.sessions, {}, loops, res, cfg, threads, cost);
   for (const auto& [s, why] : dropped) {
     spdlog::warn("slam: {} not aligned: {}", res.sessions[s].name, why);
     if (!res.sessions[s].aligned) res.sessions[s].reason = why;
@@ -824,7 +1000,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   std::vector<std::vector<double>> routes;  // each session's distance along its odometry
   for (const Session& s : sessions) routes.push_back(PathLength(s));
   Refine(refined, routes, loops, res, store, cfg, reach.median_m, threads, cost);
-  CheckPredictions(refined, routes, loops, res, cfg, reach.median_m, threads, cost);
+  CheckPlacements(Drives{refined, sc, routes, pairs, store, reach}, loops, res, cfg, threads, cost);
   for (std::size_t s = 0; s < refined.size(); ++s) res.sessions[s].registered = refined[s].registered;
   res.refine_radius_m = reach.median_m;
   res.max_translation_m = reach.farthest_m;
