@@ -666,22 +666,48 @@ struct Drives {
   Reach reach;
 };
 
-// Candidates for a look-alike of keyframe n in its own drive: keyframes j whose Scan Context is as
-// close to n's as a loop candidate of n's session's pairs must be, lying farther than any two
-// keyframes still overlap (along the route and at the odometry's poses, so not a revisit); up to
+// A session's ring keys in a tree (the retrieval's first stage, as RetrievePair's), for the
+// look-alikes of its own keyframes.
+struct OwnRings {
+  RingKeys keys;
+  std::unique_ptr<RingTree> tree;
+  OwnRings(OwnRings&&) = delete;  // the tree holds a reference to `keys`
+  OwnRings(const std::vector<ScanContext>& sc, const SlamConfig& cfg) {
+    for (const auto& d : sc) keys.keys.push_back(d.ring_key);
+    tree = std::make_unique<RingTree>(static_cast<std::size_t>(cfg.sc_rings), keys,
+                                      nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  }
+};
+
+// Candidates for a look-alike of keyframe n in its own drive (`rings` its session's): of its
+// sc_candidates nearest ring keys among the keyframes lying farther than any two keyframes still
+// overlap (along the route and at the odometry's poses, so not a revisit), those whose Scan
+// Context is as close to n's as a loop candidate of n's session's pairs must be; up to
 // sc_per_query, closest first (a = {s, j}, b = n, the Scan Context's yaw as the guess).
-std::vector<LoopRecord> LookAlikeCandidates(const NodeKey& n, const Drives& d, const SlamConfig& cfg) {
+std::vector<LoopRecord> LookAlikeCandidates(const NodeKey& n, const Drives& d, const OwnRings& rings,
+                                            const SlamConfig& cfg) {
   const std::size_t s = std::size_t(n.session), k = std::size_t(n.keyframe);
   const std::vector<Keyframe>& kfs = d.sessions[s].keyframes;
   const std::vector<double>& route = d.routes[s];
   const double far_m = d.reach.farthest_m;
+  std::vector<bool> near(kfs.size());
+  std::size_t nears = 0;
+  for (std::size_t j = 0; j < kfs.size(); ++j) {
+    const double apart = (kfs[j].T_session_sensor.translation() - kfs[k].T_session_sensor.translation()).norm();
+    near[j] = std::abs(route[j] - route[k]) <= far_m || apart <= far_m;
+    nears += near[j];
+  }
+  // The nearest ring keys are mostly n's own neighbours: ask for as many more as those.
+  const std::size_t want = std::min(kfs.size(), nears + std::size_t(cfg.sc_candidates));
+  std::vector<std::uint32_t> idx(want);
+  std::vector<float> d2(want);
+  idx.resize(rings.tree->knnSearch(d.sc[s][k].ring_key.data(), want, idx.data(), d2.data()));
   double gate = 0.0;
   for (const PairCandidates& p : d.pairs)
     if (p.a == n.session || p.b == n.session) gate = std::max(gate, p.gate);
   std::vector<LoopRecord> out;
-  for (std::size_t j = 0; j < kfs.size(); ++j) {
-    const double apart = (kfs[j].T_session_sensor.translation() - kfs[k].T_session_sensor.translation()).norm();
-    if (std::abs(route[j] - route[k]) <= far_m || apart <= far_m) continue;
+  for (const std::uint32_t j : idx) {
+    if (near[j]) continue;
     const ScMatch m = CompareScanContexts(d.sc[s][j], d.sc[s][k], cfg);
     if (m.distance >= gate) continue;
     LoopRecord l;
@@ -758,11 +784,17 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
     std::vector<LoopRecord> cand;
     std::vector<Pose> shifts;  // of the verified look-alikes
   };
+  std::map<int, OwnRings> rings;  // per session with loop keyframes
+  const auto rings_of = [&](int session) -> const OwnRings& {
+    auto it = rings.find(session);
+    if (it == rings.end()) it = rings.try_emplace(session, d.sc[std::size_t(session)], cfg).first;
+    return it->second;
+  };
   std::vector<Place> places;
   for (LoopPlace& at : LoopPlaces(d, loops, res, s)) {
     Place p{std::move(at), {}, {}};
     for (const auto& [n, best] : p.at.best) {
-      const std::vector<LoopRecord> mine = LookAlikeCandidates(n, d, cfg);
+      const std::vector<LoopRecord> mine = LookAlikeCandidates(n, d, rings_of(n.session), cfg);
       p.cand.insert(p.cand.end(), mine.begin(), mine.end());
     }
     if (p.cand.empty()) return "";
