@@ -790,8 +790,10 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
     if (it == rings.end()) it = rings.try_emplace(session, d.sc[std::size_t(session)], cfg).first;
     return it->second;
   };
+  std::vector<LoopPlace> held = LoopPlaces(d, loops, res, s);
+  if (held.size() < 2) return "";
   std::vector<Place> places;
-  for (LoopPlace& at : LoopPlaces(d, loops, res, s)) {
+  for (LoopPlace& at : held) {
     Place p{std::move(at), {}, {}};
     for (const auto& [n, best] : p.at.best) {
       const std::vector<LoopRecord> mine = LookAlikeCandidates(n, d, rings_of(n.session), cfg);
@@ -800,7 +802,6 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
     if (p.cand.empty()) return "";
     places.push_back(std::move(p));
   }
-  if (places.size() < 2) return "";
   std::sort(places.begin(), places.end(), [](const Place& x, const Place& y) { return x.cand.size() < y.cand.size(); });
   for (Place& p : places) {
     RegisterRound(p.cand, d.store, cfg, threads, "GICP look-alike places", cost);
