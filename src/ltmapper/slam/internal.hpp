@@ -159,6 +159,12 @@ Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfi
 // within a session); of a session: along its odometry (the keyframes' session-frame poses).
 std::vector<double> PathLength(const std::vector<Pose>& poses);
 std::vector<double> PathLength(const Session& session);
+// Rotation angle of R [deg].
+double AngleDeg(const Eigen::Matrix3d& R);
+// Whether two placements of one session (anchors T_world_session) implied by evidence
+// `travelled_m` apart along the routes are one: within graph.consensus_t_m plus
+// consensus_drift_ratio of that path, and graph.consensus_r_deg (the consensus's rule).
+bool PlacementsAgree(const Pose& A, const Pose& B, double travelled_m, const SlamConfig& cfg);
 
 // ------------------------------------------------------------------- global registration (global.cpp)
 // An aligned session's map in the world frame with FPFH features, for placing submaps of a session

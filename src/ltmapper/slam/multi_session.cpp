@@ -149,6 +149,30 @@ using RingTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, RingKeys>, RingKeys, -1,
                                         std::uint32_t>;
 
+// A session's ring keys in a tree: the retrieval's first stage.
+struct RingIndex {
+  RingKeys keys;
+  std::unique_ptr<RingTree> tree;
+  RingIndex(RingIndex&&) = delete;  // the tree holds a reference to `keys`
+  RingIndex(const std::vector<ScanContext>& sc, const SlamConfig& cfg) {
+    for (const auto& d : sc) keys.keys.push_back(d.ring_key);
+    tree = std::make_unique<RingTree>(static_cast<std::size_t>(cfg.sc_rings), keys,
+                                      nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  }
+};
+
+// A loop candidate between keyframes a and b from their Scan Context match (its yaw the guess).
+LoopRecord ScLoop(const NodeKey& a, const NodeKey& b, const ScMatch& m, const std::string& source) {
+  LoopRecord l;
+  l.a = a;
+  l.b = b;
+  l.source = source;
+  l.sc_distance = m.distance;
+  l.yaw_deg = m.yaw_rad * 180.0 / M_PI;
+  l.T_a_b = Pose(Eigen::AngleAxisd(m.yaw_rad, Eigen::Vector3d::UnitZ()));
+  return l;
+}
+
 // Scan Context candidates of one query keyframe j of session b against session a: the best of
 // the ring-key neighbours and the others within (1 + sc_close_ratio) x its distance, at most
 // sc_per_query, best first.
@@ -161,15 +185,7 @@ std::vector<LoopRecord> QueryCandidates(const std::vector<ScanContext>& sa, cons
   const std::size_t got = tree.knnSearch(query.ring_key.data(), k, idx.data(), d2.data());
   std::vector<LoopRecord> out;
   for (std::size_t c = 0; c < got; ++c) {
-    const ScMatch m = CompareScanContexts(sa[idx[c]], query, cfg);
-    LoopRecord l;
-    l.a = {a, int(idx[c])};
-    l.b = {b, j};
-    l.source = "sc";
-    l.sc_distance = m.distance;
-    l.yaw_deg = m.yaw_rad * 180.0 / M_PI;
-    l.T_a_b = Pose(Eigen::AngleAxisd(m.yaw_rad, Eigen::Vector3d::UnitZ()));
-    out.push_back(l);
+    out.push_back(ScLoop({a, int(idx[c])}, {b, j}, CompareScanContexts(sa[idx[c]], query, cfg), "sc"));
   }
   std::stable_sort(out.begin(), out.end(), [](const LoopRecord& x, const LoopRecord& y) {
     return x.sc_distance < y.sc_distance;
@@ -455,11 +471,9 @@ std::vector<PairCandidates> RetrieveCandidates(const std::vector<Session>& sessi
                                                int threads, std::vector<LoopRecord>* loops) {
   std::vector<PairCandidates> pairs;
   for (std::size_t a = 0; a + 1 < sessions.size(); ++a) {
-    RingKeys keys;
-    for (const auto& d : sc[a]) keys.keys.push_back(d.ring_key);
-    RingTree tree(static_cast<std::size_t>(cfg.sc_rings), keys, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+    const RingIndex index(sc[a], cfg);
     for (std::size_t b = a + 1; b < sessions.size(); ++b) {
-      pairs.push_back(RetrievePair(sc, tree, int(a), int(b), cfg, threads));
+      pairs.push_back(RetrievePair(sc, *index.tree, int(a), int(b), cfg, threads));
       const std::vector<LoopRecord> batch = NextBatch(pairs.back(), cfg);
       spdlog::info("slam: {} vs {}: {} scan context candidates below the pair's median best "
                    "distance {:.3f}, {} selected",
@@ -609,6 +623,19 @@ int Places(const std::vector<double>& at, double radius_m) {
   return place.empty() ? 0 : *std::max_element(place.begin(), place.end()) + 1;
 }
 
+// Whether loop l ties session s to another session.
+bool Between(const LoopRecord& l, std::size_t s) {
+  return !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s));
+}
+// The end of loop l in session s (l between s and another session).
+const NodeKey& EndIn(const LoopRecord& l, std::size_t s) { return l.b.session == int(s) ? l.b : l.a; }
+
+// Drops session s's placement: its verified loops between sessions rejected with `why`.
+void RejectPlacement(std::vector<LoopRecord>& loops, std::size_t s, const std::string& why) {
+  for (LoopRecord& l : loops)
+    if (Between(l, s) && l.verified) l.verified = false, l.status = "rejected: alignment " + why;
+}
+
 // An alignment predicts where its session's scans overlap the others'; the radius search tested
 // those predictions. A candidate whose scans looked at the same space at the predicted pose (view
 // >= registration.min_overlap) and failed verification contradicts the placement there; one that
@@ -632,10 +659,9 @@ std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vec
     const std::vector<double>& route = routes[s];
     std::vector<double> support, contra;
     std::size_t confirmed = 0;
-    const auto involves = [&](const LoopRecord& l) { return !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)); };
     for (const LoopRecord& l : loops) {
-      if (!involves(l)) continue;
-      const double at = route[std::size_t(l.b.session == int(s) ? l.b.keyframe : l.a.keyframe)];
+      if (!Between(l, s)) continue;
+      const double at = route[std::size_t(EndIn(l, s).keyframe)];
       const bool tested = l.source == "radius" && l.view >= cfg.reg_min_overlap;
       if (l.accepted) support.push_back(at);
       if (tested && !l.verified) contra.push_back(at);
@@ -647,8 +673,7 @@ std::vector<std::pair<std::size_t, std::string>> DropContradicted(const std::vec
                             "at the same space failed verification (" + std::to_string(confirmed) + " held), at " +
                             std::to_string(failed) + " place(s) of its route; its " + std::to_string(support.size()) +
                             " loops hold at " + std::to_string(held);
-    for (LoopRecord& l : loops)
-      if (involves(l) && l.verified) l.verified = false, l.status = "rejected: alignment " + why;
+    RejectPlacement(loops, s, why);
     dropped.push_back({s, why});
   }
   return dropped;
@@ -666,25 +691,12 @@ struct Drives {
   Reach reach;
 };
 
-// A session's ring keys in a tree (the retrieval's first stage, as RetrievePair's), for the
-// look-alikes of its own keyframes.
-struct OwnRings {
-  RingKeys keys;
-  std::unique_ptr<RingTree> tree;
-  OwnRings(OwnRings&&) = delete;  // the tree holds a reference to `keys`
-  OwnRings(const std::vector<ScanContext>& sc, const SlamConfig& cfg) {
-    for (const auto& d : sc) keys.keys.push_back(d.ring_key);
-    tree = std::make_unique<RingTree>(static_cast<std::size_t>(cfg.sc_rings), keys,
-                                      nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  }
-};
-
 // Candidates for a look-alike of keyframe n in its own drive (`rings` its session's): of its
 // sc_candidates nearest ring keys among the keyframes lying farther than any two keyframes still
 // overlap (along the route and at the odometry's poses, so not a revisit), those whose Scan
 // Context is as close to n's as a loop candidate of n's session's pairs must be; up to
 // sc_per_query, closest first (a = {s, j}, b = n, the Scan Context's yaw as the guess).
-std::vector<LoopRecord> LookAlikeCandidates(const NodeKey& n, const Drives& d, const OwnRings& rings,
+std::vector<LoopRecord> LookAlikeCandidates(const NodeKey& n, const Drives& d, const RingIndex& rings,
                                             const SlamConfig& cfg) {
   const std::size_t s = std::size_t(n.session), k = std::size_t(n.keyframe);
   const std::vector<Keyframe>& kfs = d.sessions[s].keyframes;
@@ -709,14 +721,7 @@ std::vector<LoopRecord> LookAlikeCandidates(const NodeKey& n, const Drives& d, c
   for (const std::uint32_t j : idx) {
     if (near[j]) continue;
     const ScMatch m = CompareScanContexts(d.sc[s][j], d.sc[s][k], cfg);
-    if (m.distance >= gate) continue;
-    LoopRecord l;
-    l.a = {n.session, int(j)};
-    l.b = n;
-    l.source = "look-alike";
-    l.sc_distance = m.distance;
-    l.T_a_b = Pose(Eigen::AngleAxisd(m.yaw_rad, Eigen::Vector3d::UnitZ()));
-    out.push_back(l);
+    if (m.distance < gate) out.push_back(ScLoop({n.session, int(j)}, n, m, "look-alike"));
   }
   std::sort(out.begin(), out.end(), [](const LoopRecord& x, const LoopRecord& y) { return x.sc_distance < y.sc_distance; });
   if (int(out.size()) > cfg.sc_per_query) out.resize(std::size_t(cfg.sc_per_query));
@@ -736,16 +741,13 @@ std::vector<LoopPlace> LoopPlaces(const Drives& d, const std::vector<LoopRecord>
   std::vector<double> at;
   std::vector<const LoopRecord*> which;
   for (const LoopRecord& l : loops)
-    if (l.accepted && !OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)))
-      at.push_back(d.routes[s][std::size_t(l.b.session == int(s) ? l.b.keyframe : l.a.keyframe)]), which.push_back(&l);
+    if (l.accepted && Between(l, s)) at.push_back(d.routes[s][std::size_t(EndIn(l, s).keyframe)]), which.push_back(&l);
   const std::vector<int> place = PlaceOf(at, d.reach.median_m);
   std::vector<LoopPlace> out(std::size_t(Places(at, d.reach.median_m)));
   for (std::size_t i = 0; i < which.size(); ++i) {
     LoopPlace& p = out[std::size_t(place[i])];
-    if (p.best.empty()) {
-      const NodeKey& own = which[i]->b.session == int(s) ? which[i]->b : which[i]->a;
-      p.route_m = at[i], p.where = res.sessions[s].T_world_sensor[std::size_t(own.keyframe)].translation();
-    }
+    if (p.best.empty())
+      p.route_m = at[i], p.where = res.sessions[s].T_world_sensor[std::size_t(EndIn(*which[i], s).keyframe)].translation();
     for (const NodeKey& n : {which[i]->a, which[i]->b}) {
       const LoopRecord*& best = p.best[n];
       if (!best || which[i]->overlap > best->overlap) best = which[i];
@@ -761,7 +763,8 @@ std::vector<LoopPlace> LoopPlaces(const Drives& d, const std::vector<LoopRecord>
 // the loop put m, at W(m) T_m'm^-1 instead of W(m').
 Pose Shift(const SlamResult& res, const LoopRecord& l, std::size_t s, const LoopRecord& e) {
   const bool own_b = l.b.session == int(s);
-  const NodeKey m = own_b ? l.b : l.a, o = own_b ? l.a : l.b;
+  const NodeKey& m = EndIn(l, s);
+  const NodeKey& o = own_b ? l.a : l.b;
   const Pose T_o_m = own_b ? l.T_a_b : l.T_a_b.inverse();
   const auto W = [&](const NodeKey& k) { return res.sessions[std::size_t(k.session)].T_world_sensor[std::size_t(k.keyframe)]; };
   if (e.b == o) return W(e.a) * e.T_a_b * T_o_m * W(m).inverse();
@@ -772,23 +775,18 @@ Pose Shift(const SlamResult& res, const LoopRecord& l, std::size_t s, const Loop
 // loops hold at (LoopPlaces). A loop keyframe that verifies against another place of its own drive
 // (a row of identical blocks; a street that looks the same both ways to a forward cone) could as
 // well be at that look-alike, which would move the placement (Shift). When one such move fits every
-// place (within the consensus gates, the drift's share growing with the route between them),
-// another placement explains all the loops as well, and nothing fixes this one. It takes two
+// place (the placements it implies agree as the consensus's must: PlacementsAgree, over the route
+// between the places), another placement explains all the loops as well, and nothing fixes this one. It takes two
 // places at least: one look-alike alone may be chance (scans mostly of flat ground verify
 // anywhere flat), one move that fits independent places is a repeated scene. Places without
 // candidates settle it at no cost; the others are registered fewest candidates first.
 std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, const SlamResult& res, std::size_t s,
-                      const SlamConfig& cfg, int threads, StageCost& cost) {
+                      const std::function<const RingIndex&(int)>& rings, const SlamConfig& cfg, int threads,
+                      StageCost& cost) {
   struct Place {
     LoopPlace at;
     std::vector<LoopRecord> cand;
     std::vector<Pose> shifts;  // of the verified look-alikes
-  };
-  std::map<int, OwnRings> rings;  // per session with loop keyframes
-  const auto rings_of = [&](int session) -> const OwnRings& {
-    auto it = rings.find(session);
-    if (it == rings.end()) it = rings.try_emplace(session, d.sc[std::size_t(session)], cfg).first;
-    return it->second;
   };
   std::vector<LoopPlace> held = LoopPlaces(d, loops, res, s);
   if (held.size() < 2) return "";
@@ -796,7 +794,7 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
   for (LoopPlace& at : held) {
     Place p{std::move(at), {}, {}};
     for (const auto& [n, best] : p.at.best) {
-      const std::vector<LoopRecord> mine = LookAlikeCandidates(n, d, rings_of(n.session), cfg);
+      const std::vector<LoopRecord> mine = LookAlikeCandidates(n, d, rings(n.session), cfg);
       p.cand.insert(p.cand.end(), mine.begin(), mine.end());
     }
     if (p.cand.empty()) return "";
@@ -809,10 +807,9 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
       if (e.verified) p.shifts.push_back(Shift(res, *p.at.best.at(e.b), s, e));
     if (p.shifts.empty()) return "";
   }
+  const Pose& A = res.sessions[s].anchor;
   const auto agree = [&](const Pose& x, const Place& px, const Pose& y, const Place& py) {
-    const double tol_t = cfg.consensus_t_m + cfg.consensus_drift_ratio * std::abs(px.at.route_m - py.at.route_m);
-    return (x * px.at.where - y * px.at.where).norm() <= tol_t && (x * py.at.where - y * py.at.where).norm() <= tol_t &&
-           Eigen::AngleAxisd(x.linear().transpose() * y.linear()).angle() * 180.0 / M_PI <= cfg.consensus_r_deg;
+    return PlacementsAgree(x * A, y * A, std::abs(px.at.route_m - py.at.route_m), cfg);
   };
   for (const Pose& x : places.front().shifts) {
     const bool fits = std::all_of(places.begin() + 1, places.end(), [&](const Place& p) {
@@ -821,7 +818,7 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
     if (!fits) continue;
     char moved[96];
     std::snprintf(moved, sizeof moved, "%.1f m, %.0f deg", (x * places.front().at.where - places.front().at.where).norm(),
-                  Eigen::AngleAxisd(x.linear()).angle() * 180.0 / M_PI);
+                  AngleDeg(x.linear()));
     return "ambiguous: another placement (" + std::string(moved) + " away) fits all " + std::to_string(places.size()) +
            " place(s) its loops hold at, where keyframes look like other places of their own drives";
   }
@@ -833,14 +830,18 @@ std::string Ambiguity(const Drives& d, const std::vector<LoopRecord>& loops, con
 std::vector<std::pair<std::size_t, std::string>> DropAmbiguous(const Drives& d, std::vector<LoopRecord>& loops,
                                                                const SlamResult& res, const std::set<std::size_t>& skip,
                                                                const SlamConfig& cfg, int threads, StageCost& cost) {
+  std::map<int, RingIndex> built;  // each session's, built once when first asked for
+  const auto rings = [&](int session) -> const RingIndex& {
+    auto it = built.find(session);
+    if (it == built.end()) it = built.try_emplace(session, d.sc[std::size_t(session)], cfg).first;
+    return it->second;
+  };
   std::vector<std::pair<std::size_t, std::string>> dropped;
   for (std::size_t s = 1; s < res.sessions.size(); ++s) {
     if (!res.sessions[s].aligned || skip.count(s)) continue;
-    const std::string why = Ambiguity(d, loops, res, s, cfg, threads, cost);
+    const std::string why = Ambiguity(d, loops, res, s, rings, cfg, threads, cost);
     if (why.empty()) continue;
-    for (LoopRecord& l : loops)
-      if (!OwnLoop(l) && (l.a.session == int(s) || l.b.session == int(s)) && l.verified)
-        l.verified = false, l.status = "rejected: alignment " + why;
+    RejectPlacement(loops, s, why);
     dropped.push_back({s, why});
   }
   return dropped;

@@ -62,10 +62,6 @@ ceres::LossFunction* MakeLoss(const SlamConfig& cfg) {
   throw Error("graph.robust_loss: unknown value '" + cfg.robust_loss + "' (cauchy|dcs|none)");
 }
 
-double AngleDeg(const Eigen::Matrix3d& R) {
-  return Eigen::AngleAxisd(R).angle() / kDeg;
-}
-
 // A session edge's information in the graph: its own (`own_information`: registered steps), or
 // the file's when graph.use_g2o_information says so, else the config's odometry sigmas.
 Matrix6d EdgeInformation(const Edge& e, const SlamConfig& cfg, bool own_information) {
@@ -274,6 +270,13 @@ std::size_t RivalSupport(const std::vector<C>& cand, std::size_t best,
 }
 
 }  // namespace
+
+double AngleDeg(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle() / kDeg; }
+
+bool PlacementsAgree(const Pose& A, const Pose& B, double travelled_m, const SlamConfig& cfg) {
+  const double tol_t = cfg.consensus_t_m + cfg.consensus_drift_ratio * travelled_m;
+  return (A.translation() - B.translation()).norm() <= tol_t && AngleDeg(A.linear().transpose() * B.linear()) <= cfg.consensus_r_deg;
+}
 
 void ValidateSessionGraphs(const std::vector<Session>& sessions) {
   if (sessions.empty()) throw Error("slam: no sessions given");
@@ -555,9 +558,7 @@ bool AnchorSession(Graph& g, std::vector<LoopRecord>& loops, const std::vector<s
   }
   const std::function<bool(const Implied&, const Implied&)> consistent = [&](const Implied& x, const Implied& y) {
     const double travelled = std::abs(x.pos_s - y.pos_s) + (x.t == y.t ? std::abs(x.pos_t - y.pos_t) : 0.0);
-    const double tol_t = cfg.consensus_t_m + cfg.consensus_drift_ratio * travelled;
-    return (x.A.translation() - y.A.translation()).norm() <= tol_t &&
-           AngleDeg(x.A.linear().transpose() * y.A.linear()) <= cfg.consensus_r_deg;
+    return PlacementsAgree(x.A, y.A, travelled, cfg);
   };
   std::vector<std::size_t> inliers;
   const std::size_t best = Consensus(cand, loops, consistent, &inliers);
