@@ -521,14 +521,9 @@ TEST(RemovertLd, ASeenThroughPieceOfALargerChangeIsNoResidue) {
   EXPECT_EQ(CountIn(ld.nd_residue, car), 0u);
 }
 
-// A truck driving 12 m ahead of the central's sensor in the next lane (2.5 m wide, 8 m long: no
-// pedestrian-sized residue from any view): each keyframe met it at another place, and
-// none came back to see through that place (the session's end, where its own HD removal has no
-// later keyframe). Each place was hit by one keyframe, so it may have been moving: a residue of a
-// mover (removed as HD, no object), though car-sized. The parked car, which many keyframes hit at
-// the same place, stays a change (strong ND: the query saw through it).
-TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
-  const test::Box parked = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
+// The central session's drive (Drive's keyframes at y = 0) behind a truck 12 m ahead of the sensor
+// in the next lane (y 2 to 4.5, 8 m long), with `parked` standing still.
+std::vector<WorldKeyframe> BehindATruck(const test::Box& parked) {
   std::vector<WorldKeyframe> central;
   for (int k = 0; k <= 20; ++k) {
     WorldKeyframe kf;
@@ -538,10 +533,21 @@ TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
     boxes.push_back(parked);
     const double x = -20.0 + 2.0 * k + 12.0;
     boxes.push_back(test::MakeBox(x, 2.0, 0.3, x + 8.0, 4.5, 2.5, 30));
-    auto scan = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
-    kf.cloud = scan;
+    kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
     central.push_back(kf);
   }
+  return central;
+}
+
+// A truck driving 12 m ahead of the central's sensor in the next lane (2.5 m wide, 8 m long: no
+// pedestrian-sized residue from any view): each keyframe met it at another place, and
+// none came back to see through that place (the session's end, where its own HD removal has no
+// later keyframe). Each place was hit by one keyframe, so it may have been moving: a residue of a
+// mover (removed as HD, no object), though car-sized. The parked car, which many keyframes hit at
+// the same place, stays a change (strong ND: the query saw through it).
+TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
+  const test::Box parked = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
+  const std::vector<WorldKeyframe> central = BehindATruck(parked);
   const auto query = Drive(Common(), 0.7, nullptr);
   RemovertConfig cfg = test::ConfigFor();
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
@@ -562,6 +568,33 @@ TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
   ASSERT_GT(CountIn(lmap, ahead), 50u);
   EXPECT_GE(double(CountIn(one.nd_strong, ahead)), 0.6 * double(CountIn(lmap, ahead)));
   EXPECT_GT(CountIn(one.nd_strong, ahead), 4 * CountIn(one.nd_residue, ahead));  // a small piece or two by size
+}
+
+// The same truck's last place, with a car parked beside it (1.5 m off its lane) that many
+// keyframes hit, and the ground between them hidden from the query behind a wall 1.6 m high: the
+// query sees over the wall through the truck's upper part and the car's, never the ground. That
+// ground is a change the query did not see (weak ND), and through it the truck's places and the
+// car were one thing, most of whose points one keyframe hit: the parked car went as a mover's
+// residue (313 of its 423 points). On the default scenario's HDL-64E the same bridge, a strip of
+// new road, kept a car that drove ahead of the sensor as a new object, joined to a parked one.
+// Things are not joined through the ground they stand on: the car stays a change, the truck's
+// last place is a residue.
+TEST(RemovertLd, AMoversLastPlaceIsNotJoinedToAParkedCarThroughTheGround) {
+  const test::Box parked = test::MakeBox(33, 6, 0.3, 37, 7.8, 1.8, kCarCentral);
+  const std::vector<WorldKeyframe> central = BehindATruck(parked);
+  auto qb = Common();
+  qb.push_back(test::MakeBox(-14, 1.5, 0, 44, 1.8, 1.6, kWallQuery));
+  const auto query = Drive(qb, 0.7, nullptr);
+  RemovertConfig cfg = test::ConfigFor();
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box ahead = test::MakeBox(31.95, 1.95, 0.4, 40.05, 4.55, 2.55, 30);  // its last place
+  const test::Box between = test::MakeBox(30, 4.6, -0.1, 40, 5.9, 0.1, 0);      // the hidden ground
+  ASSERT_GT(CountIn(ld.nd_weak, between), 20u) << "the ground between them must be a change the query did not see";
+  ASSERT_GT(CountIn(ld.nd_strong, ahead) + CountIn(ld.nd_residue, ahead), 50u);
+  EXPECT_GE(double(CountIn(ld.nd_residue, ahead)), 0.9 * double(CountIn(ld.nd_residue, ahead) + CountIn(ld.nd_strong, ahead)));
+  EXPECT_GE(double(CountIn(ld.nd_strong, parked)), 0.5 * double(CountIn(cmap, parked)));
+  EXPECT_EQ(CountIn(ld.nd_residue, parked), 0u);
 }
 
 bool SameBytes(const PointCloud& a, const PointCloud& b) {

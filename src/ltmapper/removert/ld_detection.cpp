@@ -233,6 +233,25 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
   }
 }
 
+// The points of `c` higher than ld_radius_m above the ground of `own` under them (its lowest point
+// within the cell around them, as FitAMover measures a thing's top). A thing stands on the ground
+// but is not joined to others through it: a strip of new road surface the other session did not
+// see, between a parked car and the last place of a car that drove ahead of the sensor when the
+// session ended, made one thing of the two, seen by many keyframes (the default scenario's HDL-64E: the driving
+// car stayed in the map as a new object).
+PointCloud OffTheGround(const PointCloud& c, const PointCloud& own, const RemovertConfig& cfg) {
+  constexpr int kGrowCells = 1;
+  geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
+  for (const auto& p : c.points) ground.Watch(p.xyz(), p.xyz(), kGrowCells);
+  ground.AddWatched(own);
+  std::vector<bool> keep(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Vector3f p = c.points[i].xyz();
+    keep[i] = double(p.z() - ground.Under(p, p, kGrowCells)) >= cfg.ld_radius_m;
+  }
+  return c.select(keep);
+}
+
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
 // of `own` map) split into clusters at ld_residue_gap_m, sized together with `unseen` (the same
 // map's changes on the same side that the other session did not see through): a thing whose end
@@ -252,7 +271,7 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
                            const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
   PointCloud both = seen;
-  both.append(unseen);
+  both.append(OffTheGround(unseen, own, cfg));
   const auto whole = geometry::EuclideanClusterMembers(both, cfg.ld_residue_gap_m, threads);
   std::vector<bool> fit = FitAMover(both, whole, own, cfg);
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
