@@ -1093,6 +1093,31 @@ TEST(MapObjects, ADisappearedThingIsSampledFromTheSessionsThatScannedIt) {
   EXPECT_NEAR(objs[0].range_m, 60.0, 3.0);
 }
 
+// A container that left (strong ND), seen whole on its near long side (6 m long, 2.5 m high) and,
+// through other gaps, on 2.5 m of its far side, 2.44 m behind it (seed 7's container on Pandar64,
+// VLP-32C and VLP-16): the far side is a face parallel to the near one, within its length and
+// height, and no farther from it than its length, so one object. The same panel 7 m away, farther
+// than a box of that length is deep, is another object.
+TEST(MapObjects, AContainersFarSideIsPartOfIt) {
+  for (const float across : {2.44f, 7.0f}) {
+    const PointCloud near_side = Car(-6, -6, 0.f, 6.f, 2.5f), far_side = Car(-6 + across, -4, 0.f, 2.5f, 2.25f);
+    const PointCloud both = Cat(near_side, far_side);
+    KeyframeDelta d;
+    d.nd_strong = both;
+    test::TempDir tmp;
+    std::vector<MapObject> rejected;
+    const auto objs = StepObjects(tmp, both, d, &rejected);
+    for (const auto& r : rejected) ADD_FAILURE() << "rejected " << r.rejected << " at " << r.centroid.transpose();
+    std::vector<std::size_t> points;
+    for (const auto& o : objs) points.push_back(o.points);
+    std::sort(points.begin(), points.end());
+    if (across < 6.f)
+      EXPECT_EQ(points, (std::vector<std::size_t>{both.size()})) << "across " << across;
+    else
+      EXPECT_EQ(points, (std::vector<std::size_t>{far_side.size(), near_side.size()})) << "across " << across;
+  }
+}
+
 // A fence 14 m long running at 45 deg to the map's axes and a car parked 1.6 m beside it, inside
 // the fence's axis-aligned box but not its oriented one: two objects, not a car merged into the
 // fence.

@@ -15,7 +15,8 @@
 //     cluster's range, flat horizontal patches, optional maximum extent.
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
-//     object's box or one missed line of the sensor's samples from it (MergeParts). A cluster
+//     object's box, one missed line of the sensor's samples from it, or its box's far side
+//     (MergeParts). A cluster
 //     also stands on change points of its group under it (StandOnChangesBelow), and a
 //     disappeared one on its lower part the query did not see; an object keeps that part and
 //     the rows the query did not see inside its box and over it (UnseenParts), and every object
@@ -871,12 +872,36 @@ bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig
   return false;
 }
 
+// Is `part` the far side of `whole`'s box? A view of a box shows its near long side whole, and its
+// width only as far as the view reaches; the far long side, seen through other gaps, is a face
+// parallel to it: in whole's frame its seen points span no more than the cluster tolerance across,
+// lie within whole's length and height (grown by the tolerance), and at most whole's length from
+// its axis (a box is no deeper than it is long: the length is its longer side). Seed 7's moved
+// container left its far long face, 2.44 m behind the near one, as a disappeared object of its own
+// on three sensors.
+bool FarSideOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m, c = std::cos(whole.yaw_rad), s = std::sin(whole.yaw_rad);
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (std::size_t i = 0; i < part.cloud.size(); ++i) {
+    if (Unseen(part.cloud.cls[i])) continue;
+    const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
+    const double dx = q.x() - whole.box_center.x(), dy = q.y() - whole.box_center.y();
+    const double along = c * dx + s * dy, across = -s * dx + c * dy;
+    if (std::abs(along) > 0.5 * whole.size.x() + tol || std::abs(across) > whole.size.x() ||
+        q.z() < whole.lo.z() - tol || q.z() > whole.hi.z() + tol)
+      return false;
+    lo = std::min(lo, across), hi = std::max(hi, across);
+  }
+  return hi >= lo && hi - lo <= tol;
+}
+
 // Is `part` a piece of `whole`: the same change, and at least object_merge_inside_fraction of its
-// points inside whole's box (grown by the tolerance: an occlusion gap) or one missed line of
-// samples from it (OneLineApart)?
+// points inside whole's box (grown by the tolerance: an occlusion gap), one missed line of
+// samples from it (OneLineApart), or its far side (FarSideOf)?
 bool PieceOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
   return whole.change == part.change &&
-         (InsideShare(part, whole, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction || OneLineApart(part, whole, cfg));
+         (InsideShare(part, whole, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction ||
+          OneLineApart(part, whole, cfg) || FarSideOf(part, whole, cfg));
 }
 
 // Parts of one object split by a gap wider than the cluster's: an accepted cluster that is a piece
