@@ -1094,8 +1094,8 @@ TEST(MapObjects, ADisappearedThingIsSampledFromTheSessionsThatScannedIt) {
 }
 
 // A container that left (strong ND), seen whole on its near long side (6 m long, 2.5 m high) and,
-// through other gaps, on 2.5 m of its far side, 2.44 m behind it (seed 7's container on Pandar64,
-// VLP-32C and VLP-16): the far side is a face parallel to the near one, within its length and
+// through other gaps, on 2.5 m of its far side, 2.44 m behind it (seed 7's container on Pandar64
+// and VLP-32C): the far side is a face parallel to the near one, within its length and
 // height, and no farther from it than its length, so one object. The same panel 7 m away, farther
 // than a box of that length is deep, is another object.
 TEST(MapObjects, AContainersFarSideIsPartOfIt) {

@@ -152,28 +152,33 @@ std::pair<Eigen::Vector3f, Eigen::Vector3f> BoxOf(const PointCloud& c, const std
   return {lo, hi};
 }
 
+// The ground of the residue rule: the lowest point of the session's own map in a cell of half a
+// mover's length, read over the cell around a place (kGroundGrowCells on each side): what a thing's
+// top is measured from (FitAMover) and what does not join things (OffTheGround).
+constexpr int kGroundGrowCells = 1;
+geometry::LowestGrid ResidueGround(const RemovertConfig& cfg) { return geometry::LowestGrid(0.5 * cfg.ld_residue_length_m); }
+
 // The clusters of `c` that fit in a mover's size (Residues), marked point by point: first
 // across (longest horizontal edge), then in height above the ground of `own` under them (the
 // ground hashed only under the clusters that fit across).
 std::vector<bool> FitAMover(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
                             const PointCloud& own, const RemovertConfig& cfg) {
-  constexpr int kGrowCells = 1;
   struct Candidate {
     const std::vector<std::uint32_t>* members;
     Eigen::Vector3f lo, hi;
   };
   std::vector<Candidate> across;
-  geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
+  geometry::LowestGrid ground = ResidueGround(cfg);
   for (const auto& m : members)
     if (geometry::LongestHorizontalEdge(c, m) < cfg.ld_residue_length_m) {
       const auto [lo, hi] = BoxOf(c, m);
       across.push_back({&m, lo, hi});
-      ground.Watch(lo, hi, kGrowCells);
+      ground.Watch(lo, hi, kGroundGrowCells);
     }
   ground.AddWatched(own);
   std::vector<bool> fit(c.size(), false);
   for (const Candidate& k : across) {
-    const double top = double(k.hi.z() - std::min(k.lo.z(), ground.Under(k.lo, k.hi, kGrowCells)));
+    const double top = double(k.hi.z() - std::min(k.lo.z(), ground.Under(k.lo, k.hi, kGroundGrowCells)));
     if (top >= cfg.ld_radius_m && top < cfg.ld_residue_length_m)
       for (auto i : *k.members) fit[i] = true;
   }
@@ -233,21 +238,20 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
   }
 }
 
-// The points of `c` higher than ld_radius_m above the ground of `own` under them (its lowest point
-// within the cell around them, as FitAMover measures a thing's top). A thing stands on the ground
-// but is not joined to others through it: a strip of new road surface the other session did not
-// see, between a parked car and the last place of a car that drove ahead of the sensor when the
-// session ended, made one thing of the two, seen by many keyframes (the default scenario's HDL-64E: the driving
-// car stayed in the map as a new object).
+// The points of `c` higher than ld_radius_m above the ground of `own` under them (ResidueGround,
+// as FitAMover measures a thing's top). A thing stands on the ground but is not joined to others
+// through it: a strip of new road surface the other session did not see, between a parked car and
+// the last place of a car that drove ahead of the sensor when the session ended, made one thing of
+// the two, seen by many keyframes (the default scenario's HDL-64E: the driving car stayed in the
+// map as a new object).
 PointCloud OffTheGround(const PointCloud& c, const PointCloud& own, const RemovertConfig& cfg) {
-  constexpr int kGrowCells = 1;
-  geometry::LowestGrid ground(0.5 * cfg.ld_residue_length_m);
-  for (const auto& p : c.points) ground.Watch(p.xyz(), p.xyz(), kGrowCells);
+  geometry::LowestGrid ground = ResidueGround(cfg);
+  for (const auto& p : c.points) ground.Watch(p.xyz(), p.xyz(), kGroundGrowCells);
   ground.AddWatched(own);
   std::vector<bool> keep(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) {
     const Eigen::Vector3f p = c.points[i].xyz();
-    keep[i] = double(p.z() - ground.Under(p, p, kGrowCells)) >= cfg.ld_radius_m;
+    keep[i] = double(p.z() - ground.Under(p, p, kGroundGrowCells)) >= cfg.ld_radius_m;
   }
   return c.select(keep);
 }
