@@ -5,9 +5,11 @@
 
 #include <array>
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace ltm::geometry {
@@ -165,6 +167,23 @@ double AngleDeg(const Eigen::Matrix3d& R);
 // `travelled_m` apart along the routes are one: within graph.consensus_t_m plus
 // consensus_drift_ratio of that path, and graph.consensus_r_deg (the consensus's rule).
 bool PlacementsAgree(const Pose& A, const Pose& B, double travelled_m, const SlamConfig& cfg);
+
+// ------------------------------------------------------------------ placement checks (placements.cpp)
+// What the checks of the placements read besides the loops and the result: each session's route
+// (distance along its odometry, per keyframe), how far apart loops are one place (the median
+// overlap reach), and two services of the alignment: a keyframe's look-alike candidates in its own
+// drive, and their registration and verification.
+struct PlacementEvidence {
+  const std::vector<std::vector<double>>& routes;
+  double place_m = 0.0;
+  std::function<std::vector<LoopRecord>(const NodeKey&)> look_alikes;
+  std::function<void(std::vector<LoopRecord>&)> verify;
+};
+// The placements a check drops, each with its reason (the session's loops between sessions are
+// rejected in `loops`): those their predicted overlaps contradict (DropContradicted), then of the
+// others those a single move to look-alike places would explain as well (DropAmbiguous).
+std::vector<std::pair<std::size_t, std::string>> DroppedPlacements(const PlacementEvidence& e, std::vector<LoopRecord>& loops,
+                                                                   const SlamResult& res, const SlamConfig& cfg);
 
 // ------------------------------------------------------------------- global registration (global.cpp)
 // An aligned session's map in the world frame with FPFH features, for placing submaps of a session
