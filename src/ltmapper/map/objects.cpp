@@ -322,22 +322,35 @@ void OrientedBox(MapObject& o) {
   o.size = Eigen::Vector3d(b.length, b.width, o.hi.z() - o.lo.z());
 }
 
-// An object's oriented box grown by `margin` across (xy) and `margin_z` in z, its yaw's sine and
-// cosine taken once for every point asked.
-class InOrientedBox {
+// An object's oriented box frame: a point's (along, across) offsets from the box centre, along its
+// length and width, the yaw's sine and cosine taken once for every point asked.
+class BoxFrame {
  public:
-  InOrientedBox(const MapObject& o, double margin, double margin_z)
-      : o_(o), c_(std::cos(o.yaw_rad)), s_(std::sin(o.yaw_rad)), margin_(margin), margin_z_(margin_z) {}
-  bool operator()(const Eigen::Vector3d& q) const {
-    if (q.z() < o_.lo.z() - margin_z_ || q.z() > o_.hi.z() + margin_z_) return false;
+  explicit BoxFrame(const MapObject& o) : o_(o), c_(std::cos(o.yaw_rad)), s_(std::sin(o.yaw_rad)) {}
+  Eigen::Vector2d Local(const Eigen::Vector3d& q) const {
     const double dx = q.x() - o_.box_center.x(), dy = q.y() - o_.box_center.y();
-    return std::abs(c_ * dx + s_ * dy) <= 0.5 * o_.size.x() + margin_ &&
-           std::abs(-s_ * dx + c_ * dy) <= 0.5 * o_.size.y() + margin_;
+    return {c_ * dx + s_ * dy, -s_ * dx + c_ * dy};
   }
 
  private:
   const MapObject& o_;
-  double c_, s_, margin_, margin_z_;
+  double c_, s_;
+};
+
+// An object's oriented box grown by `margin` across (xy) and `margin_z` in z.
+class InOrientedBox {
+ public:
+  InOrientedBox(const MapObject& o, double margin, double margin_z) : o_(o), frame_(o), margin_(margin), margin_z_(margin_z) {}
+  bool operator()(const Eigen::Vector3d& q) const {
+    if (q.z() < o_.lo.z() - margin_z_ || q.z() > o_.hi.z() + margin_z_) return false;
+    const Eigen::Vector2d l = frame_.Local(q);
+    return std::abs(l.x()) <= 0.5 * o_.size.x() + margin_ && std::abs(l.y()) <= 0.5 * o_.size.y() + margin_;
+  }
+
+ private:
+  const MapObject& o_;
+  BoxFrame frame_;
+  double margin_, margin_z_;
 };
 
 // Principal spreads (std along the 3D principal axes, ascending), the smallest axis and the middle one.
@@ -880,13 +893,14 @@ bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig
 // container left its far long face, 2.44 m behind the near one, as a disappeared object of its own
 // on three sensors.
 bool FarSideOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
-  const double tol = cfg.object_tolerance_m, c = std::cos(whole.yaw_rad), s = std::sin(whole.yaw_rad);
+  const double tol = cfg.object_tolerance_m;
+  const BoxFrame frame(whole);
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   for (std::size_t i = 0; i < part.cloud.size(); ++i) {
     if (Unseen(part.cloud.cls[i])) continue;
     const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
-    const double dx = q.x() - whole.box_center.x(), dy = q.y() - whole.box_center.y();
-    const double along = c * dx + s * dy, across = -s * dx + c * dy;
+    const Eigen::Vector2d l = frame.Local(q);
+    const double along = l.x(), across = l.y();
     if (std::abs(along) > 0.5 * whole.size.x() + tol || std::abs(across) > whole.size.x() ||
         q.z() < whole.lo.z() - tol || q.z() > whole.hi.z() + tol)
       return false;

@@ -601,9 +601,10 @@ void Refine(const std::vector<Session>& sessions, const std::vector<std::vector<
   }
 }
 
-// What the checks of the placements read besides the loops: the drives, their Scan Contexts, their
-// routes (distance along the odometry), the pairs' Scan Context gates, the clouds, and how far
-// apart keyframes still overlap.
+// What this file gives the placements' checks (CheckPlacements) reads: the drives, their Scan
+// Contexts, their routes (distance along the odometry), the pairs' Scan Context gates (the
+// look-alike candidates), the clouds (their registration), and how far apart keyframes still
+// overlap.
 struct Drives {
   const std::vector<Session>& sessions;
   const std::vector<std::vector<ScanContext>>& sc;
