@@ -18,6 +18,7 @@ struct RunArgs {
   std::vector<std::string> sessions;
   std::string out;
   std::string slam_config, removert_config, map_config, from;
+  std::vector<std::string> poses;  // run: world poses per session instead of LT-SLAM
 };
 
 // The run params from --config and the per-stage overrides (run and add share them).
@@ -35,7 +36,7 @@ ltm::pipeline::RunConfig LoadRunConfig(const RunArgs& a) {
 
 void Run(const RunArgs& a) {
   if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
-  const auto report = ltm::pipeline::RunPipeline(LoadRunConfig(a), a.sessions, a.out, a.common.threads);
+  const auto report = ltm::pipeline::RunPipeline(LoadRunConfig(a), a.sessions, a.out, a.common.threads, a.poses);
   std::cout << ltm::pipeline::FormatRunReport(report) << std::flush;
 }
 
@@ -51,6 +52,10 @@ LTM_COMMAND(70, [](CLI::App& parent) {
   cmd->add_option("--map-config", a->map_config, "LT-map params");
   cmd->add_option("--from", a->from, "Rerun from this stage (default: resume after the last finished one)")
       ->check(CLI::IsMember({"auto", "slam", "removert", "map"}));
+  cmd->add_option("--poses", a->poses,
+                  "One KITTI world-pose file per session, in --sessions order: place the sessions by "
+                  "these poses instead of aligning them (e.g. sim truth/session_XX/poses_world.txt)")
+      ->check(CLI::ExistingFile);
   ltm::app::AddCommonOptions(*cmd, a->common);
   cmd->callback([a] { Run(*a); });
 });

@@ -10,8 +10,10 @@ one table, worst HD SA first:
   separable truth, PD/ND: farther than the match distance from what the other session sampled> and strong / weak correct,
   against the beam truth (and the exact-ray truth) | changed objects found (precision) [found among the observable ones, eval objects' slice] | HD wall s/kf | run wall s | peak MB of the run
 
-usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S]
+usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [--true-poses]
                                [--slam-config F] [--removert-config F] [--map-config F] [scenario.yaml ...]
+  --true-poses: the simulator's true world poses instead of LT-SLAM's (`ltmapper run --poses`), the
+  second pose source of issue 17's acceptance; "consistency" is then 0.
   --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
   --slam-config / --removert-config / --map-config go to `ltmapper run` (e.g. a slam YAML with
   `registration: {steps: true}`); without them every stage runs with its defaults.
@@ -145,7 +147,7 @@ def evaluate(ltm, sim, out, names):
     return row
 
 
-def scenario(ltm, yaml, out_root, keyframes, seed, keep, run_args):
+def scenario(ltm, yaml, out_root, keyframes, seed, keep, run_args, true_poses=False):
     name = os.path.splitext(os.path.basename(yaml))[0]
     out = os.path.join(out_root, name)
     sim = os.path.join(out, "sim")
@@ -153,6 +155,8 @@ def scenario(ltm, yaml, out_root, keyframes, seed, keep, run_args):
     simulate(ltm, yaml, sim, keyframes, seed)
     sessions = sorted(glob.glob(os.path.join(sim, "sessions", "session_*")))
     names = [os.path.basename(s) for s in sessions]
+    if true_poses:  # the second pose source: the simulator's true world poses (`run --poses`)
+        run_args = run_args + ["--poses"] + [os.path.join(sim, "truth", n, "poses_world.txt") for n in names]
     runp = os.path.join(out, "run")
     subprocess.call(["rm", "-rf", runp])
     log = os.path.join(out, "run.log")
@@ -207,6 +211,9 @@ def main():
     ap.add_argument("--keyframes", type=int, default=0, help="route.keyframes of every scenario (0 = the scenario's)")
     ap.add_argument("--seed", type=int, default=None, help="simulator seed of every scenario (default: the scenario's)")
     ap.add_argument("--keep", action="store_true", help="keep each run's changes/ and map store")
+    ap.add_argument("--true-poses", action="store_true",
+                    help="place the sessions by the simulator's true world poses (`ltmapper run --poses`) instead of "
+                         "LT-SLAM's; LD's rotation tolerance is then measured at those poses")
     for stage in ("slam", "removert", "map"):
         ap.add_argument("--%s-config" % stage, default=None, help="`ltmapper run --%s-config` (default: none)" % stage)
     ap.add_argument("scenarios", nargs="*")
@@ -220,7 +227,7 @@ def main():
     rows = []
     for y in yamls:
         try:
-            rows.append(scenario(a.ltmapper, y, a.out, a.keyframes, a.seed, a.keep, run_args))
+            rows.append(scenario(a.ltmapper, y, a.out, a.keyframes, a.seed, a.keep, run_args, a.true_poses))
             print("done %s (%.0f s)" % (rows[-1]["name"], rows[-1]["wall"]), file=sys.stderr, flush=True)
         except RuntimeError as e:
             print("scenario %s: %s" % (y, e), file=sys.stderr, flush=True)

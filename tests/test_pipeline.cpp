@@ -339,6 +339,57 @@ TEST_F(Rerun, AddWithoutAMapOrOfAnotherPlaceIsAnErrorAndChangesNothing) {
   ExpectSameFiles(Files(fresh3_), before);
 }
 
+// `run --poses`: LT-removert and LT-map on world poses from elsewhere (here the simulator's
+// truth). The sessions are placed exactly as given, and each query's rotation uncertainty, which
+// LD's tolerances follow, is measured at those poses as LT-SLAM measures its own (loops verified by
+// GICP, their RMS rotation residual): true poses measure the registrations' own error, far below
+// LD's prior (pose_sigma_deg, 0.3 deg), which cost 5 points of LD recall on the scenario matrix.
+// A rerun finds every stage finished; a wrong pose count names the file.
+TEST_F(Rerun, GivenPosesPlaceTheSessionsAndMeasureTheirRotation) {
+  const std::string out = *root_ / "given";
+  const std::vector<std::string> names = {"session_00", "session_01", "session_02"};
+  std::string args = "run --quiet --threads 2 --removert-config " + *root_ / "removert.yaml" + " --out " + out;
+  std::string sessions = " --sessions", poses = " --poses";
+  for (const auto& n : names) {
+    sessions += " " + Session(n);
+    poses += " " + *root_ / ("sim/truth/" + n + "/poses_world.txt");
+  }
+  std::string log;
+  ASSERT_EQ(test::RunCli(args + sessions + poses, &log), 0) << log;
+  const auto manifest = io::ReadRunManifest(io::layout::AlignedDir(out));
+  ASSERT_EQ(manifest.sessions.size(), 3u);
+  for (std::size_t s = 0; s < names.size(); ++s) {
+    EXPECT_TRUE(manifest.sessions[s].aligned);
+    const auto given = io::ReadKittiPoses(*root_ / ("sim/truth/" + names[s] + "/poses_world.txt"));
+    const auto placed = io::ReadKittiPoses(io::layout::PosesWorldFile(io::layout::AlignedDir(out), names[s]));
+    ASSERT_EQ(placed.size(), given.size());
+    for (std::size_t k = 0; k < given.size(); ++k)
+      EXPECT_LT((placed[k].matrix() - given[k].matrix()).cwiseAbs().maxCoeff(), 1e-6) << names[s] << " " << k;
+  }
+  EXPECT_EQ(manifest.sessions[0].rotation_sigma_deg, 0.0);
+  for (std::size_t s = 1; s < 3; ++s) {
+    EXPECT_GT(manifest.sessions[s].rotation_sigma_deg, 0.0) << names[s];
+    EXPECT_LT(manifest.sessions[s].rotation_sigma_deg, 0.1) << names[s];
+  }
+  EXPECT_NE(test::ReadText(out + "/aligned/loops.csv").find("accepted: measures the given poses"), std::string::npos);
+  EXPECT_TRUE(std::filesystem::exists(out + "/changes/pair_00_02/keyframes.csv"));
+  ASSERT_EQ(test::RunCli(args + sessions + poses, &log), 0) << log;
+  EXPECT_EQ(test::ReadText(out + "/run_report.json").find("\"skipped\": false"), std::string::npos);
+  // One pose too few: the file and the counts are named; nothing of the finished run is replaced.
+  std::string text = test::ReadText(*root_ / "sim/truth/session_01/poses_world.txt");
+  text.erase(text.rfind('\n', text.size() - 2) + 1);
+  test::WriteText(*root_ / "short_poses.txt", text);
+  const std::string bad_poses = " --poses " + *root_ / "sim/truth/session_00/poses_world.txt" + " " +
+                                *root_ / "short_poses.txt" + " " + *root_ / "sim/truth/session_02/poses_world.txt";
+  const auto before = Files(out);
+  EXPECT_NE(test::RunCli(args + sessions + bad_poses, &log), 0);
+  EXPECT_NE(log.find("short_poses.txt"), std::string::npos) << log;
+  EXPECT_NE(log.find("44 poses for the 45 keyframes"), std::string::npos) << log;
+  ExpectSameFiles(Files(out), before);
+  EXPECT_NE(test::RunCli(args + sessions + " --poses " + *root_ / "sim/truth/session_00/poses_world.txt", &log), 0);
+  EXPECT_NE(log.find("3 sessions but 1 pose files"), std::string::npos) << log;
+}
+
 // A stage never replaces a folder that is not an ltmapper output of that stage.
 TEST(StagingDir, RefusesForeignFolderAndReplacesItsOwn) {
   test::TempDir tmp;

@@ -56,8 +56,12 @@ struct RunReport {
 // stages take the sessions, their order and which aligned from aligned/manifest.yaml; a stage
 // that runs replaces its whole folder (io::StagingDir), so a rerun into a used out_dir gives the
 // files of a fresh one.
+// With `world_poses` (one KITTI world-pose file per session, in session order) the first stage
+// places the sessions by those poses instead of aligning them (slam::WriteGivenPoses): LT-removert
+// and LT-map on poses from elsewhere, e.g. the simulator's truth or a GNSS / INS solution.
 RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
-                      const std::string& out_dir, int threads = 0);
+                      const std::string& out_dir, int threads = 0,
+                      const std::vector<std::string>& world_poses = {});
 std::string FormatRunReport(const RunReport& report);
 
 // ------------------------------------------------------------------------------ lifelong add

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <optional>
 #include <sstream>
 
 namespace ltm::pipeline {
@@ -60,11 +61,13 @@ std::vector<std::string> StageMarkers(const RunPaths& p) {
 // Each stage's key: the output layout version, the code it ran (CodeId), the sessions, its resolved
 // config, and the keys before it (outputs of a run without a manifest never count as finished).
 std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
-                                   const std::vector<std::string>& session_dirs) {
+                                   const std::vector<std::string>& session_dirs,
+                                   const std::vector<std::string>& world_poses) {
   std::vector<std::string> keys(3);
   keys[0] = std::string("layout: manifest-1\ncode: ") + CodeId() + "\nsessions:\n";
   for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
-  keys[0] += "slam:\n" + ConfigToString(sc.slam);
+  if (world_poses.empty()) keys[0] += "slam:\n" + ConfigToString(sc.slam);
+  for (const auto& f : world_poses) keys[0] += "poses: " + f + "\n" + io::ReadFileText(f);
   keys[1] = keys[0] + "removert:\n" + ConfigToString(sc.removert);
   keys[2] = keys[1] + "map:\n" + ConfigToString(sc.map) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";
   return keys;
@@ -228,7 +231,7 @@ void Stage(std::size_t i, std::size_t first, const std::string& marker, const st
 }  // namespace
 
 RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& session_dirs,
-                      const std::string& out_dir, int threads) {
+                      const std::string& out_dir, int threads, const std::vector<std::string>& world_poses) {
   ValidateConfig(cfg, "run config");
   if (session_dirs.size() < 2)
     throw Error("run: need a central and at least one query session, got " +
@@ -245,12 +248,20 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   const auto& slam_cfg = sc.slam;
   const auto& rem_cfg = sc.removert;
   const auto& map_cfg = sc.map;
-  const std::vector<std::string> keys = StageKeys(cfg, sc, session_dirs);
+  // Given poses are checked before any stage's output is touched.
+  std::optional<slam::GivenPoses> given;
+  if (!world_poses.empty()) given = slam::ReadGivenPoses(session_dirs, world_poses);
+  const std::vector<std::string> keys = StageKeys(cfg, sc, session_dirs, world_poses);
   // A marker lies in its stage folder (written once the folder is published; a rerun replaces it).
   const std::vector<std::string> markers = StageMarkers(p);
   const std::size_t first = FirstStage(cfg, markers, keys);
 
   Stage(0, first, markers[0], keys[0], "LT-SLAM", &report, [&] {
+    if (given) {
+      spdlog::info("run [1/3] world poses given: {} sessions -> {}", session_dirs.size(), p.aligned);
+      slam::WriteGivenPoses(slam_cfg, std::move(*given), p.aligned, threads);
+      return;
+    }
     spdlog::info("run [1/3] LT-SLAM: {} sessions -> {}", session_dirs.size(), p.aligned);
     const auto res = slam::RunSlamStage(slam_cfg, session_dirs, p.aligned, threads);
     for (const auto& s : res.sessions)

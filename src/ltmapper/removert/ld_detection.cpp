@@ -416,7 +416,7 @@ LdResult DetectLd(const PointCloud& central_map, const PointCloud& query_map,
   const auto t0 = std::chrono::steady_clock::now();
   spdlog::info("LD: rotation uncertainty between the sessions {:.3f} deg ({}): kd radius {} m + {:.2f} % of the "
                "distance, beam tolerance {} m (own pixel + {:.2f} %)", cfg.LdRotationSigmaDeg(),
-               cfg.ld_rotation_sigma_deg > 0.0 ? "ld.rotation_sigma_deg: measured by LT-SLAM, or set" : "pose_sigma_deg",
+               cfg.ld_rotation_sigma_deg > 0.0 ? "ld.rotation_sigma_deg: measured by LT-SLAM or at the given poses, or set" : "pose_sigma_deg",
                cfg.ld_radius_m, 100.0 * cfg.LdRadiusRel(), cfg.ld_beam.tol_m, 100.0 * cfg.LdOwnTolRel());
   LogBeamsThatTellTheirReturns(cfg);
   const detail::LdLabels labels =

@@ -85,6 +85,26 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
 // out_dir as described in docs/FORMATS.md ("LT-SLAM output").
 SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
                         const std::string& out_dir, int threads = 0);
+// The same output from world poses the user already has (GNSS / INS, another SLAM): one KITTI
+// pose file per session (a pose per keyframe, keyframe order, the sessions' common world frame).
+// ReadGivenPoses loads and checks them (ltm::Error naming the file whose pose count differs from
+// its session's keyframes) before anything is written; WriteGivenPoses places every session as
+// given, measured by MeasureGivenPoses, into out_dir.
+struct GivenPoses {
+  std::vector<std::string> session_dirs;
+  std::vector<Session> sessions;
+  SlamResult placed;  // every session aligned at its given poses
+};
+GivenPoses ReadGivenPoses(const std::vector<std::string>& session_dirs, const std::vector<std::string>& pose_files);
+SlamResult WriteGivenPoses(const SlamConfig& cfg, GivenPoses given, const std::string& out_dir, int threads = 0);
+// Given world poses (`res`: every session aligned, T_world_sensor set) measured as LT-SLAM measures
+// its own: radius loops between every two sessions at the given poses (within the keyframes'
+// overlap reach), verified by GICP from the given relative pose. Each later session's
+// rotation_sigma_deg is its verified loops' RMS rotation residual against the given poses: what
+// LD's tolerances follow, so poses from elsewhere get margins as measured as LT-SLAM's (without a
+// verified loop: 0, LD's prior). The loops go to res.loops (loops.csv).
+void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, const SlamConfig& cfg,
+                       int threads = 0);
 
 // ------------------------------------------------------------------------------ lifelong add
 // A session already in the world frame, as the fixed reference that a new session is aligned

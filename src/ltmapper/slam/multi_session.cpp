@@ -863,4 +863,50 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   return res;
 }
 
+void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, const SlamConfig& cfg_in, int threads) {
+  ValidateConfig(cfg_in, "slam config");
+  CloudStore store(sessions, cfg_in);
+  const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
+  SlamConfig cfg = cfg_in;
+  cfg.reg_max_translation_m = reach.farthest_m;
+  std::set<std::pair<NodeKey, NodeKey>> tried;
+  std::vector<LoopRecord> loops;
+  for (std::size_t a = 0; a + 1 < sessions.size(); ++a)
+    for (std::size_t b = a + 1; b < sessions.size(); ++b)
+      RadiusCandidates(res, {}, a, b, cfg, reach.median_m, {}, tried, &loops);
+  std::vector<Pose> given;
+  for (const LoopRecord& l : loops) given.push_back(l.T_a_b);
+  Register(loops, store, cfg, threads, "GICP loops at the given poses");
+  std::vector<double> sum_sq(res.sessions.size(), 0.0);
+  std::vector<std::size_t> n(res.sessions.size(), 0);
+  for (std::size_t i = 0; i < loops.size(); ++i) {
+    LoopRecord& l = loops[i];
+    ++res.sessions[std::size_t(l.b.session)].sc_candidates;
+    if (!l.verified) continue;
+    l.accepted = true;
+    l.status = "accepted: measures the given poses";
+    const Pose E = l.T_a_b.inverse() * given[i];  // registration against the given relative pose
+    l.residual_t_m = E.translation().norm();
+    l.residual_r_deg = AngleDeg(E.linear());
+    for (int s : {l.a.session, l.b.session}) ++res.sessions[std::size_t(s)].loops_accepted;
+    sum_sq[std::size_t(l.b.session)] += l.residual_r_deg * l.residual_r_deg;
+    ++n[std::size_t(l.b.session)];
+  }
+  for (std::size_t s = 1; s < n.size(); ++s) {
+    SessionAlignment& a = res.sessions[s];
+    a.loops_verified = a.loops_accepted;
+    if (n[s]) a.rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
+    if (n[s])
+      spdlog::info("slam: {}: {} loops at the given poses verified, rotation residual {:.3f} deg (RMS)", a.name, n[s],
+                   a.rotation_sigma_deg);
+    else
+      spdlog::warn("slam: {}: no loop at the given poses verified; LD keeps its rotation prior (pose_sigma_deg)",
+                   a.name);
+  }
+  res.loops = std::move(loops);
+  res.registrations = int(res.loops.size());
+  res.refine_radius_m = reach.median_m;
+  res.max_translation_m = reach.farthest_m;
+}
+
 }  // namespace ltm::slam

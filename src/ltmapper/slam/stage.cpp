@@ -186,14 +186,8 @@ void WriteManifest(const std::vector<Session>& sessions, const std::vector<std::
   m.slam_config = ConfigToString(cfg);
   io::WriteRunManifest(out_dir, m);
 }
-}  // namespace
-
-SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
-                        const std::string& out_dir, int threads) {
-  if (session_dirs.empty()) throw Error("slam: no session directories given");
-  io::MakeWritableDir(out_dir);  // before minutes of alignment, not after
-  // The whole output is built in a fresh folder and replaces out_dir when complete.
-  io::StagingDir staging(out_dir, "report.json");
+// The session directories, named (a session without a name takes its folder's), names unique.
+std::vector<Session> LoadSessions(const std::vector<std::string>& session_dirs) {
   std::vector<Session> sessions;
   std::set<std::string> names;
   for (const auto& dir : session_dirs) {
@@ -207,6 +201,58 @@ SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& s
     spdlog::info("slam: session {} ({}): {} keyframes, {} odometry + {} loop edges", s.name, dir,
                  s.keyframes.size(), s.odometry.size(), s.loops.size());
   }
+  return sessions;
+}
+
+// Session s placed by the world poses of `file` (one per keyframe, keyframe order): aligned, its
+// anchor the world pose of its first keyframe's odometry frame.
+SessionAlignment GivenAlignment(const Session& s, const std::string& file) {
+  SessionAlignment a;
+  a.name = s.name;
+  a.aligned = true;
+  a.T_world_sensor = io::ReadKittiPoses(file);
+  if (a.T_world_sensor.size() != s.keyframes.size())
+    throw Error(file, 0, std::to_string(a.T_world_sensor.size()) + " poses for the " +
+                             std::to_string(s.keyframes.size()) + " keyframes of session '" + s.name + "' (" +
+                             s.dir + ")");
+  for (const Keyframe& k : s.keyframes) a.T_session_sensor.push_back(k.T_session_sensor);
+  if (!s.keyframes.empty()) a.anchor = a.T_world_sensor.front() * a.T_session_sensor.front().inverse();
+  return a;
+}
+
+}  // namespace
+
+GivenPoses ReadGivenPoses(const std::vector<std::string>& session_dirs, const std::vector<std::string>& pose_files) {
+  if (session_dirs.empty()) throw Error("slam: no session directories given");
+  if (pose_files.size() != session_dirs.size())
+    throw Error("slam: " + std::to_string(session_dirs.size()) + " sessions but " +
+                std::to_string(pose_files.size()) + " pose files (one per session, in the same order)");
+  GivenPoses g;
+  g.session_dirs = session_dirs;
+  g.sessions = LoadSessions(session_dirs);
+  for (std::size_t s = 0; s < g.sessions.size(); ++s) g.placed.sessions.push_back(GivenAlignment(g.sessions[s], pose_files[s]));
+  return g;
+}
+
+SlamResult WriteGivenPoses(const SlamConfig& cfg, GivenPoses given, const std::string& out_dir, int threads) {
+  io::MakeWritableDir(out_dir);
+  io::StagingDir staging(out_dir, "report.json");
+  SlamResult& res = given.placed;
+  MeasureGivenPoses(given.sessions, res, cfg, threads);
+  WriteOutputs(given.sessions, res, cfg, staging.path());
+  WriteManifest(given.sessions, given.session_dirs, res, cfg, staging.path());
+  staging.Publish();
+  spdlog::info("slam: {} sessions placed by the given world poses (no alignment)", given.sessions.size());
+  return res;
+}
+
+SlamResult RunSlamStage(const SlamConfig& cfg, const std::vector<std::string>& session_dirs,
+                        const std::string& out_dir, int threads) {
+  if (session_dirs.empty()) throw Error("slam: no session directories given");
+  io::MakeWritableDir(out_dir);  // before minutes of alignment, not after
+  // The whole output is built in a fresh folder and replaces out_dir when complete.
+  io::StagingDir staging(out_dir, "report.json");
+  const std::vector<Session> sessions = LoadSessions(session_dirs);
   SlamResult res = AlignSessions(sessions, cfg, threads);
   WriteOutputs(sessions, res, cfg, staging.path());
   WriteManifest(sessions, session_dirs, res, cfg, staging.path());
