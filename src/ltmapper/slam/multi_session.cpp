@@ -881,20 +881,21 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
   std::vector<std::size_t> n(res.sessions.size(), 0);
   for (std::size_t i = 0; i < loops.size(); ++i) {
     LoopRecord& l = loops[i];
-    ++res.sessions[std::size_t(l.b.session)].sc_candidates;
     if (!l.verified) continue;
     l.accepted = true;
     l.status = "accepted: measures the given poses";
     const Pose E = l.T_a_b.inverse() * given[i];  // registration against the given relative pose
     l.residual_t_m = E.translation().norm();
     l.residual_r_deg = AngleDeg(E.linear());
-    for (int s : {l.a.session, l.b.session}) ++res.sessions[std::size_t(s)].loops_accepted;
+    for (int s : {l.a.session, l.b.session}) {
+      ++res.sessions[std::size_t(s)].loops_verified;
+      ++res.sessions[std::size_t(s)].loops_accepted;
+    }
     sum_sq[std::size_t(l.b.session)] += l.residual_r_deg * l.residual_r_deg;
     ++n[std::size_t(l.b.session)];
   }
   for (std::size_t s = 1; s < n.size(); ++s) {
     SessionAlignment& a = res.sessions[s];
-    a.loops_verified = a.loops_accepted;
     if (n[s]) a.rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
     if (n[s])
       spdlog::info("slam: {}: {} loops at the given poses verified, rotation residual {:.3f} deg (RMS)", a.name, n[s],
