@@ -18,7 +18,7 @@ struct RunArgs {
   std::vector<std::string> sessions;
   std::string out;
   std::string slam_config, removert_config, map_config, from;
-  std::vector<std::string> poses;  // run: world poses per session instead of LT-SLAM
+  std::vector<std::string> poses;  // world poses per session instead of LT-SLAM's alignment
 };
 
 // The run params from --config and the per-stage overrides (run and add share them).
@@ -63,8 +63,12 @@ LTM_COMMAND(70, [](CLI::App& parent) {
 void Add(const RunArgs& a) {
   if (a.common.quiet) spdlog::set_level(spdlog::level::warn);
   const auto cfg = LoadRunConfig(a);
-  for (const auto& s : a.sessions) {  // one at a time, in the order given
-    const auto report = ltm::pipeline::AddSession(cfg, a.out, s, a.common.threads);
+  if (!a.poses.empty() && a.poses.size() != a.sessions.size())
+    throw ltm::Error("add: " + std::to_string(a.sessions.size()) + " sessions but " + std::to_string(a.poses.size()) +
+                     " pose files (--poses: one per session, in the same order)");
+  for (std::size_t i = 0; i < a.sessions.size(); ++i) {  // one at a time, in the order given
+    const auto report =
+        ltm::pipeline::AddSession(cfg, a.out, a.sessions[i], a.common.threads, a.poses.empty() ? "" : a.poses[i]);
     std::cout << ltm::pipeline::FormatAddReport(report) << std::flush;
   }
 }
@@ -80,6 +84,10 @@ LTM_COMMAND(75, [](CLI::App& parent) {
   cmd->add_option("--slam-config", a->slam_config, "LT-SLAM params (overrides the run params)");
   cmd->add_option("--removert-config", a->removert_config, "LT-removert params");
   cmd->add_option("--map-config", a->map_config, "LT-map params");
+  cmd->add_option("--poses", a->poses,
+                  "One KITTI world-pose file per new session, in the same order: place them by these poses "
+                  "(the map's world frame) instead of aligning them")
+      ->check(CLI::ExistingFile);
   ltm::app::AddCommonOptions(*cmd, a->common);
   cmd->callback([a] { Add(*a); });
 });

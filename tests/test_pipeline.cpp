@@ -390,6 +390,33 @@ TEST_F(Rerun, GivenPosesPlaceTheSessionsAndMeasureTheirRotation) {
   EXPECT_NE(log.find("3 sessions but 1 pose files"), std::string::npos) << log;
 }
 
+// `add --poses`: a drive with world poses of its own joins a map built from given poses the same
+// way, placed exactly as given, its rotation measured against the map's sessions.
+TEST_F(Rerun, AddWithPosesPlacesTheDriveAsGiven) {
+  const std::string out = *root_ / "given_add";
+  const auto truth = [&](const std::string& n) { return *root_ / ("sim/truth/" + n + "/poses_world.txt"); };
+  std::string log;
+  ASSERT_EQ(test::RunCli("run --quiet --threads 2 --removert-config " + *root_ / "removert.yaml" + " --out " + out +
+                             " --sessions " + Session("session_00") + " " + Session("session_01") + " --poses " +
+                             truth("session_00") + " " + truth("session_01"), &log), 0) << log;
+  const std::string add = "add --quiet --threads 2 --removert-config " + *root_ / "removert.yaml" + " --map " + out +
+                          " " + Session("session_02");
+  EXPECT_NE(test::RunCli(add + " --poses " + truth("session_00") + " " + truth("session_01"), &log), 0);
+  EXPECT_NE(log.find("1 sessions but 2 pose files"), std::string::npos) << log;
+  ASSERT_EQ(test::RunCli(add + " --poses " + truth("session_02"), &log), 0) << log;
+  const auto manifest = io::ReadRunManifest(io::layout::AlignedDir(out));
+  ASSERT_EQ(manifest.sessions.size(), 3u);
+  EXPECT_GT(manifest.sessions[2].rotation_sigma_deg, 0.0);
+  EXPECT_LT(manifest.sessions[2].rotation_sigma_deg, 0.1);
+  const auto given = io::ReadKittiPoses(truth("session_02"));
+  const auto placed = io::ReadKittiPoses(io::layout::PosesWorldFile(io::layout::AlignedDir(out), "session_02"));
+  ASSERT_EQ(placed.size(), given.size());
+  for (std::size_t k = 0; k < given.size(); ++k)
+    EXPECT_LT((placed[k].matrix() - given[k].matrix()).cwiseAbs().maxCoeff(), 1e-6) << k;
+  EXPECT_TRUE(std::filesystem::exists(out + "/changes/pair_00_02/keyframes.csv"));
+  EXPECT_NE(test::ReadText(out + "/add_report.md").find("session_00 (given poses)"), std::string::npos);
+}
+
 // A stage never replaces a folder that is not an ltmapper output of that stage.
 TEST(StagingDir, RefusesForeignFolderAndReplacesItsOwn) {
   test::TempDir tmp;

@@ -81,6 +81,35 @@ slam::SessionAlignment AlignNewSession(const io::RunManifest& m, const RunPaths&
               "nothing was changed:" + why);
 }
 
+// The new session placed by its given world poses, their rotation error measured against the
+// map's sessions in ReferenceOrder: the first at whose world poses a loop verifies.
+slam::SessionAlignment PlaceNewSession(const io::RunManifest& m, const RunPaths& p, const Session& query,
+                                       const std::string& pose_file, const slam::SlamConfig& cfg, int threads,
+                                       AddReport* rep) {
+  slam::GivenPoses given = slam::ReadGivenPoses({query.dir}, {pose_file});
+  slam::SessionAlignment placed = given.placed.sessions.front();
+  placed.name = query.name;
+  for (const auto& ref : ReferenceOrder(m)) {
+    Session world = io::LoadSession(ref.dir);
+    world.name = ref.name;
+    slam::SlamResult res;
+    res.sessions.resize(2);
+    res.sessions[0].name = ref.name;
+    res.sessions[0].aligned = true;
+    res.sessions[0].T_world_sensor = WorldPoses(p, ref.name);
+    res.sessions[1] = placed;
+    slam::MeasureGivenPoses({world, query}, res, cfg, threads);
+    rep->registrations += res.registrations;
+    if (res.sessions[1].rotation_sigma_deg > 0.0) {
+      rep->aligned_to = ref.name + " (given poses)";
+      rep->loops_accepted = res.sessions[1].loops_accepted;
+      return res.sessions[1];
+    }
+  }
+  rep->aligned_to = "given poses, not measured";
+  return placed;
+}
+
 // aligned/<name>/ replaced whole.
 void PublishAlignment(const RunPaths& p, const slam::SessionAlignment& a) {
   io::StagingDir staging((fs::path(p.aligned) / a.name).string(), "poses_world.txt");
@@ -122,7 +151,8 @@ void WriteAddReport(const std::string& out_dir, const AddReport& r) {
 
 }  // namespace
 
-AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std::string& session_dir, int threads) {
+AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std::string& session_dir, int threads,
+                     const std::string& world_poses) {
   ValidateConfig(cfg, "run config");
   if (!fs::is_directory(session_dir)) throw Error(session_dir, 0, "session directory not found");
   const auto t0 = std::chrono::steady_clock::now();
@@ -143,7 +173,9 @@ AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std
   auto t = std::chrono::steady_clock::now();
   Session query = io::LoadSession(session_dir);
   query.name = rep.session;
-  const slam::SessionAlignment aligned = AlignNewSession(m, p, query, sc.slam, threads, &rep);
+  const slam::SessionAlignment aligned = world_poses.empty()
+                                             ? AlignNewSession(m, p, query, sc.slam, threads, &rep)
+                                             : PlaceNewSession(m, p, query, world_poses, sc.slam, threads, &rep);
   PublishAlignment(p, aligned);
   rep.seconds_slam = Since(t);
 

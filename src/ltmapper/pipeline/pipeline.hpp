@@ -87,8 +87,11 @@ struct AddReport {
 // The work follows the new session's and its reference's sizes, not the number of sessions.
 // A session already in the store is a no-op; one that an earlier add left in the manifest but
 // not in the store (stopped half-way) is added again from the start.
+// With `world_poses` (a KITTI file of the session's world poses, as `run --poses`) step 1 places
+// the session by them instead of aligning it, and measures their rotation error against the
+// map's sessions in the same order (slam::MeasureGivenPoses; LD's prior where no loop verifies).
 AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std::string& session_dir,
-                     int threads = 0);
+                     int threads = 0, const std::string& world_poses = "");
 std::string FormatAddReport(const AddReport& report);
 
 // Resume markers: a finished stage writes `marker` holding its key (the session directories, the
