@@ -3,6 +3,7 @@
 #include "ltmapper/eval/eval.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/map.hpp"
+#include "ltmapper/slam/slam.hpp"
 
 #include "test_util.hpp"
 
@@ -388,6 +389,30 @@ TEST_F(Rerun, GivenPosesPlaceTheSessionsAndMeasureTheirRotation) {
   ExpectSameFiles(Files(out), before);
   EXPECT_NE(test::RunCli(args + sessions + " --poses " + *root_ / "sim/truth/session_00/poses_world.txt", &log), 0);
   EXPECT_NE(log.find("3 sessions but 1 pose files"), std::string::npos) << log;
+}
+
+// The measure of given poses tells their error: the query's true poses turned by a known angle
+// about the vertical (around its first keyframe) measure that angle, the true poses measure far
+// less (the registrations' own error).
+TEST_F(Rerun, GivenPosesMeasureTheirRotationError) {
+  const std::vector<std::string> dirs = {Session("session_00"), Session("session_01")};
+  const auto truth = [&](const std::string& n) { return *root_ / ("sim/truth/" + n + "/poses_world.txt"); };
+  constexpr double kTurnDeg = 0.25;
+  std::vector<Pose> turned = io::ReadKittiPoses(truth("session_01"));
+  const Pose about = turned.front();
+  const Pose turn = about * Pose(Eigen::AngleAxisd(kTurnDeg * M_PI / 180.0, Eigen::Vector3d::UnitZ())) * about.inverse();
+  for (Pose& T : turned) T = turn * T;
+  io::WriteKittiPoses(*root_ / "turned_poses.txt", turned);
+  const auto measure = [&](const std::string& query_poses) {
+    slam::GivenPoses g = slam::ReadGivenPoses(dirs, {truth("session_00"), query_poses});
+    slam::MeasureGivenPoses(g.sessions, g.placed, slam::SlamConfig(), 2);
+    return g.placed.sessions[1].rotation_sigma_deg;
+  };
+  const double exact = measure(truth("session_01")), off = measure(*root_ / "turned_poses.txt");
+  EXPECT_GT(exact, 0.0);
+  EXPECT_LT(exact, 0.1);
+  EXPECT_GT(off, 0.7 * kTurnDeg) << "exact poses measured " << exact;
+  EXPECT_LT(off, 1.3 * kTurnDeg + exact) << "exact poses measured " << exact;
 }
 
 // `add --poses`: a drive with world poses of its own joins a map built from given poses the same
