@@ -86,7 +86,9 @@ LTM_COMMAND(40, [](CLI::App& parent) {
                              "LT-SLAM output dir: world poses from <dir>/<session>/poses_world.txt")
                  ->check(CLI::ExistingDirectory);
   auto* po = cmd->add_option("--poses", a->poses,
-                             "One KITTI world-pose file per session (e.g. sim truth/session_XX/poses_world.txt)");
+                             "One KITTI world-pose file per session (e.g. sim truth/session_XX/poses_world.txt); "
+                             "LD then takes the rotation prior pose_sigma_deg (`ltmapper run --poses` measures the "
+                             "poses' rotation error instead)");
   al->excludes(po);
   po->excludes(al);
   cmd->add_option("--out", a->out, "Output directory (changes/)")->required();
