@@ -67,6 +67,7 @@ struct SlamResult {
   // misstates the loops' heading variance (1 when no cycle measured it).
   int heading_cycles = 0;
   double loop_heading_scale = 1.0;
+  bool given_poses = false;  // placed by world poses from elsewhere (MeasureGivenPoses), not aligned
 };
 
 // Back end alone: anchor initialisation from `loops` (verified ones), consistency gating,

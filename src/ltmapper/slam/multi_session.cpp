@@ -865,6 +865,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
 
 void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, const SlamConfig& cfg_in, int threads) {
   ValidateConfig(cfg_in, "slam config");
+  const Stopwatch total;
   CloudStore store(sessions, cfg_in);
   const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
   SlamConfig cfg = cfg_in;
@@ -876,7 +877,9 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
       RadiusCandidates(res, {}, a, b, cfg, reach.median_m, {}, tried, &loops);
   std::vector<Pose> given;
   for (const LoopRecord& l : loops) given.push_back(l.T_a_b);
+  const Stopwatch sw;
   Register(loops, store, cfg, threads, "GICP loops at the given poses");
+  res.time_registration_s = sw.Seconds();
   std::vector<double> sum_sq(res.sessions.size(), 0.0);
   std::vector<std::size_t> n(res.sessions.size(), 0);
   for (std::size_t i = 0; i < loops.size(); ++i) {
@@ -890,6 +893,7 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
     for (int s : {l.a.session, l.b.session}) {
       ++res.sessions[std::size_t(s)].loops_verified;
       ++res.sessions[std::size_t(s)].loops_accepted;
+      ++res.sessions[std::size_t(s)].radius_loops;
     }
     sum_sq[std::size_t(l.b.session)] += l.residual_r_deg * l.residual_r_deg;
     ++n[std::size_t(l.b.session)];
@@ -908,6 +912,8 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
   res.registrations = int(res.loops.size());
   res.refine_radius_m = reach.median_m;
   res.max_translation_m = reach.farthest_m;
+  res.given_poses = true;
+  res.time_total_s = total.Seconds();
 }
 
 }  // namespace ltm::slam

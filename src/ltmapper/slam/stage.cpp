@@ -99,7 +99,7 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
 
   io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) {
     os << std::setprecision(6) << "{\n  \"central\": " << io::json::Quote(res.sessions[0].name)
-       << ",\n  \"all_aligned\": ";
+       << ",\n  \"given_poses\": " << (res.given_poses ? "true" : "false") << ",\n  \"all_aligned\": ";
     bool all = true;
     for (const auto& a : res.sessions) all = all && a.aligned;
     os << (all ? "true" : "false") << ",\n  \"sessions\": [\n";
@@ -136,6 +136,9 @@ void WriteReportMd(const std::vector<Session>& sessions, const SlamResult& res, 
   io::WriteFileAtomic((fs::path(out_dir) / "report.md").string(), [&](std::ostream& os) {
     os << std::fixed << std::setprecision(2) << "# LT-SLAM report\n\nCentral session: `"
        << res.sessions[0].name << "` (world frame).\n\n"
+       << (res.given_poses ? "Poses given (`--poses`): every session placed as given, not aligned; the radius loops "
+                             "only measure the given poses (the rotation error LD's tolerances follow).\n\n"
+                           : "")
        << "| session | keyframes | registered steps | aligned | SC candidates | verified | accepted | radius | own loops | "
           "anchor x y z [m] | anchor yaw [deg] |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (std::size_t s = 0; s < n; ++s) {
