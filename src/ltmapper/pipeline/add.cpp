@@ -84,8 +84,8 @@ slam::SessionAlignment AlignNewSession(const io::RunManifest& m, const RunPaths&
 // The new session placed by its given world poses, their rotation error measured against the
 // map's sessions in ReferenceOrder: the first at whose world poses a loop verifies.
 slam::SessionAlignment PlaceNewSession(const io::RunManifest& m, const RunPaths& p, const Session& query,
-                                       const std::string& pose_file, const slam::SlamConfig& cfg, int threads,
-                                       AddReport* rep) {
+                                       const std::string& pose_file, const slam::SlamConfig& cfg,
+                                       const removert::RemovertConfig& removert_cfg, int threads, AddReport* rep) {
   slam::GivenPoses given = slam::ReadGivenPoses({query.dir}, {pose_file});
   slam::SessionAlignment placed = given.placed.sessions.front();
   placed.name = query.name;
@@ -101,6 +101,7 @@ slam::SessionAlignment PlaceNewSession(const io::RunManifest& m, const RunPaths&
     slam::MeasureGivenPoses({world, query}, res, cfg, threads);
     rep->registrations += res.registrations;
     if (res.sessions[1].rotation_sigma_deg > 0.0) {
+      WarnRoughPoses(res.sessions[1], removert_cfg);
       rep->aligned_to = ref.name + " (given poses)";
       rep->loops_accepted = res.sessions[1].loops_accepted;
       return res.sessions[1];
@@ -175,7 +176,7 @@ AddReport AddSession(const RunConfig& cfg, const std::string& out_dir, const std
   query.name = rep.session;
   const slam::SessionAlignment aligned = world_poses.empty()
                                              ? AlignNewSession(m, p, query, sc.slam, threads, &rep)
-                                             : PlaceNewSession(m, p, query, world_poses, sc.slam, threads, &rep);
+                                             : PlaceNewSession(m, p, query, world_poses, sc.slam, sc.removert, threads, &rep);
   PublishAlignment(p, aligned);
   rep.seconds_slam = Since(t);
 

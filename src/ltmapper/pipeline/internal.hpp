@@ -39,6 +39,10 @@ std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
                                    const std::vector<std::string>& session_dirs,
                                    const std::vector<std::string>& world_poses = {});
 
+// Given poses whose measured rotation error exceeds LD's prior (pose_sigma_deg): a warning per
+// session, as LD's tolerances widen with it and find fewer changes.
+void WarnRoughPoses(const slam::SessionAlignment& a, const removert::RemovertConfig& cfg);
+
 // live.pcd, meta.pcd and objects/ from the store (objects with the central session's sensor).
 void ExportMaps(const RunPaths& p, const StageConfigs& sc, const std::string& central_dir, bool export_maps,
                 int threads);

@@ -73,6 +73,14 @@ std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
   return keys;
 }
 
+void WarnRoughPoses(const slam::SessionAlignment& a, const removert::RemovertConfig& cfg) {
+  if (a.rotation_sigma_deg > cfg.pose_sigma_deg)
+    spdlog::warn("run: the given poses of '{}' measure {:.2f} deg of rotation error against the earlier sessions, more "
+                 "than LD's prior ({} deg): LD's tolerances widen with it and find fewer changes; LT-SLAM (without "
+                 "--poses) may place the session better",
+                 a.name, a.rotation_sigma_deg, cfg.pose_sigma_deg);
+}
+
 // live.pcd, meta.pcd and objects/ from the store; objects/ is replaced whole (StagingDir), so no
 // object of an earlier run survives. Without export, those of an earlier run are removed.
 // The object rules' sampling step comes from the sensor LT-removert used (the central session's).
@@ -259,7 +267,8 @@ RunReport RunPipeline(const RunConfig& cfg, const std::vector<std::string>& sess
   Stage(0, first, markers[0], keys[0], "LT-SLAM", &report, [&] {
     if (given) {
       spdlog::info("run [1/3] world poses given: {} sessions -> {}", session_dirs.size(), p.aligned);
-      slam::WriteGivenPoses(slam_cfg, std::move(*given), p.aligned, threads);
+      for (const auto& a : slam::WriteGivenPoses(slam_cfg, std::move(*given), p.aligned, threads).sessions)
+        WarnRoughPoses(a, rem_cfg);
       return;
     }
     spdlog::info("run [1/3] LT-SLAM: {} sessions -> {}", session_dirs.size(), p.aligned);

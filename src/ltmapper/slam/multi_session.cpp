@@ -881,9 +881,10 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
   Register(loops, store, cfg, threads, "GICP loops at the given poses");
   res.time_registration_s = sw.Seconds();
   std::vector<double> sum_sq(res.sessions.size(), 0.0);
-  std::vector<std::size_t> n(res.sessions.size(), 0);
+  std::vector<std::size_t> n(res.sessions.size(), 0), tried_pairs(res.sessions.size(), 0);
   for (std::size_t i = 0; i < loops.size(); ++i) {
     LoopRecord& l = loops[i];
+    ++tried_pairs[std::size_t(l.b.session)];
     if (!l.verified) continue;
     l.accepted = true;
     l.status = "accepted: measures the given poses";
@@ -905,8 +906,10 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
       spdlog::info("slam: {}: {} loops at the given poses verified, rotation residual {:.3f} deg (RMS)", a.name, n[s],
                    a.rotation_sigma_deg);
     else
-      spdlog::warn("slam: {}: no loop at the given poses verified; LD keeps its rotation prior (pose_sigma_deg)",
-                   a.name);
+      spdlog::warn("slam: {}: no loop at the given poses verified ({} keyframe pairs within {:.1f} m tried{}); LD "
+                   "keeps its rotation prior (pose_sigma_deg)",
+                   a.name, tried_pairs[s], reach.median_m,
+                   tried_pairs[s] ? ": do the pose files share one world frame?" : ": the drives do not meet");
   }
   res.loops = std::move(loops);
   res.registrations = int(res.loops.size());
