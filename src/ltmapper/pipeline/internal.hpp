@@ -32,7 +32,7 @@ struct StageConfigs {
 
 // Resume markers of the three stages and their keys for a list of session folders (run order).
 // The keys hold the code id: a rebuilt ltmapper never takes an older build's outputs as its own.
-// With world poses given (`run --poses`) the first key holds those files' contents, not LT-SLAM's
+// With world poses given (`run --poses`) the first key holds those files' digests, not LT-SLAM's
 // config.
 std::vector<std::string> StageMarkers(const RunPaths& p);
 std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,

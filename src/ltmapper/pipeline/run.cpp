@@ -11,6 +11,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <optional>
 #include <sstream>
@@ -67,7 +68,11 @@ std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
   keys[0] = std::string("layout: manifest-1\ncode: ") + CodeId() + "\nsessions:\n";
   for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
   if (world_poses.empty()) keys[0] += "slam:\n" + ConfigToString(sc.slam);
-  for (const auto& f : world_poses) keys[0] += "poses: " + f + "\n" + io::ReadFileText(f);
+  for (const auto& f : world_poses) {  // a digest of each file (std::hash: stable within a build, as the key is)
+    const std::string text = io::ReadFileText(f);
+    keys[0] += "poses: " + f + " " + std::to_string(text.size()) + " bytes, hash " +
+               std::to_string(std::hash<std::string>{}(text)) + "\n";
+  }
   keys[1] = keys[0] + "removert:\n" + ConfigToString(sc.removert);
   keys[2] = keys[1] + "map:\n" + ConfigToString(sc.map) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";
   return keys;

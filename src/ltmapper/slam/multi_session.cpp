@@ -863,23 +863,13 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   return res;
 }
 
-void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, const SlamConfig& cfg_in, int threads) {
-  ValidateConfig(cfg_in, "slam config");
-  const Stopwatch total;
-  CloudStore store(sessions, cfg_in);
-  const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
-  SlamConfig cfg = cfg_in;
-  cfg.reg_max_translation_m = reach.farthest_m;
-  std::set<std::pair<NodeKey, NodeKey>> tried;
-  std::vector<LoopRecord> loops;
-  for (std::size_t a = 0; a + 1 < sessions.size(); ++a)
-    for (std::size_t b = a + 1; b < sessions.size(); ++b)
-      RadiusCandidates(res, {}, a, b, cfg, reach.median_m, {}, tried, &loops);
-  std::vector<Pose> given;
-  for (const LoopRecord& l : loops) given.push_back(l.T_a_b);
-  const Stopwatch sw;
-  Register(loops, store, cfg, threads, "GICP loops at the given poses");
-  res.time_registration_s = sw.Seconds();
+namespace {
+
+// The loops registered at given poses (`given`: each loop's given relative pose) scored against
+// them: a verified loop is accepted with its residual; each later session's rotation_sigma_deg is
+// the RMS rotation residual of its loops (none verified: 0, with a warning saying whether keyframe
+// pairs within `radius_m` were tried at all).
+void ScoreGivenLoops(std::vector<LoopRecord>& loops, const std::vector<Pose>& given, double radius_m, SlamResult& res) {
   std::vector<double> sum_sq(res.sessions.size(), 0.0);
   std::vector<std::size_t> n(res.sessions.size(), 0), tried_pairs(res.sessions.size(), 0);
   for (std::size_t i = 0; i < loops.size(); ++i) {
@@ -901,16 +891,39 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
   }
   for (std::size_t s = 1; s < n.size(); ++s) {
     SessionAlignment& a = res.sessions[s];
-    if (n[s]) a.rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
-    if (n[s])
+    if (n[s]) {
+      a.rotation_sigma_deg = std::sqrt(sum_sq[s] / double(n[s]));
       spdlog::info("slam: {}: {} loops at the given poses verified, rotation residual {:.3f} deg (RMS)", a.name, n[s],
                    a.rotation_sigma_deg);
-    else
+    } else {
       spdlog::warn("slam: {}: no loop at the given poses verified ({} keyframe pairs within {:.1f} m tried{}); LD "
                    "keeps its rotation prior (pose_sigma_deg)",
-                   a.name, tried_pairs[s], reach.median_m,
+                   a.name, tried_pairs[s], radius_m,
                    tried_pairs[s] ? ": do the pose files share one world frame?" : ": the drives do not meet");
+    }
   }
+}
+
+}  // namespace
+
+void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, const SlamConfig& cfg_in, int threads) {
+  ValidateConfig(cfg_in, "slam config");
+  const Stopwatch total;
+  CloudStore store(sessions, cfg_in);
+  const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
+  SlamConfig cfg = cfg_in;
+  cfg.reg_max_translation_m = reach.farthest_m;
+  std::set<std::pair<NodeKey, NodeKey>> tried;
+  std::vector<LoopRecord> loops;
+  for (std::size_t a = 0; a + 1 < sessions.size(); ++a)
+    for (std::size_t b = a + 1; b < sessions.size(); ++b)
+      RadiusCandidates(res, {}, a, b, cfg, reach.median_m, {}, tried, &loops);
+  std::vector<Pose> given;
+  for (const LoopRecord& l : loops) given.push_back(l.T_a_b);
+  const Stopwatch sw;
+  Register(loops, store, cfg, threads, "GICP loops at the given poses");
+  res.time_registration_s = sw.Seconds();
+  ScoreGivenLoops(loops, given, reach.median_m, res);
   res.loops = std::move(loops);
   res.registrations = int(res.loops.size());
   res.refine_radius_m = reach.median_m;
