@@ -338,18 +338,21 @@ void BindStages(py::module_& m) {
   // ------------------------------------------------------------------------------ pipeline
   m.def(
       "run_pipeline",
-      [](const pipeline::RunConfig& cfg, const py::object& sessions, const std::string& out, int threads) {
+      [](const pipeline::RunConfig& cfg, const py::object& sessions, const std::string& out, int threads,
+         const py::object& poses) {
         ValidateConfig(cfg, "run config");
         const std::vector<std::string> dirs = Strings(sessions);
+        const std::vector<std::string> pose_files = poses.is_none() ? std::vector<std::string>() : Strings(poses);
         pipeline::RunReport r;
         {
           py::gil_scoped_release unlock;
-          r = pipeline::RunPipeline(cfg, dirs, out, threads);
+          r = pipeline::RunPipeline(cfg, dirs, out, threads, pose_files);
         }
         return RunReportToDict(r);
       },
-      py::arg("cfg"), py::arg("sessions"), py::arg("out"), py::arg("threads") = 0,
-      "`ltmapper run`: LT-SLAM -> LT-removert -> LT-map into OUT (resumes finished stages).");
+      py::arg("cfg"), py::arg("sessions"), py::arg("out"), py::arg("threads") = 0, py::arg("poses") = py::none(),
+      "`ltmapper run`: LT-SLAM -> LT-removert -> LT-map into OUT (resumes finished stages). poses: one KITTI "
+      "world-pose file per session (`run --poses`): the sessions placed by them, their rotation error measured.");
 }
 
 }  // namespace ltm::py_bind

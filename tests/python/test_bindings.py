@@ -456,6 +456,17 @@ def test_store_threads_order_and_pipeline():
     assert os.path.exists(os.path.join(out, "map.ltmap")) and os.path.exists(os.path.join(out, "live.pcd"))
     raises(ltmapper.Error, ltmapper.run_pipeline, ltmapper.RunConfig({"from_stage": "map"}), [session_dir(0)],
            os.path.join(w, "run_nothing"))
+    # `run --poses`: the sessions placed by the true poses, the query's rotation error measured.
+    given = os.path.join(w, "run_given")
+    r = ltmapper.run_pipeline(ltmapper.RunConfig(), [session_dir(0), session_dir(1)], given, threads=2,
+                              poses=[truth_poses(0), truth_poses(1)])
+    assert r["aligned"] == ["session_00", "session_01"] and r["map_points_live"] > 0
+    manifest = open(os.path.join(given, "aligned", "manifest.yaml")).read()
+    assert "rotation_sigma_deg" in manifest, manifest
+    placed = np.loadtxt(os.path.join(given, "aligned", "session_01", "poses_world.txt"))
+    np.testing.assert_allclose(placed, np.loadtxt(truth_poses(1)), atol=1e-6)
+    raises(ltmapper.Error, ltmapper.run_pipeline, ltmapper.RunConfig(), [session_dir(0), session_dir(1)], given,
+           poses=[truth_poses(0)], match="2 sessions but 1 pose files")
 
 if __name__ == "__main__":
     t0 = time.time()
