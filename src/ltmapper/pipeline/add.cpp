@@ -56,14 +56,19 @@ std::vector<io::ManifestSession> ReferenceOrder(const io::RunManifest& m) {
   return refs;
 }
 
+// A session of the map, loaded under its run name (its world poses are in aligned/).
+Session MapSession(const io::ManifestSession& ref) {
+  Session s = io::LoadSession(ref.dir);
+  s.name = ref.name;
+  return s;
+}
+
 // LT-SLAM of the new session against the map's sessions held fixed; throws when none aligns it.
 slam::SessionAlignment AlignNewSession(const io::RunManifest& m, const RunPaths& p, const Session& query,
                                        const slam::SlamConfig& cfg, int threads, AddReport* rep) {
   std::vector<std::string> reasons;
   for (const auto& ref : ReferenceOrder(m)) {
-    Session world = io::LoadSession(ref.dir);
-    world.name = ref.name;
-    world = slam::WorldReference(std::move(world), WorldPoses(p, ref.name), cfg);
+    const Session world = slam::WorldReference(MapSession(ref), WorldPoses(p, ref.name), cfg);
     spdlog::info("add: aligning '{}' to '{}' ({} keyframes, world poses held fixed)", query.name, ref.name,
                  world.keyframes.size());
     const slam::SlamResult res = slam::AlignToReference(world, query, cfg, threads);
@@ -86,12 +91,9 @@ slam::SessionAlignment AlignNewSession(const io::RunManifest& m, const RunPaths&
 slam::SessionAlignment PlaceNewSession(const io::RunManifest& m, const RunPaths& p, const Session& query,
                                        const std::string& pose_file, const slam::SlamConfig& cfg,
                                        const removert::RemovertConfig& removert_cfg, int threads, AddReport* rep) {
-  slam::GivenPoses given = slam::ReadGivenPoses({query.dir}, {pose_file});
-  slam::SessionAlignment placed = given.placed.sessions.front();
-  placed.name = query.name;
+  const slam::SessionAlignment placed = slam::GivenAlignment(query, pose_file);
   for (const auto& ref : ReferenceOrder(m)) {
-    Session world = io::LoadSession(ref.dir);
-    world.name = ref.name;
+    const Session world = MapSession(ref);
     slam::SlamResult res;
     res.sessions.resize(2);
     res.sessions[0].name = ref.name;

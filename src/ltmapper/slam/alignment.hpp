@@ -97,6 +97,9 @@ struct GivenPoses {
   SlamResult placed;  // every session aligned at its given poses
 };
 GivenPoses ReadGivenPoses(const std::vector<std::string>& session_dirs, const std::vector<std::string>& pose_files);
+// One loaded session placed by the world poses of `file` (one per keyframe, keyframe order):
+// aligned, its anchor the world pose of its first keyframe's odometry frame.
+SessionAlignment GivenAlignment(const Session& s, const std::string& file);
 SlamResult WriteGivenPoses(const SlamConfig& cfg, GivenPoses given, const std::string& out_dir, int threads = 0);
 // Given world poses (`res`: every session aligned, T_world_sensor set) measured as LT-SLAM measures
 // its own: radius loops between every two sessions at the given poses (within the keyframes'

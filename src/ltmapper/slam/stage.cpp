@@ -207,8 +207,8 @@ std::vector<Session> LoadSessions(const std::vector<std::string>& session_dirs) 
   return sessions;
 }
 
-// Session s placed by the world poses of `file` (one per keyframe, keyframe order): aligned, its
-// anchor the world pose of its first keyframe's odometry frame.
+}  // namespace
+
 SessionAlignment GivenAlignment(const Session& s, const std::string& file) {
   SessionAlignment a;
   a.name = s.name;
@@ -222,8 +222,6 @@ SessionAlignment GivenAlignment(const Session& s, const std::string& file) {
   if (!s.keyframes.empty()) a.anchor = a.T_world_sensor.front() * a.T_session_sensor.front().inverse();
   return a;
 }
-
-}  // namespace
 
 GivenPoses ReadGivenPoses(const std::vector<std::string>& session_dirs, const std::vector<std::string>& pose_files) {
   if (session_dirs.empty()) throw Error("slam: no session directories given");
