@@ -69,6 +69,8 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
 // |normal z| below cos 45 deg: the surface is more upright than horizontal (a wall, a car's flank);
 // above it, more horizontal (ground, a roof).
 constexpr float kUprightNormalZ = 0.70710678f;
+// |n1 . n2| at least cos 45 deg: two planes are parallel.
+constexpr float kParallelCos = 0.70710678f;
 
 // The at most kNeighbourhoodPoints nearest points of `cloud` within `radius` of p: how many, their
 // mean offset from p, and the eigen decomposition (ascending) of their covariance.

@@ -276,8 +276,31 @@ Candidates FindCandidates(const VisibilityVotes& votes, std::size_t n, const Rem
   return c;
 }
 
+// The candidates' surfaces for the revert's surface hits: their normals from the whole map, and
+// *takes_hits, whether a candidate's plane takes them. A level surface (ground) always does. An
+// upright one only where the map without the candidates holds an upright plane parallel to it
+// (normals within 45 deg): a walker going along the line of sight leaves an upright trail of its
+// own points, whose "plane" holds the walker's later returns metres along it, so a surface of
+// candidates alone would vouch for itself. A wall keeps its plane. A trail over open ground has
+// none and is judged by its returns alone (one within the normal radius of a parallel wall still
+// takes them).
+std::vector<Eigen::Vector3f> RevertSurfaces(const PointCloud& map, const Candidates& cand, const PointCloud& cpts,
+                                            const RemovertConfig& cfg, int threads, std::vector<bool>* takes_hits) {
+  const double r = cfg.ld_normal_radius_m;
+  std::vector<Eigen::Vector3f> normals = detail::EstimateNormals(cpts, map, r, threads);
+  std::vector<bool> rest_mask = geometry::WithinRadius(map, cpts, r, threads), rest_planar;  // what the normals read
+  for (std::uint32_t i : cand.index) rest_mask[i] = false;
+  const std::vector<Eigen::Vector3f> rest = detail::EstimateNormals(cpts, map.select(rest_mask), r, threads, &rest_planar);
+  takes_hits->assign(cpts.size(), true);
+  for (std::size_t j = 0; j < cpts.size(); ++j)
+    if (std::fabs(normals[j].z()) < detail::kUprightNormalZ)
+      (*takes_hits)[j] = rest_planar[j] && std::fabs(rest[j].z()) < detail::kUprightNormalZ &&
+                         std::fabs(rest[j].dot(normals[j])) >= detail::kParallelCos;
+  return normals;
+}
+
 // Revert: only the candidates are projected again, at the coarser resolutions, counting hits
-// on their surface plane (normals from the map), so grazing ground is observed as a surface.
+// on their surface plane (RevertSurfaces), so grazing ground is observed as a surface.
 std::vector<bool> Revert(const PointCloud& map, const Candidates& cand, const std::vector<WorldKeyframe>& keyframes,
                          const RemovertConfig& cfg, int threads) {
   std::vector<bool> reverted(cand.index.size(), false);
@@ -285,9 +308,11 @@ std::vector<bool> Revert(const PointCloud& map, const Candidates& cand, const st
   const PointCloud cpts = map.select(cand.index);
   VisibilityOptions opt;
   std::vector<Eigen::Vector3f> normals;
+  std::vector<bool> takes_hits;
   if (cfg.revert_surface_max_m > 0.0) {
-    normals = detail::EstimateNormals(cpts, map, cfg.ld_normal_radius_m, threads);
+    normals = RevertSurfaces(map, cand, cpts, cfg, threads, &takes_hits);
     opt.normals = &normals;
+    opt.surface_at = &takes_hits;
     opt.surface_max_m = cfg.revert_surface_max_m;
   }
   const VisibilityVotes rv = CountVisibility(cpts, keyframes, cfg.revert_resolutions_deg, cfg, threads, opt);

@@ -50,7 +50,11 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
                                              std::vector<bool>* rim) {
   std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
   std::vector<std::uint8_t> plane(points.size(), 0), edge(points.size(), 0);
-  if (points.empty() || map.empty()) return normals;
+  if (points.empty() || map.empty()) {
+    if (planar) planar->assign(points.size(), false);
+    if (rim) rim->assign(points.size(), false);
+    return normals;
+  }
   const geometry::KdTree tree(std::make_shared<const PointCloud>(map), threads);
   const std::size_t chunk = 2048;
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
@@ -91,7 +95,6 @@ namespace {
 // that left in front of a wall is not: its own session did not see the wall behind it. Upright
 // points only: under a level one (a car's hood or roof) the ground both maps hold is what the
 // thing stood on (Missing's kRawAboveTheirGround), not a copy of it.
-constexpr float kParallelCos = 0.70710678f;  // two planes' normals within 45 deg: parallel
 
 std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::Vector3f>& normals,
                              const std::vector<bool>& want, const PointCloud& own, const PointCloud& other,

@@ -1220,6 +1220,9 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     pl[1] = ns.y();
     pl[2] = ns.z();
     pl[3] = ns.dot(ps);
+    // A point whose plane takes no surface hits: a plane of NaNs, on which no return lies.
+    if (s.options.surface_at != nullptr && !(*s.options.surface_at)[ix.order()[i]])
+      std::fill(pl, pl + 4, std::numeric_limits<float>::quiet_NaN());
     const auto asked = [&](const std::vector<bool>* at) { return at != nullptr && (*at)[ix.order()[i]]; };
     if (s.beams)
       sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
@@ -1322,6 +1325,9 @@ void CheckVisibilityInput(const PointCloud& points, const std::vector<WorldKeyfr
                           const VisibilityOptions& options) {
   if (options.normals && options.normals->size() != points.size())
     throw Error("removert: " + std::to_string(options.normals->size()) + " normals for " +
+                std::to_string(points.size()) + " points");
+  if (options.surface_at && options.surface_at->size() != points.size())
+    throw Error("removert: " + std::to_string(options.surface_at->size()) + " surface flags for " +
                 std::to_string(points.size()) + " points");
   if (keyframes.size() >= 65535)
     throw Error("removert: " + std::to_string(keyframes.size()) +

@@ -61,6 +61,9 @@ struct VisibilityOptions {
   bool within_beams = true;
   const std::vector<Eigen::Vector3f>* normals = nullptr;
   double surface_max_m = 0.0;  // [m]
+  // With normals and surface_max_m: per point, whether its plane takes surface hits (null: every
+  // point's plane does).
+  const std::vector<bool>* surface_at = nullptr;
   // With normals: the beam test per keyframe (BeamTest; VisibilityVotes::beam_hits).
   const BeamTest* beams = nullptr;
   // With the beam test, without count_own_see: per point, whether a beam may have gone through its
