@@ -389,6 +389,14 @@ TEST_F(Rerun, GivenPosesPlaceTheSessionsAndMeasureTheirRotation) {
   ExpectSameFiles(Files(out), before);
   EXPECT_NE(test::RunCli(args + sessions + " --poses " + *root_ / "sim/truth/session_00/poses_world.txt", &log), 0);
   EXPECT_NE(log.find("3 sessions but 1 pose files"), std::string::npos) << log;
+  // The measure registers loops with LT-SLAM's config: another config reruns the first stage.
+  test::WriteText(*root_ / "slam_given.yaml", "registration:\n  voxel_m: 0.6\n");
+  ASSERT_EQ(test::RunCli(args + " --slam-config " + *root_ / "slam_given.yaml" + sessions + poses, &log), 0) << log;
+  const std::string report = test::ReadText(out + "/run_report.json");
+  const std::size_t slam_at = report.find("\"slam\"");
+  ASSERT_NE(slam_at, std::string::npos) << report;
+  const std::string ran = "\"skipped\": false";
+  EXPECT_EQ(report.compare(report.find("\"skipped\"", slam_at), ran.size(), ran), 0) << report;
 }
 
 // The measure of given poses tells their error: the query's true poses turned by a known angle

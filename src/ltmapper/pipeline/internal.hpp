@@ -32,8 +32,8 @@ struct StageConfigs {
 
 // Resume markers of the three stages and their keys for a list of session folders (run order).
 // The keys hold the code id: a rebuilt ltmapper never takes an older build's outputs as its own.
-// With world poses given (`run --poses`) the first key holds those files' digests, not LT-SLAM's
-// config.
+// With world poses given (`run --poses`) the first key also holds those files' digests (LT-SLAM's
+// config stays in it: the given poses' measure registers loops with it).
 std::vector<std::string> StageMarkers(const RunPaths& p);
 std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
                                    const std::vector<std::string>& session_dirs,

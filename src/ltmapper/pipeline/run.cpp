@@ -67,11 +67,11 @@ std::vector<std::string> StageKeys(const RunConfig& cfg, const StageConfigs& sc,
   std::vector<std::string> keys(3);
   keys[0] = std::string("layout: manifest-1\ncode: ") + CodeId() + "\nsessions:\n";
   for (const auto& d : session_dirs) keys[0] += "  " + fs::absolute(d).lexically_normal().string() + "\n";
-  if (world_poses.empty()) keys[0] += "slam:\n" + ConfigToString(sc.slam);
+  keys[0] += "slam:\n" + ConfigToString(sc.slam);  // with given poses too: their measure registers loops
   for (const auto& f : world_poses) {  // a digest of each file (std::hash: stable within a build, as the key is)
     const std::string text = io::ReadFileText(f);
-    keys[0] += "poses: " + f + " " + std::to_string(text.size()) + " bytes, hash " +
-               std::to_string(std::hash<std::string>{}(text)) + "\n";
+    keys[0] += "poses: " + fs::absolute(f).lexically_normal().string() + " " + std::to_string(text.size()) +
+               " bytes, hash " + std::to_string(std::hash<std::string>{}(text)) + "\n";
   }
   keys[1] = keys[0] + "removert:\n" + ConfigToString(sc.removert);
   keys[2] = keys[1] + "map:\n" + ConfigToString(sc.map) + "export_maps: " + (cfg.export_maps ? "true" : "false") + "\n";

@@ -61,8 +61,8 @@ struct VisibilityOptions {
   bool within_beams = true;
   const std::vector<Eigen::Vector3f>* normals = nullptr;
   double surface_max_m = 0.0;  // [m]
-  // With normals and surface_max_m: per point, whether its plane takes surface hits (null: every
-  // point's plane does).
+  // With normals: per point, whether its plane is used (surface hits, the beam test); a point
+  // without one is judged by its returns alone (null: every point's plane is used).
   const std::vector<bool>* surface_at = nullptr;
   // With normals: the beam test per keyframe (BeamTest; VisibilityVotes::beam_hits).
   const BeamTest* beams = nullptr;
