@@ -1301,6 +1301,34 @@ TEST(MapObjects, OneObjectFoundByTwoStepsIsOneTrack) {
   EXPECT_EQ(moved[0].track, moved[1].track);
   EXPECT_EQ(moved[0].track_sessions, std::vector<int>({0, 1}));
 }
+// A thing that came at step 1 and is seen again by step 2 on the same surface (samples 5 cm from
+// step 1's), both against session 0, each step's change held by another keyframe of session 0
+// (both at the origin): step 1's points stay in the map step 2 starts from, but they are a change
+// against the reference, not a surface that stayed, so step 2's view is no fragment of them. It is
+// an appeared object of step 2 too, one track with step 1's.
+TEST(MapObjects, AThingSeenAgainByALaterStepIsNoFragmentOfItsEarlierView) {
+  test::TempDir tmp;
+  Store s = Store::Create(tmp / "o.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Grid(-20, -20, 0, 160, 160, 0.25f)}, {1, At(0, 0), Grid(15, 15, 0, 8, 8, 0.25f)}});
+  const PointCloud kiosk = Car(-12, -4, 2.f, 4.f, 2.5f);
+  KeyframeDelta d1, d2;
+  d1.pd_weak = kiosk;
+  d2.keyframe = 1;
+  d2.pd_weak = WithZ(kiosk, 0.05f);
+  s.IntegrateSession({"s1"}, "s0", {d1}, {});
+  s.IntegrateSession({"s2"}, "s0", {d2}, {});
+  const auto objs = s.Objects();
+  ASSERT_EQ(objs.size(), 2u);
+  EXPECT_EQ(objs[0].session, 1);
+  EXPECT_EQ(objs[1].session, 2);
+  for (const auto& o : objs) {
+    EXPECT_EQ(o.change, "appeared");
+    EXPECT_LT(o.attached_fraction, 0.1) << "session " << o.session;
+  }
+  EXPECT_EQ(objs[0].track, objs[1].track);
+  EXPECT_EQ(objs[1].track_sessions, std::vector<int>({1, 2}));
+}
+
 
 // Each step's objects are computed once and kept in the store: decoding them gives what computing
 // them gives (every field, every point), a new step computes only itself, and another object

@@ -151,6 +151,15 @@ PointCloud WithoutUnseen(const PointCloud& unchanged, const PointCloud& changes,
   return unchanged.select(keep);
 }
 
+// Whether a map point that existed before the step is a surface the step's reference holds too: a
+// point a step after the reference added as a change (PD) is not. A hoarding that came at step 1
+// is, at step 3 against the central session, the same appeared object again, not a surface its
+// step-3 view is a fragment of (a stress row lost its step-3 hoarding that way and kept a side of
+// it alone).
+bool StayedSinceReference(std::uint16_t session, PointClass cls, const SessionRecord& step) {
+  return int(session) < step.order && (int(session) <= step.reference || !IsPd(cls));
+}
+
 // What a step's objects read from the maps before and after it, gathered as the store streams
 // them (memory: a batch of keyframes, the floor's cells and the surfaces near the changes, never
 // a map):
@@ -158,7 +167,8 @@ PointCloud WithoutUnseen(const PointCloud& unchanged, const PointCloud& changes,
 //    wider than the footprint an object hides from every view (a car's width), so that each cell
 //    holds some ground;
 //  - the surfaces the step left unchanged (points of the map after the step that existed before
-//    it, less its weak ND: WithoutUnseen), only those in the xy cells (object_tolerance_m wide)
+//    it and are no change since its reference: StayedSinceReference, less its weak ND:
+//    WithoutUnseen), only those in the xy cells (object_tolerance_m wide)
 //    around a change point: the only ones NearbyAboveGround can return for any group of the changes.
 struct StepMaps {
   Floor floor;
@@ -182,9 +192,9 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
       const PointCloud& part = batch[k];
       floors[k].Add(part);
       if (!after || near.empty()) return;
-      const bool labelled = part.session.size() == part.size();
+      const bool labelled = part.session.size() == part.size() && part.cls.size() == part.size();
       for (std::size_t i = 0; i < part.size(); ++i)
-        if ((!labelled || int(part.session[i]) < step.order) && near.Near(part.points[i].xyz()))
+        if ((!labelled || StayedSinceReference(part.session[i], part.cls[i], step)) && near.Near(part.points[i].xyz()))
           kept[k].push_back(part.points[i].x, part.points[i].y, part.points[i].z);
     });
     for (std::size_t k = 0; k < batch.size(); ++k) {
