@@ -523,6 +523,42 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
   EXPECT_EQ(objects[0].exists_in, 1);
 }
 
+// In a keyframe the step created, an appeared cluster is judged with the surface it continues
+// into: a 3 m wall of new territory (strong PD: the reference never saw it) whose two rows 0.5 m up
+// the reference's rays passed over 4 m (weak PD, where the step's pose erred) is coverage, not a
+// new 4 m object; the wall all weak PD is one.
+TEST(MapObjects, ARimTheReferencePassedOfASurfaceItNeverSawIsNoObject) {
+  for (const bool rim : {true, false}) {
+    test::TempDir tmp;
+    Store s = Store::Create(tmp / "m.ltmap", Cfg());
+    s.IntegrateBase({"s0"}, {{0, At(0, 0), Grid(-20, -20, 0, 160, 160, 0.25f)}});
+    PointCloud cloud = Grid(-3, -6, 0, 40, 48, 0.25f);
+    cloud.cls.assign(cloud.size(), PointClass::kPDStrong);
+    PointCloud wall = Car(4, -4, 0.25f, 8.f, 3.f);
+    wall.cls.resize(wall.size());
+    for (std::size_t i = 0; i < wall.size(); ++i) {
+      const auto& p = wall.points[i];
+      const bool passed = p.z > 0.4f && p.z < 0.9f && std::abs(p.y) <= 2.f;
+      wall.cls[i] = !rim || passed ? PointClass::kPDWeak : PointClass::kPDStrong;
+    }
+    cloud.append(wall);
+    s.IntegrateSession({"s1"}, "s0", {}, {{6, At(100, 0), cloud}});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    if (rim) {
+      EXPECT_TRUE(objs.empty());
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "coverage");
+      EXPECT_GT(rejected[0].unobserved_beside, rejected[0].points);
+    } else {
+      ASSERT_EQ(objs.size(), 1u) << (rejected.empty() ? "" : rejected[0].rejected);
+      EXPECT_EQ(objs[0].change, "appeared");
+      EXPECT_EQ(objs[0].unobserved_beside, 0u);
+      EXPECT_DOUBLE_EQ(objs[0].observed_fraction, 1.0);
+    }
+  }
+}
+
 // ------------------------------------------------------------------------------------ objects
 // One step on a flat 40 m x 40 m ground keyframe holding `standing` (strong ND removes map
 // points, so what disappears must be in it); `d0` is keyframe 0's delta.

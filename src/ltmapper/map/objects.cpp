@@ -8,7 +8,8 @@
 //  3. Coverage: a change is an object only in space both sessions observed. Strong ND is by
 //     definition seen through by the query. PD is weak when the reference saw its space free,
 //     strong when it never saw there (new territory, facades newly in view) or its view was
-//     blocked: an appeared cluster needs a majority of weak PD, or a disappeared cluster of the
+//     blocked: an appeared cluster needs a majority of weak PD (among its points and the step's
+//     strong PD beside them that its changes do not hold: UnobservedBeside), or a disappeared cluster of the
 //     step between it and the nearest reference keyframe and the shape of an object the step
 //     removed (that object moved there; anything else revealed behind it is coverage).
 //  4. Geometry (Reject()): ghosts of misalignment, height above ground, width across the sensor's sampling at the
@@ -139,16 +140,19 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
   return out;
 }
 
-// `unchanged` without the step's weak ND points (the same store grid points: within half a grid
-// step). The query did not observe those places, so they are no surface the step saw unchanged:
+// `c` without the step's change points of the classes `of` picks (the same store grid points:
+// within half a grid step). WithoutUnseen: `unchanged` without the step's weak ND points. The query did not observe those places, so they are no surface the step saw unchanged:
 // beside them, a disappeared thing's strong part (the panels of a fence the query's beams passed
 // through) is not a fragment of a surface that stayed, nor, in its box, what it left behind.
-PointCloud WithoutUnseen(const PointCloud& unchanged, const PointCloud& changes, const MapConfig& cfg) {
-  std::vector<bool> unseen(changes.size());
-  for (std::size_t i = 0; i < changes.size(); ++i) unseen[i] = Unseen(changes.cls[i]);
-  std::vector<bool> keep = geometry::WithinRadius(unchanged, changes.select(unseen), 0.5 * cfg.resolution_m);
+PointCloud WithoutChanges(const PointCloud& c, const PointCloud& changes, bool (*of)(PointClass), const MapConfig& cfg) {
+  std::vector<bool> picked(changes.size());
+  for (std::size_t i = 0; i < changes.size(); ++i) picked[i] = of(changes.cls[i]);
+  std::vector<bool> keep = geometry::WithinRadius(c, changes.select(picked), 0.5 * cfg.resolution_m);
   keep.flip();
-  return unchanged.select(keep);
+  return c.select(keep);
+}
+PointCloud WithoutUnseen(const PointCloud& unchanged, const PointCloud& changes, const MapConfig& cfg) {
+  return WithoutChanges(unchanged, changes, Unseen, cfg);
 }
 
 // Whether a map point that existed before the step is a surface the step's reference holds too: a
@@ -160,6 +164,14 @@ bool StayedSinceReference(std::uint16_t session, PointClass cls, const SessionRe
   return int(session) < step.order && (int(session) <= step.reference || !IsPd(cls));
 }
 
+// Whether a map point after the step is the step's own surface that its reference never observed:
+// its strong PD. Those of keyframes the step created (new territory) are no change of the step
+// (Store::StepChanges takes their weak PD only); ReadStepMaps keeps the ones its changes do not
+// hold, the surface an appeared cluster there continues into (Describe).
+bool UnobservedByReference(std::uint16_t session, PointClass cls, const SessionRecord& step) {
+  return int(session) == step.order && cls == PointClass::kPDStrong;
+}
+
 // What a step's objects read from the maps before and after it, gathered as the store streams
 // them (memory: a batch of keyframes, the floor's cells and the surfaces near the changes, never
 // a map):
@@ -169,13 +181,16 @@ bool StayedSinceReference(std::uint16_t session, PointClass cls, const SessionRe
 //  - the surfaces the step left unchanged (points of the map after the step that existed before
 //    it and are no change since its reference: StayedSinceReference, less its weak ND:
 //    WithoutUnseen), only those in the xy cells (object_tolerance_m wide)
-//    around a change point: the only ones NearbyAboveGround can return for any group of the changes.
+//    around a change point: the only ones NearbyAboveGround can return for any group of the changes;
+//  - the same for the step's surfaces its reference never observed that its changes do not hold
+//    (UnobservedByReference).
 struct StepMaps {
   Floor floor;
   PointCloud unchanged_near;
+  PointCloud unobserved_near;  // the step's own strong PD its changes do not hold (UnobservedByReference)
 };
 StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const PointCloud& changes, const MapConfig& cfg) {
-  StepMaps m{Floor(cfg.object_ground_cell_m), {}};
+  StepMaps m{Floor(cfg.object_ground_cell_m), {}, {}};
   m.floor.Add(changes);
   NearCells near(cfg.object_tolerance_m);
   if (cfg.object_tolerance_m > 0.0)
@@ -187,19 +202,25 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
   std::vector<PointCloud> batch;
   auto read_batch = [&](bool after) {
     std::vector<Floor> floors(batch.size(), Floor(cfg.object_ground_cell_m));
-    std::vector<PointCloud> kept(batch.size());
+    std::vector<PointCloud> kept(batch.size()), unobserved(batch.size());
     ParallelFor(batch.size(), store.threads(), [&](std::size_t k) {
       const PointCloud& part = batch[k];
       floors[k].Add(part);
       if (!after || near.empty()) return;
       const bool labelled = part.session.size() == part.size() && part.cls.size() == part.size();
-      for (std::size_t i = 0; i < part.size(); ++i)
-        if ((!labelled || StayedSinceReference(part.session[i], part.cls[i], step)) && near.Near(part.points[i].xyz()))
-          kept[k].push_back(part.points[i].x, part.points[i].y, part.points[i].z);
+      for (std::size_t i = 0; i < part.size(); ++i) {
+        if (!near.Near(part.points[i].xyz())) continue;
+        const auto& p = part.points[i];
+        if (!labelled || StayedSinceReference(part.session[i], part.cls[i], step))
+          kept[k].push_back(p.x, p.y, p.z);
+        else if (UnobservedByReference(part.session[i], part.cls[i], step))
+          unobserved[k].push_back(p.x, p.y, p.z);
+      }
     });
     for (std::size_t k = 0; k < batch.size(); ++k) {
       m.floor.Add(floors[k]);
       m.unchanged_near.append(kept[k]);
+      m.unobserved_near.append(unobserved[k]);
     }
     batch.clear();
   };
@@ -211,6 +232,7 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
     read_batch(after);
   }
   m.unchanged_near = WithoutUnseen(m.unchanged_near, changes, cfg);
+  m.unobserved_near = WithoutChanges(m.unobserved_near, changes, IsPd, cfg);
   return m;
 }
 
@@ -301,9 +323,11 @@ std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const
 }
 
 // Centroid, axis-aligned box, class votes (of the changes seen, not of joined unseen parts)
-// and see-through share.
+// and see-through share, of its points and of the surface beside them its reference never
+// observed (MapObject::unobserved_beside).
 void Describe(MapObject& o) {
   std::map<PointClass, std::size_t> votes;
+  o.centroid.setZero();
   o.lo = o.hi = o.cloud.points[0].xyz().cast<double>();
   std::size_t seen_through = 0;
   for (std::size_t i = 0; i < o.cloud.size(); ++i) {
@@ -316,7 +340,7 @@ void Describe(MapObject& o) {
   }
   o.points = o.cloud.size();
   o.centroid /= double(o.points);
-  o.observed_fraction = double(seen_through) / double(o.points);
+  o.observed_fraction = double(seen_through) / double(o.points + o.unobserved_beside);
   std::size_t best = 0;
   for (const auto& [c, n] : votes)
     if (n > best) best = n, o.cls = c;
@@ -574,6 +598,7 @@ struct Masks {
   std::vector<bool> twin;
   PointCloud unchanged;
   PointCloud seen;
+  PointCloud unobserved;  // appeared: the step's surfaces its reference never observed near the group
 };
 
 // The group's change points (`idx`, above ground) the other session saw changed: strong ND for
@@ -665,6 +690,21 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
   return total == 0 ? 1.0 : double(n_seen) / double(total);
 }
 
+// How many points of `unobserved` (the step's surfaces its reference never observed, beside the
+// group) lie within the cluster tolerance r of the cluster's points. In a keyframe the step created,
+// an appeared cluster is only what the reference's rays reached of a surface that goes on there:
+// a wall's rim row its rays passed where the step's pose erred (seed 3's HDL-32E, the stress row's
+// unlooped session start). In the reference's keyframes those points are the cluster's own.
+std::size_t UnobservedBeside(const MapObject& o, const PointCloud& unobserved, double r) {
+  if (unobserved.empty()) return 0;
+  PointCloud box;
+  for (const auto& p : unobserved.points)
+    if (InGrownBox(o, p.xyz(), r)) box.push_back(p.x, p.y, p.z);
+  if (box.empty()) return 0;
+  const std::vector<bool> near = geometry::WithinRadius(box, o.cloud, r);
+  return std::size_t(std::count(near.begin(), near.end(), true));
+}
+
 MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
                       const SessionRecord& step, const Floor& floor, const Masks& masks,
                       const StepContext& ctx, const MapConfig& cfg) {
@@ -676,6 +716,8 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.exists_in = appeared ? step.order : step.reference;
   o.cloud = changes.select(sel);
   Describe(o);
+  o.unobserved_beside = UnobservedBeside(o, masks.unobserved, cfg.object_tolerance_m);
+  if (o.unobserved_beside > 0) Describe(o);
   OrientedBox(o);
   const OwnLowerPart lower(o, cfg.object_tolerance_m);
   const PointCloud unchanged = InGrownBox(o, masks.unchanged, cfg.object_tolerance_m);
@@ -723,7 +765,6 @@ std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
 // Appends `part` (points with their classes) to `whole` and describes it again (box, class votes, height).
 void Absorb(MapObject& whole, const PointCloud& part) {
   whole.cloud.append(part);
-  whole.centroid.setZero();
   Describe(whole);
   OrientedBox(whole);
   whole.height_above_ground = whole.hi.z() - whole.ground_z;
@@ -1003,7 +1044,9 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const std::vector<std::uint32_t> idx = GroupPoints(changes, appeared, floor, cfg);
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m),
-                      SeenChanged(changes, idx)};
+                      SeenChanged(changes, idx),
+                      appeared ? NearbyAboveGround(changes, idx, maps.unobserved_near, floor, cfg, cfg.object_tolerance_m)
+                               : PointCloud()};
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));

@@ -127,7 +127,12 @@ struct MapObject {
   double ground_z = 0.0, height_above_ground = 0.0;  // local ground under it, top above it [m]
   double clearance_m = 0.0;           // lowest point above the ground of its cell [m]
   double range_m = 0.0;               // distance to the nearest map keyframe (sensor position)
-  double observed_fraction = 0.0;     // share of see-through evidence (strong ND / weak PD)
+  double observed_fraction = 0.0;     // share of see-through evidence (strong ND / weak PD), of its
+                                      // points and of the unobserved surface beside them
+  // Appeared: points of the step's own surface its reference never observed within the cluster
+  // tolerance, that the step's changes do not hold (new territory's strong PD beside it). Counted
+  // in observed_fraction's whole; not stored.
+  std::size_t unobserved_beside = 0;
   double twin_fraction = 0.0;         // share with a change of the other side within the twin radius
   double attached_fraction = 0.0;     // share with an unchanged surface within the cluster tolerance
   double box_seen_fraction = 0.0;     // of what the other session observed in its box: the share seen changed
