@@ -678,6 +678,36 @@ std::vector<WorldKeyframe> DriveAlong(const std::vector<test::Box>& boxes, doubl
   return kfs;
 }
 
+// A car new in the query, which saw it from 90 m with 1 deg columns (two keyframes 2 m apart),
+// where the central's drive 8 m from its place saw the space free: weak PD, sampled in rows 0.7 m
+// and columns 0.8-1.6 m apart. At the fixed ld.residue_gap_m (0.5 m) each sample was a piece that fits in
+// a mover's size, all residues; joined at the sensor's sample gaps at their range (ResidueGaps) it
+// is one car, a change. A pedestrian 8 m from the sensor is still a residue.
+TEST(RemovertLd, AFarCarSampledSparselyIsNoResidue) {
+  const test::Box car = test::MakeBox(-2.25, 88, 0.3, 2.25, 90, 1.8, kCarQuery);
+  const test::Box ped = test::MakeBox(6, 8, 0, 6.6, 8.6, 1.7, 21);
+  const test::Box far_wall = test::MakeBox(-60, 100, 0, 60, 100.3, 8, 1);
+  test::Lidar lidar;
+  lidar.max_range = 130.0;
+  lidar.cols = 360;
+  RemovertConfig cfg = test::ConfigFor(lidar);
+  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;
+  const auto central = DriveAlong({far_wall}, -20, 21, 80.0, 1.8, lidar);
+  const auto query = DriveAlong({far_wall, car, ped}, 0, 2, 0.0, 1.8, lidar);
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  test::Box body = car;
+  body.lo.z() = 0.7;  // above the LD radius over the ground
+  const std::size_t in_map = CountIn(qmap, body), weak = CountIn(ld.pd_weak, body), res = CountIn(ld.pd_residue, body);
+  std::printf("car seen from 90 m: %zu map points, weak PD %zu, strong PD %zu, residue %zu\n", in_map, weak,
+              CountIn(ld.pd_strong, body), res);
+  ASSERT_GE(in_map, 8u);
+  EXPECT_GE(2 * weak, in_map);
+  EXPECT_EQ(res, 0u);
+  EXPECT_GT(CountIn(ld.pd_residue, ped), 0u);
+  EXPECT_EQ(CountIn(ld.pd_weak, ped), 0u);
+}
+
 // A car the central passed at 6 m is gone when the query passes 60 m away, its sensor 1 m higher
 // (a raised road), looking down at its place at 1-2 deg. The pixel windows of the car's lower
 // part also hold the ground there, which returns at the car's range (a hit, never a see-through):

@@ -393,6 +393,16 @@ TEST(RemovertTileJobs, LdPlanRunMergeEqualsTheStagesPairFiles) {
   EXPECT_FALSE(removert::RunLdTileJob(tmp / "ld", 0, 2));  // done: skipped
   const removert::LdStats st = removert::MergeLdTileJobs(tmp / "ld", tmp / "pair");
   EXPECT_GT(st.nd_strong, 100u);  // the parked car left
+  {  // A plan whose margin is not what the config and the central's scans give is refused.
+    const std::string plan_json = tmp / "ld/plan.json", kept = test::ReadText(plan_json);
+    const std::string key = "\"margin_voxels\": ";
+    const std::size_t at = kept.find(key);
+    ASSERT_NE(at, std::string::npos);
+    const std::size_t end = kept.find_first_not_of("0123456789", at + key.size());
+    test::WriteText(plan_json, kept.substr(0, at + key.size()) + "1" + kept.substr(end));
+    test::ExpectError([&] { removert::RunLdTileJob(tmp / "ld", 0, 2, true); }, {plan_json, "margin_voxels differs"});
+    test::WriteText(plan_json, kept);
+  }
   std::string out;
   ASSERT_EQ(0, test::RunCli("tiles ld-plan --central " + (tmp / "hd0") + " --query " + (tmp / "hd1") + " --out " +
                                 (tmp / "ld_cli"), &out)) << out;

@@ -76,6 +76,11 @@ std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud
   return Members(EuclideanClusters(cloud, gap_m, threads));
 }
 
+Eigen::Vector2f SampleJoinGaps(double azimuth_step_deg, double vertical_step_deg, double range_m) {
+  constexpr double kGapsPerStep = 2.0, kDegToRad = M_PI / 180.0;  // 1 / cos 60 deg
+  return Eigen::Vector2f(float(azimuth_step_deg), float(vertical_step_deg)) * float(kGapsPerStep * kDegToRad * range_m);
+}
+
 std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud,
                                                                 const std::vector<Eigen::Vector2f>& gaps, int threads) {
   if (gaps.size() != cloud.size())

@@ -132,6 +132,10 @@ std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud
 // cloud.size(), else ltm::Error). With every gap {g, g}, the same clusters as above with gap g.
 std::vector<std::vector<std::uint32_t>> EuclideanClusterMembers(const PointCloud& cloud,
                                                                 const std::vector<Eigen::Vector2f>& gaps, int threads = 1);
+// The gaps {horizontal, vertical} [m] that still join a far surface's samples into one cluster at
+// `range_m`, for a sensor sampling columns `azimuth_step_deg` and rows `vertical_step_deg` apart:
+// r * step, up to twice that on a surface seen at up to 60 deg incidence (1 / cos 60 deg).
+Eigen::Vector2f SampleJoinGaps(double azimuth_step_deg, double vertical_step_deg, double range_m);
 // The xy-oriented box of cloud[idx] (all points when idx is empty): its major axis the principal
 // axis of the points' x, y spread (2x2 covariance about their mean), at yaw_rad; the minor axis
 // 90 deg counter-clockwise from it; the box's xy centre and its extents along the two axes [m].

@@ -13,6 +13,7 @@
 
 #include "ltmapper/core/core.hpp"
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,9 @@ struct SensorModel {
   double MaxSpacing() const;
   // The median gap between neighbouring beams (the grid for non-repetitive scanners).
   double MedianSpacing() const;
+  // The coarser of the beam gap at the horizon and the azimuth step: how far apart a far
+  // surface's samples lie at most along its rows or its columns (clustering gaps).
+  double CoarserStepDeg() const { return std::max(SpacingAt(0.0), azimuth_step_deg); }
   // One line for logs: "hdl32e: 32 beams +10.67 .. -30.67 deg, spacing 1.33 (max 1.33) deg, ...".
   std::string Describe() const;
 };

@@ -141,9 +141,10 @@ std::vector<bool> NearMask(const PointCloud& changes, const std::vector<std::uin
 }
 
 // `c` without the step's change points of the classes `of` picks (the same store grid points:
-// within half a grid step). WithoutUnseen: `unchanged` without the step's weak ND points. The query did not observe those places, so they are no surface the step saw unchanged:
-// beside them, a disappeared thing's strong part (the panels of a fence the query's beams passed
-// through) is not a fragment of a surface that stayed, nor, in its box, what it left behind.
+// within half a grid step). WithoutUnseen: `unchanged` without the step's weak ND points. The
+// query did not observe those places, so they are no surface the step saw unchanged: beside them,
+// a disappeared thing's strong part (the panels of a fence the query's beams passed through) is
+// not a fragment of a surface that stayed, nor, in its box, what it left behind.
 PointCloud WithoutChanges(const PointCloud& c, const PointCloud& changes, bool (*of)(PointClass), const MapConfig& cfg) {
   std::vector<bool> picked(changes.size());
   for (std::size_t i = 0; i < changes.size(); ++i) picked[i] = of(changes.cls[i]);
@@ -278,17 +279,11 @@ class SensorRanges {
   std::shared_ptr<const geometry::KdTree> tree_;
 };
 
-// The sensor samples a surface at range r in rows r * object_sensor_step_deg apart and columns
-// r * object_sensor_azimuth_step_deg apart, up to twice that on a surface seen at up to 60 deg
-// incidence (1 / cos 60 deg): the gaps that still join a far object's rows and columns into one
-// cluster.
-constexpr double kSampleGapsPerStep = 2.0;
-
 // The sensor's sample gaps {horizontal, vertical} [m] that still join a cluster at `range_m`
-// (kSampleGapsPerStep times its steps there), before the cluster tolerance's floor.
+// (geometry::SampleJoinGaps of its columns and rows: object_sensor_azimuth_step_deg,
+// object_sensor_step_deg), before the cluster tolerance's floor.
 Eigen::Vector2f SensorGapsAt(double range_m, const MapConfig& cfg) {
-  return Eigen::Vector2f(float(cfg.object_sensor_azimuth_step_deg), float(cfg.object_sensor_step_deg)) *
-         float(kSampleGapsPerStep * kDegToRad * range_m);
+  return geometry::SampleJoinGaps(cfg.object_sensor_azimuth_step_deg, cfg.object_sensor_step_deg, range_m);
 }
 
 // Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
@@ -696,10 +691,7 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
 // a wall's rim row its rays passed where the step's pose erred (seed 3's HDL-32E, the stress row's
 // unlooped session start). In the reference's keyframes those points are the cluster's own.
 std::size_t UnobservedBeside(const MapObject& o, const PointCloud& unobserved, double r) {
-  if (unobserved.empty()) return 0;
-  PointCloud box;
-  for (const auto& p : unobserved.points)
-    if (InGrownBox(o, p.xyz(), r)) box.push_back(p.x, p.y, p.z);
+  const PointCloud box = InGrownBox(o, unobserved, r);
   if (box.empty()) return 0;
   const std::vector<bool> near = geometry::WithinRadius(box, o.cloud, r);
   return std::size_t(std::count(near.begin(), near.end(), true));
@@ -1188,7 +1180,7 @@ void InheritMoves(std::vector<MapObject>& objects) {
 
 MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
   if (cfg.object_sensor_step_deg <= 0.0)
-    cfg.object_sensor_step_deg = std::max(sensor.SpacingAt(0.0), sensor.azimuth_step_deg);
+    cfg.object_sensor_step_deg = sensor.CoarserStepDeg();
   if (cfg.object_sensor_azimuth_step_deg <= 0.0) cfg.object_sensor_azimuth_step_deg = sensor.azimuth_step_deg;
   return cfg;
 }

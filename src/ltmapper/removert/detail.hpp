@@ -277,6 +277,14 @@ void WriteKeyframesCsv(const std::string& dir, const std::vector<WorldKeyframe>&
 
 // The files of a pair's LD clouds (the stage's pair folder, an LD tile's part, its merge).
 std::vector<std::string> LdPairCloudFiles();
+// ---- multi-session cleanup (ld_detection.cpp)
+// The sensor's joining gaps {horizontal, vertical} [m] at `range_m` for the residues' clusters:
+// ld.residue_gap_m or, farther out, geometry::SampleJoinGaps of the sensor's columns and rows (a
+// range beyond ld.submap_radius_m counts as that radius: the voters' reach, in a tile as in the
+// whole). ResidueGapsAt(cfg, ld.submap_radius_m).x() is the farthest one hop of a residue's
+// cluster reaches in xy (LdTileMarginM).
+Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m);
+
 // ---- the stage tile by tile from files (stage_tiles.cpp)
 // RunRemovertStage's sessions and pairs with tiles.stage: every session's HD tiles and every pair's
 // LD tiles run from files under out/.tiles (removed at the end) and merged into the stage's

@@ -256,14 +256,37 @@ PointCloud OffTheGround(const PointCloud& c, const PointCloud& own, const Remove
   return c.select(keep);
 }
 
+// Per point of `c`: the gaps {horizontal, vertical} that join it to its neighbours at its range
+// from the nearest of `own_voters` (detail::ResidueGapsAt; a lower bound of the range it was
+// scanned from), as LT-map clusters objects. A parked car 70-100 m out is sampled sparsely (rows
+// 0.5 m apart on 64 beams): at a fixed gap its samples were pieces that each fit in a mover's size
+// (seed 7's car 4 left the map as residues on three sensors).
+std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<WorldKeyframe>& own_voters,
+                                         const RemovertConfig& cfg) {
+  std::vector<Eigen::Vector2f> gaps(c.size(), Eigen::Vector2f::Constant(float(cfg.ld_residue_gap_m)));
+  if (own_voters.empty()) return gaps;
+  PointCloud sensors;
+  for (const auto& kf : own_voters) {
+    const Eigen::Vector3d t = kf.T_world_sensor.translation();
+    sensors.push_back(float(t.x()), float(t.y()), float(t.z()));
+  }
+  const geometry::KdTree tree(std::move(sensors));
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    std::uint32_t k = 0;
+    float sq = 0.f;
+    if (tree.Nearest(c.points[i].xyz(), &k, &sq)) gaps[i] = detail::ResidueGapsAt(cfg, std::sqrt(double(sq)));
+  }
+  return gaps;
+}
+
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
-// of `own` map) split into clusters at ld_residue_gap_m, sized together with `unseen` (the same
-// map's changes on the same side that the other session did not see through): a thing whose end
-// the other session saw through and whose body it never observed is one thing, not a pedestrian.
-// A cluster that fits in a mover's size, ld_residue_length_m, along its longest horizontal edge
-// and from the ground under it (the lowest point of `own` within half that around it) to its top,
-// and that no larger cluster comes that close to, is a residue of a mover (marked in the result,
-// per point of `seen`). A pole, a
+// of `own` map) split into clusters at ld_residue_gap_m (farther out at the sensor's sample gaps:
+// ResidueGaps), sized together with `unseen` (the same map's changes on the same side that the
+// other session did not see through): a thing whose end the other session saw through and whose
+// body it never observed is one thing, not a pedestrian. A cluster that fits in a mover's size,
+// ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
+// point of `own` within half that around it) to its top, and that no larger cluster comes that
+// close to, is a residue of a mover (marked in the result, per point of `seen`). A pole, a
 // facade's edge or a lamp head that poses let the other session see past reaches higher; a short
 // piece beside a large one is part of that object (a trunk's foot under its canopy, a sparse
 // object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
@@ -276,7 +299,7 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
   PointCloud both = seen;
   both.append(OffTheGround(unseen, own, cfg));
-  const auto whole = geometry::EuclideanClusterMembers(both, cfg.ld_residue_gap_m, threads);
+  const auto whole = geometry::EuclideanClusterMembers(both, ResidueGaps(both, own_voters, cfg), threads);
   std::vector<bool> fit = FitAMover(both, whole, own, cfg);
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
   std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
@@ -341,6 +364,13 @@ PointCloud WithLabel(const PointCloud& map, const std::vector<std::uint8_t>& lab
 }  // namespace
 
 namespace detail {
+
+Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m) {
+  const Eigen::Vector2f gap = Eigen::Vector2f::Constant(float(cfg.ld_residue_gap_m));
+  if (!cfg.SensorResolved()) return gap;
+  const geometry::SensorModel& m = cfg.sensor_model;
+  return gap.cwiseMax(geometry::SampleJoinGaps(m.azimuth_step_deg, m.CoarserStepDeg(), std::min(range_m, cfg.ld_submap_radius_m)));
+}
 
 LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, const PointCloud& central_positions,
                  const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_voters,

@@ -186,11 +186,12 @@ LdTilePlanFile ReadLdTilePlan(const std::string& plan_dir) {
   f.central_plan = Member(doc, "central_plan", T::kString, path).str;
   f.query_plan = Member(doc, "query_plan", T::kString, path).str;
   f.plan.voxel_m = f.cfg.map_voxel_m;
-  f.plan.margin_voxels = LdCellCounts(f.cfg).CellVoxels();
+  // The margin depends on the sensor (the residues' farthest hop), which the tile jobs resolve from
+  // the central's scans: RunLdTileJobs checks it against the resolved config.
+  f.plan.margin_voxels = Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path);
   f.plan.edge_voxels = Integer(Member(doc, "edge_voxels", T::kNumber, path), "edge_voxels", path);
-  if (Integer(Member(doc, "margin_voxels", T::kNumber, path), "margin_voxels", path) != f.plan.margin_voxels ||
-      f.plan.edge_voxels <= 0 || f.plan.edge_voxels % f.plan.margin_voxels != 0)
-    throw Error(path, 0, "edge_voxels / margin_voxels differ from what config.yaml gives");
+  if (f.plan.margin_voxels <= 0 || f.plan.edge_voxels <= 0 || f.plan.edge_voxels % f.plan.margin_voxels != 0)
+    throw Error(path, 0, "edge_voxels is no positive multiple of margin_voxels");
   f.plan.largest_window = Count(Member(doc, "largest_window", T::kNumber, path), "largest_window", path);
   const std::size_t nc = Count(Member(doc, "central_keyframes", T::kNumber, path), "central_keyframes", path);
   const std::size_t nq = Count(Member(doc, "query_keyframes", T::kNumber, path), "query_keyframes", path);
@@ -210,6 +211,9 @@ std::size_t RunLdTileJobs(const std::string& plan_dir, std::vector<std::size_t> 
   // The pair's sessions and the sensor (the central's scans) once for every tile.
   const PairSessions p = LoadPair(f.central_plan, f.query_plan);
   const RemovertConfig cfg = WithSensor(f.cfg, p.central_kfs, threads);
+  if (LdCellCounts(cfg).CellVoxels() != f.plan.margin_voxels)
+    throw Error(detail::PlanFileIn(plan_dir), 0,
+                "margin_voxels differs from what config.yaml and the central's scans give: plan the LD tiles again");
   return detail::RunUndoneTiles(plan_dir, std::move(tiles), f.plan.tiles.size(), force, [&](std::size_t tile,
                                                                                           const std::string& dir) {
     const detail::VoxelBox window = detail::LdWindowBox(f.plan, tile);

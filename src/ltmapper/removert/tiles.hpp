@@ -88,7 +88,8 @@ HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const Remove
 // a cluster that fits a mover (ld.residue_length_m L across, its box's diagonal >= its xy span) and
 // touches a core lies within L of it, the larger clusters that unmark it within 2 L, their ground
 // within 3 L; a cluster cut by the window's edge reaches from there to the edge, so with
-// (2 + sqrt 2) L + 2 ld.residue_gap_m it is no mover's in the window as in truth. The margin is
+// (2 + sqrt 2) L + 2 hops (a hop: ld.residue_gap_m, far out the sensor's column gap at
+// ld.submap_radius_m, detail::ResidueGapsAt) it is no mover's in the window as in truth. The margin is
 // (a) + (b).
 double LdTileMarginM(const RemovertConfig& cfg);
 struct LdTile {
