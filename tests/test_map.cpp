@@ -524,9 +524,10 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
 }
 
 // In a keyframe the step created, an appeared cluster is judged with the surface it continues
-// into: a 3 m wall of new territory (strong PD: the reference never saw it) whose two rows 0.5 m up
+// into: a 3 m wall of new territory (strong PD: the reference never saw it) whose four rows 0.5 m up
 // the reference's rays passed over 4 m (weak PD, where the step's pose erred) is coverage, not a
-// new 4 m object; the wall all weak PD is one.
+// new 4 m object; the wall all weak PD is one. The wall counts as far as it reaches from the strip
+// in hops of the cluster tolerance (within one hop the strip would still be a majority).
 TEST(MapObjects, ARimTheReferencePassedOfASurfaceItNeverSawIsNoObject) {
   for (const bool rim : {true, false}) {
     test::TempDir tmp;
@@ -538,7 +539,7 @@ TEST(MapObjects, ARimTheReferencePassedOfASurfaceItNeverSawIsNoObject) {
     wall.cls.resize(wall.size());
     for (std::size_t i = 0; i < wall.size(); ++i) {
       const auto& p = wall.points[i];
-      const bool passed = p.z > 0.4f && p.z < 0.9f && std::abs(p.y) <= 2.f;
+      const bool passed = p.z > 0.4f && p.z < 1.4f && std::abs(p.y) <= 2.f;
       wall.cls[i] = !rim || passed ? PointClass::kPDWeak : PointClass::kPDStrong;
     }
     cloud.append(wall);

@@ -686,15 +686,27 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
 }
 
 // How many points of `unobserved` (the step's surfaces its reference never observed, beside the
-// group) lie within the cluster tolerance r of the cluster's points. In a keyframe the step created,
-// an appeared cluster is only what the reference's rays reached of a surface that goes on there:
-// a wall's rim row its rays passed where the step's pose erred (seed 3's HDL-32E, the stress row's
-// unlooped session start). In the reference's keyframes those points are the cluster's own.
+// group) the cluster reaches through them in hops of the cluster tolerance r, as Euclidean
+// clustering joins points. In a keyframe the step created, an appeared cluster is only what the
+// reference's rays reached of a surface that goes on there: a wall's rim row its rays passed where
+// the step's pose erred (seed 3's HDL-32E and tilted VLP-16, the stress row's unlooped session
+// start). In the reference's keyframes those points are the cluster's own. `unobserved` holds only
+// the cells around the group's change points (ReadStepMaps), so the reach ends there.
 std::size_t UnobservedBeside(const MapObject& o, const PointCloud& unobserved, double r) {
-  const PointCloud box = InGrownBox(o, unobserved, r);
-  if (box.empty()) return 0;
-  const std::vector<bool> near = geometry::WithinRadius(box, o.cloud, r);
-  return std::size_t(std::count(near.begin(), near.end(), true));
+  if (unobserved.empty()) return 0;
+  std::vector<bool> reached = geometry::WithinRadius(unobserved, o.cloud, r);
+  std::vector<std::uint32_t> front;
+  for (std::size_t i = 0; i < reached.size(); ++i)
+    if (reached[i]) front.push_back(std::uint32_t(i));
+  if (front.empty()) return 0;
+  const geometry::KdTree tree(unobserved);
+  while (!front.empty()) {
+    const std::uint32_t i = front.back();
+    front.pop_back();
+    for (const auto& [j, d] : tree.Radius(unobserved.points[i].xyz(), float(r)))
+      if (!reached[j]) reached[j] = true, front.push_back(j);
+  }
+  return std::size_t(std::count(reached.begin(), reached.end(), true));
 }
 
 MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
