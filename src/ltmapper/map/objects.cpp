@@ -589,11 +589,20 @@ double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& se
 // (NearbyAboveGround at the cluster tolerance), for each cluster's attached share and
 // box share; the group's change points seen changed (SeenChanged), for the box share
 // (BoxSeenFraction).
+// The step's surfaces its reference never observed near a group's change points, with their tree
+// (built once per group: UnobservedBeside walks it for every cluster).
+struct UnobservedSurface {
+  PointCloud cloud;
+  std::shared_ptr<const geometry::KdTree> tree;
+  explicit UnobservedSurface(PointCloud c = {})
+      : cloud(std::move(c)), tree(cloud.empty() ? nullptr : std::make_shared<const geometry::KdTree>(cloud)) {}
+};
+
 struct Masks {
   std::vector<bool> twin;
   PointCloud unchanged;
   PointCloud seen;
-  PointCloud unobserved;  // appeared: the step's surfaces its reference never observed near the group
+  UnobservedSurface unobserved;  // appeared: the step's surfaces its reference never observed near the group
 };
 
 // The group's change points (`idx`, above ground) the other session saw changed: strong ND for
@@ -686,27 +695,27 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
 }
 
 // How many points of `unobserved` (the step's surfaces its reference never observed, beside the
-// group) the cluster reaches through them in hops of the cluster tolerance r, as Euclidean
+// group) the cluster's points reach through them in hops of the cluster tolerance r, as Euclidean
 // clustering joins points. In a keyframe the step created, an appeared cluster is only what the
 // reference's rays reached of a surface that goes on there: a wall's rim row its rays passed where
 // the step's pose erred (seed 3's HDL-32E and tilted VLP-16, the stress row's unlooped session
 // start). In the reference's keyframes those points are the cluster's own. `unobserved` holds only
 // the cells around the group's change points (ReadStepMaps), so the reach ends there.
-std::size_t UnobservedBeside(const MapObject& o, const PointCloud& unobserved, double r) {
-  if (unobserved.empty()) return 0;
-  std::vector<bool> reached = geometry::WithinRadius(unobserved, o.cloud, r);
+std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface& unobserved, double r) {
+  if (!unobserved.tree) return 0;
+  std::unordered_set<std::uint32_t> reached;
   std::vector<std::uint32_t> front;
-  for (std::size_t i = 0; i < reached.size(); ++i)
-    if (reached[i]) front.push_back(std::uint32_t(i));
-  if (front.empty()) return 0;
-  const geometry::KdTree tree(unobserved);
+  const auto reach_from = [&](const Eigen::Vector3f& p) {
+    for (const auto& [j, d] : unobserved.tree->Radius(p, float(r)))
+      if (reached.insert(j).second) front.push_back(j);
+  };
+  for (const auto& p : cluster.points) reach_from(p.xyz());
   while (!front.empty()) {
     const std::uint32_t i = front.back();
     front.pop_back();
-    for (const auto& [j, d] : tree.Radius(unobserved.points[i].xyz(), float(r)))
-      if (!reached[j]) reached[j] = true, front.push_back(j);
+    reach_from(unobserved.cloud.points[i].xyz());
   }
-  return std::size_t(std::count(reached.begin(), reached.end(), true));
+  return reached.size();
 }
 
 MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t>& sel, bool appeared,
@@ -719,9 +728,8 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   o.change = appeared ? "appeared" : "disappeared";
   o.exists_in = appeared ? step.order : step.reference;
   o.cloud = changes.select(sel);
+  o.unobserved_beside = UnobservedBeside(o.cloud, masks.unobserved, cfg.object_tolerance_m);
   Describe(o);
-  o.unobserved_beside = UnobservedBeside(o, masks.unobserved, cfg.object_tolerance_m);
-  if (o.unobserved_beside > 0) Describe(o);
   OrientedBox(o);
   const OwnLowerPart lower(o, cfg.object_tolerance_m);
   const PointCloud unchanged = InGrownBox(o, masks.unchanged, cfg.object_tolerance_m);
@@ -1049,8 +1057,9 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     const Masks masks{NearMask(changes, idx, OtherSide(changes, appeared), floor, cfg, cfg.object_twin_radius_m),
                       NearbyAboveGround(changes, idx, unchanged, floor, cfg, cfg.object_tolerance_m),
                       SeenChanged(changes, idx),
-                      appeared ? NearbyAboveGround(changes, idx, maps.unobserved_near, floor, cfg, cfg.object_tolerance_m)
-                               : PointCloud()};
+                      UnobservedSurface(appeared ? NearbyAboveGround(changes, idx, maps.unobserved_near, floor, cfg,
+                                                                     cfg.object_tolerance_m)
+                                                 : PointCloud())};
     std::vector<MapObject> group;
     for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));

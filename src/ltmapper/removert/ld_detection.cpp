@@ -265,12 +265,7 @@ std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<
                                          const RemovertConfig& cfg) {
   std::vector<Eigen::Vector2f> gaps(c.size(), Eigen::Vector2f::Constant(float(cfg.ld_residue_gap_m)));
   if (own_voters.empty()) return gaps;
-  PointCloud sensors;
-  for (const auto& kf : own_voters) {
-    const Eigen::Vector3d t = kf.T_world_sensor.translation();
-    sensors.push_back(float(t.x()), float(t.y()), float(t.z()));
-  }
-  const geometry::KdTree tree(std::move(sensors));
+  const geometry::KdTree tree(detail::Positions(own_voters));
   for (std::size_t i = 0; i < c.size(); ++i) {
     std::uint32_t k = 0;
     float sq = 0.f;

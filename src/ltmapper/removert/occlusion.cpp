@@ -95,7 +95,6 @@ namespace {
 // that left in front of a wall is not: its own session did not see the wall behind it. Upright
 // points only: under a level one (a car's hood or roof) the ground both maps hold is what the
 // thing stood on (Missing's kRawAboveTheirGround), not a copy of it.
-
 std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::Vector3f>& normals,
                              const std::vector<bool>& want, const PointCloud& own, const PointCloud& other,
                              const RemovertConfig& cfg, int threads) {
