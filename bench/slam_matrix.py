@@ -29,9 +29,26 @@ CONFIGS = {  # name: (sessions, keyframes, strong drift)
 STRONG_DRIFT = {"scale": "0.02", "translation": "0.03", "yaw_deg": "0.15"}
 
 
+def scenario_lidar(name):
+    """The lidar keys of config/scenarios/NAME.yaml (a sensor no preset names, e.g. the rosette), or None."""
+    path = os.path.join(ROOT, "config", "scenarios", name + ".yaml")
+    if not os.path.exists(path):
+        return None
+    keys, inside = {}, False
+    for line in open(path):
+        if not line.startswith(" "):
+            inside = line.startswith("lidar:")
+        elif inside and ":" in line:
+            k, v = line.split("#")[0].split(":", 1)
+            keys["  " + k.strip()] = v.strip()
+    return keys
+
+
 def sim_yaml(sessions, keyframes, drift, preset, seed):
     text = open(os.path.join(ROOT, "config", "params_sim.yaml")).read()
-    subs = {"seed": str(seed), "  sessions": str(sessions), "  keyframes": str(keyframes), "  preset": preset}
+    lidar = scenario_lidar(preset)
+    subs = {"seed": str(seed), "  sessions": str(sessions), "  keyframes": str(keyframes)}
+    subs.update(lidar if lidar is not None else {"  preset": preset})
     if drift:
         subs.update({"  " + k: v for k, v in STRONG_DRIFT.items()})
     for key, val in subs.items():
@@ -115,7 +132,8 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "slam_matrix"))
     ap.add_argument("--seeds", default="1-20")
     ap.add_argument("--configs", default=",".join(CONFIGS))
-    ap.add_argument("--sensors", default="uniform,hdl32e,os1-128", help="lidar.preset values (uniform = the default 64)")
+    ap.add_argument("--sensors", default="uniform,hdl32e,os1-128", help="lidar.preset values (uniform = the default 64), or the name of a "
+                    "config/scenarios/ file whose lidar keys to use (rosette)")
     ap.add_argument("--near-m", type=float, default=5.0)
     ap.add_argument("--min-near", type=int, default=20)
     ap.add_argument("--keep", action="store_true", help="keep the simulated scans")

@@ -1108,6 +1108,36 @@ TEST(MapObjects, ASmallPieceOneMissedLineFromAnObjectIsPartOfIt) {
   }
 }
 
+// A container that left, seen 60 m out over a low wall (its rows 1.3 .. 2.5 m above the ground,
+// the rows below met the wall): its lowest point is 1.3 m up, more than object_max_clearance_m.
+// With 0.625 deg rows (0.65 m apart there) the row under its lowest one may have passed beneath it,
+// so it stands on the ground: an object (seed 7's container on HDL-32E was "floating"). With 0.1
+// deg rows (0.1 m apart) a row would have met its lower part: it floats.
+TEST(MapObjects, AThingsLowestRowMayLieARowAboveTheGroundItStandsOn) {
+  for (const double step_deg : {0.625, 0.1}) {
+    test::TempDir tmp;
+    MapConfig cfg = Cfg();
+    cfg.object_sensor_step_deg = step_deg;
+    const PointCloud upper = FarColumns({1.3f, 1.7f, 2.1f, 2.5f}, -3.f, 31);
+    Store s = FarScene(tmp, cfg, upper);
+    KeyframeDelta d;
+    d.nd_strong = upper;
+    s.IntegrateSession({"s1"}, "s0", {d}, {});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    if (step_deg > 0.5) {
+      for (const auto& r : rejected) ADD_FAILURE() << "rejected " << r.rejected << " at " << r.centroid.transpose();
+      ASSERT_EQ(objs.size(), 1u);
+      EXPECT_EQ(objs[0].change, "disappeared");
+      EXPECT_NEAR(objs[0].clearance_m, 1.3, 1e-3);
+    } else {
+      EXPECT_TRUE(objs.empty());
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "floating");
+    }
+  }
+}
+
 // A car that left, 60 m from the reference's keyframe (4 rows, a column every 0.2 m, a gap of
 // 0.6 m where a pole hid one column), with the step's route passing 5 m from it (a keyframe the
 // step created there, in new territory). Its points were scanned from 60 m, where columns 0.35

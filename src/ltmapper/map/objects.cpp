@@ -473,6 +473,22 @@ Eigen::Vector2d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
   return kEnds * SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
 }
 
+// The spacing of the sensor's rows on a surface at `range_m` facing it: r * object_sensor_step_deg.
+double RowSpacing(double range_m, const MapConfig& cfg) { return range_m * cfg.object_sensor_step_deg * kDegToRad; }
+
+// The highest a cluster's lowest point may lie above the ground of its cell while it stands on it:
+// object_max_clearance_m (the lower part LD matched to the other session's ground), plus one row
+// of the sensor at the cluster's range (RowSpacing): the row below its lowest one passed under the
+// thing, or over a low wall in front of it, and met the ground (seed 7's container seen over a
+// wall from 36 m by an HDL-32E, rows 0.84 m apart there: its lowest point 1.14 m up, "floating").
+double MaxClearance(const MapObject& o, const MapConfig& cfg) {
+  return cfg.object_max_clearance_m + RowSpacing(o.range_m, cfg);
+}
+// Whether a cluster floats: its lowest point above MaxClearance (the rule off at object_max_clearance_m 0).
+bool Floats(const MapObject& o, const MapConfig& cfg) {
+  return cfg.object_max_clearance_m > 0.0 && o.clearance_m > MaxClearance(o, cfg);
+}
+
 // Whether views a and b can be of one object: neither box's length nor height exceeds the other's
 // by more than the other may have fallen short (ViewShortfall); a far view may be much smaller than
 // a near one, not larger. Their widths say nothing: a view sees an object's depth only as far as
@@ -546,8 +562,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // apart span (n - 1) s. The bound lies halfway between n - 1 and n rows, (n - 1.5) s, so noise does
 // not decide an n-row cluster (a car seen in two rows of a VLP-16 is kept, a one-row rim is not).
 double MinWidth(double range_m, const MapConfig& cfg) {
-  const double sample = std::max(cfg.output_voxel_m, range_m * cfg.object_sensor_step_deg * kDegToRad);
-  return sample * std::max(0.0, cfg.object_min_samples - 1.5);
+  return std::max(cfg.output_voxel_m, RowSpacing(range_m, cfg)) * std::max(0.0, cfg.object_min_samples - 1.5);
 }
 
 // Reject's reason for a cluster shorter than object_min_length_m (MergeParts asks for it too).
@@ -559,7 +574,7 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
   if (o.attached_fraction >= cfg.object_max_attached_fraction) return "fragment";
   if (o.box_seen_fraction < cfg.object_min_observed_fraction) return "stayed";
   if (o.height_above_ground < cfg.object_min_height_m) return "low";
-  if (cfg.object_max_clearance_m > 0.0 && o.clearance_m > cfg.object_max_clearance_m) return "floating";
+  if (Floats(o, cfg)) return "floating";
   if (width_m < MinWidth(o.range_m, cfg)) return "sliver";
   if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
     return "flat";
@@ -758,13 +773,13 @@ std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
   for (std::size_t i = 0; i < group.size(); ++i) {
     const MapObject& o = group[i];
     held[i] = o.clearance_m;
-    if (o.clearance_m <= gap) continue;
+    if (!Floats(o, cfg)) continue;
     for (std::size_t j = 0; j < group.size(); ++j) {
       const MapObject& b = group[j];
       const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
                          (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
       const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - gap;
-      if (j != i && under && just_below && b.clearance_m <= gap && b.clearance_m < held[i]) {
+      if (j != i && under && just_below && !Floats(b, cfg) && b.clearance_m < held[i]) {
         held[i] = b.clearance_m;
         holder[i] = int(j);
       }
@@ -857,7 +872,7 @@ void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& change
   if (cfg.object_max_clearance_m <= 0.0) return;
   const std::vector<std::uint32_t> by_z = ByZ(changes, idx);
   for (MapObject& o : group)
-    if (o.clearance_m > cfg.object_max_clearance_m) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
+    if (Floats(o, cfg)) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
 }
 
 // A disappeared cluster's parts that the query did not see through: weak ND of the step (stored
