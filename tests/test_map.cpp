@@ -1160,6 +1160,37 @@ TEST(MapObjects, ADisappearedThingIsSampledFromTheSessionsThatScannedIt) {
   EXPECT_NEAR(objs[0].range_m, 60.0, 3.0);
 }
 
+// A car that came, 60 m out (4 rows, a column every 0.2 m, a 0.6 m gap where a pole hid one
+// column), seen by step 2 from its own route near the central's keyframe. An earlier step's route
+// passed 5 m from it and made a map keyframe there (new territory). Step 2's points were scanned
+// from 60 m, along its trajectory: one object. Measured from the map keyframes as of the step (what
+// a store without the step's trajectory has), the gap split it in two (seed 7's car 4: two "small"
+// pieces of 56 points on deskewed64).
+TEST(MapObjects, AnAppearedThingIsSampledFromTheStepsOwnTrajectory) {
+  for (const bool trajectory : {true, false}) {
+    test::TempDir tmp;
+    Store s = FarScene(tmp, Cfg());
+    s.IntegrateSession({"s1", Pose::Identity(), "", {At(0, 0), At(64, 5)}}, "s0", {},
+                       {{7, At(64, 5), Grid(-2, -2, 0, 16, 16, 0.25f)}});
+    KeyframeDelta d;
+    d.pd_weak = Cat(FarColumns({0.3f, 0.7f, 1.1f, 1.5f}, -3.f, 13), FarColumns({0.3f, 0.7f, 1.1f, 1.5f}, 0.f, 13));
+    s.IntegrateSession({"s2", Pose::Identity(), "", trajectory ? std::vector<Pose>{At(-1, 0), At(0, 0)} : std::vector<Pose>{}},
+                       "s0", {d}, {});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    if (trajectory) {
+      for (const auto& o : rejected) ADD_FAILURE() << "rejected " << o.rejected << " at " << o.centroid.transpose();
+      ASSERT_EQ(objs.size(), 1u);
+      EXPECT_EQ(objs[0].change, "appeared");
+      EXPECT_EQ(objs[0].points, d.pd_weak.size());
+      EXPECT_NEAR(objs[0].range_m, 60.0, 1.0);
+    } else {
+      ASSERT_EQ(objs.size(), 2u);  // measured from the keyframe 5 m away
+      for (const auto& o : objs) EXPECT_EQ(o.points, d.pd_weak.size() / 2);
+    }
+  }
+}
+
 // A container that left (strong ND), seen whole on its near long side (6 m long, 2.5 m high) and,
 // through other gaps, on 2.5 m of its far side, 2.44 m behind it (seed 7's container on Pandar64
 // and VLP-32C): the far side is a face parallel to the near one, within its length and
@@ -1583,11 +1614,53 @@ TEST(MapStore, SchemaVersion1StoreStillOpensAndIsMarkedCurrentByAWrite) {
   sqlite3_stmt* st = nullptr;
   ASSERT_EQ(sqlite3_prepare_v2(db, "SELECT value FROM schema_info WHERE key = 'schema_version'", -1, &st, nullptr), SQLITE_OK);
   ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
-  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "3");
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "4");
   sqlite3_finalize(st);
   sqlite3_close(db);
-  ExecSql(path, "UPDATE schema_info SET value = '4' WHERE key = 'schema_version'");
-  test::ExpectError([&] { Store::Open(path); }, {path, "schema version 4"});
+  ExecSql(path, "UPDATE schema_info SET value = '5' WHERE key = 'schema_version'");
+  test::ExpectError([&] { Store::Open(path); }, {path, "schema version 5"});
+}
+
+// Each session's trajectory (every keyframe's world pose) is kept with it and read back in scan
+// order; it is part of the digest. A store written before schema 4 has none: it opens, passes
+// fsck, reads empty trajectories, and gets the table with its next write.
+TEST(MapStore, ASessionsTrajectoryIsKeptAndAnOlderStoreGetsItsTableWithAWrite) {
+  test::TempDir tmp;
+  Scene sc;
+  const std::vector<Pose> t0 = {At(0, 0), At(1, 0, 0.1), At(2, 0.5)}, t1 = {At(5, 5), At(6, 5)};
+  std::uint64_t without = 0;
+  {
+    Store s = Store::Create(tmp / "plain.ltmap", Cfg());
+    s.IntegrateBase({"s0"}, sc.base);
+    without = s.Digest();
+  }
+  const std::string path = tmp / "m.ltmap";
+  {
+    Store s = Store::Create(path, Cfg());
+    s.IntegrateBase({"s0", Pose::Identity(), "", t0}, sc.base);
+    EXPECT_NE(s.Digest(), without);
+    s.IntegrateSession({"s1", Pose::Identity(), "", t1}, "s0", Step1(), {});
+  }
+  {
+    const Store s = Store::Open(path);
+    for (const auto& [order, want] : {std::make_pair(0, t0), std::make_pair(1, t1)}) {
+      const auto got = s.Trajectory(order);
+      ASSERT_EQ(got.size(), want.size()) << "session " << order;
+      for (std::size_t k = 0; k < got.size(); ++k)
+        EXPECT_TRUE(got[k].matrix().isApprox(want[k].matrix(), 1e-9)) << "session " << order << " keyframe " << k;
+    }
+    EXPECT_TRUE(s.Trajectory(2).empty());
+  }
+  ExecSql(path, "DROP TABLE trajectories");
+  ExecSql(path, "UPDATE schema_info SET value = '3' WHERE key = 'schema_version'");
+  {
+    Store s = Store::Open(path, Cfg());
+    EXPECT_TRUE(s.Fsck().ok);
+    EXPECT_TRUE(s.Trajectory(0).empty());
+    s.IntegrateSession({"s2", Pose::Identity(), "", t1}, "s0", Step1(), {});
+    EXPECT_EQ(s.Trajectory(2).size(), t1.size());
+    EXPECT_TRUE(s.Fsck().ok);
+  }
 }
 
 // A committed integration is in the store file itself, not only in its -wal: the file copied

@@ -130,6 +130,12 @@ Pose ReadAnchor(const PipelineDirs& dirs, const std::string& name) {
   return fs::exists(p) ? io::ReadTransform(p) : Pose::Identity();
 }
 
+// What the store records of an aligned session: its name, anchor, the config text and its
+// trajectory (LT-SLAM's world poses of every keyframe).
+SessionMeta AlignedSessionMeta(const PipelineDirs& dirs, const std::string& name, const std::string& params) {
+  return {name, ReadAnchor(dirs, name), params, io::ReadKittiPoses(io::layout::PosesWorldFile(dirs.aligned, name))};
+}
+
 // The input folder of a session: from the run manifest, else <dirs.sessions>/<name>, else "".
 std::string SessionInputDir(const PipelineDirs& dirs, const std::string& name) {
   if (io::HasRunManifest(dirs.aligned))
@@ -238,7 +244,7 @@ IntegrationResult InitFromDirs(const std::string& store_path, const MapConfig& c
   try {
     Store store = Store::Create(tmp, cfg, Store::Creation::kUnpublished);
     store.set_threads(threads);
-    r = store.IntegrateBaseFrom({cname, ReadAnchor(dirs, cname), ConfigToString(cfg)}, src);
+    r = store.IntegrateBaseFrom(AlignedSessionMeta(dirs, cname, ConfigToString(cfg)), src);
     store.Close();
   } catch (...) {
     RemoveStoreFiles(tmp);
@@ -294,7 +300,7 @@ IntegrationResult IntegrateFromDirs(Store& store, const PipelineDirs& dirs, cons
   };
   spdlog::info("map integrate: {} from {} ({} reference keyframes, {} new-territory keyframes)", query, pair,
                kidx.size(), nidx.size());
-  return store.IntegrateSessionFrom({query, ReadAnchor(dirs, query), ConfigToString(store.config())},
+  return store.IntegrateSessionFrom(AlignedSessionMeta(dirs, query, ConfigToString(store.config())),
                                     names[std::size_t(ci)], deltas, fresh);
 }
 

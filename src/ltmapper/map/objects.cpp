@@ -249,9 +249,9 @@ std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared,
   return idx;
 }
 
-// The map keyframes' sensor positions: the nearest to a point (Covered's view of it), and its
-// distance, a lower bound of the range the point was scanned from (the sampling of a cluster's
-// surface: SampleGaps, MinWidth through MapObject::range_m).
+// Sensor positions (ContextOf: where the sessions that scanned a change were): the nearest to a
+// point (Covered's view of it), and its distance, a lower bound of the range the point was scanned
+// from (the sampling of a cluster's surface: SampleGaps, MinWidth through MapObject::range_m).
 class SensorRanges {
  public:
   SensorRanges() = default;
@@ -1235,18 +1235,33 @@ void RequireSensorStep(const MapConfig& cfg) {
                 "objects --session DIR` derive it from the scans; elsewhere set it (the sensor's coarser angular step)");
 }
 
-// The map keyframes' sensor positions as of the step (a later step's keyframes were not there
-// yet): a step's objects depend on the store up to that step only, so they can be kept.
-StepContext ContextOf(const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
-  StepContext ctx;
-  std::vector<Eigen::Vector3d> all, reference;
-  for (const auto& k : keyframes) {
-    if (k.session > step.order) continue;
-    all.push_back(k.T_world_sensor.translation());
-    if (k.session <= step.reference) reference.push_back(k.T_world_sensor.translation());
+// Where the sessions `from` .. `to` scanned from: each one's trajectory (Store::Trajectory), or,
+// for one the store has none of, the map keyframes it created.
+std::vector<Eigen::Vector3d> ScannedFrom(const Store& store, const std::vector<KeyframeRecord>& keyframes, int from,
+                                         int to) {
+  std::vector<Eigen::Vector3d> at;
+  for (int s = from; s <= to; ++s) {
+    const std::vector<Pose> trajectory = store.Trajectory(s);
+    for (const Pose& T : trajectory) at.push_back(T.translation());
+    if (trajectory.empty())
+      for (const auto& k : keyframes)
+        if (k.session == s) at.push_back(k.T_world_sensor.translation());
   }
-  ctx.ranges = SensorRanges(std::move(all));
-  ctx.reference_ranges = SensorRanges(std::move(reference));
+  return at;
+}
+
+// Where the step's changes were scanned from (a later step's keyframes were not there yet: a
+// step's objects depend on the store up to that step only, so they can be kept). Appeared (PD):
+// by the step's session, along its trajectory (a car it saw 70 m out lies 20 m from a keyframe
+// its route created farther on: seed 7's car 4 fell into two "small" pieces); without one, every
+// map keyframe as of the step. Disappeared (strong ND): by the sessions up to the reference.
+StepContext ContextOf(const Store& store, const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
+  StepContext ctx;
+  std::vector<Eigen::Vector3d> appeared;
+  for (const Pose& T : store.Trajectory(step.order)) appeared.push_back(T.translation());
+  if (appeared.empty()) appeared = ScannedFrom(store, keyframes, 0, step.order);
+  ctx.ranges = SensorRanges(std::move(appeared));
+  ctx.reference_ranges = SensorRanges(ScannedFrom(store, keyframes, 0, step.reference));
   return ctx;
 }
 
@@ -1255,7 +1270,7 @@ struct StepResult {
 };
 StepResult ComputeStep(const Store& store, const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
   StepResult r;
-  StepObjects(store, step, ContextOf(step, keyframes), r.kept, r.rejected);
+  StepObjects(store, step, ContextOf(store, step, keyframes), r.kept, r.rejected);
   for (auto& o : r.rejected) o.cloud.clear();  // rows only (rejected.csv)
   return r;
 }

@@ -48,11 +48,16 @@ KeyframeSource InMemory(const std::vector<KeyframeInput>& keyframes);
 DeltaSource InMemory(const std::vector<KeyframeDelta>& deltas);
 
 struct SessionMeta {
-  SessionMeta(std::string name_ = {}, const Pose& anchor_ = Pose::Identity(), std::string params_ = {})
-      : name(std::move(name_)), anchor(anchor_), params(std::move(params_)) {}
+  SessionMeta(std::string name_ = {}, const Pose& anchor_ = Pose::Identity(), std::string params_ = {},
+              std::vector<Pose> trajectory_ = {})
+      : name(std::move(name_)), anchor(anchor_), params(std::move(params_)), trajectory(std::move(trajectory_)) {}
   std::string name;
   Pose anchor = Pose::Identity();  // the session's anchor A (paper eq. 3)
   std::string params;              // free text recorded with the session (resolved config)
+  // Where the session's sensor was: its keyframes' world poses in scan order (LT-SLAM's
+  // poses_world.txt), every keyframe, also those that made no map keyframe. Empty: not known (the
+  // object rules then take the map keyframes as of the step: Store::Trajectory).
+  std::vector<Pose> trajectory;
 };
 
 // ----------------------------------------------------------------------------------- records
@@ -126,7 +131,7 @@ struct MapObject {
   double yaw_rad = 0.0;
   double ground_z = 0.0, height_above_ground = 0.0;  // local ground under it, top above it [m]
   double clearance_m = 0.0;           // lowest point above the ground of its cell [m]
-  double range_m = 0.0;               // distance to the nearest map keyframe (sensor position)
+  double range_m = 0.0;               // distance to where it was scanned from (ContextOf: trajectories)
   double observed_fraction = 0.0;     // share of see-through evidence (strong ND / weak PD), of its
                                       // points and of the unobserved surface beside them
   // Appeared: points of the step's own surface its reference never observed within the cluster

@@ -35,8 +35,10 @@ namespace {
 // truncated one. Version 1 stores still open (their blobs keep version 1 and verify with the old
 // basis); the first integration into one marks it version 2, since it adds version 2 blobs.
 // Version 3 adds step_records (derived per-step records: the object cache); older stores read
-// without it (objects are computed) and get the table with their first write.
-constexpr int kSchemaVersion = 3;
+// without it (objects are computed) and get the table with their first write. Version 4 adds
+// trajectories (each session's keyframe poses); older stores read without them and get the table
+// with their first write.
+constexpr int kSchemaVersion = 4;
 constexpr int kOldestSchemaVersion = 1;
 constexpr int kApplicationId = 0x4C544D50;  // "LTMP"
 
@@ -76,6 +78,16 @@ CREATE TABLE deltas(
   data     BLOB NOT NULL,
   PRIMARY KEY(keyframe, session));
 CREATE INDEX deltas_by_session ON deltas(session);
+)sql";
+// Where each session's sensor was (SessionMeta::trajectory): every keyframe, not only those that
+// made map keyframes. Made by every write (Transaction), so a store has it from its first
+// session on, and an older store with its first write.
+const char* kTrajectoriesTable = R"sql(
+CREATE TABLE IF NOT EXISTS trajectories(
+  session INTEGER NOT NULL REFERENCES sessions(id),
+  idx     INTEGER NOT NULL,                      -- position in the session's scan order
+  pose    TEXT NOT NULL,                         -- T_world_sensor 3x4 row-major
+  PRIMARY KEY(session, idx));
 )sql";
 // Derived from the rows above and rebuilt from them whenever missing or made with another key
 // (never part of Digest()).
@@ -310,6 +322,7 @@ struct Store::Impl {
                   "-wal into the store file (" + (rc == SQLITE_OK ? "incomplete" : sqlite3_errmsg(db)) +
                   "); keep the -wal file next to the store and run the command again");
   }
+  bool HasTable(const std::string& name) const;
   bool HasStepRecords() const;  // false for stores of schema 1-2 never written since
   std::string Info(const std::string& key) const {
     Stmt st(db, "SELECT value FROM schema_info WHERE key = ?", path);
@@ -535,6 +548,7 @@ class Transaction {
     const std::string current = "'" + std::to_string(kSchemaVersion) + "'";
     s_.Exec("UPDATE schema_info SET value = " + current + " WHERE key = 'schema_version' AND value <> " + current);
     s_.Exec(kStepRecordsTable);
+    s_.Exec(kTrajectoriesTable);
   }
   // COMMIT, then the checkpoint that puts the committed data into the store file itself.
   void Commit() {
@@ -559,6 +573,9 @@ void InsertSession(Store::Impl& s, int order, const SessionMeta& meta, int refer
   else
     st.Bind(3, reference);
   st.Bind(4, PoseToText(meta.anchor)).Bind(5, meta.params).Bind(6, UtcNow()).Run();
+  Stmt it(s.db, "INSERT INTO trajectories(session, idx, pose) VALUES(?,?,?)", s.path);
+  for (std::size_t k = 0; k < meta.trajectory.size(); ++k)
+    it.Bind(1, order).Bind(2, (long long)k).Bind(3, PoseToText(meta.trajectory[k])).Run();
 }
 
 void FinishSession(Store::Impl& s, IntegrationResult& r) {
@@ -1309,9 +1326,22 @@ void CheckBases(const Store::Impl& s, const std::map<int, KeyframeRecord>& kfs, 
 }
 }  // namespace
 
-bool Store::Impl::HasStepRecords() const {
-  Stmt st(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'step_records'", path);
+bool Store::Impl::HasTable(const std::string& name) const {
+  Stmt st(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", path);
+  st.Bind(1, name);
   return st.Step();
+}
+
+bool Store::Impl::HasStepRecords() const { return HasTable("step_records"); }
+
+std::vector<Pose> Store::Trajectory(int order) const {
+  const Impl& s = *impl_;
+  std::vector<Pose> out;
+  if (!s.HasTable("trajectories")) return out;
+  Stmt st(s.db, "SELECT pose FROM trajectories WHERE session = ? ORDER BY idx", s.path);
+  st.Bind(1, order);
+  while (st.Step()) out.push_back(PoseFromText(st.Text(0), s.path + ": trajectory of session " + std::to_string(order)));
+  return out;
 }
 
 std::string Store::StepRecord(int session, const std::string& key) const {
@@ -1395,7 +1425,9 @@ std::uint64_t Store::Digest() const {
       "SELECT id, session, source_index, pose FROM keyframes ORDER BY id",
       "SELECT keyframe, as_of, points, data FROM base_clouds ORDER BY keyframe",
       "SELECT keyframe, session, added, removed, info, data FROM deltas ORDER BY keyframe, session"};
-  for (const char* q : queries) {
+  std::vector<std::string> all(std::begin(queries), std::end(queries));
+  if (s.HasTable("trajectories")) all.push_back("SELECT session, idx, pose FROM trajectories ORDER BY session, idx");
+  for (const std::string& q : all) {
     Stmt st(s.db, q, s.path);
     while (st.Step()) {
       for (int c = 0; c < st.Columns(); ++c) add(st.Blob(c));

@@ -63,6 +63,9 @@ class Store {
   std::function<void(std::size_t keyframes_written)> on_keyframe_written;
 
   std::vector<SessionRecord> Sessions() const;
+  // Session `order`'s trajectory (SessionMeta::trajectory), empty when the store has none for it
+  // (written before schema 4, or given none).
+  std::vector<Pose> Trajectory(int order) const;
   std::vector<KeyframeRecord> Keyframes() const;
   int SessionOrder(const std::string& name) const;  // throws when unknown
   int LatestSession() const;                        // -1 when empty
@@ -114,7 +117,7 @@ class Store {
   // Schema version, PRAGMA integrity_check, foreign keys, every blob's checksum and decoding,
   // references between rows, and that every stored base equals its deltas' composition counts.
   FsckReport Fsck() const;
-  // Hash of all logical content (sessions, keyframes, blobs); equal stores give equal digests.
+  // Hash of all logical content (sessions, trajectories, keyframes, blobs); equal stores give equal digests.
   std::uint64_t Digest() const;
 
   struct Impl;  // opaque (SQLite handle); public only so store.cpp helpers can name it
