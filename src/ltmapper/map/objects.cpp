@@ -1253,8 +1253,9 @@ std::vector<Eigen::Vector3d> ScannedFrom(const Store& store, const std::vector<K
 // Where the step's changes were scanned from (a later step's keyframes were not there yet: a
 // step's objects depend on the store up to that step only, so they can be kept). Appeared (PD):
 // by the step's session, along its trajectory (a car it saw 70 m out lies 20 m from a keyframe
-// its route created farther on: seed 7's car 4 fell into two "small" pieces); without one, every
-// map keyframe as of the step. Disappeared (strong ND): by the sessions up to the reference.
+// its route created farther on: seed 7's car 4 fell into two "small" pieces); without one (a store
+// written before schema 4), wherever the sessions up to the step scanned from (ScannedFrom: their
+// map keyframes). Disappeared (strong ND): by the sessions up to the reference.
 StepContext ContextOf(const Store& store, const SessionRecord& step, const std::vector<KeyframeRecord>& keyframes) {
   StepContext ctx;
   std::vector<Eigen::Vector3d> appeared;
