@@ -758,17 +758,16 @@ MapObject BuildObject(const PointCloud& changes, const std::vector<std::uint32_t
   return o;
 }
 
-// A cluster that floats (clearance above object_max_clearance_m) still stands on the ground when
-// another cluster of the same change holds it up: under its xy box (both grown by the cluster
-// tolerance), topping out between object_max_clearance_m below its bottom and the tolerance above
-// it, and itself standing on the ground. A cut tree's canopy and its trunk are two clusters where
+// A cluster that floats (Floats) still stands on the ground when another cluster of the same
+// change holds it up: under its xy box (both grown by the cluster tolerance), topping out between
+// MaxClearance below its bottom (the rows between them not scanned) and the tolerance above it,
+// and itself standing on the ground. A cut tree's canopy and its trunk are two clusters where
 // the trunk's top was not scanned; the canopy then takes the trunk's clearance (one level: a
 // cluster held up by a floating one still floats). Returns per cluster the index of the one that
 // holds it up (the lowest), or -1: the two are parts of one object (JoinHeldParts).
 std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
-  const double gap = cfg.object_max_clearance_m, tol = cfg.object_tolerance_m;
+  const double tol = cfg.object_tolerance_m;
   std::vector<int> holder(group.size(), -1);
-  if (gap <= 0.0) return holder;
   std::vector<double> held(group.size());
   for (std::size_t i = 0; i < group.size(); ++i) {
     const MapObject& o = group[i];
@@ -778,7 +777,7 @@ std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
       const MapObject& b = group[j];
       const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
                          (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
-      const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - gap;
+      const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - MaxClearance(o, cfg);
       if (j != i && under && just_below && !Floats(b, cfg) && b.clearance_m < held[i]) {
         held[i] = b.clearance_m;
         holder[i] = int(j);
