@@ -92,6 +92,28 @@ TEST(SlamRegistration, ViewShareIsWhereTheTargetLooked) {
   EXPECT_DOUBLE_EQ(ViewShare(cone, beyond, Pose::Identity(), 0.5), 0.0);
 }
 
+// A forward cone of +-30 deg leaves 300 deg round it without a return (to its 5 deg bins), a ring
+// none, half a ring 180 (not yet "one way": LT-SLAM registers by place clouds beyond half a turn),
+// nothing the whole turn; a real ring sensor's scan (KITTI) none.
+TEST(SlamRegistration, WidestBlindArcIsTheTurnWithoutAReturn) {
+  const auto ring = [](double from_deg, double to_deg) {
+    PointCloud c;
+    for (double az = from_deg; az < to_deg; az += 1.0)
+      c.push_back(float(10.0 * std::cos(az * kDeg)), float(10.0 * std::sin(az * kDeg)), -1.5f);
+    return c;
+  };
+  EXPECT_NEAR(WidestBlindArcDeg(ring(-30.0, 30.0)), 300.0, 5.0);
+  EXPECT_NEAR(WidestBlindArcDeg(ring(150.0, 210.0)), 300.0, 5.0);  // a cone facing back: the run through 0 deg
+  EXPECT_DOUBLE_EQ(WidestBlindArcDeg(ring(-180.0, 180.0)), 0.0);
+  EXPECT_NEAR(WidestBlindArcDeg(ring(0.0, 180.0)), 180.0, 5.0);
+  EXPECT_DOUBLE_EQ(WidestBlindArcDeg(PointCloud()), 360.0);
+}
+
+TEST(SlamRegistrationReal, AKittiScanLeavesNoTurnWithoutAReturn) {
+  LTM_REQUIRE_REAL_DATA(data);
+  EXPECT_DOUBLE_EQ(WidestBlindArcDeg(io::ReadKittiBin(data + "/kitti00_head/velodyne/000000.bin")), 0.0);
+}
+
 TEST(SlamRegistration, LoopInformationFollowsWhatTheSurfacesConstrain) {
   SlamConfig cfg;
   const PointCloud a = geometry::VoxelDownsample(Corridor(1), cfg.reg_voxel_m);

@@ -67,6 +67,9 @@ double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pos
 // far, less slack_m. Whether the two scans could overlap at that pose, whatever they hold.
 double ViewShare(const PointCloud& target, const PointCloud& source, const Pose& T_target_source, double slack_m);
 
+// The widest turn about the sensor's z axis [deg] in which `scan` holds no return (ViewShare's
+// bins): 0-5 for a ring sensor, 290 for a 70 deg forward cone.
+double WidestBlindArcDeg(const PointCloud& scan);
 // The points of `cloud` (a downsampled scan in its sensor frame, `up` the vertical in that frame)
 // off the ground: levelled, those more than a registration voxel above the lowest point of their
 // column (cells of two voxels; a voxel's centroid lies within one voxel of the ground it samples).

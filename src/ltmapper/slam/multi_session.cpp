@@ -52,6 +52,8 @@ class CloudStore {
   CloudStore(const std::vector<Session>& sessions, const SlamConfig& cfg)
       : sessions_(sessions), cfg_(cfg), budget_bytes_(std::size_t(cfg.reg_cache_mb * 1e6)) {
     for (const Session& s : sessions) slots_.emplace_back(s.keyframes.size());
+    place_reach_m_.assign(sessions.size(), 0.0);
+    routes_.resize(sessions.size());
   }
   std::size_t Keyframes(int s) const { return sessions_[std::size_t(s)].keyframes.size(); }
   const Keyframe& KeyframeOf(int s, int k) const { return sessions_[std::size_t(s)].keyframes[std::size_t(k)]; }
@@ -71,8 +73,17 @@ class CloudStore {
     if (auto c = Cached(s, k)) return c;
     return Keep(s, k, Prepare(*Raw(s, k)));
   }
+  // From now on, session s's keyframes are registered by their place clouds (PlaceCloud), the
+  // keyframes behind each within `reach_m` along the route.
+  void UsePlaceClouds(int s, double reach_m) {
+    place_reach_m_[std::size_t(s)] = reach_m;
+    routes_[std::size_t(s)] = PathLength(sessions_[std::size_t(s)]);
+  }
+  bool PlaceClouds(int s) const { return place_reach_m_[std::size_t(s)] > 0.0; }
+  // What a keyframe is registered by: its place cloud (PlaceClouds) or its submap (Neighbours).
+  PointCloud Submap(int s, int k) { return PlaceClouds(s) ? PlaceCloud(s, k) : Neighbours(s, k); }
   // Keyframe k with its neighbours, in k's sensor frame (session-local poses), downsampled.
-  PointCloud Submap(int s, int k) {
+  PointCloud Neighbours(int s, int k) {
     const Session& ses = sessions_[s];
     const int n = static_cast<int>(ses.keyframes.size());
     const Pose T_k_session = ses.keyframes[k].T_session_sensor.inverse();
@@ -84,6 +95,19 @@ class CloudStore {
                            : geometry::Transform(*c, T_k_session * ses.keyframes[j].T_session_sensor));
     }
     if (cfg_.reg_submap_neighbours == 0) return merged;
+    return geometry::VoxelDownsample(merged, cfg_.reg_voxel_m, 1);
+  }
+  // Keyframe k's place cloud: k and the keyframes behind it whose route to k is within the place
+  // reach, merged in k's sensor frame (session-local poses) and downsampled. A sensor that looks
+  // one way (a forward cone) sees where it stands only from the keyframes that approached it:
+  // with them, k's cloud holds the street behind it too, which a drive the other way sees ahead.
+  PointCloud PlaceCloud(int s, int k) {
+    const Session& ses = sessions_[std::size_t(s)];
+    const std::vector<double>& route = routes_[std::size_t(s)];
+    const Pose T_k_session = ses.keyframes[std::size_t(k)].T_session_sensor.inverse();
+    PointCloud merged;
+    for (int j = k; j >= 0 && route[std::size_t(k)] - route[std::size_t(j)] <= place_reach_m_[std::size_t(s)]; --j)
+      merged.append(geometry::Transform(*Get(s, j), T_k_session * ses.keyframes[std::size_t(j)].T_session_sensor));
     return geometry::VoxelDownsample(merged, cfg_.reg_voxel_m, 1);
   }
 
@@ -135,6 +159,8 @@ class CloudStore {
   std::vector<std::vector<Slot>> slots_;
   std::list<std::pair<int, int>> used_;  // kept keyframes, most recently used first
   std::size_t bytes_ = 0;
+  std::vector<double> place_reach_m_;        // per session: 0, or the reach of its place clouds [m]
+  std::vector<std::vector<double>> routes_;  // per session with place clouds: distance along its odometry
 };
 
 // nanoflann adaptor over the ring keys of one session.
@@ -256,6 +282,17 @@ std::vector<LoopRecord> NextBatch(PairCandidates& p, const SlamConfig& cfg) {
   return batch;
 }
 
+// A loop verified on place clouds, registered again on the two keyframes' submaps from where the
+// place clouds put them: a place cloud carries its odometry's drift over the place reach, a submap
+// only over its neighbours. Where the submaps verify too (keyframes that look the same way), theirs
+// is the loop; where they do not (keyframes that face each other share too little), the place
+// clouds' is.
+RegistrationResult Finer(const RegistrationResult& placed, const LoopRecord& l, CloudStore& store, const SlamConfig& cfg) {
+  const RegistrationResult r = RegisterGicp(store.Neighbours(l.a.session, l.a.keyframe),
+                                            store.Neighbours(l.b.session, l.b.keyframe), placed.T_target_source, cfg);
+  return r.accepted ? r : placed;
+}
+
 // Every candidate goes through the coarse stage, radius ones too: a query that ran far without
 // loops has an estimate metres off where it comes back. A verified loop's information is the
 // paper's adaptive one (LoopInformation); with registration.steps, the graph adds the registration's
@@ -267,9 +304,9 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
   Progress progress(label, cand.size());
   ParallelFor(cand.size(), threads, [&](std::size_t i) {
     LoopRecord& l = cand[i];
-    const PointCloud target = store.Submap(l.a.session, l.a.keyframe);
-    const PointCloud source = store.Submap(l.b.session, l.b.keyframe);
-    const RegistrationResult r = RegisterGicp(target, source, l.T_a_b, cfg);
+    RegistrationResult r = RegisterGicp(store.Submap(l.a.session, l.a.keyframe), store.Submap(l.b.session, l.b.keyframe),
+                                        l.T_a_b, cfg);
+    if (r.accepted && (store.PlaceClouds(l.a.session) || store.PlaceClouds(l.b.session))) r = Finer(r, l, store, cfg);
     l.T_a_b = r.T_target_source;
     l.fitness = r.fitness;
     l.overlap = r.overlap;
@@ -433,6 +470,28 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
         if (verified_so_far == 0) break;
       }
     }
+}
+
+// A session whose sensor looks one way (the median over kReachSamples of its keyframes of the
+// widest turn without a return, WidestBlindArcDeg, is more than half a turn: no keyframe sees both
+// sides of where it stands) is registered by place clouds (CloudStore::PlaceCloud) reaching
+// `reach_m` back, the overlap reach: the keyframes behind k that still see what k sees. A drive the
+// other way sees the same street from its other end; two such keyframes facing each other share
+// 0.20-0.29 of their submaps' points at the true pose (under registration.min_overlap), and a street
+// turned by half a turn may share more (the rosette's seed 16 was placed 64 m off that way). Scan
+// Context stays on single scans: a place cloud's descriptor told no true pair from false ones there.
+void UsePlaceCloudsWhereOneWay(const std::vector<Session>& sessions, CloudStore& store, double reach_m) {
+  for (std::size_t s = 0; s < sessions.size(); ++s) {
+    const int n = int(sessions[s].keyframes.size()), m = std::min(n, kReachSamples);
+    std::vector<double> blind;
+    for (int i = 0; i < m; ++i) blind.push_back(WidestBlindArcDeg(*store.Raw(int(s), int((long(i) * n) / m))));
+    std::nth_element(blind.begin(), blind.begin() + m / 2, blind.end());
+    if (blind[std::size_t(m / 2)] <= 180.0) continue;
+    store.UsePlaceClouds(int(s), reach_m);
+    spdlog::info("slam: {}'s sensor looks one way ({:.0f} deg around it without a return): its keyframes are registered "
+                 "by place clouds (the keyframes behind each within {:.0f} m)", sessions[s].name,
+                 blind[std::size_t(m / 2)], reach_m);
+  }
 }
 
 // Scan Context of every keyframe (read from SCDs/ when present and allowed, else computed from
@@ -819,6 +878,7 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   spdlog::info("slam: scan context for {} sessions ({} read from SCDs) in {:.2f} s", sessions.size(), read_files,
                t_desc);
   const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
+  UsePlaceCloudsWhereOneWay(sessions, store, reach.median_m);
   spdlog::info("slam: keyframes overlap by {} up to {:.1f} m apart (median), {:.1f} m at most: the radius search's "
                "radius and the registrations' translation gate", cfg_in.reg_min_overlap, reach.median_m, reach.farthest_m);
   SlamConfig cfg = cfg_in;

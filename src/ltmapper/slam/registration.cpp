@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <vector>
 
 namespace ltm::slam {
 
@@ -210,6 +211,22 @@ double ViewShare(const PointCloud& target, const PointCloud& source, const Pose&
     seen += f && r <= *f + float(slack_m);
   }
   return double(seen) / double(source.size());
+}
+
+double WidestBlindArcDeg(const PointCloud& scan) {
+  const int bins = int(360.0 / kViewBinDeg);
+  std::vector<bool> hit(std::size_t(bins), false);
+  for (const auto& p : scan.points) {
+    if (p.x == 0.f && p.y == 0.f) continue;
+    const double az = std::atan2(double(p.y), double(p.x)) * 180.0 / M_PI + 180.0;  // [0, 360]
+    hit[std::size_t(std::min(bins - 1, int(az / kViewBinDeg)))] = true;
+  }
+  int widest = 0, run = 0;  // empty bins in a row, twice round the circle for a run through 0 deg
+  for (int i = 0; i < 2 * bins; ++i) {
+    run = hit[std::size_t(i % bins)] ? 0 : run + 1;
+    widest = std::max(widest, run);
+  }
+  return std::min(widest, bins) * kViewBinDeg;
 }
 
 PointCloud OffTheGround(const PointCloud& cloud, const Eigen::Vector3d& up, const SlamConfig& cfg) {
