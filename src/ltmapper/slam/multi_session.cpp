@@ -29,6 +29,8 @@ namespace fs = std::filesystem;
 
 // Keyframes per session whose overlap reach is measured (OverlapReach: their median).
 constexpr int kReachSamples = 16;
+// A sensor leaving more than half a turn round it without a return sees no place from both sides.
+constexpr double kHalfTurnDeg = 180.0;
 
 std::string KeyframeWhere(const Session& s, const Keyframe& kf) {
   return (kf.cloud_path.empty() ? "session " + s.name : kf.cloud_path) + " (keyframe " +
@@ -486,7 +488,7 @@ void UsePlaceCloudsWhereOneWay(const std::vector<Session>& sessions, CloudStore&
     std::vector<double> blind;
     for (int i = 0; i < m; ++i) blind.push_back(WidestBlindArcDeg(*store.Raw(int(s), int((long(i) * n) / m))));
     std::nth_element(blind.begin(), blind.begin() + m / 2, blind.end());
-    if (blind[std::size_t(m / 2)] <= 180.0) continue;
+    if (blind[std::size_t(m / 2)] <= kHalfTurnDeg) continue;
     store.UsePlaceClouds(int(s), reach_m);
     spdlog::info("slam: {}'s sensor looks one way ({:.0f} deg around it without a return): its keyframes are registered "
                  "by place clouds (the keyframes behind each within {:.0f} m)", sessions[s].name,
