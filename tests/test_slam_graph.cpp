@@ -385,6 +385,22 @@ TEST(SlamGraph, NoOverlapIsReportedNotAligned) {
   EXPECT_NE(r.sessions[1].reason.find("consistent"), std::string::npos) << r.sessions[1].reason;
 }
 
+// Three loops agree within the consensus gates (one 2.5 m off the others), so the query is
+// anchored; after the solve the off one lies beyond graph.outlier_t_m and is pruned, leaving two of
+// graph.min_loops = 3: the query is no longer aligned. The next solve must hold none of its loops
+// (a loop still accepted there reached into the query's absent poses: a crash, found on a 3-session
+// rosette).
+TEST(SlamGraph, AQueryLeftWithTooFewLoopsIsDroppedWithItsLoops) {
+  SlamConfig cfg;
+  TwoSessions t = MakeTwoSessions(test::MakePose(10, 0, 0, 1), 0, 12, cfg);
+  std::vector<LoopRecord> three = {t.loops[0], t.loops[2], t.loops[4]};
+  three[2].T_a_b = three[2].T_a_b * test::MakePose(2.5, 0, 0, 0);
+  const SlamResult r = OptimizeSessions(t.sessions, three, cfg, 1);
+  EXPECT_FALSE(r.sessions[1].aligned);
+  EXPECT_NE(r.sessions[1].reason.find("left after outlier rejection"), std::string::npos) << r.sessions[1].reason;
+  for (const LoopRecord& l : r.loops) EXPECT_FALSE(l.accepted) << l.status;
+}
+
 TEST(SlamGraph, BrokenInputIsAnError) {
   SlamConfig cfg;
   TwoSessions t = MakeTwoSessions(Pose::Identity(), 0, 12, cfg);

@@ -650,8 +650,9 @@ bool PruneLoops(const Graph& g, std::vector<LoopRecord>& loops) {
   return changed;
 }
 
-// A query left with too few accepted loops is no longer aligned; true when one was dropped.
-bool DropUnderconstrained(Graph& g, const std::vector<LoopRecord>& loops, std::vector<std::string>& reason) {
+// A query left with too few accepted loops is no longer aligned, and its loops (its own ones too)
+// no longer accepted: the next solve holds no poses of it; true when one was dropped.
+bool DropUnderconstrained(Graph& g, std::vector<LoopRecord>& loops, std::vector<std::string>& reason) {
   bool changed = false;
   for (std::size_t s = 1; s < g.sessions.size(); ++s) {
     if (!g.aligned[s]) continue;
@@ -662,6 +663,9 @@ bool DropUnderconstrained(Graph& g, const std::vector<LoopRecord>& loops, std::v
     g.aligned[s] = false;
     reason[s] = "only " + std::to_string(count) + " loop(s) left after outlier rejection (need graph.min_loops = " +
                 std::to_string(g.cfg.min_loops) + ")";
+    for (auto& l : loops)
+      if (l.accepted && (l.a.session == int(s) || l.b.session == int(s)))
+        l.accepted = false, l.status = "rejected: session not aligned";
     changed = true;
   }
   return changed;
