@@ -27,10 +27,19 @@ namespace ltm::slam {
 namespace {
 namespace fs = std::filesystem;
 
-// Keyframes per session whose overlap reach is measured (OverlapReach: their median).
+// Keyframes per session whose overlap reach is measured (OverlapReach: their median), and whose
+// view round the sensor is (UsePlaceCloudsWhereOneWay): the same ones (SampledKeyframes).
 constexpr int kReachSamples = 16;
 // A sensor leaving more than half a turn round it without a return sees no place from both sides.
 constexpr double kHalfTurnDeg = 180.0;
+
+// Positions of up to kReachSamples keyframes spread evenly over a session of n keyframes.
+std::vector<int> SampledKeyframes(int n) {
+  const int m = std::min(n, kReachSamples);
+  std::vector<int> k;
+  for (int i = 0; i < m; ++i) k.push_back(int((long(i) * n) / m));
+  return k;
+}
 
 std::string KeyframeWhere(const Session& s, const Keyframe& kf) {
   return (kf.cloud_path.empty() ? "session " + s.name : kf.cloud_path) + " (keyframe " +
@@ -477,8 +486,9 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
     }
 }
 
-// A session whose sensor looks one way (the median over kReachSamples of its keyframes of the
-// widest turn without a return, WidestBlindArcDeg, is more than half a turn: no keyframe sees both
+// A session whose sensor looks one way (the median over its sampled keyframes' clouds, as the
+// registration reads them, of the widest turn without a return, WidestBlindArcDeg, is more than
+// half a turn: no keyframe sees both
 // sides of where it stands) is registered by place clouds (CloudStore::PlaceCloud) reaching
 // `reach_m` back, the overlap reach: the keyframes behind k that still see what k sees. A drive the
 // other way sees the same street from its other end; two such keyframes facing each other share
@@ -487,15 +497,16 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
 // Context stays on single scans: a place cloud's descriptor told no true pair from false ones there.
 void UsePlaceCloudsWhereOneWay(const std::vector<Session>& sessions, CloudStore& store, double reach_m) {
   for (std::size_t s = 0; s < sessions.size(); ++s) {
-    const int n = int(sessions[s].keyframes.size()), m = std::min(n, kReachSamples);
     std::vector<double> blind;
-    for (int i = 0; i < m; ++i) blind.push_back(WidestBlindArcDeg(*store.Raw(int(s), int((long(i) * n) / m))));
-    std::nth_element(blind.begin(), blind.begin() + m / 2, blind.end());
-    if (blind[std::size_t(m / 2)] <= kHalfTurnDeg) continue;
+    for (const int k : SampledKeyframes(int(sessions[s].keyframes.size())))
+      blind.push_back(WidestBlindArcDeg(*store.Get(int(s), k)));  // kept since OverlapReach read them
+    const std::size_t m = blind.size() / 2;
+    std::nth_element(blind.begin(), blind.begin() + long(m), blind.end());
+    if (blind[m] <= kHalfTurnDeg) continue;
     store.UsePlaceClouds(int(s), reach_m);
     spdlog::info("slam: {}'s sensor looks one way ({:.0f} deg around it without a return): its keyframes are registered "
                  "by place clouds (the keyframes behind each within {:.0f} m)", sessions[s].name,
-                 blind[std::size_t(m / 2)], reach_m);
+                 blind[m], reach_m);
   }
 }
 
@@ -573,11 +584,8 @@ struct Reach {
 };
 Reach OverlapReach(const std::vector<Session>& sessions, CloudStore& store, const SlamConfig& cfg, int threads) {
   std::vector<std::pair<int, int>> samples;
-  for (std::size_t s = 0; s < sessions.size(); ++s) {
-    const int n = static_cast<int>(sessions[s].keyframes.size());
-    const int m = std::min(n, kReachSamples);
-    for (int i = 0; i < m; ++i) samples.push_back({int(s), int((long(i) * n) / m)});
-  }
+  for (std::size_t s = 0; s < sessions.size(); ++s)
+    for (const int k : SampledKeyframes(int(sessions[s].keyframes.size()))) samples.push_back({int(s), k});
   std::vector<double> reach(samples.size(), 0.0);
   ParallelFor(samples.size(), threads, [&](std::size_t i) {
     const auto [s, k] = samples[i];
