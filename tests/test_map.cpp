@@ -1268,6 +1268,18 @@ TEST(MapObjects, MovedContainerAndStableIds) {
   }
 }
 
+// Objects of one step whose delta `d` has one thing gone (strong ND) and one come (weak PD), under
+// `cfg`: both reported as the ends of one move where `moved`, else as disappeared and appeared.
+void ExpectOneMove(const KeyframeDelta& d, const MapConfig& cfg, bool moved, const std::string& label) {
+  test::TempDir tmp;
+  const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr, cfg);
+  ASSERT_EQ(objs.size(), 2u) << label;
+  for (const auto& o : objs)
+    EXPECT_EQ(o.change, moved ? "moved" : o.cls == PointClass::kNDStrong ? "disappeared" : "appeared")
+        << label << ": " << o.centroid.transpose() << " " << o.size.transpose() << " top " << o.height_above_ground
+        << " range " << o.range_m;
+}
+
 // A car gone and another, 0.5 m longer, come: no move where the sensor samples both finely enough
 // to tell the lengths apart (the test sensor's columns are exact: its views fall short of nothing),
 // one move where its columns are 1 deg apart: 13 m out, each end of a view may then miss a sample
@@ -1277,15 +1289,24 @@ TEST(MapObjects, LookAlikesAreOneMovedObjectOnlyWithinTheSensorsSampling) {
   d.nd_strong = Car(8, 8, 2.f, 4.f, 1.5f);
   d.pd_weak = Car(-12, -4, 2.f, 4.5f, 1.5f);
   for (const double azimuth_step_deg : {0.0, 1.0}) {
-    test::TempDir tmp;
     MapConfig cfg = Cfg();
     cfg.object_sensor_azimuth_step_deg = azimuth_step_deg;
-    const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr, cfg);
-    ASSERT_EQ(objs.size(), 2u);
-    for (const auto& o : objs) {
-      EXPECT_EQ(o.change, azimuth_step_deg > 0.0 ? "moved" : o.cls == PointClass::kNDStrong ? "disappeared" : "appeared")
-          << azimuth_step_deg << " deg: " << o.centroid.transpose() << " " << o.size.transpose();
-    }
+    ExpectOneMove(d, cfg, azimuth_step_deg > 0.0, "columns " + std::to_string(azimuth_step_deg) + " deg");
+  }
+}
+
+// A fence 2.0 m tall gone and a wall 2.5 m tall come, 13 m from the keyframe: no move where the
+// sensor's rows are 0.625 deg apart (the lower view's top may lie one row gap, 0.28 m at 60 deg
+// incidence, below the object's; both stand on the ground, so no second gap at their feet), one
+// move where the rows are 2 deg apart (0.91 m there: the sampling cannot tell those tops apart).
+TEST(MapObjects, ViewsWhoseTopsDifferByMoreThanOneRowAreNoMove) {
+  KeyframeDelta d;
+  d.nd_strong = Car(8, 8, 0.5f, 6.f, 2.f);
+  d.pd_weak = Car(-12, -4, 0.5f, 6.f, 2.5f);
+  for (const double step_deg : {0.625, 2.0}) {
+    MapConfig cfg = Cfg();
+    cfg.object_sensor_step_deg = step_deg;
+    ExpectOneMove(d, cfg, step_deg > 1.0, "rows " + std::to_string(step_deg) + " deg");
   }
 }
 

@@ -23,9 +23,9 @@
 //     the rows the query did not see inside its box and over it (UnseenParts), and every object
 //     its foot, the changes of its side in the ground band under it (KeepFeet). Its confidence
 //     is rated over all it then holds (Rate).
-//  5. Moved: a disappeared and an appeared object of one step whose box lengths and heights agree
-//     within what the sensor's sampling lets each view fall short (SizesAgree); of such pairings,
-//     the one that moves the objects least in all (LinkMoved).
+//  5. Moved: a disappeared and an appeared object of one step whose box lengths and tops above the
+//     ground agree within what the sensor's sampling lets each view fall short (SizesAgree); of
+//     such pairings, the one that moves the objects least in all (LinkMoved).
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
@@ -489,14 +489,29 @@ bool Floats(const MapObject& o, const MapConfig& cfg) {
   return cfg.object_max_clearance_m > 0.0 && o.clearance_m > MaxClearance(o, cfg);
 }
 
-// Whether views a and b can be of one object: neither box's length nor height exceeds the other's
-// by more than the other may have fallen short (ViewShortfall); a far view may be much smaller than
-// a near one, not larger. Their widths say nothing: a view sees an object's depth only as far as
-// the object lets it (a container's side seen across the street is 0.2 m wide, at an angle 1.3 m
-// of its 2.4 m), so both are lower bounds of the same width.
+// How far below an object's top a view's highest sample may lie: one gap of the sensor's rows at
+// the view's range (SensorGapsAt), at least the map's sample spacing: the row above it passed over
+// the object.
+double TopShortfall(const MapObject& o, const MapConfig& cfg) {
+  return std::max(double(SensorGapsAt(o.range_m, cfg).y()), SampleSpacing(cfg));
+}
+
+// A view's top above its foot: the floor under it (Clearance's ground_z), or its lowest point where
+// that lies lower (a far object's cell may hold no ground sample, its floor then one of its own).
+double TopAboveFoot(const MapObject& o) { return o.hi.z() - std::min(o.lo.z(), o.ground_z); }
+
+// Whether views a and b can be of one object: neither box's length exceeds the other's by more than
+// the other may have fallen short (ViewShortfall), nor its top above its foot the other's by more
+// than the other's top may lie below the object's (TopShortfall: one row, not a row at either end,
+// as both stand on the ground: a fence 2.1 m tall is no wall of 3.3 m, a structure 3 m tall no
+// tree of 7 m); a far view may be much smaller than a near one, not larger. Their widths say
+// nothing: a view sees an object's depth only as far as the object lets it (a container's side
+// seen across the street is 0.2 m wide, at an angle 1.3 m of its 2.4 m), so both are lower bounds
+// of the same width.
 bool SizesAgree(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
-  const Eigen::Vector2d d(a.size.x() - b.size.x(), a.size.z() - b.size.z());
-  return (d.array() <= ViewShortfall(b, cfg).array()).all() && ((-d).array() <= ViewShortfall(a, cfg).array()).all();
+  const double length = a.size.x() - b.size.x(), top = TopAboveFoot(a) - TopAboveFoot(b);
+  return length <= ViewShortfall(b, cfg).x() && -length <= ViewShortfall(a, cfg).x() && top <= TopShortfall(b, cfg) &&
+         -top <= TopShortfall(a, cfg);
 }
 
 // Disappeared object d and appeared object a could be one object that moved: their sizes agree
