@@ -13,6 +13,16 @@ pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
 # ltmapper view: HTTP server (libcpp-httplib-dev) and JSON (nlohmann-json3-dev).
 pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
 find_package(nlohmann_json 3 REQUIRED)
+# Reports: Markdown to HTML (libcmark-gfm-dev, libcmark-gfm-extensions-dev: GitHub's tables).
+# Debian ships no CMake config or .pc file for the extensions; both are plain libraries.
+find_path(CMARK_GFM_INCLUDE_DIR cmark-gfm-core-extensions.h REQUIRED)
+find_library(CMARK_GFM_LIBRARY cmark-gfm REQUIRED)
+find_library(CMARK_GFM_EXTENSIONS_LIBRARY cmark-gfm-extensions REQUIRED)
+if(NOT TARGET ltm_cmark)
+  add_library(ltm_cmark INTERFACE)
+  target_include_directories(ltm_cmark SYSTEM INTERFACE ${CMARK_GFM_INCLUDE_DIR})
+  target_link_libraries(ltm_cmark INTERFACE ${CMARK_GFM_EXTENSIONS_LIBRARY} ${CMARK_GFM_LIBRARY})
+endif()
 
 # Heavy libraries: only the .cpp files of the module that owns them include their headers.
 find_package(PCL 1.13 REQUIRED COMPONENTS common io kdtree search features)

@@ -26,6 +26,7 @@ PACKAGES=(
   python3-pytest                               # their tests (ctest python_bindings)
   python3-distributed                          # Dask: the tile jobs on a cluster (python/ltmapper_dask.py, ctest tiles_dask)
   libcpp-httplib-dev nlohmann-json3-dev        # ltmapper view: HTTP server, JSON
+  libcmark-gfm-dev libcmark-gfm-extensions-dev # reports: Markdown to HTML (GitHub's tables)
   chromium               # headless browser of the viewer's browser test (tests/browser/)
 )
 # three.js and playwright-core come from the npm registry (web/package-lock.json): Debian's node

@@ -18,10 +18,13 @@ namespace {
 
 TEST(Markdown, TablesHeadingsListsAndEscaping) {
   const std::string html = pipeline::MarkdownToHtml(
-      "# Title\n\n| a | b |\n|---|---|\n| 1 | <2> |\n\n- item `x`\n- two\n\nplain & **bold**\n");
-  test::ExpectContains(html, {"<h2>Title</h2>", "<tr><th>a</th><th>b</th></tr>", "<tr><td>1</td><td>&lt;2&gt;</td></tr>",
-                              "<ul>\n<li>item <code>x</code></li>\n<li>two</li>\n</ul>", "<p>plain &amp; <b>bold</b></p>"});
+      "# Title\n\n| a | b |\n|---|--:|\n| 1 | <2> |\n\n- item `x`\n- two\n\nplain & **bold** <script>x</script>\n");
+  test::ExpectContains(html, {"<h2>Title</h2>", "<th>a</th>\n<th align=\"right\">b</th>",
+                              "<td>1</td>\n<td align=\"right\">&lt;2&gt;</td>",
+                              "<ul>\n<li>item <code>x</code></li>\n<li>two</li>\n</ul>",
+                              "<p>plain &amp; <strong>bold</strong>"});
   EXPECT_EQ(html.find("---"), std::string::npos) << html;
+  EXPECT_EQ(html.find("<script>"), std::string::npos) << "raw HTML passed through: " << html;
 }
 
 TEST(Report, WritesMarkdownAndHtmlWithRelativePictures) {

@@ -109,8 +109,8 @@ struct ReportItem {
 };
 void WriteReport(const std::string& out_base, const std::string& title,
                  const std::vector<ReportItem>& items);
-// The small Markdown subset the reports use (#-headings, | tables |, - lists, paragraphs,
-// `code`) as HTML; everything else is escaped text.
+// Markdown (CommonMark with GitHub's tables, by cmark-gfm) as HTML, every heading one level down;
+// raw HTML in it is not passed through.
 std::string MarkdownToHtml(const std::string& markdown);
 
 }  // namespace ltm::pipeline

@@ -2,6 +2,11 @@
 
 #include "ltmapper/io/io.hpp"
 
+#include <cmark-gfm-core-extensions.h>
+#include <cmark-gfm.h>
+
+#include <algorithm>
+
 #include <filesystem>
 #include <sstream>
 
@@ -25,132 +30,51 @@ std::string Escape(const std::string& s) {
   return out;
 }
 
-// Escaped text with `code` spans and **bold**.
-std::string Inline(const std::string& s) {
-  std::string out;
-  bool code = false, bold = false;
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '`') {
-      out += code ? "</code>" : "<code>";
-      code = !code;
-    } else if (!code && s.compare(i, 2, "**") == 0) {
-      out += bold ? "</b>" : "<b>";
-      bold = !bold;
-      ++i;
-    } else {
-      out += Escape(std::string(1, s[i]));
-    }
-  }
-  if (code) out += "</code>";
-  if (bold) out += "</b>";
-  return out;
-}
-
-std::vector<std::string> Cells(const std::string& line) {
-  std::vector<std::string> cells;
-  std::string t = line;
-  const auto a = t.find_first_not_of(" \t");
-  const auto b = t.find_last_not_of(" \t");
-  t = t.substr(a, b - a + 1);
-  if (!t.empty() && t.front() == '|') t.erase(0, 1);
-  if (!t.empty() && t.back() == '|') t.pop_back();
-  std::stringstream ss(t);
-  std::string cell;
-  while (std::getline(ss, cell, '|')) {
-    const auto x = cell.find_first_not_of(' ');
-    const auto y = cell.find_last_not_of(' ');
-    cells.push_back(x == std::string::npos ? "" : cell.substr(x, y - x + 1));
-  }
-  return cells;
-}
-
-bool IsSeparatorRow(const std::string& line) {
-  return line.find_first_not_of("|-: \t") == std::string::npos && line.find('-') != std::string::npos;
-}
-
 bool EndsWith(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// A parsed Markdown document (cmark-gfm with GitHub's tables), freed with it.
+struct MarkdownDocument {
+  cmark_parser* parser = nullptr;
+  cmark_node* root = nullptr;
+  explicit MarkdownDocument(const std::string& markdown) {
+    cmark_gfm_core_extensions_ensure_registered();
+    parser = cmark_parser_new(CMARK_OPT_DEFAULT);
+    if (!parser) throw Error("markdown: cmark-gfm could not make a parser");
+    if (cmark_syntax_extension* table = cmark_find_syntax_extension("table"))
+      cmark_parser_attach_syntax_extension(parser, table);
+    cmark_parser_feed(parser, markdown.data(), markdown.size());
+    root = cmark_parser_finish(parser);
+  }
+  ~MarkdownDocument() {
+    if (root) cmark_node_free(root);
+    cmark_parser_free(parser);
+  }
+  MarkdownDocument(const MarkdownDocument&) = delete;
+  MarkdownDocument& operator=(const MarkdownDocument&) = delete;
+};
+
+// Every heading one level down (the report's title is its only <h1>), at most <h6>.
+void DemoteHeadings(cmark_node* root) {
+  cmark_iter* it = cmark_iter_new(root);
+  for (cmark_event_type ev; (ev = cmark_iter_next(it)) != CMARK_EVENT_DONE;) {
+    cmark_node* node = cmark_iter_get_node(it);
+    if (ev == CMARK_EVENT_ENTER && cmark_node_get_type(node) == CMARK_NODE_HEADING)
+      cmark_node_set_heading_level(node, std::min(cmark_node_get_heading_level(node) + 1, 6));
+  }
+  cmark_iter_free(it);
 }
 
 }  // namespace
 
 std::string MarkdownToHtml(const std::string& markdown) {
-  std::istringstream in(markdown);
-  std::ostringstream out;
-  std::string line;
-  std::vector<std::string> lines;
-  while (std::getline(in, line)) lines.push_back(line);
-  bool in_list = false, in_pre = false;
-  std::string para;
-  auto flush_para = [&] {
-    if (!para.empty()) out << "<p>" << Inline(para) << "</p>\n";
-    para.clear();
-  };
-  auto close_list = [&] {
-    if (in_list) out << "</ul>\n";
-    in_list = false;
-  };
-  for (std::size_t i = 0; i < lines.size(); ++i) {
-    const std::string& l = lines[i];
-    if (l.rfind("```", 0) == 0) {
-      flush_para();
-      close_list();
-      out << (in_pre ? "</pre>\n" : "<pre>");
-      in_pre = !in_pre;
-      continue;
-    }
-    if (in_pre) {
-      out << Escape(l) << "\n";
-      continue;
-    }
-    const auto first = l.find_first_not_of(" \t");
-    if (first == std::string::npos) {
-      flush_para();
-      close_list();
-      continue;
-    }
-    if (l[first] == '#') {
-      flush_para();
-      close_list();
-      std::size_t level = 0;
-      while (first + level < l.size() && l[first + level] == '#') ++level;
-      level = std::min<std::size_t>(level + 1, 6);  // the report title is the only <h1>
-      out << "<h" << level << ">" << Inline(l.substr(l.find_first_not_of("# ", first))) << "</h" << level
-          << ">\n";
-      continue;
-    }
-    if (l[first] == '|') {
-      flush_para();
-      close_list();
-      out << "<table>\n";
-      bool header = i + 1 < lines.size() && IsSeparatorRow(lines[i + 1]);
-      for (; i < lines.size(); ++i) {
-        const auto f = lines[i].find_first_not_of(" \t");
-        if (f == std::string::npos || lines[i][f] != '|') break;
-        if (IsSeparatorRow(lines[i])) continue;
-        out << "<tr>";
-        for (const auto& c : Cells(lines[i])) out << (header ? "<th>" : "<td>") << Inline(c) << (header ? "</th>" : "</td>");
-        out << "</tr>\n";
-        header = false;
-      }
-      --i;
-      out << "</table>\n";
-      continue;
-    }
-    if ((l[first] == '-' || l[first] == '*') && first + 1 < l.size() && l[first + 1] == ' ') {
-      flush_para();
-      if (!in_list) out << "<ul>\n";
-      in_list = true;
-      out << "<li>" << Inline(l.substr(first + 2)) << "</li>\n";
-      continue;
-    }
-    close_list();
-    para += (para.empty() ? "" : " ") + l.substr(first);
-  }
-  flush_para();
-  close_list();
-  if (in_pre) out << "</pre>\n";
-  return out.str();
+  const MarkdownDocument doc(markdown);
+  DemoteHeadings(doc.root);
+  char* html = cmark_render_html(doc.root, CMARK_OPT_DEFAULT, cmark_parser_get_syntax_extensions(doc.parser));
+  std::string out(html ? html : "");
+  cmark_get_default_mem_allocator()->free(html);
+  return out;
 }
 
 void WriteReport(const std::string& out_base, const std::string& title, const std::vector<ReportItem>& items) {
@@ -175,7 +99,7 @@ void WriteReport(const std::string& out_base, const std::string& title, const st
       const std::string caption = item.caption.empty() ? fs::path(item.path).filename().string() : item.caption;
       md << "![" << caption << "](" << rel << ")\n\n*" << caption << "*\n\n";
       html << "<figure><a href=\"" << Escape(rel) << "\"><img src=\"" << Escape(rel) << "\" alt=\""
-           << Escape(caption) << "\"></a><figcaption>" << Inline(caption) << "</figcaption></figure>\n";
+           << Escape(caption) << "\"></a><figcaption>" << MarkdownToHtml(caption) << "</figcaption></figure>\n";
     } else {
       throw Error(item.path, 0, "report items must be .md or .png files");
     }
