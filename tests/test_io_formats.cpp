@@ -533,7 +533,26 @@ TEST(Json, QuoteEscapesControlCharactersAndParseReadsThemBack) {
   ASSERT_NE(v.Find("k"), nullptr);
   EXPECT_EQ(v.Find("k")->str, all);
   EXPECT_EQ(io::json::Parse("\"\\/\\b\\f\"", "test").str, "/\b\f");
-  test::ExpectError([] { io::json::Parse("\"\\x\"", "where"); }, {"where", "bad escape"});
+  test::ExpectError([] { io::json::Parse("\"\\x\"", "where"); }, {"where", "offset 3", "after backslash"});
+  EXPECT_EQ(io::json::Quote("a\xff"), "\"a\xef\xbf\xbd\"");  // not UTF-8: U+FFFD
+}
+
+// A document nested deeper than the parser allows is an error, not a stack overflow; the writer
+// builds what it is told in order and refuses a value outside any container.
+TEST(Json, DeepNestingIsAnErrorAndTheWriterKeepsOrder) {
+  test::ExpectError([] { io::json::Parse(std::string(100000, '[') + std::string(100000, ']'), "deep.json"); },
+                    {"deep.json", "nesting deeper than 256"});
+  io::json::Writer w;
+  w.BeginObject().Int("z", 1).Number("a", 0.1).Number("nan", std::nan("")).BeginArray("v").Number(2.5).EndArray()
+      .String("s", "x\"y").Bool("b", true).EndObject();
+  EXPECT_EQ(w.str(), "{\n  \"z\": 1,\n  \"a\": 0.1,\n  \"nan\": null,\n  \"v\": [\n    2.5\n  ],\n  \"s\": \"x\\\"y\",\n"
+                     "  \"b\": true\n}\n");
+  const io::json::Value v = io::json::Parse(w.str(), "w");
+  ASSERT_EQ(v.obj.size(), 6u);
+  EXPECT_EQ(v.obj[0].first, "z");
+  EXPECT_EQ(v.Find("v")->arr.at(0).num, 2.5);
+  io::json::Writer bad;
+  test::ExpectError([&] { bad.Number("x", 1.0); }, {"outside any object or array"});
 }
 
 }  // namespace

@@ -1,6 +1,6 @@
 // ltmapper io: the one JSON writer and reader of the project (stage reports, eval reports, map
 // objects): a small value, parser, pretty writer and the string quoting every hand-laid-out
-// report uses. No third-party JSON library is a project dependency.
+// report uses, on nlohmann-json (its header only in json.cpp).
 #pragma once
 
 #include "ltmapper/core/core.hpp"
@@ -30,9 +30,14 @@ Value Parse(const std::string& text, const std::string& where);
 // The JSON file at `path`; ltm::Error naming it when it cannot be read or is malformed.
 Value ParseFile(const std::string& path);
 
-// Pretty writer (2-space indent). Non-finite numbers are written as null.
+// Pretty writer (2-space indent), building the document in order. Non-finite numbers are written
+// as null; a value outside any object or array, or an End without a Begin, is an ltm::Error.
 class Writer {
  public:
+  Writer();
+  ~Writer();
+  Writer(Writer&&) noexcept;
+  Writer& operator=(Writer&&) noexcept;
   Writer& BeginObject(const std::string& key = {});
   Writer& EndObject();
   Writer& BeginArray(const std::string& key = {});
@@ -41,20 +46,21 @@ class Writer {
   Writer& Int(const std::string& key, long long v);
   Writer& String(const std::string& key, const std::string& v);
   Writer& Bool(const std::string& key, bool v);
+  Writer& Null(const std::string& key);
   // Array elements (no key).
   Writer& Number(double v) { return Number({}, v); }
-  std::string str() const { return out_ + "\n"; }
+  Writer& Int(long long v) { return Int({}, v); }
+  std::string str() const;
 
  private:
-  void Prefix(const std::string& key);
-  Writer& Open(const std::string& key, char bracket, bool object);  // a container: { or [
-  Writer& Close(char bracket);
-  std::string out_;
-  std::vector<bool> first_;  // per open container: no element written yet
-  std::vector<bool> is_object_;
+  struct Tree;
+  Writer& Open(const std::string& key, bool object);  // a container: object or array
+  Writer& Close();
+  std::unique_ptr<Tree> tree_;
 };
 
-// A JSON string literal: quotes, backslash, \n \r \t escaped, other control characters as \u00XX.
+// A JSON string literal: quotes, backslash and control characters escaped; bytes that are not
+// UTF-8 become U+FFFD.
 std::string Quote(const std::string& s);
 
 }  // namespace ltm::io::json
