@@ -213,16 +213,15 @@ void BuildStore(const RunPaths& p, const map::MapConfig& map_cfg, const RunRepor
 void WriteRunReport(const std::string& out_dir, const RunReport& report) {
   const std::string text = FormatRunReport(report);
   io::WriteFileAtomic((fs::path(out_dir) / "run_report.md").string(), [&](std::ostream& os) { os << text; });
-  io::WriteFileAtomic((fs::path(out_dir) / "run_report.json").string(), [&](std::ostream& os) {
-    os << "{\n  \"sessions\": " << report.sessions.size() << ",\n  \"aligned\": " << report.aligned.size()
-       << ",\n  \"not_aligned\": " << report.not_aligned.size() << ",\n  \"stages\": {";
-    for (std::size_t i = 0; i < report.stages.size(); ++i)
-      os << (i ? ", " : "") << io::json::Quote(report.stages[i].stage) << ": {\"skipped\": "
-         << (report.stages[i].skipped ? "true" : "false") << ", \"seconds\": " << report.stages[i].seconds << "}";
-    os << "},\n  \"live_points\": " << report.map_points_live << ",\n  \"meta_points\": " << report.map_points_meta
-       << ",\n  \"objects\": " << report.objects << ",\n  \"store_bytes\": " << report.store_bytes
-       << ",\n  \"seconds\": " << report.seconds << ",\n  \"peak_rss_bytes\": " << report.peak_rss_bytes << "\n}\n";
-  });
+  io::json::Writer w;
+  w.BeginObject().Int("sessions", (long long)report.sessions.size()).Int("aligned", (long long)report.aligned.size());
+  w.Int("not_aligned", (long long)report.not_aligned.size()).BeginObject("stages");
+  for (const auto& st : report.stages)
+    w.BeginObject(st.stage).Bool("skipped", st.skipped).Number("seconds", st.seconds).EndObject();
+  w.EndObject().Int("live_points", (long long)report.map_points_live).Int("meta_points", (long long)report.map_points_meta);
+  w.Int("objects", (long long)report.objects).Int("store_bytes", (long long)report.store_bytes);
+  w.Number("seconds", report.seconds).Int("peak_rss_bytes", (long long)report.peak_rss_bytes).EndObject();
+  io::WriteFileAtomic((fs::path(out_dir) / "run_report.json").string(), [&](std::ostream& os) { os << w.str(); });
 }
 
 // Runs stage `i` unless it is before `first` (finished, same key): times it and writes its marker.

@@ -200,43 +200,36 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
 // Pairs: (central 0, q) for every query, or consecutive (q-1, q).
 int PairCentral(const RemovertConfig& cfg, int q) { return cfg.pairs == "consecutive" ? q - 1 : 0; }
 
-void WriteHdJson(std::ostream& os, const std::string& name, std::size_t keyframes, const HdStats& h) {
-  os << "{\"name\": " << io::json::Quote(name) << ", \"keyframes\": " << keyframes << ", \"map_points\": " << h.map_points
-     << ", \"candidates\": " << h.candidates << ", \"reverted\": " << h.reverted << ", \"removed\": " << h.removed
-     << ", \"dilated\": " << h.dilated << ", \"removed_per_resolution\": [";
-  for (std::size_t l = 0; l < h.removed_per_resolution.size(); ++l)
-    os << (l ? ", " : "") << h.removed_per_resolution[l];
-  os << "], \"seconds_map\": " << h.seconds_map << ", \"seconds_votes\": " << h.seconds_votes << "}";
+void WriteHdJson(io::json::Writer& w, const std::string& name, std::size_t keyframes, const HdStats& h) {
+  w.BeginObject().String("name", name).Int("keyframes", (long long)keyframes).Int("map_points", (long long)h.map_points);
+  w.Int("candidates", (long long)h.candidates).Int("reverted", (long long)h.reverted).Int("removed", (long long)h.removed);
+  w.Int("dilated", (long long)h.dilated).BeginArray("removed_per_resolution");
+  for (const auto n : h.removed_per_resolution) w.Int((long long)n);
+  w.EndArray().Number("seconds_map", h.seconds_map).Number("seconds_votes", h.seconds_votes).EndObject();
 }
 
-void WritePairJson(std::ostream& os, int c, int q, const LdStats& l, const std::vector<int>& new_keyframes) {
-  os << "{\"central\": " << c << ", \"query\": " << q << ", \"dir\": " << io::json::Quote(io::layout::PairDirName(c, q))
-     << ", \"nd_strong\": " << l.nd_strong << ", \"nd_weak\": " << l.nd_weak << ", \"pd_strong\": " << l.pd_strong
-     << ", \"pd_weak\": " << l.pd_weak << ", \"pd_unobserved\": " << l.pd_unobserved
-     << ", \"nd_unobserved\": " << l.nd_unobserved << ", \"nd_residue\": " << l.nd_residue
-     << ", \"pd_residue\": " << l.pd_residue << ", \"seconds\": " << l.seconds << ", \"new_keyframes\": [";
-  for (std::size_t j = 0; j < new_keyframes.size(); ++j) os << (j ? ", " : "") << new_keyframes[j];
-  os << "]}";
+void WritePairJson(io::json::Writer& w, int c, int q, const LdStats& l, const std::vector<int>& new_keyframes) {
+  w.BeginObject().Int("central", c).Int("query", q).String("dir", io::layout::PairDirName(c, q));
+  w.Int("nd_strong", (long long)l.nd_strong).Int("nd_weak", (long long)l.nd_weak);
+  w.Int("pd_strong", (long long)l.pd_strong).Int("pd_weak", (long long)l.pd_weak);
+  w.Int("pd_unobserved", (long long)l.pd_unobserved).Int("nd_unobserved", (long long)l.nd_unobserved);
+  w.Int("nd_residue", (long long)l.nd_residue).Int("pd_residue", (long long)l.pd_residue).Number("seconds", l.seconds);
+  w.BeginArray("new_keyframes");
+  for (const int k : new_keyframes) w.Int(k);
+  w.EndArray().EndObject();
 }
 
 void WriteStageReport(const std::string& path, const StageReport& rep, const std::vector<std::size_t>& keyframes,
                       int threads) {
-  io::WriteFileAtomic(path, [&](std::ostream& os) {
-    os << std::setprecision(9) << "{\n  \"stage\": \"removert\",\n  \"sessions\": [\n";
-    for (std::size_t s = 0; s < rep.hd.size(); ++s) {
-      os << "    ";
-      WriteHdJson(os, rep.sessions[s], keyframes[s], rep.hd[s]);
-      os << (s + 1 < rep.hd.size() ? "," : "") << "\n";
-    }
-    os << "  ],\n  \"pairs\": [\n";
-    for (std::size_t p = 0; p < rep.ld.size(); ++p) {
-      os << "    ";
-      WritePairJson(os, rep.pairs[p].first, rep.pairs[p].second, rep.ld[p], rep.new_keyframes[p]);
-      os << (p + 1 < rep.ld.size() ? "," : "") << "\n";
-    }
-    os << "  ],\n  \"seconds\": " << rep.seconds << ",\n  \"peak_rss_bytes\": " << rep.peak_rss_bytes
-       << ",\n  \"threads\": " << threads << "\n}\n";
-  });
+  io::json::Writer w;
+  w.BeginObject().String("stage", "removert").BeginArray("sessions");
+  for (std::size_t s = 0; s < rep.hd.size(); ++s) WriteHdJson(w, rep.sessions[s], keyframes[s], rep.hd[s]);
+  w.EndArray().BeginArray("pairs");
+  for (std::size_t p = 0; p < rep.ld.size(); ++p)
+    WritePairJson(w, rep.pairs[p].first, rep.pairs[p].second, rep.ld[p], rep.new_keyframes[p]);
+  w.EndArray().Number("seconds", rep.seconds).Int("peak_rss_bytes", (long long)rep.peak_rss_bytes);
+  w.Int("threads", threads).EndObject();
+  io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
 }
 
 double Since(std::chrono::steady_clock::time_point t0) {

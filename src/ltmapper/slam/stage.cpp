@@ -19,14 +19,12 @@ namespace ltm::slam {
 namespace {
 namespace fs = std::filesystem;
 
-std::string PoseJson(const Pose& T) {
-  std::ostringstream os;
-  os << std::setprecision(9) << "[";
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 4; ++c) os << (r + c ? ", " : "") << T.matrix()(r, c);
-  }
-  os << "]";
-  return os.str();
+// A pose as its 3 x 4 matrix, row by row, under `key`.
+void PoseJson(io::json::Writer& w, const std::string& key, const Pose& T) {
+  w.BeginArray(key);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) w.Number(T.matrix()(r, c));
+  w.EndArray();
 }
 
 double YawDeg(const Pose& T) {
@@ -93,41 +91,38 @@ void WriteLoopsCsv(const std::vector<Session>& sessions, const SlamResult& res, 
 
 }
 
+// report.json's record of session s.
+void SessionJson(io::json::Writer& w, const Session& session, const SessionAlignment& a) {
+  w.BeginObject().String("name", a.name).String("dir", session.dir).Int("keyframes", (long long)session.keyframes.size());
+  w.Bool("aligned", a.aligned).String("reason", a.reason).Int("sc_candidates", (long long)a.sc_candidates);
+  w.Int("loops_verified", (long long)a.loops_verified).Int("loops_accepted", (long long)a.loops_accepted);
+  w.Int("radius_loops_accepted", (long long)a.radius_loops).Int("own_loops_accepted", (long long)a.own_loops);
+  w.Int("registered_steps", (long long)a.registered.size());
+  if (a.aligned)
+    PoseJson(w, "anchor", a.anchor);
+  else
+    w.Null("anchor");
+  w.EndObject();
+}
+
 // report.json: per-session alignment, solver and timing figures.
 void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res, const std::string& out_dir, const SlamConfig& cfg) {
-  const std::size_t n = sessions.size();
-
-  io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) {
-    os << std::setprecision(6) << "{\n  \"central\": " << io::json::Quote(res.sessions[0].name)
-       << ",\n  \"given_poses\": " << (res.given_poses ? "true" : "false") << ",\n  \"all_aligned\": ";
-    bool all = true;
-    for (const auto& a : res.sessions) all = all && a.aligned;
-    os << (all ? "true" : "false") << ",\n  \"sessions\": [\n";
-    for (std::size_t s = 0; s < n; ++s) {
-      const auto& a = res.sessions[s];
-      os << "    {\"name\": " << io::json::Quote(a.name) << ", \"dir\": " << io::json::Quote(sessions[s].dir)
-         << ", \"keyframes\": " << sessions[s].keyframes.size()
-         << ", \"aligned\": " << (a.aligned ? "true" : "false")
-         << ", \"reason\": " << io::json::Quote(a.reason) << ", \"sc_candidates\": " << a.sc_candidates
-         << ", \"loops_verified\": " << a.loops_verified
-         << ", \"loops_accepted\": " << a.loops_accepted
-         << ", \"radius_loops_accepted\": " << a.radius_loops << ", \"own_loops_accepted\": " << a.own_loops
-         << ", \"registered_steps\": " << a.registered.size()
-         << ", \"anchor\": " << (a.aligned ? PoseJson(a.anchor) : "null") << "}"
-         << (s + 1 < n ? "," : "") << "\n";
-    }
-    os << "  ],\n  \"registrations\": " << res.registrations << ",\n  \"refine_radius_m\": " << res.refine_radius_m
-       << ",\n  \"max_translation_m\": " << res.max_translation_m
-       << ",\n  \"solver\": {\"usable\": " << (res.solution_usable ? "true" : "false")
-       << ", \"initial_cost\": " << res.initial_cost << ", \"final_cost\": " << res.final_cost
-       << ", \"iterations\": " << res.solver_iterations << "},\n"
-       << "  \"time_s\": {\"descriptors\": " << res.time_descriptors_s
-       << ", \"retrieval\": " << res.time_retrieval_s
-       << ", \"registration\": " << res.time_registration_s
-       << ", \"optimisation\": " << res.time_optimisation_s << ", \"total\": " << res.time_total_s
-       << "},\n  \"robust_loss\": " << io::json::Quote(cfg.robust_loss)
-       << ",\n  \"peak_rss_bytes\": " << PeakRssBytes() << "\n}\n";
-  });
+  bool all = true;
+  for (const auto& a : res.sessions) all = all && a.aligned;
+  io::json::Writer w;
+  w.BeginObject().String("central", res.sessions[0].name).Bool("given_poses", res.given_poses).Bool("all_aligned", all);
+  w.BeginArray("sessions");
+  for (std::size_t s = 0; s < sessions.size(); ++s) SessionJson(w, sessions[s], res.sessions[s]);
+  w.EndArray();
+  w.Int("registrations", (long long)res.registrations).Number("refine_radius_m", res.refine_radius_m);
+  w.Number("max_translation_m", res.max_translation_m);
+  w.BeginObject("solver").Bool("usable", res.solution_usable).Number("initial_cost", res.initial_cost);
+  w.Number("final_cost", res.final_cost).Int("iterations", (long long)res.solver_iterations).EndObject();
+  w.BeginObject("time_s").Number("descriptors", res.time_descriptors_s).Number("retrieval", res.time_retrieval_s);
+  w.Number("registration", res.time_registration_s).Number("optimisation", res.time_optimisation_s);
+  w.Number("total", res.time_total_s).EndObject();
+  w.String("robust_loss", cfg.robust_loss).Int("peak_rss_bytes", (long long)PeakRssBytes()).EndObject();
+  io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) { os << w.str(); });
 }
 
 // report.md: the same for a reader.
