@@ -523,18 +523,20 @@ TEST(Yaml, SectionPartialKeysAndFlatDottedKeys) {
   EXPECT_EQ(d.voxel_m, 0.5);
 }
 
-// io::json: Quote writes the short escapes and \u00XX for the other control characters; Parse
-// reads every string Quote writes back unchanged, and the escapes only readers meet (\/ \b \f).
-TEST(Json, QuoteEscapesControlCharactersAndParseReadsThemBack) {
-  EXPECT_EQ(io::json::Quote("a\"b\\c\nd\re\tf\x01g/h"), "\"a\\\"b\\\\c\\nd\\re\\tf\\u0001g/h\"");
+// io::json: the writer escapes every control character, and Parse reads each string it writes
+// back unchanged, and the escapes only readers meet (\/ \b \f); bytes that are not UTF-8 are
+// written as U+FFFD.
+TEST(Json, WrittenStringsEscapeControlCharactersAndParseReadsThemBack) {
   std::string all;
   for (int c = 1; c < 128; ++c) all += char(c);
-  const io::json::Value v = io::json::Parse("{\"k\": " + io::json::Quote(all) + "}", "test");
+  io::json::Writer w;
+  w.BeginObject().String("k", all).String("s", "a\"b\\c\nd\x01").String("bad", "a\xff").EndObject();
+  test::ExpectContains(w.str(), {"\"a\\\"b\\\\c\\nd\\u0001\"", "\"a\xef\xbf\xbd\""});
+  const io::json::Value v = io::json::Parse(w.str(), "test");
   ASSERT_NE(v.Find("k"), nullptr);
   EXPECT_EQ(v.Find("k")->str, all);
   EXPECT_EQ(io::json::Parse("\"\\/\\b\\f\"", "test").str, "/\b\f");
   test::ExpectError([] { io::json::Parse("\"\\x\"", "where"); }, {"where", "offset 3", "after backslash"});
-  EXPECT_EQ(io::json::Quote("a\xff"), "\"a\xef\xbf\xbd\"");  // not UTF-8: U+FFFD
 }
 
 // A document nested deeper than the parser allows is an error, not a stack overflow; the writer

@@ -55,7 +55,7 @@ Value ToValue(const Json& j) {
   return v;
 }
 
-// A string as a JSON literal; bytes that are not UTF-8 become U+FFFD.
+// `j` as text; bytes of its strings that are not UTF-8 become U+FFFD.
 std::string Dump(const Json& j, int indent) { return j.dump(indent, ' ', false, Json::error_handler_t::replace); }
 
 }  // namespace
@@ -73,8 +73,6 @@ Value Parse(const std::string& text, const std::string& where) {
 }
 
 Value ParseFile(const std::string& path) { return Parse(ReadFileText(path), path); }
-
-std::string Quote(const std::string& s) { return Dump(Json(s), -1); }
 
 // The document a Writer builds: its root and the containers begun and not yet ended.
 struct Writer::Tree {

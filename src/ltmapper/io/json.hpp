@@ -1,6 +1,6 @@
 // ltmapper io: the one JSON writer and reader of the project (stage reports, eval reports, map
-// objects): a small value, parser, pretty writer and the string quoting every hand-laid-out
-// report uses, on nlohmann-json (its header only in json.cpp).
+// objects): a small value, parser and pretty writer, on nlohmann-json (its header only in
+// json.cpp).
 #pragma once
 
 #include "ltmapper/core/core.hpp"
@@ -58,9 +58,5 @@ class Writer {
   Writer& Close();
   std::unique_ptr<Tree> tree_;
 };
-
-// A JSON string literal: quotes, backslash and control characters escaped; bytes that are not
-// UTF-8 become U+FFFD.
-std::string Quote(const std::string& s);
 
 }  // namespace ltm::io::json
