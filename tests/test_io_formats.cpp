@@ -537,6 +537,8 @@ TEST(Json, WrittenStringsEscapeControlCharactersAndParseReadsThemBack) {
   EXPECT_EQ(v.Find("k")->str, all);
   EXPECT_EQ(io::json::Parse("\"\\/\\b\\f\"", "test").str, "/\b\f");
   test::ExpectError([] { io::json::Parse("\"\\x\"", "where"); }, {"where", "offset 3", "after backslash"});
+  test::ExpectError([] { io::json::Parse("[1e999]", "big.json"); }, {"big.json", "JSON error"});
+  test::ExpectError([] { io::json::Parse("{\"a\": 1} x", "tail.json"); }, {"tail.json", "offset"});
 }
 
 // A document nested deeper than the parser allows is an error, not a stack overflow; the writer

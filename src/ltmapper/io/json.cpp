@@ -69,6 +69,8 @@ Value Parse(const std::string& text, const std::string& where) {
     return ToValue(Json::parse(text, depth_limit));
   } catch (const Json::parse_error& e) {
     throw Error(where + ": JSON error at offset " + std::to_string(e.byte) + ": " + e.what());
+  } catch (const Json::exception& e) {  // e.g. a number beyond double's range
+    throw Error(where + ": JSON error: " + e.what());
   }
 }
 

@@ -8,6 +8,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -44,6 +45,10 @@ class Writer {
   Writer& EndArray();
   Writer& Number(const std::string& key, double v);
   Writer& Int(const std::string& key, long long v);
+  template <class I, class = std::enable_if_t<std::is_integral_v<I> && !std::is_same_v<I, bool>>>
+  Writer& Int(const std::string& key, I v) {  // any count or size
+    return Int(key, static_cast<long long>(v));
+  }
   Writer& String(const std::string& key, const std::string& v);
   Writer& Bool(const std::string& key, bool v);
   Writer& Null(const std::string& key);

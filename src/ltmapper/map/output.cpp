@@ -252,7 +252,7 @@ void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
   w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner);
   w.BeginArray("exists_in").Int(o.exists_in).EndArray().Int("track", o.track).BeginArray("track_sessions");
   for (const int s : o.track_sessions) w.Int(s);
-  w.EndArray().Int("points", (long long)o.points).Number("confidence", Mm(o.confidence));
+  w.EndArray().Int("points", o.points).Number("confidence", Mm(o.confidence));
   Vec(w, "centroid", o.centroid);
   Vec(w, "min", o.lo);
   Vec(w, "max", o.hi);

@@ -42,8 +42,12 @@ struct MarkdownDocument {
     cmark_gfm_core_extensions_ensure_registered();
     parser = cmark_parser_new(CMARK_OPT_DEFAULT);
     if (!parser) throw Error("markdown: cmark-gfm could not make a parser");
-    if (cmark_syntax_extension* table = cmark_find_syntax_extension("table"))
-      cmark_parser_attach_syntax_extension(parser, table);
+    cmark_syntax_extension* table = cmark_find_syntax_extension("table");
+    if (!table) {
+      cmark_parser_free(parser);
+      throw Error("markdown: cmark-gfm has no table extension (libcmark-gfm-extensions)");
+    }
+    cmark_parser_attach_syntax_extension(parser, table);
     cmark_parser_feed(parser, markdown.data(), markdown.size());
     root = cmark_parser_finish(parser);
   }

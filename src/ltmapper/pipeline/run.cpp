@@ -214,13 +214,13 @@ void WriteRunReport(const std::string& out_dir, const RunReport& report) {
   const std::string text = FormatRunReport(report);
   io::WriteFileAtomic((fs::path(out_dir) / "run_report.md").string(), [&](std::ostream& os) { os << text; });
   io::json::Writer w;
-  w.BeginObject().Int("sessions", (long long)report.sessions.size()).Int("aligned", (long long)report.aligned.size());
-  w.Int("not_aligned", (long long)report.not_aligned.size()).BeginObject("stages");
+  w.BeginObject().Int("sessions", report.sessions.size()).Int("aligned", report.aligned.size());
+  w.Int("not_aligned", report.not_aligned.size()).BeginObject("stages");
   for (const auto& st : report.stages)
     w.BeginObject(st.stage).Bool("skipped", st.skipped).Number("seconds", st.seconds).EndObject();
-  w.EndObject().Int("live_points", (long long)report.map_points_live).Int("meta_points", (long long)report.map_points_meta);
-  w.Int("objects", (long long)report.objects).Int("store_bytes", (long long)report.store_bytes);
-  w.Number("seconds", report.seconds).Int("peak_rss_bytes", (long long)report.peak_rss_bytes).EndObject();
+  w.EndObject().Int("live_points", report.map_points_live).Int("meta_points", report.map_points_meta);
+  w.Int("objects", report.objects).Int("store_bytes", report.store_bytes);
+  w.Number("seconds", report.seconds).Int("peak_rss_bytes", report.peak_rss_bytes).EndObject();
   io::WriteFileAtomic((fs::path(out_dir) / "run_report.json").string(), [&](std::ostream& os) { os << w.str(); });
 }
 

@@ -201,19 +201,19 @@ std::pair<LdStats, std::vector<int>> DetectPair(const SessionData& c, const Sess
 int PairCentral(const RemovertConfig& cfg, int q) { return cfg.pairs == "consecutive" ? q - 1 : 0; }
 
 void WriteHdJson(io::json::Writer& w, const std::string& name, std::size_t keyframes, const HdStats& h) {
-  w.BeginObject().String("name", name).Int("keyframes", (long long)keyframes).Int("map_points", (long long)h.map_points);
-  w.Int("candidates", (long long)h.candidates).Int("reverted", (long long)h.reverted).Int("removed", (long long)h.removed);
-  w.Int("dilated", (long long)h.dilated).BeginArray("removed_per_resolution");
-  for (const auto n : h.removed_per_resolution) w.Int((long long)n);
+  w.BeginObject().String("name", name).Int("keyframes", keyframes).Int("map_points", h.map_points);
+  w.Int("candidates", h.candidates).Int("reverted", h.reverted).Int("removed", h.removed);
+  w.Int("dilated", h.dilated).BeginArray("removed_per_resolution");
+  for (const auto n : h.removed_per_resolution) w.Int(n);
   w.EndArray().Number("seconds_map", h.seconds_map).Number("seconds_votes", h.seconds_votes).EndObject();
 }
 
 void WritePairJson(io::json::Writer& w, int c, int q, const LdStats& l, const std::vector<int>& new_keyframes) {
   w.BeginObject().Int("central", c).Int("query", q).String("dir", io::layout::PairDirName(c, q));
-  w.Int("nd_strong", (long long)l.nd_strong).Int("nd_weak", (long long)l.nd_weak);
-  w.Int("pd_strong", (long long)l.pd_strong).Int("pd_weak", (long long)l.pd_weak);
-  w.Int("pd_unobserved", (long long)l.pd_unobserved).Int("nd_unobserved", (long long)l.nd_unobserved);
-  w.Int("nd_residue", (long long)l.nd_residue).Int("pd_residue", (long long)l.pd_residue).Number("seconds", l.seconds);
+  w.Int("nd_strong", l.nd_strong).Int("nd_weak", l.nd_weak);
+  w.Int("pd_strong", l.pd_strong).Int("pd_weak", l.pd_weak);
+  w.Int("pd_unobserved", l.pd_unobserved).Int("nd_unobserved", l.nd_unobserved);
+  w.Int("nd_residue", l.nd_residue).Int("pd_residue", l.pd_residue).Number("seconds", l.seconds);
   w.BeginArray("new_keyframes");
   for (const int k : new_keyframes) w.Int(k);
   w.EndArray().EndObject();
@@ -227,7 +227,7 @@ void WriteStageReport(const std::string& path, const StageReport& rep, const std
   w.EndArray().BeginArray("pairs");
   for (std::size_t p = 0; p < rep.ld.size(); ++p)
     WritePairJson(w, rep.pairs[p].first, rep.pairs[p].second, rep.ld[p], rep.new_keyframes[p]);
-  w.EndArray().Number("seconds", rep.seconds).Int("peak_rss_bytes", (long long)rep.peak_rss_bytes);
+  w.EndArray().Number("seconds", rep.seconds).Int("peak_rss_bytes", rep.peak_rss_bytes);
   w.Int("threads", threads).EndObject();
   io::WriteFileAtomic(path, [&](std::ostream& os) { os << w.str(); });
 }

@@ -93,11 +93,11 @@ void WriteLoopsCsv(const std::vector<Session>& sessions, const SlamResult& res, 
 
 // report.json's record of session s.
 void SessionJson(io::json::Writer& w, const Session& session, const SessionAlignment& a) {
-  w.BeginObject().String("name", a.name).String("dir", session.dir).Int("keyframes", (long long)session.keyframes.size());
-  w.Bool("aligned", a.aligned).String("reason", a.reason).Int("sc_candidates", (long long)a.sc_candidates);
-  w.Int("loops_verified", (long long)a.loops_verified).Int("loops_accepted", (long long)a.loops_accepted);
-  w.Int("radius_loops_accepted", (long long)a.radius_loops).Int("own_loops_accepted", (long long)a.own_loops);
-  w.Int("registered_steps", (long long)a.registered.size());
+  w.BeginObject().String("name", a.name).String("dir", session.dir).Int("keyframes", session.keyframes.size());
+  w.Bool("aligned", a.aligned).String("reason", a.reason).Int("sc_candidates", a.sc_candidates);
+  w.Int("loops_verified", a.loops_verified).Int("loops_accepted", a.loops_accepted);
+  w.Int("radius_loops_accepted", a.radius_loops).Int("own_loops_accepted", a.own_loops);
+  w.Int("registered_steps", a.registered.size());
   if (a.aligned)
     PoseJson(w, "anchor", a.anchor);
   else
@@ -114,14 +114,14 @@ void WriteReportJson(const std::vector<Session>& sessions, const SlamResult& res
   w.BeginArray("sessions");
   for (std::size_t s = 0; s < sessions.size(); ++s) SessionJson(w, sessions[s], res.sessions[s]);
   w.EndArray();
-  w.Int("registrations", (long long)res.registrations).Number("refine_radius_m", res.refine_radius_m);
+  w.Int("registrations", res.registrations).Number("refine_radius_m", res.refine_radius_m);
   w.Number("max_translation_m", res.max_translation_m);
   w.BeginObject("solver").Bool("usable", res.solution_usable).Number("initial_cost", res.initial_cost);
-  w.Number("final_cost", res.final_cost).Int("iterations", (long long)res.solver_iterations).EndObject();
+  w.Number("final_cost", res.final_cost).Int("iterations", res.solver_iterations).EndObject();
   w.BeginObject("time_s").Number("descriptors", res.time_descriptors_s).Number("retrieval", res.time_retrieval_s);
   w.Number("registration", res.time_registration_s).Number("optimisation", res.time_optimisation_s);
   w.Number("total", res.time_total_s).EndObject();
-  w.String("robust_loss", cfg.robust_loss).Int("peak_rss_bytes", (long long)PeakRssBytes()).EndObject();
+  w.String("robust_loss", cfg.robust_loss).Int("peak_rss_bytes", PeakRssBytes()).EndObject();
   io::WriteFileAtomic((fs::path(out_dir) / "report.json").string(), [&](std::ostream& os) { os << w.str(); });
 }
 
