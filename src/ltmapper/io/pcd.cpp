@@ -107,7 +107,49 @@ void CheckFields(const std::string& path, const PcdHeader& h) {
   }
 }
 
-PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
+// One header entry `key` (the rest of its line in `ss`) into h. FIELDS / COLUMNS, SIZE, TYPE,
+// COUNT, WIDTH, HEIGHT, POINTS; VERSION is read and ignored; anything else is an error.
+void ParseEntry(const std::string& path, std::size_t lineno, const std::string& key, std::istringstream& ss,
+                PcdHeader& h) {
+  if (key == "VERSION") return;
+  if (key == "VIEWPOINT") {
+    for (double v; ss >> v;) h.viewpoint.push_back(v);
+    if (h.viewpoint.size() != 7) throw Error(path, lineno, "VIEWPOINT needs 7 numbers: tx ty tz qw qx qy qz");
+  } else if (key == "FIELDS" || key == "COLUMNS") {
+    for (std::string f; ss >> f;) h.fields.push_back(f);
+  } else if (key == "SIZE") {
+    h.sizes = ParseInts(path, lineno, key, ss);
+  } else if (key == "TYPE") {
+    for (std::string t; ss >> t;) h.types.push_back(t.empty() ? '?' : t[0]);
+  } else if (key == "COUNT") {
+    h.counts = ParseInts(path, lineno, key, ss);
+  } else if (key == "WIDTH") {
+    h.width = ParseCount(path, lineno, key, ss);
+  } else if (key == "HEIGHT") {
+    h.height = ParseCount(path, lineno, key, ss);
+  } else if (key == "POINTS") {
+    h.points = ParseCount(path, lineno, key, ss);
+  } else {
+    throw Error(path, lineno, "unknown PCD header entry '" + key + "'");
+  }
+}
+
+// The DATA line (its type in `ss`): the data start right after it, or at the end of the file
+// when DATA was the last line without a newline (no data at all).
+void ParseData(std::size_t lineno, std::istringstream& ss, std::ifstream& in, PcdHeader& h) {
+  ss >> h.data;
+  const auto pos = in.tellg();
+  h.data_offset = pos < 0 ? 0 : std::size_t(pos);
+  h.header_lines = lineno;
+  if (pos < 0) {
+    in.clear();
+    in.seekg(0, std::ios::end);
+    h.data_offset = std::size_t(in.tellg());
+  }
+}
+
+// The header's lines up to and including DATA, as written (checked by CheckHeader).
+PcdHeader ReadHeaderLines(const std::string& path, std::ifstream& in) {
   PcdHeader h;
   std::string line;
   std::size_t lineno = 0;
@@ -122,41 +164,18 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
       continue;
     }
     if (key[0] == '#') continue;
-    if (key == "VERSION") continue;
-    if (key == "VIEWPOINT") {
-      for (double v; ss >> v;) h.viewpoint.push_back(v);
-      if (h.viewpoint.size() != 7) throw Error(path, lineno, "VIEWPOINT needs 7 numbers: tx ty tz qw qx qy qz");
-      continue;
-    }
-    if (key == "FIELDS" || key == "COLUMNS") {
-      for (std::string f; ss >> f;) h.fields.push_back(f);
-    } else if (key == "SIZE") {
-      h.sizes = ParseInts(path, lineno, key, ss);
-    } else if (key == "TYPE") {
-      for (std::string t; ss >> t;) h.types.push_back(t.empty() ? '?' : t[0]);
-    } else if (key == "COUNT") {
-      h.counts = ParseInts(path, lineno, key, ss);
-    } else if (key == "WIDTH") {
-      h.width = ParseCount(path, lineno, key, ss);
-    } else if (key == "HEIGHT") {
-      h.height = ParseCount(path, lineno, key, ss);
-    } else if (key == "POINTS") {
-      h.points = ParseCount(path, lineno, key, ss);
-    } else if (key == "DATA") {
-      ss >> h.data;
-      const auto pos = in.tellg();
-      h.data_offset = pos < 0 ? 0 : std::size_t(pos);
-      h.header_lines = lineno;
-      if (pos < 0) {  // DATA was the last line without a newline: no data at all
-        in.clear();
-        in.seekg(0, std::ios::end);
-        h.data_offset = std::size_t(in.tellg());
-      }
+    if (key == "DATA") {
+      ParseData(lineno, ss, in, h);
       break;
-    } else {
-      throw Error(path, lineno, "unknown PCD header entry '" + key + "'");
     }
+    ParseEntry(path, lineno, key, ss, h);
   }
+  return h;
+}
+
+// A header's entries against each other: a DATA type, FIELDS with a SIZE, TYPE and COUNT each
+// (CheckFields), WIDTH, and POINTS = WIDTH * HEIGHT; HEIGHT 1 and COUNTs 1 where absent.
+void CheckHeader(const std::string& path, PcdHeader& h) {
   if (h.data.empty()) throw Error(path + ": not a PCD file (no DATA line in the header)");
   if (h.data != "ascii" && h.data != "binary" && h.data != "binary_compressed")
     throw Error(path, h.header_lines, "unknown PCD DATA type '" + h.data + "'");
@@ -171,6 +190,11 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   if (h.height != 0 && h.width > std::numeric_limits<long long>::max() / h.height)
     throw Error(path + ": PCD header WIDTH*HEIGHT " + std::to_string(h.width) + "*" + std::to_string(h.height) +
                 " is out of range");
+}
+
+// What PCL's reader needs of a header that ours does not (ascii and binary_compressed data are
+// read by PCL), then POINTS against WIDTH * HEIGHT.
+void CheckPoints(const std::string& path, PcdHeader& h) {
   // PCL's reader (ascii / binary_compressed data) dereferences null on a header line of only
   // whitespace (fuzz/fuzz_pcd: one "\r\n" line before a valid header); binary data is read here.
   if (h.blank_line && h.data != "binary")
@@ -184,6 +208,12 @@ PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
   if (h.points != h.width * h.height)
     throw Error(path + ": PCD header POINTS " + std::to_string(h.points) + " != WIDTH*HEIGHT " +
                 std::to_string(h.width * h.height));
+}
+
+PcdHeader ParseHeader(const std::string& path, std::ifstream& in) {
+  PcdHeader h = ReadHeaderLines(path, in);
+  CheckHeader(path, h);
+  CheckPoints(path, h);
   return h;
 }
 
