@@ -60,8 +60,8 @@ py::dict SensorToDict(const geometry::SensorModel& s) {
   return d;
 }
 
-void BindIo(py::module_& m) {
-  // ------------------------------------------------------------------------------ clouds
+// Point clouds: read and write PCD, PLY, KITTI .bin.
+void BindClouds(py::module_& m) {
   m.def(
       "read_cloud", [](const std::string& path) { return PointsToNumpy(io::ReadCloud(path)); }, py::arg("path"),
       "Reads a .pcd or KITTI .bin cloud as an (N,4) float32 array x y z intensity (NaN / Inf points dropped).");
@@ -86,8 +86,10 @@ void BindIo(py::module_& m) {
   m.def(
       "write_kitti_bin", [](const std::string& path, const py::object& cloud) { io::WriteKittiBin(path, CloudFromPython(cloud, path)); },
       py::arg("path"), py::arg("cloud"));
+}
 
-  // ------------------------------------------------------------------------------- poses
+// Pose files.
+void BindPoses(py::module_& m) {
   m.def(
       "read_kitti_poses", [](const std::string& path) { return PosesToNumpy(io::ReadKittiPoses(path)); }, py::arg("path"),
       "KITTI pose file (12 numbers per line) as an (N,4,4) float64 array.");
@@ -98,8 +100,10 @@ void BindIo(py::module_& m) {
   m.def(
       "read_transform", [](const std::string& path) { return PoseToNumpy(io::ReadTransform(path)); }, py::arg("path"),
       "A 3x4 / 4x4 rigid transform from a text file (e.g. KITTI's Tr) as a (4,4) array.");
+}
 
-  // ----------------------------------------------------------------------------- sessions
+// Session directories: load, inspect.
+void BindSessions(py::module_& m) {
   py::class_<Keyframe>(m, "Keyframe", "One keyframe of a session: index, pose in the session frame, scan file.")
       .def_readonly("index", &Keyframe::index)
       .def_readonly("cloud_path", &Keyframe::cloud_path)
@@ -182,8 +186,10 @@ void BindIo(py::module_& m) {
       "inspect_session",
       [](const std::string& dir, bool read_scans) { return io::FormatSessionInfo(io::InspectSession(dir, read_scans)); },
       py::arg("dir"), py::arg("read_scans") = true, "What `ltmapper info` prints about a session directory.");
+}
 
-  // ------------------------------------------------------------------------------- sensor
+// The sensor model: presets, beam tables, estimation from scans.
+void BindSensor(py::module_& m) {
   py::class_<geometry::SensorModel>(m, "SensorModel", "What a LiDAR samples: beam elevations, azimuth step.")
       .def_readonly("source", &geometry::SensorModel::source)
       .def_readonly("ring_based", &geometry::SensorModel::ring_based)
@@ -221,6 +227,14 @@ void BindIo(py::module_& m) {
       },
       py::arg("scans"), py::arg("min_range_m") = 3.0, py::arg("bin_deg") = 0.02, py::arg("ring_fill_max") = 0.5,
       "Estimates the sensor from a list of (N,3|4) scans in the sensor frame.");
+}
+
+// Files, poses, sessions and the sensor model.
+void BindIo(py::module_& m) {
+  BindClouds(m);
+  BindPoses(m);
+  BindSessions(m);
+  BindSensor(m);
 }
 
 }  // namespace

@@ -145,10 +145,8 @@ std::vector<std::string> Strings(const py::object& obj) {
   return out;
 }
 
-}  // namespace
-
-void BindStages(py::module_& m) {
-  // ------------------------------------------------------------------------------ configs
+// The stages' config classes: read, write, validate.
+void BindConfigs(py::module_& m) {
   BindConfig<sim::SimConfig>(m, "SimConfig", "Simulator parameters (config/params_sim.yaml).",
                              [](const sim::SimConfig& c, const std::string& w) { sim::CheckConfig(c, w); })
       .def_static("tiny", &sim::TinyConfig, "The tiny test scenario (16 beams x 360 columns, 2 sessions x 15 keyframes).");
@@ -163,8 +161,10 @@ void BindStages(py::module_& m) {
                                [](const eval::EvalConfig& c, const std::string& w) { c.Validate(w); });
   BindConfig<pipeline::RunConfig>(m, "RunConfig", "`ltmapper run` parameters (config/params_run.yaml).",
                                   [](const pipeline::RunConfig& c, const std::string& w) { ValidateConfig(c, w); });
+}
 
-  // ----------------------------------------------------------------------------------- sim
+// The simulator.
+void BindSim(py::module_& m) {
   m.def(
       "simulate",
       [](const sim::SimConfig& cfg, const std::string& out, int threads) {
@@ -178,8 +178,10 @@ void BindStages(py::module_& m) {
       },
       py::arg("cfg"), py::arg("out"), py::arg("threads") = 0,
       "`ltmapper sim`: writes OUT/sessions/session_XX and OUT/truth (docs/FORMATS.md).");
+}
 
-  // --------------------------------------------------------------------------------- LT-SLAM
+// LT-SLAM.
+void BindSlam(py::module_& m) {
   m.def(
       "run_slam",
       [](const slam::SlamConfig& cfg, const std::string& central, const py::object& queries, const std::string& out,
@@ -197,8 +199,10 @@ void BindStages(py::module_& m) {
       },
       py::arg("cfg"), py::arg("central"), py::arg("queries"), py::arg("out"), py::arg("threads") = 0,
       "`ltmapper slam`: aligns the query session directories to the central one; writes OUT (aligned/).");
+}
 
-  // ------------------------------------------------------------------------------ LT-removert
+// LT-removert: HD removal and LD changes.
+void BindRemovert(py::module_& m) {
   m.def(
       "run_removert",
       [](const removert::RemovertConfig& cfg, const py::object& sessions, const py::object& poses_files,
@@ -272,8 +276,10 @@ void BindStages(py::module_& m) {
         return removert::WithSensor(cfg, kfs).sensor_model;
       },
       py::arg("cfg"), py::arg("session"), "The sensor model LT-removert uses for this session (sensor.model).");
+}
 
-  // -------------------------------------------------------------------------------- LT-map
+// LT-map: the store.
+void BindMap(py::module_& m) {
   m.def(
       "aligned_sessions",
       [](const std::string& aligned, const std::string& central) {
@@ -334,8 +340,10 @@ void BindStages(py::module_& m) {
       py::arg("sessions_root") = "", py::arg("central") = "", py::arg("threads") = 0,
       "`ltmapper map integrate`: integrates query sessions (default: every one not yet in the store; creates the "
       "store when missing). Returns one dict per integration step.");
+}
 
-  // ------------------------------------------------------------------------------ pipeline
+// `ltmapper run`.
+void BindPipeline(py::module_& m) {
   m.def(
       "run_pipeline",
       [](const pipeline::RunConfig& cfg, const py::object& sessions, const std::string& out, int threads,
@@ -353,6 +361,17 @@ void BindStages(py::module_& m) {
       py::arg("cfg"), py::arg("sessions"), py::arg("out"), py::arg("threads") = 0, py::arg("poses") = py::none(),
       "`ltmapper run`: LT-SLAM -> LT-removert -> LT-map into OUT (resumes finished stages). poses: one KITTI "
       "world-pose file per session (`run --poses`): the sessions placed by them, their rotation error measured.");
+}
+
+}  // namespace
+
+void BindStages(py::module_& m) {
+  BindConfigs(m);
+  BindSim(m);
+  BindSlam(m);
+  BindRemovert(m);
+  BindMap(m);
+  BindPipeline(m);
 }
 
 }  // namespace ltm::py_bind
