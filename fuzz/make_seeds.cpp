@@ -46,7 +46,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path out = argv[1];
-  for (const char* h : {"pcd", "ply", "g2o", "poses", "kitti_bin", "scd", "config", "blob"})
+  for (const char* h : {"pcd", "ply", "g2o", "poses", "kitti_bin", "scd", "config", "blob", "json"})
     fs::create_directories(out / h);
 
   const PointCloud c3 = Cloud(3, false), c5 = Cloud(5, true);
@@ -97,5 +97,11 @@ int main(int argc, char** argv) {
         << map::EncodeBlob(cloud, 0.01, 1.0);
   }
   std::ofstream(out / "blob/empty.blob", std::ios::binary) << map::EncodeBlob(PointCloud{}, 0.05, 0.5);
+
+  io::json::Writer report;  // shaped like a stage's report.json
+  report.BeginObject().String("stage", "removert").BeginArray("pairs").BeginObject().Int("central", 0).Int("query", 1);
+  report.String("dir", "pair_00_01").Number("seconds", 1.25).BeginArray("new_keyframes").Int(3).Int(7).EndArray();
+  report.EndObject().EndArray().Bool("ok", true).Null("none").String("text", "a\"b\\c\n\u00e9").EndObject();
+  Text(out / "json/report.json", report.str());
   return 0;
 }

@@ -10,7 +10,7 @@ set -u
 build=${1:?usage: fuzz/run.sh BUILD_DIR [HARNESS...]}
 shift
 harnesses=("$@")
-[ ${#harnesses[@]} -eq 0 ] && harnesses=(pcd ply g2o poses kitti_bin scd config blob)
+[ ${#harnesses[@]} -eq 0 ] && harnesses=(pcd ply g2o poses kitti_bin scd config blob json)
 seconds=${FUZZ_SECONDS:-60}
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=$(cd "$build" && pwd)
