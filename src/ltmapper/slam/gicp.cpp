@@ -82,6 +82,10 @@ const GicpCloud::Plane& GicpCloud::PlaneAt(std::size_t i) const {
   return planes_[i];
 }
 
+void GicpCloud::PrepareAllPlanes() {
+  for (std::size_t i = 0; i < planes_.size(); ++i) PlaneAt(i);
+}
+
 namespace {
 // The normal equations of one GN step at T: H = sum J^T W J, g = sum J^T W r over the pairs
 // within max_corr (r = t - T s, J = dr/dxi = [ [Ts]x, -I ]).

@@ -22,7 +22,9 @@ using Vector6d = Eigen::Matrix<double, 6, 1>;
 
 // ------------------------------------------------------------------------------ GICP (gicp.cpp)
 // A cloud prepared for GICP: its kd-tree and per-point local planes of the k nearest
-// neighbours, each computed on first use (PlaneAt is not thread-safe: one registration per thread).
+// neighbours, each computed on first use (PlaneAt is not thread-safe: one registration per thread),
+// or all at once by PrepareAllPlanes (then PlaneAt only reads: the cloud may take part in several
+// registrations at once). A plane depends on the cloud alone, so either way gives the same.
 class GicpCloud {
  public:
   struct Plane {
@@ -35,6 +37,7 @@ class GicpCloud {
   GicpCloud(GicpCloud&&) noexcept;
   const PointCloud& cloud() const;
   const Plane& PlaneAt(std::size_t i) const;
+  void PrepareAllPlanes();
   int neighbours() const { return k_; }  // k of the local planes
   std::unique_ptr<geometry::KdTree> tree;
 
@@ -58,6 +61,10 @@ struct GicpResult {
 };
 // GICP of `source` onto `target` from `guess` (T_target_source).
 GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pose& guess, const GicpOptions& opt);
+// The fine stage alone, on clouds prepared once for several registrations (GicpCloud, planes of
+// cfg.reg_covariance_neighbours): the same result as RegisterGicp with the coarse stage off.
+RegistrationResult RegisterGicp(const GicpCloud& target, const GicpCloud& source, const Pose& T_target_source_init,
+                                const SlamConfig& cfg);
 // The inlier ratio of `source` under T_target_source against `target` without registering: the
 // share of source points with a target point within InlierRadius, as the verification counts it.
 double OverlapRatio(const GicpCloud& target, const PointCloud& source, const Pose& T_target_source,

@@ -801,11 +801,45 @@ StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResul
   return h;
 }
 
+// Keyframes whose GICP clouds (kd-tree and the plane of every point: GicpCloud::PrepareAllPlanes)
+// are held at once while their steps are registered: each cloud takes part in up to four
+// registrations (two steps, two skips), and its planes are made once for all of them.
+constexpr std::size_t kPreparedSteps = 32;
+
+// The steps and skips from keyframes [w, we) of the block starting at b (off: its scans off the
+// ground), on clouds prepared once for the keyframes w .. we + 1.
+void RegisterStepsFrom(const std::vector<Keyframe>& kfs, const std::vector<PointCloud>& off, std::size_t b,
+                       std::size_t w, std::size_t we, const SlamConfig& cfg, int threads,
+                       std::vector<std::optional<RegistrationResult>>* steps,
+                       std::vector<std::optional<RegistrationResult>>* skips) {
+  const std::size_t last = std::min(kfs.size() - 1, we + 1);
+  std::vector<std::unique_ptr<GicpCloud>> prepared(last - w + 1);
+  ParallelFor(prepared.size(), threads, [&](std::size_t i) {
+    const PointCloud& c = off[w + i - b];
+    if (c.size() <= std::size_t(cfg.reg_covariance_neighbours)) return;  // too few to register (RegisterGicp)
+    prepared[i] = std::make_unique<GicpCloud>(c, cfg.reg_covariance_neighbours);
+    prepared[i]->PrepareAllPlanes();
+  });
+  const auto registered = [&](std::size_t from, std::size_t to) -> std::optional<RegistrationResult> {
+    if (!prepared[from - w] || !prepared[to - w]) return std::nullopt;
+    const Pose guess = kfs[from].T_session_sensor.inverse() * kfs[to].T_session_sensor;
+    RegistrationResult r = RegisterGicp(*prepared[from - w], *prepared[to - w], guess, cfg);
+    if (!r.accepted) return std::nullopt;
+    return r;
+  };
+  ParallelFor(2 * (we - w), threads, [&](std::size_t i) {
+    const std::size_t k = w + i / 2;
+    if (i % 2 == 0) (*steps)[k] = registered(k, k + 1);
+    else if (k + 2 < kfs.size()) (*skips)[k] = registered(k, k + 2);
+  });
+}
+
 // Keyframe k + 1 registered onto k (*steps, k < n) and k + 2 onto k (*skips, k < n - 1) of a
 // session's keyframes `kfs`, scans from `scan` (downsampled, sensor frame), from the odometry's
 // relative pose, off the ground (OffTheGround: the steps measure the heading alone);
 // a registration not accepted is left empty. In blocks of keyframes, each scan's ground found once
-// per block.
+// per block; within a block, windows of kPreparedSteps keyframes on clouds prepared once
+// (RegisterStepsFrom).
 void RegisterSteps(const std::vector<Keyframe>& kfs, const std::function<std::shared_ptr<const PointCloud>(std::size_t)>& scan,
                    const SlamConfig& cfg, int threads, std::vector<std::optional<RegistrationResult>>* steps,
                    std::vector<std::optional<RegistrationResult>>* skips) {
@@ -815,17 +849,8 @@ void RegisterSteps(const std::vector<Keyframe>& kfs, const std::function<std::sh
     const std::size_t e = std::min(n, b + kBlock), last = std::min(kfs.size() - 1, e + 1);
     std::vector<PointCloud> off(last - b + 1);  // off the ground
     ParallelFor(off.size(), threads, [&](std::size_t i) { off[i] = OffTheGround(*scan(b + i), Up(kfs[b + i]), cfg); });
-    const auto registered = [&](std::size_t from, std::size_t to) -> std::optional<RegistrationResult> {
-      const Pose guess = kfs[from].T_session_sensor.inverse() * kfs[to].T_session_sensor;
-      RegistrationResult r = RegisterGicp(off[from - b], off[to - b], guess, cfg);
-      if (!r.accepted) return std::nullopt;
-      return r;
-    };
-    ParallelFor(2 * (e - b), threads, [&](std::size_t i) {
-      const std::size_t k = b + i / 2;
-      if (i % 2 == 0) (*steps)[k] = registered(k, k + 1);
-      else if (k + 2 < kfs.size()) (*skips)[k] = registered(k, k + 2);
-    });
+    for (std::size_t w = b; w < e; w += kPreparedSteps)
+      RegisterStepsFrom(kfs, off, b, w, std::min(e, w + kPreparedSteps), cfg, threads, steps, skips);
   }
 }
 

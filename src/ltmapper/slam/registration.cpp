@@ -242,27 +242,23 @@ PointCloud OffTheGround(const PointCloud& cloud, const Eigen::Vector3d& up, cons
   return cloud.select(keep);
 }
 
-RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
-                                const Pose& T_target_source_init, const SlamConfig& cfg) {
-  RegistrationResult r;
+namespace {
+// Why clouds of these sizes cannot be registered (empty when they can): fewer points than a
+// local plane needs.
+std::string TooFewPoints(std::size_t target, std::size_t source, const SlamConfig& cfg) {
   const std::size_t min_points = static_cast<std::size_t>(cfg.reg_covariance_neighbours) + 1;
-  if (target.size() < min_points || source.size() < min_points) {
-    r.reason = "too few points for registration (" + std::to_string(target.size()) + " / " +
-               std::to_string(source.size()) + ")";
-    return r;
-  }
-  Pose guess = T_target_source_init;
-  if (cfg.reg_coarse_correspondence_m > 0.0) {
-    r.reason = CoarseStage(target, source, cfg, guess, &r.overlap);
-    if (!r.reason.empty()) return r;
-  }
-  const GicpCloud tgt(target, cfg.reg_covariance_neighbours), src(source, cfg.reg_covariance_neighbours);
+  if (target >= min_points && source >= min_points) return {};
+  return "too few points for registration (" + std::to_string(target) + " / " + std::to_string(source) + ")";
+}
+
+// The fine stage from `guess`, and the gates' measures with its final pose.
+RegistrationResult FineStage(const GicpCloud& tgt, const GicpCloud& src, Pose guess, const Pose& T_target_source_init,
+                             const SlamConfig& cfg) {
+  RegistrationResult r;
   r.converged = RunGicp(tgt, src, cfg.reg_max_correspondence_m, cfg, guess);
   r.T_target_source = Pose::Identity();
   r.T_target_source.linear() = Eigen::Quaterniond(guess.linear()).normalized().toRotationMatrix();
   r.T_target_source.translation() = guess.translation();
-
-  // The gates' measures with the final pose.
   r.inlier_radius_m = InlierRadius(cfg.reg_voxel_m, cfg.reg_range_noise_m);
   const Inliers in = CountInliers(tgt, src, r.T_target_source, r.inlier_radius_m, cfg.reg_range_noise_m);
   r.overlap = in.ratio;
@@ -275,6 +271,29 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
   r.reason = Verdict(r, T_target_source_init, cfg);
   r.accepted = r.reason.empty();
   return r;
+}
+}  // namespace
+
+RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& source,
+                                const Pose& T_target_source_init, const SlamConfig& cfg) {
+  RegistrationResult r;
+  r.reason = TooFewPoints(target.size(), source.size(), cfg);
+  if (!r.reason.empty()) return r;
+  Pose guess = T_target_source_init;
+  if (cfg.reg_coarse_correspondence_m > 0.0) {
+    r.reason = CoarseStage(target, source, cfg, guess, &r.overlap);
+    if (!r.reason.empty()) return r;
+  }
+  const GicpCloud tgt(target, cfg.reg_covariance_neighbours), src(source, cfg.reg_covariance_neighbours);
+  return FineStage(tgt, src, guess, T_target_source_init, cfg);
+}
+
+RegistrationResult RegisterGicp(const GicpCloud& target, const GicpCloud& source, const Pose& T_target_source_init,
+                                const SlamConfig& cfg) {
+  RegistrationResult r;
+  r.reason = TooFewPoints(target.cloud().size(), source.cloud().size(), cfg);
+  if (!r.reason.empty()) return r;
+  return FineStage(target, source, T_target_source_init, T_target_source_init, cfg);
 }
 
 }  // namespace ltm::slam
