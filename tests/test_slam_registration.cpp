@@ -13,6 +13,7 @@
 #include <cmath>
 #include <functional>
 #include <random>
+#include <thread>
 
 using namespace ltm;
 using namespace ltm::slam;
@@ -41,6 +42,35 @@ TEST(SlamRegistration, RecoversSyntheticOffset) {
   EXPECT_LT(r.plane_z, 1.0);
   EXPECT_LE(r.plane_tail, r.plane_tail_bound);
   EXPECT_GT(r.overlap, 0.8);
+}
+
+// Clouds prepared once (every plane made up front, as the keyframe steps use them, two
+// registrations sharing one at once) register exactly as the clouds given each time, coarse stage
+// off: a plane depends on its cloud alone.
+TEST(SlamRegistration, PreparedCloudsRegisterExactlyAsTheCloudsGiven) {
+  SlamConfig cfg;
+  cfg.reg_coarse_correspondence_m = 0.0;
+  const PointCloud world = test::SynthWorld(21);
+  const Pose Ta = test::MakePose(0, 0, 1.8, 0.1), Tb = test::MakePose(0.8, 0.1, 1.8, 0.15);
+  const PointCloud a = geometry::VoxelDownsample(*test::SynthScan(world, Ta, 40, 1), cfg.reg_voxel_m);
+  const PointCloud b = geometry::VoxelDownsample(*test::SynthScan(world, Tb, 40, 2), cfg.reg_voxel_m);
+  const Pose init = test::MakePose(0.7, 0.0, 0.0, 0.05);
+  const RegistrationResult given = RegisterGicp(a, b, init, cfg);
+  GicpCloud ta(a, cfg.reg_covariance_neighbours), tb(b, cfg.reg_covariance_neighbours);
+  ta.PrepareAllPlanes();
+  tb.PrepareAllPlanes();
+  RegistrationResult twice[2];
+  std::thread other([&] { twice[1] = RegisterGicp(ta, tb, init, cfg); });
+  twice[0] = RegisterGicp(ta, tb, init, cfg);
+  other.join();
+  ASSERT_TRUE(given.accepted) << given.reason;
+  for (const RegistrationResult& r : twice) {
+    EXPECT_TRUE(r.accepted) << r.reason;
+    EXPECT_TRUE(r.T_target_source.matrix() == given.T_target_source.matrix());
+    EXPECT_EQ(r.overlap, given.overlap);
+    EXPECT_EQ(r.plane_z, given.plane_z);
+    EXPECT_TRUE(r.fisher == given.fisher);
+  }
 }
 
 TEST(SlamRegistration, RejectsDifferentPlaces) {
