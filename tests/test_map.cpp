@@ -1268,16 +1268,22 @@ TEST(MapObjects, MovedContainerAndStableIds) {
   }
 }
 
-// Objects of one step whose delta `d` has one thing gone (strong ND) and one come (weak PD), under
-// `cfg`: both reported as the ends of one move where `moved`, else as disappeared and appeared.
-void ExpectOneMove(const KeyframeDelta& d, const MapConfig& cfg, bool moved, const std::string& label) {
-  test::TempDir tmp;
-  const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr, cfg);
-  ASSERT_EQ(objs.size(), 2u) << label;
-  for (const auto& o : objs)
-    EXPECT_EQ(o.change, moved ? "moved" : o.cls == PointClass::kNDStrong ? "disappeared" : "appeared")
-        << label << ": " << o.centroid.transpose() << " " << o.size.transpose() << " top " << o.height_above_ground
-        << " range " << o.range_m;
+// One step whose delta `d` has one thing gone (strong ND) and one come (weak PD), with the sensor's
+// sampling step `step` (a MapConfig field) at each of `fine_deg` and `coarse_deg`: the two are
+// disappeared and appeared at the fine step, the ends of one move at the coarse one.
+void ExpectOneMoveOnlyAtTheCoarseStep(const KeyframeDelta& d, double MapConfig::*step, double fine_deg,
+                                      double coarse_deg) {
+  for (const double deg : {fine_deg, coarse_deg}) {
+    test::TempDir tmp;
+    MapConfig cfg = Cfg();
+    cfg.*step = deg;
+    const auto objs = StepObjects(tmp, d.nd_strong, d, nullptr, cfg);
+    ASSERT_EQ(objs.size(), 2u) << deg << " deg";
+    for (const auto& o : objs)
+      EXPECT_EQ(o.change, deg == coarse_deg ? "moved" : o.cls == PointClass::kNDStrong ? "disappeared" : "appeared")
+          << deg << " deg: " << o.centroid.transpose() << " " << o.size.transpose() << " top "
+          << o.height_above_ground << " range " << o.range_m;
+  }
 }
 
 // A car gone and another, 0.5 m longer, come: no move where the sensor samples both finely enough
@@ -1288,11 +1294,7 @@ TEST(MapObjects, LookAlikesAreOneMovedObjectOnlyWithinTheSensorsSampling) {
   KeyframeDelta d;
   d.nd_strong = Car(8, 8, 2.f, 4.f, 1.5f);
   d.pd_weak = Car(-12, -4, 2.f, 4.5f, 1.5f);
-  for (const double azimuth_step_deg : {0.0, 1.0}) {
-    MapConfig cfg = Cfg();
-    cfg.object_sensor_azimuth_step_deg = azimuth_step_deg;
-    ExpectOneMove(d, cfg, azimuth_step_deg > 0.0, "columns " + std::to_string(azimuth_step_deg) + " deg");
-  }
+  ExpectOneMoveOnlyAtTheCoarseStep(d, &MapConfig::object_sensor_azimuth_step_deg, 0.0, 1.0);
 }
 
 // A fence 2.0 m tall gone and a wall 2.5 m tall come, 13 m from the keyframe: no move where the
@@ -1303,11 +1305,7 @@ TEST(MapObjects, ViewsWhoseTopsDifferByMoreThanOneRowAreNoMove) {
   KeyframeDelta d;
   d.nd_strong = Car(8, 8, 0.5f, 6.f, 2.f);
   d.pd_weak = Car(-12, -4, 0.5f, 6.f, 2.5f);
-  for (const double step_deg : {0.625, 2.0}) {
-    MapConfig cfg = Cfg();
-    cfg.object_sensor_step_deg = step_deg;
-    ExpectOneMove(d, cfg, step_deg > 1.0, "rows " + std::to_string(step_deg) + " deg");
-  }
+  ExpectOneMoveOnlyAtTheCoarseStep(d, &MapConfig::object_sensor_step_deg, 0.625, 2.0);
 }
 
 // Two containers of one step moved, each a short way; their boxes alike. Paired by size, each

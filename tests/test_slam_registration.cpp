@@ -71,6 +71,10 @@ TEST(SlamRegistration, PreparedCloudsRegisterExactlyAsTheCloudsGiven) {
     EXPECT_EQ(r.plane_z, given.plane_z);
     EXPECT_TRUE(r.fisher == given.fisher);
   }
+  SlamConfig coarse = cfg;  // the coarse stage needs the clouds themselves: an error, not skipped
+  coarse.reg_coarse_correspondence_m = SlamConfig().reg_coarse_correspondence_m;
+  ASSERT_GT(coarse.reg_coarse_correspondence_m, 0.0);
+  test::ExpectError([&] { RegisterGicp(ta, tb, init, coarse); }, {"fine stage alone", "coarse_correspondence_m"});
 }
 
 TEST(SlamRegistration, RejectsDifferentPlaces) {

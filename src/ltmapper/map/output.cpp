@@ -238,6 +238,13 @@ void WriteObjectRow(std::ostream& os, const MapObject& o) {
      << o.observed_fraction << ',' << o.twin_fraction << ',' << o.attached_fraction << ',' << o.box_seen_fraction;
 }
 
+// Object `id`'s cloud, relative to the objects folder (objects.json's "cloud").
+std::string ObjectCloudPath(int id) {
+  char name[64];
+  std::snprintf(name, sizeof(name), "clouds/object_%04d.pcd", id);
+  return name;
+}
+
 // A figure as objects.csv writes it: to the millimetre (3 decimals).
 double Mm(double v) { return std::round(v * 1e3) / 1e3; }
 
@@ -246,8 +253,6 @@ void Vec(io::json::Writer& w, const std::string& key, const Eigen::Vector3d& v) 
 }
 
 void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
-  char cloud[64];
-  std::snprintf(cloud, sizeof(cloud), "clouds/object_%04d.pcd", o.id);
   w.BeginObject().Int("id", o.id).Int("session", o.session).Int("reference", o.reference);
   w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner);
   w.BeginArray("exists_in").Int(o.exists_in).EndArray().Int("track", o.track).BeginArray("track_sessions");
@@ -261,7 +266,7 @@ void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
   w.Number("yaw_deg", Mm(o.yaw_rad * kRadToDeg));
   Vec(w, "size", o.size);
   w.EndObject().Number("ground_z", Mm(o.ground_z)).Number("height_above_ground", Mm(o.height_above_ground));
-  w.String("cloud", cloud).EndObject();
+  w.String("cloud", ObjectCloudPath(o.id)).EndObject();
 }
 
 }  // namespace
@@ -270,9 +275,7 @@ void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects,
   io::MakeDirs(dir + "/clouds");
   PointCloud all;
   for (const auto& o : objects) {
-    char name[64];
-    std::snprintf(name, sizeof(name), "/clouds/object_%04d.pcd", o.id);
-    WriteLabelledCloud(dir + name, o.cloud);
+    WriteLabelledCloud(dir + "/" + ObjectCloudPath(o.id), o.cloud);
     all.append(o.cloud);
   }
   WriteLabelledCloud(dir + "/objects.ply", all);

@@ -61,8 +61,12 @@ struct GicpResult {
 };
 // GICP of `source` onto `target` from `guess` (T_target_source).
 GicpResult AlignGicp(const GicpCloud& target, const GicpCloud& source, const Pose& guess, const GicpOptions& opt);
+// Whether a cloud of `points` points can take part in a registration: more than a local plane's
+// neighbours (cfg.reg_covariance_neighbours).
+bool Registrable(std::size_t points, const SlamConfig& cfg);
 // The fine stage alone, on clouds prepared once for several registrations (GicpCloud, planes of
-// cfg.reg_covariance_neighbours): the same result as RegisterGicp with the coarse stage off.
+// cfg.reg_covariance_neighbours): the same result as RegisterGicp with the coarse stage off (an
+// ltm::Error when cfg has it on: it needs the clouds, not their GICP preparation).
 RegistrationResult RegisterGicp(const GicpCloud& target, const GicpCloud& source, const Pose& T_target_source_init,
                                 const SlamConfig& cfg);
 // The inlier ratio of `source` under T_target_source against `target` without registering: the

@@ -33,6 +33,13 @@ constexpr int kReachSamples = 16;
 // A sensor leaving more than half a turn round it without a return sees no place from both sides.
 constexpr double kHalfTurnDeg = 180.0;
 
+// The upper median of non-empty `v` (reordered).
+double UpperMedian(std::vector<double>& v) {
+  const auto mid = v.begin() + long(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
 // Positions of up to kReachSamples keyframes spread evenly over a session of n keyframes.
 std::vector<int> SampledKeyframes(int n) {
   const int m = std::min(n, kReachSamples);
@@ -262,8 +269,7 @@ PairCandidates RetrievePair(const std::vector<std::vector<ScanContext>>& sc, con
     if (!q.empty()) best.push_back(q.front().sc_distance);
   }
   if (best.empty()) return p;
-  std::nth_element(best.begin(), best.begin() + best.size() / 2, best.end());
-  p.gate = best[best.size() / 2];
+  p.gate = UpperMedian(best);
   for (const auto& q : per_query) {
     for (const auto& l : q) {
       if (l.sc_distance < p.gate) p.ranked.push_back(l);
@@ -500,13 +506,11 @@ void UsePlaceCloudsWhereOneWay(const std::vector<Session>& sessions, CloudStore&
     std::vector<double> blind;
     for (const int k : SampledKeyframes(int(sessions[s].keyframes.size())))
       blind.push_back(WidestBlindArcDeg(*store.Get(int(s), k)));  // kept since OverlapReach read them
-    const std::size_t m = blind.size() / 2;
-    std::nth_element(blind.begin(), blind.begin() + long(m), blind.end());
-    if (blind[m] <= kHalfTurnDeg) continue;
+    const double median_deg = UpperMedian(blind);
+    if (median_deg <= kHalfTurnDeg) continue;
     store.UsePlaceClouds(int(s), reach_m);
     spdlog::info("slam: {}'s sensor looks one way ({:.0f} deg around it without a return): its keyframes are registered "
-                 "by place clouds (the keyframes behind each within {:.0f} m)", sessions[s].name,
-                 blind[m], reach_m);
+                 "by place clouds (the keyframes behind each within {:.0f} m)", sessions[s].name, median_deg, reach_m);
   }
 }
 
@@ -816,7 +820,7 @@ void RegisterStepsFrom(const std::vector<Keyframe>& kfs, const std::vector<Point
   std::vector<std::unique_ptr<GicpCloud>> prepared(last - w + 1);
   ParallelFor(prepared.size(), threads, [&](std::size_t i) {
     const PointCloud& c = off[w + i - b];
-    if (c.size() <= std::size_t(cfg.reg_covariance_neighbours)) return;  // too few to register (RegisterGicp)
+    if (!Registrable(c.size(), cfg)) return;  // its registrations stay empty, as RegisterGicp's "too few points"
     prepared[i] = std::make_unique<GicpCloud>(c, cfg.reg_covariance_neighbours);
     prepared[i]->PrepareAllPlanes();
   });

@@ -242,12 +242,14 @@ PointCloud OffTheGround(const PointCloud& cloud, const Eigen::Vector3d& up, cons
   return cloud.select(keep);
 }
 
+bool Registrable(std::size_t points, const SlamConfig& cfg) {
+  return points > static_cast<std::size_t>(cfg.reg_covariance_neighbours);
+}
+
 namespace {
-// Why clouds of these sizes cannot be registered (empty when they can): fewer points than a
-// local plane needs.
+// Why clouds of these sizes cannot be registered (empty when they can): Registrable.
 std::string TooFewPoints(std::size_t target, std::size_t source, const SlamConfig& cfg) {
-  const std::size_t min_points = static_cast<std::size_t>(cfg.reg_covariance_neighbours) + 1;
-  if (target >= min_points && source >= min_points) return {};
+  if (Registrable(target, cfg) && Registrable(source, cfg)) return {};
   return "too few points for registration (" + std::to_string(target) + " / " + std::to_string(source) + ")";
 }
 
@@ -290,6 +292,8 @@ RegistrationResult RegisterGicp(const PointCloud& target, const PointCloud& sour
 
 RegistrationResult RegisterGicp(const GicpCloud& target, const GicpCloud& source, const Pose& T_target_source_init,
                                 const SlamConfig& cfg) {
+  if (cfg.reg_coarse_correspondence_m > 0.0)
+    throw Error("RegisterGicp on prepared clouds is the fine stage alone: registration.coarse_correspondence_m must be 0");
   RegistrationResult r;
   r.reason = TooFewPoints(target.cloud().size(), source.cloud().size(), cfg);
   if (!r.reason.empty()) return r;
