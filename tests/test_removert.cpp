@@ -239,6 +239,56 @@ TEST(RemovertVotes, BeamTestAsksForABeamThatEndedNearThePoint) {
   EXPECT_EQ(pixel.Hit(0, 0), 1);
 }
 
+// The beam truth takes a return's along-ray tolerance from the surface the ray met, not only from
+// the point's: a grazing ray (sensor 1.8 m up, ground 40 m away) that ended on a curb's face 1.2 m
+// short of a point on the road behind it did not end on the point's surface, though the face's foot
+// lies within the tolerance of the road's plane. The same return on open road 1.2 m short of a point
+// (the ground's incidence: tol / cos 2.6 deg, capped at 2 m) did observe it.
+TEST(RemovertVotes, BeamTestReadsTheIncidenceOnTheSurfaceTheBeamMet) {
+  const Pose T = test::At(0, 0, 1.8);
+  auto world = [](double yaw_deg, double rho, double z) {
+    const double a = yaw_deg * M_PI / 180.0;
+    return Eigen::Vector3f(float(rho * std::cos(a)), float(rho * std::sin(a)), float(z));
+  };
+  // Points on the road 40 m out at azimuths 0 (behind a curb) and 30 deg (open road).
+  PointCloud pts;
+  for (double yaw : {0.0, 30.0}) {
+    const Eigen::Vector3f p = world(yaw, 40.0, 0.0);
+    pts.push_back(p.x(), p.y(), p.z());
+  }
+  // Each point's ray ended 1.2 m short of it.
+  auto scan = std::make_shared<PointCloud>();
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const Eigen::Vector3f ray = pts.points[i].xyz() - Eigen::Vector3f(0.f, 0.f, 1.8f);
+    const Eigen::Vector3f q = ray * (1.f - 1.2f / ray.norm());
+    scan->push_back(q.x(), q.y(), q.z());
+  }
+  // The scan's session's map: the road, and at azimuth 0 a curb face (0.15 m high, x = 38.8 m,
+  // across the ray) where that ray ended, sampled every 5 cm.
+  PointCloud map;
+  for (double x = 30.0; x <= 45.0; x += 0.2)
+    for (double y = -1.0; y <= 26.0; y += 0.2) map.push_back(float(x), float(y), x > 38.8 ? 0.15f : 0.f);
+  for (double y = -1.0; y <= 1.0; y += 0.05)
+    for (double z = 0.0; z <= 0.151; z += 0.05) map.push_back(38.8f, float(y), float(z));
+  WorldKeyframe kf;
+  kf.T_world_sensor = T;
+  kf.cloud = scan;
+  const std::vector<Eigen::Vector3f> up(pts.size(), Eigen::Vector3f::UnitZ());
+  const RemovertConfig cfg = test::ConfigFor();
+  removert::BeamTest beams;
+  removert::VisibilityOptions opt;
+  opt.normals = &up;
+  opt.beams = &beams;
+  const auto plane_only = removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt);
+  EXPECT_EQ(plane_only.beam_hits[0], 1);  // the point's plane alone: 1.2 m is within its 2 m
+  EXPECT_EQ(plane_only.beam_hits[1], 1);
+  const removert::detail::HitSurfaces hits(map, pts, beams, 1);
+  opt.hit_surfaces = &hits;
+  const auto v = removert::CountVisibility(pts, {kf}, {1.0}, cfg, 1, opt);
+  EXPECT_EQ(v.beam_hits[0], 0);  // the curb's face: 1.2 m is beyond its 0.3 m
+  EXPECT_EQ(v.beam_hits[1], 1);  // the road: as before
+}
+
 // The beam test's columns are one azimuth step wide: a cell keeps its nearest return, so a column
 // two steps wide (0.4 deg for a VLP-16's 0.2 deg) would hold two returns of a beam and lose the
 // farther. Here the return that ended on the ground 1 m beyond a point 33 m away shares a 0.4 deg

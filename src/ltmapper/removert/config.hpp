@@ -20,7 +20,9 @@ constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
 // in each, the return of the point's row and the nearest returns above and below it (within
 // span_deg), one of them on the point's plane (within tol_m), its ray
 // passing within that tolerance of the point and its return within the along-ray tolerance of
-// the point's place along it (tol / cos(incidence), at most grazing_max_m). A point between two
+// the point's place along it (tol / cos(incidence), at most grazing_max_m, at the incidence on the
+// point's plane and on the surface the beam met: the other session's map around its return,
+// detail::HitSurfaces; the truth reads the surface its ray hit). A point between two
 // beams that met its surface farther away (far ground between rings) was not sampled: unobserved;
 // it is "around" (both beams on its plane and the ray towards it meets the surface through them
 // within the along-ray tolerance, not in a trough behind a crest; or one on its plane and the

@@ -59,8 +59,9 @@ struct Visibility {
 // standing (optional, per point): the point stands on the other session's ground (a lower body,
 // Missing's kRawAboveTheirGround), whose plane its level normal may be: the level-ground rule of
 // `same` does not apply to it.
-// other_map (optional, ND): the keyframes' session map; with it, a point its own map drew twice
-// (a displaced copy of a surface both maps hold) is not seen through.
+// other_map (optional): the keyframes' session map; with it, the beam test reads the incidence on
+// the surfaces their beams met (HitSurfaces), and (ND) a point its own map drew twice (a displaced
+// copy of a surface both maps hold) is not seen through.
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                          int threads, bool own_pixel, const std::vector<bool>* standing = nullptr,

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <vector>
 
 namespace ltm::removert::detail {
@@ -183,6 +184,37 @@ class MultiResImage {
 // the first returns above and below a direction are the two beams around it.
 constexpr std::uint8_t kBeamEnded = 1, kBeamAround = 2, kBeamPassed = 4, kBeamThrough = 8,
                        kBeamNear = 16;  // ColumnImage::Observed
+// Where the beams of a session ended, in world coordinates: its map's points within reach of the
+// points asked (ReachM), each with the normal of its map within BeamTest::tol_m of it (planar
+// neighbourhoods only). The beam truth takes a return's along-ray tolerance from the incidence on
+// the surface the ray met (tol / cos, at most grazing_max_m): a grazing ray that ended on a curb's
+// face 1.5 m short of a point on the pavement behind it did not end on that point's surface, though
+// the face's foot lies on the point's plane.
+class HitSurfaces {
+ public:
+  HitSurfaces(const PointCloud& map, const PointCloud& points, const BeamTest& test, int threads);
+  ~HitSurfaces();
+  // [m] How far from a point a return the beam test accepts, and the map points its normal is fitted
+  // to, may lie: the ray within tol of the point, the return within grazing_max_m along it, the
+  // normal's neighbours within tol of the return.
+  static double ReachM(const BeamTest& test) { return test.grazing_max_m + 2.0 * test.tol_m; }
+  // |cos| of the angle between unit `dir` and the surface at `at` (world); false where no map point
+  // with a planar neighbourhood lies within tol of `at`.
+  bool Cosine(const Eigen::Vector3f& at, const Eigen::Vector3f& dir, float* cosine) const;
+
+ private:
+  float tol_;
+  std::unique_ptr<geometry::KdTree> tree_;
+  std::vector<Eigen::Vector3f> normals_;  // zero: no plane
+};
+// A point's sensor frame in the world, for HitSurfaces: the point (world) and the rotation from the
+// (firing) sensor frame to the world.
+struct PointInWorld {
+  const HitSurfaces* surfaces = nullptr;
+  Eigen::Vector3f at = Eigen::Vector3f::Zero();
+  Eigen::Matrix3f to_world = Eigen::Matrix3f::Identity();
+};
+
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
 // half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
@@ -202,9 +234,12 @@ class ColumnImage {
   // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
   // ended near it and the beam of its own column passed it without a return crossing its surface
   // inside that extent (PassedInside), on the same MetSurfaceNear condition. Without want_around
-  // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear).
+  // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear). With
+  // `world` (null: not asked), a return farther than tol from the point along its ray ended near it
+  // only within the along-ray tolerance of the surface it met too (HitSurfaces).
   std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
-                        bool want_around, bool ask_through, const SurfaceExtent* inside) const;
+                        bool want_around, bool ask_through, const SurfaceExtent* inside,
+                        const PointInWorld* world = nullptr) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing

@@ -331,7 +331,7 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
     if (missing[i] != kRawNone) raw.push_back(std::uint32_t(i));
   std::vector<bool> standing(raw.size());
   for (std::size_t j = 0; j < raw.size(); ++j) standing[j] = missing[raw[j]] == kRawAboveTheirGround;
-  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd, &standing, nd ? &other : nullptr), nd, cfg);
+  const Strength s = Split(SeenThroughBy(own.select(raw), own, others, cfg, threads, !nd, &standing, &other), nd, cfg);
   for (std::size_t j = 0; j < raw.size(); ++j)
     (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
   const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak, unseen_label = nd ? kLdWeak : kLdStrong;

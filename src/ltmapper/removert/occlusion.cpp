@@ -84,6 +84,26 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
   return normals;
 }
 
+HitSurfaces::HitSurfaces(const PointCloud& map, const PointCloud& points, const BeamTest& test, int threads)
+    : tol_(float(test.tol_m)) {
+  const PointCloud near = map.select(geometry::WithinRadius(map, points, ReachM(test), threads));
+  std::vector<bool> planar;
+  normals_ = EstimateNormals(near, map, test.tol_m, threads, &planar);
+  for (std::size_t i = 0; i < near.size(); ++i)
+    if (!planar[i]) normals_[i] = Eigen::Vector3f::Zero();
+  tree_ = std::make_unique<geometry::KdTree>(near, threads);
+}
+
+HitSurfaces::~HitSurfaces() = default;
+
+bool HitSurfaces::Cosine(const Eigen::Vector3f& at, const Eigen::Vector3f& dir, float* cosine) const {
+  std::uint32_t i = 0;
+  float d2 = 0.f;
+  if (!tree_->Nearest(at, &i, &d2) || d2 > tol_ * tol_ || normals_[i].isZero()) return false;
+  *cosine = std::fabs(normals_[i].dot(dir));
+  return true;
+}
+
 namespace {
 
 // Per point where `want` holds: its own map drew its surface twice. The other session's map holds
@@ -221,11 +241,12 @@ struct SurfaceSetup {
   std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
   std::vector<SurfaceExtent> extents;  // ND: how far the upright surface around a point goes on, for
                                        // a beam that passed it without a return
+  std::unique_ptr<HitSurfaces> hits;   // beams: the other session's surfaces where its beams ended
   VisibilityOptions opt;
 };
 
-void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const RemovertConfig& cfg, int threads,
-                   bool own_pixel, SurfaceSetup* s) {
+void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const PointCloud* other_map,
+                   const RemovertConfig& cfg, int threads, bool own_pixel, SurfaceSetup* s) {
   s->opt.count_occluded = true;
   s->opt.within_beams = false;
   s->opt.count_own_see = own_pixel;
@@ -234,6 +255,10 @@ void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const Re
   s->normals = EstimateNormals(points, own_map, cfg.ld_normal_radius_m, threads, &s->planar, &s->rim);
   s->opt.normals = &s->normals;
   if (s->beams) s->opt.beams = &cfg.ld_beam;
+  if (s->beams && other_map != nullptr) {
+    s->hits = std::make_unique<HitSurfaces>(*other_map, points, cfg.ld_beam, threads);
+    s->opt.hit_surfaces = s->hits.get();
+  }
   // ND: a beam may have gone through the place of a point inside a plane (planar, not at its rim):
   // a ray that crossed the plane within a voxel of a line's or an edge's point may have passed
   // beside the surface.
@@ -310,12 +335,12 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   vcfg.window_px = cfg.ld_window_px;
   vcfg.pose_sigma_deg = 0.0;  // LD's own windows (ld.window_px); HD's pose widening is not applied here
   SurfaceSetup surfaces;
-  SetUpSurfaces(points, own_map, cfg, threads, own_pixel, &surfaces);
+  SetUpSurfaces(points, own_map, other_map, cfg, threads, own_pixel, &surfaces);
   const VisibilityVotes v = CountVisibility(points, keyframes, cfg.ld_resolutions_deg, vcfg, threads, surfaces.opt);
   std::vector<bool> seen_through = SeenThroughVotes(v, cfg);
   // Not where its own map drew the surface twice (DrawnTwice): those rays went past a displaced
   // copy to the surface both sessions met.
-  if (other_map != nullptr && !surfaces.normals.empty()) {
+  if (other_map != nullptr && !own_pixel && !surfaces.normals.empty()) {
     const std::vector<bool> displaced =
         DrawnTwice(points, surfaces.normals, seen_through, own_map, *other_map, cfg, threads);
     for (std::size_t i = 0; i < points.size(); ++i) seen_through[i] = seen_through[i] && !displaced[i];

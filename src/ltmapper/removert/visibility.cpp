@@ -686,15 +686,16 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
 }
 
 std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                                   const float* plane, bool want_around, bool ask_through, const SurfaceExtent* inside) const {
+                                   const float* plane, bool want_around, bool ask_through, const SurfaceExtent* inside,
+                                   const PointInWorld* world) const {
   const float tol = float(test_.tol_m);
   const float grazing_max = float(test_.grazing_max_m);
   const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
   const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
   // Beam r of column c ended on the point's surface near it: its return on the point's plane, its
   // ray passing within tol of the point, and its return within the along-ray tolerance of the
-  // point's place along it (the sim's beam truth: a ray of the scan that ended on the surface near
-  // the point).
+  // point's place along it, at the incidence on the point's plane and (with `world`) on the surface
+  // the return met (the sim's beam truth: a ray of the scan that ended on the surface near the point).
   auto ended_near = [&](std::size_t c, int r) {
     const float rr = range_[c + std::size_t(r)];
     const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
@@ -702,7 +703,12 @@ std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Ei
     const Eigen::Vector3f u = q / rr;
     const float s = ps.dot(u);
     if ((ps - s * u).squaredNorm() > tol * tol) return false;
-    return std::fabs(rr - s) <= AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max);
+    const float along = std::fabs(rr - s);
+    if (along > AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max)) return false;
+    float met = 0.f;
+    return along <= tol || world == nullptr ||
+           !world->surfaces->Cosine(world->at + world->to_world * (q - ps), world->to_world * u, &met) ||
+           along <= AlongRay(tol, met, grazing_max);
   };
   // In column c: its cell in the point's row, else the nearest beams above and below it.
   auto column_ended = [&](int c_index, int* ra, int* rb) {
@@ -1224,9 +1230,14 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     if (s.options.surface_at != nullptr && !(*s.options.surface_at)[ix.order()[i]])
       std::fill(pl, pl + 4, std::numeric_limits<float>::quiet_NaN());
     const auto asked = [&](const std::vector<bool>* at) { return at != nullptr && (*at)[ix.order()[i]]; };
-    if (s.beams)
-      sc->seen_beams[sc->idx[j]] = sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
-                                                         asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside));
+    if (!s.beams) continue;
+    detail::PointInWorld world;
+    if (s.options.hit_surfaces != nullptr)
+      world = {s.options.hit_surfaces, Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]), R.transpose()};
+    sc->seen_beams[sc->idx[j]] =
+        sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
+                              asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside),
+                              s.options.hit_surfaces != nullptr ? &world : nullptr);
   }
 }
 

@@ -11,6 +11,10 @@
 
 namespace ltm::removert {
 
+namespace detail {
+class HitSurfaces;  // images.hpp
+}
+
 // For each point (world frame) and each resolution, how many keyframes see through it (scan
 // range > point range + tolerance) and how many hit it (|scan range - point range| <=
 // tolerance), counting keyframes within submap_radius_m of the point. The building block of HD
@@ -74,6 +78,10 @@ struct VisibilityOptions {
   // sensor's range) and crossed its plane within that extent went through its place
   // (ColumnImage::PassedInside; a level surface is passed at a grazing angle). Counts in beam_through.
   const std::vector<SurfaceExtent>* passed_at = nullptr;
+  // With the beam test: the keyframes' own surfaces (their session's map) where their beams ended,
+  // whose incidence also bounds how far along its ray a return may lie from the point
+  // (HitSurfaces; null: the point's plane alone).
+  const detail::HitSurfaces* hit_surfaces = nullptr;
   bool AsksThrough() const { return through_at != nullptr || passed_at != nullptr; }
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
