@@ -91,7 +91,7 @@ HitSurfaces::HitSurfaces(const PointCloud& map, const PointCloud& points, const 
   normals_ = EstimateNormals(near, map, test.tol_m, threads, &planar);
   for (std::size_t i = 0; i < near.size(); ++i)
     if (!planar[i]) normals_[i] = Eigen::Vector3f::Zero();
-  tree_ = std::make_unique<geometry::KdTree>(near, threads);
+  if (!near.empty()) tree_ = std::make_unique<geometry::KdTree>(near, threads);
 }
 
 HitSurfaces::~HitSurfaces() = default;
@@ -99,7 +99,7 @@ HitSurfaces::~HitSurfaces() = default;
 bool HitSurfaces::Cosine(const Eigen::Vector3f& at, const Eigen::Vector3f& dir, float* cosine) const {
   std::uint32_t i = 0;
   float d2 = 0.f;
-  if (!tree_->Nearest(at, &i, &d2) || d2 > tol_ * tol_ || normals_[i].isZero()) return false;
+  if (!tree_ || !tree_->Nearest(at, &i, &d2) || d2 > tol_ * tol_ || normals_[i].isZero()) return false;
   *cosine = std::fabs(normals_[i].dot(dir));
   return true;
 }
