@@ -20,6 +20,12 @@
 
 namespace ltm {
 
+double UpperMedian(std::vector<double>& v) {
+  const auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
 Error::Error(const std::string& file, std::size_t line, const std::string& what)
     : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
                          what) {}

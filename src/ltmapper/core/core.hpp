@@ -37,6 +37,10 @@ class Error : public std::runtime_error {
   Error(const std::string& file, std::size_t line, const std::string& what);
 };
 
+// The upper median of non-empty `v`: the element at v.size() / 2 once sorted (for an even size the
+// larger of the middle two); reorders v.
+double UpperMedian(std::vector<double>& v);
+
 // ---------------------------------------------------------------------------------------------
 // Parallel loops: f(0) .. f(n-1) on `threads` workers (0 = all cores) in a task arena of the
 // call's own (no process-wide thread limit), one index per task (each may be big). Every module

@@ -160,8 +160,7 @@ double AzimuthStep(const PointCloud& scan, const std::vector<double>& elevations
       if (a[i] - a[i - 1] > 1e-4) steps.push_back(a[i] - a[i - 1]);
   }
   if (steps.empty()) return 0.0;
-  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
-  return steps[steps.size() / 2];
+  return UpperMedian(steps);
 }
 
 // Non-repetitive scanners: the angular grid that spreads a scan's points evenly over the solid
@@ -223,7 +222,7 @@ RingFit RingsFromOrder(const PointCloud& scan, double min_range_m) {
   if (rings.size() < kMinRings) return fit;
   double largest = 0.0;
   for (const Acc& a : rings) largest = std::max(largest, a.n);
-  std::vector<float> dev;
+  std::vector<double> dev;
   for (const Acc& a : rings) {
     if (a.n < kMinRingShare * largest) continue;
     const double mean = a.y / a.n;
@@ -231,10 +230,7 @@ RingFit RingsFromOrder(const PointCloud& scan, double min_range_m) {
     for (float y : a.ys) dev.push_back(std::fabs(y - float(mean)));
   }
   constexpr double kMadToSigma = 1.4826;  // sigma of a normal distribution per median absolute deviation
-  if (!dev.empty()) {
-    std::nth_element(dev.begin(), dev.begin() + dev.size() / 2, dev.end());
-    fit.spread_deg = kMadToSigma * dev[dev.size() / 2];
-  }
+  if (!dev.empty()) fit.spread_deg = kMadToSigma * UpperMedian(dev);
   return fit;
 }
 
@@ -267,8 +263,7 @@ double SensorModel::MedianSpacing() const {
   if (!ring_based || elevations_deg.size() < 2) return grid_deg;
   std::vector<double> gaps;
   for (std::size_t i = 1; i < elevations_deg.size(); ++i) gaps.push_back(elevations_deg[i - 1] - elevations_deg[i]);
-  std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
-  return gaps[gaps.size() / 2];
+  return UpperMedian(gaps);
 }
 
 std::string SensorModel::Describe() const {

@@ -410,8 +410,7 @@ CloudInfo InspectCloud(const std::string& path, PointCloud* out) {
     range.push_back(p.norm());
   }
   if (!range.empty()) {
-    std::nth_element(range.begin(), range.begin() + std::ptrdiff_t(range.size() / 2), range.end());
-    info.range_median_m = range[range.size() / 2];
+    info.range_median_m = UpperMedian(range);
     info.range_min_m = *std::min_element(range.begin(), range.end());
     info.range_max_m = *std::max_element(range.begin(), range.end());
   }

@@ -104,6 +104,10 @@ constexpr double kSurfaceExtentTols = 10.0, kSurfaceGapTols = 2.0, kSurfaceVoxel
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
                                              double radius_m, int threads,
                                              std::vector<bool>* planar = nullptr, std::vector<bool>* rim = nullptr);
+// The same on `tree`, a kd-tree over `map` built already.
+std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const geometry::KdTree& tree,
+                                             const PointCloud& map, double radius_m, int threads,
+                                             std::vector<bool>* planar = nullptr, std::vector<bool>* rim = nullptr);
 
 // Points of `cloud` (world frame) moved into a keyframe's frame: p_local = T^-1 p.
 PointCloud ToLocal(const PointCloud& cloud, const Pose& T_world_sensor);

@@ -194,10 +194,10 @@ class HitSurfaces {
  public:
   HitSurfaces(const PointCloud& map, const PointCloud& points, const BeamTest& test, int threads);
   ~HitSurfaces();
-  // [m] How far from a point a return the beam test accepts, and the map points its normal is fitted
-  // to, may lie: the ray within tol of the point, the return within grazing_max_m along it, the
-  // normal's neighbours within tol of the return.
-  static double ReachM(const BeamTest& test) { return test.grazing_max_m + 2.0 * test.tol_m; }
+  // [m] How far from a point the map points the test reads may lie: the ray within tol of the
+  // point and its return within grazing_max_m along it, the return's nearest map point within tol
+  // of it, and that point's normal from its neighbours within tol.
+  static double ReachM(const BeamTest& test) { return test.grazing_max_m + 3.0 * test.tol_m; }
   // |cos| of the angle between unit `dir` and the surface at `at` (world); false where no map point
   // with a planar neighbourhood lies within tol of `at`.
   bool Cosine(const Eigen::Vector3f& at, const Eigen::Vector3f& dir, float* cosine) const;

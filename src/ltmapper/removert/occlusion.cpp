@@ -48,14 +48,20 @@ Neighbourhood FitNeighbourhood(const geometry::KdTree& tree, const PointCloud& c
 std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const PointCloud& map,
                                              double radius_m, int threads, std::vector<bool>* planar,
                                              std::vector<bool>* rim) {
-  std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
-  std::vector<std::uint8_t> plane(points.size(), 0), edge(points.size(), 0);
   if (points.empty() || map.empty()) {
     if (planar) planar->assign(points.size(), false);
     if (rim) rim->assign(points.size(), false);
-    return normals;
+    return std::vector<Eigen::Vector3f>(points.size(), Eigen::Vector3f::UnitZ());
   }
   const geometry::KdTree tree(std::make_shared<const PointCloud>(map), threads);
+  return EstimateNormals(points, tree, map, radius_m, threads, planar, rim);
+}
+
+std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const geometry::KdTree& tree,
+                                             const PointCloud& map, double radius_m, int threads,
+                                             std::vector<bool>* planar, std::vector<bool>* rim) {
+  std::vector<Eigen::Vector3f> normals(points.size(), Eigen::Vector3f::UnitZ());
+  std::vector<std::uint8_t> plane(points.size(), 0), edge(points.size(), 0);
   const std::size_t chunk = 2048;
   ParallelFor((points.size() + chunk - 1) / chunk, threads, [&](std::size_t ch) {
     const std::size_t b = ch * chunk, e = std::min(points.size(), b + chunk);
@@ -86,12 +92,15 @@ std::vector<Eigen::Vector3f> EstimateNormals(const PointCloud& points, const Poi
 
 HitSurfaces::HitSurfaces(const PointCloud& map, const PointCloud& points, const BeamTest& test, int threads)
     : tol_(float(test.tol_m)) {
-  const PointCloud near = map.select(geometry::WithinRadius(map, points, ReachM(test), threads));
+  // One kd-tree for the lookups and the normals' neighbourhoods: a map point within tol of a
+  // return the test reads lies within ReachM - tol of a point asked, its neighbours within ReachM.
+  PointCloud near = map.select(geometry::WithinRadius(map, points, ReachM(test), threads));
+  if (near.empty()) return;
+  tree_ = std::make_unique<geometry::KdTree>(std::move(near), threads);
   std::vector<bool> planar;
-  normals_ = EstimateNormals(near, map, test.tol_m, threads, &planar);
-  for (std::size_t i = 0; i < near.size(); ++i)
+  normals_ = EstimateNormals(tree_->cloud(), *tree_, tree_->cloud(), test.tol_m, threads, &planar);
+  for (std::size_t i = 0; i < normals_.size(); ++i)
     if (!planar[i]) normals_[i] = Eigen::Vector3f::Zero();
-  if (!near.empty()) tree_ = std::make_unique<geometry::KdTree>(near, threads);
 }
 
 HitSurfaces::~HitSurfaces() = default;

@@ -33,13 +33,6 @@ constexpr int kReachSamples = 16;
 // A sensor leaving more than half a turn round it without a return sees no place from both sides.
 constexpr double kHalfTurnDeg = 180.0;
 
-// The upper median of non-empty `v` (reordered).
-double UpperMedian(std::vector<double>& v) {
-  const auto mid = v.begin() + long(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-
 // Positions of up to kReachSamples keyframes spread evenly over a session of n keyframes.
 std::vector<int> SampledKeyframes(int n) {
   const int m = std::min(n, kReachSamples);

@@ -383,9 +383,8 @@ bool SquaresWithin(double sum_sq, std::size_t n, double variance) {
 double VarianceScale(std::vector<double> ratio) {
   constexpr double kChiSquare1Median = 0.45493642;
   if (ratio.empty()) return 1.0;
-  const auto mid = ratio.begin() + std::ptrdiff_t(ratio.size() / 2);
-  std::nth_element(ratio.begin(), mid, ratio.end());
-  return *mid > 0.0 ? *mid / kChiSquare1Median : 1.0;
+  const double median = UpperMedian(ratio);
+  return median > 0.0 ? median / kChiSquare1Median : 1.0;
 }
 
 namespace {
