@@ -463,6 +463,70 @@ StepScene MakeStepScene(const std::function<double(std::size_t)>& step_error,
 }
 }  // namespace
 
+namespace {
+// A straight session of 121 keyframes 1.5 m apart whose odometry is `odometry_scale` too long and
+// off by N(0, odometry_sigma) [m] a step on each horizontal axis, with registered steps and
+// two-steps off the truth by `bias` [m] along the route (each registration's own) and N(0,
+// step_sigma) on each axis, their Fisher information stating 10 times that sigma (off the ground
+// it overstates).
+StepScene MakeTranslationScene(double odometry_scale, double odometry_sigma, double step_sigma, double bias = 0.0) {
+  constexpr std::size_t kKeyframes = 121;
+  std::mt19937 rng(13);
+  std::normal_distribution<double> N(0.0, 1.0);
+  const auto off = [&](double sigma) { return Pose(Eigen::Translation3d(sigma * N(rng), sigma * N(rng), 0.0)); };
+  const auto truth = [](std::size_t k) { return Pose(Eigen::Translation3d(1.5 * double(k), 0, 0)); };
+  StepScene s;
+  Pose odometry = Pose::Identity();
+  for (std::size_t k = 0; k < kKeyframes; ++k) {
+    if (k > 0) odometry = odometry * Pose(Eigen::Translation3d(1.5 * (1.0 + odometry_scale), 0, 0)) * off(odometry_sigma);
+    Keyframe kf;
+    kf.index = int(k);
+    kf.T_session_sensor = odometry;
+    s.session.keyframes.push_back(kf);
+    if (k > 0) s.session.odometry.push_back(Edge{int(k - 1), int(k), s.session.keyframes[k - 1].T_session_sensor.inverse() * odometry});
+  }
+  Matrix6d fisher = Matrix6d::Zero();
+  fisher.diagonal() << Eigen::Vector3d::Constant(1.0 / std::pow(10.0 * step_sigma, 2)), Eigen::Vector3d::Constant(1e10);
+  const auto registered = [&](std::size_t from, std::size_t to) {
+    RegistrationResult r;
+    r.T_target_source = truth(from).inverse() * truth(to) * Pose(Eigen::Translation3d(bias, 0, 0)) * off(step_sigma);
+    r.fisher = fisher;
+    r.accepted = true;
+    return std::optional<RegistrationResult>(r);
+  };
+  for (std::size_t k = 0; k + 1 < kKeyframes; ++k) {
+    s.steps.push_back(registered(k, k + 1));
+    s.skips.push_back(k + 2 < kKeyframes ? registered(k, k + 2) : std::nullopt);
+  }
+  return s;
+}
+}  // namespace
+
+// MeasureStepTranslation reads a step's horizontal error off the closures (its own shift, their
+// mean, and how far the Fisher information overstates the rest), and the odometry's, scale error
+// included, against the steps: steps of 2 mm, shifted 1.5 mm along the route, against an odometry
+// 1.5 % long and 3 cm off a step are finer and explained; steps of 5 cm against an odometry of 5 mm
+// are not finer.
+TEST(SlamRegistration, StepTranslationIsMeasuredAgainstClosuresAndTheOdometry) {
+  SlamConfig cfg;
+  const StepScene good = MakeTranslationScene(0.015, 0.03, 0.002, 0.0015);
+  const StepTranslation g = MeasureStepTranslation(good.steps, good.skips, good.session, cfg);
+  EXPECT_EQ(g.closures, 119u);
+  EXPECT_NEAR(g.bias.x(), 0.0015, 0.0005);
+  EXPECT_NEAR(g.bias.y(), 0.0, 0.0005);
+  EXPECT_NEAR(std::sqrt(g.step_var), 0.002, 0.0006);
+  EXPECT_NEAR(g.scale, 0.01, 0.005);
+  EXPECT_GT(std::sqrt(g.odom_var), 0.02);
+  EXPECT_NEAR(std::sqrt(g.stated_var), cfg.odom_sigma_t_m, 1e-9);
+  EXPECT_TRUE(g.finer);
+  EXPECT_TRUE(g.explained);
+
+  const StepScene coarse = MakeTranslationScene(0.0, 0.005, 0.05);
+  const StepTranslation c = MeasureStepTranslation(coarse.steps, coarse.skips, coarse.session, cfg);
+  EXPECT_NEAR(std::sqrt(c.step_var), 0.05, 0.015);
+  EXPECT_FALSE(c.finer);
+}
+
 // MeasureStepHeading admits steps finer than the odometry whose differences from it their own and
 // the odometry's stated variances explain, also against an odometry biased 0.1 deg a step (a
 // gyro's bias). Steps that err together (each scan's own turn, which a closure cancels) pass the

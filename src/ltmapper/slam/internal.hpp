@@ -105,6 +105,9 @@ double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up);
 // The variance [rad^2] of a session edge's turn about `up` as the graph reads its information
 // (EdgeInformation: the file's or the config's odometry sigmas; a registered step's own).
 double TurnVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg, bool own_information);
+// The variance [m^2] per axis (the mean of the two) of an odometry edge's translation in the plane
+// square to `up`, as the graph reads its information (EdgeInformation).
+double StatedHorizontalVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg);
 // Calls f(a, e) for each edge e of `edges` (a session's odometry or registered steps) that is a
 // step, from keyframe position a to a + 1; edges between other keyframes are skipped.
 template <class F>
@@ -148,11 +151,50 @@ struct StepHeading {
 StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResult>>& steps,
                                const std::vector<std::optional<RegistrationResult>>& skips, const Session& session,
                                const SlamConfig& cfg);
+// What a session's registered steps say of their translation in the horizontal plane (square to
+// the vertical, Up), as MeasureStepHeading of the heading. Off the ground (OffTheGround) no ring of
+// the ground pulls a step toward standing still; the structures beside the route hold it, the
+// Fisher information says how well in each direction (a straight street's axis: hardly).
+//  - closures: a two-step's horizontal translation (in keyframe k's frame) differs from the two
+//    steps' composed by the three registrations' errors. A shift each registration makes of its
+//    own (the registration voxels travel with the sensor) survives as b - b - b: minus the
+//    closures' mean is the steps' bias (on the demo 1.0-1.6 mm a step along the route, against the
+//    truth's 0.9-1.2). Per horizontal axis, the median of their squares over a chi-square's of one
+//    degree, over three, is a step's variance (step_var); the squared closures whitened by the
+//    three Fisher covariances say how far those misstate it (scale, VarianceScale). A share of the
+//    step that each registration keeps of its guess (along a street's axis) cancels in a closure;
+//  - against the odometry: a step's horizontal translation minus the odometry's over the same step
+//    holds both their errors (an odometry's scale error and its noise a step), so the odometry's
+//    variance per axis is the median square over a chi-square's median less the step's (odom_var);
+//    what the odometry states (its edges' information as the graph reads it: stated_var, per axis)
+//    bounds the differences as for the heading (SquaresWithin: explained);
+//  - admitted (with the heading's): finer than the odometry and explained by the two.
+struct StepTranslation {
+  double step_var = 0.0, odom_var = 0.0, stated_var = 0.0, scale = 1.0;  // [m^2] per axis, [-]
+  Eigen::Vector3d bias = Eigen::Vector3d::Zero();  // [m] a step's own horizontal shift (keyframe k's frame)
+  std::size_t closures = 0, compared = 0;
+  bool finer = false, explained = false;
+  std::vector<Eigen::Matrix3d> covariance;  // per verified step, the Fisher information's of its translation
+                                            // (source frame, HorizontalCovariance) [m^2]
+};
+StepTranslation MeasureStepTranslation(const std::vector<std::optional<RegistrationResult>>& steps,
+                                       const std::vector<std::optional<RegistrationResult>>& skips,
+                                       const Session& session, const SlamConfig& cfg);
+// The covariance [m^2] of the translation (source frame) that a registration's Fisher information
+// implies, with the same negligible prior as HeadingVariance (pose_graph.cpp).
+Eigen::Matrix3d TranslationCovariance(const Matrix6d& fisher, const SlamConfig& cfg);
+// Two unit vectors spanning the plane square to `up`.
+Eigen::Matrix<double, 3, 2> Horizontal(const Eigen::Vector3d& up);
+// Information of a registered step on its translation in the plane square to `up` alone (the
+// 2 x 2 covariance `horizontal` in Horizontal(up)'s axes); height is left to the odometry.
+Matrix6d HorizontalInformation(const Eigen::Matrix2d& horizontal, const Eigen::Vector3d& up);
 // How far the variances a model gives understate (> 1) or overstate (< 1) the errors, from the
 // ratios (squared error over the model's variance) of errors measured one degree of freedom each:
 // their median over a chi-square's of one degree, which a few gross errors (a wrong loop, a step
 // through a moving truck) do not move; 1 without ratios (pose_graph.cpp).
 double VarianceScale(std::vector<double> ratio);
+// The median of a chi-square of one degree of freedom.
+constexpr double kChiSquare1Median = 0.45493642;
 // How far the loops' heading variances (LoopRecord::heading_variance) misstate their errors,
 // measured on the loops themselves (pose_graph.cpp): two verified loops between the same sessions,
 // next to each other along the first session's route, close a cycle through each session's edges

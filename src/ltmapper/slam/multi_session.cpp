@@ -798,6 +798,70 @@ StepHeading MeasureStepHeading(const std::vector<std::optional<RegistrationResul
   return h;
 }
 
+namespace {
+// The horizontal components of a translation error d in keyframe frame `up`, whitened by its
+// covariance C (3 x 3, that frame): one chi-square of one degree each where C states d's spread.
+Eigen::Vector2d Whitened(const Eigen::Vector3d& d, const Eigen::Matrix3d& C, const Eigen::Vector3d& up) {
+  const Eigen::Matrix<double, 3, 2> H = Horizontal(up);
+  const Eigen::Matrix2d C2 = H.transpose() * C * H;
+  return Eigen::LLT<Eigen::Matrix2d>(C2).matrixL().solve(H.transpose() * d);
+}
+// A registration's translation covariance (source frame) in its target's frame.
+Eigen::Matrix3d InTarget(const RegistrationResult& r, const Eigen::Matrix3d& C) {
+  const Eigen::Matrix3d R = r.T_target_source.linear();
+  return R * C * R.transpose();
+}
+// Per-axis variance from the squares of errors of one degree each: their median over a
+// chi-square's (a few gross errors do not move it).
+double MedianVariance(std::vector<double> squares) {
+  return squares.empty() ? 0.0 : UpperMedian(squares) / kChiSquare1Median;
+}
+}  // namespace
+
+StepTranslation MeasureStepTranslation(const std::vector<std::optional<RegistrationResult>>& steps,
+                                       const std::vector<std::optional<RegistrationResult>>& skips,
+                                       const Session& session, const SlamConfig& cfg) {
+  const std::vector<Keyframe>& kfs = session.keyframes;
+  StepTranslation t;
+  t.covariance.assign(steps.size(), Eigen::Matrix3d::Zero());
+  for (std::size_t k = 0; k < steps.size(); ++k)
+    if (steps[k]) t.covariance[k] = TranslationCovariance(steps[k]->fisher, cfg);
+  std::vector<double> squares, ratio;
+  for (std::size_t k = 0; k + 1 < steps.size(); ++k) {
+    if (!steps[k] || !steps[k + 1] || !skips[k]) continue;
+    const RegistrationResult &a = *steps[k], &b = *steps[k + 1], &c = *skips[k];
+    const Eigen::Vector3d d = c.T_target_source.translation() - (a.T_target_source * b.T_target_source).translation();
+    const Eigen::Matrix3d Ra = a.T_target_source.linear();
+    const Eigen::Matrix3d C = InTarget(c, TranslationCovariance(c.fisher, cfg)) + InTarget(a, t.covariance[k]) +
+                              Ra * InTarget(b, t.covariance[k + 1]) * Ra.transpose();
+    const Eigen::Vector3d up = Up(kfs[k]);
+    const Eigen::Vector2d h = Horizontal(up).transpose() * d, w = Whitened(d, C, up);
+    for (int i = 0; i < 2; ++i) squares.push_back(h[i] * h[i]), ratio.push_back(w[i] * w[i]);
+    t.bias -= Horizontal(up) * h;
+    ++t.closures;
+  }
+  if (t.closures < 2) return t;
+  t.bias /= double(t.closures);
+  t.step_var = MedianVariance(squares) / 3.0;
+  t.scale = VarianceScale(std::move(ratio));
+  std::vector<double> diff;
+  double sum_sq = 0.0, stated_sum = 0.0;
+  ForEachStep(session, session.odometry, [&](std::size_t k, const Edge& e) {
+    if (k >= steps.size() || !steps[k]) return;
+    const Pose odometry = kfs[k].T_session_sensor.inverse() * kfs[k + 1].T_session_sensor;
+    const Eigen::Vector2d h =
+        Horizontal(Up(kfs[k])).transpose() * (odometry.translation() - steps[k]->T_target_source.translation() + t.bias);
+    for (int i = 0; i < 2; ++i) diff.push_back(h[i] * h[i]), sum_sq += h[i] * h[i];
+    stated_sum += StatedHorizontalVariance(e, Up(kfs[k + 1]), cfg), ++t.compared;
+  });
+  if (t.compared == 0) return t;
+  t.odom_var = std::max(0.0, MedianVariance(diff) - t.step_var);
+  t.stated_var = stated_sum / double(t.compared);
+  t.finer = t.step_var < t.odom_var;
+  t.explained = SquaresWithin(sum_sq, 2 * t.compared, t.step_var + t.stated_var);
+  return t;
+}
+
 // Keyframes whose GICP clouds (kd-tree and the plane of every point: GicpCloud::PrepareAllPlanes)
 // are held at once while their steps are registered: each cloud takes part in up to four
 // registrations (two steps, two skips), and its planes are made once for all of them.
@@ -833,7 +897,8 @@ void RegisterStepsFrom(const std::vector<Keyframe>& kfs, const std::vector<Point
 
 // Keyframe k + 1 registered onto k (*steps, k < n) and k + 2 onto k (*skips, k < n - 1) of a
 // session's keyframes `kfs`, scans from `scan` (downsampled, sensor frame), from the odometry's
-// relative pose, off the ground (OffTheGround: the steps measure the heading alone);
+// relative pose, off the ground (OffTheGround: the steps measure the heading and the horizontal
+// translation; no ring of the ground pulls them toward standing still);
 // a registration not accepted is left empty. In blocks of keyframes, each scan's ground found once
 // per block; within a block, windows of kPreparedSteps keyframes on clouds prepared once
 // (RegisterStepsFrom).
@@ -851,6 +916,49 @@ void RegisterSteps(const std::vector<Keyframe>& kfs, const std::function<std::sh
   }
 }
 
+namespace {
+const char* Verdict(bool admitted, bool finer) {
+  return admitted ? "registered"
+         : !finer ? "not finer than the odometry, left out"
+                  : "steps and odometry disagree beyond both their variances, left out";
+}
+// What a session's steps say of their heading and horizontal translation, and whether they join.
+void LogSteps(const std::string& name, const std::vector<std::optional<RegistrationResult>>& steps,
+              const StepHeading& h, const StepTranslation& tr, bool heading, bool translation) {
+  constexpr double kRadToDeg = 180.0 / M_PI;
+  spdlog::info("slam: session {}: {} of {} keyframe steps verified; heading sigma {:.4f} deg a step, bias {:.4f} "
+               "(two-step closures: {}), the odometry's {:.4f} deg (mean {:.4f}; it states {:.4f}): {}",
+               name, std::count_if(steps.begin(), steps.end(), [](const auto& r) { return bool(r); }), steps.size(),
+               std::sqrt(h.step_var) * kRadToDeg, h.bias * kRadToDeg, h.closures, std::sqrt(h.odom_var) * kRadToDeg,
+               h.odom_mean * kRadToDeg, std::sqrt(h.stated_var) * kRadToDeg, Verdict(heading, h.finer));
+  spdlog::info("slam: session {}: horizontal translation sigma {:.4f} m a step, bias ({:.4f}, {:.4f}) m (closures: {}; "
+               "{:.2f} x the Fisher information's), the odometry's {:.4f} m (it states {:.4f}): {}",
+               name, std::sqrt(tr.step_var), tr.bias.x(), tr.bias.y(), tr.closures, tr.scale, std::sqrt(tr.odom_var),
+               std::sqrt(tr.stated_var), heading ? Verdict(translation, tr.finer) : "left out with the heading");
+}
+// Verified step k (keyframe k + 1 onto k) as a registered edge: its heading, the closures' bias
+// turned back, with the information HeadingInformation gives it, scaled as the closures show; with
+// `tr`, its horizontal translation too, the closures' mean shift turned back, with the Fisher
+// information's covariance (never scaled down: what a step and a two-step share in proportion to
+// their length cancels in a closure).
+Edge RegisteredEdge(const std::vector<Keyframe>& kfs, std::size_t k, const RegistrationResult& step,
+                    const StepHeading& h, const StepTranslation* tr, const SlamConfig& cfg) {
+  const Eigen::Vector3d up = Up(kfs[k + 1]);
+  Edge e;
+  e.from = kfs[k].index;
+  e.to = kfs[k + 1].index;
+  e.T_from_to = step.T_target_source * Pose(Eigen::AngleAxisd(-h.bias, up));
+  e.information = HeadingInformation(h.variance[k] * h.scale, up, cfg);
+  if (tr) {
+    e.T_from_to.pretranslate(-tr->bias);
+    const Eigen::Matrix<double, 3, 2> H = Horizontal(up);
+    e.information += HorizontalInformation(H.transpose() * tr->covariance[k] * H * std::max(1.0, tr->scale), up);
+  }
+  e.has_information = true;
+  return e;
+}
+}  // namespace
+
 // The odometry refined by registration: each keyframe k + 1 of a session registered onto keyframe
 // k, single scans off the ground from the odometry's relative pose, fine stage only (the odometry
 // is centimetres off, not the metres a loop's guess may be; RegisterSteps). Where the steps are
@@ -858,7 +966,12 @@ void RegisterSteps(const std::vector<Keyframe>& kfs, const std::function<std::sh
 // within both's variances, the odometry's as it states), each verified step, the closures' bias
 // turned back, joins the session's graph beside its odometry edge (Session::registered) with the
 // registration's information on the heading (HeadingInformation), its variance scaled as the
-// closures show. A scanner whose consecutive scans share little (a forward cone that samples
+// closures show. Where the steps' horizontal translation is admitted too (MeasureStepTranslation,
+// the same two tests), each step's, its closures' mean shift turned back, joins that edge with the
+// Fisher information's covariance of it (HorizontalInformation): not scaled down as the closures
+// show, since a shift a step and a two-step share in proportion to their length (a street's axis
+// the surfaces hardly hold, where a registration keeps part of its guess) cancels in a closure;
+// height, roll and pitch stay the odometry's. A scanner whose consecutive scans share little (a forward cone that samples
 // other places each sweep) gives steps no finer than the odometry, or steps whose shared errors
 // the closures cancel and the odometry shows: they are left out. Sessions whose poses
 // are the world (the add's reference: central_own_loops off) are left as they are. Returns the
@@ -877,26 +990,11 @@ std::vector<Session> WithRegisteredSteps(const std::vector<Session>& sessions, C
     *tried += int(n + (n - 1));
     RegisterSteps(kfs, [&](std::size_t k) { return store.Get(int(s), int(k)); }, fine, threads, &steps, &skips);
     const StepHeading h = MeasureStepHeading(steps, skips, out[s], cfg);
-    const bool admitted = h.finer && h.explained;
-    constexpr double kRadToDeg = 180.0 / M_PI;
-    spdlog::info("slam: session {}: {} of {} keyframe steps verified; heading sigma {:.4f} deg a step, bias {:.4f} "
-                 "(two-step closures: {}), the odometry's {:.4f} deg (mean {:.4f}; it states {:.4f}): {}",
-                 out[s].name, std::count_if(steps.begin(), steps.end(), [](const auto& r) { return bool(r); }), n,
-                 std::sqrt(h.step_var) * kRadToDeg, h.bias * kRadToDeg, h.closures,
-                 std::sqrt(h.odom_var) * kRadToDeg, h.odom_mean * kRadToDeg, std::sqrt(h.stated_var) * kRadToDeg,
-                 admitted ? "registered"
-                 : !h.finer ? "not finer than the odometry, left out"
-                            : "steps and odometry disagree beyond both their variances, left out");
-    for (std::size_t k = 0; k < n && admitted; ++k) {
-      if (!steps[k]) continue;
-      Edge e;
-      e.from = kfs[k].index;
-      e.to = kfs[k + 1].index;
-      e.T_from_to = steps[k]->T_target_source * Pose(Eigen::AngleAxisd(-h.bias, Up(kfs[k + 1])));
-      e.information = HeadingInformation(h.variance[k] * h.scale, Up(kfs[k + 1]), cfg);
-      e.has_information = true;
-      out[s].registered.push_back(e);
-    }
+    const StepTranslation tr = MeasureStepTranslation(steps, skips, out[s], cfg);
+    const bool heading = h.finer && h.explained, translation = heading && tr.finer && tr.explained;
+    LogSteps(out[s].name, steps, h, tr, heading, translation);
+    for (std::size_t k = 0; k < n && heading; ++k)
+      if (steps[k]) out[s].registered.push_back(RegisteredEdge(kfs, k, *steps[k], h, translation ? &tr : nullptr, cfg));
   }
   return out;
 }

@@ -348,14 +348,34 @@ double HeadingVariance(const Matrix6d& fisher, const Eigen::Vector3d& up, const 
   return g.dot(F.ldlt().solve(g));
 }
 
+Eigen::Matrix3d TranslationCovariance(const Matrix6d& fisher, const SlamConfig& cfg) {
+  const Matrix6d F = 0.5 * (fisher + fisher.transpose()) + NegligiblePrior(cfg);
+  Eigen::Matrix<double, 6, 3> P = Eigen::Matrix<double, 6, 3>::Zero();
+  P.topRows<3>().setIdentity();
+  return P.transpose() * F.ldlt().solve(P);
+}
+
+Eigen::Matrix<double, 3, 2> Horizontal(const Eigen::Vector3d& up) {
+  const Eigen::Vector3d z = up.normalized(), x = z.unitOrthogonal();
+  Eigen::Matrix<double, 3, 2> H;
+  H << x, z.cross(x);
+  return H;
+}
+
+Matrix6d HorizontalInformation(const Eigen::Matrix2d& horizontal, const Eigen::Vector3d& up) {
+  Eigen::Matrix<double, 6, 2> G = Eigen::Matrix<double, 6, 2>::Zero();
+  G.topRows<3>() = Horizontal(up);
+  return G * horizontal.inverse() * G.transpose();
+}
+
 // The information of a registered step or loop on the turn about the vertical alone: g g^T /
 // variance, plus the same negligible prior so that it inverts. A step measures the heading change
 // far better than an odometry integrates it (the heading is what drifts; inertial odometry holds
-// roll and pitch to gravity). Its other directions it measures worse than that odometry, summed
-// over a session by the chain of steps: registered with the ground, the ground's rings, which move
-// with the sensor, biased them (on the default scene -0.24 and -0.37 % of the step along the road,
-// -0.003 deg of pitch a step); registered off it (OffTheGround), nothing holds height, roll and
-// pitch (README, "Registered steps hold the heading").
+// roll and pitch to gravity). Registered with the ground, the ground's rings, which move with the
+// sensor, biased its other directions (on the default scene -0.24 and -0.37 % of the step along
+// the road, -0.003 deg of pitch a step); registered off it (OffTheGround), nothing holds height,
+// roll and pitch, while its horizontal translation may join (HorizontalInformation, README:
+// "Registered steps hold the horizontal translation").
 Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg) {
   const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
   return g * g.transpose() / variance + NegligiblePrior(cfg);
@@ -373,6 +393,13 @@ double TurnVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& 
   return 1.0 / g.dot(EdgeInformation(e, cfg, own_information) * g);
 }
 
+double StatedHorizontalVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg) {
+  const Matrix6d info = EdgeInformation(e, cfg, false);
+  const Eigen::Matrix3d C = info.ldlt().solve(Matrix6d::Identity()).topLeftCorner<3, 3>();
+  const Eigen::Matrix<double, 3, 2> H = Horizontal(up);
+  return 0.5 * (H.transpose() * C * H).trace();
+}
+
 bool SquaresWithin(double sum_sq, std::size_t n, double variance) {
   constexpr double kZ = 3.09;  // the standard normal's 0.999 quantile
   if (n == 0) return true;
@@ -381,7 +408,6 @@ bool SquaresWithin(double sum_sq, std::size_t n, double variance) {
 }
 
 double VarianceScale(std::vector<double> ratio) {
-  constexpr double kChiSquare1Median = 0.45493642;
   if (ratio.empty()) return 1.0;
   const double median = UpperMedian(ratio);
   return median > 0.0 ? median / kChiSquare1Median : 1.0;
