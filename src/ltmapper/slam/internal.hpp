@@ -175,7 +175,7 @@ struct StepTranslation {
   std::size_t closures = 0, compared = 0;
   bool finer = false, explained = false;
   std::vector<Eigen::Matrix3d> covariance;  // per verified step, the Fisher information's of its translation
-                                            // (source frame, HorizontalCovariance) [m^2]
+                                            // (source frame, TranslationCovariance) [m^2]
 };
 StepTranslation MeasureStepTranslation(const std::vector<std::optional<RegistrationResult>>& steps,
                                        const std::vector<std::optional<RegistrationResult>>& skips,

@@ -966,12 +966,9 @@ Edge RegisteredEdge(const std::vector<Keyframe>& kfs, std::size_t k, const Regis
 // within both's variances, the odometry's as it states), each verified step, the closures' bias
 // turned back, joins the session's graph beside its odometry edge (Session::registered) with the
 // registration's information on the heading (HeadingInformation), its variance scaled as the
-// closures show. Where the steps' horizontal translation is admitted too (MeasureStepTranslation,
-// the same two tests), each step's, its closures' mean shift turned back, joins that edge with the
-// Fisher information's covariance of it (HorizontalInformation): not scaled down as the closures
-// show, since a shift a step and a two-step share in proportion to their length (a street's axis
-// the surfaces hardly hold, where a registration keeps part of its guess) cancels in a closure;
-// height, roll and pitch stay the odometry's. A scanner whose consecutive scans share little (a forward cone that samples
+// closures show; where the steps' horizontal translation passes the same two tests
+// (MeasureStepTranslation), that joins the edge too (RegisteredEdge); height, roll and pitch stay
+// the odometry's. A scanner whose consecutive scans share little (a forward cone that samples
 // other places each sweep) gives steps no finer than the odometry, or steps whose shared errors
 // the closures cancel and the odometry shows: they are left out. Sessions whose poses
 // are the world (the add's reference: central_own_loops off) are left as they are. Returns the
