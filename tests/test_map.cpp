@@ -594,7 +594,7 @@ TEST(MapObjects, GroundSliverRejectedCarKept) {
   for (const auto& r : rejected) EXPECT_EQ(r.rejected, "low");  // both below object_min_height_m
 }
 
-// An appeared car's lowest row lies in the ground band, like the new kerb stone 1 m beside it:
+// An appeared car's lowest row lies in the ground band, like the new curb stone 1 m beside it:
 // neither is clustered. The row under the car is its foot (KeepFeet), the stone is no part of it.
 TEST(MapObjects, AnObjectKeepsItsFootNotTheGroundChangesBesideIt) {
   test::TempDir tmp;

@@ -400,7 +400,7 @@ TEST_F(SimTruth, UnobservedStaticSurfacesAreStrongPdAndWeakNd) {
 
 // "Observed" means a ray of the other session ended on the point's own surface near it. A ray
 // cast straight at a point that ends on another surface within the along-ray band (the side of a
-// box passed at a grazing angle, in front of a point on its back; a kerb before the road behind
+// box passed at a grazing angle, in front of a point on its back; a curb before the road behind
 // it) did not observe it. Central static points (their surface normal from a central ray that hit
 // them) that every query keyframe's straight ray reaches only that way are weak ND in the
 // exact-ray truth.

@@ -562,7 +562,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one scan row wide) spans fewer than object_min_samples rows across its middle
 // principal axis (Width, MinWidth). A cluster whose top is
-// below object_min_height_m above the local ground is a ground bump (kerb, misregistered
+// below object_min_height_m above the local ground is a ground bump (curb, misregistered
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
 // kiosks, trees) stand on the ground: a cluster whose lowest point is more than

@@ -40,7 +40,7 @@ bool PastTheirRim(const detail::Neighbourhood& nb, float r, const RemovertConfig
 
 // The other session's neighbours of a point (none within a map voxel) are one plane of ground
 // (thinner than kPlaneMaxThickness map voxels, normal more vertical than horizontal), around the
-// point (not to one side as at a kerb's edge, PastTheirRim's rule) and below it by more than a map
+// point (not to one side as at a curb's edge, PastTheirRim's rule) and below it by more than a map
 // voxel plus `shift` (what the sessions' rotation error can put between two samplings of one
 // surface at the point's distance): two samplings of one surface lie within that of each other's
 // plane, so the point is another surface standing on that ground (the lower body of a car that
