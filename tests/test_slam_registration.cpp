@@ -348,6 +348,32 @@ TEST(SlamRegistrationReal, Kitti08RevisitAcceptedAndAnotherPlaceRejected) {
   EXPECT_FALSE(w.accepted);
 }
 
+namespace {
+// Two drives of n keyframes 1 m apart along x (the loops place them side by side), each keyframe
+// tied to its neighbour by the odometry and by a registered step of the given information.
+std::vector<Session> ParallelDrives(int n, const Matrix6d& step_information) {
+  std::vector<Session> sessions(2);
+  for (int s = 0; s < 2; ++s) {
+    sessions[std::size_t(s)].name = "s" + std::to_string(s);
+    for (int k = 0; k < n; ++k) {
+      Keyframe kf;
+      kf.index = k;
+      kf.T_session_sensor.translation() = Eigen::Vector3d(k, 0, 0);
+      sessions[std::size_t(s)].keyframes.push_back(kf);
+      if (k == 0) continue;
+      Edge e;
+      e.from = k - 1, e.to = k;
+      e.T_from_to.translation() = Eigen::Vector3d(1, 0, 0);
+      sessions[std::size_t(s)].odometry.push_back(e);
+      e.information = step_information;
+      e.has_information = true;
+      sessions[std::size_t(s)].registered.push_back(e);
+    }
+  }
+  return sessions;
+}
+}  // namespace
+
 // LoopHeadingScale: two parallel drives 2 m apart, each keyframe tied to its neighbour by a
 // registered step (heading variance 1e-12 rad^2) and to the other drive's by a loop whose heading
 // is off by N(0, 9 v), v its declared variance. The cycles of consecutive loops give 9 back. With
@@ -359,24 +385,7 @@ TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
   constexpr double kLoopVar = 1e-8, kScale = 9.0;
   std::mt19937 rng(11);
   std::normal_distribution<double> N(0.0, std::sqrt(kScale * kLoopVar));
-  std::vector<Session> sessions(2);
-  for (int s = 0; s < 2; ++s) {
-    sessions[std::size_t(s)].name = "s" + std::to_string(s);
-    for (int k = 0; k < kKeyframes; ++k) {
-      Keyframe kf;
-      kf.index = k;
-      kf.T_session_sensor.translation() = Eigen::Vector3d(k, 0, 0);
-      sessions[std::size_t(s)].keyframes.push_back(kf);
-      if (k == 0) continue;
-      Edge e;
-      e.from = k - 1, e.to = k;
-      e.T_from_to.translation() = Eigen::Vector3d(1, 0, 0);
-      sessions[std::size_t(s)].odometry.push_back(e);
-      e.information = HeadingInformation(1e-12, Eigen::Vector3d::UnitZ(), cfg);
-      e.has_information = true;
-      sessions[std::size_t(s)].registered.push_back(e);
-    }
-  }
+  std::vector<Session> sessions = ParallelDrives(kKeyframes, HeadingInformation(1e-12, Eigen::Vector3d::UnitZ(), cfg));
   std::vector<LoopRecord> loops;
   for (int k = 0; k < kKeyframes; ++k) {
     LoopRecord l;
@@ -387,7 +396,7 @@ TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
     l.heading_variance = kLoopVar;
     loops.push_back(l);
   }
-  const LoopHeading h = LoopHeadingScale(sessions, loops, cfg);
+  const LoopCycleScale h = LoopHeadingScale(sessions, loops, cfg);
   EXPECT_EQ(h.cycles, kKeyframes - 1);
   EXPECT_NEAR(h.scale, kScale, 0.3 * kScale);
   for (Session& s : sessions) s.registered.clear();
@@ -396,6 +405,40 @@ TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
   // (as above) hide within its variance: the cycles do not measure them, no heading information.
   for (LoopRecord& l : loops) l.heading_variance = 1e-4;
   EXPECT_EQ(LoopHeadingScale(sessions, loops, cfg).cycles, 0);
+}
+
+// LoopTranslationScale: the same two drives, their steps exact, each loop's translation off by
+// N(0, 4 c) per horizontal axis, c the per-axis variance its registration declares (1 cm): the
+// cycles of consecutive loops give 4 back (each gap holds two loops' errors, each of 4 c). Cycles
+// through the odometry, or loops with no covariance (registered without registration.steps), none.
+TEST(SlamRegistration, LoopTranslationScaleIsMeasuredOnCyclesOfTwoLoops) {
+  SlamConfig cfg;
+  constexpr int kKeyframes = 400;
+  constexpr double kLoopVar = 1e-4, kScale = 4.0;
+  std::mt19937 rng(13);
+  std::normal_distribution<double> N(0.0, std::sqrt(kScale * kLoopVar));
+  std::vector<Session> sessions =
+      ParallelDrives(kKeyframes, HeadingInformation(1e-12, Eigen::Vector3d::UnitZ(), cfg) +
+                                     HorizontalInformation(Eigen::Matrix2d::Identity() * 1e-10, Eigen::Vector3d::UnitZ()));
+  std::vector<LoopRecord> loops;
+  for (int k = 0; k < kKeyframes; ++k) {
+    LoopRecord l;
+    l.a = {0, k}, l.b = {1, k};
+    l.T_a_b.translation() = Eigen::Vector3d(N(rng), 2 + N(rng), 0);
+    l.verified = true;
+    l.translation_covariance = Eigen::Matrix3d::Identity() * kLoopVar;
+    loops.push_back(l);
+  }
+  const LoopCycleScale t = LoopTranslationScale(sessions, loops, cfg);
+  std::printf("loops' translation: %d cycles, scale %.2f (truth %.2f)\n", t.cycles, t.scale, kScale);
+  EXPECT_EQ(t.cycles, kKeyframes - 1);
+  EXPECT_NEAR(t.scale, kScale, 0.3 * kScale);
+  // Through the odometry alone (the config's 5 cm a step) the cycles measure the odometry: none.
+  std::vector<Session> odometry = sessions;
+  for (Session& s : odometry) s.registered.clear();
+  EXPECT_EQ(LoopTranslationScale(odometry, loops, cfg).cycles, 0);
+  for (LoopRecord& l : loops) l.translation_covariance.setZero();
+  EXPECT_EQ(LoopTranslationScale(sessions, loops, cfg).cycles, 0);
 }
 
 // SquaresWithin: errors of the model pass but about one time in a thousand; errors 1.5 times wider

@@ -30,6 +30,11 @@ struct LoopRecord {
   // Fisher information gives (HeadingVariance) [rad^2]; the graph scales it as the loops' cycles
   // show (LoopHeadingScale) and adds that information on the heading. 0: none.
   double heading_variance = 0.0;
+  // With registration.steps: the covariance of the translation that the registration's Fisher
+  // information gives (TranslationCovariance, source frame: keyframe b) [m^2]; the graph scales it as
+  // the loops' cycles show (LoopTranslationScale) and adds that information on the horizontal
+  // translation. Zero: none.
+  Eigen::Matrix3d translation_covariance = Eigen::Matrix3d::Zero();
 };
 
 // A loop between two keyframes of one session (the radius search's, where its route came back):
@@ -67,6 +72,9 @@ struct SlamResult {
   // misstates the loops' heading variance (1 when no cycle measured it).
   int heading_cycles = 0;
   double loop_heading_scale = 1.0;
+  // The same for the loops' horizontal translation (LoopTranslationScale).
+  int translation_cycles = 0;
+  double loop_translation_scale = 1.0;
   bool given_poses = false;  // placed by world poses from elsewhere (MeasureGivenPoses), not aligned
 };
 

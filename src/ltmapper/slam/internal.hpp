@@ -106,8 +106,10 @@ double TurnAbout(const Pose& a, const Pose& b, const Eigen::Vector3d& up);
 // (EdgeInformation: the file's or the config's odometry sigmas; a registered step's own).
 double TurnVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg, bool own_information);
 // The variance [m^2] per axis (the mean of the two) of an odometry edge's translation in the plane
-// square to `up`, as the graph reads its information (EdgeInformation).
-double StatedHorizontalVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg);
+// square to `up`, as the graph reads its information (EdgeInformation; `own_information`: a
+// registered step's own).
+double StatedHorizontalVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg,
+                                bool own_information = false);
 // Calls f(a, e) for each edge e of `edges` (a session's odometry or registered steps) that is a
 // step, from keyframe position a to a + 1; edges between other keyframes are skipped.
 template <class F>
@@ -204,12 +206,18 @@ constexpr double kChiSquare1Median = 0.45493642;
 // over those cycles of (turn^2 - edges' variance) / (the two loops' variances), over the median of
 // a chi-square of one degree (VarianceScale). Where that median is not positive the cycles do not
 // measure the loops (cycles 0: no heading information).
-struct LoopHeading {
+struct LoopCycleScale {
   int cycles = 0;
   double scale = 1.0;
 };
-LoopHeading LoopHeadingScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
-                             const SlamConfig& cfg);
+LoopCycleScale LoopHeadingScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
+                                const SlamConfig& cfg);
+// The same for the loops' horizontal translation (LoopRecord::translation_covariance): the two loops'
+// translations and the edges' close the same cycle; per horizontal axis of keyframe a1, squared gap
+// / (the two loops' variances), the whole gap laid on the loops (an upper bound of their error).
+// Only cycles whose edges all hold the translation finer than the config's odometry count.
+LoopCycleScale LoopTranslationScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
+                                    const SlamConfig& cfg);
 // Information of an inter-session loop: the paper's adaptive covariance from the registration
 // fitness plus the registration's own (the inverse of its Fisher information; zero: none).
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg);

@@ -326,6 +326,8 @@ void Register(std::vector<LoopRecord>& cand, CloudStore& store, const SlamConfig
     l.information = LoopInformation(r.fitness, r.accepted ? r.fisher : Matrix6d::Zero(), cfg);
     l.heading_variance =
         r.accepted && cfg.reg_steps ? HeadingVariance(r.fisher, Up(store.KeyframeOf(l.b.session, l.b.keyframe)), cfg) : 0.0;
+    l.translation_covariance =
+        r.accepted && cfg.reg_steps ? TranslationCovariance(r.fisher, cfg) : Eigen::Matrix3d::Zero().eval();
     progress.Tick();
   });
   progress.Done();
@@ -1047,6 +1049,9 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
   if (res.heading_cycles > 0)
     spdlog::info("slam: the loops' heading, measured on {} cycles of two loops: {:.1f} x the variance their "
                  "registrations' Fisher information gives", res.heading_cycles, res.loop_heading_scale);
+  if (res.translation_cycles > 0)
+    spdlog::info("slam: the loops' horizontal translation, measured on {} cycles of two loops: {:.2f} x the variance "
+                 "their registrations' Fisher information gives", res.translation_cycles, res.loop_translation_scale);
   spdlog::info("slam: time per phase: descriptors {:.2f} s, retrieval {:.2f} s, registration {:.2f} s "
                "({} GICP), optimisation {:.2f} s, total {:.2f} s",
                t_desc, t_retr, cost.registration_s, cost.registrations, cost.optimisation_s, res.time_total_s);

@@ -75,7 +75,8 @@ struct Graph {
   std::vector<std::vector<Pose>> poses;  // current estimate, session frame
   std::vector<Pose> anchors;
   std::vector<bool> aligned;
-  LoopHeading heading;  // how far the loops' heading variances misstate their errors (LoopHeadingScale)
+  LoopCycleScale heading;      // how far the loops' heading variances misstate their errors (LoopHeadingScale)
+  LoopCycleScale translation;  // and their horizontal translation's (LoopTranslationScale)
 };
 
 struct SolveStats {
@@ -167,12 +168,21 @@ class GraphProblem {
     if (!problem_.HasParameterBlock(b)) problem_.AddParameterBlock(b, 7, manifold_);
   }
 
-  // A loop's information: the paper's, plus its registration's on the heading scaled as the loops'
-  // cycles show, where they measured it (registration.steps).
+  // A loop's information: the paper's, plus its registration's on the heading and on the horizontal
+  // translation, each scaled as the loops' cycles show, where they measured it (registration.steps:
+  // steps that hold a session's heading and translation need loops that tie the sessions as finely,
+  // else the steps' shares that no closure sees bend the sessions apart; README: "The loops hold
+  // the translation as finely as their cycles show").
   Matrix6d LoopGraphInformation(const LoopRecord& l) const {
-    if (l.heading_variance <= 0.0 || g_.heading.cycles == 0) return l.information;
-    const Keyframe& kb = g_.sessions[std::size_t(l.b.session)].keyframes[std::size_t(l.b.keyframe)];
-    return l.information + HeadingInformation(l.heading_variance * g_.heading.scale, Up(kb), g_.cfg);
+    Matrix6d info = l.information;
+    const Eigen::Vector3d up = Up(g_.sessions[std::size_t(l.b.session)].keyframes[std::size_t(l.b.keyframe)]);
+    if (l.heading_variance > 0.0 && g_.heading.cycles > 0)
+      info += HeadingInformation(l.heading_variance * g_.heading.scale, up, g_.cfg);
+    if (!l.translation_covariance.isZero() && g_.translation.cycles > 0) {
+      const Eigen::Matrix<double, 3, 2> H = Horizontal(up);
+      info += HorizontalInformation(H.transpose() * l.translation_covariance * H * g_.translation.scale, up);
+    }
+    return info;
   }
 
   // Edges of session s; `own_information`: each edge's information, else the file's only when
@@ -393,8 +403,8 @@ double TurnVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& 
   return 1.0 / g.dot(EdgeInformation(e, cfg, own_information) * g);
 }
 
-double StatedHorizontalVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg) {
-  const Matrix6d info = EdgeInformation(e, cfg, false);
+double StatedHorizontalVariance(const Edge& e, const Eigen::Vector3d& up, const SlamConfig& cfg, bool own_information) {
+  const Matrix6d info = EdgeInformation(e, cfg, own_information);
   const Eigen::Matrix3d C = info.ldlt().solve(Matrix6d::Identity()).topLeftCorner<3, 3>();
   const Eigen::Matrix<double, 3, 2> H = Horizontal(up);
   return 0.5 * (H.transpose() * C * H).trace();
@@ -416,19 +426,26 @@ double VarianceScale(std::vector<double> ratio) {
 namespace {
 
 // The edges a loops' cycle runs through in one session: per keyframe position k, the edge from k to
-// k + 1 (the finer in heading of its registered step and its odometry edge) and the variance of its
-// turn about the vertical [rad^2] (infinite without an edge).
+// k + 1 (the finer in heading of its registered step and its odometry edge), the variance of its
+// turn about the vertical [rad^2] (infinite without an edge), and whether it holds the horizontal
+// translation finer than the config's odometry does (a registered step that holds it).
 struct CycleEdges {
   std::vector<Pose> T;
   std::vector<double> var;
+  std::vector<bool> holds;
 };
 CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
   const std::size_t n = s.keyframes.empty() ? 0 : s.keyframes.size() - 1;
-  CycleEdges c{std::vector<Pose>(n, Pose::Identity()), std::vector<double>(n, std::numeric_limits<double>::infinity())};
+  CycleEdges c{std::vector<Pose>(n, Pose::Identity()), std::vector<double>(n, std::numeric_limits<double>::infinity()),
+               std::vector<bool>(n, false)};
+  const double odometry = StatedHorizontalVariance(Edge{}, Eigen::Vector3d::UnitZ(), cfg);
   const auto put = [&](const std::vector<Edge>& edges, bool own_information) {
     ForEachStep(s, edges, [&](std::size_t a, const Edge& e) {
-      const double var = TurnVariance(e, Up(s.keyframes[a + 1]), cfg, own_information);
-      if (var < c.var[a]) c.T[a] = e.T_from_to, c.var[a] = var;
+      const Eigen::Vector3d up = Up(s.keyframes[a + 1]);
+      const double var = TurnVariance(e, up, cfg, own_information);
+      if (var >= c.var[a]) return;
+      c.T[a] = e.T_from_to, c.var[a] = var;
+      c.holds[a] = StatedHorizontalVariance(e, up, cfg, own_information) < odometry;
     });
   };
   put(s.odometry, false);
@@ -436,55 +453,107 @@ CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
   return c;
 }
 
-// The pose of keyframe position j in the frame of position i through the edges, and the variance of
-// its turn (their sum); false where an edge is missing.
-bool Through(const CycleEdges& c, int i, int j, Pose* T, double* var) {
-  *T = Pose::Identity();
-  *var = 0.0;
+// The pose of keyframe position j in the frame of position i through the edges, the variance of
+// its turn (their sum), and whether every edge holds the translation; false where an edge is missing.
+struct Path {
+  Pose T = Pose::Identity();
+  double var = 0.0;
+  bool holds = true;
+};
+bool Through(const CycleEdges& c, int i, int j, Path* p) {
+  *p = Path{};
   for (int k = std::min(i, j); k < std::max(i, j); ++k) {
     if (!std::isfinite(c.var[std::size_t(k)])) return false;
-    *T = *T * c.T[std::size_t(k)];
-    *var += c.var[std::size_t(k)];
+    p->T = p->T * c.T[std::size_t(k)];
+    p->var += c.var[std::size_t(k)];
+    p->holds = p->holds && c.holds[std::size_t(k)];
   }
-  if (j < i) *T = T->inverse();
+  if (j < i) p->T = p->T.inverse();
   return true;
 }
-}  // namespace
 
-LoopHeading LoopHeadingScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
-                             const SlamConfig& cfg) {
+// Calls f(l1, l2, A, B) for each two verified loops between the same sessions next to each other
+// along the first session's route that `use` takes, A and B the paths between their keyframes
+// in the first and the second session.
+void ForEachCycle(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops, const SlamConfig& cfg,
+                  const std::function<bool(const LoopRecord&)>& use,
+                  const std::function<void(const LoopRecord&, const LoopRecord&, const Path&, const Path&)>& f) {
   std::vector<const LoopRecord*> ls;
   for (const LoopRecord& l : loops)
-    if (l.verified && !OwnLoop(l) && l.heading_variance > 0.0) ls.push_back(&l);
+    if (l.verified && !OwnLoop(l) && use(l)) ls.push_back(&l);
   const auto key = [](const LoopRecord* l) { return std::tie(l->a.session, l->b.session, l->a.keyframe, l->b.keyframe); };
   std::sort(ls.begin(), ls.end(), [&](const LoopRecord* x, const LoopRecord* y) { return key(x) < key(y); });
   std::vector<CycleEdges> edges;
   for (const Session& s : sessions) edges.push_back(EdgesOf(s, cfg));
-  std::vector<double> ratio;
   for (std::size_t i = 1; i < ls.size(); ++i) {
     const LoopRecord &l1 = *ls[i - 1], &l2 = *ls[i];
     if (l1.a.session != l2.a.session || l1.b.session != l2.b.session) continue;
-    Pose A, B;
-    double va = 0.0, vb = 0.0;
-    if (!Through(edges[std::size_t(l1.a.session)], l1.a.keyframe, l2.a.keyframe, &A, &va) ||
-        !Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B, &vb))
-      continue;
-    const double v = l1.heading_variance + l2.heading_variance;
-    if (va + vb >= v) continue;  // the cycle would measure the edges, not the loops
-    // Both T1 B and A T2 map keyframe b2 into keyframe a1.
-    const Keyframe& b2 = sessions[std::size_t(l2.b.session)].keyframes[std::size_t(l2.b.keyframe)];
-    const double c = TurnAbout(A * l2.T_a_b, l1.T_a_b * B, Up(b2));
-    ratio.push_back((c * c - va - vb) / v);
+    Path A, B;
+    if (Through(edges[std::size_t(l1.a.session)], l1.a.keyframe, l2.a.keyframe, &A) &&
+        Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B))
+      f(l1, l2, A, B);
   }
-  // The median ratio is positive where more than half are: else the loops' errors lie within what
-  // the edges' variance hides (the odometry's, where a session has no steps), and the cycles do not
-  // measure them: no heading information, as without a cycle.
-  LoopHeading out;
+}
+
+// The scale from the cycles' ratios: the median ratio is positive where more than half are; else
+// the loops' errors lie within what the edges' variance hides (the odometry's, where a session has
+// no steps), and the cycles do not measure them: none, as without a cycle.
+LoopCycleScale ScaleOf(std::vector<double> ratio, int cycles) {
+  LoopCycleScale out;
   const auto positive = std::count_if(ratio.begin(), ratio.end(), [](double r) { return r > 0.0; });
   if (2 * std::size_t(positive) <= ratio.size()) return out;
-  out.cycles = int(ratio.size());
+  out.cycles = cycles;
   out.scale = VarianceScale(std::move(ratio));
   return out;
+}
+
+// The horizontal variance per axis of a translation covariance C (3 x 3) in the frame of `up`.
+double PerAxis(const Eigen::Matrix3d& C, const Eigen::Vector3d& up) {
+  const Eigen::Matrix<double, 3, 2> H = Horizontal(up);
+  return 0.5 * (H.transpose() * C * H).trace();
+}
+}  // namespace
+
+LoopCycleScale LoopHeadingScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
+                                const SlamConfig& cfg) {
+  std::vector<double> ratio;
+  ForEachCycle(
+      sessions, loops, cfg, [](const LoopRecord& l) { return l.heading_variance > 0.0; },
+      [&](const LoopRecord& l1, const LoopRecord& l2, const Path& A, const Path& B) {
+        const double v = l1.heading_variance + l2.heading_variance;
+        if (A.var + B.var >= v) return;  // the cycle would measure the edges, not the loops
+        // Both T1 B and A T2 map keyframe b2 into keyframe a1.
+        const Keyframe& b2 = sessions[std::size_t(l2.b.session)].keyframes[std::size_t(l2.b.keyframe)];
+        const double c = TurnAbout(A.T * l2.T_a_b, l1.T_a_b * B.T, Up(b2));
+        ratio.push_back((c * c - A.var - B.var) / v);
+      });
+  const int cycles = int(ratio.size());
+  return ScaleOf(std::move(ratio), cycles);
+}
+
+LoopCycleScale LoopTranslationScale(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops,
+                                    const SlamConfig& cfg) {
+  std::vector<double> ratio;
+  int cycles = 0;
+  ForEachCycle(
+      sessions, loops, cfg, [](const LoopRecord& l) { return !l.translation_covariance.isZero(); },
+      [&](const LoopRecord& l1, const LoopRecord& l2, const Path& A, const Path& B) {
+        // A cycle through the odometry measures the odometry. Both T1 B and A T2 map keyframe b2
+        // into keyframe a1; each loop's covariance (its source frame, keyframe b) turned into a1's.
+        // The whole gap is laid on the loops: the steps' Fisher variance overstates their error
+        // (their closures show 0.05-0.11 x of it), and whatever share is theirs makes the loops
+        // looser, never finer, than they are.
+        if (!A.holds || !B.holds) return;
+        const Pose one = l1.T_a_b * B.T, two = A.T * l2.T_a_b;
+        const Eigen::Vector3d up = Up(sessions[std::size_t(l1.a.session)].keyframes[std::size_t(l1.a.keyframe)]);
+        const Eigen::Matrix3d R1 = l1.T_a_b.linear(), R2 = two.linear();
+        const double v = PerAxis(R1 * l1.translation_covariance * R1.transpose(), up) +
+                         PerAxis(R2 * l2.translation_covariance * R2.transpose(), up);
+        const Eigen::Vector2d d = Horizontal(up).transpose() * (one.translation() - two.translation());
+        for (int i = 0; i < 2; ++i) ratio.push_back(d[i] * d[i] / v);
+        ++cycles;
+      });
+  return ScaleOf(std::move(ratio), cycles);
 }
 
 Matrix6d LoopInformation(double fitness, const Matrix6d& fisher, const SlamConfig& cfg) {
@@ -739,6 +808,8 @@ SlamResult MakeResult(const Graph& g, const std::vector<LoopRecord>& loops, cons
   res.loops = loops;
   res.heading_cycles = g.heading.cycles;
   res.loop_heading_scale = g.heading.scale;
+  res.translation_cycles = g.translation.cycles;
+  res.loop_translation_scale = g.translation.scale;
   return res;
 }
 }  // namespace
@@ -749,7 +820,7 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
   ValidateSessionGraphs(sessions);
   const std::size_t n = sessions.size();
   Graph g{sessions, cfg, std::vector<std::vector<Pose>>(n), std::vector<Pose>(n, Pose::Identity()),
-          std::vector<bool>(n, false), LoopHeading{}};
+          std::vector<bool>(n, false), LoopCycleScale{}, LoopCycleScale{}};
   std::vector<std::vector<double>> path(n);
   for (std::size_t s = 0; s < n; ++s) {
     for (const Keyframe& kf : sessions[s].keyframes) g.poses[s].push_back(kf.T_session_sensor);
@@ -757,6 +828,7 @@ SlamResult OptimizeSessions(const std::vector<Session>& sessions, std::vector<Lo
   }
   CheckLoops(sessions, loops);
   g.heading = LoopHeadingScale(sessions, loops, cfg);
+  g.translation = LoopTranslationScale(sessions, loops, cfg);
   std::vector<std::string> reason(n);
   g.aligned[0] = true;
   InitialiseAnchors(g, loops, path, reason);
