@@ -427,8 +427,8 @@ namespace {
 
 // The edges a loops' cycle runs through in one session: per keyframe position k, the edge from k to
 // k + 1 (the finer in heading of its registered step and its odometry edge), the variance of its
-// turn about the vertical [rad^2] (infinite without an edge), and whether it holds the horizontal
-// translation finer than the config's odometry does (a registered step that holds it).
+// turn about the vertical [rad^2] (infinite without an edge), and whether it is a registered step
+// that holds the horizontal translation (finer than the config's odometry).
 struct CycleEdges {
   std::vector<Pose> T;
   std::vector<double> var;
@@ -445,7 +445,7 @@ CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
       const double var = TurnVariance(e, up, cfg, own_information);
       if (var >= c.var[a]) return;
       c.T[a] = e.T_from_to, c.var[a] = var;
-      c.holds[a] = StatedHorizontalVariance(e, up, cfg, own_information) < odometry;
+      c.holds[a] = own_information && StatedHorizontalVariance(e, up, cfg, true) < odometry;
     });
   };
   put(s.odometry, false);
@@ -454,10 +454,12 @@ CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
 }
 
 // The pose of keyframe position j in the frame of position i through the edges, the variance of
-// its turn (their sum), and whether every edge holds the translation; false where an edge is missing.
+// its turn (their sum), its edges, and whether every edge holds the translation; false where an
+// edge is missing.
 struct Path {
   Pose T = Pose::Identity();
   double var = 0.0;
+  int edges = 0;
   bool holds = true;
 };
 bool Through(const CycleEdges& c, int i, int j, Path* p) {
@@ -467,6 +469,7 @@ bool Through(const CycleEdges& c, int i, int j, Path* p) {
     p->T = p->T * c.T[std::size_t(k)];
     p->var += c.var[std::size_t(k)];
     p->holds = p->holds && c.holds[std::size_t(k)];
+    ++p->edges;
   }
   if (j < i) p->T = p->T.inverse();
   return true;
@@ -543,7 +546,8 @@ LoopCycleScale LoopTranslationScale(const std::vector<Session>& sessions, const 
         // The whole gap is laid on the loops: the steps' Fisher variance overstates their error
         // (their closures show 0.05-0.11 x of it), and whatever share is theirs makes the loops
         // looser, never finer, than they are.
-        if (!A.holds || !B.holds) return;
+        // Two loops between the same two keyframes (a place cloud's and a scan's) close no cycle.
+        if (!A.holds || !B.holds || A.edges + B.edges == 0) return;
         const Pose one = l1.T_a_b * B.T, two = A.T * l2.T_a_b;
         const Eigen::Vector3d up = Up(sessions[std::size_t(l1.a.session)].keyframes[std::size_t(l1.a.keyframe)]);
         const Eigen::Matrix3d R1 = l1.T_a_b.linear(), R2 = two.linear();
