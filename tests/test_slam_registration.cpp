@@ -396,6 +396,9 @@ TEST(SlamRegistration, LoopHeadingScaleIsMeasuredOnCyclesOfTwoLoops) {
     l.heading_variance = kLoopVar;
     loops.push_back(l);
   }
+  // Each keyframe pair registered twice over, alike: two loops between the same keyframes close no
+  // cycle (their zero turns had made half the ratios zero, and the cycles had measured nothing).
+  for (int k = 0; k < kKeyframes; ++k) loops.push_back(loops[std::size_t(k)]);
   const LoopCycleScale h = LoopHeadingScale(sessions, loops, cfg);
   EXPECT_EQ(h.cycles, kKeyframes - 1);
   EXPECT_NEAR(h.scale, kScale, 0.3 * kScale);

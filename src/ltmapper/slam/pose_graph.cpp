@@ -477,7 +477,8 @@ bool Through(const CycleEdges& c, int i, int j, Path* p) {
 
 // Calls f(l1, l2, A, B) for each two verified loops between the same sessions next to each other
 // along the first session's route that `use` takes, A and B the paths between their keyframes
-// in the first and the second session.
+// in the first and the second session. Two loops between the same two keyframes (a place cloud's
+// and a scan's) close no cycle: their gap is two registrations of one pair, not the loops' error.
 void ForEachCycle(const std::vector<Session>& sessions, const std::vector<LoopRecord>& loops, const SlamConfig& cfg,
                   const std::function<bool(const LoopRecord&)>& use,
                   const std::function<void(const LoopRecord&, const LoopRecord&, const Path&, const Path&)>& f) {
@@ -493,7 +494,7 @@ void ForEachCycle(const std::vector<Session>& sessions, const std::vector<LoopRe
     if (l1.a.session != l2.a.session || l1.b.session != l2.b.session) continue;
     Path A, B;
     if (Through(edges[std::size_t(l1.a.session)], l1.a.keyframe, l2.a.keyframe, &A) &&
-        Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B))
+        Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B) && A.edges + B.edges > 0)
       f(l1, l2, A, B);
   }
 }
@@ -546,8 +547,7 @@ LoopCycleScale LoopTranslationScale(const std::vector<Session>& sessions, const 
         // The whole gap is laid on the loops: the steps' Fisher variance overstates their error
         // (their closures show 0.05-0.11 x of it), and whatever share is theirs makes the loops
         // looser, never finer, than they are.
-        // Two loops between the same two keyframes (a place cloud's and a scan's) close no cycle.
-        if (!A.holds || !B.holds || A.edges + B.edges == 0) return;
+        if (!A.holds || !B.holds) return;
         const Pose one = l1.T_a_b * B.T, two = A.T * l2.T_a_b;
         const Eigen::Vector3d up = Up(sessions[std::size_t(l1.a.session)].keyframes[std::size_t(l1.a.keyframe)]);
         const Eigen::Matrix3d R1 = l1.T_a_b.linear(), R2 = two.linear();
