@@ -487,21 +487,25 @@ void GlobalFallback(const std::vector<Session>& sessions, std::vector<LoopRecord
     }
 }
 
-// A session whose sensor looks one way (the median over its sampled keyframes' clouds, as the
-// registration reads them, of the widest turn without a return, WidestBlindArcDeg, is more than
-// half a turn: no keyframe sees both
-// sides of where it stands) is registered by place clouds (CloudStore::PlaceCloud) reaching
-// `reach_m` back, the overlap reach: the keyframes behind k that still see what k sees. A drive the
+// The median over session s's sampled keyframes' clouds, as the registration reads them, of the
+// widest turn without a return (WidestBlindArcDeg) [deg]; over half a turn, the sensor looks one
+// way: no keyframe sees both sides of where it stands.
+double MedianBlindArcDeg(const Session& session, int s, CloudStore& store) {
+  std::vector<double> blind;
+  for (const int k : SampledKeyframes(int(session.keyframes.size())))
+    blind.push_back(WidestBlindArcDeg(*store.Get(s, k)));  // kept since OverlapReach read them
+  return UpperMedian(blind);
+}
+
+// A session whose sensor looks one way (MedianBlindArcDeg) is registered by place clouds
+// (CloudStore::PlaceCloud) reaching `reach_m` back, the overlap reach: the keyframes behind k that still see what k sees. A drive the
 // other way sees the same street from its other end; two such keyframes facing each other share
 // 0.20-0.29 of their submaps' points at the true pose (under registration.min_overlap), and a street
 // turned by half a turn may share more (the rosette's seed 16 was placed 64 m off that way). Scan
 // Context stays on single scans: a place cloud's descriptor told no true pair from false ones there.
 void UsePlaceCloudsWhereOneWay(const std::vector<Session>& sessions, CloudStore& store, double reach_m) {
   for (std::size_t s = 0; s < sessions.size(); ++s) {
-    std::vector<double> blind;
-    for (const int k : SampledKeyframes(int(sessions[s].keyframes.size())))
-      blind.push_back(WidestBlindArcDeg(*store.Get(int(s), k)));  // kept since OverlapReach read them
-    const double median_deg = UpperMedian(blind);
+    const double median_deg = MedianBlindArcDeg(sessions[s], int(s), store);
     if (median_deg <= kHalfTurnDeg) continue;
     store.UsePlaceClouds(int(s), reach_m);
     spdlog::info("slam: {}'s sensor looks one way ({:.0f} deg around it without a return): its keyframes are registered "
@@ -1060,11 +1064,22 @@ SlamResult AlignSessions(const std::vector<Session>& sessions, const SlamConfig&
 
 namespace {
 
+// Why no loop at given poses verified: the drives do not meet, the sensor looks one way (single
+// scans facing each other share too little; place clouds, as LT-SLAM registers them, carry their
+// odometry's drift: on the rosette 0.2-0.5 deg of residual at true poses, above LD's prior), or
+// the pose files may not share one world frame.
+const char* NoGivenLoopReason(bool tried, bool one_way) {
+  if (!tried) return ": the drives do not meet";
+  if (one_way) return ": its sensor looks one way, and single scans facing each other share too little to verify";
+  return ": do the pose files share one world frame?";
+}
+
 // The loops registered at given poses (`given`: each loop's given relative pose) scored against
 // them: a verified loop is accepted with its residual; each later session's rotation_sigma_deg is
 // the RMS rotation residual of its loops (none verified: 0, with a warning saying whether keyframe
-// pairs within `radius_m` were tried at all).
-void ScoreGivenLoops(std::vector<LoopRecord>& loops, const std::vector<Pose>& given, double radius_m, SlamResult& res) {
+// pairs within `radius_m` were tried at all, and whether the session's sensor looks one way).
+void ScoreGivenLoops(std::vector<LoopRecord>& loops, const std::vector<Pose>& given, double radius_m,
+                     const std::vector<bool>& one_way, SlamResult& res) {
   std::vector<double> sum_sq(res.sessions.size(), 0.0);
   std::vector<std::size_t> n(res.sessions.size(), 0), tried_pairs(res.sessions.size(), 0);
   for (std::size_t i = 0; i < loops.size(); ++i) {
@@ -1093,8 +1108,7 @@ void ScoreGivenLoops(std::vector<LoopRecord>& loops, const std::vector<Pose>& gi
     } else {
       spdlog::warn("slam: {}: no loop at the given poses verified ({} keyframe pairs within {:.1f} m tried{}); LD "
                    "keeps its rotation prior (pose_sigma_deg)",
-                   a.name, tried_pairs[s], radius_m,
-                   tried_pairs[s] ? ": do the pose files share one world frame?" : ": the drives do not meet");
+                   a.name, tried_pairs[s], radius_m, NoGivenLoopReason(tried_pairs[s] > 0, one_way[s]));
     }
   }
 }
@@ -1106,6 +1120,9 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
   const Stopwatch total;
   CloudStore store(sessions, cfg_in);
   const Reach reach = OverlapReach(sessions, store, cfg_in, threads);
+  std::vector<bool> one_way;
+  for (std::size_t s = 0; s < sessions.size(); ++s)
+    one_way.push_back(MedianBlindArcDeg(sessions[s], int(s), store) > kHalfTurnDeg);
   SlamConfig cfg = cfg_in;
   cfg.reg_max_translation_m = reach.farthest_m;
   std::set<std::pair<NodeKey, NodeKey>> tried;
@@ -1118,7 +1135,7 @@ void MeasureGivenPoses(const std::vector<Session>& sessions, SlamResult& res, co
   const Stopwatch sw;
   Register(loops, store, cfg, threads, "GICP loops at the given poses");
   res.time_registration_s = sw.Seconds();
-  ScoreGivenLoops(loops, given, reach.median_m, res);
+  ScoreGivenLoops(loops, given, reach.median_m, one_way, res);
   res.loops = std::move(loops);
   res.registrations = int(res.loops.size());
   res.refine_radius_m = reach.median_m;
