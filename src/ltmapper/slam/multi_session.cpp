@@ -498,11 +498,12 @@ double MedianBlindArcDeg(const Session& session, int s, CloudStore& store) {
 }
 
 // A session whose sensor looks one way (MedianBlindArcDeg) is registered by place clouds
-// (CloudStore::PlaceCloud) reaching `reach_m` back, the overlap reach: the keyframes behind k that still see what k sees. A drive the
-// other way sees the same street from its other end; two such keyframes facing each other share
-// 0.20-0.29 of their submaps' points at the true pose (under registration.min_overlap), and a street
-// turned by half a turn may share more (the rosette's seed 16 was placed 64 m off that way). Scan
-// Context stays on single scans: a place cloud's descriptor told no true pair from false ones there.
+// (CloudStore::PlaceCloud) reaching `reach_m` back, the overlap reach: the keyframes behind k that
+// still see what k sees. A drive the other way sees the same street from its other end; two such
+// keyframes facing each other share 0.20-0.29 of their submaps' points at the true pose (under
+// registration.min_overlap), and a street turned by half a turn may share more (the rosette's seed
+// 16 was placed 64 m off that way). Scan Context stays on single scans: a place cloud's descriptor
+// told no true pair from false ones there.
 void UsePlaceCloudsWhereOneWay(const std::vector<Session>& sessions, CloudStore& store, double reach_m) {
   for (std::size_t s = 0; s < sessions.size(); ++s) {
     const double median_deg = MedianBlindArcDeg(sessions[s], int(s), store);

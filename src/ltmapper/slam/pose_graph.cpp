@@ -454,12 +454,10 @@ CycleEdges EdgesOf(const Session& s, const SlamConfig& cfg) {
 }
 
 // The pose of keyframe position j in the frame of position i through the edges, the variance of
-// its turn (their sum), its edges, and whether every edge holds the translation; false where an
-// edge is missing.
+// its turn (their sum), and whether every edge holds the translation; false where an edge is missing.
 struct Path {
   Pose T = Pose::Identity();
   double var = 0.0;
-  int edges = 0;
   bool holds = true;
 };
 bool Through(const CycleEdges& c, int i, int j, Path* p) {
@@ -469,7 +467,6 @@ bool Through(const CycleEdges& c, int i, int j, Path* p) {
     p->T = p->T * c.T[std::size_t(k)];
     p->var += c.var[std::size_t(k)];
     p->holds = p->holds && c.holds[std::size_t(k)];
-    ++p->edges;
   }
   if (j < i) p->T = p->T.inverse();
   return true;
@@ -492,9 +489,10 @@ void ForEachCycle(const std::vector<Session>& sessions, const std::vector<LoopRe
   for (std::size_t i = 1; i < ls.size(); ++i) {
     const LoopRecord &l1 = *ls[i - 1], &l2 = *ls[i];
     if (l1.a.session != l2.a.session || l1.b.session != l2.b.session) continue;
+    if (l1.a.keyframe == l2.a.keyframe && l1.b.keyframe == l2.b.keyframe) continue;
     Path A, B;
     if (Through(edges[std::size_t(l1.a.session)], l1.a.keyframe, l2.a.keyframe, &A) &&
-        Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B) && A.edges + B.edges > 0)
+        Through(edges[std::size_t(l1.b.session)], l1.b.keyframe, l2.b.keyframe, &B))
       f(l1, l2, A, B);
   }
 }
