@@ -215,6 +215,21 @@ struct PointInWorld {
   Eigen::Matrix3f to_world = Eigen::Matrix3f::Identity();
 };
 
+// A point as ColumnImage::Observed tests it: ps in the (firing) sensor frame, its range, pitch and
+// yaw as MultiResImage::Angles gives them, on the plane n . x = off (plane[0..3], sensor frame).
+struct BeamPoint {
+  float range = 0.f, pitch = 0.f, yaw = 0.f;
+  Eigen::Vector3f ps = Eigen::Vector3f::Zero();
+  const float* plane = nullptr;
+};
+// What ColumnImage::Observed is asked beyond kBeamEnded (see there).
+struct BeamAsk {
+  bool want_around = false;               // PD: kBeamAround, kBeamPassed; ND (false): kBeamNear
+  bool ask_through = false;               // kBeamThrough by a beam that crossed the plane
+  const SurfaceExtent* inside = nullptr;  // kBeamThrough by the own column's beam (PassedInside)
+  const PointInWorld* world = nullptr;    // the surface a far return met (HitSurfaces)
+};
+
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
 // half the finest beam spacing.
 BeamTest ForSensor(const RemovertConfig& cfg, BeamTest test);
@@ -222,8 +237,7 @@ class ColumnImage {
  public:
   ColumnImage(const RemovertConfig& cfg, const BeamTest& test);
   void Build(const PointCloud& scan);
-  // BeamTest for a point ps (sensor frame; its range, pitch and yaw as MultiResImage::Angles
-  // gives them) on the plane n . x = off (plane[0..3], sensor frame): kBeamEnded when a beam of
+  // BeamTest for a point (BeamPoint) asked as `ask` says: kBeamEnded when a beam of
   // its column or of the columns within asin(tol / range) of it ended on its surface near it;
   // with want_around, kBeamAround when its cell is empty and the
   // beams around it met its surface farther away (Around), and kBeamPassed when a beam passed it
@@ -237,9 +251,7 @@ class ColumnImage {
   // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear). With
   // `world` (null: not asked), a return farther than tol from the point along its ray ended near it
   // only within the along-ray tolerance of the surface it met too (HitSurfaces).
-  std::uint8_t Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane,
-                        bool want_around, bool ask_through, const SurfaceExtent* inside,
-                        const PointInWorld* world = nullptr) const;
+  std::uint8_t Observed(const BeamPoint& p, const BeamAsk& ask) const;
   // A ring sensor fires every beam at every azimuth step: a beam of the table whose ray passes
   // within the tolerance of the point (at its range, inside the sensor's max range) and whose
   // cells there and one step to each side hold no return went on past the point and met nothing
@@ -291,6 +303,13 @@ class ColumnImage {
     }
     return false;
   }
+  // Observed's steps: beam r of column c (its cell offset c) ended on p's surface near it; some
+  // beam of column col did (its cell in p's row, else the nearest beams above and below, returned
+  // in *ra / *rb); some beam of the columns within `reach` of p's crossed its plane within a map
+  // voxel of it and ended beyond (WentThrough).
+  bool EndedNear(const BeamPoint& p, std::size_t c, int r, const PointInWorld* world) const;
+  bool ColumnEnded(const BeamPoint& p, int col, const PointInWorld* world, int* ra, int* rb) const;
+  bool WentThrough(const BeamPoint& p, int reach) const;
   // A return of the scan on the point's plane (within tol) within surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
   BeamTest test_;

@@ -685,83 +685,94 @@ std::pair<int, int> ColumnImage::BeamsAround(const float* rc, int row) const {
   return {ra, rb};
 }
 
-std::uint8_t ColumnImage::Observed(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
-                                   const float* plane, bool want_around, bool ask_through, const SurfaceExtent* inside,
-                                   const PointInWorld* world) const {
+// Beam r of column c ended on the point's surface near it: its return on the point's plane, its
+// ray passing within tol of the point, and its return within the along-ray tolerance of the point's
+// place along it, at the incidence on the point's plane and (with `world`) on the surface the
+// return met (the sim's beam truth: a ray of the scan that ended on the surface near the point).
+bool ColumnImage::EndedNear(const BeamPoint& p, std::size_t c, int r, const PointInWorld* world) const {
+  const float tol = float(test_.tol_m), grazing_max = float(test_.grazing_max_m);
+  const float rr = range_[c + std::size_t(r)];
+  const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
+  if (PlaneDistance(p.plane, q) > tol) return false;
+  const Eigen::Vector3f u = q / rr;
+  const float s = p.ps.dot(u);
+  if ((p.ps - s * u).squaredNorm() > tol * tol) return false;
+  const float along = std::fabs(rr - s);
+  const Eigen::Vector3f nrm(p.plane[0], p.plane[1], p.plane[2]);
+  if (along > AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max)) return false;
+  float met = 0.f;
+  return along <= tol || world == nullptr ||
+         !world->surfaces->Cosine(world->at + world->to_world * (q - p.ps), world->to_world * u, &met) ||
+         along <= AlongRay(tol, met, grazing_max);
+}
+
+// In column col: its cell in the point's row, else the nearest beams above and below it.
+bool ColumnImage::ColumnEnded(const BeamPoint& p, int col, const PointInWorld* world, int* ra, int* rb) const {
+  const int row = grid_.Row(p.pitch);
+  const std::size_t c = std::size_t(col) * std::size_t(grid_.rows);
+  const float* rc = range_.data() + c;
+  if (std::isfinite(rc[row]) && EndedNear(p, c, row, world)) return true;
+  std::tie(*ra, *rb) = BeamsAround(rc, row);
+  return (*ra >= 0 && EndedNear(p, c, *ra, world)) || (*rb >= 0 && EndedNear(p, c, *rb, world));
+}
+
+// Without a beam ending near it: a beam of the columns within `reach` whose ray crossed the point's
+// plane within a map voxel of it (the surface element the map point stands for) and whose return
+// lies beyond the crossing by more than tol / cos(incidence) went through its place: past the band
+// along the ray where it is within tol of the plane (not capped at grazing_max as for a beam that
+// ended near: a ray grazing a facade ends on it a few metres on).
+bool ColumnImage::WentThrough(const BeamPoint& p, int reach) const {
   const float tol = float(test_.tol_m);
-  const float grazing_max = float(test_.grazing_max_m);
-  const int rows = grid_.rows, row = grid_.Row(pitch), col = grid_.Col(yaw);
-  const Eigen::Vector3f nrm(plane[0], plane[1], plane[2]);
-  // Beam r of column c ended on the point's surface near it: its return on the point's plane, its
-  // ray passing within tol of the point, and its return within the along-ray tolerance of the
-  // point's place along it, at the incidence on the point's plane and (with `world`) on the surface
-  // the return met (the sim's beam truth: a ray of the scan that ended on the surface near the point).
-  auto ended_near = [&](std::size_t c, int r) {
-    const float rr = range_[c + std::size_t(r)];
-    const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
-    if (PlaneDistance(plane, q) > tol) return false;
-    const Eigen::Vector3f u = q / rr;
-    const float s = ps.dot(u);
-    if ((ps - s * u).squaredNorm() > tol * tol) return false;
-    const float along = std::fabs(rr - s);
-    if (along > AlongRay(tol, std::fabs(nrm.dot(u)), grazing_max)) return false;
-    float met = 0.f;
-    return along <= tol || world == nullptr ||
-           !world->surfaces->Cosine(world->at + world->to_world * (q - ps), world->to_world * u, &met) ||
-           along <= AlongRay(tol, met, grazing_max);
-  };
-  // In column c: its cell in the point's row, else the nearest beams above and below it.
-  auto column_ended = [&](int c_index, int* ra, int* rb) {
-    const std::size_t c = std::size_t(c_index) * std::size_t(rows);
-    const float* rc = range_.data() + c;
-    if (std::isfinite(rc[row]) && ended_near(c, row)) return true;
-    std::tie(*ra, *rb) = BeamsAround(rc, row);
-    return (*ra >= 0 && ended_near(c, *ra)) || (*rb >= 0 && ended_near(c, *rb));
-  };
-  int ra = -1, rb = -1;
-  bool ended = column_ended(col, &ra, &rb);
-  const bool own_empty = !std::isfinite(range_[std::size_t(col) * std::size_t(rows) + std::size_t(row)]);
-  const bool around = want_around && own_empty && Around(range, std::size_t(col) * std::size_t(rows), ra, rb, ps, plane);
-  // The truth counts every ray that passes within tol of the point, whatever its azimuth: the
-  // columns within asin(tol / range) of the point's.
-  const int reach = std::min(grid_.cols / 2, int(std::ceil(std::asin(std::min(1.f, tol / range)) * grid_.col_scale)));
-  for (int d = 1; d <= reach && !ended; ++d)
-    for (int c : {col - d, col + d}) {
-      int a = -1, b = -1;
-      if (!ended) ended = column_ended((c + grid_.cols) % grid_.cols, &a, &b);
-    }
-  const bool passed = want_around && !ended && PassedWithoutReturn(range, pitch, yaw);
-  // ND's, with `inside`: the beam of the point's own column passed it without a return and crossed
-  // its surface inside (PassedInside), not beside its edge.
-  const bool passed_own = inside != nullptr && !ended && PassedInside(range, pitch, yaw, ps, plane, *inside);
-  // Without a beam ending near it: a beam of those columns whose ray crossed the point's plane
-  // within a map voxel of it (the surface element the map point stands for) and whose return lies
-  // beyond the crossing by more than tol / cos(incidence) went through its place: past the band
-  // along the ray where it is within tol of the plane (not capped at grazing_max as for a beam
-  // that ended near: a ray grazing a facade ends on it a few metres on). Not where the scan met
-  // the point's surface nearby (MetSurfaceNear): that ray passed an edge of it (a wall's top, a
-  // gap between fence panels) without crossing it.
+  const int row = grid_.Row(p.pitch), col = grid_.Col(p.yaw);
+  const Eigen::Vector3f nrm(p.plane[0], p.plane[1], p.plane[2]);
   constexpr float kUncapped = std::numeric_limits<float>::infinity();
   auto went_beyond = [&](std::size_t c, int r) {
     const float rr = range_[c + std::size_t(r)];
     const Eigen::Vector3f u = ret_[c + std::size_t(r)] / rr;
     const float cs = nrm.dot(u);
     if (std::fabs(cs) < 1e-3f) return false;
-    const float t = nrm.dot(ps) / cs;
-    return t > 0.f && (t * u - ps).squaredNorm() <= through_m_ * through_m_ && rr - t > AlongRay(tol, std::fabs(cs), kUncapped);
+    const float t = nrm.dot(p.ps) / cs;
+    return t > 0.f && (t * u - p.ps).squaredNorm() <= through_m_ * through_m_ &&
+           rr - t > AlongRay(tol, std::fabs(cs), kUncapped);
   };
-  bool through = false;
-  for (int d = -reach; d <= reach && ask_through && !ended && !through; ++d) {
-    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(rows);
+  for (int d = -reach; d <= reach; ++d) {
+    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
     const float* rc = range_.data() + c;
     const auto [a, b] = BeamsAround(rc, row);
-    through = (std::isfinite(rc[row]) && went_beyond(c, row)) || (a >= 0 && went_beyond(c, a)) || (b >= 0 && went_beyond(c, b));
+    if ((std::isfinite(rc[row]) && went_beyond(c, row)) || (a >= 0 && went_beyond(c, a)) || (b >= 0 && went_beyond(c, b)))
+      return true;
   }
-  // A beam that passed it and met nothing inside its surface went through its place too (ND's
-  // PassedInside), where it did not pass an edge of the surface either.
-  through = (through || passed_own) && !MetSurfaceNear(range, pitch, yaw, ps, plane);
+  return false;
+}
+
+std::uint8_t ColumnImage::Observed(const BeamPoint& p, const BeamAsk& ask) const {
+  const int rows = grid_.rows, row = grid_.Row(p.pitch), col = grid_.Col(p.yaw);
+  int ra = -1, rb = -1;
+  bool ended = ColumnEnded(p, col, ask.world, &ra, &rb);
+  const bool own_empty = !std::isfinite(range_[std::size_t(col) * std::size_t(rows) + std::size_t(row)]);
+  const bool around = ask.want_around && own_empty &&
+                      Around(p.range, std::size_t(col) * std::size_t(rows), ra, rb, p.ps, p.plane);
+  // The truth counts every ray that passes within tol of the point, whatever its azimuth: the
+  // columns within asin(tol / range) of the point's.
+  const int reach =
+      std::min(grid_.cols / 2, int(std::ceil(std::asin(std::min(1.f, float(test_.tol_m) / p.range)) * grid_.col_scale)));
+  for (int d = 1; d <= reach && !ended; ++d)
+    for (int c : {col - d, col + d}) {
+      int a = -1, b = -1;
+      if (!ended) ended = ColumnEnded(p, (c + grid_.cols) % grid_.cols, ask.world, &a, &b);
+    }
+  const bool passed = ask.want_around && !ended && PassedWithoutReturn(p.range, p.pitch, p.yaw);
+  // ND's, with `inside`: the beam of the point's own column passed it without a return and crossed
+  // its surface inside (PassedInside), not beside its edge.
+  const bool passed_own =
+      ask.inside != nullptr && !ended && PassedInside(p.range, p.pitch, p.yaw, p.ps, p.plane, *ask.inside);
+  // Not where the scan met the point's surface nearby (MetSurfaceNear): that ray passed an edge of
+  // it (a wall's top, a gap between fence panels) without crossing it; nor beside the edge of its
+  // surface (passed_own).
+  const bool through = ((ask.ask_through && !ended && WentThrough(p, reach)) || passed_own) &&
+                       !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, p.plane);
   // kBeamNear gates ND's pixel see-through (VoteCounts); PD (want_around) does not read it.
-  const bool near = !want_around && BeamNear(range, pitch);
+  const bool near = !ask.want_around && BeamNear(p.range, p.pitch);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
                       (through ? kBeamThrough : 0) | (near ? kBeamNear : 0));
 }
@@ -1235,9 +1246,9 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     if (s.options.hit_surfaces != nullptr)
       world = {s.options.hit_surfaces, Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]), R.transpose()};
     sc->seen_beams[sc->idx[j]] =
-        sc->columns->Observed(sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl, s.options.count_own_see,
-                              asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside),
-                              s.options.hit_surfaces != nullptr ? &world : nullptr);
+        sc->columns->Observed({sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl},
+                              {s.options.count_own_see, asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside),
+                               s.options.hit_surfaces != nullptr ? &world : nullptr});
   }
 }
 
