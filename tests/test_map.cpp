@@ -1324,6 +1324,11 @@ TEST(MapObjects, AlikeObjectsThatMovedArePairedByTheLeastTotalDisplacement) {
     EXPECT_EQ(other.partner, o.id);
     EXPECT_EQ(o.centroid.x() > 0.0, other.centroid.x() > 0.0) << o.centroid.transpose() << " paired with "
                                                               << other.centroid.transpose();
+    // Either alike object on the other side could be it: the user is told the pairing is a choice.
+    std::vector<int> other_side;
+    for (const auto& p : objs)
+      if ((p.cls == PointClass::kNDStrong) != (o.cls == PointClass::kNDStrong)) other_side.push_back(p.id);
+    EXPECT_EQ(o.move_candidates, other_side);
   }
 }
 
@@ -1375,6 +1380,11 @@ TEST(MapObjects, AMovedThingSeenAgainByALaterStepIsTheMovesEnd) {
   EXPECT_EQ(again->partner, gone->id);
   EXPECT_EQ(car->change, "appeared");
   EXPECT_EQ(car->partner, -1);
+  // One alike candidate on each side: the pairing had no alternative; step 2's view takes it.
+  EXPECT_EQ(gone->move_candidates, std::vector<int>({came->id}));
+  EXPECT_EQ(came->move_candidates, std::vector<int>({gone->id}));
+  EXPECT_EQ(again->move_candidates, std::vector<int>({gone->id}));
+  EXPECT_TRUE(car->move_candidates.empty());
 }
 
 // Identity across steps: car A, new in session 1, is found again by step 2, which sampled it 0.3 m

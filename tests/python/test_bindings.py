@@ -225,6 +225,7 @@ def test_stages_store_eval():
     assert len(st.map_at("session_00", box=((-5, -5, -5), (5, 5, 5)))["points"]) <= len(st.map_at(0)["points"])
     assert isinstance(st.objects(), list) and st.fsck()["ok"] and st.totals()["file_bytes"] > 0
     assert all(o["track"] <= o["id"] and o["exists_in"] in o["track_sessions"] for o in st.objects())
+    assert all(o["partner"] < 0 or o["partner"] in o["move_candidates"] for o in st.objects())
     ch = st.step_changes(1, voxel=0.0)
     assert set(np.unique(ch["cls"])) <= {3, 4, 5, 6} and (ch["session"] == 1).all()
     kf = st.keyframes()[0]

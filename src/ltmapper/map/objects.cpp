@@ -1154,8 +1154,11 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
     std::vector<std::vector<double>> cost(gone.size(), std::vector<double>(came.size(), forbidden));
     for (std::size_t r = 0; r < gone.size(); ++r)
       for (std::size_t c = 0; c < came.size(); ++c) {
-        const MapObject &d = objects[gone[r]], &a = objects[came[c]];
-        if (CouldHaveMoved(d, a, cfg)) cost[r][c] = (d.centroid - a.centroid).norm();
+        MapObject &d = objects[gone[r]], &a = objects[came[c]];
+        if (!CouldHaveMoved(d, a, cfg)) continue;
+        cost[r][c] = (d.centroid - a.centroid).norm();
+        d.move_candidates.push_back(a.id);  // gone and came are in id order: each list ascends
+        a.move_candidates.push_back(d.id);
       }
     for (const auto& [r, c] : detail::LeastCostPairs(cost)) {
       objects[gone[r]].partner = objects[came[c]].id;
@@ -1210,19 +1213,21 @@ void AssignTracks(std::vector<MapObject>& objects, const MapConfig& cfg) {
 
 // A later step's view of a moved object's end is that end too: a row of the same track, on the
 // same side of the change (PD: the place it came to, strong ND: the place it left) and against
-// the same reference session, as a row LinkMoved paired, is "moved" with that row's partner (the
+// the same reference session, as a row LinkMoved paired, is "moved" with that row's partner and
+// move candidates (the
 // container that came at step 1 seen from its other side at step 2: against the reference it was
 // still elsewhere, so at step 2 too it is a move's end, not a new object).
 void InheritMoves(std::vector<MapObject>& objects) {
-  std::map<std::tuple<int, bool, int>, int> moved_end;  // (track, PD side, reference) -> partner
+  std::map<std::tuple<int, bool, int>, const MapObject*> moved_end;  // (track, PD side, reference) -> row
   for (const auto& o : objects)
-    if (o.change == "moved") moved_end.emplace(std::make_tuple(o.track, IsPd(o.cls), o.reference), o.partner);
+    if (o.change == "moved") moved_end.emplace(std::make_tuple(o.track, IsPd(o.cls), o.reference), &o);
   for (auto& o : objects) {
     if (o.change == "moved") continue;
     const auto it = moved_end.find(std::make_tuple(o.track, IsPd(o.cls), o.reference));
     if (it == moved_end.end()) continue;
     o.change = "moved";
-    o.partner = it->second;
+    o.partner = it->second->partner;
+    o.move_candidates = it->second->move_candidates;
   }
 }
 

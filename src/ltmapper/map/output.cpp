@@ -217,9 +217,9 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / M_PI;
 const char* const kObjectColumns =
-    "id,session,reference,class,change,partner,exists_in,track,track_sessions,points,confidence,cx,cy,cz,min_x,min_y,"
-    "min_z,max_x,max_y,max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,height_above_ground,clearance,"
-    "range_m,observed_fraction,twin_fraction,attached_fraction,box_seen_fraction";
+    "id,session,reference,class,change,partner,move_candidates,exists_in,track,track_sessions,points,confidence,cx,cy,"
+    "cz,min_x,min_y,min_z,max_x,max_y,max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,"
+    "height_above_ground,clearance,range_m,observed_fraction,twin_fraction,attached_fraction,box_seen_fraction";
 
 std::string Joined(const std::vector<int>& v, const char* sep) {
   std::string out;
@@ -229,8 +229,8 @@ std::string Joined(const std::vector<int>& v, const char* sep) {
 
 void WriteObjectRow(std::ostream& os, const MapObject& o) {
   os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.change << ','
-     << o.partner << ',' << o.exists_in << ',' << o.track << ',' << Joined(o.track_sessions, ";") << ',' << o.points
-     << ',' << o.confidence << ',' << o.centroid.x() << ','
+     << o.partner << ',' << Joined(o.move_candidates, ";") << ',' << o.exists_in << ',' << o.track << ','
+     << Joined(o.track_sessions, ";") << ',' << o.points << ',' << o.confidence << ',' << o.centroid.x() << ','
      << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y() << ',' << o.lo.z() << ','
      << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << ',' << o.box_center.x() << ',' << o.box_center.y() << ','
      << o.box_center.z() << ',' << o.yaw_rad * kRadToDeg << ',' << o.size.x() << ',' << o.size.y() << ','
@@ -254,7 +254,9 @@ void Vec(io::json::Writer& w, const std::string& key, const Eigen::Vector3d& v) 
 
 void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
   w.BeginObject().Int("id", o.id).Int("session", o.session).Int("reference", o.reference);
-  w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner);
+  w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner).BeginArray("move_candidates");
+  for (const int c : o.move_candidates) w.Int(c);
+  w.EndArray();
   w.BeginArray("exists_in").Int(o.exists_in).EndArray().Int("track", o.track).BeginArray("track_sessions");
   for (const int s : o.track_sessions) w.Int(s);
   w.EndArray().Int("points", o.points).Number("confidence", Mm(o.confidence));

@@ -116,6 +116,11 @@ struct MapObject {
   PointClass cls = PointClass::kUnknown;  // majority class: kPDStrong, kPDWeak or kNDStrong
   std::string change;  // "appeared" (PD), "disappeared" (strong ND), "moved" (either end of a move)
   int partner = -1;    // moved: id of the other end (same step), else -1
+  // Ids of the step's objects on the other side of the change that could be this one, moved
+  // (sizes agree within the sensor's sampling, far enough apart: objects.cpp CouldHaveMoved),
+  // ascending. A move whose list holds its partner alone had no alike alternative; with more, a
+  // box cannot tell which alike object went where (LinkMoved took the least total displacement).
+  std::vector<int> move_candidates;
   int exists_in = 0;   // session whose scans hold the object (session for PD, reference for ND)
   // Identity across steps (Store::Objects, not stored per step): the rows that are one object, the
   // same thing at one place seen by several steps or a move's two ends, form one track; its id is
