@@ -461,10 +461,15 @@ function selectObject(k) {
   state.selected = k;
   [...$('object-list').children].forEach((row, i) => row.classList.toggle('selected', i === k));
   const name = (i) => (state.info.sessions[i] || { name: String(i) }).name;
+  // A move's partner, and whether it was a choice among alike objects (objects.json's move_candidates).
+  const alike = o.move_candidates || [];
+  const partner = o.partner < 0 ? '' : `\nmoved: the other end is #${o.partner}` +
+      (alike.length > 1 ? ` (a choice among the alike #${alike.join(', #')})` : '');
   $('object-detail').textContent =
       `#${o.id} ${o.change} (${o.class}) in ${name(o.session)} vs ${name(o.reference)}\n` +
       `${o.points} points, confidence ${o.confidence}\n` +
-      `box ${o.box.size.map((v) => v.toFixed(1)).join(' x ')} m at ${o.box.center.map((v) => v.toFixed(1)).join(', ')}`;
+      `box ${o.box.size.map((v) => v.toFixed(1)).join(' x ')} m at ${o.box.center.map((v) => v.toFixed(1)).join(', ')}` +
+      partner;
   showBox(o);
   flyTo(new THREE.Vector3(...o.box.center), new THREE.Vector3(...o.box.size).length());
   showStep(o.session);

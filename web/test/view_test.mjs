@@ -228,6 +228,10 @@ async function clickObject(page, objects) {
                              o.session, { timeout: STEP_TIMEOUT_MS });
   const detail = await page.textContent('#object-detail');
   assert.match(detail, new RegExp(`#${o.id} ${o.change} \\(${o.class}\\)`));
+  // A move names its other end, and the alike objects when its partner was a choice among them.
+  if (o.partner >= 0) assert.match(detail, new RegExp(`the other end is #${o.partner}`));
+  if ((o.move_candidates || []).length > 1) assert.match(detail, new RegExp(`a choice among the alike #${o.move_candidates.join(', #')}`));
+  if (o.partner < 0) assert.doesNotMatch(detail, /the other end/);
   assert.match(await page.textContent('#session-label'), new RegExp(`Session ${o.session}: `));
   await page.waitForTimeout(1000);  // the camera's flight (0.8 s)
   console.log(`object #${o.id}: ${detail.split('\n')[0]}`);
