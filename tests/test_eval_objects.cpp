@@ -187,7 +187,11 @@ TEST(Objects, MovedFoundLinkedAndPrecision) {
   Report rep;
   rep.objects = r;
   EXPECT_NEAR(*JsonNumber(ToJson(rep), "objects.moved.0.precision"), 0.5, 1e-9);
-  EXPECT_NE(ToMarkdown(rep).find("| all | 1 | 1 | 1 | 4 | 2 | 0.500 | 1.000 |"), std::string::npos);
+  const std::string md = ToMarkdown(rep);
+  EXPECT_NE(md.find("| all | 1 | 1 | 1 | 4 | 2 | 0.500 | 1.000 |"), std::string::npos);
+  // Every reported object with its verdict: the container's end true, the car "moved" too.
+  EXPECT_NE(md.find("| 00_01 | 0 | moved | 1 | - | 100 | 10 (container) | 1.000 | yes |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| 00_01 | 2 | moved | 3 | - | 100 | 7 (car) | 1.000 | yes |"), std::string::npos) << md;
   // Both ends reported as moved, each linked to a car: found, not linked.
   clusters[0].partner = 3, clusters[3].partner = 0, clusters[1].partner = 2, clusters[2].partner = 1;
   r = EvaluateObjects(truth, clusters, cfg, 2);

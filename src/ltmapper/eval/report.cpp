@@ -6,7 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <sstream>
+#include <string>
+#include <utility>
 
 namespace ltm::eval {
 namespace {
@@ -462,6 +465,23 @@ void MdStorage(std::ostringstream& md, const StorageResult& s) {
   }
 }
 
+// What a user reads, judged: every reported object (objects.csv) with the truth object of its pair
+// that overlaps it most, and whether that makes it a true object.
+void MdObjectVerdicts(std::ostringstream& md, const ObjectsResult& r) {
+  md << "\nReported objects (objects.csv), each with the truth object of its pair that overlaps it most:\n\n"
+     << Header({"pair", "id", "change", "partner", "track", "points", "best truth", "IoU", "true object"});
+  std::map<std::pair<std::string, int>, std::string> cls;  // (pair, truth id) -> its class
+  for (const auto& o : r.objects) cls[{o.pair, o.id}] = o.cls;
+  const auto id_or_dash = [](int v) { return v < 0 ? std::string("-") : std::to_string(v); };
+  for (const auto& c : r.cluster_scores) {
+    const auto t = cls.find({c.pair, c.best_truth});
+    const std::string truth = id_or_dash(c.best_truth) + (t == cls.end() ? "" : " (" + t->second + ")");
+    md << Row({c.pair, std::to_string(c.id), c.moved ? std::string("moved") : c.change, id_or_dash(c.partner),
+               id_or_dash(c.track), std::to_string(c.points), truth, Fmt(c.best_iou, 3),
+               c.true_object ? std::string("yes") : std::string("no")});
+  }
+}
+
 void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   md << "## Changed objects\n\nTruth: LD objects present in exactly one session of the pair; point IoU "
         "after a " << Fmt(r.voxel_m, 2) << " m voxel filter, match distance " << Fmt(r.match_dist_m, 2)
@@ -501,7 +521,8 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
   md << "\nIdentity across steps (objects.csv's track), over pairs of true clusters of different steps: "
      << id.same_tracked << " of the " << id.same << " that find one truth object share a track; " << id.tracked_wrong
      << " of the " << id.tracked << " that share a track find two objects that are not one move's ends.\n";
-  md << "\n"
+  MdObjectVerdicts(md, r);
+  md << "\nTruth objects, each with the cluster that overlaps it most:\n\n"
      << Header({"pair", "id", "class", "placement", "in session", "points", "change points", "observed share",
                 "best cluster", "cluster points", "IoU", "found"});
   for (const auto& o : r.objects)
