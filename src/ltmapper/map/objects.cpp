@@ -1214,9 +1214,8 @@ void AssignTracks(std::vector<MapObject>& objects, const MapConfig& cfg) {
 // A later step's view of a moved object's end is that end too: a row of the same track, on the
 // same side of the change (PD: the place it came to, strong ND: the place it left) and against
 // the same reference session, as a row LinkMoved paired, is "moved" with that row's partner and
-// move candidates (the
-// container that came at step 1 seen from its other side at step 2: against the reference it was
-// still elsewhere, so at step 2 too it is a move's end, not a new object).
+// move candidates (the container that came at step 1 seen from its other side at step 2: against
+// the reference it was still elsewhere, so at step 2 too it is a move's end, not a new object).
 void InheritMoves(std::vector<MapObject>& objects) {
   std::map<std::tuple<int, bool, int>, const MapObject*> moved_end;  // (track, PD side, reference) -> row
   for (const auto& o : objects)
