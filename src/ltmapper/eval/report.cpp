@@ -465,6 +465,9 @@ void MdStorage(std::ostringstream& md, const StorageResult& s) {
   }
 }
 
+// An object id, or "-" for none (-1).
+std::string IdOrDash(int id) { return id < 0 ? std::string("-") : std::to_string(id); }
+
 // What a user reads, judged: every reported object (objects.csv) with the truth object of its pair
 // that overlaps it most, and whether that makes it a true object.
 void MdObjectVerdicts(std::ostringstream& md, const ObjectsResult& r) {
@@ -472,12 +475,11 @@ void MdObjectVerdicts(std::ostringstream& md, const ObjectsResult& r) {
      << Header({"pair", "id", "change", "partner", "track", "points", "best truth", "IoU", "true object"});
   std::map<std::pair<std::string, int>, std::string> cls;  // (pair, truth id) -> its class
   for (const auto& o : r.objects) cls[{o.pair, o.id}] = o.cls;
-  const auto id_or_dash = [](int v) { return v < 0 ? std::string("-") : std::to_string(v); };
   for (const auto& c : r.cluster_scores) {
     const auto t = cls.find({c.pair, c.best_truth});
-    const std::string truth = id_or_dash(c.best_truth) + (t == cls.end() ? "" : " (" + t->second + ")");
-    md << Row({c.pair, std::to_string(c.id), c.moved ? std::string("moved") : c.change, id_or_dash(c.partner),
-               id_or_dash(c.track), std::to_string(c.points), truth, Fmt(c.best_iou, 3),
+    const std::string truth = IdOrDash(c.best_truth) + (t == cls.end() ? "" : " (" + t->second + ")");
+    md << Row({c.pair, std::to_string(c.id), c.moved ? std::string("moved") : c.change, IdOrDash(c.partner),
+               IdOrDash(c.track), std::to_string(c.points), truth, Fmt(c.best_iou, 3),
                c.true_object ? std::string("yes") : std::string("no")});
   }
 }
@@ -529,7 +531,7 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
     md << Row({o.pair, std::to_string(o.id), o.cls, o.placement, std::to_string(o.session), std::to_string(o.points),
                o.change_points < 0 ? std::string("n/a") : std::to_string(o.change_points),
                std::isnan(o.observed_share) ? std::string("n/a") : Fmt(o.observed_share, 2),
-               o.best_cluster < 0 ? std::string("-") : std::to_string(o.best_cluster),
+               IdOrDash(o.best_cluster),
                std::to_string(o.cluster_points), Fmt(o.best_iou, 3),
                !o.scored ? std::string("not scored") : o.found ? std::string("yes") : std::string("no")});
   md << "\n";

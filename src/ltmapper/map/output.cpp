@@ -252,14 +252,20 @@ void Vec(io::json::Writer& w, const std::string& key, const Eigen::Vector3d& v) 
   w.BeginArray(key).Number(Mm(v.x())).Number(Mm(v.y())).Number(Mm(v.z())).EndArray();
 }
 
+void Ints(io::json::Writer& w, const std::string& key, const std::vector<int>& v) {
+  w.BeginArray(key);
+  for (const int i : v) w.Int(i);
+  w.EndArray();
+}
+
 void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
   w.BeginObject().Int("id", o.id).Int("session", o.session).Int("reference", o.reference);
-  w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner).BeginArray("move_candidates");
-  for (const int c : o.move_candidates) w.Int(c);
-  w.EndArray();
-  w.BeginArray("exists_in").Int(o.exists_in).EndArray().Int("track", o.track).BeginArray("track_sessions");
-  for (const int s : o.track_sessions) w.Int(s);
-  w.EndArray().Int("points", o.points).Number("confidence", Mm(o.confidence));
+  w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner);
+  Ints(w, "move_candidates", o.move_candidates);
+  Ints(w, "exists_in", {o.exists_in});
+  w.Int("track", o.track);
+  Ints(w, "track_sessions", o.track_sessions);
+  w.Int("points", o.points).Number("confidence", Mm(o.confidence));
   Vec(w, "centroid", o.centroid);
   Vec(w, "min", o.lo);
   Vec(w, "max", o.hi);

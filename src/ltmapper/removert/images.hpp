@@ -303,13 +303,12 @@ class ColumnImage {
     }
     return false;
   }
-  // Observed's steps: beam r of column c (its cell offset c) ended on p's surface near it; some
-  // beam of column col did (its cell in p's row, else the nearest beams above and below, returned
-  // in *ra / *rb); some beam of the columns within `reach` of p's crossed its plane within a map
-  // voxel of it and ended beyond (WentThrough).
+  // Observed's steps: beam r of column c (its cells' offset c) ended on p's surface near it, or
+  // went through p's place; either asked of a column's cell in p's row, else the beams around it.
   bool EndedNear(const BeamPoint& p, std::size_t c, int r, const PointInWorld* world) const;
-  bool ColumnEnded(const BeamPoint& p, int col, const PointInWorld* world, int* ra, int* rb) const;
-  bool WentThrough(const BeamPoint& p, int reach) const;
+  bool WentBeyond(const BeamPoint& p, std::size_t c, int r) const;
+  template <class At>
+  bool OwnOrAround(std::size_t c, int row, At&& at, int* ra, int* rb) const;
   // A return of the scan on the point's plane (within tol) within surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
   BeamTest test_;

@@ -706,52 +706,42 @@ bool ColumnImage::EndedNear(const BeamPoint& p, std::size_t c, int r, const Poin
          along <= AlongRay(tol, met, grazing_max);
 }
 
-// In column col: its cell in the point's row, else the nearest beams above and below it.
-bool ColumnImage::ColumnEnded(const BeamPoint& p, int col, const PointInWorld* world, int* ra, int* rb) const {
-  const int row = grid_.Row(p.pitch);
-  const std::size_t c = std::size_t(col) * std::size_t(grid_.rows);
+// at(c, r) for the cell of the column at offset c in `row` when it holds a return, else for the
+// nearest beams above and below it (BeamsAround; their rows in *ra / *rb, -1: none).
+template <class At>
+bool ColumnImage::OwnOrAround(std::size_t c, int row, At&& at, int* ra, int* rb) const {
   const float* rc = range_.data() + c;
-  if (std::isfinite(rc[row]) && EndedNear(p, c, row, world)) return true;
+  if (std::isfinite(rc[row]) && at(c, row)) return true;
   std::tie(*ra, *rb) = BeamsAround(rc, row);
-  return (*ra >= 0 && EndedNear(p, c, *ra, world)) || (*rb >= 0 && EndedNear(p, c, *rb, world));
+  return (*ra >= 0 && at(c, *ra)) || (*rb >= 0 && at(c, *rb));
 }
 
-// Without a beam ending near it: a beam of the columns within `reach` whose ray crossed the point's
-// plane within a map voxel of it (the surface element the map point stands for) and whose return
-// lies beyond the crossing by more than tol / cos(incidence) went through its place: past the band
-// along the ray where it is within tol of the plane (not capped at grazing_max as for a beam that
-// ended near: a ray grazing a facade ends on it a few metres on).
-bool ColumnImage::WentThrough(const BeamPoint& p, int reach) const {
-  const float tol = float(test_.tol_m);
-  const int row = grid_.Row(p.pitch), col = grid_.Col(p.yaw);
-  const Eigen::Vector3f nrm(p.plane[0], p.plane[1], p.plane[2]);
+// Beam r of column c crossed the point's plane within a map voxel of it (the surface element the
+// map point stands for) and its return lies beyond the crossing by more than tol / cos(incidence):
+// it went through the point's place, past the band along the ray where it is within tol of the
+// plane (not capped at grazing_max as for a beam that ended near: a ray grazing a facade ends on
+// it a few metres on).
+bool ColumnImage::WentBeyond(const BeamPoint& p, std::size_t c, int r) const {
   constexpr float kUncapped = std::numeric_limits<float>::infinity();
-  auto went_beyond = [&](std::size_t c, int r) {
-    const float rr = range_[c + std::size_t(r)];
-    const Eigen::Vector3f u = ret_[c + std::size_t(r)] / rr;
-    const float cs = nrm.dot(u);
-    if (std::fabs(cs) < 1e-3f) return false;
-    const float t = nrm.dot(p.ps) / cs;
-    return t > 0.f && (t * u - p.ps).squaredNorm() <= through_m_ * through_m_ &&
-           rr - t > AlongRay(tol, std::fabs(cs), kUncapped);
-  };
-  for (int d = -reach; d <= reach; ++d) {
-    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
-    const float* rc = range_.data() + c;
-    const auto [a, b] = BeamsAround(rc, row);
-    if ((std::isfinite(rc[row]) && went_beyond(c, row)) || (a >= 0 && went_beyond(c, a)) || (b >= 0 && went_beyond(c, b)))
-      return true;
-  }
-  return false;
+  const float rr = range_[c + std::size_t(r)];
+  const Eigen::Vector3f u = ret_[c + std::size_t(r)] / rr;
+  const Eigen::Vector3f nrm(p.plane[0], p.plane[1], p.plane[2]);
+  const float cs = nrm.dot(u);
+  if (std::fabs(cs) < 1e-3f) return false;
+  const float t = nrm.dot(p.ps) / cs;
+  return t > 0.f && (t * u - p.ps).squaredNorm() <= through_m_ * through_m_ &&
+         rr - t > AlongRay(float(test_.tol_m), std::fabs(cs), kUncapped);
 }
 
 std::uint8_t ColumnImage::Observed(const BeamPoint& p, const BeamAsk& ask) const {
   const int rows = grid_.rows, row = grid_.Row(p.pitch), col = grid_.Col(p.yaw);
+  const auto cell = [&](int c) { return std::size_t((c + grid_.cols) % grid_.cols) * std::size_t(rows); };
+  const auto ended_near = [&](std::size_t c, int r) { return EndedNear(p, c, r, ask.world); };
+  const auto went_beyond = [&](std::size_t c, int r) { return WentBeyond(p, c, r); };
   int ra = -1, rb = -1;
-  bool ended = ColumnEnded(p, col, ask.world, &ra, &rb);
-  const bool own_empty = !std::isfinite(range_[std::size_t(col) * std::size_t(rows) + std::size_t(row)]);
-  const bool around = ask.want_around && own_empty &&
-                      Around(p.range, std::size_t(col) * std::size_t(rows), ra, rb, p.ps, p.plane);
+  bool ended = OwnOrAround(cell(col), row, ended_near, &ra, &rb);
+  const bool own_empty = !std::isfinite(range_[cell(col) + std::size_t(row)]);
+  const bool around = ask.want_around && own_empty && Around(p.range, cell(col), ra, rb, p.ps, p.plane);
   // The truth counts every ray that passes within tol of the point, whatever its azimuth: the
   // columns within asin(tol / range) of the point's.
   const int reach =
@@ -759,18 +749,22 @@ std::uint8_t ColumnImage::Observed(const BeamPoint& p, const BeamAsk& ask) const
   for (int d = 1; d <= reach && !ended; ++d)
     for (int c : {col - d, col + d}) {
       int a = -1, b = -1;
-      if (!ended) ended = ColumnEnded(p, (c + grid_.cols) % grid_.cols, ask.world, &a, &b);
+      if (!ended) ended = OwnOrAround(cell(c), row, ended_near, &a, &b);
     }
   const bool passed = ask.want_around && !ended && PassedWithoutReturn(p.range, p.pitch, p.yaw);
+  // Without a beam ending near it, a beam of those columns went through its place (WentBeyond).
+  bool went = false;
+  for (int d = -reach; d <= reach && ask.ask_through && !ended && !went; ++d) {
+    int a = -1, b = -1;
+    went = OwnOrAround(cell(col + d), row, went_beyond, &a, &b);
+  }
   // ND's, with `inside`: the beam of the point's own column passed it without a return and crossed
   // its surface inside (PassedInside), not beside its edge.
   const bool passed_own =
       ask.inside != nullptr && !ended && PassedInside(p.range, p.pitch, p.yaw, p.ps, p.plane, *ask.inside);
   // Not where the scan met the point's surface nearby (MetSurfaceNear): that ray passed an edge of
-  // it (a wall's top, a gap between fence panels) without crossing it; nor beside the edge of its
-  // surface (passed_own).
-  const bool through = ((ask.ask_through && !ended && WentThrough(p, reach)) || passed_own) &&
-                       !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, p.plane);
+  // it (a wall's top, a gap between fence panels) without crossing it.
+  const bool through = (went || passed_own) && !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, p.plane);
   // kBeamNear gates ND's pixel see-through (VoteCounts); PD (want_around) does not read it.
   const bool near = !ask.want_around && BeamNear(p.range, p.pitch);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
