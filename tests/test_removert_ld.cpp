@@ -708,6 +708,31 @@ TEST(RemovertLd, AFarCarSampledSparselyIsNoResidue) {
   EXPECT_EQ(CountIn(ld.pd_weak, ped), 0u);
 }
 
+// A structure appeared 65 m to the side of the drive, in open space: the central's beams through
+// its place met nothing (the sky, or ground beyond the sensor's range), so the central observed
+// it free and it is weak PD. At a few keyframes a beam below its lowest points landed on the
+// ground at the face's foot, on the face's plane, with no return above (BeamTest's "around": the
+// edge of a surface the beams around it met); those few do not outvote the many keyframes whose
+// beams passed its place. Seed 7's Pandar64 and VLP-32C saw a structure 71 m out so: its lower
+// half was strong PD, and the cluster "coverage", not an object.
+TEST(RemovertLd, AFewBeamsOnAFacesFootDoNotOutvoteTheManyThatPassedIt) {
+  const test::Box structure = test::MakeBox(-2, -68.6, 0, 1.6, -65, 3.0, 33);
+  const test::Lidar lidar;
+  RemovertConfig cfg = test::ConfigFor(lidar);
+  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;  // a ring sensor: its beams tell their returns
+  const auto c = DriveAlong({}, -20, 21, 0.0, 1.8, lidar), q = DriveAlong({structure}, -20, 21, 0.0, 1.8, lidar);
+  const auto ld = removert::DetectLd(removert::BuildSessionMap(c, cfg, 2), removert::BuildSessionMap(q, cfg, 2), c, q,
+                                     cfg, 2);
+  const test::Box upper = test::MakeBox(-2, -68.6, 1.5, 1.6, -65, 3.0, 0), lower = test::MakeBox(-2, -68.6, 0.3, 1.6, -65, 1.5, 0);
+  const std::size_t up_w = CountIn(ld.pd_weak, upper), up_s = CountIn(ld.pd_strong, upper);
+  const std::size_t lo_w = CountIn(ld.pd_weak, lower), lo_s = CountIn(ld.pd_strong, lower);
+  std::printf("structure 65 m out, PD weak / strong: upper half %zu / %zu, lower half %zu / %zu\n", up_w, up_s, lo_w, lo_s);
+  ASSERT_GT(lo_w + lo_s, 30u);
+  ASSERT_GT(up_w + up_s, 30u);
+  EXPECT_GE(double(up_w), 0.9 * double(up_w + up_s));
+  EXPECT_GE(double(lo_w), 0.9 * double(lo_w + lo_s));
+}
+
 // A car the central passed at 6 m is gone when the query passes 60 m away, its sensor 1 m higher
 // (a raised road), looking down at its place at 1-2 deg. The pixel windows of the car's lower
 // part also hold the ground there, which returns at the car's range (a hit, never a see-through):
