@@ -2,7 +2,7 @@
 # LT-SLAM speed benchmark: 2 sessions x 500 keyframes of 64-beam simulated scans, aligned with
 # the default params; prints time per phase, accuracy against the simulator truth and a check
 # that no false loop was accepted. Target (issue 15): under 30 s on a 2-core machine (10.6 s measured
-# before registration.steps; 36 s with them, README "Registered steps").
+# before registration.steps; 36 s with them, docs/RESULTS.md "Registered steps").
 # usage: bench/bench_slam.sh [BUILD_DIR] [WORK_DIR] [THREADS]
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"

@@ -449,7 +449,7 @@ TEST_F(ViewHandler, ReadsDuringAnIntegrationSeeTheLastCommittedState) {
   EXPECT_FALSE(Get(v, "/api/cloud", {{"layer", "live"}}).body == before);   // not the cached cloud
 }
 
-// Not a check: writes a large synthetic store for measuring the viewer (README, "View the map").
+// Not a check: writes a large synthetic store for measuring the viewer (docs/RESULTS.md, "View the map").
 //   LTM_VIEW_BIG_STORE=/tmp/big.ltmap tests/test_view --gtest_also_run_disabled_tests --gtest_filter='*BigStore*'
 // 20 x 20 keyframes 40 m apart (an 800 m square of streets), each a 40 m ground square at 0.25 m
 // and a 10 x 10 x 8 m building's walls at 0.2 m: about 12 M points at 0.1 m.

@@ -1,4 +1,4 @@
-// Timing of `ltmapper view` on a store (the figures in README "View the map"): the server's
+// Timing of `ltmapper view` on a store (the figures in docs/RESULTS.md "View the map"): the server's
 // start until it listens (the latest session's tiles and level 0 built), then in headless
 // chromium (software WebGL) the page's first frame with the browser started cold, and again on
 // reloads with the browser warm; each time also until the tiles near the camera are refined

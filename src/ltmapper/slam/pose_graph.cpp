@@ -171,7 +171,7 @@ class GraphProblem {
   // A loop's information: the paper's, plus its registration's on the heading and on the horizontal
   // translation, each scaled as the loops' cycles show, where they measured it (registration.steps:
   // steps that hold a session's heading and translation need loops that tie the sessions as finely,
-  // else the steps' shares that no closure sees bend the sessions apart; README: "The loops hold
+  // else the steps' shares that no closure sees bend the sessions apart; docs/RESULTS.md: "The loops hold
   // the translation as finely as their cycles show").
   Matrix6d LoopGraphInformation(const LoopRecord& l) const {
     Matrix6d info = l.information;
@@ -384,7 +384,7 @@ Matrix6d HorizontalInformation(const Eigen::Matrix2d& horizontal, const Eigen::V
 // roll and pitch to gravity). Registered with the ground, the ground's rings, which move with the
 // sensor, biased its other directions (on the default scene -0.24 and -0.37 % of the step along
 // the road, -0.003 deg of pitch a step); registered off it (OffTheGround), nothing holds height,
-// roll and pitch, while its horizontal translation may join (HorizontalInformation, README:
+// roll and pitch, while its horizontal translation may join (HorizontalInformation, docs/RESULTS.md:
 // "Registered steps hold the horizontal translation").
 Matrix6d HeadingInformation(double variance, const Eigen::Vector3d& up, const SlamConfig& cfg) {
   const Eigen::Matrix<double, 6, 1> g = TurnDirection(up);
