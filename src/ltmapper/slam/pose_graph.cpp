@@ -171,8 +171,8 @@ class GraphProblem {
   // A loop's information: the paper's, plus its registration's on the heading and on the horizontal
   // translation, each scaled as the loops' cycles show, where they measured it (registration.steps:
   // steps that hold a session's heading and translation need loops that tie the sessions as finely,
-  // else the steps' shares that no closure sees bend the sessions apart; docs/RESULTS.md: "The loops hold
-  // the translation as finely as their cycles show").
+  // else the steps' shares that no closure sees bend the sessions apart; docs/RESULTS.md: "The loops
+  // hold the horizontal translation as finely as their cycles show").
   Matrix6d LoopGraphInformation(const LoopRecord& l) const {
     Matrix6d info = l.information;
     const Eigen::Vector3d up = Up(g_.sessions[std::size_t(l.b.session)].keyframes[std::size_t(l.b.keyframe)]);
