@@ -66,6 +66,9 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                          int threads, bool own_pixel, const std::vector<bool>* standing = nullptr,
                          const PointCloud* other_map = nullptr);
+// Per point of `v`: seen through by the pixels, or by more keyframes' beams that went through its
+// place than ended near it (occlusion.cpp; SeenThroughBy's ND evidence).
+std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg);
 
 // |normal z| below cos 45 deg: the surface is more upright than horizontal (a wall, a car's flank);
 // above it, more horizontal (ground, a roof).

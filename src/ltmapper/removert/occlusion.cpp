@@ -163,24 +163,6 @@ std::vector<bool> DrawnTwice(const PointCloud& points, const std::vector<Eigen::
   return out;
 }
 
-// Per point: seen through by the pixels (at some resolution, ld.min_votes keyframes and
-// ld.min_ratio of those with evidence), or by a beam of the other session that went through the
-// point's place and ended beyond it while none of its beams ended near the point: the beam truth's
-// "observed absent" (a see-through the pixels miss where the other sensor looks down at a grazing
-// angle: the ground in front of a thing that left counts as a hit in its pixel window; asked only
-// where SeenThroughBy's `through_at` holds).
-std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg) {
-  std::vector<bool> seen(v.points, false);
-  for (std::size_t i = 0; i < v.points; ++i) {
-    for (int l = 0; l < v.levels && !seen[i]; ++l) {
-      const double s = v.See(l, i), h = v.Hit(l, i);
-      seen[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
-    }
-    seen[i] = seen[i] || (!v.beam_through.empty() && v.beam_through[i] >= cfg.ld_min_votes && v.beam_hits[i] == 0);
-  }
-  return seen;
-}
-
 // How far a point's surface goes on along one direction of its plane: the farthest of the
 // offsets (along it, ascending) reached from the point without a gap wider than `gap`.
 float Reach(std::vector<float>& along, float gap) {
@@ -334,6 +316,25 @@ void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const Surfac
 }
 
 }  // namespace
+
+// Per point: seen through by the pixels (at some resolution, ld.min_votes keyframes and
+// ld.min_ratio of those with evidence), or by beams of the other session that went through the
+// point's place and ended beyond it, at more keyframes than had a beam end near the point (each
+// keyframe looks once; as JudgePoint's passes against "around"): the beam truth's "observed
+// absent" (a see-through the pixels miss where the other sensor looks down at a grazing angle: the
+// ground in front of a thing that left counts as a hit in its pixel window; asked only where
+// SeenThroughBy's `through_at` holds).
+std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg) {
+  std::vector<bool> seen(v.points, false);
+  for (std::size_t i = 0; i < v.points; ++i) {
+    for (int l = 0; l < v.levels && !seen[i]; ++l) {
+      const double s = v.See(l, i), h = v.Hit(l, i);
+      seen[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
+    }
+    seen[i] = seen[i] || (!v.beam_through.empty() && v.beam_through[i] >= cfg.ld_min_votes && v.beam_through[i] > v.beam_hits[i]);
+  }
+  return seen;
+}
 
 Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
                          const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
