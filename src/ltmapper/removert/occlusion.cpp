@@ -115,6 +115,12 @@ bool HitSurfaces::Cosine(const Eigen::Vector3f& at, const Eigen::Vector3f& dir, 
 
 namespace {
 
+// The beam tests' keyframes vote, as each looks once: `votes` keyframes' evidence for a see-through
+// wins where it reaches ld.min_votes and outnumbers the `against` keyframes' evidence of the
+// surface (PD: beams that passed the point without a return against beams around it that met its
+// surface; ND: beams that went through its place against beams that ended near it).
+bool Outvotes(int votes, int against, const RemovertConfig& cfg) { return votes >= cfg.ld_min_votes && votes > against; }
+
 // Per point where `want` holds: its own map drew its surface twice. The other session's map holds
 // at least ld.min_neighbors points on the point's normal line (within ld.beam_tol_m of it) within
 // ld.radius_max_m in front of or behind it (the most LD accepts between two samplings of one
@@ -293,12 +299,11 @@ void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const Surfac
     const bool around = s.beams && v.beam_around[i] > 0;
     // A beam that passed it and met nothing (the sky beyond a tall thing, ground beyond the
     // sensor's range) saw its place free; not at the edge of a surface the beams around it met (a
-    // facade's top against the sky). Each keyframe looks once, so the keyframes vote: the place
-    // is free where more of them had a beam pass it than had the beams around it meet its
-    // surface. Far out, a beam below a point may land on ground that happens to lie on the
-    // point's plane: Pandar64 (seed 7, true poses) passed a structure 71 m out with 22 keyframes
-    // and met "around" it with 1 to 3, which made its lower half strong PD (weak PD recall 0.88).
-    const bool passed = s.beams && upright && v.beam_passed[i] >= cfg.ld_min_votes && v.beam_passed[i] > v.beam_around[i];
+    // facade's top against the sky), by the keyframes' vote (Outvotes). Far out, a beam below a
+    // point may land on ground that happens to lie on the point's plane: Pandar64 (seed 7, true
+    // poses) passed a structure 71 m out with 22 keyframes and met "around" it with 1 to 3, which
+    // made its lower half strong PD while one "around" vetoed all passes (weak PD recall 0.88).
+    const bool passed = s.beams && upright && Outvotes(v.beam_passed[i], v.beam_around[i], cfg);
     out->seen_own[i] = seen || (seen_own && upright && !around) || passed;
     observed = observed || passed;
   }
@@ -319,11 +324,10 @@ void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const Surfac
 
 // Per point: seen through by the pixels (at some resolution, ld.min_votes keyframes and
 // ld.min_ratio of those with evidence), or by beams of the other session that went through the
-// point's place and ended beyond it, at more keyframes than had a beam end near the point (each
-// keyframe looks once; as JudgePoint's passes against "around"): the beam truth's "observed
-// absent" (a see-through the pixels miss where the other sensor looks down at a grazing angle: the
-// ground in front of a thing that left counts as a hit in its pixel window; asked only where
-// SeenThroughBy's `through_at` holds).
+// point's place and ended beyond it, at more keyframes than had a beam end near the point
+// (Outvotes): the beam truth's "observed absent" (a see-through the pixels miss where the other
+// sensor looks down at a grazing angle: the ground in front of a thing that left counts as a hit in
+// its pixel window; asked only where SeenThroughBy's `through_at` holds).
 std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfig& cfg) {
   std::vector<bool> seen(v.points, false);
   for (std::size_t i = 0; i < v.points; ++i) {
@@ -331,7 +335,7 @@ std::vector<bool> SeenThroughVotes(const VisibilityVotes& v, const RemovertConfi
       const double s = v.See(l, i), h = v.Hit(l, i);
       seen[i] = s >= cfg.ld_min_votes && s >= cfg.ld_min_ratio * (s + h);
     }
-    seen[i] = seen[i] || (!v.beam_through.empty() && v.beam_through[i] >= cfg.ld_min_votes && v.beam_through[i] > v.beam_hits[i]);
+    seen[i] = seen[i] || (!v.beam_through.empty() && Outvotes(v.beam_through[i], v.beam_hits[i], cfg));
   }
   return seen;
 }
