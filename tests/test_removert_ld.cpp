@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 
 namespace ltm {
 namespace {
@@ -49,6 +50,31 @@ std::vector<WorldKeyframe> Drive(const std::vector<test::Box>& boxes, double y, 
     kfs.push_back(kf);
   }
   return kfs;
+}
+
+// Drive's keyframes with a thing that moves: keyframe k also sees moving(k).
+std::vector<WorldKeyframe> DriveWith(const std::vector<test::Box>& boxes, double y,
+                                     const std::function<test::Box(int)>& moving) {
+  std::vector<WorldKeyframe> kfs;
+  for (int k = 0; k <= 20; ++k) {
+    WorldKeyframe kf;
+    kf.index = k;
+    kf.T_world_sensor = test::At(-20.0 + 2.0 * k, y, 1.8, 0.0);
+    auto seen = boxes;
+    seen.push_back(moving(k));
+    kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, seen, test::Lidar{}));
+    kfs.push_back(kf);
+  }
+  return kfs;
+}
+
+// A pedestrian (0.5 m square, 1.7 m tall) walking along x from x0 at y0, 0.25 m per keyframe of
+// Drive (2 m per keyframe): about 1.4 m/s beside a car at 10 m/s.
+std::function<test::Box(int)> Walker(double x0, double y0) {
+  return [=](int k) {
+    const double x = x0 + 0.25 * k;
+    return test::MakeBox(x, y0, 0.0, x + 0.5, y0 + 0.5, 1.7, 20);
+  };
 }
 
 struct Scene {
@@ -597,6 +623,32 @@ TEST(RemovertLd, AMoversLastPlaceIsNotJoinedToAParkedCarThroughTheGround) {
   EXPECT_EQ(CountIn(ld.nd_residue, parked), 0u);
 }
 
+// A pedestrian walking beside the road (0.5 m square, 1.7 m tall) 0.25 m per keyframe while the
+// central session drives past at 2 m per keyframe: the central's map (the union of its scans, as an
+// HD removal that could not take the trail leaves it) holds all its places, a trail 5.5 m long
+// that each keyframe hit 0.5 m of, most of it hit by two or three keyframes (so MarkSeenOnce does
+// not take it). The query, without the walker, saw through all of it. The trail is a mover's
+// residue, not a disappeared object; the parked car of the same session, hit whole by many
+// keyframes, stays strong ND.
+TEST(RemovertLd, AWalkersTrailIsAResidueWhereEachKeyframeSawAMoverSizedPiece) {
+  const test::Box parked = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
+  auto cb = Common();
+  cb.push_back(parked);
+  const auto central = DriveWith(cb, 0.0, Walker(0.0, 5.0));
+  const auto query = Drive(Common(), 0.7, nullptr);
+  RemovertConfig cfg = test::ConfigFor();
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box trail = test::MakeBox(-0.05, 4.95, 0.4, 5.55, 5.55, 1.75, 20);  // above the ground's radius
+  const std::size_t residue = CountIn(ld.nd_residue, trail), strong = CountIn(ld.nd_strong, trail);
+  std::printf("trail: %zu map points, %zu residue, %zu strong ND\n", CountIn(cmap, trail), residue, strong);
+  ASSERT_GT(CountIn(cmap, trail), 200u);
+  EXPECT_GE(double(residue + strong), 0.8 * double(CountIn(cmap, trail)));  // the query saw through it
+  EXPECT_GE(double(residue), 0.9 * double(residue + strong));
+  EXPECT_GE(double(CountIn(ld.nd_strong, parked)), 0.9 * double(CountIn(cmap, parked)));
+  EXPECT_EQ(CountIn(ld.nd_residue, parked), 0u);
+}
+
 bool SameBytes(const PointCloud& a, const PointCloud& b) {
   return a.size() == b.size() && std::memcmp(a.points.data(), b.points.data(), a.size() * sizeof(PointXYZI)) == 0;
 }
@@ -614,7 +666,7 @@ TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
   auto qb = Common();
   qb.push_back(ped_q);
   qb.push_back(test::MakeBox(-7, -6, 0.3, -3, -4, 1.8, kCarQuery));
-  const auto central = Drive(cb, 2.0, nullptr), query = Drive(qb, 2.7, nullptr);
+  const auto central = DriveWith(cb, 2.0, Walker(-2.5, 8.0)), query = Drive(qb, 2.7, nullptr);  // a trail across x = 0
   RemovertConfig cfg = test::ConfigFor();
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   cfg.tiles_max_map_points = 1;  // the finest edge
@@ -630,6 +682,7 @@ TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
   const auto whole = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
   const auto tiled = removert::DetectLdTiled(cmap, qmap, central, query, cfg, 2);
   ASSERT_GT(whole.nd_residue.size(), 20u) << "the pedestrian must be a residue for the comparison to mean anything";
+  ASSERT_GT(CountIn(whole.nd_residue, test::MakeBox(-2.55, 7.95, 0.4, 3.05, 8.55, 1.75, 20)), 500u) << "and the trail";
   ASSERT_GT(whole.nd_strong.size(), 100u);
   ASSERT_GT(whole.pd_weak.size(), 100u);
   const std::vector<std::pair<const PointCloud*, const PointCloud*>> clouds = {

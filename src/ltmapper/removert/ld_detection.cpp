@@ -3,6 +3,7 @@
 // the central map, PD from the query map. Occlusion then splits each into strong and weak
 // (occlusion.cpp).
 #include "ltmapper/removert/detail.hpp"
+#include "ltmapper/removert/tiles.hpp"
 
 #include "ltmapper/geometry/geometry.hpp"
 
@@ -11,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iterator>
 #include <memory>
 #include <utility>
 
@@ -238,6 +240,101 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
   }
 }
 
+// Per own keyframe, the points of `c` among `asked` that it returned on: a return of its scan within
+// a map voxel's diagonal of the point (the map is the union of those returns, one point per voxel,
+// so a voxel's point lies that close to every return it was made of), counting, as the votes do,
+// keyframes within ld_submap_radius_m of the point.
+std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, const std::vector<std::uint32_t>& asked,
+                                                        const std::vector<WorldKeyframe>& own_voters,
+                                                        const RemovertConfig& cfg, int threads) {
+  std::vector<std::vector<std::uint32_t>> hits(own_voters.size());
+  if (asked.empty()) return hits;
+  PointCloud pts;
+  for (auto i : asked) pts.points.push_back(c.points[i]);
+  const float reach = float(cfg.map_voxel_m * std::sqrt(3.0));
+  const float submap = float(cfg.ld_submap_radius_m);
+  Eigen::Vector3f lo = pts.points.front().xyz(), hi = lo;
+  for (const auto& p : pts.points) lo = lo.cwiseMin(p.xyz()), hi = hi.cwiseMax(p.xyz());
+  lo.array() -= reach, hi.array() += reach;
+  const geometry::KdTree tree(std::move(pts));
+  detail::ParallelFor(own_voters.size(), threads, [&](std::size_t k) {
+    const PointCloud scan = geometry::Transform(*detail::LoadScan(own_voters[k]), own_voters[k].T_world_sensor);
+    const Eigen::Vector3f at = own_voters[k].T_world_sensor.translation().cast<float>();
+    std::vector<bool> hit(asked.size(), false);
+    for (const auto& q : scan.points) {
+      const Eigen::Vector3f x = q.xyz();
+      if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) continue;
+      for (const auto& [j, sq] : tree.RadiusUnsorted(x, reach))
+        hit[j] = hit[j] || (tree.cloud().points[j].xyz() - at).norm() <= submap;
+    }
+    for (std::size_t j = 0; j < asked.size(); ++j)
+      if (hit[j]) hits[k].push_back(asked[j]);
+  });
+  return hits;
+}
+
+// The longest piece keyframe `kf` saw of a cluster: its hits (`hit`, points of `c`) joined at the
+// gaps of its samples at their range from it (ResidueGapsAt), the longest horizontal edge among
+// the pieces.
+double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& hit, const WorldKeyframe& kf,
+                        const RemovertConfig& cfg) {
+  PointCloud sub;
+  std::vector<Eigen::Vector2f> gaps;
+  const Eigen::Vector3f at = kf.T_world_sensor.translation().cast<float>();
+  for (auto i : hit) {
+    sub.points.push_back(c.points[i]);
+    gaps.push_back(detail::ResidueGapsAt(cfg, double((c.points[i].xyz() - at).norm())));
+  }
+  double longest = 0.0;
+  for (const auto& m : geometry::EuclideanClusterMembers(sub, gaps))
+    longest = std::max(longest, geometry::LongestHorizontalEdge(sub, m));
+  return longest;
+}
+
+// A mover walking along its own session's line of sight leaves a trail in that session's map that
+// its HD removal cannot take (the keyframes that met it later met it nearer, in front of its earlier
+// places, so none saw through them) and that is longer than a mover (FitAMover does not take it).
+// At one instant a mover is in one place: each keyframe that hit the trail hit a piece of it that
+// fits in a mover's length, ld_residue_length_m, at another place along it. A thing standing there
+// is seen along its visible length by the keyframes that see it whole. So a cluster of `c` (not yet
+// marked) longer than a mover that at least two of `own_voters` hit, each in pieces shorter than a
+// mover (LongestPieceSeen), is a mover's trail (marked in *residue, per point of `c`). The whole
+// cluster decides, so a tile must hold it: trails are judged up to (LdTileMarginM - a hop) / sqrt 2
+// long (about 6 m with the defaults: a cluster that long touching a tile's core lies in its window; one
+// the window cuts reaches to within a hop of its edge, so is longer there).
+void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
+                const std::vector<WorldKeyframe>& own_voters,
+                const RemovertConfig& cfg, int threads, std::vector<bool>* residue) {
+  std::vector<const std::vector<std::uint32_t>*> longer;
+  std::vector<std::uint32_t> asked;
+  const double hop = double(detail::ResidueGapsAt(cfg, cfg.ld_submap_radius_m).x());
+  const double longest = (LdTileMarginM(cfg) - hop) / std::sqrt(2.0);
+  for (const auto& m : members)
+    if (!(*residue)[m.front()]) {
+      const double length = geometry::LongestHorizontalEdge(c, m);
+      if (length < cfg.ld_residue_length_m || length >= longest) continue;
+      longer.push_back(&m);
+      asked.insert(asked.end(), m.begin(), m.end());
+    }
+  if (longer.empty()) return;
+  std::sort(asked.begin(), asked.end());
+  const auto hits = HitsPerKeyframe(c, asked, own_voters, cfg, threads);
+  for (const auto* m : longer) {
+    const std::vector<std::uint32_t> sorted = [&] { auto s = *m; std::sort(s.begin(), s.end()); return s; }();
+    int seen_by = 0;
+    bool whole = false;
+    for (std::size_t k = 0; k < hits.size() && !whole; ++k) {
+      std::vector<std::uint32_t> mine;
+      std::set_intersection(hits[k].begin(), hits[k].end(), sorted.begin(), sorted.end(), std::back_inserter(mine));
+      if (mine.empty()) continue;
+      ++seen_by;
+      whole = LongestPieceSeen(c, mine, own_voters[k], cfg) >= cfg.ld_residue_length_m;
+    }
+    if (!whole && seen_by >= 2)
+      for (auto i : *m) (*residue)[i] = true;
+  }
+}
+
 // The points of `c` higher than ld_radius_m above the ground of `own` under them (ResidueGround,
 // as FitAMover measures a thing's top). A thing stands on the ground but is not joined to others
 // through it: a strip of new road surface the other session did not see, between a parked car and
@@ -287,8 +384,9 @@ std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<
 // object's fragment). A flat patch within ld_radius_m of the ground is no mover's: a mover's part
 // that low is within the radius of the other session's ground, so no change at all; such a patch
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
-// So is a thing its own session saw at its place from one keyframe only (MarkSeenOnce, over the
-// seen-through part of each cluster).
+// So is a cluster longer than a mover that each keyframe of its own session saw only a mover-sized
+// piece of (MarkTrails: a walker's trail), and a thing its own session saw at its place from one
+// keyframe only (MarkSeenOnce, over the seen-through part of each cluster).
 std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, const PointCloud& own,
                            const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
@@ -297,6 +395,7 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
   const auto whole = geometry::EuclideanClusterMembers(both, ResidueGaps(both, own_voters, cfg), threads);
   std::vector<bool> fit = FitAMover(both, whole, own, cfg);
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
+  MarkTrails(both, whole, own_voters, cfg, threads, &fit);
   std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
   // The same things' seen-through parts (`both` holds `seen` first) for MarkSeenOnce.
   std::vector<std::vector<std::uint32_t>> members;
