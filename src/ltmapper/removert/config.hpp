@@ -167,7 +167,8 @@ struct RemovertConfig {
   // ld_residue_length_m (its longest horizontal edge, and its top above the ground under it, which
   // must reach ld_radius_m: lower is ground the other session did not cover), and that no larger
   // cluster comes that close to, is a residue of a moving object that its session's HD removal
-  // missed: the session's HD, not a change (0 = off).
+  // missed: the session's HD, not a change (0 = off). So is a longer cluster that each keyframe of
+  // its session hit only in pieces shorter than ld_residue_length_m (a walker's trail).
   double ld_residue_gap_m = 0.5;     // [m]
   double ld_residue_length_m = 2.0;  // [m]
   bool covisible_only = false;    // true: a raw change counts only where the other session had its line

@@ -273,20 +273,17 @@ std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, con
   return hits;
 }
 
-// The longest piece keyframe `kf` saw of a cluster: its hits (`hit`, points of `c`) joined at the
-// gaps of its samples at their range from it (ResidueGapsAt), the longest horizontal edge among
-// the pieces.
-double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& hit, const WorldKeyframe& kf,
-                        const RemovertConfig& cfg) {
+// The longest piece one keyframe saw of a cluster: its hits (`hit`, points of `c`) joined where
+// closer than a mover's length, ld_residue_length_m (the returns on one mover lie that close to each
+// other; a keyframe's hits farther apart are different things), the longest horizontal edge among
+// the pieces. Not the gaps of the keyframe's samples: a far thing's changed part is a sparse subset
+// of what the keyframe sampled on it (seed 7's car 4 and container 11, 70-100 m out, fell apart
+// into pieces under 2 m and went as trails).
+double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& hit, const RemovertConfig& cfg) {
   PointCloud sub;
-  std::vector<Eigen::Vector2f> gaps;
-  const Eigen::Vector3f at = kf.T_world_sensor.translation().cast<float>();
-  for (auto i : hit) {
-    sub.points.push_back(c.points[i]);
-    gaps.push_back(detail::ResidueGapsAt(cfg, double((c.points[i].xyz() - at).norm())));
-  }
+  for (auto i : hit) sub.points.push_back(c.points[i]);
   double longest = 0.0;
-  for (const auto& m : geometry::EuclideanClusterMembers(sub, gaps))
+  for (const auto& m : geometry::EuclideanClusterMembers(sub, cfg.ld_residue_length_m))
     longest = std::max(longest, geometry::LongestHorizontalEdge(sub, m));
   return longest;
 }
@@ -328,7 +325,7 @@ void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t
       std::set_intersection(hits[k].begin(), hits[k].end(), sorted.begin(), sorted.end(), std::back_inserter(mine));
       if (mine.empty()) continue;
       ++seen_by;
-      whole = LongestPieceSeen(c, mine, own_voters[k], cfg) >= cfg.ld_residue_length_m;
+      whole = LongestPieceSeen(c, mine, cfg) >= cfg.ld_residue_length_m;
     }
     if (!whole && seen_by >= 2)
       for (auto i : *m) (*residue)[i] = true;
