@@ -258,8 +258,9 @@ std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, con
   lo.array() -= reach, hi.array() += reach;
   const geometry::KdTree tree(std::move(pts));
   detail::ParallelFor(own_voters.size(), threads, [&](std::size_t k) {
-    const PointCloud scan = geometry::Transform(*detail::LoadScan(own_voters[k]), own_voters[k].T_world_sensor);
     const Eigen::Vector3f at = own_voters[k].T_world_sensor.translation().cast<float>();
+    if ((at.cwiseMax(lo).cwiseMin(hi) - at).norm() > submap) return;  // no asked point within its reach
+    const PointCloud scan = geometry::Transform(*detail::LoadScan(own_voters[k]), own_voters[k].T_world_sensor);
     std::vector<bool> hit(asked.size(), false);
     for (const auto& q : scan.points) {
       const Eigen::Vector3f x = q.xyz();
