@@ -331,6 +331,11 @@ TEST(RemovertTileJobs, StageTileByTileWritesTheSameFiles) {
   cfg.write_keyframes = true;
   cfg.write_ply = true;            // the keyframes' classes.ply; the whole-map twins are skipped tiled
   cfg.tiles_max_map_points = 1;    // the finest tiles
+  // LT-SLAM's rotation measures per session (as `--aligned` reads them from the manifest): each
+  // session's HD plan carries the LD tolerance of its own pair, and the pairs' LD plans take them
+  // (the plans' configs differed there, and the LD plan refused them as two configs).
+  cfg.ld_rotation_sigma_deg = 0.0;  // taken from the measures
+  cfg.session_rotation_sigma_deg = {0.0, 0.13, 0.2};
   const std::vector<std::string> sessions = {tmp / "s0", tmp / "s1", tmp / "s2"};
   const removert::StageReport whole = removert::RunRemovertStage(cfg, sessions, poses, tmp / "whole", 2);
   cfg.tiles_stage = true;

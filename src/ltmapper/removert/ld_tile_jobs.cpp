@@ -115,11 +115,16 @@ struct PairSessions {
   TilePlanFile central, query;
   std::vector<WorldKeyframe> central_kfs, query_kfs;
 };
+// The two plans' configs must be one, but for the LD rotation tolerance: each session's plan carries
+// that of the pair it is the query of (ForPair), and the pair's LD takes the query's.
 PairSessions LoadPair(const std::string& central_plan, const std::string& query_plan) {
   PairSessions p{ReadTilePlan(central_plan), ReadTilePlan(query_plan), {}, {}};
-  if (io::ReadFileText(detail::ConfigFileIn(central_plan)) != io::ReadFileText(detail::ConfigFileIn(query_plan)))
+  RemovertConfig central = p.central.cfg, query = p.query.cfg;
+  query.ld_rotation_sigma_deg = central.ld_rotation_sigma_deg;
+  if (FieldsToString(FieldsOf(central)) != FieldsToString(FieldsOf(query)))
     throw Error(detail::ConfigFileIn(query_plan), 0, "differs from " + detail::ConfigFileIn(central_plan) +
-                                               ": plan both sessions' HD tiles with one config");
+                                               ": plan both sessions' HD tiles with one config (but for "
+                                               "ld.rotation_sigma_deg)");
   p.central_kfs = LoadWorldKeyframes(p.central.session_dir, p.central.poses_file);
   p.query_kfs = LoadWorldKeyframes(p.query.session_dir, p.query.poses_file);
   return p;
