@@ -38,31 +38,20 @@ std::vector<test::Box> Common() {
           test::MakeBox(-17, -9, 0, -13, -7, 2.0, kRevealedBox)};
 }
 
-std::vector<WorldKeyframe> Drive(const std::vector<test::Box>& boxes, double y, PointCloud* truth) {
-  std::vector<WorldKeyframe> kfs;
-  for (int k = 0; k <= 20; ++k) {
-    WorldKeyframe kf;
-    kf.index = k;
-    kf.T_world_sensor = test::At(-20.0 + 2.0 * k, y, 1.8, 0.0);
-    auto scan = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
-    if (truth) truth->append(test::ToWorld(*scan, kf.T_world_sensor));
-    kf.cloud = scan;
-    kfs.push_back(kf);
-  }
-  return kfs;
-}
-
-// Drive's keyframes with a thing that moves: keyframe k also sees moving(k).
-std::vector<WorldKeyframe> DriveWith(const std::vector<test::Box>& boxes, double y,
-                                     const std::function<test::Box(int)>& moving) {
+// Keyframes every 2 m along x from -20 to 20 at `y`, scanning `boxes` (and moving(k) at keyframe k
+// when given); `truth`, when given, gathers the scans in the world frame.
+std::vector<WorldKeyframe> Drive(const std::vector<test::Box>& boxes, double y, PointCloud* truth,
+                                 const std::function<test::Box(int)>& moving = nullptr) {
   std::vector<WorldKeyframe> kfs;
   for (int k = 0; k <= 20; ++k) {
     WorldKeyframe kf;
     kf.index = k;
     kf.T_world_sensor = test::At(-20.0 + 2.0 * k, y, 1.8, 0.0);
     auto seen = boxes;
-    seen.push_back(moving(k));
-    kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, seen, test::Lidar{}));
+    if (moving) seen.push_back(moving(k));
+    auto scan = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, seen, test::Lidar{}));
+    if (truth) truth->append(test::ToWorld(*scan, kf.T_world_sensor));
+    kf.cloud = scan;
     kfs.push_back(kf);
   }
   return kfs;
@@ -550,19 +539,12 @@ TEST(RemovertLd, ASeenThroughPieceOfALargerChangeIsNoResidue) {
 // The central session's drive (Drive's keyframes at y = 0) behind a truck 12 m ahead of the sensor
 // in the next lane (y 2 to 4.5, 8 m long), with `parked` standing still.
 std::vector<WorldKeyframe> BehindATruck(const test::Box& parked) {
-  std::vector<WorldKeyframe> central;
-  for (int k = 0; k <= 20; ++k) {
-    WorldKeyframe kf;
-    kf.index = k;
-    kf.T_world_sensor = test::At(-20.0 + 2.0 * k, 0.0, 1.8, 0.0);
-    auto boxes = Common();
-    boxes.push_back(parked);
+  auto boxes = Common();
+  boxes.push_back(parked);
+  return Drive(boxes, 0.0, nullptr, [](int k) {
     const double x = -20.0 + 2.0 * k + 12.0;
-    boxes.push_back(test::MakeBox(x, 2.0, 0.3, x + 8.0, 4.5, 2.5, 30));
-    kf.cloud = std::make_shared<PointCloud>(test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
-    central.push_back(kf);
-  }
-  return central;
+    return test::MakeBox(x, 2.0, 0.3, x + 8.0, 4.5, 2.5, 30);
+  });
 }
 
 // A truck driving 12 m ahead of the central's sensor in the next lane (2.5 m wide, 8 m long: no
@@ -634,7 +616,7 @@ TEST(RemovertLd, AWalkersTrailIsAResidueWhereEachKeyframeSawAMoverSizedPiece) {
   const test::Box parked = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
   auto cb = Common();
   cb.push_back(parked);
-  const auto central = DriveWith(cb, 0.0, Walker(0.0, 5.0));
+  const auto central = Drive(cb, 0.0, nullptr, Walker(0.0, 5.0));
   const auto query = Drive(Common(), 0.7, nullptr);
   RemovertConfig cfg = test::ConfigFor();
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
@@ -666,7 +648,7 @@ TEST(RemovertLd, TileByTileEqualsTheWholeMaps) {
   auto qb = Common();
   qb.push_back(ped_q);
   qb.push_back(test::MakeBox(-7, -6, 0.3, -3, -4, 1.8, kCarQuery));
-  const auto central = DriveWith(cb, 2.0, Walker(-2.5, 8.0)), query = Drive(qb, 2.7, nullptr);  // a trail across x = 0
+  const auto central = Drive(cb, 2.0, nullptr, Walker(-2.5, 8.0)), query = Drive(qb, 2.7, nullptr);  // a trail across x = 0
   RemovertConfig cfg = test::ConfigFor();
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   cfg.tiles_max_map_points = 1;  // the finest edge

@@ -12,8 +12,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <iterator>
 #include <memory>
+#include <tuple>
 #include <utility>
 
 namespace ltm::removert {
@@ -240,23 +240,23 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
   }
 }
 
-// Per own keyframe, the points of `c` among `asked` that it returned on: a return of its scan within
-// a map voxel's diagonal of the point (the map is the union of those returns, one point per voxel,
-// so a voxel's point lies that close to every return it was made of), counting, as the votes do,
-// keyframes within ld_submap_radius_m of the point.
+// A trail needs two instants: a cluster that fewer keyframes of its session hit is not judged.
+constexpr int kTrailMinKeyframes = 2;
+
+// Per own keyframe, the points of `c` among `asked` that it returned on, in `asked`'s order: a return
+// of its scan within a map voxel's diagonal of the point (the map is the union of those returns, one
+// point per voxel, so a voxel's point lies that close to every return it was made of), counting, as
+// the votes do, keyframes within ld_submap_radius_m of the point.
 std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, const std::vector<std::uint32_t>& asked,
                                                         const std::vector<WorldKeyframe>& own_voters,
                                                         const RemovertConfig& cfg, int threads) {
   std::vector<std::vector<std::uint32_t>> hits(own_voters.size());
   if (asked.empty()) return hits;
-  PointCloud pts;
-  for (auto i : asked) pts.points.push_back(c.points[i]);
-  const float reach = float(cfg.map_voxel_m * std::sqrt(3.0));
-  const float submap = float(cfg.ld_submap_radius_m);
-  Eigen::Vector3f lo = pts.points.front().xyz(), hi = lo;
-  for (const auto& p : pts.points) lo = lo.cwiseMin(p.xyz()), hi = hi.cwiseMax(p.xyz());
+  const float reach = float(cfg.map_voxel_m * std::sqrt(3.0)), submap = float(cfg.ld_submap_radius_m);
+  Eigen::Vector3f lo, hi;
+  std::tie(lo, hi) = BoxOf(c, asked);
   lo.array() -= reach, hi.array() += reach;
-  const geometry::KdTree tree(std::move(pts));
+  const geometry::KdTree tree(c.select(asked));
   detail::ParallelFor(own_voters.size(), threads, [&](std::size_t k) {
     const Eigen::Vector3f at = own_voters[k].T_world_sensor.translation().cast<float>();
     if ((at.cwiseMax(lo).cwiseMin(hi) - at).norm() > submap) return;  // no asked point within its reach
@@ -281,8 +281,7 @@ std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, con
 // of what the keyframe sampled on it (seed 7's car 4 and container 11, 70-100 m out, fell apart
 // into pieces under 2 m and went as trails).
 double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& hit, const RemovertConfig& cfg) {
-  PointCloud sub;
-  for (auto i : hit) sub.points.push_back(c.points[i]);
+  const PointCloud sub = c.select(hit);
   double longest = 0.0;
   for (const auto& m : geometry::EuclideanClusterMembers(sub, cfg.ld_residue_length_m))
     longest = std::max(longest, geometry::LongestHorizontalEdge(sub, m));
@@ -295,42 +294,41 @@ double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& h
 // At one instant a mover is in one place: each keyframe that hit the trail hit a piece of it that
 // fits in a mover's length, ld_residue_length_m, at another place along it. A thing standing there
 // is seen along its visible length by the keyframes that see it whole. So a cluster of `c` (not yet
-// marked) longer than a mover that at least two of `own_voters` hit, each in pieces shorter than a
-// mover (LongestPieceSeen), is a mover's trail (marked in *residue, per point of `c`). The whole
-// cluster decides, so a tile must hold it: trails are judged up to (LdTileMarginM - a hop) / sqrt 2
-// long (about 6 m with the defaults: a cluster that long touching a tile's core lies in its window; one
-// the window cuts reaches to within a hop of its edge, so is longer there).
+// marked) longer than a mover that at least kTrailMinKeyframes of `own_voters` hit, each in pieces
+// shorter than a mover (LongestPieceSeen), is a mover's trail (marked in *residue, per point of
+// `c`). The whole cluster decides, so a tile must hold it: clusters up to LdWholeClusterM long are
+// judged (about 6 m with the defaults).
 void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
-                const std::vector<WorldKeyframe>& own_voters,
-                const RemovertConfig& cfg, int threads, std::vector<bool>* residue) {
-  std::vector<const std::vector<std::uint32_t>*> longer;
+                const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
+                std::vector<bool>* residue) {
+  const double longest = LdWholeClusterM(cfg);
+  std::vector<const std::vector<std::uint32_t>*> judged;
   std::vector<std::uint32_t> asked;
-  const double hop = double(detail::ResidueGapsAt(cfg, cfg.ld_submap_radius_m).x());
-  const double longest = (LdTileMarginM(cfg) - hop) / std::sqrt(2.0);
-  for (const auto& m : members)
-    if (!(*residue)[m.front()]) {
-      const double length = geometry::LongestHorizontalEdge(c, m);
-      if (length < cfg.ld_residue_length_m || length >= longest) continue;
-      longer.push_back(&m);
-      asked.insert(asked.end(), m.begin(), m.end());
-    }
-  if (longer.empty()) return;
-  std::sort(asked.begin(), asked.end());
-  const auto hits = HitsPerKeyframe(c, asked, own_voters, cfg, threads);
-  for (const auto* m : longer) {
-    const std::vector<std::uint32_t> sorted = [&] { auto s = *m; std::sort(s.begin(), s.end()); return s; }();
-    int seen_by = 0;
-    bool whole = false;
-    for (std::size_t k = 0; k < hits.size() && !whole; ++k) {
-      std::vector<std::uint32_t> mine;
-      std::set_intersection(hits[k].begin(), hits[k].end(), sorted.begin(), sorted.end(), std::back_inserter(mine));
-      if (mine.empty()) continue;
-      ++seen_by;
-      whole = LongestPieceSeen(c, mine, cfg) >= cfg.ld_residue_length_m;
-    }
-    if (!whole && seen_by >= 2)
-      for (auto i : *m) (*residue)[i] = true;
+  std::vector<std::uint32_t> cluster_of(c.size());  // index into `judged`, for the asked points
+  for (const auto& m : members) {
+    if ((*residue)[m.front()]) continue;
+    const double length = geometry::LongestHorizontalEdge(c, m);
+    if (length < cfg.ld_residue_length_m || length >= longest) continue;
+    for (auto i : m) cluster_of[i] = std::uint32_t(judged.size());
+    judged.push_back(&m);
+    asked.insert(asked.end(), m.begin(), m.end());
   }
+  if (judged.empty()) return;
+  std::sort(asked.begin(), asked.end());  // each keyframe's hits, and so its pieces, in map order
+  std::vector<int> seen_by(judged.size(), 0);
+  std::vector<bool> whole(judged.size(), false);
+  for (const auto& h : HitsPerKeyframe(c, asked, own_voters, cfg, threads)) {
+    std::vector<std::vector<std::uint32_t>> piece(judged.size());  // this keyframe's hits per cluster
+    for (auto i : h) piece[cluster_of[i]].push_back(i);
+    for (std::size_t t = 0; t < judged.size(); ++t) {
+      if (piece[t].empty()) continue;
+      ++seen_by[t];
+      whole[t] = whole[t] || LongestPieceSeen(c, piece[t], cfg) >= cfg.ld_residue_length_m;
+    }
+  }
+  for (std::size_t t = 0; t < judged.size(); ++t)
+    if (!whole[t] && seen_by[t] >= kTrailMinKeyframes)
+      for (auto i : *judged[t]) (*residue)[i] = true;
 }
 
 // The points of `c` higher than ld_radius_m above the ground of `own` under them (ResidueGround,

@@ -109,14 +109,19 @@ void MarkOutside(const PointCloud& window, const detail::VoxelBox& core, double 
   }
 }
 
+// [m] A residue cluster's farthest hop in xy (ResidueGapsAt at ld.submap_radius_m).
+double ResidueHopM(const RemovertConfig& cfg) { return double(detail::ResidueGapsAt(cfg, cfg.ld_submap_radius_m).x()); }
+
 }  // namespace
+
+double LdWholeClusterM(const RemovertConfig& cfg) { return (LdTileMarginM(cfg) - ResidueHopM(cfg)) / std::sqrt(2.0); }
 
 double LdTileMarginM(const RemovertConfig& cfg) {
   const double points = std::max({cfg.ld_radius_m, cfg.ld_radius_max_m, cfg.ld_normal_radius_m,
                                   detail::kSurfaceExtentTols * cfg.ld_beam.tol_m,
                                   detail::HitSurfaces::ReachM(cfg.ld_beam)});
   const double l = cfg.ld_residue_length_m;
-  const double hop = double(detail::ResidueGapsAt(cfg, cfg.ld_submap_radius_m).x());  // a cluster's farthest hop in xy
+  const double hop = ResidueHopM(cfg);
   const double clusters = l > 0.0 ? (2.0 + std::sqrt(2.0)) * l + 2.0 * hop : 0.0;
   return points + clusters;
 }

@@ -92,6 +92,11 @@ HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const Remove
 // ld.submap_radius_m, detail::ResidueGapsAt) it is no mover's in the window as in truth. The margin is
 // (a) + (b).
 double LdTileMarginM(const RemovertConfig& cfg);
+// [m] The longest residue cluster (longest horizontal edge) a tile's window holds whole wherever it
+// touches the core: (LdTileMarginM - a hop) / sqrt 2. Shorter, its xy span is under the margin less
+// a hop; one the window cuts reaches to within a hop of the window's edge, so is longer there. The
+// rules that judge a cluster as a whole (detail::Residues' trails) judge only those.
+double LdWholeClusterM(const RemovertConfig& cfg);
 struct LdTile {
   std::int64_t ix = 0, iy = 0;  // core: voxels [ix, ix + 1) x [iy, iy + 1) tile edges
   // positions of the keyframes within ld.submap_radius_m of core + margin (they judge occlusion)
