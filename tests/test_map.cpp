@@ -897,6 +897,36 @@ TEST(MapObjects, AContainerThatLeftKeepsItsUnseenUpperRows) {
   EXPECT_EQ(objs[0].cls, PointClass::kNDStrong);  // the class of what was seen
 }
 
+// A container that came into new territory (a keyframe the step created): the reference saw its
+// space free up to 1.5 m (weak PD) and never observed its upper rows (the step's strong PD, which
+// the step's changes do not hold). The object keeps those rows (UnseenParts), and its see-through
+// share counts each of its points once: the weak rows of the whole side.
+TEST(MapObjects, AContainerThatCameKeepsTheUpperRowsItsReferenceNeverObserved) {
+  test::TempDir tmp;
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Grid(-20, -20, 0, 160, 160, 0.25f)}});
+  PointCloud cloud = Grid(-10, -10, 0, 80, 80, 0.25f);
+  cloud.cls.assign(cloud.size(), PointClass::kPDStrong);
+  PointCloud side = Car(-6, -6, 0.f, 6.f, 2.5f);  // x -6, y -6 .. 0, rows z 0.25 .. 2.5
+  side.cls.resize(side.size());
+  std::size_t weak = 0;
+  for (std::size_t i = 0; i < side.size(); ++i) {
+    const bool seen = side.points[i].z < 1.6f;
+    side.cls[i] = seen ? PointClass::kPDWeak : PointClass::kPDStrong;
+    weak += seen ? 1 : 0;
+  }
+  cloud.append(side);
+  s.IntegrateSession({"s1"}, "s0", {}, {{6, At(100, 0), cloud}});
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
+  EXPECT_EQ(objs[0].change, "appeared");
+  EXPECT_EQ(objs[0].points, side.size());
+  EXPECT_NEAR(objs[0].hi.z(), 2.5, 0.01);
+  EXPECT_EQ(objs[0].unobserved_beside, 0u);
+  EXPECT_NEAR(objs[0].observed_fraction, double(weak) / double(side.size()), 1e-9);
+}
+
 // A disappeared object's confidence weighs what the query saw through against all it is, its
 // unseen rows included (Rate): the container seen gone up to 1.1 m, its upper rows unseen, is less
 // certain than the same container seen gone to its top, and no more than the cube root of its
@@ -1104,6 +1134,39 @@ TEST(MapObjects, ASmallPieceOneMissedLineFromAnObjectIsPartOfIt) {
       EXPECT_EQ(objs[0].points, std::size_t(4 * 13));
       ASSERT_EQ(rejected.size(), 1u);
       EXPECT_EQ(rejected[0].rejected, "small");
+    }
+  }
+}
+
+// A car 60 m out cut in two (as above), its smaller piece seen mostly where the reference never
+// looked (strong PD in three of its four rows: rejected alone for coverage): one missed line of
+// samples from the larger piece, which the reference saw free, it is the car's other end and joins
+// it, as a thing that came is new as a whole. Two missed lines away it does not, nor does a piece
+// larger than the object it would join (the object would be the smaller part of it).
+TEST(MapObjects, AnAppearedPieceItsReferenceNeverObservedJoinsTheObjectItContinues) {
+  struct Case {
+    float gap;
+    int seen_columns, piece_columns;
+    bool joins;
+  };
+  for (const Case c : {Case{1.0f, 31, 16, true}, Case{2.0f, 31, 16, false}, Case{1.0f, 16, 31, false}}) {
+    test::TempDir tmp;
+    Store s = FarScene(tmp, Cfg());
+    KeyframeDelta d;
+    const float y1 = -3.f + 0.2f * float(c.seen_columns) + c.gap;
+    d.pd_weak = Cat(FarColumns({0.3f, 0.9f, 1.5f, 2.1f}, -3.f, c.seen_columns), FarColumns({0.3f}, y1, c.piece_columns));
+    d.pd_strong = FarColumns({0.9f, 1.5f, 2.1f}, y1, c.piece_columns);
+    s.IntegrateSession({"s1"}, "s0", {d}, {});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    ASSERT_EQ(objs.size(), 1u) << "gap " << c.gap;
+    if (c.joins) {
+      EXPECT_EQ(objs[0].points, std::size_t(4 * (c.seen_columns + c.piece_columns)));
+      EXPECT_TRUE(rejected.empty());
+    } else {
+      EXPECT_EQ(objs[0].points, std::size_t(4 * c.seen_columns)) << "gap " << c.gap;
+      ASSERT_EQ(rejected.size(), 1u);
+      EXPECT_EQ(rejected[0].rejected, "coverage");
     }
   }
 }

@@ -17,10 +17,11 @@
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
 //     object's box, one missed line of the sensor's samples from it, or its box's far side
-//     (MergeParts). A cluster
-//     also stands on change points of its group under it (StandOnChangesBelow), and a
-//     disappeared one on its lower part the query did not see; an object keeps that part and
-//     the rows the query did not see inside its box and over it (UnseenParts), and every object
+//     (MergeParts; an appeared part rejected for coverage too). A cluster
+//     also stands on change points of its group under it (StandOnChangesBelow), and on its lower
+//     part the other session did not observe; an object keeps that part and the rows the other
+//     session did not observe inside its box and over it (UnseenParts: weak ND of a disappeared
+//     one, the step's surface its reference never observed of an appeared one), and every object
 //     its foot, the changes of its side in the ground band under it (KeepFeet). Its confidence
 //     is rated over all it then holds (Rate).
 //  5. Moved: a disappeared and an appeared object of one step whose box lengths and tops above the
@@ -317,7 +318,8 @@ std::vector<std::vector<std::uint32_t>> Cluster(const PointCloud& changes, const
   return out;
 }
 
-// Centroid, axis-aligned box, class votes (of the changes seen, not of joined unseen parts)
+// Centroid, axis-aligned box, class votes (of the changes seen, not of a disappeared object's
+// joined unseen parts)
 // and see-through share, of its points and of the surface beside them its reference never
 // observed (MapObject::unobserved_beside).
 void Describe(MapObject& o) {
@@ -580,11 +582,13 @@ double MinWidth(double range_m, const MapConfig& cfg) {
   return std::max(cfg.output_voxel_m, RowSpacing(range_m, cfg)) * std::max(0.0, cfg.object_min_samples - 1.5);
 }
 
-// Reject's reason for a cluster shorter than object_min_length_m (MergeParts asks for it too).
+// Reject's reasons that MergeParts asks for too: a cluster shorter than object_min_length_m, and
+// an appeared one most of whose space the reference never observed.
 constexpr const char* kSmall = "small";
+constexpr const char* kCoverage = "coverage";
 
 std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
-  if (!Covered(o, ctx, cfg)) return "coverage";
+  if (!Covered(o, ctx, cfg)) return kCoverage;
   if (o.twin_fraction >= cfg.object_twin_max_fraction) return "ghost";
   if (o.attached_fraction >= cfg.object_max_attached_fraction) return "fragment";
   if (o.box_seen_fraction < cfg.object_min_observed_fraction) return "stayed";
@@ -889,41 +893,80 @@ void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& change
     if (Floats(o, cfg)) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
 }
 
-// A disappeared cluster's parts that the query did not see through: weak ND of the step (stored
-// in the columns of strong ND, store.cpp) inside its oriented box (grown by the map's sample
-// spacing: rows between the rows its beams passed), chained down from its bottom (ChainBelow),
-// above the ground band, and chained up from its top (ChainAbove: the rows over a scanner's cone,
-// or between its beams). The cluster's clearance is counted from its lowest point (a fence whose
-// upper half the query saw through while parked cars hid its lower half stands on the ground, it
-// does not float; a trunk that stayed under a cut crown is unchanged, no weak ND); the rules judge
-// what was seen, and an object keeps these parts in its cloud. Returns per cluster the parts'
-// indices.
-std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& changes,
-                                                    const Floor& floor, const MapConfig& cfg) {
+// A cluster's parts the other session did not observe (`unseen`: indices into `pool`). A
+// disappeared cluster's: weak ND of the step (stored in the columns of strong ND, store.cpp); an
+// appeared one's: the step's strong PD its changes do not hold, the surface its reference never
+// observed (Masks::unobserved: a new fence whose lower rows the reference saw free and whose upper
+// rows its beams never reached). Of those, the ones inside its oriented box (grown by the map's
+// sample spacing: rows between the rows its beams passed), chained down from its bottom
+// (ChainBelow), above the ground band, and chained up from its top (ChainAbove: the rows over a
+// scanner's cone, or between its beams). The cluster's clearance is counted from its lowest point
+// (a fence whose upper half the query saw through while parked cars hid its lower half stands on
+// the ground, it does not float; a trunk that stayed under a cut crown is unchanged, no weak ND);
+// the rules judge what was seen, and an object keeps these parts in its cloud. Returns per cluster
+// the parts' indices into `pool`.
+std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& pool,
+                                                    std::vector<std::uint32_t> unseen, const Floor& floor,
+                                                    const MapConfig& cfg) {
   std::vector<std::vector<std::uint32_t>> parts(group.size());
-  std::vector<std::uint32_t> weak;
-  for (std::size_t i = 0; i < changes.size(); ++i)
-    if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
-  if (weak.empty() || floor.empty()) return parts;
-  const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(weak));
+  if (unseen.empty() || floor.empty()) return parts;
+  const std::vector<std::uint32_t> by_z = ByZ(pool, std::move(unseen));
   const double edge = SampleSpacing(cfg), tol = cfg.object_tolerance_m;
   for (std::size_t k = 0; k < group.size(); ++k) {
     const MapObject& o = group[k];
-    std::vector<std::uint32_t> columns;  // the step's weak ND over and under o (one pass), highest first
+    std::vector<std::uint32_t> columns;  // the unseen points over and under o (one pass), highest first
     for (std::uint32_t i : by_z)
-      if (InColumns(o, changes.points[i], std::max(edge, tol))) columns.push_back(i);
+      if (InColumns(o, pool.points[i], std::max(edge, tol))) columns.push_back(i);
     const InOrientedBox in_box(o, edge, 0.0);
     for (std::uint32_t i : columns)
-      if (InGrownBox(o, changes.points[i].xyz(), edge) && in_box(changes.points[i].xyz().cast<double>()))
+      if (InGrownBox(o, pool.points[i].xyz(), edge) && in_box(pool.points[i].xyz().cast<double>()))
         parts[k].push_back(i);
     std::vector<std::uint32_t> lower;
-    for (std::uint32_t i : ChainBelow(o, changes, columns, tol))
-      if (AboveGround(changes.points[i].xyz(), floor, cfg)) lower.push_back(i);
+    for (std::uint32_t i : ChainBelow(o, pool, columns, tol))
+      if (AboveGround(pool.points[i].xyz(), floor, cfg)) lower.push_back(i);
     parts[k].insert(parts[k].end(), lower.begin(), lower.end());
-    for (std::uint32_t i : ChainAbove(o, changes, columns, tol)) parts[k].push_back(i);
-    StandOn(group[k], changes, lower, floor);
+    for (std::uint32_t i : ChainAbove(o, pool, columns, tol)) parts[k].push_back(i);
+    StandOn(group[k], pool, lower, floor);
   }
   return parts;
+}
+
+// What UnseenParts reads for a group: for the disappeared one the step's weak ND among its
+// changes; for the appeared one the surface its reference never observed beside the group, as
+// the step's strong PD (its class and session, for the object's cloud).
+struct UnseenPool {
+  PointCloud own;  // the appeared group's labelled copy of the unobserved surface
+  const PointCloud* cloud = nullptr;
+  std::vector<std::uint32_t> idx;
+};
+UnseenPool UnseenPoolOf(const PointCloud& changes, bool appeared, const UnobservedSurface& unobserved,
+                        const SessionRecord& step) {
+  UnseenPool p;
+  if (!appeared) {
+    p.cloud = &changes;
+    for (std::size_t i = 0; i < changes.size(); ++i)
+      if (Unseen(changes.cls[i])) p.idx.push_back(std::uint32_t(i));
+    return p;
+  }
+  p.own = unobserved.cloud;
+  p.own.cls.assign(p.own.size(), PointClass::kPDStrong);
+  p.own.session.assign(p.own.size(), std::uint16_t(step.order));
+  p.cloud = &p.own;
+  p.idx.resize(p.own.size());
+  std::iota(p.idx.begin(), p.idx.end(), 0u);
+  return p;
+}
+
+// An object keeps its unseen parts (UnseenParts). An appeared object's are surface that
+// UnobservedBeside counted beside it: what stays beside it is what it reaches through that surface
+// and does not hold, so that its see-through share (Describe) counts each point once.
+void KeepUnseenParts(MapObject& o, const PointCloud& part, const UnobservedSurface& unobserved, const MapConfig& cfg) {
+  if (o.change == "appeared") {
+    PointCloud all = o.cloud;
+    all.append(part);
+    o.unobserved_beside = UnobservedBeside(all, unobserved, cfg.object_tolerance_m) - part.size();
+  }
+  Absorb(o, part);
 }
 
 // The rules (Reject) of a built cluster, on what was seen of it (its confidence is Rate's).
@@ -1013,7 +1056,11 @@ bool PieceOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg
 // Parts of one object split by a gap wider than the cluster's: an accepted cluster that is a piece
 // of a larger accepted one (PieceOf) joins it; so does a cluster of `rejected` rejected only for its
 // length (kSmall): too short to be an object alone, it is the part of one that an occluder cut off
-// (a car behind a pole). What joined an object leaves `rejected`.
+// (a car behind a pole); and an appeared one rejected for coverage (kCoverage: the reference never
+// observed most of its space) that is a piece of a larger appeared object: the reference saw that
+// object's space free, and a thing that came is new as a whole (the far half of a container 62 m
+// out whose near half the reference saw free: vlp16_drift3x). What joined an object leaves
+// `rejected`.
 void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
   std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
@@ -1029,9 +1076,13 @@ void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected
     else
       out.push_back(std::move(o));
   }
+  const auto joins = [&](const MapObject& r) -> MapObject* {
+    MapObject* whole = r.rejected == kSmall || r.rejected == kCoverage ? whole_of(r) : nullptr;
+    return whole && (r.rejected == kSmall || whole->points > r.points) ? whole : nullptr;
+  };
   std::vector<MapObject> still;
   for (auto& r : rejected) {
-    if (MapObject* whole = r.rejected == kSmall ? whole_of(r) : nullptr)
+    if (MapObject* whole = joins(r))
       Absorb(*whole, r.cloud);
     else
       still.push_back(std::move(r));
@@ -1093,12 +1144,13 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
-    const auto unseen = appeared ? std::vector<std::vector<std::uint32_t>>(group.size())
-                                 : UnseenParts(group, changes, floor, cfg);
+    const UnseenPool pool = UnseenPoolOf(changes, appeared, masks.unobserved, step);
+    const auto unseen = UnseenParts(group, *pool.cloud, pool.idx, floor, cfg);
     StandOnChangesBelow(group, changes, idx, floor, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
-    for (std::size_t k = 0; k < group.size(); ++k)  // an object keeps its unseen parts
-      if (group[k].rejected.empty() && !unseen[k].empty()) Absorb(group[k], changes.select(unseen[k]));
+    for (std::size_t k = 0; k < group.size(); ++k)
+      if (group[k].rejected.empty() && !unseen[k].empty())
+        KeepUnseenParts(group[k], pool.cloud->select(unseen[k]), masks.unobserved, cfg);
     const std::vector<bool> keep = JoinHeldParts(group, holder);
     for (std::size_t k = 0; k < group.size(); ++k) {
       MapObject& o = group[k];
