@@ -1418,6 +1418,33 @@ std::vector<MapObject> TwoStepObjects(const test::TempDir& tmp, const PointCloud
   return s.Objects();
 }
 
+// A container side that left, seen gone by step 1 up to 1 m (its upper rows unseen: weak ND, which
+// the map keeps; the object holds them) and by step 2 above that: step 2's view lies on step 1's
+// object's unseen rows, so it confirms that object and is no second one ("reported" among the
+// rejected clusters).
+TEST(MapObjects, ALaterViewOfAnObjectsUnseenRowsConfirmsItIsNoNewObject) {
+  const PointCloud side = Car(8, 8, 0.f, 6.f, 2.5f);
+  KeyframeDelta d1, d2;
+  for (const auto& p : side.points) (p.z < 1.1f ? d1.nd_strong : d1.nd_weak).push_back(p.x, p.y, p.z, p.intensity);
+  d2.nd_strong = d1.nd_weak;
+  MapConfig cfg = Cfg();
+  cfg.object_max_clearance_m = 0.0;  // step 2's view starts 1.25 m up: no floating rule
+  test::TempDir tmp;
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(Grid(-20, -20, 0, 160, 160, 0.25f), side)}});
+  s.IntegrateSession({"s1"}, "s0", {d1}, {});
+  s.IntegrateSession({"s2"}, "s0", {d2}, {});
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].session, 1);
+  EXPECT_EQ(objs[0].points, side.size());
+  const auto again = std::find_if(rejected.begin(), rejected.end(), [](const MapObject& r) { return r.rejected == "reported"; });
+  ASSERT_NE(again, rejected.end());
+  EXPECT_EQ(again->session, 2);
+  EXPECT_EQ(again->points, d2.nd_strong.size());
+}
+
 // A container moved at step 1 (gone from A, come to B) and seen again at B by step 2, against the
 // same reference: step 2's row is an end of that move too ("moved", the partner step 1 paired),
 // while a car new at step 2 stays "appeared".
