@@ -895,24 +895,21 @@ void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& change
     if (Floats(o, cfg)) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
 }
 
-// A cluster's parts the other session did not observe (`unseen`: indices into `pool`). A
-// disappeared cluster's: weak ND of the step (stored in the columns of strong ND, store.cpp); an
-// appeared one's: the step's strong PD its changes do not hold, the surface its reference never
-// observed (Masks::unobserved: a new fence whose lower rows the reference saw free and whose upper
-// rows its beams never reached). Of those, the ones inside its oriented box (grown by the map's
-// sample spacing: rows between the rows its beams passed), chained down from its bottom
-// (ChainBelow), above the ground band, and chained up from its top (ChainAbove: the rows over a
-// scanner's cone, or between its beams). The cluster's clearance is counted from its lowest point
-// (a fence whose upper half the query saw through while parked cars hid its lower half stands on
-// the ground, it does not float; a trunk that stayed under a cut crown is unchanged, no weak ND);
-// the rules judge what was seen, and an object keeps these parts in its cloud. Returns per cluster
-// the parts' indices into `pool`.
+// A cluster's parts the other session did not observe, among `pool` (UnseenPool). Of those, the
+// ones inside its oriented box (grown by the map's sample spacing: rows between the rows its beams
+// passed), chained down from its bottom (ChainBelow), above the ground band, and chained up from
+// its top (ChainAbove: the rows over a scanner's cone, or between its beams). The cluster's
+// clearance is counted from its lowest point (a fence whose upper half the query saw through while
+// parked cars hid its lower half stands on the ground, it does not float; a trunk that stayed under
+// a cut crown is unchanged, no weak ND); the rules judge what was seen, and an object keeps these
+// parts in its cloud. Returns per cluster the parts' indices into `pool`.
 std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& pool,
-                                                    std::vector<std::uint32_t> unseen, const Floor& floor,
-                                                    const MapConfig& cfg) {
+                                                    const Floor& floor, const MapConfig& cfg) {
   std::vector<std::vector<std::uint32_t>> parts(group.size());
-  if (unseen.empty() || floor.empty()) return parts;
-  const std::vector<std::uint32_t> by_z = ByZ(pool, std::move(unseen));
+  if (pool.empty() || floor.empty()) return parts;
+  std::vector<std::uint32_t> all(pool.size());
+  std::iota(all.begin(), all.end(), 0u);
+  const std::vector<std::uint32_t> by_z = ByZ(pool, std::move(all));
   const double edge = SampleSpacing(cfg), tol = cfg.object_tolerance_m;
   for (std::size_t k = 0; k < group.size(); ++k) {
     const MapObject& o = group[k];
@@ -933,30 +930,22 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
   return parts;
 }
 
-// What UnseenParts reads for a group: for the disappeared one the step's weak ND among its
-// changes; for the appeared one the surface its reference never observed beside the group, as
-// the step's strong PD (its class and session, for the object's cloud).
-struct UnseenPool {
-  PointCloud own;  // the appeared group's labelled copy of the unobserved surface
-  const PointCloud* cloud = nullptr;
-  std::vector<std::uint32_t> idx;
-};
-UnseenPool UnseenPoolOf(const PointCloud& changes, bool appeared, const UnobservedSurface& unobserved,
-                        const SessionRecord& step) {
-  UnseenPool p;
+// What a group's clusters did not observe (UnseenParts): for the disappeared group the step's weak
+// ND (stored in the columns of strong ND, store.cpp); for the appeared one the step's surface its
+// reference never observed within the cluster tolerance's cells of the group (`unobserved`: the
+// step's strong PD its changes do not hold; a new fence whose lower rows the reference saw free and
+// whose upper rows its beams never reached), labelled as the step's strong PD for the object's cloud.
+PointCloud UnseenPool(const PointCloud& changes, bool appeared, const PointCloud& unobserved, const SessionRecord& step) {
   if (!appeared) {
-    p.cloud = &changes;
+    std::vector<std::uint32_t> weak;
     for (std::size_t i = 0; i < changes.size(); ++i)
-      if (Unseen(changes.cls[i])) p.idx.push_back(std::uint32_t(i));
-    return p;
+      if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
+    return changes.select(weak);
   }
-  p.own = unobserved.cloud;
-  p.own.cls.assign(p.own.size(), PointClass::kPDStrong);
-  p.own.session.assign(p.own.size(), std::uint16_t(step.order));
-  p.cloud = &p.own;
-  p.idx.resize(p.own.size());
-  std::iota(p.idx.begin(), p.idx.end(), 0u);
-  return p;
+  PointCloud pool = unobserved;
+  pool.cls.assign(pool.size(), PointClass::kPDStrong);
+  pool.session.assign(pool.size(), std::uint16_t(step.order));
+  return pool;
 }
 
 // An object keeps its unseen parts (UnseenParts). An appeared object's are surface that
@@ -1146,13 +1135,13 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
       group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
     const std::vector<int> holder = HoldUp(group, cfg);
-    const UnseenPool pool = UnseenPoolOf(changes, appeared, masks.unobserved, step);
-    const auto unseen = UnseenParts(group, *pool.cloud, pool.idx, floor, cfg);
+    const PointCloud pool = UnseenPool(changes, appeared, masks.unobserved.cloud, step);
+    const auto unseen = UnseenParts(group, pool, floor, cfg);
     StandOnChangesBelow(group, changes, idx, floor, cfg);
     for (MapObject& o : group) Judge(o, ctx, cfg);
     for (std::size_t k = 0; k < group.size(); ++k)
       if (group[k].rejected.empty() && !unseen[k].empty())
-        KeepUnseenParts(group[k], pool.cloud->select(unseen[k]), masks.unobserved, cfg);
+        KeepUnseenParts(group[k], pool.select(unseen[k]), masks.unobserved, cfg);
     const std::vector<bool> keep = JoinHeldParts(group, holder);
     for (std::size_t k = 0; k < group.size(); ++k) {
       MapObject& o = group[k];

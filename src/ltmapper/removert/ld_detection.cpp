@@ -265,11 +265,10 @@ std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, con
     for (const auto& q : scan.points) {
       const Eigen::Vector3f x = q.xyz();
       if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) continue;
-      for (const auto& [j, sq] : tree.RadiusUnsorted(x, reach))
-        hit[j] = hit[j] || (tree.cloud().points[j].xyz() - at).norm() <= submap;
+      for (const auto& [j, sq] : tree.RadiusUnsorted(x, reach)) hit[j] = true;
     }
     for (std::size_t j = 0; j < asked.size(); ++j)
-      if (hit[j]) hits[k].push_back(asked[j]);
+      if (hit[j] && (tree.cloud().points[j].xyz() - at).norm() <= submap) hits[k].push_back(asked[j]);
   });
   return hits;
 }
