@@ -523,6 +523,20 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
   EXPECT_EQ(objects[0].exists_in, 1);
 }
 
+// A store whose central session is flat ground 40 m square around the origin (keyframe 0).
+Store FlatCentral(const test::TempDir& tmp) {
+  Store s = Store::Create(tmp / "m.ltmap", Cfg());
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Grid(-20, -20, 0, 160, 160, 0.25f)}});
+  return s;
+}
+
+// Ground a step's new keyframe sees for the first time (strong PD: new territory), 0.25 m apart.
+PointCloud NewGround(float x0, float y0, int nx, int ny) {
+  PointCloud c = Grid(x0, y0, 0, nx, ny, 0.25f);
+  c.cls.assign(c.size(), PointClass::kPDStrong);
+  return c;
+}
+
 // In a keyframe the step created, an appeared cluster is judged with the surface it continues
 // into: a 3 m wall of new territory (strong PD: the reference never saw it) whose four rows 0.5 m up
 // the reference's rays passed over 4 m (weak PD, where the step's pose erred) is coverage, not a
@@ -531,10 +545,8 @@ TEST(MapStore, CreatedKeyframesWeakPdIsAStepChange) {
 TEST(MapObjects, ARimTheReferencePassedOfASurfaceItNeverSawIsNoObject) {
   for (const bool rim : {true, false}) {
     test::TempDir tmp;
-    Store s = Store::Create(tmp / "m.ltmap", Cfg());
-    s.IntegrateBase({"s0"}, {{0, At(0, 0), Grid(-20, -20, 0, 160, 160, 0.25f)}});
-    PointCloud cloud = Grid(-3, -6, 0, 40, 48, 0.25f);
-    cloud.cls.assign(cloud.size(), PointClass::kPDStrong);
+    Store s = FlatCentral(tmp);
+    PointCloud cloud = NewGround(-3, -6, 40, 48);
     PointCloud wall = Car(4, -4, 0.25f, 8.f, 3.f);
     wall.cls.resize(wall.size());
     for (std::size_t i = 0; i < wall.size(); ++i) {
@@ -903,10 +915,8 @@ TEST(MapObjects, AContainerThatLeftKeepsItsUnseenUpperRows) {
 // share counts each of its points once: the weak rows of the whole side.
 TEST(MapObjects, AContainerThatCameKeepsTheUpperRowsItsReferenceNeverObserved) {
   test::TempDir tmp;
-  Store s = Store::Create(tmp / "m.ltmap", Cfg());
-  s.IntegrateBase({"s0"}, {{0, At(0, 0), Grid(-20, -20, 0, 160, 160, 0.25f)}});
-  PointCloud cloud = Grid(-10, -10, 0, 80, 80, 0.25f);
-  cloud.cls.assign(cloud.size(), PointClass::kPDStrong);
+  Store s = FlatCentral(tmp);
+  PointCloud cloud = NewGround(-10, -10, 80, 80);
   PointCloud side = Car(-6, -6, 0.f, 6.f, 2.5f);  // x -6, y -6 .. 0, rows z 0.25 .. 2.5
   side.cls.resize(side.size());
   std::size_t weak = 0;
@@ -925,6 +935,41 @@ TEST(MapObjects, AContainerThatCameKeepsTheUpperRowsItsReferenceNeverObserved) {
   EXPECT_NEAR(objs[0].hi.z(), 2.5, 0.01);
   EXPECT_EQ(objs[0].unobserved_beside, 0u);
   EXPECT_NEAR(objs[0].observed_fraction, double(weak) / double(side.size()), 1e-9);
+}
+
+// A hoarding in new territory (a keyframe the step created) whose 2.5 m middle the reference saw
+// free (weak PD) and whose face goes on for 10 m either way where the reference never looked (the
+// step's strong PD): followed along its face (FollowFaces), most of it was never observed, so it is
+// coverage, not an object. The same piece with no face beyond it is an object.
+TEST(MapObjects, AFaceThatGoesOnWhereTheReferenceNeverLookedIsCoverage) {
+  for (const bool goes_on : {false, true}) {
+    test::TempDir tmp;
+    Store s = FlatCentral(tmp);
+    PointCloud cloud = NewGround(-16, -16, 128, 128);
+    PointCloud face = Car(-6, -12, 0.f, 24.f, 2.0f);  // x -6, y -12 .. 12, rows z 0.25 .. 2
+    face.cls.resize(face.size());
+    std::vector<bool> keep(face.size());
+    std::size_t weak = 0;
+    for (std::size_t i = 0; i < face.size(); ++i) {
+      const bool seen = face.points[i].y >= -1.f && face.points[i].y <= 1.5f;
+      face.cls[i] = seen ? PointClass::kPDWeak : PointClass::kPDStrong;
+      keep[i] = seen || goes_on;
+      weak += seen ? 1 : 0;
+    }
+    cloud.append(face.select(keep));
+    s.IntegrateSession({"s1"}, "s0", {}, {{6, At(100, 0), cloud}});
+    std::vector<MapObject> rejected;
+    const auto objs = s.Objects(&rejected);
+    if (!goes_on) {
+      ASSERT_EQ(objs.size(), 1u);
+      EXPECT_EQ(objs[0].points, weak);
+      continue;
+    }
+    EXPECT_TRUE(objs.empty()) << objs.size() << " objects, first observed " << objs[0].observed_fraction;
+    ASSERT_EQ(rejected.size(), 1u);  // the piece, without its foot (the ground band's row)
+    EXPECT_EQ(rejected[0].rejected, "coverage");
+    EXPECT_LT(rejected[0].observed_fraction, 0.4);
+  }
 }
 
 // A disappeared object's confidence weighs what the query saw through against all it is, its
