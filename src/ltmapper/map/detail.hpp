@@ -91,4 +91,17 @@ std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double
 // those the least total cost. Forbidden pairs: non-finite costs. Sorted by row. (assignment.cpp)
 std::vector<std::pair<std::size_t, std::size_t>> LeastCostPairs(const std::vector<std::vector<double>>& cost);
 
+// Change classes as the objects read them (objects.cpp, object_identity.cpp): PD, either
+// strength; weak ND, an object's unseen parts (UnseenParts), not something seen.
+inline bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
+inline bool Unseen(PointClass c) { return c == PointClass::kNDWeak; }
+
+// Disappeared object d and appeared object a could be one object that moved (objects.cpp).
+bool CouldHaveMoved(const MapObject& d, const MapObject& a, const MapConfig& cfg);
+
+// Identity across steps of the store's objects, all steps' rows in `objects` (object_identity.cpp):
+// those that confirm an earlier step's object go to `rejected` ("reported"); then stable ids, moves
+// linked, tracks, and the moves later steps' views inherit.
+void IdentifyAcrossSteps(std::vector<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg);
+
 }  // namespace ltm::map::detail
