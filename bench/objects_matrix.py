@@ -10,13 +10,18 @@ and `ltmapper eval objects`, then print one table, worst object precision first:
 A change to the object rules is measured on every row in about 30 s on 2 cores, against LT-SLAM and
 LT-removert outputs that stay fixed (a full matrix takes about 15 min).
 
-usage: bench/objects_matrix.py [--ltmapper BIN] [--out DIR] [--map-config F] ROW [ROW ...]
+usage: bench/objects_matrix.py [--ltmapper BIN] [--out DIR] [--map-config F] [--baseline DIR] ROW [ROW ...]
   e.g. bench/objects_matrix.py --out /tmp/objects /tmp/matrix/* out/demo
+  --baseline DIR: the --out of an earlier run over the same rows (e.g. main's binary); then each
+  row also says what changed: SAME (every cluster and every truth object's IoU, and objects.csv
+  byte for byte), or the truth objects whose IoU moved, and the clusters only one run holds.
   The sensor of each row is read from its last session's scans (object_sensor_step_deg: 0).
   Exit status 0 even when a row misses a target: this prints figures, the tests judge.
 """
 import argparse
+import filecmp
 import glob
+import json
 import os
 import shutil
 import sys
@@ -58,19 +63,49 @@ def summary(name, o):
     }
 
 
+def clusters(o):
+    """A run's clusters as comparable tuples: pair, change, points, best truth object, IoU."""
+    return sorted((c["pair"], c["change"], c["points"], c["best_truth"], round(c["best_iou"], 3))
+                  for c in o["clusters_scored"])
+
+
+def changes(out, base):
+    """What differs between this run's row folder and the baseline's: a list of lines, [] = the same."""
+    mine, theirs = [load_objects(d) for d in (out, base)]
+    iou = {(t["pair"], t["id"]): t["best_iou"] for t in theirs["objects"]}
+    lines = ["truth %s/%d IoU %.3f -> %.3f" % (t["pair"], t["id"], iou.get((t["pair"], t["id"]), 0.0), t["best_iou"])
+             for t in mine["objects"] if abs(t["best_iou"] - iou.get((t["pair"], t["id"]), 0.0)) > 1e-9]
+    a, b = clusters(mine), clusters(theirs)
+    lines += ["cluster only here: %s" % (c,) for c in a if c not in b]
+    lines += ["cluster only in the baseline: %s" % (c,) for c in b if c not in a]
+    csvs = [os.path.join(d, "objects", "objects.csv") for d in (out, base)]
+    if not lines and not filecmp.cmp(*csvs, shallow=False):
+        lines.append("objects.csv differs (same clusters and IoUs)")
+    return lines
+
+
+def load_objects(row_out):
+    with open(os.path.join(row_out, "objects.json")) as f:
+        return json.load(f)["objects"]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--ltmapper", default=os.path.join(ROOT, "build", "apps", "ltmapper"))
     ap.add_argument("--out", default="/tmp/ltmapper_objects_matrix")
     ap.add_argument("--map-config", default=os.path.join(ROOT, "config", "params_ltmap.yaml"))
+    ap.add_argument("--baseline", help="--out of an earlier run over the same rows: print what changed")
     ap.add_argument("rows", nargs="+")
     a = ap.parse_args()
-    rows, skipped = [], []
+    rows, skipped, diffs = [], [], []
     for k, row in enumerate(a.rows):
         name = os.path.basename(os.path.normpath(row))
         try:
             out = os.path.join(a.out, "%02d_%s" % (k, name))  # rows of two matrices may share a name
             rows.append(summary(name, run_row(a.ltmapper, row, out, a.map_config)))
+            if a.baseline:
+                lines = changes(out, os.path.join(a.baseline, os.path.basename(out)))
+                diffs.append("%s: %s" % (name, "SAME" if not lines else "\n  ".join(["changed"] + lines)))
         except RuntimeError as e:
             skipped.append("%s: skipped: %s" % (row, str(e).splitlines()[0]))
     rows.sort(key=lambda r: r["precision"])
@@ -86,6 +121,9 @@ def main():
     print("\nall rows: moves found %d of %d; %d clusters reported as moved, %d of them ends of a move; "
           "mean IoU %.3f over %d truth objects" % (found, truth, reported, true,
                                                    sum(ious) / max(len(ious), 1), len(ious)))
+    if diffs:
+        print("\nagainst %s:" % a.baseline)
+        print("\n".join(diffs))
     for line in skipped:
         print(line)
 
