@@ -523,7 +523,6 @@ bool SizesAgree(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
          -top <= TopShortfall(a, cfg);
 }
 
-
 // Whether view o shows the shape of object d: it may fall short (ViewShortfall) by less than d's
 // length and height. A view that may miss a whole edge of d agrees with d's size without showing it
 // (seed 7's VLP-16 saw a patch 58 m out in rows 2 m apart: "the tree 5.6 m tall moved there").
@@ -756,7 +755,7 @@ std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface&
 
 // An appeared thin face (a fence, a hoarding, a wall: its oriented box no wider than the cluster
 // tolerance) is followed beyond its ends into the step's surface its reference never observed, as
-// far as its own length on either side (FaceCorridor): a face that goes on unobserved that far was
+// far as its own length on either side (InFaceCorridor): a face that goes on unobserved that far was
 // mostly never observed, and the cells around the step's changes (ReadStepMaps) end a tolerance
 // from them. The reference saw free 72 points of a hoarding that goes on for 18 m in territory it
 // never observed (vlp16_drift3x): those cells gave it a see-through share of 0.60, an object with
@@ -764,12 +763,16 @@ std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface&
 // joined): coverage. No other row's objects changed (docs/RESULTS.md).
 bool ThinFace(const MapObject& o, const MapConfig& cfg) { return o.size.y() <= cfg.object_tolerance_m; }
 
+// How far a thin face's corridor reaches along its axis from its centre: its half length and its
+// length beyond that.
+double FaceReach(const MapObject& o) { return 1.5 * o.size.x(); }
+
 // Is q within a thin face's corridor: along its axis no farther than its length beyond either end,
 // across it and in height within the cluster tolerance?
 bool InFaceCorridor(const MapObject& o, const Eigen::Vector3d& q, double tol) {
   if (q.z() < o.lo.z() - tol || q.z() > o.hi.z() + tol) return false;
   const Eigen::Vector2d l = BoxFrame(o).Local(q);
-  return std::abs(l.x()) <= 1.5 * o.size.x() && std::abs(l.y()) <= tol;
+  return std::abs(l.x()) <= FaceReach(o) && std::abs(l.y()) <= tol;
 }
 
 // The step's own surface its reference never observed (UnobservedByReference, less its changes,
@@ -785,7 +788,7 @@ PointCloud AlongFaces(const std::vector<MapObject>& group, const Store& store, c
   for (const MapObject& o : group) {
     if (o.change != "appeared" || !ThinFace(o, cfg)) continue;
     faces.push_back(&o);
-    const Eigen::Vector3d reach(1.5 * o.size.x() + tol, 1.5 * o.size.x() + tol, tol);
+    const Eigen::Vector3d reach(FaceReach(o) + tol, FaceReach(o) + tol, tol);
     box.lo = box.lo.cwiseMin(Eigen::Vector3d(o.box_center.x(), o.box_center.y(), o.lo.z()) - reach);
     box.hi = box.hi.cwiseMax(Eigen::Vector3d(o.box_center.x(), o.box_center.y(), o.hi.z()) + reach);
   }
@@ -846,8 +849,9 @@ UnobservedSurface FollowFaces(std::vector<MapObject>& group, const Store& store,
                               const PointCloud& changes, const Floor& floor, const UnobservedSurface& near,
                               const MapConfig& cfg) {
   const PointCloud along = AlongFaces(group, store, step, changes, floor, cfg);
-  UnobservedSurface all(Joined(near.cloud, along));
-  if (all.cloud.size() == near.cloud.size()) return near;
+  PointCloud joined = along.empty() ? PointCloud() : Joined(near.cloud, along);
+  if (joined.size() <= near.cloud.size()) return near;
+  UnobservedSurface all(std::move(joined));
   for (MapObject& o : group) {
     o.unobserved_beside = UnobservedBeside(o.cloud, all, cfg.object_tolerance_m);
     Describe(o);
