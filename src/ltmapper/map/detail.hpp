@@ -91,10 +91,12 @@ std::vector<bool> WithinRadiusQ(const QCloud& cloud, const QCloud& query, double
 // those the least total cost. Forbidden pairs: non-finite costs. Sorted by row. (assignment.cpp)
 std::vector<std::pair<std::size_t, std::size_t>> LeastCostPairs(const std::vector<std::vector<double>>& cost);
 
-// Change classes as the objects read them (objects.cpp, object_identity.cpp): PD, either
+// Change classes as the objects read them (objects.cpp, object_shape.cpp, object_identity.cpp): PD, either
 // strength; weak ND, an object's unseen parts (UnseenParts), not something seen.
 inline bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
 inline bool Unseen(PointClass c) { return c == PointClass::kNDWeak; }
+// A change the other session saw through its place (strong ND, weak PD): see-through evidence.
+inline bool SeenThrough(PointClass c) { return c == PointClass::kNDStrong || c == PointClass::kPDWeak; }
 
 // Disappeared object d and appeared object a could be one object that moved (objects.cpp).
 bool CouldHaveMoved(const MapObject& d, const MapObject& a, const MapConfig& cfg);
