@@ -338,8 +338,7 @@ void MarkDroveWithTheSensor(const PointCloud& c, const std::vector<const std::ve
 // marked) longer than a mover that at least kTrailMinKeyframes of `own_voters` hit, each in pieces
 // shorter than a mover (LongestPieceSeen), is a mover's trail (marked in *residue, per point of
 // `c`). The whole cluster decides, so a tile must hold it: clusters up to LdWholeClusterM long are
-// judged (about 6 m with the defaults). The same clusters, with the keyframes' hits, are judged for
-// having driven with the sensor (MarkDroveWithTheSensor).
+// judged (about 6 m with the defaults).
 void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
                 const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
                 std::vector<bool>* residue) {
@@ -426,9 +425,8 @@ std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<
 // that low is within the radius of the other session's ground, so no change at all; such a patch
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
 // So is a cluster longer than a mover that each keyframe of its own session saw only a mover-sized
-// piece of (MarkTrails: a walker's trail), one of those lengths that drove with the sensor
-// (MarkDroveWithTheSensor: a car ahead of it to the session's end), and a thing its own session saw
-// at its place from one keyframe only (MarkSeenOnce, over the seen-through part of each cluster).
+// piece of (MarkTrails: a walker's trail), and a thing its own session saw at its place from one
+// keyframe only (MarkSeenOnce, over the seen-through part of each cluster).
 std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, const PointCloud& own,
                            const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
