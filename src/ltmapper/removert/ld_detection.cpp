@@ -12,7 +12,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <map>
 #include <memory>
 #include <tuple>
 #include <utility>
@@ -288,47 +287,6 @@ double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& h
   return longest;
 }
 
-// How many keyframes before its last view a thing that drove with the sensor is tested over
-// (DroveWithTheSensor): two instants, as a trail needs.
-constexpr int kDroveKeyframesBefore = kTrailMinKeyframes;
-
-// Share of `pts` that a scan (world frame, its tree) returned on: a return within `reach` of the point.
-double ReturnedShare(const std::vector<Eigen::Vector3f>& pts, const geometry::KdTree& scan, float reach) {
-  std::size_t n = 0;
-  for (const auto& p : pts) n += scan.CountWithin(p, reach, 1) > 0 ? 1 : 0;
-  return double(n) / double(std::max<std::size_t>(pts.size(), 1));
-}
-
-// The clusters of `judged` that drove with the sensor (DroveWithTheSensor), each tested at the last
-// of `own_voters` that hit it (`last`, -1: none) against the kDroveKeyframesBefore keyframes of the
-// session just before it (by index), when LD picked them as voters too.
-void MarkDroveWithTheSensor(const PointCloud& c, const std::vector<const std::vector<std::uint32_t>*>& judged,
-                            const std::vector<int>& last, const std::vector<WorldKeyframe>& own_voters,
-                            std::vector<bool>* residue, const RemovertConfig& cfg) {
-  std::map<int, std::size_t> by_index;
-  for (std::size_t v = 0; v < own_voters.size(); ++v) by_index[own_voters[v].index] = v;
-  std::map<std::size_t, std::shared_ptr<const geometry::KdTree>> scans;  // voter -> its scan's tree
-  const auto scan_of = [&](std::size_t v) {
-    auto& t = scans[v];
-    if (!t) t = std::make_shared<const geometry::KdTree>(geometry::Transform(*detail::LoadScan(own_voters[v]), own_voters[v].T_world_sensor));
-    return t;
-  };
-  for (std::size_t t = 0; t < judged.size(); ++t) {
-    if (last[t] < 0 || (*residue)[judged[t]->front()]) continue;
-    const WorldKeyframe& k = own_voters[std::size_t(last[t])];
-    std::vector<const WorldKeyframe*> before;
-    std::vector<std::shared_ptr<const geometry::KdTree>> trees;
-    for (int d = 1; d <= kDroveKeyframesBefore; ++d) {
-      const auto it = by_index.find(k.index - d);
-      if (it == by_index.end()) break;
-      before.push_back(&own_voters[it->second]);
-      trees.push_back(scan_of(it->second));
-    }
-    if (detail::DroveWithTheSensor(c, *judged[t], k, before, trees, cfg))
-      for (auto i : *judged[t]) (*residue)[i] = true;
-  }
-}
-
 // A mover walking along its own session's line of sight leaves a trail in that session's map that
 // its HD removal cannot take (the keyframes that met it later met it nearer, in front of its earlier
 // places, so none saw through them) and that is longer than a mover (FitAMover does not take it).
@@ -356,23 +314,20 @@ void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t
   }
   if (judged.empty()) return;
   std::sort(asked.begin(), asked.end());  // each keyframe's hits, and so its pieces, in map order
-  std::vector<int> seen_by(judged.size(), 0), last(judged.size(), -1);  // last: the latest voter that hit it
+  std::vector<int> seen_by(judged.size(), 0);
   std::vector<bool> whole(judged.size(), false);
-  const auto hits = HitsPerKeyframe(c, asked, own_voters, cfg, threads);
-  for (std::size_t v = 0; v < hits.size(); ++v) {
+  for (const auto& h : HitsPerKeyframe(c, asked, own_voters, cfg, threads)) {
     std::vector<std::vector<std::uint32_t>> piece(judged.size());  // this keyframe's hits per cluster
-    for (auto i : hits[v]) piece[cluster_of[i]].push_back(i);
+    for (auto i : h) piece[cluster_of[i]].push_back(i);
     for (std::size_t t = 0; t < judged.size(); ++t) {
       if (piece[t].empty()) continue;
       ++seen_by[t];
       whole[t] = whole[t] || LongestPieceSeen(c, piece[t], cfg) >= cfg.ld_residue_length_m;
-      if (last[t] < 0 || own_voters[v].index > own_voters[std::size_t(last[t])].index) last[t] = int(v);
     }
   }
   for (std::size_t t = 0; t < judged.size(); ++t)
     if (!whole[t] && seen_by[t] >= kTrailMinKeyframes)
       for (auto i : *judged[t]) (*residue)[i] = true;
-  MarkDroveWithTheSensor(c, judged, last, own_voters, residue, cfg);
 }
 
 // The points of `c` higher than ld_radius_m above the ground of `own` under them (ResidueGround,
@@ -498,34 +453,6 @@ PointCloud WithLabel(const PointCloud& map, const std::vector<std::uint8_t>& lab
 }  // namespace
 
 namespace detail {
-
-// A car that drove ahead of the sensor at about its speed until the session ended stays at one
-// place relative to the sensor, not in the world. The keyframes saw through its earlier places
-// (HD removal took them), but none came after its last one, which its own session's map keeps: on
-// OS1-64 and the rosette, two lead cars 19.5 m and 30 m ahead were false disappeared objects. A
-// thing whose points the keyframes before its last view `last` (`before`) returned on more at
-// their place relative to the sensor (T_before T_last^-1 p) than at their place in the world drove
-// with the sensor. Whatever stands still is returned on at its world place at least as much: a
-// wall along the road stays at one place relative to the sensor too, and in the world as well (on
-// the sessions' labelled scans, 31 true objects of three rows: world 0.06-0.84, sensor 0.00-0.25;
-// the two lead cars: sensor 0.41 / 0.37 against world 0.20 / 0.17, and 0.41 / 0.21 against 0.03 /
-// 0.09). A return within a map voxel's diagonal is one on the point (HitsPerKeyframe).
-bool DroveWithTheSensor(const PointCloud& c, const std::vector<std::uint32_t>& m, const WorldKeyframe& last,
-                        const std::vector<const WorldKeyframe*>& before, const std::vector<std::shared_ptr<const geometry::KdTree>>& scans,
-                        const RemovertConfig& cfg) {
-  if (before.size() < std::size_t(kDroveKeyframesBefore)) return false;
-  const float reach = float(cfg.map_voxel_m * std::sqrt(3.0));
-  std::vector<Eigen::Vector3f> world;
-  for (auto i : m) world.push_back(c.points[i].xyz());
-  for (std::size_t j = 0; j < before.size(); ++j) {
-    const Eigen::Affine3f to = (before[j]->T_world_sensor * last.T_world_sensor.inverse()).cast<float>();
-    std::vector<Eigen::Vector3f> relative;
-    for (const auto& p : world) relative.push_back(to * p);
-    if (ReturnedShare(relative, *scans[j], reach) <= ReturnedShare(world, *scans[j], reach)) return false;
-  }
-  return true;
-}
-
 
 Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m) {
   const Eigen::Vector2f gap = Eigen::Vector2f::Constant(float(cfg.ld_residue_gap_m));
