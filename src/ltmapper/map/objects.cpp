@@ -46,7 +46,6 @@
 #include <map>
 #include <memory>
 #include <numeric>
-#include <set>
 #include <tuple>
 #include <unordered_map>
 #include <unordered_set>
@@ -638,11 +637,11 @@ bool ThinFace(const MapObject& o, const MapConfig& cfg) { return o.size.y() <= c
 // length beyond that.
 double FaceReach(const MapObject& o) { return 1.5 * o.size.x(); }
 
-// Is q within a thin face's corridor: along its axis no farther than its length beyond either end,
-// across it and in height within the cluster tolerance?
-bool InFaceCorridor(const MapObject& o, const Eigen::Vector3d& q, double tol) {
+// Is q within a thin face's corridor (`frame`: the face's box frame): along its axis no farther than
+// its length beyond either end, across it and in height within the cluster tolerance?
+bool InFaceCorridor(const MapObject& o, const BoxFrame& frame, const Eigen::Vector3d& q, double tol) {
   if (q.z() < o.lo.z() - tol || q.z() > o.hi.z() + tol) return false;
-  const Eigen::Vector2d l = BoxFrame(o).Local(q);
+  const Eigen::Vector2d l = frame.Local(q);
   return std::abs(l.x()) <= FaceReach(o) && std::abs(l.y()) <= tol;
 }
 
@@ -653,12 +652,14 @@ PointCloud AlongFaces(const std::vector<MapObject>& group, const Store& store, c
                       const PointCloud& changes, const Floor& floor, const MapConfig& cfg) {
   const double tol = cfg.object_tolerance_m;
   std::vector<const MapObject*> faces;
+  std::vector<BoxFrame> frames;  // each face's, its yaw's sine and cosine taken once
   Region box;
   box.use_box = true;
   box.lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), box.hi = -box.lo;
   for (const MapObject& o : group) {
     if (o.change != "appeared" || !ThinFace(o, cfg)) continue;
     faces.push_back(&o);
+    frames.emplace_back(o);
     const Eigen::Vector3d reach(FaceReach(o) + tol, FaceReach(o) + tol, tol);
     box.lo = box.lo.cwiseMin(Eigen::Vector3d(o.box_center.x(), o.box_center.y(), o.lo.z()) - reach);
     box.hi = box.hi.cwiseMax(Eigen::Vector3d(o.box_center.x(), o.box_center.y(), o.hi.z()) + reach);
@@ -671,21 +672,23 @@ PointCloud AlongFaces(const std::vector<MapObject>& group, const Store& store, c
       const auto& p = part.points[i];
       if (!UnobservedByReference(part.session[i], part.cls[i], step) || !AboveGround(p.xyz(), floor, cfg)) continue;
       const Eigen::Vector3d q = p.xyz().cast<double>();
-      if (std::any_of(faces.begin(), faces.end(), [&](const MapObject* o) { return InFaceCorridor(*o, q, tol); }))
-        along.push_back(p.x, p.y, p.z);
+      for (std::size_t f = 0; f < faces.size(); ++f)
+        if (InFaceCorridor(*faces[f], frames[f], q, tol)) {
+          along.push_back(p.x, p.y, p.z);
+          break;
+        }
     }
   });
   return WithoutChanges(along, changes, IsPd, cfg);
 }
 
-// `near` with the points of `along` it does not hold (the same map points: equal coordinates).
-PointCloud Joined(const PointCloud& near, const PointCloud& along) {
-  const auto key = [](const PointXYZI& p) { return std::make_tuple(p.x, p.y, p.z); };
-  std::set<std::tuple<float, float, float>> have;
-  for (const auto& p : near.points) have.insert(key(p));
+// `near` with the points of `along` it does not hold: the same store grid points are within half a
+// grid step (as WithoutChanges tells them).
+PointCloud Joined(const PointCloud& near, const PointCloud& along, const MapConfig& cfg) {
+  std::vector<bool> fresh = geometry::WithinRadius(along, near, 0.5 * cfg.resolution_m);
+  fresh.flip();
   PointCloud out = near;
-  for (const auto& p : along.points)
-    if (have.insert(key(p)).second) out.push_back(p.x, p.y, p.z);
+  out.append(along.select(fresh));
   return out;
 }
 
@@ -720,7 +723,7 @@ UnobservedSurface FollowFaces(std::vector<MapObject>& group, const Store& store,
                               const PointCloud& changes, const Floor& floor, const UnobservedSurface& near,
                               const MapConfig& cfg) {
   const PointCloud along = AlongFaces(group, store, step, changes, floor, cfg);
-  PointCloud joined = along.empty() ? PointCloud() : Joined(near.cloud, along);
+  PointCloud joined = along.empty() ? PointCloud() : Joined(near.cloud, along, cfg);
   if (joined.size() <= near.cloud.size()) return near;
   UnobservedSurface all(std::move(joined));
   for (MapObject& o : group) {
