@@ -24,7 +24,8 @@
 //     session did not observe inside its box and over it (UnseenParts: weak ND of a disappeared
 //     one, the step's surface its reference never observed of an appeared one), and every object
 //     its foot, the changes of its side in the ground band under it (KeepFeet). Its confidence
-//     is rated over all it then holds (Rate).
+//     is rated over all it then holds (Rate). The rules that join parts live in object_parts.cpp;
+//     what both files read (the ground band, the sampling at a range) in object_rules.hpp.
 // Then over all steps (object_identity.cpp, detail::IdentifyAcrossSteps):
 //  5. Once: a disappeared cluster on the unseen parts of an object an earlier step reported gone
 //     confirms that object and is no second one (Confirms, SetAsideConfirmations).
@@ -36,6 +37,7 @@
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/map/detail.hpp"
 #include "ltmapper/map/map.hpp"
+#include "ltmapper/map/object_rules.hpp"
 #include "ltmapper/map/object_shape.hpp"
 
 #include <algorithm>
@@ -66,33 +68,46 @@ struct CellKey {
 struct CellKeyHash {
   std::size_t operator()(const CellKey& c) const { return std::size_t(c.x * 73856093) ^ std::size_t(c.y * 19349663); }
 };
-using Floor = geometry::LowestGrid;
 
 CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
   return {std::int64_t(std::floor(double(p.x()) / cell)), std::int64_t(std::floor(double(p.y()) / cell))};
 }
 
 
+using detail::AboveGround;
 using detail::BoxFrame;
 using detail::Clearance;
 using detail::CouldHaveMoved;
 using detail::Describe;
+using detail::Floats;
+using detail::Floor;
+using detail::Grouped;
+using detail::HoldUp;
+using detail::InGrownBox;
 using detail::InOrientedBox;
 using detail::IsPd;
+using detail::JoinHeldParts;
+using detail::KeepFeet;
+using detail::KeepUnseenParts;
+using detail::kCoverage;
+using detail::kSmall;
+using detail::MergeParts;
 using detail::OrientedBox;
+using detail::RowSpacing;
+using detail::SampleSpacing;
 using detail::SeenThrough;
 using detail::SegmentHitsBox;
+using detail::SensorGapsAt;
 using detail::Spread;
 using detail::Spread3;
+using detail::StandOnChangesBelow;
+using detail::UnobservedBeside;
+using detail::UnobservedSurface;
 using detail::Unseen;
+using detail::UnseenParts;
+using detail::UnseenPool;
 using detail::Width;
-// The change points objects are clustered from (GroupPoints): PD and strong ND, not weak ND.
-bool Grouped(PointClass c) { return IsPd(c) || c == PointClass::kNDStrong; }
 
-bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& cfg) {
-  float z = 0.f;
-  return !floor.At(p, &z) || p.z() > z + float(cfg.object_ground_height_m);
-}
 
 // The other side of a change: PD (the query's new surfaces) for disappeared clusters, strong ND
 // (the reference's surfaces the query saw through) for appeared ones. Not weak ND: the wall
@@ -290,12 +305,6 @@ class SensorRanges {
   std::shared_ptr<const geometry::KdTree> tree_;
 };
 
-// The sensor's sample gaps {horizontal, vertical} [m] that still join a cluster at `range_m`
-// (geometry::SampleJoinGaps of its columns and rows: object_sensor_azimuth_step_deg,
-// object_sensor_step_deg), before the cluster tolerance's floor.
-Eigen::Vector2f SensorGapsAt(double range_m, const MapConfig& cfg) {
-  return geometry::SampleJoinGaps(cfg.object_sensor_azimuth_step_deg, cfg.object_sensor_step_deg, range_m);
-}
 
 // Per change point idx[k]: its clustering gaps {horizontal, vertical}, the cluster tolerance or,
 // farther out, the sensor's sample gaps at its range from the nearest map keyframe (a lower bound
@@ -338,9 +347,6 @@ struct StepContext {
   std::vector<const MapObject*> disappeared;       // accepted strong-ND objects of the step
 };
 
-// The map's sample spacing: the output voxel, at least the store's quantisation step. An object's
-// box grown by it holds the samples of its own surfaces (AttachedFraction, UnseenParts).
-double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m, cfg.resolution_m); }
 
 // How far short of an object's length and height a view's box may fall: its extremes are the
 // samples nearest the object's ends, so each edge may miss up to one sample gap at either end: the
@@ -352,21 +358,7 @@ Eigen::Vector2d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
   return kEnds * SensorGapsAt(o.range_m, cfg).cast<double>().cwiseMax(SampleSpacing(cfg));
 }
 
-// The spacing of the sensor's rows on a surface at `range_m` facing it: r * object_sensor_step_deg.
-double RowSpacing(double range_m, const MapConfig& cfg) { return range_m * cfg.object_sensor_step_deg * kDegToRad; }
 
-// The highest a cluster's lowest point may lie above the ground of its cell while it stands on it:
-// object_max_clearance_m (the lower part LD matched to the other session's ground), plus one row
-// of the sensor at the cluster's range (RowSpacing): the row below its lowest one passed under the
-// thing, or over a low wall in front of it, and met the ground (seed 7's container seen over a
-// wall from 36 m by an HDL-32E, rows 0.84 m apart there: its lowest point 1.14 m up, "floating").
-double MaxClearance(const MapObject& o, const MapConfig& cfg) {
-  return cfg.object_max_clearance_m + RowSpacing(o.range_m, cfg);
-}
-// Whether a cluster floats: its lowest point above MaxClearance (the rule off at object_max_clearance_m 0).
-bool Floats(const MapObject& o, const MapConfig& cfg) {
-  return cfg.object_max_clearance_m > 0.0 && o.clearance_m > MaxClearance(o, cfg);
-}
 
 // How far below an object's top a view's highest sample may lie: one gap of the sensor's rows at
 // the view's range (SensorGapsAt), at least the map's sample spacing: the row above it passed over
@@ -453,10 +445,6 @@ double MinWidth(double range_m, const MapConfig& cfg) {
   return std::max(cfg.output_voxel_m, RowSpacing(range_m, cfg)) * std::max(0.0, cfg.object_min_samples - 1.5);
 }
 
-// Reject's reasons that MergeParts asks for too: a cluster shorter than object_min_length_m, and
-// an appeared one most of whose space the reference never observed.
-constexpr const char* kSmall = "small";
-constexpr const char* kCoverage = "coverage";
 
 std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
   if (!Covered(o, ctx, cfg)) return kCoverage;
@@ -494,14 +482,6 @@ double Share(const std::vector<bool>& mask, const std::vector<std::uint32_t>& se
 // (NearbyAboveGround at the cluster tolerance), for each cluster's attached share and
 // box share; the group's change points seen changed (SeenChanged), for the box share
 // (BoxSeenFraction).
-// The step's surfaces its reference never observed near a group's change points, with their tree
-// (built once per group: UnobservedBeside walks it for every cluster).
-struct UnobservedSurface {
-  PointCloud cloud;
-  std::shared_ptr<const geometry::KdTree> tree;
-  explicit UnobservedSurface(PointCloud c = {})
-      : cloud(std::move(c)), tree(cloud.empty() ? nullptr : std::make_shared<const geometry::KdTree>(cloud)) {}
-};
 
 struct Masks {
   std::vector<bool> twin;
@@ -546,11 +526,6 @@ class OwnLowerPart {
   std::unordered_map<CellKey, float, CellKeyHash> bottom_;  // lowest cluster point per xy cell
 };
 
-// Whether q lies in o's axis-aligned box grown by r (a cheap test before the oriented box).
-bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
-  const Eigen::Vector3d d = q.cast<double>();
-  return !((d.array() < o.lo.array() - r).any() || (d.array() > o.hi.array() + r).any());
-}
 
 // The points of `c` in o's axis-aligned box grown by r: what AttachedFraction (at the cluster
 // tolerance) and BoxSeenFraction (inside the box) read of the unchanged map, gathered once per object.
@@ -599,29 +574,6 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
   return total == 0 ? 1.0 : double(n_seen) / double(total);
 }
 
-// How many points of `unobserved` (the step's surfaces its reference never observed, beside the
-// group) the cluster's points reach through them in hops of the cluster tolerance r, as Euclidean
-// clustering joins points. In a keyframe the step created, an appeared cluster is only what the
-// reference's rays reached of a surface that goes on there: a wall's rim row its rays passed where
-// the step's pose erred (seed 3's HDL-32E and tilted VLP-16, the stress row's unlooped session
-// start). In the reference's keyframes those points are the cluster's own. `unobserved` holds only
-// the cells around the group's change points (ReadStepMaps), so the reach ends there.
-std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface& unobserved, double r) {
-  if (!unobserved.tree) return 0;
-  std::unordered_set<std::uint32_t> reached;
-  std::vector<std::uint32_t> front;
-  const auto reach_from = [&](const Eigen::Vector3f& p) {
-    for (const auto& [j, d] : unobserved.tree->Radius(p, float(r)))
-      if (reached.insert(j).second) front.push_back(j);
-  };
-  for (const auto& p : cluster.points) reach_from(p.xyz());
-  while (!front.empty()) {
-    const std::uint32_t i = front.back();
-    front.pop_back();
-    reach_from(unobserved.cloud.points[i].xyz());
-  }
-  return reached.size();
-}
 
 // An appeared thin face (a fence, a hoarding, a wall: its oriented box no wider than the cluster
 // tolerance) is followed beyond its ends into the step's surface its reference never observed, as
@@ -733,186 +685,6 @@ UnobservedSurface FollowFaces(std::vector<MapObject>& group, const Store& store,
   return all;
 }
 
-// A cluster that floats (Floats) still stands on the ground when another cluster of the same
-// change holds it up: under its xy box (both grown by the cluster tolerance), topping out between
-// MaxClearance below its bottom (the rows between them not scanned) and the tolerance above it,
-// and itself standing on the ground. A cut tree's canopy and its trunk are two clusters where
-// the trunk's top was not scanned; the canopy then takes the trunk's clearance (one level: a
-// cluster held up by a floating one still floats). Returns per cluster the index of the one that
-// holds it up (the lowest), or -1: the two are parts of one object (JoinHeldParts).
-std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
-  const double tol = cfg.object_tolerance_m;
-  std::vector<int> holder(group.size(), -1);
-  std::vector<double> held(group.size());
-  for (std::size_t i = 0; i < group.size(); ++i) {
-    const MapObject& o = group[i];
-    held[i] = o.clearance_m;
-    if (!Floats(o, cfg)) continue;
-    for (std::size_t j = 0; j < group.size(); ++j) {
-      const MapObject& b = group[j];
-      const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
-                         (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
-      const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - MaxClearance(o, cfg);
-      if (j != i && under && just_below && !Floats(b, cfg) && b.clearance_m < held[i]) {
-        held[i] = b.clearance_m;
-        holder[i] = int(j);
-      }
-    }
-  }
-  for (std::size_t i = 0; i < group.size(); ++i) group[i].clearance_m = held[i];
-  return holder;
-}
-
-// Appends `part` (points with their classes) to `whole` and describes it again (box, class votes, height).
-void Absorb(MapObject& whole, const PointCloud& part) {
-  whole.cloud.append(part);
-  Describe(whole);
-  OrientedBox(whole);
-  whole.height_above_ground = whole.hi.z() - whole.ground_z;
-}
-
-// A cluster held up by another (HoldUp) that both pass the rules is one object with it: a tree's
-// canopy standing on its trunk, a container's top on its side (they were reported twice, the
-// upper part a false object). The held part joins its holder; returns which clusters remain.
-std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector<int>& holder) {
-  std::vector<bool> keep(group.size(), true);
-  for (std::size_t i = 0; i < group.size(); ++i) {
-    const int h = holder[i];
-    if (h < 0 || !group[i].rejected.empty() || !group[std::size_t(h)].rejected.empty() || !keep[std::size_t(h)]) continue;
-    Absorb(group[std::size_t(h)], group[i].cloud);
-    keep[i] = false;
-  }
-  return keep;
-}
-
-// Whether p lies over or under o's axis-aligned xy box grown by `tol` (ChainBelow, ChainAbove).
-bool InColumns(const MapObject& o, const PointXYZI& p, double tol) {
-  return double(p.x) >= o.lo.x() - tol && double(p.x) <= o.hi.x() + tol && double(p.y) >= o.lo.y() - tol &&
-         double(p.y) <= o.hi.y() + tol;
-}
-
-// The points of `by_z` (indices into `changes`, highest first) under o's xy box grown by `tol`
-// that reach down from its bottom with no vertical gap wider than `tol`, highest first.
-std::vector<std::uint32_t> ChainBelow(const MapObject& o, const PointCloud& changes,
-                                      const std::vector<std::uint32_t>& by_z, double tol) {
-  std::vector<std::uint32_t> chain;
-  double reached = o.lo.z();
-  for (std::uint32_t i : by_z) {
-    const PointXYZI& p = changes.points[i];
-    if (double(p.z) >= o.lo.z() || !InColumns(o, p, tol)) continue;
-    if (double(p.z) < reached - tol) break;
-    reached = double(p.z);
-    chain.push_back(i);
-  }
-  return chain;
-}
-
-// The points of `by_z` (highest first) over o's xy box grown by `tol` that reach up from its top
-// with no vertical gap wider than `tol`, lowest first (ChainBelow upside down).
-std::vector<std::uint32_t> ChainAbove(const MapObject& o, const PointCloud& changes,
-                                      const std::vector<std::uint32_t>& by_z, double tol) {
-  std::vector<std::uint32_t> chain;
-  double reached = o.hi.z();
-  for (auto it = by_z.rbegin(); it != by_z.rend(); ++it) {
-    const PointXYZI& p = changes.points[*it];
-    if (double(p.z) <= o.hi.z() || !InColumns(o, p, tol)) continue;
-    if (double(p.z) > reached + tol) break;
-    reached = double(p.z);
-    chain.push_back(*it);
-  }
-  return chain;
-}
-
-// `idx` sorted by z, highest first (for ChainBelow, ChainAbove).
-std::vector<std::uint32_t> ByZ(const PointCloud& changes, std::vector<std::uint32_t> idx) {
-  std::sort(idx.begin(), idx.end(), [&](std::uint32_t a, std::uint32_t b) { return changes.points[a].z > changes.points[b].z; });
-  return idx;
-}
-
-// Lowers o's clearance to that of the lowest of `chain` above the floor of its cell.
-void StandOn(MapObject& o, const PointCloud& changes, const std::vector<std::uint32_t>& chain, const Floor& floor) {
-  float z = 0.f;
-  if (!chain.empty() && floor.At(changes.points[chain.back()].xyz(), &z))
-    o.clearance_m = std::min(o.clearance_m, double(changes.points[chain.back()].z) - double(z));
-}
-
-// A cluster stands on the group's own change points under it (`idx`: above the ground band),
-// reaching down from its bottom with no vertical gap wider than the cluster tolerance: points
-// too few to be a cluster of their own (HoldUp needs one) still hold it up. The appeared
-// structure whose upper part OS1-64 saw as one cluster and whose lower part as scattered points
-// floated.
-void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& changes, const std::vector<std::uint32_t>& idx,
-                         const Floor& floor, const MapConfig& cfg) {
-  if (cfg.object_max_clearance_m <= 0.0) return;
-  const std::vector<std::uint32_t> by_z = ByZ(changes, idx);
-  for (MapObject& o : group)
-    if (Floats(o, cfg)) StandOn(o, changes, ChainBelow(o, changes, by_z, cfg.object_tolerance_m), floor);
-}
-
-// A cluster's parts the other session did not observe, among `pool` (UnseenPool). Of those, the
-// ones inside its oriented box (grown by the map's sample spacing: rows between the rows its beams
-// passed), chained down from its bottom (ChainBelow), above the ground band, and chained up from
-// its top (ChainAbove: the rows over a scanner's cone, or between its beams). The cluster's
-// clearance is counted from its lowest point (a fence whose upper half the query saw through while
-// parked cars hid its lower half stands on the ground, it does not float; a trunk that stayed under
-// a cut crown is unchanged, no weak ND); the rules judge what was seen, and an object keeps these
-// parts in its cloud. Returns per cluster the parts' indices into `pool`.
-std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& pool,
-                                                    const Floor& floor, const MapConfig& cfg) {
-  std::vector<std::vector<std::uint32_t>> parts(group.size());
-  if (pool.empty() || floor.empty()) return parts;
-  std::vector<std::uint32_t> all(pool.size());
-  std::iota(all.begin(), all.end(), 0u);
-  const std::vector<std::uint32_t> by_z = ByZ(pool, std::move(all));
-  const double edge = SampleSpacing(cfg), tol = cfg.object_tolerance_m;
-  for (std::size_t k = 0; k < group.size(); ++k) {
-    const MapObject& o = group[k];
-    std::vector<std::uint32_t> columns;  // the unseen points over and under o (one pass), highest first
-    for (std::uint32_t i : by_z)
-      if (InColumns(o, pool.points[i], std::max(edge, tol))) columns.push_back(i);
-    const InOrientedBox in_box(o, edge, 0.0);
-    for (std::uint32_t i : columns)
-      if (InGrownBox(o, pool.points[i].xyz(), edge) && in_box(pool.points[i].xyz().cast<double>()))
-        parts[k].push_back(i);
-    std::vector<std::uint32_t> lower;
-    for (std::uint32_t i : ChainBelow(o, pool, columns, tol))
-      if (AboveGround(pool.points[i].xyz(), floor, cfg)) lower.push_back(i);
-    parts[k].insert(parts[k].end(), lower.begin(), lower.end());
-    for (std::uint32_t i : ChainAbove(o, pool, columns, tol)) parts[k].push_back(i);
-    StandOn(group[k], pool, lower, floor);
-  }
-  return parts;
-}
-
-// What a group's clusters did not observe (UnseenParts): for the disappeared group the step's weak
-// ND (stored in the columns of strong ND, store.cpp); for the appeared one the step's surface its
-// reference never observed within the cluster tolerance's cells of the group (`unobserved`: the
-// step's strong PD its changes do not hold; a new fence whose lower rows the reference saw free and
-// whose upper rows its beams never reached), labelled as the step's strong PD for the object's cloud.
-PointCloud UnseenPool(const PointCloud& changes, bool appeared, const PointCloud& unobserved, const SessionRecord& step) {
-  if (!appeared) {
-    std::vector<std::uint32_t> weak;
-    for (std::size_t i = 0; i < changes.size(); ++i)
-      if (Unseen(changes.cls[i])) weak.push_back(std::uint32_t(i));
-    return changes.select(weak);
-  }
-  PointCloud pool = unobserved;
-  pool.cls.assign(pool.size(), PointClass::kPDStrong);
-  pool.session.assign(pool.size(), std::uint16_t(step.order));
-  return pool;
-}
-
-// An object keeps its unseen parts (UnseenParts). An appeared object's are surface that
-// UnobservedBeside counted beside it: what stays beside it is what it reaches through that surface
-// and does not hold, so that its see-through share (Describe) counts each point once.
-void KeepUnseenParts(MapObject& o, const PointCloud& part, const UnobservedSurface& unobserved, const MapConfig& cfg) {
-  if (o.change == "appeared") {
-    PointCloud all = o.cloud;
-    all.append(part);
-    o.unobserved_beside = UnobservedBeside(all, unobserved, cfg.object_tolerance_m) - part.size();
-  }
-  Absorb(o, part);
-}
 
 // The rules (Reject) of a built cluster, on what was seen of it (its confidence is Rate's).
 void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
@@ -928,144 +700,6 @@ void Rate(MapObject& o, const MapConfig& cfg) {
   o.confidence = Confidence(o, cfg, Width(o, Spread(o).middle), MinWidth(o.range_m, cfg));
 }
 
-// Share of `part`'s points inside `whole`'s oriented box grown by `margin` (of the points seen: not
-// of its unseen parts). The oriented box, not the axis-aligned one: a fence or wall that runs
-// diagonally to the map's axes has an axis-aligned box metres wide, and a car parked beside it
-// lies inside that.
-double InsideShare(const MapObject& part, const MapObject& whole, double margin) {
-  const InOrientedBox in_box(whole, margin, margin);
-  std::size_t n = 0, seen = 0;
-  for (std::size_t i = 0; i < part.cloud.size(); ++i) {
-    if (Unseen(part.cloud.cls[i])) continue;
-    n += in_box(part.cloud.points[i].xyz().cast<double>()) ? 1 : 0;
-    ++seen;
-  }
-  return double(n) / double(std::max<std::size_t>(seen, 1));
-}
-
-// Does `part` come within one missed line of the sensor's samples of `whole`? Clustering joins
-// samples up to SensorGapsAt apart (twice the sampling step: a surface seen at up to 60 deg
-// incidence), so where the sensor missed one line of samples between two parts of one surface (a
-// container's corner, a strip a thin occluder hid) they lie up to twice that apart, horizontally
-// and vertically, at the smaller of the two ranges (the finer sampling, as Cluster takes the
-// smaller gap). Near the sensor the cluster tolerance, larger there, stays the bound: no part
-// joins there that Cluster did not already join.
-bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
-  const Eigen::Vector2f reach = (2.f * SensorGapsAt(std::min(part.range_m, whole.range_m), cfg))
-                                    .cwiseMax(float(cfg.object_tolerance_m));
-  const Eigen::Vector3d grow(reach.x(), reach.x(), reach.y());
-  if (((part.lo - whole.hi).array() > grow.array()).any() || ((whole.lo - part.hi).array() > grow.array()).any())
-    return false;
-  const geometry::KdTree tree(whole.cloud);
-  for (const auto& p : part.cloud.points)
-    for (const auto& hit : tree.RadiusUnsorted(p.xyz(), reach.maxCoeff())) {
-      const Eigen::Vector3f d = whole.cloud.points[hit.first].xyz() - p.xyz();
-      if ((d.head<2>() / reach.x()).squaredNorm() + (d.z() / reach.y()) * (d.z() / reach.y()) < 1.f) return true;
-    }
-  return false;
-}
-
-// Is `part` the far side of `whole`'s box? A view of a box shows its near long side whole, and its
-// width only as far as the view reaches; the far long side, seen through other gaps, is a face
-// parallel to it: in whole's frame its seen points span no more than the cluster tolerance across,
-// lie within whole's length and height (grown by the tolerance), and at most whole's length from
-// its axis (a box is no deeper than it is long: the length is its longer side). Seed 7's moved
-// container left its far long face, 2.44 m behind the near one, as a disappeared object of its own
-// on three sensors.
-bool FarSideOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
-  const double tol = cfg.object_tolerance_m;
-  const BoxFrame frame(whole);
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (std::size_t i = 0; i < part.cloud.size(); ++i) {
-    if (Unseen(part.cloud.cls[i])) continue;
-    const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
-    const Eigen::Vector2d l = frame.Local(q);
-    const double along = l.x(), across = l.y();
-    if (std::abs(along) > 0.5 * whole.size.x() + tol || std::abs(across) > whole.size.x() ||
-        q.z() < whole.lo.z() - tol || q.z() > whole.hi.z() + tol)
-      return false;
-    lo = std::min(lo, across), hi = std::max(hi, across);
-  }
-  return hi >= lo && hi - lo <= tol;
-}
-
-// Is `part` a piece of `whole`: the same change, and at least object_merge_inside_fraction of its
-// points inside whole's box (grown by the tolerance: an occlusion gap), one missed line of
-// samples from it (OneLineApart), or its far side (FarSideOf)?
-bool PieceOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
-  return whole.change == part.change &&
-         (InsideShare(part, whole, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction ||
-          OneLineApart(part, whole, cfg) || FarSideOf(part, whole, cfg));
-}
-
-// Parts of one object split by a gap wider than the cluster's: an accepted cluster that is a piece
-// of a larger accepted one (PieceOf) joins it; so does a cluster of `rejected` rejected only for its
-// length (kSmall): too short to be an object alone, it is the part of one that an occluder cut off
-// (a car behind a pole); and an appeared one rejected for coverage (kCoverage: the reference never
-// observed most of its space) that is a piece of a larger appeared object: the reference saw that
-// object's space free, and a thing that came is new as a whole (the far half of a container 62 m
-// out whose near half the reference saw free: vlp16_drift3x). What joined an object leaves
-// `rejected`.
-void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg) {
-  if (cfg.object_merge_inside_fraction <= 0.0) return;
-  std::sort(objects.begin(), objects.end(), [](const MapObject& a, const MapObject& b) { return a.points > b.points; });
-  std::deque<MapObject> out;
-  const auto whole_of = [&](const MapObject& o) -> MapObject* {
-    for (auto& w : out)
-      if (PieceOf(o, w, cfg)) return &w;
-    return nullptr;
-  };
-  for (auto& o : objects) {
-    if (MapObject* whole = whole_of(o))
-      Absorb(*whole, o.cloud);
-    else
-      out.push_back(std::move(o));
-  }
-  const auto joins = [&](const MapObject& r) -> MapObject* {
-    MapObject* whole = r.rejected == kSmall || r.rejected == kCoverage ? whole_of(r) : nullptr;
-    return whole && (r.rejected == kSmall || whole->points > r.points) ? whole : nullptr;
-  };
-  std::vector<MapObject> still;
-  for (auto& r : rejected) {
-    if (MapObject* whole = joins(r))
-      Absorb(*whole, r.cloud);
-    else
-      still.push_back(std::move(r));
-  }
-  rejected.swap(still);
-  objects.swap(out);
-}
-
-// An object's foot: the change points of its side in the ground band (GroupPoints leaves them out,
-// as they would glue objects to the ground and to each other) inside its oriented box grown by the
-// map's sample spacing: those as high as its bottom or higher (where a cell holds no ground, its
-// band reaches up there) and those chained down from its bottom (ChainBelow). A
-// container's lowest rows and a car's wheels are the object's own surfaces: its cloud keeps them,
-// each point in the first object that claims it. The rules judged the object without them.
-void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg) {
-  std::vector<std::uint32_t> band;
-  for (std::size_t i = 0; i < changes.size(); ++i)
-    if (Grouped(changes.cls[i]) && !AboveGround(changes.points[i].xyz(), floor, cfg)) band.push_back(std::uint32_t(i));
-  if (band.empty()) return;
-  const std::vector<std::uint32_t> by_z = ByZ(changes, std::move(band));
-  std::unordered_set<std::uint32_t> taken;
-  const double edge = SampleSpacing(cfg);
-  for (MapObject& o : kept) {
-    const InOrientedBox in_box(o, edge, std::numeric_limits<double>::infinity());
-    std::vector<std::uint32_t> side, foot;  // the band's points of o's side in its box's columns, highest first
-    for (std::uint32_t i : by_z) {
-      if (IsPd(changes.cls[i]) != IsPd(o.cls) || taken.count(i) || !in_box(changes.points[i].xyz().cast<double>()))
-        continue;
-      side.push_back(i);
-      if (double(changes.points[i].z) >= o.lo.z()) foot.push_back(i);
-    }
-    const std::vector<std::uint32_t> below = ChainBelow(o, changes, side, cfg.object_tolerance_m);
-    foot.insert(foot.end(), below.begin(), below.end());
-    if (foot.empty()) continue;
-    taken.insert(foot.begin(), foot.end());
-    Absorb(o, changes.select(foot));
-  }
-}
 
 // One step's objects (disappeared first: they can reveal appeared ones) and rejected clusters.
 void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx, std::vector<MapObject>& kept,

@@ -1,0 +1,106 @@
+// Private to src/ltmapper/map: what the object rules share between the step's per-cluster rules
+// (objects.cpp) and the rules that join the parts of one object (object_parts.cpp): the ground
+// band, the sensor's and the map's sampling at a cluster's range, whether a cluster floats, the
+// step's surface its reference never observed, and the parts rules themselves.
+#pragma once
+
+#include "ltmapper/geometry/geometry.hpp"
+#include "ltmapper/map/config.hpp"
+#include "ltmapper/map/detail.hpp"
+#include "ltmapper/map/map.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <vector>
+
+namespace ltm::map::detail {
+
+using Floor = geometry::LowestGrid;
+
+// Reject's reasons that MergeParts asks for too: a cluster shorter than object_min_length_m, and
+// an appeared one most of whose space the reference never observed.
+constexpr const char* kSmall = "small";
+constexpr const char* kCoverage = "coverage";
+
+// The change points objects are clustered from (GroupPoints): PD and strong ND, not weak ND.
+inline bool Grouped(PointClass c) { return IsPd(c) || c == PointClass::kNDStrong; }
+
+// Whether p lies above the ground band: object_ground_height_m over the floor of its cell (or its
+// cell holds no floor).
+inline bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapConfig& cfg) {
+  float z = 0.f;
+  return !floor.At(p, &z) || p.z() > z + float(cfg.object_ground_height_m);
+}
+
+// The sensor's sample gaps {horizontal, vertical} [m] that still join a cluster at `range_m`
+// (geometry::SampleJoinGaps of its columns and rows: object_sensor_azimuth_step_deg,
+// object_sensor_step_deg), before the cluster tolerance's floor.
+inline Eigen::Vector2f SensorGapsAt(double range_m, const MapConfig& cfg) {
+  return geometry::SampleJoinGaps(cfg.object_sensor_azimuth_step_deg, cfg.object_sensor_step_deg, range_m);
+}
+
+// The map's sample spacing: the output voxel, at least the store's quantisation step. An object's
+// box grown by it holds the samples of its own surfaces (AttachedFraction, UnseenParts).
+inline double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_voxel_m, cfg.resolution_m); }
+
+// The spacing of the sensor's rows on a surface at `range_m` facing it: r * object_sensor_step_deg.
+inline double RowSpacing(double range_m, const MapConfig& cfg) {
+  return range_m * cfg.object_sensor_step_deg * (M_PI / 180.0);
+}
+
+// The highest a cluster's lowest point may lie above the ground of its cell while it stands on it:
+// object_max_clearance_m (the lower part LD matched to the other session's ground), plus one row
+// of the sensor at the cluster's range (RowSpacing): the row below its lowest one passed under the
+// thing, or over a low wall in front of it, and met the ground (seed 7's container seen over a
+// wall from 36 m by an HDL-32E, rows 0.84 m apart there: its lowest point 1.14 m up, "floating").
+inline double MaxClearance(const MapObject& o, const MapConfig& cfg) {
+  return cfg.object_max_clearance_m + RowSpacing(o.range_m, cfg);
+}
+// Whether a cluster floats: its lowest point above MaxClearance (the rule off at object_max_clearance_m 0).
+inline bool Floats(const MapObject& o, const MapConfig& cfg) {
+  return cfg.object_max_clearance_m > 0.0 && o.clearance_m > MaxClearance(o, cfg);
+}
+
+// Whether q lies in o's axis-aligned box grown by r (a cheap test before the oriented box).
+inline bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
+  const Eigen::Vector3d d = q.cast<double>();
+  return !((d.array() < o.lo.array() - r).any() || (d.array() > o.hi.array() + r).any());
+}
+
+// The step's surfaces its reference never observed near a group's change points, with their tree
+// (built once per group: UnobservedBeside walks it for every cluster).
+struct UnobservedSurface {
+  PointCloud cloud;
+  std::shared_ptr<const geometry::KdTree> tree;
+  explicit UnobservedSurface(PointCloud c = {})
+      : cloud(std::move(c)), tree(cloud.empty() ? nullptr : std::make_shared<const geometry::KdTree>(cloud)) {}
+};
+
+// How many points of `unobserved` a cluster reaches through them in hops of the cluster tolerance r.
+std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface& unobserved, double r);
+
+// ---- the parts of one object (object_parts.cpp)
+// Per cluster, the cluster of the same change that holds it up where it floats (-1: none); lowers
+// its clearance to the holder's.
+std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg);
+// Joins the clusters held up (HoldUp) that both pass the rules to their holders; returns which remain.
+std::vector<bool> JoinHeldParts(std::vector<MapObject>& group, const std::vector<int>& holder);
+// Lowers a floating cluster's clearance to the group's change points `idx` chained down from it.
+void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& changes, const std::vector<std::uint32_t>& idx,
+                         const Floor& floor, const MapConfig& cfg);
+// What a group's clusters did not observe: weak ND (disappeared), the step's unobserved surface (appeared).
+PointCloud UnseenPool(const PointCloud& changes, bool appeared, const PointCloud& unobserved, const SessionRecord& step);
+// Per cluster, its parts among `pool` the other session did not observe (indices into `pool`).
+std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& group, const PointCloud& pool,
+                                                    const Floor& floor, const MapConfig& cfg);
+// An object takes its unseen parts (UnseenParts).
+void KeepUnseenParts(MapObject& o, const PointCloud& part, const UnobservedSurface& unobserved, const MapConfig& cfg);
+// Joins the pieces of one object split by a gap wider than the cluster's (accepted, and some rejected).
+void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg);
+// Each object takes its foot: the change points of its side in the ground band under it.
+void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg);
+
+}  // namespace ltm::map::detail
