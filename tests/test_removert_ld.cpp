@@ -631,6 +631,62 @@ TEST(RemovertLd, AWalkersTrailIsAResidueWhereEachKeyframeSawAMoverSizedPiece) {
   EXPECT_EQ(CountIn(ld.nd_residue, parked), 0u);
 }
 
+// Vertical patch of points 0.1 m apart: x fixed, y in [y0, y1], z in [0, h].
+PointCloud Patch(double x, double y0, double y1, double h) {
+  PointCloud c;
+  for (double y = y0; y <= y1 + 1e-9; y += 0.1)
+    for (double z = 0.0; z <= h + 1e-9; z += 0.1) c.push_back(float(x), float(y), float(z), 0.5f);
+  return c;
+}
+
+// Three keyframes 1 m apart along x. A car's rear 20 m ahead of each, at the same place relative
+// to the sensor (it drove ahead at the sensor's speed), drove with the sensor: the keyframes before
+// the last returned on its last place's points where they lie relative to the sensor, not where
+// they lie in the world. A wall along the road looks the same from each keyframe too, but stays in
+// the world; a parked car's rear stays in the world only. Neither drove with the sensor. Nor did a
+// container neither earlier keyframe saw, where each returned once by chance at a corner's place
+// relative to the sensor (the 4 points within reach of it against none, at each keyframe: 8
+// against 0 together is under 3 standard deviations, sqrt(8) each).
+TEST(RemovertLd, AThingThatKeptItsPlaceRelativeToTheSensorDroveWithIt) {
+  const RemovertConfig cfg = test::ConfigFor();
+  const PointCloud lead = Patch(20.0, 1.0, 2.8, 1.5);
+  PointCloud side;  // the wall: y = -5, x from -10 to 40
+  for (double x = -10.0; x <= 40.0; x += 0.1)
+    for (double z = 0.0; z <= 2.0; z += 0.1) side.push_back(float(x), -5.f, float(z), 0.5f);
+  const PointCloud parked = Patch(14.0, 4.0, 6.0, 1.5);
+  const PointCloud unseen = Patch(30.0, 8.0, 10.0, 2.5);  // in no scan
+  std::vector<WorldKeyframe> kf(3);
+  std::vector<std::shared_ptr<const geometry::KdTree>> trees;
+  for (int k = 0; k < 3; ++k) {
+    kf[std::size_t(k)].index = k;
+    kf[std::size_t(k)].T_world_sensor = Pose::Identity();
+    kf[std::size_t(k)].T_world_sensor.translation() = Eigen::Vector3d(k, 0, 0);
+    PointCloud scan = geometry::Transform(lead, kf[std::size_t(k)].T_world_sensor);  // world frame
+    scan.append(side);
+    scan.append(parked);
+    const Eigen::Vector3f stray = unseen.points.front().xyz() - Eigen::Vector3f(float(2 - k), 0.f, 0.f);  // its place relative to the sensor
+    scan.push_back(stray.x(), stray.y(), stray.z(), 0.5f);
+    trees.push_back(std::make_shared<const geometry::KdTree>(scan));
+  }
+  const std::vector<const WorldKeyframe*> before = {&kf[1], &kf[0]};
+  const std::vector<std::shared_ptr<const geometry::KdTree>> before_trees = {trees[1], trees[0]};
+  const auto drove = [&](const PointCloud& c) {
+    std::vector<std::uint32_t> all(c.size());
+    for (std::size_t i = 0; i < c.size(); ++i) all[i] = std::uint32_t(i);
+    return removert::detail::DroveWithTheSensor(c, all, kf[2], before, before_trees, cfg);
+  };
+  EXPECT_TRUE(drove(geometry::Transform(lead, kf[2].T_world_sensor)));
+  PointCloud stretch;  // the wall beside the lead car's last place
+  for (const auto& p : side.points)
+    if (p.x >= 18.f && p.x <= 24.f) stretch.push_back(p.x, p.y, p.z, p.intensity);
+  EXPECT_FALSE(drove(stretch));
+  EXPECT_FALSE(drove(parked));
+  EXPECT_FALSE(drove(unseen)) << "one stray return against none is chance";
+  EXPECT_FALSE(removert::detail::DroveWithTheSensor(geometry::Transform(lead, kf[2].T_world_sensor), {0, 1, 2}, kf[2],
+                                                     {&kf[1]}, {trees[1]}, cfg))  // one view before: no second instant
+      << "a single earlier view decides nothing";
+}
+
 bool SameBytes(const PointCloud& a, const PointCloud& b) {
   return a.size() == b.size() && std::memcmp(a.points.data(), b.points.data(), a.size() * sizeof(PointXYZI)) == 0;
 }

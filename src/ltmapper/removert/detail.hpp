@@ -293,6 +293,14 @@ std::vector<std::string> LdPairCloudFiles();
 // cluster reaches in xy (LdTileMarginM).
 Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m);
 
+// Whether the points `m` of `c`, last returned on by keyframe `last`, drove with the sensor: each of
+// the keyframes `before` it (their scans' trees in world coordinates, `scans`) returned on more of
+// them at their place relative to the sensor than at their place in the world, and all of them by
+// more than chance (ld_detection.cpp).
+bool DroveWithTheSensor(const PointCloud& c, const std::vector<std::uint32_t>& m, const WorldKeyframe& last,
+                        const std::vector<const WorldKeyframe*>& before,
+                        const std::vector<std::shared_ptr<const geometry::KdTree>>& scans, const RemovertConfig& cfg);
+
 // ---- the stage tile by tile from files (stage_tiles.cpp)
 // RunRemovertStage's sessions and pairs with tiles.stage: every session's HD tiles and every pair's
 // LD tiles run from files under out/.tiles (removed at the end) and merged into the stage's
