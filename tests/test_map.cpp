@@ -1,6 +1,8 @@
 // LT-map: blob codec, composition / rollback, live vs meta, new keyframes, transactions, fsck.
 #include "ltmapper/map/map.hpp"
 #include "ltmapper/map/detail.hpp"
+#include "ltmapper/map/object_rules.hpp"
+#include "ltmapper/map/object_shape.hpp"
 #include "ltmapper/geometry/geometry.hpp"
 #include "ltmapper/io/io.hpp"
 
@@ -941,6 +943,55 @@ TEST(MapObjects, AContainerThatCameKeepsTheUpperRowsItsReferenceNeverObserved) {
 // free (weak PD) and whose face goes on for 10 m either way where the reference never looked (the
 // step's strong PD): followed along its face (FollowFaces), most of it was never observed, so it is
 // coverage, not an object. The same piece with no face beyond it is an object.
+// A piece of an appeared face along y = 0 from x0 to x1, 1.5 m tall, described as the rules see it.
+MapObject FacePiece(double x0, double x1, double y = 0.0) {
+  MapObject o;
+  o.change = "appeared";
+  for (double x = x0; x <= x1 + 1e-9; x += 0.1)
+    for (double z = 0.0; z <= 1.5 + 1e-9; z += 0.1) o.cloud.push_back(float(x), float(y), float(z), 0.5f);
+  o.cloud.cls.assign(o.cloud.size(), PointClass::kPDWeak);
+  detail::Describe(o);
+  detail::OrientedBox(o);
+  return o;
+}
+
+// Two pieces of one fence 4 m apart along its line (x 0-4 and 8-10). A keyframe 15 m off the line
+// looking at the gap with a clear line of sight saw that the fence was not there; a wall 8 m in
+// front of the fence hides the gap, and a keyframe looking along the road (the gap 90 deg off its
+// +-35 deg cone) never looked: then the pieces are one fence (JoinHiddenGaps). A piece off the
+// line, or one beside the other, has no gap.
+TEST(MapObjects, PiecesOfAFaceJoinAcrossAGapNoKeyframeSaw) {
+  MapConfig cfg;
+  cfg.object_sensor_azimuth_center_deg = 0.0;
+  cfg.object_sensor_azimuth_half_fov_deg = 35.0;
+  const MapObject whole = FacePiece(0.0, 4.0), part = FacePiece(8.0, 10.0);
+  const std::vector<Eigen::Vector3d> gap = detail::GapBetween(whole, part, cfg);
+  ASSERT_FALSE(gap.empty());
+  for (const auto& g : gap) {
+    EXPECT_GT(g.x(), 4.0);
+    EXPECT_LT(g.x(), 8.0);
+    EXPECT_NEAR(g.y(), 0.0, 0.05);
+  }
+  EXPECT_TRUE(detail::GapBetween(whole, FacePiece(8.0, 10.0, 2.0), cfg).empty()) << "off the line";
+  EXPECT_TRUE(detail::GapBetween(whole, FacePiece(3.0, 6.0), cfg).empty()) << "no gap between them";
+
+  const auto looking = [](double yaw_deg) {
+    Pose T = Pose::Identity();
+    T.linear() = Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.translation() = Eigen::Vector3d(6.0, -15.0, 1.8);
+    return T;
+  };
+  EXPECT_TRUE(detail::GapInClearView(gap, {looking(90.0)}, nullptr, cfg)) << "a clear view of the gap";
+  PointCloud wall;  // y = -8, x 0-12, 2.5 m tall
+  for (double x = 0.0; x <= 12.0; x += 0.1)
+    for (double z = 0.0; z <= 2.5; z += 0.1) wall.push_back(float(x), -8.f, float(z), 0.5f);
+  const geometry::KdTree blockers(wall);
+  EXPECT_FALSE(detail::GapInClearView(gap, {looking(90.0)}, &blockers, cfg)) << "the wall hides the gap";
+  EXPECT_FALSE(detail::GapInClearView(gap, {looking(0.0)}, nullptr, cfg)) << "the gap lay outside the cone";
+  cfg.object_sensor_azimuth_half_fov_deg = 180.0;
+  EXPECT_TRUE(detail::GapInClearView(gap, {looking(0.0)}, nullptr, cfg)) << "all around: it looked";
+}
+
 TEST(MapObjects, AFaceThatGoesOnWhereTheReferenceNeverLookedIsCoverage) {
   for (const bool goes_on : {false, true}) {
     test::TempDir tmp;

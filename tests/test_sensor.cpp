@@ -75,6 +75,8 @@ TEST(SensorEstimate, RingTablesWithin005Deg) {
       EXPECT_NEAR(est.elevations_deg[std::size_t(b)], truth.elevations_deg[std::size_t(b)], 0.05) << name << " beam " << b;
     EXPECT_NEAR(est.azimuth_step_deg, truth.azimuth_step_deg, 0.05 * truth.azimuth_step_deg) << name;
     EXPECT_LT(est.spread_deg, 0.01) << name;
+    EXPECT_EQ(est.azimuth_half_fov_deg, 180.0) << name << ": a ring sensor looks all around";
+    EXPECT_TRUE(est.InAzimuthView(179.9) && est.InAzimuthView(-90.0)) << name;
   }
 }
 
@@ -95,6 +97,20 @@ TEST(SensorEstimate, NonRepetitivePatternHasNoRings) {
   // 70 x 70 deg holding 1e5 points: one point per (0.22 deg)^2.
   EXPECT_NEAR(est.grid_deg, 70.0 / std::sqrt(double(n)), 0.02);
   EXPECT_NEAR(est.SpacingAt(0.0), est.grid_deg, 1e-12);
+  // Its horizontal field of view: the cone, +-35 deg about +x (to the 1 deg cells it is told in).
+  EXPECT_NEAR(est.azimuth_center_deg, 0.0, 1.0);
+  EXPECT_NEAR(est.azimuth_half_fov_deg, 35.0, 1.0);
+  EXPECT_TRUE(est.InAzimuthView(30.0));
+  EXPECT_FALSE(est.InAzimuthView(40.0));
+  EXPECT_FALSE(est.InAzimuthView(180.0));
+  // The same cone looking back (about 180 deg, across the wrap of the azimuth).
+  PointCloud back;
+  for (const auto& p : c.points) back.push_back(-p.x, -p.y, p.z);
+  const SensorModel rear = EstimateSensor({back});
+  EXPECT_NEAR(std::abs(rear.azimuth_center_deg), 180.0, 1.0);
+  EXPECT_NEAR(rear.azimuth_half_fov_deg, 35.0, 1.0);
+  EXPECT_TRUE(rear.InAzimuthView(-170.0) && rear.InAzimuthView(170.0));
+  EXPECT_FALSE(rear.InAzimuthView(0.0));
 }
 
 TEST(SensorEstimate, TooFewPointsIsAnError) {

@@ -163,6 +163,34 @@ double AzimuthStep(const PointCloud& scan, const std::vector<double>& elevations
   return UpperMedian(steps);
 }
 
+// The horizontal field of view: the arc of azimuths with returns, the complement of the widest run
+// of 1 deg cells (GridFromDensity's) none of the scans' points fell in; all around when every cell
+// holds some. A forward cone (a rosette scanner) is its cone; a ring sensor whose rear the vehicle
+// hides keeps the rest.
+void EstimateAzimuthView(const std::vector<PointCloud>& scans, double min_range_m, SensorModel* m) {
+  constexpr int kCells = 360;
+  std::vector<char> cell(kCells, 0);
+  for (const PointCloud& scan : scans)
+    for (const PointXYZI& p : scan.points) {
+      const double rxy = std::hypot(double(p.x), double(p.y));
+      if (!std::isfinite(rxy) || !std::isfinite(p.z) || std::hypot(rxy, double(p.z)) < min_range_m) continue;
+      const double az = std::atan2(double(p.y), double(p.x)) * kRadToDeg + 180.0;  // [0, 360]
+      cell[std::size_t(std::clamp(int(az), 0, kCells - 1))] = 1;
+    }
+  int best_len = 0, best_end = 0;  // the widest empty run (circular), ending before cell best_end
+  for (int start = 0, len = 0; start < 2 * kCells; ++start) {
+    len = cell[std::size_t(start % kCells)] ? 0 : len + 1;
+    if (len > best_len && len <= kCells) best_len = len, best_end = start + 1;
+  }
+  if (best_len == 0) return;  // all around (the default)
+  if (best_len >= kCells) return;  // no returns: nothing to tell
+  const double arc = double(kCells - best_len);  // [deg] cells with returns, from best_end on
+  m->azimuth_half_fov_deg = 0.5 * arc;
+  double center = double(best_end) + 0.5 * arc - 180.0;
+  while (center > 180.0) center -= 360.0;
+  m->azimuth_center_deg = center;
+}
+
 // Non-repetitive scanners: the angular grid that spreads a scan's points evenly over the solid
 // angle they cover (1 x 1 deg cells with points).
 double GridFromDensity(const std::vector<PointCloud>& scans, double min_range_m) {
@@ -268,15 +296,18 @@ double SensorModel::MedianSpacing() const {
 
 std::string SensorModel::Describe() const {
   std::string s = source + ": ";
+  const std::string view = azimuth_half_fov_deg < 180.0 ? ", azimuth " + Fmt("%+.0f", azimuth_center_deg) + " +- " +
+                                                             Fmt("%.0f", azimuth_half_fov_deg) + " deg"
+                                                       : std::string();
   if (!ring_based) {
     return s + "non-repetitive (no rings), " + Fmt("%+.2f", fov_up_deg) + " .. " + Fmt("%+.2f", fov_down_deg) +
-           " deg, point grid " + Fmt("%.3f", grid_deg) + " deg";
+           " deg, point grid " + Fmt("%.3f", grid_deg) + " deg" + view;
   }
   s += std::to_string(beams()) + " beams " + Fmt("%+.3f", fov_up_deg) + " .. " + Fmt("%+.3f", fov_down_deg) +
        " deg, beam spacing median " + Fmt("%.3f", MedianSpacing()) + " / max " + Fmt("%.3f", MaxSpacing()) + " deg";
   if (azimuth_step_deg > 0) s += ", azimuth step " + Fmt("%.3f", azimuth_step_deg) + " deg";
   if (source == "estimated") s += ", spread " + Fmt("%.3f", spread_deg) + " deg";
-  return s;
+  return s + view;
 }
 
 std::vector<std::string> SensorPresetNames() {
@@ -314,7 +345,9 @@ SensorModel SensorFromTable(const std::vector<double>& elevations_deg, double az
   return m;
 }
 
-SensorModel EstimateSensor(const std::vector<PointCloud>& scans, const SensorEstimateOptions& opt) {
+namespace {
+// EstimateSensor's vertical sampling: the beams of a ring sensor, or a non-repetitive grid.
+SensorModel EstimateBeams(const std::vector<PointCloud>& scans, const SensorEstimateOptions& opt) {
   const ElevationHistogram h = Histogram(scans, opt);
   constexpr std::size_t kMinPoints = 1000;  // fewer points cannot show the beams
   if (h.points < kMinPoints)
@@ -356,6 +389,20 @@ SensorModel EstimateSensor(const std::vector<PointCloud>& scans, const SensorEst
   m.fov_down_deg = h.Lo(lo);
   m.fov_up_deg = h.Lo(hi) + h.bin_deg;
   return m;
+}
+
+}  // namespace
+
+SensorModel EstimateSensor(const std::vector<PointCloud>& scans, const SensorEstimateOptions& opt) {
+  SensorModel m = EstimateBeams(scans, opt);
+  EstimateAzimuthView(scans, opt.min_range_m, &m);
+  return m;
+}
+
+bool SensorModel::InAzimuthView(double azimuth_deg) const {
+  if (azimuth_half_fov_deg >= 180.0) return true;
+  const double off = std::remainder(azimuth_deg - azimuth_center_deg, 360.0);
+  return std::fabs(off) <= azimuth_half_fov_deg;
 }
 
 SensorModel ResolveSensor(const std::string& sensor, const std::vector<double>& elevations_deg,

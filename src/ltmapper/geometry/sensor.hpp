@@ -29,6 +29,12 @@ struct SensorModel {
   double fov_down_deg = 0.0;           // [deg] lowest elevation sampled
   double spread_deg = 0.0;             // [deg] estimated: scatter of point elevations about their beam (RMS
                                        // from the histogram; robust sigma from the point order)
+  double azimuth_center_deg = 0.0;     // [deg] middle of the horizontal field of view (sensor frame, from +x)
+  double azimuth_half_fov_deg = 180.0; // [deg] half its width: 180 all around; estimated: the azimuths with
+                                       // returns (a forward cone: its half angle)
+
+  // Whether a direction at azimuth `azimuth_deg` (sensor frame) lies in the horizontal field of view.
+  bool InAzimuthView(double azimuth_deg) const;
 
   int beams() const { return int(elevations_deg.size()); }
   // Elevation gap between the two beams around `elevation_deg` (the grid for non-repetitive

@@ -36,6 +36,9 @@ struct MapConfig {
   double object_sensor_azimuth_step_deg = 0.0;  // [deg] the sensor's horizontal sampling step (far clusters join
                                          // columns up to 2 r x it apart); 0 = from the run's sensor model, or
                                          // unknown: columns join within object_tolerance_m only
+  double object_sensor_azimuth_center_deg = 0.0;    // [deg] the sensor's horizontal field of view: its middle
+  double object_sensor_azimuth_half_fov_deg = 0.0;  // [deg] and half its width (180: all around); 0 = from the
+                                         // run's sensor model (estimated from the scans: a forward cone's half angle)
   double object_min_samples = 2.0;       // rows of sensor samples across the cluster's width (objects.cpp MinWidth)
   double object_flat_sigma_m = 0.05;     // thickness (std along the smallest axis) of a flat patch
   double object_flat_tilt_deg = 20.0;    // flat patches with a normal this close to vertical are ground
@@ -67,6 +70,8 @@ struct MapConfig {
     v("object_max_clearance_m", object_max_clearance_m, "m", 0.0, 100.0);
     v("object_sensor_step_deg", object_sensor_step_deg, "deg", 0.0, 45.0);
     v("object_sensor_azimuth_step_deg", object_sensor_azimuth_step_deg, "deg", 0.0, 45.0);
+    v("object_sensor_azimuth_center_deg", object_sensor_azimuth_center_deg, "deg", -180.0, 180.0);
+    v("object_sensor_azimuth_half_fov_deg", object_sensor_azimuth_half_fov_deg, "deg", 0.0, 180.0);
     v("object_min_samples", object_min_samples, "", 0.0, 1000.0);
     v("object_flat_sigma_m", object_flat_sigma_m, "m", 0.0, 10.0);
     v("object_flat_tilt_deg", object_flat_tilt_deg, "deg", 0.0, 90.0);

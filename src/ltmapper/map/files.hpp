@@ -50,7 +50,8 @@ std::size_t WriteLabelledCloudParts(const std::string& path, double voxel_m,
 // With `rejected`, also rejected.csv (same columns plus `reason`, no clouds).
 // The config with object_sensor_step_deg taken from the sensor when it is 0: the beam spacing at
 // the horizon (where a vehicle sees objects) or the azimuth step, whichever is coarser; and
-// object_sensor_azimuth_step_deg when it is 0: the azimuth step.
+// object_sensor_azimuth_step_deg when it is 0: the azimuth step; object_sensor_azimuth_half_fov_deg
+// (with its centre) when it is 0: the horizontal field of view.
 MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor);
 void WriteObjects(const std::string& dir, const std::vector<MapObject>& objects,
                   const std::vector<MapObject>* rejected = nullptr);

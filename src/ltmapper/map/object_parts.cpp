@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <deque>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <unordered_set>
 
@@ -363,4 +364,171 @@ void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floo
   }
 }
 
+
+// Two pieces of one thin face may lie apart along its line where the sessions that scanned it never
+// saw the gap: a static surface hid it from every keyframe whose field of view held it (the
+// rosette's fence, default seed: sampled at 0-5 m and 11-13.5 m of its 13.5 m; a structure 11-14 m
+// out hid the middle from keyframes 32-42, and the keyframes with a clear line of sight to it had it
+// 44-130 deg off their forward cone). Where some keyframe looking that way had a clear line to
+// the gap, the face was not there (a gate, two fences), and the pieces stay apart.
+std::vector<Eigen::Vector3d> GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m;
+  if (!ThinFace(whole, cfg) || !ThinFace(part, cfg) || part.cloud.empty()) return {};
+  const double z_lo = std::max(whole.lo.z(), part.lo.z()), z_hi = std::min(whole.hi.z(), part.hi.z());
+  if (z_hi < z_lo) return {};  // no height in common: not one face
+  const BoxFrame frame(whole);
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (const auto& p : part.cloud.points) {
+    const Eigen::Vector2d l = frame.Local(p.xyz().cast<double>());
+    if (std::abs(l.y()) > tol) return {};  // off whole's line
+    lo = std::min(lo, l.x()), hi = std::max(hi, l.x());
+  }
+  const double end = 0.5 * whole.size.x();
+  double a = 0.0, b = 0.0;  // the gap along whole's axis
+  if (lo > end) a = end, b = lo;
+  else if (hi < -end) a = hi, b = -end;
+  else return {};  // overlapping along the line: MergeParts' pieces
+  const int along = std::max(1, int(std::floor((b - a) / tol)) - 1), up = std::max(1, int(std::floor((z_hi - z_lo) / tol)));
+  const Eigen::Vector2d axis(std::cos(whole.yaw_rad), std::sin(whole.yaw_rad));
+  std::vector<Eigen::Vector3d> gap;
+  for (int i = 1; i <= along; ++i) {
+    const Eigen::Vector2d xy = whole.box_center.head<2>() + axis * (a + (b - a) * i / (along + 1));
+    for (int k = 0; k < up; ++k)
+      gap.emplace_back(xy.x(), xy.y(), z_lo + (z_hi - z_lo) * (k + 0.5) / up);
+  }
+  return gap;
+}
+
+namespace {
+// Whether direction d (world) lies in the horizontal field of view of a sensor at pose T.
+bool InView(const Pose& T, const Eigen::Vector3d& d, const MapConfig& cfg) {
+  const double half = cfg.object_sensor_azimuth_half_fov_deg;
+  if (half <= 0.0 || half >= 180.0) return true;  // all around, or not known: every direction
+  const Eigen::Vector3d l = T.linear().transpose() * d;
+  const double off = std::remainder(std::atan2(l.y(), l.x()) * 180.0 / M_PI - cfg.object_sensor_azimuth_center_deg, 360.0);
+  return std::abs(off) <= half;
+}
+
+// The in-view lines of sight of GapInClearView, each walked every half tolerance from the sensor
+// to a tolerance short of the gap point (the face's own ends are no blockers of it).
+template <class Step>
+void WalkLines(const std::vector<Eigen::Vector3d>& gap, const std::vector<Pose>& views, const MapConfig& cfg,
+               const Step& step) {
+  const double r = 0.5 * cfg.object_tolerance_m;
+  for (const Pose& T : views)
+    for (const Eigen::Vector3d& g : gap) {
+      const Eigen::Vector3d s = T.translation(), d = g - s;
+      const double len = d.norm();
+      if (len <= 0.0 || !InView(T, d, cfg)) continue;
+      const Eigen::Vector3d u = d / len;
+      if (!step(s, u, std::max(r, len - cfg.object_tolerance_m))) return;
+    }
+}
+}  // namespace
+
+bool GapInClearView(const std::vector<Eigen::Vector3d>& gap, const std::vector<Pose>& views,
+                    const geometry::KdTree* blockers, const MapConfig& cfg) {
+  const float r = float(0.5 * cfg.object_tolerance_m);
+  bool clear = false;
+  WalkLines(gap, views, cfg, [&](const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until) {
+    bool blocked = false;
+    for (double t = r; t < until && !blocked && blockers; t += r)
+      blocked = blockers->CountWithin((s + u * t).cast<float>(), r, 1) > 0;
+    clear = !blocked;
+    return !clear;  // go on while every line so far was blocked
+  });
+  return clear;
+}
+
+namespace {
+// The xy cells (half a tolerance wide) the in-view lines of sight pass over: the only places a
+// blocker of GapInClearView can lie (with their neighbours).
+std::unordered_set<std::uint64_t> CellsOnLines(const std::vector<std::vector<Eigen::Vector3d>>& gaps,
+                                               const std::vector<Pose>& views, const MapConfig& cfg) {
+  const double r = 0.5 * cfg.object_tolerance_m;
+  std::unordered_set<std::uint64_t> cells;
+  for (const auto& gap : gaps)
+    WalkLines(gap, views, cfg, [&](const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until) {
+      for (double t = 0.0; t < until + r; t += r) {
+        const Eigen::Vector3d q = s + u * t;
+        const std::int64_t x = std::int64_t(std::floor(q.x() / r)), y = std::int64_t(std::floor(q.y() / r));
+        for (std::int64_t dx = -1; dx <= 1; ++dx)
+          for (std::int64_t dy = -1; dy <= 1; ++dy)
+            cells.insert((std::uint64_t(x + dx) << 32) ^ (std::uint64_t(y + dy) & 0xffffffffu));
+      }
+      return true;
+    });
+  return cells;
+}
+
+// Where the sessions that scanned a change of the step looked from: the step's session for what
+// appeared, the sessions up to its reference for what disappeared (empty: a store without them).
+std::vector<Pose> ViewsOf(const Store& store, const SessionRecord& step, bool appeared) {
+  std::vector<Pose> views;
+  for (int s = appeared ? step.order : 0; s <= (appeared ? step.order : step.reference); ++s) {
+    const std::vector<Pose> t = store.Trajectory(s);
+    views.insert(views.end(), t.begin(), t.end());
+  }
+  return views;
+}
+
+// The map's surfaces above the ground (the map after the step for what appeared, at the reference
+// for what disappeared) over `cells`, streamed in their bounding box.
+PointCloud BlockersOver(const std::unordered_set<std::uint64_t>& cells, const Eigen::Vector3d& lo,
+                        const Eigen::Vector3d& hi, const Store& store, int session, const Floor& floor,
+                        const MapConfig& cfg) {
+  const double r = 0.5 * cfg.object_tolerance_m;
+  Region box;
+  box.use_box = true, box.lo = lo.array() - r, box.hi = hi.array() + r;
+  PointCloud out;
+  store.StreamMapAt(session, box, [&](PointCloud&& part) {
+    for (const auto& p : part.points) {
+      const std::int64_t x = std::int64_t(std::floor(double(p.x) / r)), y = std::int64_t(std::floor(double(p.y) / r));
+      if (cells.count((std::uint64_t(x) << 32) ^ (std::uint64_t(y) & 0xffffffffu)) && AboveGround(p.xyz(), floor, cfg))
+        out.push_back(p.x, p.y, p.z);
+    }
+  });
+  return out;
+}
+
+struct GapPair {
+  std::size_t whole, part;
+  std::vector<Eigen::Vector3d> gap;
+};
+}  // namespace
+
+void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const SessionRecord& step, const Floor& floor,
+                    const MapConfig& cfg) {
+  if (cfg.object_merge_inside_fraction <= 0.0) return;
+  for (const bool appeared : {false, true}) {
+    std::vector<GapPair> pairs;
+    for (std::size_t i = 0; i < kept.size(); ++i)
+      for (std::size_t j = 0; j < kept.size(); ++j)
+        if (i != j && (kept[i].change == "appeared") == appeared && kept[j].change == kept[i].change &&
+            kept[i].points >= kept[j].points && (kept[i].points > kept[j].points || i < j))
+          if (auto gap = GapBetween(kept[i], kept[j], cfg); !gap.empty()) pairs.push_back({i, j, std::move(gap)});
+    const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);
+    if (views.empty()) continue;
+    std::vector<std::vector<Eigen::Vector3d>> gaps;
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const auto& p : pairs) {
+      gaps.push_back(p.gap);
+      for (const auto& g : p.gap) lo = lo.cwiseMin(g), hi = hi.cwiseMax(g);
+    }
+    for (const Pose& T : views) lo = lo.cwiseMin(T.translation()), hi = hi.cwiseMax(T.translation());
+    const PointCloud blockers = BlockersOver(CellsOnLines(gaps, views, cfg), lo, hi, store,
+                                             appeared ? step.order : step.reference, floor, cfg);
+    const std::unique_ptr<geometry::KdTree> tree = blockers.empty() ? nullptr : std::make_unique<geometry::KdTree>(blockers);
+    std::vector<bool> joined(kept.size(), false);
+    for (const auto& p : pairs) {
+      if (joined[p.whole] || joined[p.part] || GapInClearView(p.gap, views, tree.get(), cfg)) continue;
+      Absorb(kept[p.whole], kept[p.part].cloud);
+      joined[p.part] = true;
+    }
+    std::deque<MapObject> out;
+    for (std::size_t k = 0; k < kept.size(); ++k)
+      if (!joined[k]) out.push_back(std::move(kept[k]));
+    kept.swap(out);
+  }
+}
 }  // namespace ltm::map::detail

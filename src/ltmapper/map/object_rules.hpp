@@ -70,6 +70,9 @@ inline bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
   return !((d.array() < o.lo.array() - r).any() || (d.array() > o.hi.array() + r).any());
 }
 
+// A thin face (a fence, a hoarding, a wall): its oriented box no wider than the cluster tolerance.
+inline bool ThinFace(const MapObject& o, const MapConfig& cfg) { return o.size.y() <= cfg.object_tolerance_m; }
+
 // The step's surfaces its reference never observed near a group's change points, with their tree
 // (built once per group: UnobservedBeside walks it for every cluster).
 struct UnobservedSurface {
@@ -100,6 +103,19 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
 void KeepUnseenParts(MapObject& o, const PointCloud& part, const UnobservedSurface& unobserved, const MapConfig& cfg);
 // Joins the pieces of one object split by a gap wider than the cluster's (accepted, and some rejected).
 void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg);
+// Points of the gap between two pieces of one thin face (GapBetween: `part` on `whole`'s line, apart
+// along it): every cluster tolerance along the gap and up the height both share; empty when they
+// are no such pieces.
+std::vector<Eigen::Vector3d> GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg);
+// Whether some sensor pose of `views` (world from sensor) had a point of `gap` in its horizontal
+// field of view (object_sensor_azimuth_*) and a clear line of sight to it: no point of `blockers`
+// (above the ground; null: none) within half the cluster tolerance of the line before it.
+bool GapInClearView(const std::vector<Eigen::Vector3d>& gap, const std::vector<Pose>& views,
+                    const geometry::KdTree* blockers, const MapConfig& cfg);
+// Two pieces of one thin face of the same change join across a gap that no keyframe of the
+// sessions that scanned them saw (GapInClearView over the map's surfaces there).
+void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const SessionRecord& step, const Floor& floor,
+                    const MapConfig& cfg);
 // Each object takes its foot: the change points of its side in the ground band under it.
 void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg);
 

@@ -18,7 +18,8 @@
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
 //     object's box, one missed line of the sensor's samples from it, or its box's far side
-//     (MergeParts; an appeared part rejected for coverage too). A cluster
+//     (MergeParts; an appeared part rejected for coverage too), and two pieces of one thin face
+//     across a gap no keyframe looking that way had a clear line of sight to (JoinHiddenGaps). A cluster
 //     also stands on change points of its group under it (StandOnChangesBelow), and on its lower
 //     part the other session did not observe; an object keeps that part and the rows the other
 //     session did not observe inside its box and over it (UnseenParts: weak ND of a disappeared
@@ -85,6 +86,7 @@ using detail::Grouped;
 using detail::HoldUp;
 using detail::InGrownBox;
 using detail::InOrientedBox;
+using detail::JoinHiddenGaps;
 using detail::IsPd;
 using detail::JoinHeldParts;
 using detail::KeepFeet;
@@ -101,6 +103,7 @@ using detail::SensorGapsAt;
 using detail::Spread;
 using detail::Spread3;
 using detail::StandOnChangesBelow;
+using detail::ThinFace;
 using detail::UnobservedBeside;
 using detail::UnobservedSurface;
 using detail::Unseen;
@@ -582,11 +585,8 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
 // from them. The reference saw free 72 points of a hoarding that goes on for 18 m in territory it
 // never observed (vlp16_drift3x): those cells gave it a see-through share of 0.60, an object with
 // IoU 0.03; followed along its face, 0.33 (its 70 points seen, before its foot and unseen rows
-// joined): coverage. No other row's objects changed (docs/RESULTS.md).
-bool ThinFace(const MapObject& o, const MapConfig& cfg) { return o.size.y() <= cfg.object_tolerance_m; }
-
-// How far a thin face's corridor reaches along its axis from its centre: its half length and its
-// length beyond that.
+// joined): coverage. No other row's objects changed (docs/RESULTS.md). How far a thin face's
+// corridor reaches along its axis from its centre: its half length and its length beyond that.
 double FaceReach(const MapObject& o) { return 1.5 * o.size.x(); }
 
 // Is q within a thin face's corridor (`frame`: the face's box frame): along its axis no farther than
@@ -744,6 +744,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     }
   }
   MergeParts(step_kept, step_rejected, cfg);
+  JoinHiddenGaps(step_kept, store, step, floor, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
   for (auto& o : step_kept) {
     Rate(o, cfg);
@@ -769,6 +770,10 @@ MapConfig WithSensorStep(MapConfig cfg, const geometry::SensorModel& sensor) {
   if (cfg.object_sensor_step_deg <= 0.0)
     cfg.object_sensor_step_deg = sensor.CoarserStepDeg();
   if (cfg.object_sensor_azimuth_step_deg <= 0.0) cfg.object_sensor_azimuth_step_deg = sensor.azimuth_step_deg;
+  if (cfg.object_sensor_azimuth_half_fov_deg <= 0.0) {
+    cfg.object_sensor_azimuth_center_deg = sensor.azimuth_center_deg;
+    cfg.object_sensor_azimuth_half_fov_deg = sensor.azimuth_half_fov_deg;
+  }
   return cfg;
 }
 
