@@ -441,21 +441,15 @@ bool GapInClearView(const std::vector<Eigen::Vector3d>& gap, const std::vector<P
 }
 
 namespace {
-// The xy cells (half a tolerance wide) the in-view lines of sight pass over: the only places a
-// blocker of GapInClearView can lie (with their neighbours).
-std::unordered_set<std::uint64_t> CellsOnLines(const std::vector<std::vector<Eigen::Vector3d>>& gaps,
-                                               const std::vector<Pose>& views, const MapConfig& cfg) {
+// The xy cells (half a tolerance wide) the in-view lines of sight pass over: with their
+// neighbours, the only places a blocker of GapInClearView can lie (NearCells).
+NearCells CellsOnLines(const std::vector<std::vector<Eigen::Vector3d>>& gaps, const std::vector<Pose>& views,
+                       const MapConfig& cfg) {
   const double r = 0.5 * cfg.object_tolerance_m;
-  std::unordered_set<std::uint64_t> cells;
+  NearCells cells(r);
   for (const auto& gap : gaps)
     WalkLines(gap, views, cfg, [&](const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until) {
-      for (double t = 0.0; t < until + r; t += r) {
-        const Eigen::Vector3d q = s + u * t;
-        const std::int64_t x = std::int64_t(std::floor(q.x() / r)), y = std::int64_t(std::floor(q.y() / r));
-        for (std::int64_t dx = -1; dx <= 1; ++dx)
-          for (std::int64_t dy = -1; dy <= 1; ++dy)
-            cells.insert((std::uint64_t(x + dx) << 32) ^ (std::uint64_t(y + dy) & 0xffffffffu));
-      }
+      for (double t = 0.0; t < until + r; t += r) cells.Add((s + u * t).cast<float>());
       return true;
     });
   return cells;
@@ -474,19 +468,15 @@ std::vector<Pose> ViewsOf(const Store& store, const SessionRecord& step, bool ap
 
 // The map's surfaces above the ground (the map after the step for what appeared, at the reference
 // for what disappeared) over `cells`, streamed in their bounding box.
-PointCloud BlockersOver(const std::unordered_set<std::uint64_t>& cells, const Eigen::Vector3d& lo,
-                        const Eigen::Vector3d& hi, const Store& store, int session, const Floor& floor,
-                        const MapConfig& cfg) {
+PointCloud BlockersOver(const NearCells& cells, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                        const Store& store, int session, const Floor& floor, const MapConfig& cfg) {
   const double r = 0.5 * cfg.object_tolerance_m;
   Region box;
   box.use_box = true, box.lo = lo.array() - r, box.hi = hi.array() + r;
   PointCloud out;
   store.StreamMapAt(session, box, [&](PointCloud&& part) {
-    for (const auto& p : part.points) {
-      const std::int64_t x = std::int64_t(std::floor(double(p.x) / r)), y = std::int64_t(std::floor(double(p.y) / r));
-      if (cells.count((std::uint64_t(x) << 32) ^ (std::uint64_t(y) & 0xffffffffu)) && AboveGround(p.xyz(), floor, cfg))
-        out.push_back(p.x, p.y, p.z);
-    }
+    for (const auto& p : part.points)
+      if (cells.Near(p.xyz()) && AboveGround(p.xyz(), floor, cfg)) out.push_back(p.x, p.y, p.z);
   });
   return out;
 }
@@ -501,11 +491,14 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const Sessi
                     const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
   for (const bool appeared : {false, true}) {
-    std::vector<GapPair> pairs;
+    std::vector<GapPair> pairs;  // the larger of the two (the first of equals) is the whole
+    const auto whole_and_part = [&](std::size_t i, std::size_t j) {
+      return i != j && (kept[i].change == "appeared") == appeared && kept[j].change == kept[i].change &&
+             (kept[i].points > kept[j].points || (kept[i].points == kept[j].points && i < j));
+    };
     for (std::size_t i = 0; i < kept.size(); ++i)
       for (std::size_t j = 0; j < kept.size(); ++j)
-        if (i != j && (kept[i].change == "appeared") == appeared && kept[j].change == kept[i].change &&
-            kept[i].points >= kept[j].points && (kept[i].points > kept[j].points || i < j))
+        if (whole_and_part(i, j))
           if (auto gap = GapBetween(kept[i], kept[j], cfg); !gap.empty()) pairs.push_back({i, j, std::move(gap)});
     const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);
     if (views.empty()) continue;

@@ -14,11 +14,46 @@
 #include <cstdint>
 #include <deque>
 #include <memory>
+#include <unordered_set>
 #include <vector>
 
 namespace ltm::map::detail {
 
 using Floor = geometry::LowestGrid;
+
+// An xy cell of a grid `cell` wide (KeyOf), hashable.
+struct CellKey {
+  std::int64_t x, y;
+  bool operator==(const CellKey& o) const { return x == o.x && y == o.y; }
+};
+struct CellKeyHash {
+  std::size_t operator()(const CellKey& c) const { return std::size_t(c.x * 73856093) ^ std::size_t(c.y * 19349663); }
+};
+
+inline CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
+  return {std::int64_t(std::floor(double(p.x()) / cell)), std::int64_t(std::floor(double(p.y()) / cell))};
+}
+
+// The xy cells (`r` wide) that hold some points: a point in one of them or in one of their eight
+// neighbours is Near (every point within r of them is). Memory: one entry per occupied cell.
+class NearCells {
+ public:
+  explicit NearCells(double r) : r_(r) {}
+  void Add(const Eigen::Vector3f& p) { cells_.insert(Key(KeyOf(p, r_))); }
+  bool empty() const { return cells_.empty(); }
+  bool Near(const Eigen::Vector3f& p) const {
+    const CellKey k = KeyOf(p, r_);
+    for (std::int64_t dx = -1; dx <= 1; ++dx)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        if (cells_.count(Key({k.x + dx, k.y + dy}))) return true;
+    return false;
+  }
+
+ private:
+  static std::uint64_t Key(const CellKey& c) { return (std::uint64_t(c.x) << 32) ^ (std::uint64_t(c.y) & 0xffffffffu); }
+  double r_;
+  std::unordered_set<std::uint64_t> cells_;
+};
 
 // Reject's reasons that MergeParts asks for too: a cluster shorter than object_min_length_m, and
 // an appeared one most of whose space the reference never observed.

@@ -62,20 +62,13 @@ constexpr double kFullMargin = 2.0;
 // Evidence of a revealed appeared cluster (blocked reference view, no see-through): half.
 constexpr double kRevealedEvidence = 0.5;
 
-struct CellKey {
-  std::int64_t x, y;
-  bool operator==(const CellKey& o) const { return x == o.x && y == o.y; }
-};
-struct CellKeyHash {
-  std::size_t operator()(const CellKey& c) const { return std::size_t(c.x * 73856093) ^ std::size_t(c.y * 19349663); }
-};
-
-CellKey KeyOf(const Eigen::Vector3f& p, double cell) {
-  return {std::int64_t(std::floor(double(p.x()) / cell)), std::int64_t(std::floor(double(p.y()) / cell))};
-}
 
 
 using detail::AboveGround;
+using detail::CellKey;
+using detail::CellKeyHash;
+using detail::KeyOf;
+using detail::NearCells;
 using detail::BoxFrame;
 using detail::Clearance;
 using detail::CouldHaveMoved;
@@ -124,26 +117,6 @@ PointCloud OtherSide(const PointCloud& changes, bool appeared) {
   return changes.select(mask);
 }
 
-// The xy cells (`r` wide) that hold some points: a point in one of them or in one of their eight
-// neighbours is Near (every point within r of them is). Memory: one entry per occupied cell.
-class NearCells {
- public:
-  explicit NearCells(double r) : r_(r) {}
-  void Add(const Eigen::Vector3f& p) { cells_.insert(Key(KeyOf(p, r_))); }
-  bool empty() const { return cells_.empty(); }
-  bool Near(const Eigen::Vector3f& p) const {
-    const CellKey k = KeyOf(p, r_);
-    for (std::int64_t dx = -1; dx <= 1; ++dx)
-      for (std::int64_t dy = -1; dy <= 1; ++dy)
-        if (cells_.count(Key({k.x + dx, k.y + dy}))) return true;
-    return false;
-  }
-
- private:
-  static std::uint64_t Key(const CellKey& c) { return (std::uint64_t(c.x) << 32) ^ (std::uint64_t(c.y) & 0xffffffffu); }
-  double r_;
-  std::unordered_set<std::uint64_t> cells_;
-};
 
 // The points of `other` above ground in the xy cells (`r` wide) around the change points of
 // `idx`: the only ones within `r` of them.
