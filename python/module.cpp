@@ -56,7 +56,8 @@ py::dict SensorToDict(const geometry::SensorModel& s) {
   d["ring_based"] = s.ring_based;
   d["beams"] = s.beams();
   PutFields(d, s, LTM_KV(s, elevations_deg), LTM_KV(s, azimuth_step_deg), LTM_KV(s, grid_deg), LTM_KV(s, fov_up_deg),
-            LTM_KV(s, fov_down_deg), LTM_KV(s, spread_deg));
+            LTM_KV(s, fov_down_deg), LTM_KV(s, spread_deg), LTM_KV(s, azimuth_center_deg),
+            LTM_KV(s, azimuth_half_fov_deg));
   return d;
 }
 
@@ -199,6 +200,9 @@ void BindSensor(py::module_& m) {
       .def_readonly("fov_up_deg", &geometry::SensorModel::fov_up_deg)
       .def_readonly("fov_down_deg", &geometry::SensorModel::fov_down_deg)
       .def_readonly("spread_deg", &geometry::SensorModel::spread_deg)
+      .def_readonly("azimuth_center_deg", &geometry::SensorModel::azimuth_center_deg)
+      .def_readonly("azimuth_half_fov_deg", &geometry::SensorModel::azimuth_half_fov_deg)
+      .def("in_azimuth_view", &geometry::SensorModel::InAzimuthView, py::arg("azimuth_deg"))
       .def_property_readonly("beams", &geometry::SensorModel::beams)
       .def("spacing_at", &geometry::SensorModel::SpacingAt, py::arg("elevation_deg"))
       .def("max_spacing", &geometry::SensorModel::MaxSpacing)

@@ -169,6 +169,9 @@ def test_sensor():
     s = ltmapper.load_session(session_dir(0))
     est = ltmapper.estimate_sensor([s.scan(i) for i in range(3)])
     assert est.source == "estimated" and est.beams == 16, est.describe()
+    # a ring sensor looks all around: every azimuth is in its view
+    assert est.azimuth_half_fov_deg == 180.0 and est.in_azimuth_view(179.0) and est.in_azimuth_view(-90.0)
+    assert est.to_dict()["azimuth_half_fov_deg"] == 180.0
     t = ltmapper.sensor_from_table([10.0, 0.0, -10.0])
     assert t.beams == 3
 
