@@ -14,6 +14,23 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kRadToDeg = 180.0 / kPi;
 
+// The direction [deg] of a finite return at least min_range_m away (the estimates skip nearer ones:
+// the vehicle, and lasers whose vertical offsets bend their elevation at short range).
+struct Direction {
+  double elevation_deg, azimuth_deg;  // azimuth in [-180, 180] from +x
+};
+bool FarDirection(const PointXYZI& p, double min_range_m, Direction* d) {
+  const double rxy = std::hypot(double(p.x), double(p.y));
+  if (!std::isfinite(rxy) || !std::isfinite(p.z) || std::hypot(rxy, double(p.z)) < min_range_m) return false;
+  d->elevation_deg = std::atan2(double(p.z), rxy) * kRadToDeg;
+  d->azimuth_deg = std::atan2(double(p.y), double(p.x)) * kRadToDeg;
+  return true;
+}
+
+// The 1 deg azimuth cell (0 .. 359) of an azimuth in [-180, 180] (GridFromDensity, EstimateAzimuthView).
+constexpr int kAzimuthCells = 360;
+int AzimuthCell(double azimuth_deg) { return std::clamp(int(azimuth_deg + 180.0), 0, kAzimuthCells - 1); }
+
 std::vector<double> Uniform(int beams, double up_deg, double down_deg) {
   std::vector<double> e(static_cast<std::size_t>(beams));
   for (int b = 0; b < beams; ++b) e[std::size_t(b)] = up_deg - b * (up_deg - down_deg) / (beams - 1);
@@ -89,12 +106,11 @@ ElevationHistogram Histogram(const std::vector<PointCloud>& scans, const SensorE
   h.n.assign(std::size_t(bins), 0.0);
   h.sum = h.n;
   h.sum2 = h.n;
+  Direction d{};
   for (const PointCloud& scan : scans)
     for (const PointXYZI& p : scan.points) {
-      const double x = p.x, y = p.y, z = p.z, rxy = std::hypot(x, y);
-      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;
-      if (std::hypot(rxy, z) < opt.min_range_m) continue;
-      const double el = std::atan2(z, rxy) * kRadToDeg;
+      if (!FarDirection(p, opt.min_range_m, &d)) continue;
+      const double el = d.elevation_deg;
       const int b = std::clamp(int((el + 90.0) / opt.bin_deg), 0, bins - 1);
       h.n[std::size_t(b)] += 1.0;
       h.sum[std::size_t(b)] += el;
@@ -144,14 +160,13 @@ std::vector<Cluster> Clusters(const ElevationHistogram& h) {
 // Median horizontal step between consecutive points of one beam, over the beams of one scan.
 double AzimuthStep(const PointCloud& scan, const std::vector<double>& elevations_deg, double min_range_m) {
   std::vector<std::vector<double>> az(elevations_deg.size());
+  Direction d{};
   for (const PointXYZI& p : scan.points) {
-    const double rxy = std::hypot(double(p.x), double(p.y));
-    if (!std::isfinite(rxy) || !std::isfinite(p.z) || std::hypot(rxy, double(p.z)) < min_range_m) continue;
-    const double el = std::atan2(double(p.z), rxy) * kRadToDeg;
+    if (!FarDirection(p, min_range_m, &d)) continue;
     std::size_t best = 0;
     for (std::size_t b = 1; b < elevations_deg.size(); ++b)
-      if (std::fabs(elevations_deg[b] - el) < std::fabs(elevations_deg[best] - el)) best = b;
-    az[best].push_back(std::atan2(double(p.y), double(p.x)) * kRadToDeg);
+      if (std::fabs(elevations_deg[b] - d.elevation_deg) < std::fabs(elevations_deg[best] - d.elevation_deg)) best = b;
+    az[best].push_back(d.azimuth_deg);
   }
   std::vector<double> steps;
   for (auto& a : az) {
@@ -168,15 +183,12 @@ double AzimuthStep(const PointCloud& scan, const std::vector<double>& elevations
 // holds some. A forward cone (a rosette scanner) is its cone; a ring sensor whose rear the vehicle
 // hides keeps the rest.
 void EstimateAzimuthView(const std::vector<PointCloud>& scans, double min_range_m, SensorModel* m) {
-  constexpr int kCells = 360;
+  constexpr int kCells = kAzimuthCells;
   std::vector<char> cell(kCells, 0);
+  Direction d{};
   for (const PointCloud& scan : scans)
-    for (const PointXYZI& p : scan.points) {
-      const double rxy = std::hypot(double(p.x), double(p.y));
-      if (!std::isfinite(rxy) || !std::isfinite(p.z) || std::hypot(rxy, double(p.z)) < min_range_m) continue;
-      const double az = std::atan2(double(p.y), double(p.x)) * kRadToDeg + 180.0;  // [0, 360]
-      cell[std::size_t(std::clamp(int(az), 0, kCells - 1))] = 1;
-    }
+    for (const PointXYZI& p : scan.points)
+      if (FarDirection(p, min_range_m, &d)) cell[std::size_t(AzimuthCell(d.azimuth_deg))] = 1;
   int best_len = 0, best_end = 0;  // the widest empty run (circular), ending before cell best_end
   for (int start = 0, len = 0; start < 2 * kCells; ++start) {
     len = cell[std::size_t(start % kCells)] ? 0 : len + 1;
@@ -194,15 +206,14 @@ void EstimateAzimuthView(const std::vector<PointCloud>& scans, double min_range_
 // Non-repetitive scanners: the angular grid that spreads a scan's points evenly over the solid
 // angle they cover (1 x 1 deg cells with points).
 double GridFromDensity(const std::vector<PointCloud>& scans, double min_range_m) {
-  std::vector<char> cell(180 * 360, 0);
+  std::vector<char> cell(180 * kAzimuthCells, 0);
   std::size_t points = 0;
+  Direction d{};
   for (const PointCloud& scan : scans)
     for (const PointXYZI& p : scan.points) {
-      const double rxy = std::hypot(double(p.x), double(p.y));
-      if (!std::isfinite(rxy) || !std::isfinite(p.z) || std::hypot(rxy, double(p.z)) < min_range_m) continue;
-      const int r = std::clamp(int(std::atan2(double(p.z), rxy) * kRadToDeg + 90.0), 0, 179);
-      const int c = std::clamp(int(std::atan2(double(p.y), double(p.x)) * kRadToDeg + 180.0), 0, 359);
-      cell[std::size_t(r) * 360 + std::size_t(c)] = 1;
+      if (!FarDirection(p, min_range_m, &d)) continue;
+      const int r = std::clamp(int(d.elevation_deg + 90.0), 0, 179);
+      cell[std::size_t(r) * kAzimuthCells + std::size_t(AzimuthCell(d.azimuth_deg))] = 1;
       ++points;
     }
   const double area = double(std::count(cell.begin(), cell.end(), 1));  // [deg^2]
@@ -230,17 +241,17 @@ RingFit RingsFromOrder(const PointCloud& scan, double min_range_m) {
   std::vector<Acc> rings;
   double unwrapped = 0.0, prev = 0.0;
   bool first = true;
+  Direction d{};
   for (const PointXYZI& p : scan.points) {
-    const double rxy = std::hypot(double(p.x), double(p.y)), r = std::hypot(rxy, double(p.z));
-    if (!std::isfinite(r) || r < min_range_m) continue;
-    const double az = std::atan2(double(p.y), double(p.x)) * kRadToDeg;
+    if (!FarDirection(p, min_range_m, &d)) continue;
+    const double az = d.azimuth_deg;
     if (!first) unwrapped += std::remainder(az - prev, 360.0);
     first = false;
     prev = az;
     const auto turn = std::size_t(std::max(0.0, std::floor(std::fabs(unwrapped) / 360.0)));
     if (turn >= rings.size()) rings.resize(turn + 1);
     Acc& a = rings[turn];
-    const double y = std::atan2(double(p.z), rxy) * kRadToDeg;
+    const double y = d.elevation_deg;
     a.n += 1, a.y += y;
     a.ys.push_back(float(y));
   }
@@ -399,10 +410,12 @@ SensorModel EstimateSensor(const std::vector<PointCloud>& scans, const SensorEst
   return m;
 }
 
+bool InAzimuthArc(double azimuth_deg, double center_deg, double half_deg) {
+  return half_deg >= 180.0 || std::fabs(std::remainder(azimuth_deg - center_deg, 360.0)) <= half_deg;
+}
+
 bool SensorModel::InAzimuthView(double azimuth_deg) const {
-  if (azimuth_half_fov_deg >= 180.0) return true;
-  const double off = std::remainder(azimuth_deg - azimuth_center_deg, 360.0);
-  return std::fabs(off) <= azimuth_half_fov_deg;
+  return InAzimuthArc(azimuth_deg, azimuth_center_deg, azimuth_half_fov_deg);
 }
 
 SensorModel ResolveSensor(const std::string& sensor, const std::vector<double>& elevations_deg,

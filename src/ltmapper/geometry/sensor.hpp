@@ -52,6 +52,10 @@ struct SensorModel {
   std::string Describe() const;
 };
 
+// Whether azimuth `azimuth_deg` lies within `half_deg` of `center_deg` (across the wrap at +-180;
+// a half of 180 or more: every azimuth).
+bool InAzimuthArc(double azimuth_deg, double center_deg, double half_deg);
+
 // Names of the presets ("vlp16", "hdl32e", "vlp32c", "hdl64e", "os1-64", "os1-128", "pandar64",
 // "sim64": the simulator's default uniform 64 beams, +15 / -25 deg).
 std::vector<std::string> SensorPresetNames();

@@ -389,10 +389,9 @@ std::vector<Eigen::Vector3d> GapBetween(const MapObject& whole, const MapObject&
   else if (hi < -end) a = hi, b = -end;
   else return {};  // overlapping along the line: MergeParts' pieces
   const int along = std::max(1, int(std::floor((b - a) / tol)) - 1), up = std::max(1, int(std::floor((z_hi - z_lo) / tol)));
-  const Eigen::Vector2d axis(std::cos(whole.yaw_rad), std::sin(whole.yaw_rad));
   std::vector<Eigen::Vector3d> gap;
   for (int i = 1; i <= along; ++i) {
-    const Eigen::Vector2d xy = whole.box_center.head<2>() + axis * (a + (b - a) * i / (along + 1));
+    const Eigen::Vector2d xy = frame.World(a + (b - a) * i / (along + 1), 0.0);
     for (int k = 0; k < up; ++k)
       gap.emplace_back(xy.x(), xy.y(), z_lo + (z_hi - z_lo) * (k + 0.5) / up);
   }
@@ -403,10 +402,9 @@ namespace {
 // Whether direction d (world) lies in the horizontal field of view of a sensor at pose T.
 bool InView(const Pose& T, const Eigen::Vector3d& d, const MapConfig& cfg) {
   const double half = cfg.object_sensor_azimuth_half_fov_deg;
-  if (half <= 0.0 || half >= 180.0) return true;  // all around, or not known: every direction
+  if (half <= 0.0) return true;  // not known: every direction
   const Eigen::Vector3d l = T.linear().transpose() * d;
-  const double off = std::remainder(std::atan2(l.y(), l.x()) * 180.0 / M_PI - cfg.object_sensor_azimuth_center_deg, 360.0);
-  return std::abs(off) <= half;
+  return geometry::InAzimuthArc(std::atan2(l.y(), l.x()) / kDegToRad, cfg.object_sensor_azimuth_center_deg, half);
 }
 
 // The in-view lines of sight of GapInClearView, each walked every half tolerance from the sensor

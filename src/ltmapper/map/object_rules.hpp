@@ -20,6 +20,7 @@
 namespace ltm::map::detail {
 
 using Floor = geometry::LowestGrid;
+constexpr double kDegToRad = M_PI / 180.0;
 
 // An xy cell of a grid `cell` wide (KeyOf), hashable.
 struct CellKey {
@@ -83,7 +84,7 @@ inline double SampleSpacing(const MapConfig& cfg) { return std::max(cfg.output_v
 
 // The spacing of the sensor's rows on a surface at `range_m` facing it: r * object_sensor_step_deg.
 inline double RowSpacing(double range_m, const MapConfig& cfg) {
-  return range_m * cfg.object_sensor_step_deg * (M_PI / 180.0);
+  return range_m * cfg.object_sensor_step_deg * kDegToRad;
 }
 
 // The highest a cluster's lowest point may lie above the ground of its cell while it stands on it:

@@ -16,13 +16,17 @@ void Describe(MapObject& o);
 void OrientedBox(MapObject& o);
 
 // An object's oriented box frame: a point's (along, across) offsets from the box centre, along its
-// length and width, the yaw's sine and cosine taken once for every point asked.
+// length and width (and back: World), the yaw's sine and cosine taken once for every point asked.
 class BoxFrame {
  public:
   explicit BoxFrame(const MapObject& o) : o_(o), c_(std::cos(o.yaw_rad)), s_(std::sin(o.yaw_rad)) {}
   Eigen::Vector2d Local(const Eigen::Vector3d& q) const {
     const double dx = q.x() - o_.box_center.x(), dy = q.y() - o_.box_center.y();
     return {c_ * dx + s_ * dy, -s_ * dx + c_ * dy};
+  }
+  // The world xy of the offsets (along, across) from the box centre (Local's inverse).
+  Eigen::Vector2d World(double along, double across) const {
+    return {o_.box_center.x() + c_ * along - s_ * across, o_.box_center.y() + s_ * along + c_ * across};
   }
 
  private:

@@ -56,7 +56,6 @@
 namespace ltm::map {
 namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
 // Confidence margins reach 1 when a measure is this many times its minimum.
 constexpr double kFullMargin = 2.0;
 // Evidence of a revealed appeared cluster (blocked reference view, no see-through): half.
@@ -83,6 +82,7 @@ using detail::JoinHiddenGaps;
 using detail::IsPd;
 using detail::JoinHeldParts;
 using detail::KeepFeet;
+using detail::kDegToRad;
 using detail::KeepUnseenParts;
 using detail::kCoverage;
 using detail::kSmall;

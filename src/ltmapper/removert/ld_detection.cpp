@@ -244,16 +244,20 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
 // A trail needs two instants: a cluster that fewer keyframes of its session hit is not judged.
 constexpr int kTrailMinKeyframes = 2;
 
+// How near a return lies to a map point it is one of: a map voxel's diagonal (the map is the union
+// of the returns, one point per voxel, so a voxel's point lies that close to every return it was
+// made of).
+float HitReach(const RemovertConfig& cfg) { return float(cfg.map_voxel_m * std::sqrt(3.0)); }
+
 // Per own keyframe, the points of `c` among `asked` that it returned on, in `asked`'s order: a return
-// of its scan within a map voxel's diagonal of the point (the map is the union of those returns, one
-// point per voxel, so a voxel's point lies that close to every return it was made of), counting, as
-// the votes do, keyframes within ld_submap_radius_m of the point.
+// of its scan within HitReach of the point, counting, as the votes do, keyframes within
+// ld_submap_radius_m of the point.
 std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, const std::vector<std::uint32_t>& asked,
                                                         const std::vector<WorldKeyframe>& own_voters,
                                                         const RemovertConfig& cfg, int threads) {
   std::vector<std::vector<std::uint32_t>> hits(own_voters.size());
   if (asked.empty()) return hits;
-  const float reach = float(cfg.map_voxel_m * std::sqrt(3.0)), submap = float(cfg.ld_submap_radius_m);
+  const float reach = HitReach(cfg), submap = float(cfg.ld_submap_radius_m);
   Eigen::Vector3f lo, hi;
   std::tie(lo, hi) = BoxOf(c, asked);
   lo.array() -= reach, hi.array() += reach;
@@ -524,13 +528,13 @@ namespace detail {
 // cars: sensor 0.41 / 0.37 against world 0.20 / 0.17, and 0.41 / 0.21 against 0.03 / 0.09). Chance
 // matters where neither keyframe saw the thing: a container under 3x drift whose two keyframes
 // returned on 1 of its 338 points relative to the sensor and on none in the world (the lead cars:
-// 63 against 30 returns, 3.4 standard deviations, and 102 against 20). A return within a map
-// voxel's diagonal is one on the point (HitsPerKeyframe).
+// 63 against 30 returns, 3.4 standard deviations, and 102 against 20). A return within HitReach
+// is one on the point, as for HitsPerKeyframe.
 bool DroveWithTheSensor(const PointCloud& c, const std::vector<std::uint32_t>& m, const WorldKeyframe& last,
                         const std::vector<const WorldKeyframe*>& before, const std::vector<std::shared_ptr<const geometry::KdTree>>& scans,
                         const RemovertConfig& cfg) {
   if (before.size() < std::size_t(kDroveKeyframesBefore)) return false;
-  const float reach = float(cfg.map_voxel_m * std::sqrt(3.0));
+  const float reach = HitReach(cfg);
   std::vector<Eigen::Vector3f> world;
   for (auto i : m) world.push_back(c.points[i].xyz());
   std::size_t with_sensor = 0, in_world = 0;
