@@ -866,6 +866,36 @@ TEST(MapObjects, AFenceThatLeftStandsOnItsUnseenLowerHalf) {
   EXPECT_EQ(weak_far, 0u);
 }
 
+// A fence that left, 11 m long (x -6 .. 5, one face at y = 6): the query saw through its first
+// 5.75 m (strong ND) and never observed the rest (weak ND: a far fence whose far end the query's
+// beams passed with no return beyond it). The object is the whole fence: the weak ND along its line
+// past its end, chained in steps of at most the cluster tolerance, as far as the seen part's length
+// past it (RestOfTheFace); not a wall 2 m behind it (off its line), nor another fence on its line
+// past a gap of 1.5 m, nor the rows in the ground band. All weak ND is stored here (store_weak_nd),
+// so the rule alone decides what joins.
+TEST(MapObjects, AFenceThatLeftKeepsItsUnseenRestAlongItsLine) {
+  const PointCloud seen = Car(-6, 6, 5.75f, 0.f, 2.f);    // x -6 .. -0.25
+  const PointCloud rest = Car(0, 6, 5.f, 0.f, 2.f);        // x 0 .. 5
+  const PointCloud wall = Car(-6, 8, 11.f, 0.f, 2.f);      // y = 8
+  const PointCloud other = Car(6.5f, 6, 3.f, 0.f, 2.f);    // x 6.5 .. 9.5
+  KeyframeDelta d;
+  d.nd_strong = seen;
+  d.nd_weak = Cat(Cat(rest, wall), other);
+  MapConfig cfg = Cfg();
+  cfg.store_weak_nd = true;
+  test::TempDir tmp;
+  std::vector<MapObject> rejected;
+  const auto objs = StepObjects(tmp, Cat(seen, d.nd_weak), d, &rejected, cfg);
+  ASSERT_EQ(objs.size(), 1u) << rejected.size() << " rejected, first: " << (rejected.empty() ? "" : rejected[0].rejected);
+  std::size_t rest_above_ground = 0;
+  for (const auto& p : rest.points) rest_above_ground += p.z > 0.3f;
+  EXPECT_EQ(objs[0].points, seen.size() + rest_above_ground);  // the seen part with its foot row
+  EXPECT_NEAR(objs[0].lo.x(), -6.0, 0.01);
+  EXPECT_NEAR(objs[0].hi.x(), 5.0, 0.01);
+  EXPECT_NEAR(objs[0].hi.y(), 6.0, 0.01);
+  EXPECT_NEAR(objs[0].observed_fraction, double(seen.size()) / double(objs[0].points), 1e-9);
+}
+
 // A car that left: the new session saw through its lowest row and one side (strong ND); the rows
 // above the rest lay between its beams (weak ND, kept in the map).
 // Those rows are no surface the step saw stay: they are stored in the columns of the strong ND

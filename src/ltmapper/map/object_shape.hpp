@@ -34,6 +34,19 @@ class BoxFrame {
   double c_, s_;
 };
 
+// How far a thin face's corridor reaches along its axis from its centre: its half length and its
+// length beyond that (an appeared face's unobserved continuation, FollowFaces; a disappeared one's
+// unseen rest, UnseenParts).
+inline double FaceReach(const MapObject& o) { return 1.5 * o.size.x(); }
+
+// Is q within a thin face's corridor (`frame`: the face's box frame): along its axis no farther than
+// its length beyond either end, across it and in height within the cluster tolerance?
+inline bool InFaceCorridor(const MapObject& o, const BoxFrame& frame, const Eigen::Vector3d& q, double tol) {
+  if (q.z() < o.lo.z() - tol || q.z() > o.hi.z() + tol) return false;
+  const Eigen::Vector2d l = frame.Local(q);
+  return std::abs(l.x()) <= FaceReach(o) && std::abs(l.y()) <= tol;
+}
+
 // An object's oriented box grown by `margin` across (xy) and `margin_z` in z.
 class InOrientedBox {
  public:

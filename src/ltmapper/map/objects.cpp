@@ -23,7 +23,8 @@
 //     also stands on change points of its group under it (StandOnChangesBelow), and on its lower
 //     part the other session did not observe; an object keeps that part and the rows the other
 //     session did not observe inside its box and over it (UnseenParts: weak ND of a disappeared
-//     one, the step's surface its reference never observed of an appeared one), and every object
+//     one, and a disappeared thin face's rest along its line; the step's surface its reference
+//     never observed of an appeared one), and every object
 //     its foot, the changes of its side in the ground band under it (KeepFeet). Its confidence
 //     is rated over all it then holds (Rate). The rules that join parts live in object_parts.cpp;
 //     what both files read (the ground band, the sampling at a range) in object_rules.hpp.
@@ -86,6 +87,8 @@ using detail::kDegToRad;
 using detail::KeepUnseenParts;
 using detail::kCoverage;
 using detail::kSmall;
+using detail::FaceReach;
+using detail::InFaceCorridor;
 using detail::MergeParts;
 using detail::OrientedBox;
 using detail::RowSpacing;
@@ -559,16 +562,7 @@ double BoxSeenFraction(const MapObject& o, const OwnLowerPart& lower, const Poin
 // never observed (vlp16_drift3x): those cells gave it a see-through share of 0.60, an object with
 // IoU 0.03; followed along its face, 0.33 (its 70 points seen, before its foot and unseen rows
 // joined): coverage. No other row's objects changed (docs/RESULTS.md). How far a thin face's
-// corridor reaches along its axis from its centre: its half length and its length beyond that.
-double FaceReach(const MapObject& o) { return 1.5 * o.size.x(); }
-
-// Is q within a thin face's corridor (`frame`: the face's box frame): along its axis no farther than
-// its length beyond either end, across it and in height within the cluster tolerance?
-bool InFaceCorridor(const MapObject& o, const BoxFrame& frame, const Eigen::Vector3d& q, double tol) {
-  if (q.z() < o.lo.z() - tol || q.z() > o.hi.z() + tol) return false;
-  const Eigen::Vector2d l = frame.Local(q);
-  return std::abs(l.x()) <= FaceReach(o) && std::abs(l.y()) <= tol;
-}
+// corridor reaches: FaceReach (object_shape.hpp).
 
 // The step's own surface its reference never observed (UnobservedByReference, less its changes,
 // above ground) in the corridors of the group's thin appeared faces, streamed from the map after
