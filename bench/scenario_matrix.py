@@ -22,7 +22,7 @@ usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyfram
   each row's simulation is hard-linked from there and its LT-SLAM output (run/aligned) copied, and
   `ltmapper run --from removert` runs LT-removert and LT-map with --ltmapper: a change to those stages
   measured on the same poses as the earlier binary's rows (diff the two --out folders' eval/), in
-  about two thirds of the time of full runs.
+  about two thirds of the time of full runs (--seed and --keyframes are the kept run's, not given again).
   Exit status 0 even when a row misses a target: this prints figures, the tests judge.
 """
 import argparse
@@ -249,6 +249,8 @@ def main():
     yamls = a.scenarios or sorted(glob.glob(os.path.join(ROOT, "config", "scenarios", "*.yaml")))
     if a.reuse and os.path.realpath(a.reuse) == os.path.realpath(a.out):
         ap.error("--reuse must name another folder than --out (its rows are read, --out's are replaced)")
+    if a.reuse and (a.seed is not None or a.keyframes):
+        ap.error("--reuse runs on the kept run's simulations: --seed and --keyframes are that run's")
     rows = []
     for y in yamls:
         try:

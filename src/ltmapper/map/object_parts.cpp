@@ -231,17 +231,16 @@ void StandOnChangesBelow(std::vector<MapObject>& group, const PointCloud& change
 }
 
 namespace {
-// A disappeared thin face's points of `pool` past its ends in its corridor (InFaceCorridor) and
-// above the ground band (as far as its own length past either end), chained along its line from
-// either end in steps of at most the cluster tolerance (or the map's sample spacing, as the columns
-// over it): the rest of a fence the query saw
-// through near one end and never observed beyond. Seed 3's fence 9 (8.9 m long, 73-97 m from the
+// A disappeared thin face's points of `pool` past its ends in its corridor (InFaceCorridor: as far
+// as its own length past either end) and above the ground band, chained along its line from either
+// end in steps of at most `hop` (UnseenParts' hop over and under it too): the rest of a fence the
+// query saw through near one end and never observed beyond. Seed 3's fence 9 (8.9 m long, 73-97 m from the
 // central's drive and 79-88 m from the query's, OS1-64): the query saw through 51 of its points, over
 // 6 m, and never observed 172, most of them past those; the object held 107 of its 237 points (IoU
 // 0.48: a false object and a miss), with its rest 145 (0.65).
-std::vector<std::uint32_t> RestOfTheFace(const MapObject& o, const PointCloud& pool, const Floor& floor,
+std::vector<std::uint32_t> RestOfTheFace(const MapObject& o, const PointCloud& pool, double hop, const Floor& floor,
                                          const MapConfig& cfg) {
-  const double tol = cfg.object_tolerance_m, step = std::max(SampleSpacing(cfg), tol);
+  const double tol = cfg.object_tolerance_m;
   const BoxFrame frame(o);
   const double end = 0.5 * o.size.x();
   std::vector<std::pair<double, std::uint32_t>> ahead, behind;  // (how far past the end, index)
@@ -257,7 +256,7 @@ std::vector<std::uint32_t> RestOfTheFace(const MapObject& o, const PointCloud& p
     std::sort(side->begin(), side->end());
     double reached = 0.0;
     for (const auto& [past, i] : *side) {
-      if (past > reached + step) break;
+      if (past > reached + hop) break;
       reached = past;
       rest.push_back(i);
     }
@@ -283,11 +282,12 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
   std::iota(all.begin(), all.end(), 0u);
   const std::vector<std::uint32_t> by_z = ByZ(pool, std::move(all));
   const double edge = SampleSpacing(cfg), tol = cfg.object_tolerance_m;
+  const double hop = std::max(edge, tol);  // how far apart the rows of an unseen part may lie
   for (std::size_t k = 0; k < group.size(); ++k) {
     const MapObject& o = group[k];
     std::vector<std::uint32_t> columns;  // the unseen points over and under o (one pass), highest first
     for (std::uint32_t i : by_z)
-      if (InColumns(o, pool.points[i], std::max(edge, tol))) columns.push_back(i);
+      if (InColumns(o, pool.points[i], hop)) columns.push_back(i);
     const InOrientedBox in_box(o, edge, 0.0);
     for (std::uint32_t i : columns)
       if (InGrownBox(o, pool.points[i].xyz(), edge) && in_box(pool.points[i].xyz().cast<double>()))
@@ -297,8 +297,8 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
       if (AboveGround(pool.points[i].xyz(), floor, cfg)) lower.push_back(i);
     parts[k].insert(parts[k].end(), lower.begin(), lower.end());
     for (std::uint32_t i : ChainAbove(o, pool, columns, tol)) parts[k].push_back(i);
-    if (o.change == "disappeared" && ThinFace(o, cfg)) {
-      for (std::uint32_t i : RestOfTheFace(o, pool, floor, cfg)) parts[k].push_back(i);
+    if (o.change == "disappeared" && ThinFace(o, cfg)) {  // its rest may lie in its columns too: once each
+      for (std::uint32_t i : RestOfTheFace(o, pool, hop, floor, cfg)) parts[k].push_back(i);
       std::sort(parts[k].begin(), parts[k].end());
       parts[k].erase(std::unique(parts[k].begin(), parts[k].end()), parts[k].end());
     }
