@@ -104,7 +104,9 @@ def main():
             out = os.path.join(a.out, "%02d_%s" % (k, name))  # rows of two matrices may share a name
             rows.append(summary(name, run_row(a.ltmapper, row, out, a.map_config)))
             if a.baseline:
-                lines = changes(out, os.path.join(a.baseline, os.path.basename(out)))
+                base = os.path.join(a.baseline, os.path.basename(out))
+                lines = (changes(out, base) if os.path.exists(os.path.join(base, "objects.json"))
+                         else ["no row %s in the baseline" % base])
                 diffs.append("%s: %s" % (name, "SAME" if not lines else "\n  ".join(["changed"] + lines)))
         except RuntimeError as e:
             skipped.append("%s: skipped: %s" % (row, str(e).splitlines()[0]))

@@ -727,38 +727,44 @@ TEST(MapObjects, AFacadeStripAmongRowsThatStayedIsNoObject) {
 
 // The store's object records round-trip box_seen_fraction (version 2); a version-1 record (a store
 // written before it) still decodes, without it, so fsck does not call it damaged.
-TEST(MapObjects, ObjectRecordsOfBothVersionsDecode) {
+TEST(MapObjects, ObjectRecordsOfEveryVersionDecode) {
   MapObject o;
   o.change = "appeared";
   o.points = 1;
   o.attached_fraction = 0.25;
   o.box_seen_fraction = 0.75;
+  o.alike_beside = 2;
   o.cloud.push_back(1.f, 2.f, 3.f, 0.5f);
   o.cloud.cls.assign(1, PointClass::kPDWeak);
   o.cloud.session.assign(1, 1);
-  const std::string v2 = detail::EncodeObjects({o}, {});
+  const std::string v3 = detail::EncodeObjects({o}, {});
   std::vector<MapObject> kept, rejected;
-  detail::DecodeObjects(v2, "v2", &kept, &rejected);
+  detail::DecodeObjects(v3, "v3", &kept, &rejected);
   ASSERT_EQ(kept.size(), 1u);
   EXPECT_EQ(kept[0].box_seen_fraction, 0.75);
   EXPECT_EQ(kept[0].attached_fraction, 0.25);
-  // Version 1: the same bytes less box_seen_fraction, which follows attached_fraction: after the
-  // counts (12 bytes), 3 ints, the class byte, two strings ("appeared", ""), points, confidence,
-  // five 3-vectors and eight doubles.
+  EXPECT_EQ(kept[0].alike_beside, 2u);
+  const auto version = [](std::string raw, std::uint32_t v) {
+    std::memcpy(&raw[0], &v, sizeof(v));
+    return raw;
+  };
+  // Version 2: the same bytes less alike_beside (4 bytes after box_seen_fraction); version 1 also
+  // less box_seen_fraction, which follows attached_fraction: after the counts (12 bytes), 3 ints,
+  // the class byte, two strings ("appeared", ""), points, confidence, five 3-vectors and eight doubles.
   const std::size_t at = 12 + 3 * 4 + 1 + (4 + 8) + 4 + 8 + 8 + 5 * 3 * 8 + 8 * 8;
-  std::string v1 = v2.substr(0, at) + v2.substr(at + 8);
-  const std::uint32_t one = 1;
-  std::memcpy(&v1[0], &one, sizeof(one));
+  const std::string v2 = version(v3.substr(0, at + 8) + v3.substr(at + 8 + 4), 2);
+  detail::DecodeObjects(v2, "v2", &kept, &rejected);
+  ASSERT_EQ(kept.size(), 1u);
+  EXPECT_EQ(kept[0].box_seen_fraction, 0.75);
+  EXPECT_EQ(kept[0].alike_beside, 0u);
+  const std::string v1 = version(v2.substr(0, at) + v2.substr(at + 8), 1);
   detail::DecodeObjects(v1, "v1", &kept, &rejected);
   ASSERT_EQ(kept.size(), 1u);
   EXPECT_EQ(kept[0].box_seen_fraction, 0.0);
   EXPECT_EQ(kept[0].attached_fraction, 0.25);
   ASSERT_EQ(kept[0].cloud.size(), 1u);
   EXPECT_EQ(kept[0].cloud.points[0].z, 3.f);
-  std::string v3 = v2;
-  const std::uint32_t three = 3;
-  std::memcpy(&v3[0], &three, sizeof(three));
-  EXPECT_THROW(detail::DecodeObjects(v3, "v3", &kept, &rejected), Error);
+  EXPECT_THROW(detail::DecodeObjects(version(v3, 4), "v4", &kept, &rejected), Error);
 }
 
 // A fence that left: the query saw through the place of its front face (strong ND) but never
@@ -1495,6 +1501,29 @@ TEST(MapObjects, ViewsWhoseTopsDifferByMoreThanOneRowAreNoMove) {
   d.nd_strong = Car(8, 8, 0.5f, 6.f, 2.f);
   d.pd_weak = Car(-12, -4, 0.5f, 6.f, 2.5f);
   ExpectOneMoveOnlyAtTheCoarseStep(d, &MapConfig::object_sensor_step_deg, 0.625, 2.0);
+}
+
+// A car gone from a row of parked cars and a car of its size come 20 m away: among like cars the
+// two are as likely two cars as one that moved, so neither is paired (each still lists the other as
+// a candidate); the same two without the row are one move.
+TEST(MapObjects, ACarGoneFromARowOfLikeCarsIsNoMovesEnd) {
+  KeyframeDelta d;
+  d.nd_strong = Car(8, 8, 2.f, 4.5f, 1.5f);
+  d.pd_weak = Car(-12, -4, 2.f, 4.5f, 1.5f);
+  const PointCloud row = Cat(Car(8, 1.5f, 2.f, 4.5f, 1.5f), Car(8, 14.5f, 2.f, 4.5f, 1.5f));  // 2 m gaps
+  for (const bool in_row : {false, true}) {
+    test::TempDir tmp;
+    const auto objs = StepObjects(tmp, in_row ? Cat(d.nd_strong, row) : d.nd_strong, d, nullptr);
+    ASSERT_EQ(objs.size(), 2u) << in_row;
+    const MapObject& gone = objs[0].cls == PointClass::kNDStrong ? objs[0] : objs[1];
+    const MapObject& came = &gone == &objs[0] ? objs[1] : objs[0];
+    EXPECT_EQ(gone.change, in_row ? "disappeared" : "moved");
+    EXPECT_EQ(came.change, in_row ? "appeared" : "moved");
+    EXPECT_EQ(gone.alike_beside, in_row ? 2u : 0u);
+    EXPECT_EQ(came.alike_beside, 0u);
+    EXPECT_EQ(gone.move_candidates, std::vector<int>({came.id}));
+    EXPECT_EQ(came.move_candidates, std::vector<int>({gone.id}));
+  }
 }
 
 // Two containers of one step moved, each a short way; their boxes alike. Paired by size, each

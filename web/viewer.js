@@ -465,11 +465,14 @@ function selectObject(k) {
   const alike = o.move_candidates || [];
   const partner = o.partner < 0 ? '' : `\nmoved: the other end is #${o.partner}` +
       (alike.length > 1 ? ` (a choice among the alike #${alike.join(', #')})` : '');
+  // Could have moved, but stands among unchanged objects of its shape (objects.json's alike_beside).
+  const among = o.partner >= 0 || !alike.length || !o.alike_beside ? '' :
+      `\nno move: #${alike.join(', #')} could be it, but ${o.alike_beside} unchanged object(s) of its shape stand beside it`;
   $('object-detail').textContent =
       `#${o.id} ${o.change} (${o.class}) in ${name(o.session)} vs ${name(o.reference)}\n` +
       `${o.points} points, confidence ${o.confidence}\n` +
       `box ${o.box.size.map((v) => v.toFixed(1)).join(' x ')} m at ${o.box.center.map((v) => v.toFixed(1)).join(', ')}` +
-      partner;
+      partner + among;
   showBox(o);
   flyTo(new THREE.Vector3(...o.box.center), new THREE.Vector3(...o.box.size).length());
   showStep(o.session);

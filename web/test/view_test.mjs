@@ -230,7 +230,10 @@ async function clickObject(page, objects) {
   assert.match(detail, new RegExp(`#${o.id} ${o.change} \\(${o.class}\\)`));
   // A move names its other end, and the alike objects when its partner was a choice among them.
   if (o.partner >= 0) assert.match(detail, new RegExp(`the other end is #${o.partner}`));
-  if ((o.move_candidates || []).length > 1) assert.match(detail, new RegExp(`a choice among the alike #${o.move_candidates.join(', #')}`));
+  const candidates = o.move_candidates || [];
+  if (o.partner >= 0 && candidates.length > 1) assert.match(detail, new RegExp(`a choice among the alike #${candidates.join(', #')}`));
+  // One that could have moved but stands among unchanged objects of its shape says why it is no move.
+  if (o.partner < 0 && candidates.length && o.alike_beside) assert.match(detail, new RegExp(`no move: #${candidates.join(', #')} could be it`));
   if (o.partner < 0) assert.doesNotMatch(detail, /the other end/);
   assert.match(await page.textContent('#session-label'), new RegExp(`Session ${o.session}: `));
   await page.waitForTimeout(1000);  // the camera's flight (0.8 s)

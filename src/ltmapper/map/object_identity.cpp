@@ -78,7 +78,9 @@ void AssignIds(std::vector<MapObject>& objects) {
 // by nothing their boxes hold: the size differences of one object's two views and of two such
 // objects overlap. So of the pairings with the most moves, the one that moves the objects least in
 // all (LeastCostPairs over the centroids' displacement): the likeliest, as moves are more often
-// short than long.
+// short than long. An end that stands among unchanged objects of its shape (alike_beside: a row of
+// parked cars) is paired with none: there, one that left and one that came are as likely two
+// things as one that moved. Each still lists the other in move_candidates.
 void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
   std::map<int, std::pair<std::vector<std::size_t>, std::vector<std::size_t>>> ends;  // step -> gone, came
   for (std::size_t i = 0; i < objects.size(); ++i) {
@@ -94,9 +96,9 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
       for (std::size_t c = 0; c < came.size(); ++c) {
         MapObject &d = objects[gone[r]], &a = objects[came[c]];
         if (!CouldHaveMoved(d, a, cfg)) continue;
-        cost[r][c] = (d.centroid - a.centroid).norm();
         d.move_candidates.push_back(a.id);  // gone and came are in id order: each list ascends
         a.move_candidates.push_back(d.id);
+        if (d.alike_beside == 0 && a.alike_beside == 0) cost[r][c] = (d.centroid - a.centroid).norm();
       }
     for (const auto& [r, c] : detail::LeastCostPairs(cost)) {
       objects[gone[r]].partner = objects[came[c]].id;

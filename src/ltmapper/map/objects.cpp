@@ -33,7 +33,8 @@
 //     confirms that object and is no second one (Confirms, SetAsideConfirmations).
 //  6. Moved: a disappeared and an appeared object of one step whose box lengths and tops above the
 //     ground agree within what the sensor's sampling lets each view fall short (SizesAgree,
-//     CouldHaveMoved); of such pairings, the one that moves the objects least in all (LinkMoved).
+//     CouldHaveMoved), neither standing among unchanged objects of its shape (AlikeIn, counted per
+//     step); of such pairings, the one that moves the objects least in all (LinkMoved).
 //  7. Tracks: rows of different steps that are one object, and a move's two ends (AssignTracks,
 //     InheritMoves).
 #include "ltmapper/geometry/geometry.hpp"
@@ -652,6 +653,84 @@ UnobservedSurface FollowFaces(std::vector<MapObject>& group, const Store& store,
   return all;
 }
 
+// Objects of one shape standing together (a row of parked cars, a container yard): that one of them
+// left and one of that shape came elsewhere tells nothing of which went where, nor that one moved
+// at all (a car that left and another that parked are two changes, not one move). Of what the
+// step's map holds around object o, the things of its shape: clusters at the cluster tolerance of
+// the surfaces the step left unchanged (StayedSinceReference) above the ground (`near`: AlikeReach,
+// which holds whole any thing up to twice o's size), that come within o's own length of its box,
+// stand on the ground (Floats), do not touch o's box (o itself, its remnants) and whose sizes agree
+// with o's (SizesAgree, each view at its range).
+std::size_t AlikeIn(const MapObject& o, const PointCloud& near, const Floor& floor, const StepContext& ctx,
+                    const MapConfig& cfg) {
+  std::size_t alike = 0;
+  for (const auto& members : geometry::EuclideanClusterMembers(near, cfg.object_tolerance_m)) {
+    if (members.size() < std::size_t(cfg.object_min_points)) continue;
+    MapObject like;
+    like.cloud = near.select(members);
+    like.cloud.cls.assign(like.cloud.size(), PointClass::kUnknown);  // Describe's votes: unchanged
+    const auto& pts = like.cloud.points;
+    const auto beside = [&](const auto& p) { return InGrownBox(o, p.xyz(), o.size.x()); };
+    if (std::none_of(pts.begin(), pts.end(), beside) ||
+        std::any_of(pts.begin(), pts.end(), [&](const auto& p) { return InGrownBox(o, p.xyz(), cfg.object_tolerance_m); }))
+      continue;
+    Describe(like);
+    OrientedBox(like);
+    like.range_m = ctx.ranges.To(like.centroid.cast<float>());
+    like.clearance_m = Clearance(like, floor);
+    if (!Floats(like, cfg) && SizesAgree(o, like, cfg)) ++alike;
+  }
+  return alike;
+}
+
+// The step's objects that could be a move's end: some object of the other side of the change
+// could be the same thing (CouldHaveMoved), as LinkMoved will ask.
+std::vector<std::size_t> MoveEnds(const std::deque<MapObject>& objects, const MapConfig& cfg) {
+  std::vector<std::size_t> ends;
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    const MapObject& o = objects[k];
+    const bool gone = o.change == "disappeared";
+    if (std::any_of(objects.begin(), objects.end(), [&](const MapObject& p) {
+          return p.change != o.change && (gone ? CouldHaveMoved(o, p, cfg) : CouldHaveMoved(p, o, cfg));
+        }))
+      ends.push_back(k);
+  }
+  return ends;
+}
+
+// Sets alike_beside (AlikeIn) of each of the step's objects that could be a move's end (MoveEnds),
+// reading the step's map once (the bounding box of their reaches) when there is one.
+void CountAlikeBeside(std::deque<MapObject>& objects, const Store& store, const SessionRecord& step, const Floor& floor,
+                      const StepContext& ctx, const MapConfig& cfg) {
+  const std::vector<std::size_t> ends = MoveEnds(objects, cfg);
+  if (ends.empty()) return;
+  const double tol = cfg.object_tolerance_m;
+  std::vector<Eigen::AlignedBox3d> reach;
+  Region box;
+  box.use_box = true;
+  box.lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), box.hi = -box.lo;
+  for (const std::size_t k : ends) {
+    // A thing within o's length of its box, up to o's length and twice its height, lies inside.
+    const MapObject& o = objects[k];
+    const Eigen::Vector3d grow(2.0 * o.size.x() + tol, 2.0 * o.size.x() + tol, tol);
+    reach.emplace_back(o.lo - grow, o.hi + grow + Eigen::Vector3d(0.0, 0.0, o.hi.z() - o.lo.z()));
+    box.lo = box.lo.cwiseMin(reach.back().min()), box.hi = box.hi.cwiseMax(reach.back().max());
+  }
+  std::vector<PointCloud> near(ends.size());
+  store.StreamMapAt(step.order, box, [&](PointCloud&& part) {
+    if (part.session.size() != part.size() || part.cls.size() != part.size()) return;
+    for (std::size_t i = 0; i < part.size(); ++i) {
+      const auto& p = part.points[i];
+      if (!StayedSinceReference(part.session[i], part.cls[i], step) || !AboveGround(p.xyz(), floor, cfg)) continue;
+      for (std::size_t e = 0; e < ends.size(); ++e)
+        if (reach[e].contains(p.xyz().cast<double>())) near[e].push_back(p.x, p.y, p.z);
+    }
+  });
+  ParallelFor(ends.size(), store.threads(), [&](std::size_t e) {
+    objects[ends[e]].alike_beside = AlikeIn(objects[ends[e]], near[e], floor, ctx, cfg);
+  });
+}
+
 
 // The rules (Reject) of a built cluster, on what was seen of it (its confidence is Rate's).
 void Judge(MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
@@ -713,6 +792,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   MergeParts(step_kept, step_rejected, cfg);
   JoinHiddenGaps(step_kept, store, step, floor, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
+  CountAlikeBeside(step_kept, store, step, floor, ctx, cfg);
   for (auto& o : step_kept) {
     Rate(o, cfg);
     kept.push_back(std::move(o));

@@ -217,7 +217,7 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / M_PI;
 const char* const kObjectColumns =
-    "id,session,reference,class,change,partner,move_candidates,exists_in,track,track_sessions,points,confidence,cx,cy,"
+    "id,session,reference,class,change,partner,move_candidates,alike_beside,exists_in,track,track_sessions,points,confidence,cx,cy,"
     "cz,min_x,min_y,min_z,max_x,max_y,max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,"
     "height_above_ground,clearance,range_m,observed_fraction,twin_fraction,attached_fraction,box_seen_fraction";
 
@@ -229,7 +229,7 @@ std::string Joined(const std::vector<int>& v, const char* sep) {
 
 void WriteObjectRow(std::ostream& os, const MapObject& o) {
   os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.change << ','
-     << o.partner << ',' << Joined(o.move_candidates, ";") << ',' << o.exists_in << ',' << o.track << ','
+     << o.partner << ',' << Joined(o.move_candidates, ";") << ',' << o.alike_beside << ',' << o.exists_in << ',' << o.track << ','
      << Joined(o.track_sessions, ";") << ',' << o.points << ',' << o.confidence << ',' << o.centroid.x() << ','
      << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y() << ',' << o.lo.z() << ','
      << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << ',' << o.box_center.x() << ',' << o.box_center.y() << ','
@@ -262,6 +262,7 @@ void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
   w.BeginObject().Int("id", o.id).Int("session", o.session).Int("reference", o.reference);
   w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner);
   Ints(w, "move_candidates", o.move_candidates);
+  w.Int("alike_beside", o.alike_beside);
   Ints(w, "exists_in", {o.exists_in});
   w.Int("track", o.track);
   Ints(w, "track_sessions", o.track_sessions);

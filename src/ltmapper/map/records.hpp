@@ -121,6 +121,10 @@ struct MapObject {
   // ascending. A move whose list holds its partner alone had no alike alternative; with more, a
   // box cannot tell which alike object went where (LinkMoved took the least total displacement).
   std::vector<int> move_candidates;
+  // Unchanged objects of its shape standing within its own length of it in the step's map (a row
+  // of parked cars: objects.cpp AlikeIn). An end with one is never paired as moved (LinkMoved):
+  // among like objects, one that left and one that came are as likely two as one that moved.
+  std::size_t alike_beside = 0;
   int exists_in = 0;   // session whose scans hold the object (session for PD, reference for ND)
   // Identity across steps (Store::Objects, not stored per step): the rows that are one object, the
   // same thing at one place seen by several steps or a move's two ends, form one track; its id is
