@@ -61,7 +61,8 @@ struct RemovertConfig {
   // returns.
   SweepTiming sweep_timing;
   double min_range_m = 2.0;       // [m] scan returns closer than this are ignored (ego vehicle)
-  double max_range_m = 100.0;     // [m] scan returns farther than this are ignored
+  double max_range_m = 100.0;     // [m] scan returns farther than this are ignored; LD's voters are the
+                                  // keyframes this close to a raw change (no farther one returned on it)
   double submap_radius_m = 60.0;  // [m] a keyframe tests only map points this close to it
   double tile_m = 10.0;           // [m] edge of the 2D tiles indexing map points for submaps
   // --- session map
@@ -145,8 +146,6 @@ struct RemovertConfig {
   double ld_min_ratio = 0.3;      // [-] and see-through / (see-through + hit) votes
   bool weak_nd = true;            // false: every ND is strong (ablation: no weak-ND preservation)
   int ld_window_px = 1;           // [pixels] window half-size of the LD see-through test (0 = the pixel alone)
-  double ld_submap_radius_m = 100.0;  // [m] keyframes this close to a raw change vote on it (far ground
-                                      // is sampled sparsely: use the sensor's max range)
   double ld_normal_radius_m = 1.0;   // [m] neighbourhood (own map, at most 16 points) for the normals of
                                       // raw changes; a line-like neighbourhood (far ground rings) takes
                                       // the normal perpendicular to the line closest to vertical; also how
@@ -224,7 +223,6 @@ struct RemovertConfig {
     v("ld.min_ratio", ld_min_ratio, "", 0.0, 1.0);
     v("ld.weak_nd", weak_nd);
     v("ld.window_px", ld_window_px, "pixels", 0, 10);
-    v("ld.submap_radius_m", ld_submap_radius_m, "m", 1.0, 10000.0);
     v("ld.normal_radius_m", ld_normal_radius_m, "m", 0.05, 10.0);
     v("ld.surface_max_m", ld_surface_max_m, "m", 0.0, 100.0);
     v("ld.same_min_hits", ld_same_min_hits, "keyframes", 0, 65535);

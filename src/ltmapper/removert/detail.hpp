@@ -123,7 +123,7 @@ struct LdLabels {
 };
 // DetectLd's decision for every point of both maps. The positions are every keyframe's of each
 // session (the radius's distance term); the voters are the keyframes whose scans judge
-// occlusion (those within ld.submap_radius_m of the points give the same votes as all). `cfg`
+// occlusion (those within sensor.max_range_m of the points give the same votes as all). `cfg`
 // has its sensor resolved.
 LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, const PointCloud& central_positions,
                  const PointCloud& query_positions, const std::vector<WorldKeyframe>& central_voters,
@@ -288,8 +288,8 @@ std::vector<std::string> LdPairCloudFiles();
 // ---- multi-session cleanup (ld_detection.cpp)
 // The sensor's joining gaps {horizontal, vertical} [m] at `range_m` for the residues' clusters:
 // ld.residue_gap_m or, farther out, geometry::SampleJoinGaps of the sensor's columns and rows (a
-// range beyond ld.submap_radius_m counts as that radius: the voters' reach, in a tile as in the
-// whole). ResidueGapsAt(cfg, ld.submap_radius_m).x() is the farthest one hop of a residue's
+// range beyond sensor.max_range_m counts as that range: the voters' reach, in a tile as in the
+// whole). ResidueGapsAt(cfg, sensor.max_range_m).x() is the farthest one hop of a residue's
 // cluster reaches in xy (LdTileMarginM).
 Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m);
 

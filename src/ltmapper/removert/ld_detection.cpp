@@ -222,7 +222,7 @@ void MarkSeenOnce(const PointCloud& seen, const std::vector<std::vector<std::uin
                   std::vector<bool>* residue) {
   if (own_voters.empty() || !cfg.SensorResolved() || !cfg.sensor_model.ring_based) return;
   RemovertConfig vcfg = cfg;
-  vcfg.submap_radius_m = cfg.ld_submap_radius_m;  // the voters LD picked (tiles: within this of the tile)
+  vcfg.submap_radius_m = cfg.max_range_m;  // the voters LD picked (tiles: within this of the tile)
   VisibilityOptions opt;
   opt.within_beams = false;  // a keyframe that met it above the top beam met it too
   opt.count_occluded = true;
@@ -251,13 +251,13 @@ float HitReach(const RemovertConfig& cfg) { return float(cfg.map_voxel_m * std::
 
 // Per own keyframe, the points of `c` among `asked` that it returned on, in `asked`'s order: a return
 // of its scan within HitReach of the point, counting, as the votes do, keyframes within
-// ld_submap_radius_m of the point.
+// sensor.max_range_m of the point.
 std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, const std::vector<std::uint32_t>& asked,
                                                         const std::vector<WorldKeyframe>& own_voters,
                                                         const RemovertConfig& cfg, int threads) {
   std::vector<std::vector<std::uint32_t>> hits(own_voters.size());
   if (asked.empty()) return hits;
-  const float reach = HitReach(cfg), submap = float(cfg.ld_submap_radius_m);
+  const float reach = HitReach(cfg), submap = float(cfg.max_range_m);
   Eigen::Vector3f lo, hi;
   std::tie(lo, hi) = BoxOf(c, asked);
   lo.array() -= reach, hi.array() += reach;
@@ -554,7 +554,7 @@ Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m) {
   const Eigen::Vector2f gap = Eigen::Vector2f::Constant(float(cfg.ld_residue_gap_m));
   if (!cfg.SensorResolved()) return gap;
   const geometry::SensorModel& m = cfg.sensor_model;
-  return gap.cwiseMax(geometry::SampleJoinGaps(m.azimuth_step_deg, m.CoarserStepDeg(), std::min(range_m, cfg.ld_submap_radius_m)));
+  return gap.cwiseMax(geometry::SampleJoinGaps(m.azimuth_step_deg, m.CoarserStepDeg(), std::min(range_m, cfg.max_range_m)));
 }
 
 LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, const PointCloud& central_positions,

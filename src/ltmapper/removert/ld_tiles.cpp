@@ -109,8 +109,8 @@ void MarkOutside(const PointCloud& window, const detail::VoxelBox& core, double 
   }
 }
 
-// [m] A residue cluster's farthest hop in xy (ResidueGapsAt at ld.submap_radius_m).
-double ResidueHopM(const RemovertConfig& cfg) { return double(detail::ResidueGapsAt(cfg, cfg.ld_submap_radius_m).x()); }
+// [m] A residue cluster's farthest hop in xy (ResidueGapsAt at sensor.max_range_m).
+double ResidueHopM(const RemovertConfig& cfg) { return double(detail::ResidueGapsAt(cfg, cfg.max_range_m).x()); }
 
 }  // namespace
 
@@ -150,8 +150,8 @@ LdTilePlan PlanLdTiles(const LdCellCounts& counts, const std::vector<WorldKeyfra
   }
   for (auto& [key, t] : tiles) {
     const detail::VoxelBox window = BoxOf(plan, t, plan.margin_voxels);
-    t.central_voters = detail::KeyframesNear(central_keyframes, window, plan.voxel_m, cfg.ld_submap_radius_m);
-    t.query_voters = detail::KeyframesNear(query_keyframes, window, plan.voxel_m, cfg.ld_submap_radius_m);
+    t.central_voters = detail::KeyframesNear(central_keyframes, window, plan.voxel_m, cfg.max_range_m);
+    t.query_voters = detail::KeyframesNear(query_keyframes, window, plan.voxel_m, cfg.max_range_m);
     plan.tiles.push_back(std::move(t));
   }
   return plan;

@@ -350,7 +350,7 @@ Visibility SeenThroughBy(const PointCloud& points, const PointCloud& own_map,
   if (own_pixel) out.seen_own.assign(points.size(), false);
   if (points.empty() || keyframes.empty()) return out;
   RemovertConfig vcfg = cfg;
-  vcfg.submap_radius_m = cfg.ld_submap_radius_m;
+  vcfg.submap_radius_m = cfg.max_range_m;
   vcfg.window_px = cfg.ld_window_px;
   vcfg.pose_sigma_deg = 0.0;  // LD's own windows (ld.window_px); HD's pose widening is not applied here
   SurfaceSetup surfaces;

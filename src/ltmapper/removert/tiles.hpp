@@ -89,7 +89,7 @@ HdResult RemoveHdTiled(const std::vector<WorldKeyframe>& keyframes, const Remove
 // touches a core lies within L of it, the larger clusters that unmark it within 2 L, their ground
 // within 3 L; a cluster cut by the window's edge reaches from there to the edge, so with
 // (2 + sqrt 2) L + 2 hops (a hop: ld.residue_gap_m, far out the sensor's column gap at
-// ld.submap_radius_m, detail::ResidueGapsAt) it is no mover's in the window as in truth. The margin is
+// sensor.max_range_m, detail::ResidueGapsAt) it is no mover's in the window as in truth. The margin is
 // (a) + (b).
 double LdTileMarginM(const RemovertConfig& cfg);
 // [m] The longest residue cluster (longest horizontal edge) a tile's window holds whole wherever it
@@ -99,7 +99,7 @@ double LdTileMarginM(const RemovertConfig& cfg);
 double LdWholeClusterM(const RemovertConfig& cfg);
 struct LdTile {
   std::int64_t ix = 0, iy = 0;  // core: voxels [ix, ix + 1) x [iy, iy + 1) tile edges
-  // positions of the keyframes within ld.submap_radius_m of core + margin (they judge occlusion)
+  // positions of the keyframes within sensor.max_range_m of core + margin (they judge occlusion)
   std::vector<std::size_t> central_voters, query_voters;
 };
 struct LdTilePlan {
