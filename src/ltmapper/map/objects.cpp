@@ -416,7 +416,7 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // (canopy, facade above an occluder) whose lower part both sessions saw the same. Clusters whose
 // longest horizontal edge is below object_min_length_m are smaller than the objects the map
 // tracks: at a pedestrian's footprint they are most likely residues of moving actors that HD
-// removal missed in one session.
+// removal missed in one session (WalkerSized).
 // The width (Width) below which a cluster at `range_m` spans fewer than object_min_samples rows of
 // the sensor's samples (r * object_sensor_step_deg, at least the output voxel). n rows a sample s
 // apart span (n - 1) s. The bound lies halfway between n - 1 and n rows, (n - 1.5) s, so noise does
@@ -425,6 +425,16 @@ double MinWidth(double range_m, const MapConfig& cfg) {
   return std::max(cfg.output_voxel_m, RowSpacing(range_m, cfg)) * std::max(0.0, cfg.object_min_samples - 1.5);
 }
 
+
+// A cluster a walker's residue could be: under object_min_length_m across (a pedestrian's, a
+// cyclist's footprint), and no taller than that either unless it is a thin face (a pole, a facade's
+// edge: no object the map tracks, but a surface two sessions sampled differently). A thing that fits
+// a walker's footprint and stands higher than one is no walker: seed 3's and 7's HDL-64E saw a young
+// tree that left in part (1.5 x 1.3 m and 1.5 x 0.6 m, 3.7 and 3.4 m high), rejected as small.
+bool WalkerSized(const MapObject& o, const MapConfig& cfg) {
+  const bool taller_than_a_walker = o.height_above_ground >= cfg.object_min_length_m;
+  return o.size.x() < cfg.object_min_length_m && (!taller_than_a_walker || ThinFace(o, cfg));
+}
 
 std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, double width_m, const Spread3& sp) {
   if (!Covered(o, ctx, cfg)) return kCoverage;
@@ -436,7 +446,7 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
   if (width_m < MinWidth(o.range_m, cfg)) return "sliver";
   if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
     return "flat";
-  if (o.size.x() < cfg.object_min_length_m) return kSmall;
+  if (WalkerSized(o, cfg)) return kSmall;
   if (cfg.object_max_extent_m > 0.0 && o.size.x() > cfg.object_max_extent_m) return "extent";
   return "";
 }
