@@ -1205,6 +1205,38 @@ TEST(MapObjects, AFenceWhoseRowsHoldUnequalSharesIsNoSliver) {
   EXPECT_NEAR(rejected[0].centroid.y(), 14.0, 0.1);
 }
 
+// A container that left, 36 m from the keyframe of a 16-beam sensor (2 deg rows: 1.26 m apart
+// there), seen in one row (two passes 0.6 m apart: under the half row that makes a sliver) along
+// its 6 m side and 1.2 m around its corner. The row is narrower than two rows across its middle
+// axis, but its box is 1.2 m wide: no thin face, so no rim along one surface (those stay "sliver",
+// as the straight row beside it): a body's corner (seed 7's VLP-16 missed container 12 so, and the
+// default seed's VLP-16 container 13, seen from 88 m).
+TEST(MapObjects, OneRowAroundABodysCornerIsNoSliver) {
+  test::TempDir tmp;
+  MapConfig cfg = Cfg();
+  cfg.object_sensor_step_deg = 2.0;
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
+  PointCloud corner, rim;
+  for (const float z : {0.9f, 1.5f}) {
+    for (int j = 0; j <= 60; ++j) corner.push_back(36.f, -3.f + 0.1f * float(j), z, 0.5f);
+    for (int i = 1; i <= 12; ++i) corner.push_back(36.f + 0.1f * float(i), 3.f, z, 0.5f);
+    for (int j = 0; j <= 60; ++j) rim.push_back(36.f, 8.f + 0.1f * float(j), z, 0.5f);
+  }
+  const PointCloud ground = Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(30, -8, 0, 48, 112, 0.25f));
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(ground, Cat(corner, rim))}});
+  KeyframeDelta d;
+  d.nd_strong = Cat(corner, rim);
+  s.IntegrateSession({"s1"}, "s0", {d}, {});
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].points, corner.size());
+  EXPECT_NEAR(objs[0].size.y(), 1.2, 0.05);
+  ASSERT_EQ(rejected.size(), 1u);
+  EXPECT_EQ(rejected[0].rejected, "sliver");
+  EXPECT_NEAR(rejected[0].centroid.y(), 11.0, 0.01);
+}
+
 // A container that appeared 60 m from the nearest keyframe, seen in four rows 0.6 m apart (the
 // sensor's 0.625 deg rows at that range): one object. Clustered at the 0.5 m tolerance alone, each
 // row was a cluster one sample wide, a "sliver" (container 13 of the scenario matrix, seen from

@@ -406,7 +406,10 @@ bool Covered(const MapObject& o, const StepContext& ctx, const MapConfig& cfg) {
 // no fragment), and the cluster "stayed". The sensor samples a surface at range r every
 // r * object_sensor_step_deg (and the map every output_voxel_m); a sliver or rim (a coverage
 // edge, one scan row wide) spans fewer than object_min_samples rows across its middle
-// principal axis (Width, MinWidth). A cluster whose top is
+// principal axis (Width, MinWidth) and lies along one surface: a thin face (ThinFace). A row
+// whose box is wider than the cluster tolerance went around a body's corner (a container's side
+// and end, seen in one row of a VLP-16 from 36 m and 88 m), which no edge of coverage draws. A
+// cluster whose top is
 // below object_min_height_m above the local ground is a ground bump (curb, misregistered
 // ground), and one flat to object_flat_sigma_m with a normal within object_flat_tilt_deg of
 // vertical is a ground patch at any height. Objects that change (vehicles, containers, fences,
@@ -443,7 +446,7 @@ std::string Reject(MapObject& o, const StepContext& ctx, const MapConfig& cfg, d
   if (o.box_seen_fraction < cfg.object_min_observed_fraction) return "stayed";
   if (o.height_above_ground < cfg.object_min_height_m) return "low";
   if (Floats(o, cfg)) return "floating";
-  if (width_m < MinWidth(o.range_m, cfg)) return "sliver";
+  if (width_m < MinWidth(o.range_m, cfg) && ThinFace(o, cfg)) return "sliver";
   if (sp.sigma.x() < cfg.object_flat_sigma_m && std::abs(sp.normal.z()) > std::cos(cfg.object_flat_tilt_deg * kDegToRad))
     return "flat";
   if (WalkerSized(o, cfg)) return kSmall;
