@@ -670,10 +670,10 @@ UnobservedSurface FollowFaces(std::vector<MapObject>& group, const Store& store,
 // left and one of that shape came elsewhere tells nothing of which went where, nor that one moved
 // at all (a car that left and another that parked are two changes, not one move). Of what the
 // step's map holds around object o, the things of its shape: clusters at the cluster tolerance of
-// the surfaces the step left unchanged (StayedSinceReference) above the ground (`near`: AlikeReach,
-// which holds whole any thing up to twice o's size), that come within o's own length of its box,
-// stand on the ground (Floats), do not touch o's box (o itself, its remnants) and whose sizes agree
-// with o's (SizesAgree, each view at its range).
+// the surfaces the step left unchanged (StayedSinceReference) above the ground (`near`: read by
+// CountAlikeBeside far enough to hold whole any thing of o's size beside it), that come within o's
+// own length of its box, stand on the ground (Floats), do not touch o's box (o itself, its
+// remnants) and whose sizes agree with o's (SizesAgree, each view at its range).
 std::size_t AlikeIn(const MapObject& o, const PointCloud& near, const Floor& floor, const StepContext& ctx,
                     const MapConfig& cfg) {
   std::size_t alike = 0;
