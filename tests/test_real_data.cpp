@@ -83,10 +83,7 @@ TEST(RealData, ARevisitOfOneStreetReportsNoChangedObject) {
   const auto drive = [&](const std::string& name, const std::string& scan, const Pose& T) {
     std::filesystem::create_directories(tmp / (name + "/velodyne"));
     std::filesystem::copy_file(rev + scan, tmp / (name + "/velodyne/000000.bin"));
-    std::string row;
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 4; ++c) row += std::to_string(T.matrix()(r, c)) + (r == 2 && c == 3 ? "\n" : " ");
-    test::WriteText(tmp / (name + "/poses.txt"), row);
+    io::WriteKittiPoses(tmp / (name + "/poses.txt"), {T});
     return tmp / name;
   };
   const std::string a = drive("a", "000720.bin", Pose::Identity()), b = drive("b", "001500.bin", relative);

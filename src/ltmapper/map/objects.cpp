@@ -699,15 +699,15 @@ std::size_t AlikeIn(const MapObject& o, const PointCloud& near, const Floor& flo
 // The step's objects that could be a move's end: some object of the other side of the change
 // could be the same thing (CouldHaveMoved), as LinkMoved will ask.
 std::vector<std::size_t> MoveEnds(const std::deque<MapObject>& objects, const MapConfig& cfg) {
+  std::vector<bool> end(objects.size(), false);
+  for (std::size_t d = 0; d < objects.size(); ++d)
+    for (std::size_t a = 0; a < objects.size(); ++a)
+      if (objects[d].change == "disappeared" && objects[a].change == "appeared" &&
+          CouldHaveMoved(objects[d], objects[a], cfg))
+        end[d] = end[a] = true;
   std::vector<std::size_t> ends;
-  for (std::size_t k = 0; k < objects.size(); ++k) {
-    const MapObject& o = objects[k];
-    const bool gone = o.change == "disappeared";
-    if (std::any_of(objects.begin(), objects.end(), [&](const MapObject& p) {
-          return p.change != o.change && (gone ? CouldHaveMoved(o, p, cfg) : CouldHaveMoved(p, o, cfg));
-        }))
-      ends.push_back(k);
-  }
+  for (std::size_t k = 0; k < objects.size(); ++k)
+    if (end[k]) ends.push_back(k);
   return ends;
 }
 
@@ -734,9 +734,13 @@ void CountAlikeBeside(std::deque<MapObject>& objects, const Store& store, const 
     if (part.session.size() != part.size() || part.cls.size() != part.size()) return;
     for (std::size_t i = 0; i < part.size(); ++i) {
       const auto& p = part.points[i];
-      if (!StayedSinceReference(part.session[i], part.cls[i], step) || !AboveGround(p.xyz(), floor, cfg)) continue;
+      const Eigen::Vector3d q = p.xyz().cast<double>();
+      const auto in = [&](const Eigen::AlignedBox3d& r) { return r.contains(q); };
+      if (std::none_of(reach.begin(), reach.end(), in) || !StayedSinceReference(part.session[i], part.cls[i], step) ||
+          !AboveGround(p.xyz(), floor, cfg))
+        continue;  // the box tests first: the map's labels and floor only for points some end reaches
       for (std::size_t e = 0; e < ends.size(); ++e)
-        if (reach[e].contains(p.xyz().cast<double>())) near[e].push_back(p.x, p.y, p.z);
+        if (in(reach[e])) near[e].push_back(p.x, p.y, p.z);
     }
   });
   ParallelFor(ends.size(), store.threads(), [&](std::size_t e) {

@@ -217,8 +217,8 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / M_PI;
 const char* const kObjectColumns =
-    "id,session,reference,class,change,partner,move_candidates,alike_beside,exists_in,track,track_sessions,points,confidence,cx,cy,"
-    "cz,min_x,min_y,min_z,max_x,max_y,max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,"
+    "id,session,reference,class,change,partner,move_candidates,alike_beside,exists_in,track,track_sessions,points,"
+    "confidence,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,"
     "height_above_ground,clearance,range_m,observed_fraction,twin_fraction,attached_fraction,box_seen_fraction";
 
 std::string Joined(const std::vector<int>& v, const char* sep) {
@@ -229,7 +229,8 @@ std::string Joined(const std::vector<int>& v, const char* sep) {
 
 void WriteObjectRow(std::ostream& os, const MapObject& o) {
   os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.change << ','
-     << o.partner << ',' << Joined(o.move_candidates, ";") << ',' << o.alike_beside << ',' << o.exists_in << ',' << o.track << ','
+     << o.partner << ',' << Joined(o.move_candidates, ";") << ',' << o.alike_beside << ',' << o.exists_in << ','
+     << o.track << ','
      << Joined(o.track_sessions, ";") << ',' << o.points << ',' << o.confidence << ',' << o.centroid.x() << ','
      << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y() << ',' << o.lo.z() << ','
      << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << ',' << o.box_center.x() << ',' << o.box_center.y() << ','
