@@ -536,6 +536,32 @@ TEST(RemovertLd, ASeenThroughPieceOfALargerChangeIsNoResidue) {
   EXPECT_EQ(CountIn(ld.nd_residue, car), 0u);
 }
 
+// A thing's lower parts size it too. A flatbed truck 6 m long, only in the central: a cab and a
+// load 1.5 m long and 1.8 m high at its ends, a bed 0.9 m high between them. Where the sessions'
+// rotation error is large (1.5 deg), LD's radius grows to ld.radius_max_m 10 m out, so the bed and
+// the ends' lower halves stand within it on the query's ground: lower parts, which the cleanup
+// does not cluster. Clustered without them, the cab and the load are two pieces that each fit a
+// pedestrian (a mover's residue: the whole truck went as the central's HD); with them, one thing
+// 6 m long that the query saw through (strong ND).
+TEST(RemovertLd, ALowBedJoinsTheEndsOfAFlatbedIntoOneThing) {
+  const test::Box cab = test::MakeBox(0, -11, 0.3, 1.5, -9, 1.8, kCarCentral);
+  const test::Box load = test::MakeBox(4.5, -11, 0.3, 6, -9, 1.8, kCarCentral);
+  const test::Box bed = test::MakeBox(1.5, -11, 0.3, 4.5, -9, 0.9, kCarCentral);
+  auto cb = Common();
+  for (const auto& b : {cab, load, bed}) cb.push_back(b);
+  const auto central = Drive(cb, 0.0, nullptr), query = Drive(Common(), 0.7, nullptr);
+  RemovertConfig cfg = test::ConfigFor();
+  cfg.ld_rotation_sigma_deg = 1.5;
+  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
+  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const test::Box truck = test::MakeBox(0, -11, 0.3, 6, -9, 1.8, kCarCentral);
+  ASSERT_GT(CountIn(cmap, cab), 50u);
+  ASSERT_GT(CountIn(cmap, load), 50u);
+  EXPECT_EQ(CountIn(ld.nd_residue, truck), 0u);
+  EXPECT_GE(double(CountIn(ld.nd_strong, cab)), 0.5 * double(CountIn(cmap, cab)));
+  EXPECT_GE(double(CountIn(ld.nd_strong, load)), 0.5 * double(CountIn(cmap, load)));
+}
+
 // The central session's drive (Drive's keyframes at y = 0) behind a truck 12 m ahead of the sensor
 // in the next lane (y 2 to 4.5, 8 m long), with `parked` standing still.
 std::vector<WorldKeyframe> BehindATruck(const test::Box& parked) {

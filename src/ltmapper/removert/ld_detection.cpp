@@ -429,7 +429,7 @@ std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
 // of `own` map) split into clusters at ld_residue_gap_m (farther out at the sensor's sample gaps:
 // ResidueGaps), sized together with `unseen` (the same map's changes on the same side that the
-// other session did not see through): a thing whose end the other session saw through and whose
+// other session did not see through, and the lower parts of both: LabelChanges): a thing whose end the other session saw through and whose
 // body it never observed is one thing, not a pedestrian. A cluster that fits in a mover's size,
 // ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
 // point of `own` within half that around it) to its top, and that no larger cluster comes that
@@ -475,8 +475,11 @@ std::vector<bool> LowerPartsOf(const PointCloud& body, const std::vector<bool>& 
 // The labels of one map's points (`own`) given its raw changes (`missing`, Raw) and the other
 // session's keyframes: same / strong / weak / unobserved (Split), then the residues among the
 // changes the other session saw through (strong ND, weak PD), sized with those it did not (weak
-// ND, strong PD): clustered without the lower parts (kRawAboveTheirGround), which join the
-// residue they touch.
+// ND, strong PD) and with the lower parts (kRawAboveTheirGround) of both: a lower part is marked
+// only where it touches a residue (LowerPartsOf), but it is part of the thing's size. Where LD's
+// radius has grown to ld.radius_max_m, a car's lower metre stands within it on the other
+// session's ground: sized without it, seed 7's rosette car 1 (true poses) was two pieces of its
+// roof 1.5 m and 1.2 m long, each a mover's residue, and the car that left was no change.
 void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missing, const PointCloud& other,
                   const std::vector<WorldKeyframe>& own_voters, const std::vector<WorldKeyframe>& others, bool nd,
                   const RemovertConfig& cfg, int threads, std::vector<std::uint8_t>* label) {
@@ -493,10 +496,12 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
   std::vector<std::uint32_t> body, lower, unseen;
   for (std::uint32_t i : raw) {
     if ((*label)[i] == seen_label) (missing[i] == kRawAboveTheirGround ? lower : body).push_back(i);
-    if ((*label)[i] == unseen_label && missing[i] != kRawAboveTheirGround) unseen.push_back(i);
+    if ((*label)[i] == unseen_label) unseen.push_back(i);
   }
   const PointCloud body_pts = own.select(body);
-  const std::vector<bool> residue = Residues(body_pts, own.select(unseen), own, own_voters, cfg, threads);
+  PointCloud sized_with = own.select(unseen);
+  sized_with.append(own.select(lower));
+  const std::vector<bool> residue = Residues(body_pts, sized_with, own, own_voters, cfg, threads);
   const std::vector<bool> residue_lower = LowerPartsOf(body_pts, residue, own.select(lower), cfg);
   for (std::size_t j = 0; j < body.size(); ++j)
     if (residue[j]) (*label)[body[j]] = kLdResidue;
