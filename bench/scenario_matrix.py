@@ -11,7 +11,8 @@ one table, worst HD SA first:
   against the beam truth (and the exact-ray truth) | changed objects found (precision) [found among the observable ones, eval objects' slice] | HD wall s/kf | run wall s | peak MB of the run
 
 usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyframes N] [--seed S] [--true-poses]
-                               [--reuse DIR] [--slam-config F] [--removert-config F] [--map-config F] [scenario.yaml ...]
+                               [--reuse DIR] [--baseline DIR] [--slam-config F] [--removert-config F] [--map-config F]
+                               [scenario.yaml ...]
   --true-poses: the simulator's true world poses instead of LT-SLAM's (`ltmapper run --poses`), the
   second pose source of issue 17's acceptance; "consistency" is then 0.
   --keyframes sets route.keyframes of every scenario (e.g. 40 for a quick pass), --seed the seed.
@@ -21,8 +22,12 @@ usage: bench/scenario_matrix.py [--ltmapper BIN] [--out DIR] [--keep] [--keyfram
   --reuse DIR: the --out of an earlier --keep run over the same scenarios (its seed and pose source):
   each row's simulation is hard-linked from there and its LT-SLAM output (run/aligned) copied, and
   `ltmapper run --from removert` runs LT-removert and LT-map with --ltmapper: a change to those stages
-  measured on the same poses as the earlier binary's rows (diff the two --out folders' eval/), in
+  measured on the same poses as the earlier binary's rows (compare them with --baseline), in
   about two thirds of the time of full runs (--seed and --keyframes are the kept run's, not given again).
+  --baseline DIR: the --out of an earlier run over the same scenarios (e.g. main's binary with --reuse
+  on the same kept run): after the table, each row's figures that differ from that run's, eval file by
+  eval file (HD SA / DA, LD P / R of PD and ND and the changed objects' recall, objects found and
+  precision), or "same".
   Exit status 0 even when a row misses a target: this prints figures, the tests judge.
 """
 import argparse
@@ -207,6 +212,45 @@ def fmt(v, scale=1.0, digits=2):
     return "n/a" if v is None else ("%.*f" % (digits, v * scale))
 
 
+def eval_figures(path):
+    """The figures of one eval JSON that --baseline compares: {name: value}."""
+    d = load(path)
+    if "hd" in d:
+        return {k: d["hd"].get(k) for k in ("sa", "da")}
+    if "ld" in d:
+        f = {}
+        for k in ("pd", "nd"):
+            f[k + " P"], f[k + " R"] = d["ld"][k]["precision"], d["ld"][k]["recall"]
+        for k in ("pd_objects", "nd_objects"):
+            f[k + " R"] = d["ld"][k]["recall"]
+        return f
+    if "objects" in d:
+        return {k: d["objects"].get(k) for k in ("found", "clusters", "precision")}
+    return {}
+
+
+def print_changes(rows, out, baseline):
+    """Per row: the eval figures (eval_figures) that differ from the same row of `baseline`."""
+    print("\nChanges against %s:" % baseline)
+    for r in sorted(rows, key=lambda r: r["name"]):
+        ev, base_ev = os.path.join(out, r["name"], "eval"), os.path.join(baseline, r["name"], "eval")
+        if not os.path.isdir(base_ev):
+            print("- %s: not in the baseline" % r["name"])
+            continue
+        lines = []
+        for path in sorted(glob.glob(os.path.join(ev, "*.json"))):
+            base = os.path.join(base_ev, os.path.basename(path))
+            if not os.path.exists(base):
+                lines.append("%s: not in the baseline" % os.path.basename(path))
+                continue
+            a, b = eval_figures(base), eval_figures(path)
+            show = lambda v: str(v) if isinstance(v, int) else fmt(v, 1, 5)
+            diff = ["%s %s -> %s" % (k, show(a.get(k)), show(b[k])) for k in b if a.get(k) != b[k]]
+            if diff:
+                lines.append("%s: %s" % (os.path.basename(path), ", ".join(diff)))
+        print("- %s: %s" % (r["name"], "; ".join(lines) if lines else "same"))
+
+
 def print_table(rows):
     print(("| scenario | aligned | SA %% per session | DA %% per session (own removal) [separable] | consistency m / deg | "
           "LD pair: PD P/R, ND P/R {recall over changed objects PD/ND} <separable recall PD/ND>; strong/weak correct PD/ND, beam truth (exact-ray truth) | objects found (precision) [observable found] | HD wall s/kf (%d threads) | run wall s | peak MB |") % os.cpu_count())
@@ -239,6 +283,7 @@ def main():
                          "LT-SLAM's; LD's rotation tolerance is then measured at those poses")
     for stage in ("slam", "removert", "map"):
         ap.add_argument("--%s-config" % stage, default=None, help="`ltmapper run --%s-config` (default: none)" % stage)
+    ap.add_argument("--baseline", default=None, help="--out of an earlier run over the same scenarios: print what changed")
     ap.add_argument("scenarios", nargs="*")
     a = ap.parse_args()
     run_args = []
@@ -259,6 +304,8 @@ def main():
         except RuntimeError as e:
             print("scenario %s: %s" % (y, e), file=sys.stderr, flush=True)
     print_table(rows)
+    if a.baseline:
+        print_changes(rows, a.out, a.baseline)
 
 
 if __name__ == "__main__":
