@@ -237,8 +237,9 @@ def print_changes(rows, out, baseline):
         if not os.path.isdir(base_ev):
             print("- %s: not in the baseline" % r["name"])
             continue
-        lines = []
-        for path in sorted(glob.glob(os.path.join(ev, "*.json"))):
+        paths = sorted(glob.glob(os.path.join(ev, "*.json")))
+        lines = [] if paths else ["no eval files in %s" % ev]
+        for path in paths:
             base = os.path.join(base_ev, os.path.basename(path))
             if not os.path.exists(base):
                 lines.append("%s: not in the baseline" % os.path.basename(path))
