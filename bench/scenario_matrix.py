@@ -231,6 +231,7 @@ def eval_figures(path):
 
 def print_changes(rows, out, baseline):
     """Per row: the eval figures (eval_figures) that differ from the same row of `baseline`."""
+    show = lambda v: str(v) if isinstance(v, int) else fmt(v, 1, 5)
     print("\nChanges against %s:" % baseline)
     for r in sorted(rows, key=lambda r: r["name"]):
         ev, base_ev = os.path.join(out, r["name"], "eval"), os.path.join(baseline, r["name"], "eval")
@@ -245,7 +246,6 @@ def print_changes(rows, out, baseline):
                 lines.append("%s: not in the baseline" % os.path.basename(path))
                 continue
             a, b = eval_figures(base), eval_figures(path)
-            show = lambda v: str(v) if isinstance(v, int) else fmt(v, 1, 5)
             diff = ["%s %s -> %s" % (k, show(a.get(k)), show(b[k])) for k in b if a.get(k) != b[k]]
             if diff:
                 lines.append("%s: %s" % (os.path.basename(path), ", ".join(diff)))

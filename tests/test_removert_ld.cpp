@@ -538,7 +538,7 @@ TEST(RemovertLd, ASeenThroughPieceOfALargerChangeIsNoResidue) {
 
 // A thing's lower parts size it too. A flatbed truck 6 m long, only in the central: a cab and a
 // load 1.5 m long and 1.8 m high at its ends, a bed 0.9 m high between them. Where the sessions'
-// rotation error is large (1.5 deg), LD's radius grows to ld.radius_max_m 10 m out, so the bed and
+// rotation error is large (1.5 deg), LD's radius reaches ld.radius_max_m 9 m out, so the bed and
 // the ends' lower halves stand within it on the query's ground: lower parts, which the cleanup
 // does not cluster. Clustered without them, the cab and the load are two pieces that each fit a
 // pedestrian (a mover's residue: the whole truck went as the central's HD); with them, one thing

@@ -4,8 +4,9 @@
 //   centroid, lo, hi, box_center, size (3 each), yaw, ground_z, height_above_ground, clearance,
 //   range, observed, twin, attached, box seen (version 2; version 1 has none: 0) fractions; u32
 //   alike beside (version 3; before: 0); u32 cloud points, then the arrays f32 x, y, z, intensity,
-//   u8 class, u16 session, each as byte planes (all lowest bytes first). Ids and partners are not stored: Store::Objects assigns them
-//   over all steps. The reader checks every length against the bytes left.
+//   u8 class, u16 session, each as byte planes (all lowest bytes first). Ids and partners are not
+//   stored: Store::Objects assigns them over all steps. The reader checks every length against the
+//   bytes left.
 #include "ltmapper/map/detail.hpp"
 
 #include <cstring>

@@ -230,9 +230,8 @@ std::string Joined(const std::vector<int>& v, const char* sep) {
 void WriteObjectRow(std::ostream& os, const MapObject& o) {
   os << o.id << ',' << o.session << ',' << o.reference << ',' << ToString(o.cls) << ',' << o.change << ','
      << o.partner << ',' << Joined(o.move_candidates, ";") << ',' << o.alike_beside << ',' << o.exists_in << ','
-     << o.track << ','
-     << Joined(o.track_sessions, ";") << ',' << o.points << ',' << o.confidence << ',' << o.centroid.x() << ','
-     << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y() << ',' << o.lo.z() << ','
+     << o.track << ',' << Joined(o.track_sessions, ";") << ',' << o.points << ',' << o.confidence << ','
+     << o.centroid.x() << ',' << o.centroid.y() << ',' << o.centroid.z() << ',' << o.lo.x() << ',' << o.lo.y() << ',' << o.lo.z() << ','
      << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << ',' << o.box_center.x() << ',' << o.box_center.y() << ','
      << o.box_center.z() << ',' << o.yaw_rad * kRadToDeg << ',' << o.size.x() << ',' << o.size.y() << ','
      << o.size.z() << ',' << o.ground_z << ',' << o.height_above_ground << ',' << o.clearance_m << ',' << o.range_m << ','

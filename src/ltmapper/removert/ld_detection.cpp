@@ -429,8 +429,9 @@ std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<
 // Multi-session cleanup (paper Fig. 3(f)): `seen` (changes the other session saw through, points
 // of `own` map) split into clusters at ld_residue_gap_m (farther out at the sensor's sample gaps:
 // ResidueGaps), sized together with `unseen` (the same map's changes on the same side that the
-// other session did not see through, and the lower parts of both: LabelChanges): a thing whose end the other session saw through and whose
-// body it never observed is one thing, not a pedestrian. A cluster that fits in a mover's size,
+// other session did not see through, and the lower parts of both: LabelChanges): a thing whose
+// end the other session saw through and whose body it never observed is one thing, not a
+// pedestrian. A cluster that fits in a mover's size,
 // ld_residue_length_m, along its longest horizontal edge and from the ground under it (the lowest
 // point of `own` within half that around it) to its top, and that no larger cluster comes that
 // close to, is a residue of a mover (marked in the result, per point of `seen`). A pole, a
@@ -493,15 +494,14 @@ void LabelChanges(const PointCloud& own, const std::vector<std::uint8_t>& missin
   for (std::size_t j = 0; j < raw.size(); ++j)
     (*label)[raw[j]] = s.strong[j] ? kLdStrong : s.weak[j] ? kLdWeak : s.unobserved[j] ? kLdUnobserved : kLdSame;
   const std::uint8_t seen_label = nd ? kLdStrong : kLdWeak, unseen_label = nd ? kLdWeak : kLdStrong;
-  std::vector<std::uint32_t> body, lower, unseen;
+  std::vector<std::uint32_t> body, lower, sized_with;  // sized_with: the unseen changes and every lower part
   for (std::uint32_t i : raw) {
-    if ((*label)[i] == seen_label) (missing[i] == kRawAboveTheirGround ? lower : body).push_back(i);
-    if ((*label)[i] == unseen_label) unseen.push_back(i);
+    const bool is_lower = missing[i] == kRawAboveTheirGround;
+    if ((*label)[i] == seen_label) (is_lower ? lower : body).push_back(i);
+    if ((*label)[i] == unseen_label || ((*label)[i] == seen_label && is_lower)) sized_with.push_back(i);
   }
   const PointCloud body_pts = own.select(body);
-  PointCloud sized_with = own.select(unseen);
-  sized_with.append(own.select(lower));
-  const std::vector<bool> residue = Residues(body_pts, sized_with, own, own_voters, cfg, threads);
+  const std::vector<bool> residue = Residues(body_pts, own.select(sized_with), own, own_voters, cfg, threads);
   const std::vector<bool> residue_lower = LowerPartsOf(body_pts, residue, own.select(lower), cfg);
   for (std::size_t j = 0; j < body.size(); ++j)
     if (residue[j]) (*label)[body[j]] = kLdResidue;
