@@ -227,6 +227,8 @@ struct BeamAsk {
   bool want_around = false;               // PD: kBeamAround, kBeamPassed; ND (false): kBeamNear
   bool ask_through = false;               // kBeamThrough by a beam that crossed the plane
   const SurfaceExtent* inside = nullptr;  // kBeamThrough by the own column's beam (PassedInside)
+  bool on_line = false;                   // kBeamThrough by a beam that passed a scan line's point
+                                          // without a return (PassedWithoutReturn, nothing met near)
   const PointInWorld* world = nullptr;    // the surface a far return met (HitSurfaces)
 };
 
@@ -247,8 +249,12 @@ class ColumnImage {
   // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
   // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
   // ended near it and the beam of its own column passed it without a return crossing its surface
-  // inside that extent (PassedInside), on the same MetSurfaceNear condition. Without want_around
-  // (ND), kBeamNear when a beam of the table passed within the tolerance of it (BeamNear). With
+  // inside that extent (PassedInside), on the same MetSurfaceNear condition; with on_line (a scan
+  // line's point over its own map's surface), kBeamThrough also when none ended near it, a beam passed
+  // it without a return (PassedWithoutReturn), no return of the scan lies within ld.normal_radius_m of
+  // it and the beams above and below it did not meet a surface at its distance (MetUnderOrOver).
+  // Without want_around (ND), kBeamNear when a beam of the table passed within the tolerance of it
+  // (BeamNear). With
   // `world` (null: not asked), a return farther than tol from the point along its ray ended near it
   // only within the along-ray tolerance of the surface it met too (HitSurfaces).
   std::uint8_t Observed(const BeamPoint& p, const BeamAsk& ask) const;
@@ -309,8 +315,13 @@ class ColumnImage {
   bool WentBeyond(const BeamPoint& p, std::size_t c, int r) const;
   template <class At>
   bool OwnOrAround(std::size_t c, int row, At&& at, int* ra, int* rb) const;
-  // A return of the scan on the point's plane (within tol) within surface_reach_m_ of it.
+  // A return of the scan on the point's plane (within tol; any return where `plane` is null) within
+  // surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
+  // The nearest beams above and below a scan line's point in its column (and the columns beside it)
+  // returned at its horizontal distance (within tol): the surface under or over it that the scan met
+  // (a standing wall whose top row the point is), which a beam that passed it went over or under.
+  bool MetUnderOrOver(const BeamPoint& p, int col) const;
   BeamTest test_;
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams

@@ -224,6 +224,24 @@ std::vector<SurfaceExtent> SurfaceExtents(const PointCloud& points, const PointC
   return out;
 }
 
+// Per point not in a plane (`planar` false: a scan line of its map), whether its own map holds a
+// point lower than it by more than ld.beam_tol_m in its xy cell (ld.normal_radius_m wide): the line
+// stands over a surface (a fence's row over the ground), not on it. A far ground row is the lowest
+// its cell holds: a beam that passed it without a return grazed the ground, whose far returns the
+// sensor drops, no sign its place was free.
+std::vector<bool> OverOwnSurface(const PointCloud& points, const PointCloud& own_map, const std::vector<bool>& planar,
+                                 const RemovertConfig& cfg) {
+  std::vector<bool> out(points.size(), false);
+  geometry::LowestGrid lowest(cfg.ld_normal_radius_m);
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (!planar[i]) lowest.Watch(points.points[i].xyz(), points.points[i].xyz());
+  lowest.AddWatched(own_map);
+  float z = 0.f;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    out[i] = !planar[i] && lowest.At(points.points[i].xyz(), &z) && z < points.points[i].z - float(cfg.ld_beam.tol_m);
+  return out;
+}
+
 // The surfaces of the points asked and the vote options they enable: normals from the own map
 // (planar, rim), the beam test or surface hits, and for ND the points whose place a beam may have
 // gone through. `opt` points into this struct: it is filled in place and never copied or moved.
@@ -236,6 +254,7 @@ struct SurfaceSetup {
   std::vector<bool> planar;      // normals[i] is a plane's (else a scan line's: orientation unknown)
   std::vector<bool> rim;         // points[i] lies at the rim of its plane (EstimateNormals)
   std::vector<bool> through_at;  // ND: points inside a plane, whose place a beam may have gone through
+  std::vector<bool> line_at;     // ND: points on a scan line (no plane), which a beam may have passed
   std::vector<SurfaceExtent> extents;  // ND: how far the upright surface around a point goes on, for
                                        // a beam that passed it without a return
   std::unique_ptr<HitSurfaces> hits;   // beams: the other session's surfaces where its beams ended
@@ -265,6 +284,8 @@ void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const Po
     s->opt.through_at = &s->through_at;
     s->extents = SurfaceExtents(points, own_map, s->normals, s->through_at, cfg.ld_beam.tol_m, threads);
     s->opt.passed_at = &s->extents;
+    s->line_at = OverOwnSurface(points, own_map, s->planar, cfg);
+    s->opt.line_at = &s->line_at;
   }
   if (!s->beams) s->opt.surface_max_m = cfg.ld_surface_max_m;
 }

@@ -765,10 +765,15 @@ std::uint8_t ColumnImage::Observed(const BeamPoint& p, const BeamAsk& ask) const
   // Not where the scan met the point's surface nearby (MetSurfaceNear): that ray passed an edge of
   // it (a wall's top, a gap between fence panels) without crossing it.
   const bool through = (went || passed_own) && !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, p.plane);
+  // A scan line's point (its surface's orientation unknown: a far fence's rows): a beam that passed
+  // it without a return, where the scan met nothing within reach of it (a wall's top row: the beams
+  // below met the wall).
+  const bool through_line = ask.on_line && !ended && PassedWithoutReturn(p.range, p.pitch, p.yaw) &&
+                            !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, nullptr) && !MetUnderOrOver(p, col);
   // kBeamNear gates ND's pixel see-through (VoteCounts); PD (want_around) does not read it.
   const bool near = !ask.want_around && BeamNear(p.range, p.pitch);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
-                      (through ? kBeamThrough : 0) | (near ? kBeamNear : 0));
+                      (through || through_line ? kBeamThrough : 0) | (near ? kBeamNear : 0));
 }
 
 bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps,
@@ -783,8 +788,25 @@ bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eige
     for (int r = r0; r <= r1; ++r) {
       if (!std::isfinite(range_[c + std::size_t(r)])) continue;
       const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
-      if (PlaneDistance(plane, q) <= tol && (q - ps).squaredNorm() <= reach_m * reach_m) return true;
+      if ((plane == nullptr || PlaneDistance(plane, q) <= tol) && (q - ps).squaredNorm() <= reach_m * reach_m)
+        return true;
     }
+  }
+  return false;
+}
+
+bool ColumnImage::MetUnderOrOver(const BeamPoint& p, int col) const {
+  const float tol = float(test_.tol_m), across = std::hypot(p.ps.x(), p.ps.y());
+  const int row = grid_.Row(p.pitch);
+  const auto at_its_distance = [&](std::size_t c, int r) {
+    if (r < 0) return false;
+    const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
+    return std::fabs(std::hypot(q.x(), q.y()) - across) <= tol;
+  };
+  for (int d = -1; d <= 1; ++d) {
+    const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
+    const auto [ra, rb] = BeamsAround(range_.data() + c, row);
+    if (at_its_distance(c, ra) || at_its_distance(c, rb)) return true;
   }
   return false;
 }
@@ -1242,6 +1264,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     sc->seen_beams[sc->idx[j]] =
         sc->columns->Observed({sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl},
                               {s.options.count_own_see, asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside),
+                               asked(s.options.line_at),
                                s.options.hit_surfaces != nullptr ? &world : nullptr});
   }
 }

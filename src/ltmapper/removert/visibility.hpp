@@ -78,11 +78,15 @@ struct VisibilityOptions {
   // sensor's range) and crossed its plane within that extent went through its place
   // (ColumnImage::PassedInside; a level surface is passed at a grazing angle). Counts in beam_through.
   const std::vector<SurfaceExtent>* passed_at = nullptr;
+  // Likewise: per point, whether it lies on a scan line of its map (no plane) over its map's surface:
+  // a beam that passed it without a return, where the scan met nothing near it nor at its distance
+  // above or below it (ColumnImage::Observed's on_line), went through its place. Counts in beam_through.
+  const std::vector<bool>* line_at = nullptr;
   // With the beam test: the keyframes' own surfaces (their session's map) where their beams ended,
   // whose incidence also bounds how far along its ray a return may lie from the point
   // (HitSurfaces; null: the point's plane alone).
   const detail::HitSurfaces* hit_surfaces = nullptr;
-  bool AsksThrough() const { return through_at != nullptr || passed_at != nullptr; }
+  bool AsksThrough() const { return through_at != nullptr || passed_at != nullptr || line_at != nullptr; }
 };
 VisibilityVotes CountVisibility(const PointCloud& points, const std::vector<WorldKeyframe>& keyframes,
                                 const std::vector<double>& resolutions_deg,
