@@ -204,7 +204,7 @@ def scenario(ltm, yaml, out_root, keyframes, seed, keep, run_args, true_poses=Fa
     row = evaluate(ltm, sim, out, names)
     row.update(name=name, sessions=len(names), cpu=cpu, rss=rss, wall=wall)
     if not keep:  # the run's clouds are large; the figures are in eval/
-        subprocess.call(["rm", "-rf", os.path.join(runp, "changes"), os.path.join(runp, "map.ltmap")])
+        subprocess.call(["rm", "-rf"] + [os.path.join(runp, f) for f in ("changes", "map.ltmap", "live.pcd", "meta.pcd")])
     return row
 
 
@@ -276,7 +276,7 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "scenario_matrix"))
     ap.add_argument("--keyframes", type=int, default=0, help="route.keyframes of every scenario (0 = the scenario's)")
     ap.add_argument("--seed", type=int, default=None, help="simulator seed of every scenario (default: the scenario's)")
-    ap.add_argument("--keep", action="store_true", help="keep each run's changes/ and map store")
+    ap.add_argument("--keep", action="store_true", help="keep each run's changes/, map store and live / meta maps")
     ap.add_argument("--reuse", default=None,
                     help="--out of an earlier --keep run: its simulations and LT-SLAM outputs, LT-removert on")
     ap.add_argument("--true-poses", action="store_true",
