@@ -227,8 +227,8 @@ struct BeamAsk {
   bool want_around = false;               // PD: kBeamAround, kBeamPassed; ND (false): kBeamNear
   bool ask_through = false;               // kBeamThrough by a beam that crossed the plane
   const SurfaceExtent* inside = nullptr;  // kBeamThrough by the own column's beam (PassedInside)
-  bool on_line = false;                   // kBeamThrough by a beam that passed a scan line's point
-                                          // without a return (PassedWithoutReturn, nothing met near)
+  const Eigen::Vector3f* line_up = nullptr;  // a scan line's point: the world's up in the sensor frame;
+                                             // kBeamThrough by a beam that passed it without a return
   const PointInWorld* world = nullptr;    // the surface a far return met (HitSurfaces)
 };
 
@@ -249,7 +249,7 @@ class ColumnImage {
   // no return of the scan lies on its plane within ld.normal_radius_m of it (MetSurfaceNear); with
   // `inside` (the point's surface extent, PassedInside; null = not asked), kBeamThrough also when none
   // ended near it and the beam of its own column passed it without a return crossing its surface
-  // inside that extent (PassedInside), on the same MetSurfaceNear condition; with on_line (a scan
+  // inside that extent (PassedInside), on the same MetSurfaceNear condition; with line_up (a scan
   // line's point over its own map's surface), kBeamThrough also when none ended near it, a beam passed
   // it without a return (PassedWithoutReturn), no return of the scan lies within ld.normal_radius_m of
   // it and the beams above and below it did not meet a surface at its distance (MetUnderOrOver).
@@ -319,9 +319,10 @@ class ColumnImage {
   // surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
   // The nearest beams above and below a scan line's point in its column (and the columns beside it)
-  // returned at its horizontal distance (within tol): the surface under or over it that the scan met
-  // (a standing wall whose top row the point is), which a beam that passed it went over or under.
-  bool MetUnderOrOver(const BeamPoint& p, int col) const;
+  // returned at its horizontal distance (within tol; level across `up`, the world's up in the sensor
+  // frame: a tilted sensor's own z is not): the surface under or over it that the scan met (a
+  // standing wall whose top row the point is), which a beam that passed it went over or under.
+  bool MetUnderOrOver(const BeamPoint& p, int col, const Eigen::Vector3f& up) const;
   BeamTest test_;
   MultiResImage::Grid grid_;  // cells stored column by column: [col * rows + row]
   std::vector<int> span_;     // [rows] per row: how far above / below to look for the beams

@@ -768,8 +768,9 @@ std::uint8_t ColumnImage::Observed(const BeamPoint& p, const BeamAsk& ask) const
   // A scan line's point (its surface's orientation unknown: a far fence's rows): a beam that passed
   // it without a return, where the scan met nothing within reach of it (a wall's top row: the beams
   // below met the wall).
-  const bool through_line = ask.on_line && !ended && PassedWithoutReturn(p.range, p.pitch, p.yaw) &&
-                            !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, nullptr) && !MetUnderOrOver(p, col);
+  const bool through_line = ask.line_up != nullptr && !ended && PassedWithoutReturn(p.range, p.pitch, p.yaw) &&
+                            !MetSurfaceNear(p.range, p.pitch, p.yaw, p.ps, nullptr) &&
+                            !MetUnderOrOver(p, col, *ask.line_up);
   // kBeamNear gates ND's pixel see-through (VoteCounts); PD (want_around) does not read it.
   const bool near = !ask.want_around && BeamNear(p.range, p.pitch);
   return std::uint8_t((ended ? kBeamEnded : 0) | (around ? kBeamAround : 0) | (passed ? kBeamPassed : 0) |
@@ -795,13 +796,12 @@ bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eige
   return false;
 }
 
-bool ColumnImage::MetUnderOrOver(const BeamPoint& p, int col) const {
-  const float tol = float(test_.tol_m), across = std::hypot(p.ps.x(), p.ps.y());
+bool ColumnImage::MetUnderOrOver(const BeamPoint& p, int col, const Eigen::Vector3f& up) const {
+  const auto level = [&](const Eigen::Vector3f& v) { return (v - v.dot(up) * up).norm(); };
+  const float tol = float(test_.tol_m), across = level(p.ps);
   const int row = grid_.Row(p.pitch);
   const auto at_its_distance = [&](std::size_t c, int r) {
-    if (r < 0) return false;
-    const Eigen::Vector3f& q = ret_[c + std::size_t(r)];
-    return std::fabs(std::hypot(q.x(), q.y()) - across) <= tol;
+    return r >= 0 && std::fabs(level(ret_[c + std::size_t(r)]) - across) <= tol;
   };
   for (int d = -1; d <= 1; ++d) {
     const std::size_t c = std::size_t((col + d + grid_.cols) % grid_.cols) * std::size_t(grid_.rows);
@@ -1248,6 +1248,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     const Eigen::Vector3f ps = fired ? sc->fired_at[j] : Eigen::Vector3f(Rt * (Eigen::Vector3f(ix.x()[i], ix.y()[i], ix.z()[i]) - c));
     const Eigen::Matrix3f R = fired ? Eigen::Matrix3f(*sc->fired_turn[j] * Rt) : Rt;
     const Eigen::Vector3f ns = R * (*s.options.normals)[ix.order()[i]];
+    const Eigen::Vector3f up = R.col(2);  // the world's up in the sensor frame
     float* pl = &sc->plane[4 * j];
     pl[0] = ns.x();
     pl[1] = ns.y();
@@ -1264,7 +1265,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
     sc->seen_beams[sc->idx[j]] =
         sc->columns->Observed({sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl},
                               {s.options.count_own_see, asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside),
-                               asked(s.options.line_at),
+                               asked(s.options.line_at) ? &up : nullptr,
                                s.options.hit_surfaces != nullptr ? &world : nullptr});
   }
 }

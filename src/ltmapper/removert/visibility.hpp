@@ -80,7 +80,7 @@ struct VisibilityOptions {
   const std::vector<SurfaceExtent>* passed_at = nullptr;
   // Likewise: per point, whether it lies on a scan line of its map (no plane) over its map's surface:
   // a beam that passed it without a return, where the scan met nothing near it nor at its distance
-  // above or below it (ColumnImage::Observed's on_line), went through its place. Counts in beam_through.
+  // above or below it (ColumnImage::Observed's line_up), went through its place. Counts in beam_through.
   const std::vector<bool>* line_at = nullptr;
   // With the beam test: the keyframes' own surfaces (their session's map) where their beams ended,
   // whose incidence also bounds how far along its ray a return may lie from the point
