@@ -807,8 +807,7 @@ TEST(RemovertLd, AFarCarSampledSparselyIsNoResidue) {
   test::Lidar lidar;
   lidar.max_range = 130.0;
   lidar.cols = 360;
-  RemovertConfig cfg = test::ConfigFor(lidar);
-  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;
+  RemovertConfig cfg = test::RingConfigFor(lidar);
   const auto central = DriveAlong({far_wall}, -20, 21, 80.0, 1.8, lidar);
   const auto query = DriveAlong({far_wall, car, ped}, 0, 2, 0.0, 1.8, lidar);
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
@@ -835,8 +834,7 @@ TEST(RemovertLd, AFarCarSampledSparselyIsNoResidue) {
 TEST(RemovertLd, AFewBeamsOnAFacesFootDoNotOutvoteTheManyThatPassedIt) {
   const test::Box structure = test::MakeBox(-2, -68.6, 0, 1.6, -65, 3.0, 33);
   const test::Lidar lidar;
-  RemovertConfig cfg = test::ConfigFor(lidar);
-  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;  // a ring sensor: its beams tell their returns
+  RemovertConfig cfg = test::RingConfigFor(lidar);
   const auto c = DriveAlong({}, -20, 21, 0.0, 1.8, lidar), q = DriveAlong({structure}, -20, 21, 0.0, 1.8, lidar);
   const auto ld = removert::DetectLd(removert::BuildSessionMap(c, cfg, 2), removert::BuildSessionMap(q, cfg, 2), c, q,
                                      cfg, 2);
@@ -885,8 +883,7 @@ TEST(RemovertLd, ABoardTheQuerySawAgainstTheSkyIsStrongNd) {
   const test::Lidar lidar;
   const auto central = DriveAlong({board}, -20, 21, 22.0, 3.0, lidar);
   const auto query = DriveAlong({}, -20, 21, -25.0, 1.8, lidar);
-  RemovertConfig cfg = test::ConfigFor(lidar);
-  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;  // a ring sensor that fires every beam each step
+  RemovertConfig cfg = test::RingConfigFor(lidar);
   ASSERT_TRUE(cfg.sensor_model.ring_based);
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
@@ -911,8 +908,7 @@ TEST(RemovertLd, ABeamThatPassedOverAWallsTopDidNotSeeThroughIt) {
   const test::Lidar sparse{16, 15.0, -15.0, 1800, 100.0};
   const auto central = DriveAlong({wall}, -20, 21, 22.0, 3.0, sparse);
   const auto query = DriveAlong({wall}, -20, 21, -25.0, 1.8, sparse);
-  RemovertConfig cfg = test::ConfigFor(sparse);
-  cfg.sensor_model.azimuth_step_deg = 360.0 / sparse.cols;
+  RemovertConfig cfg = test::RingConfigFor(sparse);
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
   const test::Box top = test::MakeBox(-6, 33.9, 2.0, 6, 34.3, 2.8, 30);
@@ -965,8 +961,7 @@ TEST(RemovertLd, AFenceTheCentralSawInScanLinesIsStrongNdWhereTheQuerysBeamsPass
   const test::Lidar sparse{16, 15.0, -15.0, 1800, 100.0};
   const auto central = DriveAlong({fence}, -10, 11, 0.0, 3.46, sparse);
   const auto query = DriveAlong({}, -10, 11, -20.0, 3.79, sparse);
-  RemovertConfig cfg = test::ConfigFor(sparse);
-  cfg.sensor_model.azimuth_step_deg = 360.0 / sparse.cols;
+  RemovertConfig cfg = test::RingConfigFor(sparse);
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
   const test::Box inner = test::MakeBox(-8, 69.9, 0.3, 8, 70.2, 3.0, 30);
@@ -991,8 +986,7 @@ TEST(RemovertLd, FarGroundRowsTheQuerysBeamsPassedOverBeyondItsRangeStayWeak) {
   const test::Lidar query_lidar{16, 15.0, -15.0, 1800, 60.0};
   const auto central = DriveAlong({}, 0, 1, 97.0, 1.97, central_lidar);
   const auto query = DriveAlong({}, -10, 11, 0.0, 3.0, query_lidar);
-  RemovertConfig cfg = test::ConfigFor(central_lidar);
-  cfg.sensor_model.azimuth_step_deg = 360.0 / central_lidar.cols;
+  RemovertConfig cfg = test::RingConfigFor(central_lidar);
   const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
   const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
   const test::Box strip = test::MakeBox(-10, 55, -0.1, 10, 59, 0.1, -1);

@@ -42,6 +42,14 @@ inline removert::RemovertConfig ConfigFor(const Lidar& lidar = {}) {
   return removert::WithSensor(cfg, {});
 }
 
+// ConfigFor a ring sensor that fires every beam at each of its `cols` azimuth steps (its beams tell
+// their returns: the beam tests that read a beam's empty cells, PassedWithoutReturn and kin).
+inline removert::RemovertConfig RingConfigFor(const Lidar& lidar) {
+  removert::RemovertConfig cfg = ConfigFor(lidar);
+  cfg.sensor_model.azimuth_step_deg = 360.0 / lidar.cols;
+  return cfg;
+}
+
 // Ray / box slab test: entry distance t > 0 or +inf.
 inline double HitBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Box& b) {
   double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
