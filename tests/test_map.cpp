@@ -1013,22 +1013,23 @@ MapObject FacePiece(double x0, double x1, double y = 0.0) {
 // Two pieces of one fence 4 m apart along its line (x 0-4 and 8-10). A keyframe 15 m off the line
 // looking at the gap with a clear line of sight saw that the fence was not there; a wall 8 m in
 // front of the fence hides the gap, and a keyframe looking along the road (the gap 90 deg off its
-// +-35 deg cone) never looked: then the pieces are one fence (JoinHiddenGaps). A piece off the
-// line, or one beside the other, has no gap.
+// +-35 deg cone) never looked: then the pieces are one fence (JoinHiddenGaps), as where a sparse
+// sensor's rows from far off likely passed over the gap (less than a row's worth of samples on
+// it). A piece off the line, or one beside the other, has no gap.
 TEST(MapObjects, PiecesOfAFaceJoinAcrossAGapNoKeyframeSaw) {
   MapConfig cfg;
   cfg.object_sensor_azimuth_center_deg = 0.0;
   cfg.object_sensor_azimuth_half_fov_deg = 35.0;
   const MapObject whole = FacePiece(0.0, 4.0), part = FacePiece(8.0, 10.0);
-  const std::vector<Eigen::Vector3d> gap = detail::GapBetween(whole, part, cfg);
-  ASSERT_FALSE(gap.empty());
-  for (const auto& g : gap) {
+  const detail::Gap gap = detail::GapBetween(whole, part, cfg);
+  ASSERT_FALSE(gap.points.empty());
+  for (const auto& g : gap.points) {
     EXPECT_GT(g.x(), 4.0);
     EXPECT_LT(g.x(), 8.0);
     EXPECT_NEAR(g.y(), 0.0, 0.05);
   }
-  EXPECT_TRUE(detail::GapBetween(whole, FacePiece(8.0, 10.0, 2.0), cfg).empty()) << "off the line";
-  EXPECT_TRUE(detail::GapBetween(whole, FacePiece(3.0, 6.0), cfg).empty()) << "no gap between them";
+  EXPECT_TRUE(detail::GapBetween(whole, FacePiece(8.0, 10.0, 2.0), cfg).points.empty()) << "off the line";
+  EXPECT_TRUE(detail::GapBetween(whole, FacePiece(3.0, 6.0), cfg).points.empty()) << "no gap between them";
 
   const auto looking = [](double yaw_deg) {
     Pose T = Pose::Identity();
@@ -1036,15 +1037,25 @@ TEST(MapObjects, PiecesOfAFaceJoinAcrossAGapNoKeyframeSaw) {
     T.translation() = Eigen::Vector3d(6.0, -15.0, 1.8);
     return T;
   };
-  EXPECT_TRUE(detail::GapInClearView(gap, {looking(90.0)}, nullptr, cfg)) << "a clear view of the gap";
+  EXPECT_TRUE(detail::GapSampled(gap, {looking(90.0)}, nullptr, cfg)) << "a clear view of the gap";
   PointCloud wall;  // y = -8, x 0-12, 2.5 m tall
   for (double x = 0.0; x <= 12.0; x += 0.1)
     for (double z = 0.0; z <= 2.5; z += 0.1) wall.push_back(float(x), -8.f, float(z), 0.5f);
   const geometry::KdTree blockers(wall);
-  EXPECT_FALSE(detail::GapInClearView(gap, {looking(90.0)}, &blockers, cfg)) << "the wall hides the gap";
-  EXPECT_FALSE(detail::GapInClearView(gap, {looking(0.0)}, nullptr, cfg)) << "the gap lay outside the cone";
+  EXPECT_FALSE(detail::GapSampled(gap, {looking(90.0)}, &blockers, cfg)) << "the wall hides the gap";
+  EXPECT_FALSE(detail::GapSampled(gap, {looking(0.0)}, nullptr, cfg)) << "the gap lay outside the cone";
   cfg.object_sensor_azimuth_half_fov_deg = 180.0;
-  EXPECT_TRUE(detail::GapInClearView(gap, {looking(0.0)}, nullptr, cfg)) << "all around: it looked";
+  EXPECT_TRUE(detail::GapSampled(gap, {looking(0.0)}, nullptr, cfg)) << "all around: it looked";
+  // A sparse sensor 68 m off the gap: its rows, 2.4 m apart there, put 0.63 of a row on the gap's
+  // 1.5 m band from each view. One clear view likely passed over the gap; two sampled it.
+  cfg.object_sensor_step_deg = 2.0;
+  const auto far = [&](double x) {
+    Pose T = looking(90.0);
+    T.translation() = Eigen::Vector3d(x, -68.0, 1.8);
+    return T;
+  };
+  EXPECT_FALSE(detail::GapSampled(gap, {far(6.0)}, nullptr, cfg)) << "one view's rows passed over it";
+  EXPECT_TRUE(detail::GapSampled(gap, {far(6.0), far(5.0)}, nullptr, cfg)) << "two views sampled it";
 }
 
 TEST(MapObjects, AFaceThatGoesOnWhereTheReferenceNeverLookedIsCoverage) {
@@ -1182,7 +1193,8 @@ PointCloud FarColumns(std::initializer_list<float> zs, float y0, int n) {
 // points at 0.4 m, 44 % at 0.8 m and 1.2 m, 6 % at 1.6 m. Its width across its middle axis, between
 // the 5 % and 95 % quantiles, is 1.2 m: more than one row, an object (sqrt(12) standard deviations,
 // 0.97 m, against the equal rows' bound of 1.09 m made it a "sliver", as fence 9 of seed 0's VLP-16
-// rows). A rim one row wide with 2 % strays above it stays a sliver.
+// rows). A rim one row wide, 1.5 m up (above one row: no thing's only row, OneRowIsAll), with 2 %
+// strays above it stays a sliver.
 TEST(MapObjects, AFenceWhoseRowsHoldUnequalSharesIsNoSliver) {
   test::TempDir tmp;
   MapConfig cfg = Cfg();
@@ -1192,8 +1204,8 @@ TEST(MapObjects, AFenceWhoseRowsHoldUnequalSharesIsNoSliver) {
   KeyframeDelta d;
   for (const auto& [z, step] : {std::pair{0.4f, 8}, {0.8f, 1}, {1.2f, 1}, {1.6f, 8}})
     for (int j = 0; j <= 80; j += step) d.pd_weak.push_back(36.f, -4.f + 0.1f * float(j), z, 0.5f);
-  for (int j = 0; j <= 80; ++j) d.pd_weak.push_back(36.f, 10.f + 0.1f * float(j), 0.5f, 0.5f);  // the rim
-  for (const float y : {12.f, 16.f}) d.pd_weak.push_back(36.f, y, 1.0f, 0.5f);                     // its strays
+  for (int j = 0; j <= 80; ++j) d.pd_weak.push_back(36.f, 10.f + 0.1f * float(j), 1.5f, 0.5f);  // the rim
+  for (const float y : {12.f, 16.f}) d.pd_weak.push_back(36.f, y, 2.0f, 0.5f);                     // its strays
   s.IntegrateSession({"s1"}, "s0", {d}, {});
   std::vector<MapObject> rejected;
   const auto objs = s.Objects(&rejected);
@@ -1235,6 +1247,44 @@ TEST(MapObjects, OneRowAroundABodysCornerIsNoSliver) {
   ASSERT_EQ(rejected.size(), 1u);
   EXPECT_EQ(rejected[0].rejected, "sliver");
   EXPECT_NEAR(rejected[0].centroid.y(), 11.0, 0.01);
+}
+
+// A fence that left, 63 m from the keyframe of a 32-beam sensor (1.33 deg rows: 1.47 m apart
+// there), seen in one row 1.2 m up (seed 23's fence 9 on the HDL-32E): the row below went under
+// the ground's level before it reached the fence, so one row is all the fence could show
+// (OneRowIsAll), an object. The same row 17.5 m out (rows 0.41 m apart, the one below would have
+// met a thing standing there), one 2.2 m up at 63 m (its top more than a row above the ground: a
+// rim high on a surface) and one that touches a post that stayed (that surface's row drawn again)
+// stay slivers.
+TEST(MapObjects, AFarFencesOnlyRowIsAnObjectANearRowIsASliver) {
+  test::TempDir tmp;
+  MapConfig cfg = Cfg();
+  cfg.object_sensor_step_deg = 1.333;
+  Store s = Store::Create(tmp / "o.ltmap", cfg);
+  const auto row = [](float x, float y0, float z) {
+    PointCloud c;
+    for (const float dz : {0.f, 0.05f})
+      for (int j = 0; j <= 80; ++j) c.push_back(x, y0 + 0.1f * float(j), z + dz, 0.5f);
+    return c;
+  };
+  const PointCloud fence = row(63.f, -4.f, 1.2f), near = row(15.f, 5.f, 1.2f), high = row(63.f, 12.f, 2.2f),
+                   touching = row(63.f, 24.f, 1.2f);
+  PointCloud post;  // 0.3 m behind the touching row's first metre, 0.3-1.5 m up
+  for (int j = 0; j <= 10; ++j)
+    for (int k = 0; k <= 12; ++k) post.push_back(63.3f, 24.f + 0.1f * float(j), 0.3f + 0.1f * float(k), 0.5f);
+  const PointCloud ground = Cat(Grid(-20, -20, 0, 160, 160, 0.25f), Grid(58, -8, 0, 40, 160, 0.25f));
+  const PointCloud gone = Cat(Cat(fence, near), Cat(high, touching));
+  s.IntegrateBase({"s0"}, {{0, At(0, 0), Cat(ground, Cat(gone, post))}});
+  KeyframeDelta d;
+  d.nd_strong = gone;
+  s.IntegrateSession({"s1"}, "s0", {d}, {});
+  std::vector<MapObject> rejected;
+  const auto objs = s.Objects(&rejected);
+  ASSERT_EQ(objs.size(), 1u);
+  EXPECT_EQ(objs[0].points, fence.size());
+  EXPECT_EQ(objs[0].change, "disappeared");
+  ASSERT_EQ(rejected.size(), 3u);
+  for (const auto& r : rejected) EXPECT_EQ(r.rejected, "sliver") << r.centroid.transpose() << " attached " << r.attached_fraction;
 }
 
 // A container that appeared 60 m from the nearest keyframe, seen in four rows 0.6 m apart (the

@@ -411,9 +411,11 @@ void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floo
 // saw the gap: a static surface hid it from every keyframe whose field of view held it (the
 // rosette's fence, default seed: sampled at 0-5 m and 11-13.5 m of its 13.5 m; a structure 11-14 m
 // out hid the middle from keyframes 32-42, and the keyframes with a clear line of sight to it had it
-// 44-130 deg off their forward cone). Where some keyframe looking that way had a clear line to
-// the gap, the face was not there (a gate, two fences), and the pieces stay apart.
-std::vector<Eigen::Vector3d> GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg) {
+// 44-130 deg off their forward cone), or the few keyframes with a clear line to it had their rows
+// pass above and below it (seed 23's fence 9 on the tilted VLP-16, 63-67 m out: 1-2 clear views of
+// a gap 0.6 m tall, rows 2.3 m apart there). Where the keyframes looking that way sampled the gap
+// (GapSampled), the face was not there (a gate, two fences), and the pieces stay apart.
+Gap GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg) {
   const double tol = cfg.object_tolerance_m;
   if (!ThinFace(whole, cfg) || !ThinFace(part, cfg) || part.cloud.empty()) return {};
   const double z_lo = std::max(whole.lo.z(), part.lo.z()), z_hi = std::min(whole.hi.z(), part.hi.z());
@@ -431,11 +433,12 @@ std::vector<Eigen::Vector3d> GapBetween(const MapObject& whole, const MapObject&
   else if (hi < -end) a = hi, b = -end;
   else return {};  // overlapping along the line: MergeParts' pieces
   const int along = std::max(1, int(std::floor((b - a) / tol)) - 1), up = std::max(1, int(std::floor((z_hi - z_lo) / tol)));
-  std::vector<Eigen::Vector3d> gap;
+  Gap gap;
+  gap.height = z_hi - z_lo;
   for (int i = 1; i <= along; ++i) {
     const Eigen::Vector2d xy = frame.World(a + (b - a) * i / (along + 1), 0.0);
     for (int k = 0; k < up; ++k)
-      gap.emplace_back(xy.x(), xy.y(), z_lo + (z_hi - z_lo) * (k + 0.5) / up);
+      gap.points.emplace_back(xy.x(), xy.y(), z_lo + (z_hi - z_lo) * (k + 0.5) / up);
   }
   return gap;
 }
@@ -449,46 +452,60 @@ bool InView(const Pose& T, const Eigen::Vector3d& d, const MapConfig& cfg) {
   return geometry::InAzimuthArc(std::atan2(l.y(), l.x()) / kDegToRad, cfg.object_sensor_azimuth_center_deg, half);
 }
 
-// The in-view lines of sight of GapInClearView, each walked every half tolerance from the sensor
-// to a tolerance short of the gap point (the face's own ends are no blockers of it).
+// The in-view lines of sight of GapSampled, view by view (its index `v`), each walked every half
+// tolerance from the sensor to a tolerance short of the gap point (the face's own ends are no
+// blockers of it), `len` long to the gap point.
 template <class Step>
 void WalkLines(const std::vector<Eigen::Vector3d>& gap, const std::vector<Pose>& views, const MapConfig& cfg,
                const Step& step) {
   const double r = 0.5 * cfg.object_tolerance_m;
-  for (const Pose& T : views)
+  for (std::size_t v = 0; v < views.size(); ++v)
     for (const Eigen::Vector3d& g : gap) {
+      const Pose& T = views[v];
       const Eigen::Vector3d s = T.translation(), d = g - s;
       const double len = d.norm();
       if (len <= 0.0 || !InView(T, d, cfg)) continue;
       const Eigen::Vector3d u = d / len;
-      if (!step(s, u, std::max(r, len - cfg.object_tolerance_m))) return;
+      if (!step(v, s, u, std::max(r, len - cfg.object_tolerance_m), len)) return;
     }
+}
+
+// The share of one row of the sensor's samples that falls on a band `height_m` tall at `range_m`:
+// rows RowSpacing apart land on it with odds height / spacing (1 where the step is unknown).
+double RowsOnBand(double height_m, double range_m, const MapConfig& cfg) {
+  const double spacing = RowSpacing(range_m, cfg);
+  return spacing > 0.0 ? std::min(1.0, height_m / spacing) : 1.0;
 }
 }  // namespace
 
-bool GapInClearView(const std::vector<Eigen::Vector3d>& gap, const std::vector<Pose>& views,
-                    const geometry::KdTree* blockers, const MapConfig& cfg) {
+bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::KdTree* blockers,
+                const MapConfig& cfg) {
   const float r = float(0.5 * cfg.object_tolerance_m);
-  bool clear = false;
-  WalkLines(gap, views, cfg, [&](const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until) {
-    bool blocked = false;
-    for (double t = r; t < until && !blocked && blockers; t += r)
-      blocked = blockers->CountWithin((s + u * t).cast<float>(), r, 1) > 0;
-    clear = !blocked;
-    return !clear;  // go on while every line so far was blocked
-  });
-  return clear;
+  double rows = 0.0, view_rows = 0.0;  // the sum over the views done, the current view's best
+  std::size_t view = views.size();
+  WalkLines(gap.points, views, cfg,
+            [&](std::size_t v, const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until, double len) {
+              if (v != view) rows += view_rows, view_rows = 0.0, view = v;
+              const double here = RowsOnBand(gap.height, len, cfg);
+              if (here <= view_rows) return true;  // this view has a line as good already
+              bool blocked = false;
+              for (double t = r; t < until && !blocked && blockers; t += r)
+                blocked = blockers->CountWithin((s + u * t).cast<float>(), r, 1) > 0;
+              if (!blocked) view_rows = here;
+              return rows + view_rows < 1.0;  // go on until one row's worth of samples
+            });
+  return rows + view_rows >= 1.0;
 }
 
 namespace {
 // The xy cells (half a tolerance wide) the in-view lines of sight pass over: with their
-// neighbours, the only places a blocker of GapInClearView can lie (NearCells).
+// neighbours, the only places a blocker of GapSampled can lie (NearCells).
 NearCells CellsOnLines(const std::vector<std::vector<Eigen::Vector3d>>& gaps, const std::vector<Pose>& views,
                        const MapConfig& cfg) {
   const double r = 0.5 * cfg.object_tolerance_m;
   NearCells cells(r);
   for (const auto& gap : gaps)
-    WalkLines(gap, views, cfg, [&](const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until) {
+    WalkLines(gap, views, cfg, [&](std::size_t, const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until, double) {
       for (double t = 0.0; t < until + r; t += r) cells.Add((s + u * t).cast<float>());
       return true;
     });
@@ -523,7 +540,7 @@ PointCloud BlockersOver(const NearCells& cells, const Eigen::Vector3d& lo, const
 
 struct GapPair {
   std::size_t whole, part;
-  std::vector<Eigen::Vector3d> gap;
+  Gap gap;
 };
 }  // namespace
 
@@ -539,14 +556,14 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const Sessi
     for (std::size_t i = 0; i < kept.size(); ++i)
       for (std::size_t j = 0; j < kept.size(); ++j)
         if (whole_and_part(i, j))
-          if (auto gap = GapBetween(kept[i], kept[j], cfg); !gap.empty()) pairs.push_back({i, j, std::move(gap)});
+          if (Gap gap = GapBetween(kept[i], kept[j], cfg); !gap.points.empty()) pairs.push_back({i, j, std::move(gap)});
     const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);
     if (views.empty()) continue;
     std::vector<std::vector<Eigen::Vector3d>> gaps;
     Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
     for (const auto& p : pairs) {
-      gaps.push_back(p.gap);
-      for (const auto& g : p.gap) lo = lo.cwiseMin(g), hi = hi.cwiseMax(g);
+      gaps.push_back(p.gap.points);
+      for (const auto& g : p.gap.points) lo = lo.cwiseMin(g), hi = hi.cwiseMax(g);
     }
     for (const Pose& T : views) lo = lo.cwiseMin(T.translation()), hi = hi.cwiseMax(T.translation());
     const PointCloud blockers = BlockersOver(CellsOnLines(gaps, views, cfg), lo, hi, store,
@@ -554,7 +571,7 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const Sessi
     const std::unique_ptr<geometry::KdTree> tree = blockers.empty() ? nullptr : std::make_unique<geometry::KdTree>(blockers);
     std::vector<bool> joined(kept.size(), false);
     for (const auto& p : pairs) {
-      if (joined[p.whole] || joined[p.part] || GapInClearView(p.gap, views, tree.get(), cfg)) continue;
+      if (joined[p.whole] || joined[p.part] || GapSampled(p.gap, views, tree.get(), cfg)) continue;
       Absorb(kept[p.whole], kept[p.part].cloud);
       joined[p.part] = true;
     }

@@ -139,17 +139,25 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
 void KeepUnseenParts(MapObject& o, const PointCloud& part, const UnobservedSurface& unobserved, const MapConfig& cfg);
 // Joins the pieces of one object split by a gap wider than the cluster's (accepted, and some rejected).
 void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg);
-// Points of the gap between two pieces of one thin face (GapBetween: `part` on `whole`'s line, apart
-// along it): every cluster tolerance along the gap and up the height both share; empty when they
-// are no such pieces.
-std::vector<Eigen::Vector3d> GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg);
-// Whether some sensor pose of `views` (world from sensor) had a point of `gap` in its horizontal
-// field of view (object_sensor_azimuth_*) and a clear line of sight to it: no point of `blockers`
-// (above the ground; null: none) within half the cluster tolerance of the line before it.
-bool GapInClearView(const std::vector<Eigen::Vector3d>& gap, const std::vector<Pose>& views,
-                    const geometry::KdTree* blockers, const MapConfig& cfg);
-// Two pieces of one thin face of the same change join across a gap that no keyframe of the
-// sessions that scanned them saw (GapInClearView over the map's surfaces there).
+// The gap between two pieces of one thin face (GapBetween: `part` on `whole`'s line, apart along
+// it): points every cluster tolerance along the gap and up the height both share, and that height;
+// no points when they are no such pieces.
+struct Gap {
+  std::vector<Eigen::Vector3d> points;
+  double height = 0.0;  // [m] the height both pieces share, the band the gap's points span
+};
+Gap GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg);
+// Whether the sensor poses of `views` (world from sensor) sampled the gap: each pose with a point of
+// the gap in its horizontal field of view (object_sensor_azimuth_*) and a clear line of sight to it
+// (no point of `blockers`, above the ground, null: none, within half the cluster tolerance of the
+// line before it) adds the share of one row of its samples that falls on the gap's height band at
+// that range (RowsOnBand: height / RowSpacing, at most 1); one row's worth in all is a sample. A
+// far fence's gap in clear view of two keyframes of a VLP-16 68 m away (rows 2.4 m apart there, the
+// band 0.6 m tall) was likely passed over by their rows.
+bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::KdTree* blockers,
+                const MapConfig& cfg);
+// Two pieces of one thin face of the same change join across a gap that the keyframes of the
+// sessions that scanned them did not sample (GapSampled over the map's surfaces there).
 void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const SessionRecord& step, const Floor& floor,
                     const MapConfig& cfg);
 // Each object takes its foot: the change points of its side in the ground band under it.
