@@ -505,10 +505,11 @@ NearCells CellsOnLines(const std::vector<std::vector<Eigen::Vector3d>>& gaps, co
   const double r = 0.5 * cfg.object_tolerance_m;
   NearCells cells(r);
   for (const auto& gap : gaps)
-    WalkLines(gap, views, cfg, [&](std::size_t, const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until, double) {
-      for (double t = 0.0; t < until + r; t += r) cells.Add((s + u * t).cast<float>());
-      return true;
-    });
+    WalkLines(gap, views, cfg,
+              [&](std::size_t, const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until, double) {
+                for (double t = 0.0; t < until + r; t += r) cells.Add((s + u * t).cast<float>());
+                return true;
+              });
   return cells;
 }
 
