@@ -11,6 +11,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -998,17 +999,24 @@ TEST(MapObjects, AContainerThatCameKeepsTheUpperRowsItsReferenceNeverObserved) {
 // free (weak PD) and whose face goes on for 10 m either way where the reference never looked (the
 // step's strong PD): followed along its face (FollowFaces), most of it was never observed, so it is
 // coverage, not an object. The same piece with no face beyond it is an object.
-// A piece of an appeared face along y = 0 from x0 to x1, 1.5 m tall, described as the rules see it.
-MapObject FacePiece(double x0, double x1, double y = 0.0) {
+// A piece of a change made of axis-aligned blocks {x0, x1, y0, y1}, `height` m tall, points every
+// 0.1 m, described as the rules see it.
+MapObject Blocks(const std::vector<std::array<double, 4>>& blocks, const std::string& change = "disappeared",
+                 double height = 3.0) {
   MapObject o;
-  o.change = "appeared";
-  for (double x = x0; x <= x1 + 1e-9; x += 0.1)
-    for (double z = 0.0; z <= 1.5 + 1e-9; z += 0.1) o.cloud.push_back(float(x), float(y), float(z), 0.5f);
-  o.cloud.cls.assign(o.cloud.size(), PointClass::kPDWeak);
+  o.change = change;
+  for (const auto& b : blocks)
+    for (double x = b[0]; x <= b[1] + 1e-9; x += 0.1)
+      for (double y = b[2]; y <= b[3] + 1e-9; y += 0.1)
+        for (double z = 0.0; z <= height + 1e-9; z += 0.1) o.cloud.push_back(float(x), float(y), float(z), 0.5f);
+  o.cloud.cls.assign(o.cloud.size(), change == "appeared" ? PointClass::kPDWeak : PointClass::kNDStrong);
   detail::Describe(o);
   detail::OrientedBox(o);
   return o;
 }
+
+// A piece of an appeared face along y = 0 from x0 to x1, 1.5 m tall.
+MapObject FacePiece(double x0, double x1, double y = 0.0) { return Blocks({{x0, x1, y, y}}, "appeared", 1.5); }
 
 // Two pieces of one fence 4 m apart along its line (x 0-4 and 8-10). A keyframe 15 m off the line
 // looking at the gap with a clear line of sight saw that the fence was not there; a wall 8 m in
@@ -1056,6 +1064,31 @@ TEST(MapObjects, PiecesOfAFaceJoinAcrossAGapNoKeyframeSaw) {
   };
   EXPECT_FALSE(detail::GapSampled(gap, {far(6.0)}, nullptr, cfg)) << "one view's rows passed over it";
   EXPECT_TRUE(detail::GapSampled(gap, {far(6.0), far(5.0)}, nullptr, cfg)) << "two views sampled it";
+}
+
+// A walled lot (seed 31) seen as two clusters: the front wall with a 1.3 m stub of a side wall and
+// the back wall, 10.6 m behind, with a 0.4 m stub; the side wall's middle no keyframe saw. Neither
+// is a thin face, but the longer stub is one pointing at the other: the gap runs along the side
+// wall, its points about two tolerances in from either stub's end (where the views' sight ended). Two cars end to end have no face at their facing ends: no gap.
+TEST(MapObjects, TheFacingEndsOfTwoPiecesMakeTheirGap) {
+  MapConfig cfg;
+  const double tol = cfg.object_tolerance_m;
+  const MapObject front = Blocks({{0.0, 22.9, 0.0, 0.3}, {0.0, 0.3, -1.3, 0.0}});
+  const MapObject back = Blocks({{0.0, 22.9, -10.6, -10.3}, {0.0, 0.3, -10.3, -9.9}});
+  ASSERT_FALSE(detail::ThinFace(front, cfg));
+  ASSERT_FALSE(detail::ThinFace(back, cfg));
+  for (const auto& [whole, part] : {std::make_pair(&front, &back), std::make_pair(&back, &front)}) {
+    const detail::Gap gap = detail::GapBetween(*whole, *part, cfg);
+    ASSERT_FALSE(gap.points.empty());
+    for (const auto& g : gap.points) {
+      EXPECT_NEAR(g.x(), 0.15, 0.2);
+      EXPECT_LT(g.y(), -1.3 - 1.5 * tol);
+      EXPECT_GT(g.y(), -9.9 + 1.5 * tol);
+    }
+    EXPECT_NEAR(gap.height, 3.0, 1e-6);
+  }
+  const MapObject car = Blocks({{0.0, 1.8, 0.0, 4.5}}), other = Blocks({{0.0, 1.8, 6.0, 10.5}});
+  EXPECT_TRUE(detail::GapBetween(car, other, cfg).points.empty()) << "a car's end is no face";
 }
 
 TEST(MapObjects, AFaceThatGoesOnWhereTheReferenceNeverLookedIsCoverage) {

@@ -139,9 +139,10 @@ std::vector<std::vector<std::uint32_t>> UnseenParts(std::vector<MapObject>& grou
 void KeepUnseenParts(MapObject& o, const PointCloud& part, const UnobservedSurface& unobserved, const MapConfig& cfg);
 // Joins the pieces of one object split by a gap wider than the cluster's (accepted, and some rejected).
 void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected, const MapConfig& cfg);
-// The gap between two pieces of one thin face (GapBetween: `part` on `whole`'s line, apart along
-// it): points every cluster tolerance along the gap and up the height both share, and that height;
-// no points when they are no such pieces.
+// The gap between two pieces of one face (GapBetween: from `whole`'s point nearest `part` to
+// `part`'s nearest it, where one of those ends is a thin face pointing at the other): points every
+// cluster tolerance along the gap, but for the ones next to its ends, and up the height both pieces
+// share, and that height; no points when they are no such pieces.
 struct Gap {
   std::vector<Eigen::Vector3d> points;
   double height = 0.0;  // [m] the height both pieces share, the band the gap's points span
@@ -156,7 +157,7 @@ Gap GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& c
 // band 0.6 m tall) was likely passed over by their rows.
 bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::KdTree* blockers,
                 const MapConfig& cfg);
-// Two pieces of one thin face of the same change join across a gap that the keyframes of the
+// Two pieces of one face of the same change join across a gap that the keyframes of the
 // sessions that scanned them did not sample (GapSampled over the map's surfaces there).
 void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const SessionRecord& step, const Floor& floor,
                     const MapConfig& cfg);
