@@ -18,6 +18,7 @@ namespace {
 
 using detail::CouldHaveMoved;
 using detail::IsPd;
+using detail::PickSeen;
 using detail::Unseen;
 
 // Does disappeared object `o` confirm `e`, one an earlier step reported gone from the same session's
@@ -31,13 +32,7 @@ bool Confirms(const MapObject& o, const MapObject& e, const MapConfig& cfg) {
     return false;
   const double tol = cfg.object_tolerance_m;
   if ((o.lo.array() > e.hi.array() + tol).any() || (e.lo.array() > o.hi.array() + tol).any()) return false;
-  const auto pick = [](const PointCloud& c, bool unseen) {
-    std::vector<std::uint32_t> idx;
-    for (std::size_t i = 0; i < c.size(); ++i)
-      if (Unseen(c.cls[i]) == unseen) idx.push_back(std::uint32_t(i));
-    return c.select(idx);
-  };
-  const PointCloud seen = pick(o.cloud, false), unseen = pick(e.cloud, true);
+  const PointCloud seen = PickSeen(o.cloud), unseen = PickSeen(e.cloud, true);
   if (seen.empty() || unseen.empty()) return false;
   const std::vector<bool> near = geometry::WithinRadius(seen, unseen, tol);
   return 2 * std::size_t(std::count(near.begin(), near.end(), true)) > near.size();

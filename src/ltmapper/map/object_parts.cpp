@@ -98,19 +98,28 @@ double InsideShare(const MapObject& part, const MapObject& whole, double margin)
 // container's corner, a strip a thin occluder hid) they lie up to twice that apart, horizontally
 // and vertically, at the smaller of the two ranges (the finer sampling, as Cluster takes the
 // smaller gap). Near the sensor the cluster tolerance, larger there, stays the bound: no part
-// joins there that Cluster did not already join.
+// joins there that Cluster did not already join. Samples are the points seen (as InsideShare and
+// FarSideOf count them): two objects' unseen parts (UnseenParts: the rows over and inside each box
+// the other session did not observe) can share points where the boxes meet, and so join nothing.
+// Seed 41's car parked at a tree's foot, both gone, was one object with the tree through the weak
+// ND at the ground between them (the nearest seen points of the two 1 m or more apart).
 bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
   const Eigen::Vector2f reach = (2.f * SensorGapsAt(std::min(part.range_m, whole.range_m), cfg))
                                     .cwiseMax(float(cfg.object_tolerance_m));
   const Eigen::Vector3d grow(reach.x(), reach.x(), reach.y());
   if (((part.lo - whole.hi).array() > grow.array()).any() || ((whole.lo - part.hi).array() > grow.array()).any())
     return false;
-  const geometry::KdTree tree(whole.cloud);
-  for (const auto& p : part.cloud.points)
+  const PointCloud samples = PickSeen(whole.cloud);
+  if (samples.empty()) return false;
+  const geometry::KdTree tree(samples);
+  for (std::size_t i = 0; i < part.cloud.size(); ++i) {
+    if (Unseen(part.cloud.cls[i])) continue;
+    const auto& p = part.cloud.points[i];
     for (const auto& hit : tree.RadiusUnsorted(p.xyz(), reach.maxCoeff())) {
-      const Eigen::Vector3f d = whole.cloud.points[hit.first].xyz() - p.xyz();
+      const Eigen::Vector3f d = samples.points[hit.first].xyz() - p.xyz();
       if ((d.head<2>() / reach.x()).squaredNorm() + (d.z() / reach.y()) * (d.z() / reach.y()) < 1.f) return true;
     }
+  }
   return false;
 }
 
