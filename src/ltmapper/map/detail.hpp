@@ -95,14 +95,16 @@ std::vector<std::pair<std::size_t, std::size_t>> LeastCostPairs(const std::vecto
 // strength; weak ND, an object's unseen parts (UnseenParts), not something seen.
 inline bool IsPd(PointClass c) { return c == PointClass::kPDStrong || c == PointClass::kPDWeak; }
 inline bool Unseen(PointClass c) { return c == PointClass::kNDWeak; }
-// The points of an object's cloud that are its unseen parts (`unseen`), or the others: what the
-// sessions sampled of it.
-inline PointCloud PickSeen(const PointCloud& c, bool unseen = false) {
+// The points of an object's cloud that the sessions sampled (SeenPoints), or its unseen parts
+// (UnseenPoints).
+inline PointCloud PointsWithUnseen(const PointCloud& c, bool unseen) {
   std::vector<std::uint32_t> idx;
   for (std::size_t i = 0; i < c.size(); ++i)
     if (Unseen(c.cls[i]) == unseen) idx.push_back(std::uint32_t(i));
   return c.select(idx);
 }
+inline PointCloud SeenPoints(const PointCloud& c) { return PointsWithUnseen(c, false); }
+inline PointCloud UnseenPoints(const PointCloud& c) { return PointsWithUnseen(c, true); }
 // A change the other session saw through its place (strong ND, weak PD): see-through evidence.
 inline bool SeenThrough(PointClass c) { return c == PointClass::kNDStrong || c == PointClass::kPDWeak; }
 

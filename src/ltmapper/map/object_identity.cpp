@@ -18,7 +18,8 @@ namespace {
 
 using detail::CouldHaveMoved;
 using detail::IsPd;
-using detail::PickSeen;
+using detail::SeenPoints;
+using detail::UnseenPoints;
 using detail::Unseen;
 
 // Does disappeared object `o` confirm `e`, one an earlier step reported gone from the same session's
@@ -32,7 +33,7 @@ bool Confirms(const MapObject& o, const MapObject& e, const MapConfig& cfg) {
     return false;
   const double tol = cfg.object_tolerance_m;
   if ((o.lo.array() > e.hi.array() + tol).any() || (e.lo.array() > o.hi.array() + tol).any()) return false;
-  const PointCloud seen = PickSeen(o.cloud), unseen = PickSeen(e.cloud, true);
+  const PointCloud seen = SeenPoints(o.cloud), unseen = UnseenPoints(e.cloud);
   if (seen.empty() || unseen.empty()) return false;
   const std::vector<bool> near = geometry::WithinRadius(seen, unseen, tol);
   return 2 * std::size_t(std::count(near.begin(), near.end(), true)) > near.size();

@@ -109,7 +109,7 @@ bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig
   const Eigen::Vector3d grow(reach.x(), reach.x(), reach.y());
   if (((part.lo - whole.hi).array() > grow.array()).any() || ((whole.lo - part.hi).array() > grow.array()).any())
     return false;
-  const PointCloud samples = PickSeen(whole.cloud);
+  const PointCloud samples = SeenPoints(whole.cloud);
   if (samples.empty()) return false;
   const geometry::KdTree tree(samples);
   for (std::size_t i = 0; i < part.cloud.size(); ++i) {
