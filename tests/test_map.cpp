@@ -1067,6 +1067,48 @@ TEST(MapObjects, PiecesOfAFaceJoinAcrossAGapNoKeyframeSaw) {
   EXPECT_TRUE(detail::GapSampled(gap, {far(6.0), far(5.0)}, nullptr, cfg)) << "two views sampled it";
 }
 
+// A face seen from 67 m at 12 deg off its line (seed 31's fence 9): a sensor's columns, 0.2 deg
+// apart, land about 1.1 m apart along it, so one view most likely put no sample on a hole of the
+// gap the width of its points' spacing: the gap was not sampled. Face-on from as far, a column
+// lands on each hole: sampled. Where changes of the pieces' side lie on the gap's line (the face's
+// columns between the pieces), those points are no hole at all; changes off the line, or above
+// the band the pieces share, leave them open.
+TEST(MapObjects, AGapBetweenAFacesColumnsSeenAtAGrazingAngleWasNotSampled) {
+  MapConfig cfg;
+  cfg.object_sensor_azimuth_step_deg = 0.2;
+  const MapObject whole = FacePiece(0.0, 4.0), part = FacePiece(8.0, 10.0);
+  detail::Gap gap = detail::GapBetween(whole, part, cfg);
+  ASSERT_FALSE(gap.points.empty());
+  const auto view_from = [](double x, double y) {
+    Pose T = Pose::Identity();
+    T.translation() = Eigen::Vector3d(x, y, 1.8);
+    return T;
+  };
+  EXPECT_FALSE(detail::GapSampled(gap, {view_from(6.0 - 65.5, -14.0)}, nullptr, cfg)) << "grazing: between columns";
+  EXPECT_TRUE(detail::GapSampled(gap, {view_from(6.0, -67.0)}, nullptr, cfg)) << "face-on: a column on each hole";
+
+  const std::size_t holes = gap.points.size();
+  PointCloud changes;  // columns every 1.1 m along the gap, 0.2-1.4 m up
+  for (double x = 4.6; x < 8.0; x += 1.1)
+    for (double z = 0.2; z <= 1.4; z += 0.3) changes.push_back(float(x), 0.02f, float(z), 0.f);
+  detail::Gap open = gap;
+  detail::LeaveOutChanged(open, detail::SideChanges(changes), cfg);
+  EXPECT_LT(open.points.size(), holes);
+  for (const auto& g : open.points) {
+    double nearest = 1e9;
+    for (const auto& c : changes.points) nearest = std::min(nearest, std::abs(double(c.x) - g.x()));
+    EXPECT_GT(nearest, cfg.object_tolerance_m - 1e-6);
+  }
+  PointCloud off = changes, above = changes;
+  for (auto& p : off.points) p.y += 1.0f;
+  for (auto& p : above.points) p.z += 3.0f;
+  for (const PointCloud* c : {&off, &above}) {
+    detail::Gap g = gap;
+    detail::LeaveOutChanged(g, detail::SideChanges(*c), cfg);
+    EXPECT_EQ(g.points.size(), holes);
+  }
+}
+
 // A walled lot (seed 31) seen as two clusters: the front wall with a 1.3 m stub of a side wall and
 // the back wall, 10.6 m behind, with a 0.4 m stub; the side wall's middle no keyframe saw. Neither
 // is a thin face, but the longer stub is one pointing at the other: the gap runs along the side

@@ -483,6 +483,9 @@ Gap GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& c
   const int along = std::max(1, int(std::floor(len / tol)) - 1), up = std::max(1, int(std::floor((z_hi - z_lo) / tol)));
   Gap gap;
   gap.height = z_hi - z_lo;
+  gap.bottom = z_lo;
+  gap.line = (q - p) / len;
+  gap.step = len / double(along + 1);
   const int margin = along >= 3 ? 1 : 0;  // the points next to an end: see above
   for (int a = 1 + margin; a <= along - margin; ++a) {
     const Eigen::Vector2d xy = p + (q - p) * double(a) / double(along + 1);
@@ -524,6 +527,16 @@ double RowsOnBand(double height_m, double range_m, const MapConfig& cfg) {
   const double spacing = RowSpacing(range_m, cfg);
   return spacing > 0.0 ? std::min(1.0, height_m / spacing) : 1.0;
 }
+
+// The share of one column of the sensor's samples that falls on a gap point's hole (gap.step wide
+// along the face) seen along `u` from `range_m`: its width across the line of sight over the
+// columns' spacing there, range * object_sensor_azimuth_step_deg (1 where the step is unknown).
+double ColumnsOnHole(const Gap& gap, const Eigen::Vector3d& u, double range_m, const MapConfig& cfg) {
+  const double spacing = range_m * cfg.object_sensor_azimuth_step_deg * kDegToRad, flat = u.head<2>().norm();
+  if (!(spacing > 0.0) || flat <= 0.0) return 1.0;
+  const double across = gap.step * std::abs(u.x() * gap.line.y() - u.y() * gap.line.x()) / flat;
+  return std::min(1.0, across / spacing);
+}
 }  // namespace
 
 bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::KdTree* blockers,
@@ -534,7 +547,7 @@ bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::
   WalkLines(gap.points, views, cfg,
             [&](std::size_t v, const Eigen::Vector3d& s, const Eigen::Vector3d& u, double until, double len) {
               if (v != view) rows += view_rows, view_rows = 0.0, view = v;
-              const double here = RowsOnBand(gap.height, len, cfg);
+              const double here = RowsOnBand(gap.height, len, cfg) * ColumnsOnHole(gap, u, len, cfg);
               if (here <= view_rows) return true;  // this view has a line as good already
               bool blocked = false;
               for (double t = r; t < until && !blocked && blockers; t += r)
@@ -593,8 +606,40 @@ struct GapPair {
 };
 }  // namespace
 
-void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const SessionRecord& step, const Floor& floor,
-                    const MapConfig& cfg) {
+SideChanges::SideChanges(PointCloud points) : at(std::move(points)) {
+  PointCloud flat;
+  for (const auto& p : at.points) flat.push_back(p.x, p.y, 0.f);
+  if (!flat.empty()) tree = std::make_unique<geometry::KdTree>(std::move(flat));
+}
+
+void LeaveOutChanged(Gap& gap, const SideChanges& side, const MapConfig& cfg) {
+  if (!side.tree) return;
+  const double tol = cfg.object_tolerance_m;
+  std::vector<Eigen::Vector3d> open;
+  for (const auto& g : gap.points) {
+    bool changed = false;
+    for (const auto& [j, sq] : side.tree->RadiusUnsorted(Eigen::Vector3f(float(g.x()), float(g.y()), 0.f), float(tol))) {
+      const double z = side.at.points[j].z;
+      changed = changed || (z >= gap.bottom - tol && z <= gap.bottom + gap.height + tol);
+    }
+    if (!changed) open.push_back(g);
+  }
+  gap.points.swap(open);
+}
+
+namespace {
+// The step's changes of one side (PD: appeared) above the ground.
+PointCloud ChangesOfSide(const PointCloud& changes, bool appeared, const Floor& floor, const MapConfig& cfg) {
+  PointCloud side;
+  for (std::size_t i = 0; i < changes.size(); ++i)
+    if (IsPd(changes.cls[i]) == appeared && AboveGround(changes.points[i].xyz(), floor, cfg))
+      side.push_back(changes.points[i].x, changes.points[i].y, changes.points[i].z);
+  return side;
+}
+}  // namespace
+
+void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, const Store& store, const SessionRecord& step,
+                    const Floor& floor, const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
   for (const bool appeared : {false, true}) {
     std::vector<GapPair> pairs;  // the larger of the two (the first of equals) is the whole
@@ -602,10 +647,14 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const Sessi
       return i != j && (kept[i].change == "appeared") == appeared && kept[j].change == kept[i].change &&
              (kept[i].points > kept[j].points || (kept[i].points == kept[j].points && i < j));
     };
+    const SideChanges side(ChangesOfSide(changes, appeared, floor, cfg));
     for (std::size_t i = 0; i < kept.size(); ++i)
       for (std::size_t j = 0; j < kept.size(); ++j)
         if (whole_and_part(i, j))
-          if (Gap gap = GapBetween(kept[i], kept[j], cfg); !gap.points.empty()) pairs.push_back({i, j, std::move(gap)});
+          if (Gap gap = GapBetween(kept[i], kept[j], cfg); !gap.points.empty()) {
+            LeaveOutChanged(gap, side, cfg);
+            pairs.push_back({i, j, std::move(gap)});
+          }
     const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);
     if (views.empty()) continue;
     std::vector<std::vector<Eigen::Vector3d>> gaps;
@@ -620,7 +669,8 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const Sessi
     const std::unique_ptr<geometry::KdTree> tree = blockers.empty() ? nullptr : std::make_unique<geometry::KdTree>(blockers);
     std::vector<bool> joined(kept.size(), false);
     for (const auto& p : pairs) {
-      if (joined[p.whole] || joined[p.part] || GapSampled(p.gap, views, tree.get(), cfg)) continue;
+      if (joined[p.whole] || joined[p.part] || (!p.gap.points.empty() && GapSampled(p.gap, views, tree.get(), cfg)))
+        continue;
       Absorb(kept[p.whole], kept[p.part].cloud);
       joined[p.part] = true;
     }

@@ -146,21 +146,40 @@ void MergeParts(std::deque<MapObject>& objects, std::vector<MapObject>& rejected
 struct Gap {
   std::vector<Eigen::Vector3d> points;
   double height = 0.0;  // [m] the height both pieces share, the band the gap's points span
+  double bottom = 0.0;  // [m] the band's lowest z
+  Eigen::Vector2d line = Eigen::Vector2d::UnitX();  // the face's direction across the gap (xy, unit)
+  double step = 0.0;    // [m] the points' spacing along it: the width of the hole each stands for
 };
 Gap GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& cfg);
 // Whether the sensor poses of `views` (world from sensor) sampled the gap: each pose with a point of
 // the gap in its horizontal field of view (object_sensor_azimuth_*) and a clear line of sight to it
 // (no point of `blockers`, above the ground, null: none, within half the cluster tolerance of the
 // line before it) adds the share of one row of its samples that falls on the gap's height band at
-// that range (RowsOnBand: height / RowSpacing, at most 1); one row's worth in all is a sample. A
-// far fence's gap in clear view of two keyframes of a VLP-16 68 m away (rows 2.4 m apart there, the
-// band 0.6 m tall) was likely passed over by their rows.
+// that range (RowsOnBand: height / RowSpacing, at most 1), times the share of one column of its
+// samples that falls on a point's hole (ColumnsOnHole: the hole's width across the line of sight
+// over the column spacing there, at most 1); one row's worth in all is a sample. A far fence's gap
+// in clear view of two keyframes of a VLP-16 68 m away (rows 2.4 m apart there, the band 0.6 m
+// tall) was likely passed over by their rows; a face seen at a grazing angle from 67 m (seed 31's
+// fence 9, 13 deg off the line of sight: columns 1 m apart along it) between its columns.
 bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::KdTree* blockers,
                 const MapConfig& cfg);
+// The step's changes of one side above the ground (`at`), and a tree of them flat in xy.
+struct SideChanges {
+  explicit SideChanges(PointCloud points);
+  PointCloud at;
+  std::unique_ptr<geometry::KdTree> tree;  // null: no changes
+};
+// Leaves out the gap's points that a change of the pieces' side lies beside: within the cluster
+// tolerance in xy, in the band the pieces share (Gap::bottom, height) grown by the tolerance. The
+// face was sampled there and had changed too (seed 31's fence 9, seen at a grazing angle from 67 m:
+// columns 1 m apart, each a cluster of its own between the two pieces).
+void LeaveOutChanged(Gap& gap, const SideChanges& side, const MapConfig& cfg);
 // Two pieces of one face of the same change join across a gap that the keyframes of the
-// sessions that scanned them did not sample (GapSampled over the map's surfaces there).
-void JoinHiddenGaps(std::deque<MapObject>& kept, const Store& store, const SessionRecord& step, const Floor& floor,
-                    const MapConfig& cfg);
+// sessions that scanned them did not sample (GapSampled over the map's surfaces there), but for
+// where the gap holds changes of their side (`changes`, the step's): there the face was sampled,
+// and changed too.
+void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, const Store& store, const SessionRecord& step,
+                    const Floor& floor, const MapConfig& cfg);
 // Each object takes its foot: the change points of its side in the ground band under it.
 void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg);
 

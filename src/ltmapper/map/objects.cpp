@@ -822,7 +822,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
     }
   }
   MergeParts(step_kept, step_rejected, cfg);
-  JoinHiddenGaps(step_kept, store, step, floor, cfg);
+  JoinHiddenGaps(step_kept, changes, store, step, floor, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
   CountAlikeBeside(step_kept, store, step, floor, ctx, cfg);
   for (auto& o : step_kept) {
