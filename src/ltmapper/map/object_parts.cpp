@@ -647,14 +647,14 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, cons
       return i != j && (kept[i].change == "appeared") == appeared && kept[j].change == kept[i].change &&
              (kept[i].points > kept[j].points || (kept[i].points == kept[j].points && i < j));
     };
-    const SideChanges side(ChangesOfSide(changes, appeared, floor, cfg));
     for (std::size_t i = 0; i < kept.size(); ++i)
       for (std::size_t j = 0; j < kept.size(); ++j)
         if (whole_and_part(i, j))
-          if (Gap gap = GapBetween(kept[i], kept[j], cfg); !gap.points.empty()) {
-            LeaveOutChanged(gap, side, cfg);
-            pairs.push_back({i, j, std::move(gap)});
-          }
+          if (Gap gap = GapBetween(kept[i], kept[j], cfg); !gap.points.empty()) pairs.push_back({i, j, std::move(gap)});
+    if (!pairs.empty()) {
+      const SideChanges side(ChangesOfSide(changes, appeared, floor, cfg));
+      for (auto& p : pairs) LeaveOutChanged(p.gap, side, cfg);
+    }
     const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);
     if (views.empty()) continue;
     std::vector<std::vector<Eigen::Vector3d>> gaps;
