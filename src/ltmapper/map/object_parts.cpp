@@ -126,25 +126,27 @@ bool OneLineApart(const MapObject& part, const MapObject& whole, const MapConfig
 // Is `part` the far side of `whole`'s box? A view of a box shows its near long side whole, and its
 // width only as far as the view reaches; the far long side, seen through other gaps, is a face
 // parallel to it: in whole's frame its seen points span no more than the cluster tolerance across,
-// lie within whole's length and height (grown by the tolerance), and at most whole's length from
-// its axis (a box is no deeper than it is long: the length is its longer side). Seed 7's moved
-// container left its far long face, 2.44 m behind the near one, as a disappeared object of its own
-// on three sensors.
+// lie within whole's length and between the ground under it and its top, reach up to its lowest
+// point (all grown by the tolerance: a face of it, not a post under it), and lie at most whole's
+// length from its axis (a box is no deeper than it is long: the length is its longer side). Seed
+// 7's moved container left its far long face, 2.44 m behind the near one, as a disappeared object
+// of its own on three sensors; a VLP-16 37 m from another saw its roof in two rows (1.36-1.78 m
+// up) and its far face down to 0.14 m: the box stands on the ground below the roof it showed.
 bool FarSideOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
   const double tol = cfg.object_tolerance_m;
   const BoxFrame frame(whole);
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo, top = -lo;
   for (std::size_t i = 0; i < part.cloud.size(); ++i) {
     if (Unseen(part.cloud.cls[i])) continue;
     const Eigen::Vector3d q = part.cloud.points[i].xyz().cast<double>();
     const Eigen::Vector2d l = frame.Local(q);
     const double along = l.x(), across = l.y();
     if (std::abs(along) > 0.5 * whole.size.x() + tol || std::abs(across) > whole.size.x() ||
-        q.z() < whole.lo.z() - tol || q.z() > whole.hi.z() + tol)
+        q.z() < std::min(whole.lo.z(), whole.ground_z) - tol || q.z() > whole.hi.z() + tol)
       return false;
-    lo = std::min(lo, across), hi = std::max(hi, across);
+    lo = std::min(lo, across), hi = std::max(hi, across), top = std::max(top, q.z());
   }
-  return hi >= lo && hi - lo <= tol;
+  return hi >= lo && hi - lo <= tol && top >= whole.lo.z() - tol;
 }
 
 // Is `part` a piece of `whole`: the same change, and at least object_merge_inside_fraction of its
