@@ -629,17 +629,6 @@ void LeaveOutChanged(Gap& gap, const SideChanges& side, const MapConfig& cfg) {
   gap.points.swap(open);
 }
 
-namespace {
-// The step's changes of one side (PD: appeared) above the ground.
-PointCloud ChangesOfSide(const PointCloud& changes, bool appeared, const Floor& floor, const MapConfig& cfg) {
-  PointCloud side;
-  for (std::size_t i = 0; i < changes.size(); ++i)
-    if (IsPd(changes.cls[i]) == appeared && AboveGround(changes.points[i].xyz(), floor, cfg))
-      side.push_back(changes.points[i].x, changes.points[i].y, changes.points[i].z);
-  return side;
-}
-}  // namespace
-
 void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, const Store& store, const SessionRecord& step,
                     const Floor& floor, const MapConfig& cfg) {
   if (cfg.object_merge_inside_fraction <= 0.0) return;
@@ -654,7 +643,7 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, cons
         if (whole_and_part(i, j))
           if (Gap gap = GapBetween(kept[i], kept[j], cfg); !gap.points.empty()) pairs.push_back({i, j, std::move(gap)});
     if (!pairs.empty()) {
-      const SideChanges side(ChangesOfSide(changes, appeared, floor, cfg));
+      const SideChanges side(changes.select(GroupPoints(changes, appeared, floor, cfg)));
       for (auto& p : pairs) LeaveOutChanged(p.gap, side, cfg);
     }
     const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);

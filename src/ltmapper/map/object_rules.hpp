@@ -71,6 +71,18 @@ inline bool AboveGround(const Eigen::Vector3f& p, const Floor& floor, const MapC
   return !floor.At(p, &z) || p.z() > z + float(cfg.object_ground_height_m);
 }
 
+// Indices of the change points of one group (disappeared: strong ND; appeared: PD) above ground.
+inline std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared, const Floor& floor,
+                                              const MapConfig& cfg) {
+  std::vector<std::uint32_t> idx;
+  for (std::size_t i = 0; i < changes.size(); ++i) {
+    const PointClass c = changes.cls[i];
+    if (Grouped(c) && IsPd(c) == appeared && AboveGround(changes.points[i].xyz(), floor, cfg))
+      idx.push_back(std::uint32_t(i));
+  }
+  return idx;
+}
+
 // The sensor's sample gaps {horizontal, vertical} [m] that still join a cluster at `range_m`
 // (geometry::SampleJoinGaps of its columns and rows: object_sensor_azimuth_step_deg,
 // object_sensor_step_deg), before the cluster tolerance's floor.
@@ -163,7 +175,8 @@ Gap GapBetween(const MapObject& whole, const MapObject& part, const MapConfig& c
 // fence 9, 13 deg off the line of sight: columns 1 m apart along it) between its columns.
 bool GapSampled(const Gap& gap, const std::vector<Pose>& views, const geometry::KdTree* blockers,
                 const MapConfig& cfg);
-// The step's changes of one side above the ground (`at`), and a tree of them flat in xy.
+// The step's changes of one side that objects are clustered from (`at`: GroupPoints), and a tree of
+// them flat in xy.
 struct SideChanges {
   explicit SideChanges(PointCloud points);
   PointCloud at;

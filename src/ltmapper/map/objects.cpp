@@ -78,6 +78,7 @@ using detail::Describe;
 using detail::Floats;
 using detail::Floor;
 using detail::Grouped;
+using detail::GroupPoints;
 using detail::HoldUp;
 using detail::FaceReach;
 using detail::InFaceCorridor;
@@ -242,18 +243,6 @@ StepMaps ReadStepMaps(const Store& store, const SessionRecord& step, const Point
   m.unchanged_near = WithoutUnseen(m.unchanged_near, changes, cfg);
   m.unobserved_near = WithoutChanges(m.unobserved_near, changes, IsPd, cfg);
   return m;
-}
-
-// Indices of the change points of one group (disappeared: strong ND; appeared: PD) above ground.
-std::vector<std::uint32_t> GroupPoints(const PointCloud& changes, bool appeared, const Floor& floor,
-                                       const MapConfig& cfg) {
-  std::vector<std::uint32_t> idx;
-  for (std::size_t i = 0; i < changes.size(); ++i) {
-    const PointClass c = changes.cls[i];
-    if (!Grouped(c) || IsPd(c) != appeared) continue;
-    if (AboveGround(changes.points[i].xyz(), floor, cfg)) idx.push_back(std::uint32_t(i));
-  }
-  return idx;
 }
 
 // Sensor positions (ContextOf: where the sessions that scanned a change were): the nearest to a

@@ -211,6 +211,12 @@ void UnmarkPiecesOfLargerOnes(const PointCloud& c, const std::vector<std::vector
 // made of).
 float HitReach(const RemovertConfig& cfg) { return float(cfg.map_voxel_m * std::sqrt(3.0)); }
 
+// How far `at` lies from the box [lo, hi] (0 inside it): a voter farther than its range from the
+// box of the points asked has none of them within its reach.
+float DistanceToBox(const Eigen::Vector3f& at, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
+  return (at.cwiseMax(lo).cwiseMin(hi) - at).norm();
+}
+
 // The voters LD picked for a session's own votes, with their settings (MarkSeenOnce, BlockedByTheMap):
 // as HD removal counts them (hd.window_px, pose_sigma_deg) at LD's resolutions, anywhere in the
 // images' FOV (a keyframe that met a thing above its top beam met it too), nearer returns counted.
@@ -226,23 +232,25 @@ VisibilityOptions OwnVoteOptions() {
   return opt;
 }
 
-// Per level and point of `pts` (VisibilityVotes::occ's layout): how many of `own_voters` the
-// session's map hid it from: the voter's image of its own returns that are points of `own` (within
-// HitReach of one), less the things `pts` are parts of (`things`: a thing does not hide itself),
-// has a nearer return in the point's window. Only the returns inside the box spanning the voter's
-// place and `pts` (what lies between them) are asked; voters are taken a batch at a time (memory:
-// one scan each).
-std::vector<std::uint16_t> BlockedByTheMap(const PointCloud& pts, const PointCloud& things, const PointCloud& own,
+// Per level and point of `seen` among `asked` (VisibilityVotes::occ's layout, in `asked`'s order):
+// how many of `own_voters` the session's map hid it from: the voter's image of its own returns
+// that are points of `own` (within HitReach of one), less the things the points are parts of
+// (`things`: a thing does not hide itself) has a nearer return in the point's window. Only the
+// returns inside the box spanning the voter's place and the points (what lies between them) are
+// asked; voters are taken a batch at a time (memory: one scan each).
+std::vector<std::uint16_t> BlockedByTheMap(const PointCloud& seen, const std::vector<std::uint32_t>& asked,
+                                           const PointCloud& things, const PointCloud& own,
                                            const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg,
                                            int threads) {
+  const PointCloud pts = seen.select(asked);
   const int levels = int(cfg.ld_resolutions_deg.size());
   std::vector<std::uint16_t> blocked(std::size_t(levels) * pts.size(), 0);
   const float reach = HitReach(cfg), range = float(cfg.max_range_m);
   std::vector<bool> keep = geometry::WithinRadius(own, things, reach, threads);
   keep.flip();
   const geometry::KdTree map(own.select(keep));
-  Eigen::Vector3f lo = pts.points.front().xyz(), hi = lo;
-  for (const auto& p : pts.points) lo = lo.cwiseMin(p.xyz()), hi = hi.cwiseMax(p.xyz());
+  Eigen::Vector3f lo, hi;  // named (not a structured binding): the lambda below captures them
+  std::tie(lo, hi) = BoxOf(seen, asked);
   const unsigned workers = threads > 0 ? unsigned(threads) : std::max(1u, std::thread::hardware_concurrency());
   const std::size_t batch = 2 * std::size_t(workers);
   for (std::size_t first = 0; first < own_voters.size(); first += batch) {
@@ -252,7 +260,7 @@ std::vector<std::uint16_t> BlockedByTheMap(const PointCloud& pts, const PointClo
     detail::ParallelFor(n, threads, [&](std::size_t k) {
       const WorldKeyframe& voter = own_voters[first + k];
       const Eigen::Vector3f at = voter.T_world_sensor.translation().cast<float>();
-      if ((at.cwiseMax(lo).cwiseMin(hi) - at).norm() > range) return;  // no point within its reach
+      if (DistanceToBox(at, lo, hi) > range) return;
       const Eigen::Vector3f box_lo = lo.cwiseMin(at), box_hi = hi.cwiseMax(at);
       const std::shared_ptr<const PointCloud> scan = detail::LoadScan(voter);
       const Eigen::Affine3f to_world = voter.T_world_sensor.cast<float>();
@@ -278,7 +286,7 @@ std::vector<std::uint16_t> BlockedByTheMap(const PointCloud& pts, const PointClo
 }
 
 // The seen-through part of each thing of `whole` that has one (points below `n_seen`: the cluster
-// cloud holds the seen-through changes first), with the thing it is part of.
+// cloud, Residues' `both`, holds the seen-through changes first), with the thing it is part of.
 struct SeenParts {
   std::vector<std::vector<std::uint32_t>> parts;
   std::vector<const std::vector<std::uint32_t>*> whole;
@@ -318,21 +326,25 @@ bool MostlyHitOnce(const std::vector<std::uint32_t>& m, const std::vector<int>& 
 // for ring sensors: a scanner without rings samples other places in each scan, so one hit there
 // says nothing about motion. The votes are the session's own, counted as HD removal counts them
 // (OwnVoteConfig), at LD's resolutions over LD's voters.
-void MarkSeenOnce(const PointCloud& both, std::size_t n_seen, const std::vector<std::vector<std::uint32_t>>& whole,
+void MarkSeenOnce(const PointCloud& seen, const PointCloud& both, const std::vector<std::vector<std::uint32_t>>& whole,
                   const PointCloud& own, const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg,
                   int threads, std::vector<bool>* residue) {
   if (own_voters.empty() || !cfg.SensorResolved() || !cfg.sensor_model.ring_based) return;
-  const SeenParts things = SeenPartsOf(whole, n_seen);
-  std::vector<bool> first(both.size(), false);
-  std::fill(first.begin(), first.begin() + std::ptrdiff_t(n_seen), true);
-  const PointCloud seen = both.select(first);
+  const SeenParts things = SeenPartsOf(whole, seen.size());
   const VisibilityVotes v = CountVisibility(seen, own_voters, cfg.ld_resolutions_deg, OwnVoteConfig(cfg), threads, OwnVoteOptions());
+  // A point's views: the most, over the levels, of the voters that hit it, saw through it or met
+  // something nearer, less those whose nearer return was the map (`blocked` at the level, or 0).
+  const auto views_of = [&](std::size_t i, const auto& blocked) {
+    int most = 0;
+    for (int l = 0; l < v.levels; ++l)
+      most = std::max(most, int(v.See(l, i)) + int(v.Hit(l, i)) + std::max(0, int(v.Occ(l, i)) - blocked(l)));
+    return most;
+  };
   std::vector<int> hits(seen.size(), 0), views(seen.size(), 0);
-  for (int l = 0; l < v.levels; ++l)
-    for (std::size_t i = 0; i < seen.size(); ++i) {
-      hits[i] = std::max(hits[i], int(v.Hit(l, i)));
-      views[i] = std::max(views[i], int(v.See(l, i)) + int(v.Hit(l, i)) + int(v.Occ(l, i)));
-    }
+  for (std::size_t i = 0; i < seen.size(); ++i) {
+    for (int l = 0; l < v.levels; ++l) hits[i] = std::max(hits[i], int(v.Hit(l, i)));
+    views[i] = views_of(i, [](int) { return 0; });
+  }
   std::vector<std::size_t> candidates;
   for (std::size_t t = 0; t < things.parts.size(); ++t)
     if (MostlyHitOnce(things.parts[t], hits, views)) candidates.push_back(t);
@@ -343,15 +355,9 @@ void MarkSeenOnce(const PointCloud& both, std::size_t n_seen, const std::vector<
     of_things.insert(of_things.end(), things.whole[t]->begin(), things.whole[t]->end());
   }
   const std::vector<std::uint16_t> blocked =
-      BlockedByTheMap(seen.select(asked), both.select(of_things), own, own_voters, cfg, threads);
-  for (std::size_t j = 0; j < asked.size(); ++j) {  // the views again, less those the map blocked
-    const std::uint32_t i = asked[j];
-    views[i] = 0;
-    for (int l = 0; l < v.levels; ++l) {
-      const int occ = std::max(0, int(v.Occ(l, i)) - int(blocked[std::size_t(l) * asked.size() + j]));
-      views[i] = std::max(views[i], int(v.See(l, i)) + int(v.Hit(l, i)) + occ);
-    }
-  }
+      BlockedByTheMap(seen, asked, both.select(of_things), own, own_voters, cfg, threads);
+  for (std::size_t j = 0; j < asked.size(); ++j)
+    views[asked[j]] = views_of(asked[j], [&](int l) { return int(blocked[std::size_t(l) * asked.size() + j]); });
   for (std::size_t t : candidates)
     if (MostlyHitOnce(things.parts[t], hits, views))
       for (auto i : things.parts[t]) (*residue)[i] = true;
@@ -375,7 +381,7 @@ std::vector<std::vector<std::uint32_t>> HitsPerKeyframe(const PointCloud& c, con
   const geometry::KdTree tree(c.select(asked));
   detail::ParallelFor(own_voters.size(), threads, [&](std::size_t k) {
     const Eigen::Vector3f at = own_voters[k].T_world_sensor.translation().cast<float>();
-    if ((at.cwiseMax(lo).cwiseMin(hi) - at).norm() > submap) return;  // no asked point within its reach
+    if (DistanceToBox(at, lo, hi) > submap) return;
     const PointCloud scan = geometry::Transform(*detail::LoadScan(own_voters[k]), own_voters[k].T_world_sensor);
     std::vector<bool> hit(asked.size(), false);
     for (const auto& q : scan.points) {
@@ -565,7 +571,7 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
   MarkTrails(both, whole, own_voters, cfg, threads, &fit);
   std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
-  MarkSeenOnce(both, seen.size(), whole, own, own_voters, cfg, threads, &residue);
+  MarkSeenOnce(seen, both, whole, own, own_voters, cfg, threads, &residue);
   return residue;
 }
 
