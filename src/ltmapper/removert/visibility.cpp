@@ -615,6 +615,7 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   down_ = float(cfg.fov_down_deg * kRadPerDeg);
   through_m_ = float(cfg.map_voxel_m);
   surface_reach_m_ = float(cfg.ld_normal_radius_m);
+  crossing_reach_m_ = float(cfg.ld_surface_max_m);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
@@ -800,7 +801,7 @@ bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eige
 bool ColumnImage::CrossesNear(const BeamPoint& p) const {
   const Eigen::Vector3f n(p.plane[0], p.plane[1], p.plane[2]);
   if (!n.allFinite()) return true;  // no plane asked: orientation unknown
-  return std::fabs(n.dot(p.ps)) * surface_reach_m_ >= float(test_.tol_m) * p.ps.norm();
+  return std::fabs(n.dot(p.ps)) * crossing_reach_m_ >= float(test_.tol_m) * p.ps.norm();
 }
 
 bool ColumnImage::MetUnderOrOver(const BeamPoint& p, int col, const Eigen::Vector3f& up) const {
