@@ -153,7 +153,7 @@ bool FarSideOf(const MapObject& part, const MapObject& whole, const MapConfig& c
 // points inside whole's box (grown by the tolerance: an occlusion gap), one missed line of
 // samples from it (OneLineApart), or its far side (FarSideOf)?
 bool PieceOf(const MapObject& part, const MapObject& whole, const MapConfig& cfg) {
-  return whole.change == part.change &&
+  return whole.change == part.change && !CutApart(part, whole) &&
          (InsideShare(part, whole, cfg.object_tolerance_m) >= cfg.object_merge_inside_fraction ||
           OneLineApart(part, whole, cfg) || FarSideOf(part, whole, cfg));
 }
@@ -204,7 +204,7 @@ std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
       const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
                          (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
       const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - MaxClearance(o, cfg);
-      if (j != i && under && just_below && !Floats(b, cfg) && b.clearance_m < held[i]) {
+      if (j != i && under && just_below && !Floats(b, cfg) && !CutApart(o, b) && b.clearance_m < held[i]) {
         held[i] = b.clearance_m;
         holder[i] = int(j);
       }

@@ -133,6 +133,20 @@ struct UnobservedSurface {
 // How many points of `unobserved` a cluster reaches through them in hops of the cluster tolerance r.
 std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface& unobserved, double r);
 
+// ---- two things of one cluster (object_split.cpp)
+// A cluster's points (indices into the step's changes) and the cluster it was cut from (-1: none).
+struct Piece {
+  std::vector<std::uint32_t> sel;
+  int cut_from = -1;
+};
+// The clusters with each thin upright face that runs on past the rest of its cluster by
+// object_min_length_m (a fence and the tree that left beside it) cut into the face and the rest;
+// the largest first.
+std::vector<Piece> SplitFaces(const PointCloud& changes, std::vector<std::vector<std::uint32_t>> clusters,
+                              const MapConfig& cfg);
+// Two pieces SplitFaces cut from one cluster: no rule joins them again.
+inline bool CutApart(const MapObject& a, const MapObject& b) { return a.cut_from >= 0 && a.cut_from == b.cut_from; }
+
 // ---- the parts of one object (object_parts.cpp)
 // Per cluster, the cluster of the same change that holds it up where it floats (-1: none); lowers
 // its clearance to the holder's.

@@ -4,7 +4,8 @@
 //     xy cell (object_ground_cell_m) are ground, not clustered (they glue objects together).
 //  2. Euclidean clustering (geometry::EuclideanClusterMembers) of strong ND (disappeared) and of
 //     PD (appeared) separately, far out with the gaps of the sensor's rows and columns at the
-//     points' range (SampleGaps).
+//     points' range (SampleGaps); a thin face that runs on past the rest of its cluster is one
+//     thing and the rest another (SplitFaces, object_split.cpp).
 //  3. Coverage: a change is an object only in space both sessions observed. Strong ND is by
 //     definition seen through by the query. PD is weak when the reference saw its space free,
 //     strong when it never saw there (new territory, facades newly in view) or its view was
@@ -101,6 +102,7 @@ using detail::SegmentHitsBox;
 using detail::SensorGapsAt;
 using detail::Spread;
 using detail::Spread3;
+using detail::SplitFaces;
 using detail::StandOnChangesBelow;
 using detail::ThinFace;
 using detail::UnobservedBeside;
@@ -787,8 +789,10 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
                                                                      cfg.object_tolerance_m)
                                                  : PointCloud())};
     std::vector<MapObject> group;
-    for (const auto& sel : Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()))
-      group.push_back(BuildObject(changes, sel, appeared, step, floor, masks, ctx, cfg));
+    for (const auto& piece : SplitFaces(changes, Cluster(changes, idx, ctx.RangesOf(appeared), cfg, store.threads()), cfg)) {
+      group.push_back(BuildObject(changes, piece.sel, appeared, step, floor, masks, ctx, cfg));
+      group.back().cut_from = piece.cut_from;
+    }
     const UnobservedSurface unobserved = FollowFaces(group, store, step, changes, floor, masks.unobserved, cfg);
     const std::vector<int> holder = HoldUp(group, cfg);
     const PointCloud pool = UnseenPool(changes, appeared, unobserved.cloud, step);

@@ -147,6 +147,9 @@ struct MapObject {
   // tolerance, that the step's changes do not hold (new territory's strong PD beside it). Counted
   // in observed_fraction's whole; not stored.
   std::size_t unobserved_beside = 0;
+  // The cluster SplitFaces cut it from (a face and the rest: two things that touch), -1 when none:
+  // no rule joins two pieces of one cut again (PieceOf, HoldUp); not stored.
+  int cut_from = -1;
   double twin_fraction = 0.0;         // share with a change of the other side within the twin radius
   double attached_fraction = 0.0;     // share with an unchanged surface within the cluster tolerance
   double box_seen_fraction = 0.0;     // of what the other session observed in its box: the share seen changed
