@@ -152,9 +152,7 @@ struct RemovertConfig {
                                       // near a scan's return on a point's plane makes a beam that went on
                                       // past it a ray past the surface's edge, no see-through
   double ld_surface_max_m = 10.0;     // [m] a return on the point's plane at most this far from it in range is
-                                      // a same-surface hit (grazing far ground; an occluder is off the plane);
-                                      // a beam that passed a PD point without a return saw its place free
-                                      // only where it crossed the point's plane this near it (CrossesNear)
+                                      // a same-surface hit (grazing far ground; an occluder is off the plane)
   int ld_same_min_hits = 1;       // [keyframes] a raw change not seen through (with the beam test, or on
                                   // level ground: see SeenThroughBy) that this many of the other
                                   // session's keyframes hit on its surface plane (surface hits, see

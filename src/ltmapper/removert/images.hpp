@@ -230,8 +230,6 @@ struct BeamAsk {
   const Eigen::Vector3f* line_up = nullptr;  // a scan line's point: the world's up in the sensor frame;
                                              // kBeamThrough by a beam that passed it without a return
   const PointInWorld* world = nullptr;    // the surface a far return met (HitSurfaces)
-  bool planar = false;                    // with want_around: kBeamPassed only by a beam that crossed
-                                          // the point's plane near it (CrossesNear)
 };
 
 // `test` as a ColumnImage for `cfg`'s sensor applies it: cells one azimuth step wide, rows at most
@@ -320,12 +318,6 @@ class ColumnImage {
   // A return of the scan on the point's plane (within tol; any return where `plane` is null) within
   // surface_reach_m_ of it.
   bool MetSurfaceNear(float range, float pitch, float yaw, const Eigen::Vector3f& ps, const float* plane) const;
-  // Whether a beam within tol of the point crosses its plane within ld.surface_max_m of it (as far
-  // as a return on the plane is a hit on the point's surface): at angle a to the plane it crosses
-  // within tol / sin(a). A beam running along a fence seen edge-on crosses it nowhere near the
-  // point, and its going on says nothing about the point's place; one that passed a box's side at
-  // 15 deg did cross it there.
-  bool CrossesNear(const BeamPoint& p) const;
   // The nearest beams above and below a scan line's point in its column (and the columns beside it)
   // returned at its horizontal distance (within tol; level across `up`, the world's up in the sensor
   // frame: a tilted sensor's own z is not): the surface under or over it that the scan met (a
@@ -339,7 +331,6 @@ class ColumnImage {
   float min_range_ = 0.f, max_range_ = 0.f;
   float through_m_ = 0.f;        // [m] kBeamThrough: the beam crossed the point's plane this close to it
   float surface_reach_m_ = 0.f;  // [m] MetSurfaceNear's reach
-  float crossing_reach_m_ = 0.f;  // [m] CrossesNear's reach (ld.surface_max_m)
   std::vector<float> range_;          // +inf = no return
   std::vector<Eigen::Vector3f> ret_;  // the cell's nearest return
   std::vector<std::uint8_t> any_;     // 1 = a return at any range, kNearBlind = one nearer than min

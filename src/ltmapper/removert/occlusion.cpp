@@ -278,7 +278,6 @@ void SetUpSurfaces(const PointCloud& points, const PointCloud& own_map, const Po
   // ND: a beam may have gone through the place of a point inside a plane (planar, not at its rim):
   // a ray that crossed the plane within a voxel of a line's or an edge's point may have passed
   // beside the surface.
-  if (s->beams && own_pixel) s->opt.planar_at = &s->planar;  // PD's passed beams (CrossesNear)
   if (s->beams && !own_pixel) {
     s->through_at.resize(points.size());
     for (std::size_t i = 0; i < points.size(); ++i) s->through_at[i] = s->planar[i] && !s->rim[i];
@@ -320,11 +319,8 @@ void JudgePoint(std::size_t i, const VisibilityVotes& v, bool seen, const Surfac
     const bool upright = s.planar.empty() || !s.planar[i] || std::abs(s.normals[i].z()) < kUprightNormalZ;
     const bool around = s.beams && v.beam_around[i] > 0;
     // A beam that passed it and met nothing (the sky beyond a tall thing, ground beyond the
-    // sensor's range) saw its place free where it crossed the point's plane near it (CrossesNear:
-    // seed 31's Pandar64 saw a permanent fence only from 73-75 m at 0.1-1.6 deg to its plane, and
-    // beams that ran along it to beyond the sensor's range made it weak PD); not at the edge of a
-    // surface the beams around it met (a facade's top against the sky), by the keyframes' vote
-    // (Outvotes). Far out, a beam below a
+    // sensor's range) saw its place free; not at the edge of a surface the beams around it met (a
+    // facade's top against the sky), by the keyframes' vote (Outvotes). Far out, a beam below a
     // point may land on ground that happens to lie on the point's plane: Pandar64 (seed 7, true
     // poses) passed a structure 71 m out with 22 keyframes and met "around" it with 1 to 3, which
     // made its lower half strong PD while one "around" vetoed all passes (weak PD recall 0.88).

@@ -615,7 +615,6 @@ ColumnImage::ColumnImage(const RemovertConfig& cfg, const BeamTest& test_in)
   down_ = float(cfg.fov_down_deg * kRadPerDeg);
   through_m_ = float(cfg.map_voxel_m);
   surface_reach_m_ = float(cfg.ld_normal_radius_m);
-  crossing_reach_m_ = float(cfg.ld_surface_max_m);
   min_range_ = float(cfg.min_range_m);
   max_range_ = float(cfg.max_range_m);
   range_.assign(std::size_t(grid_.rows) * std::size_t(grid_.cols), std::numeric_limits<float>::infinity());
@@ -752,8 +751,7 @@ std::uint8_t ColumnImage::Observed(const BeamPoint& p, const BeamAsk& ask) const
       int a = -1, b = -1;
       if (!ended) ended = OwnOrAround(cell(c), row, ended_near, &a, &b);
     }
-  const bool passed =
-      ask.want_around && !ended && (!ask.planar || CrossesNear(p)) && PassedWithoutReturn(p.range, p.pitch, p.yaw);
+  const bool passed = ask.want_around && !ended && PassedWithoutReturn(p.range, p.pitch, p.yaw);
   // Without a beam ending near it, a beam of those columns went through its place (WentBeyond).
   bool went = false;
   for (int d = -reach; d <= reach && ask.ask_through && !ended && !went; ++d) {
@@ -796,12 +794,6 @@ bool ColumnImage::MetSurfaceNear(float range, float pitch, float yaw, const Eige
     }
   }
   return false;
-}
-
-bool ColumnImage::CrossesNear(const BeamPoint& p) const {
-  const Eigen::Vector3f n(p.plane[0], p.plane[1], p.plane[2]);
-  if (!n.allFinite()) return true;  // no plane asked: orientation unknown
-  return std::fabs(n.dot(p.ps)) * crossing_reach_m_ >= float(test_.tol_m) * p.ps.norm();
 }
 
 bool ColumnImage::MetUnderOrOver(const BeamPoint& p, int col, const Eigen::Vector3f& up) const {
@@ -1274,7 +1266,7 @@ void SensorPlanes(const VoteSetup& s, const Eigen::Vector3f& c, const Eigen::Mat
         sc->columns->Observed({sc->range[j], sc->pitch[j], sc->yaw[j], ps, pl},
                               {s.options.count_own_see, asked(s.options.through_at), InsideOf(s, R, ix.order()[i], &inside),
                                asked(s.options.line_at) ? &up : nullptr,
-                               s.options.hit_surfaces != nullptr ? &world : nullptr, asked(s.options.planar_at)});
+                               s.options.hit_surfaces != nullptr ? &world : nullptr});
   }
 }
 

@@ -82,10 +82,6 @@ struct VisibilityOptions {
   // a beam that passed it without a return, where the scan met nothing near it nor at its distance
   // above or below it (ColumnImage::Observed's line_up), went through its place. Counts in beam_through.
   const std::vector<bool>* line_at = nullptr;
-  // With the beam test and count_own_see (PD): per point, whether its normal is a plane's: a beam
-  // that passed it without a return (VisibilityVotes::beam_passed) counts only where it crossed
-  // that plane near it (ColumnImage::CrossesNear), not where it ran along it (null: not asked).
-  const std::vector<bool>* planar_at = nullptr;
   // With the beam test: the keyframes' own surfaces (their session's map) where their beams ended,
   // whose incidence also bounds how far along its ray a return may lie from the point
   // (HitSurfaces; null: the point's plane alone).
