@@ -1773,15 +1773,16 @@ TEST(MapObjects, LookAlikesAreOneMovedObjectOnlyWithinTheSensorsSampling) {
   ExpectOneMoveOnlyAtTheCoarseStep(d, &MapConfig::object_sensor_azimuth_step_deg, 0.0, 1.0);
 }
 
-// A fence 2.0 m tall gone and a wall 2.5 m tall come, 13 m from the keyframe: no move where the
-// sensor's rows are 0.625 deg apart (the lower view's top may lie one row gap, 0.28 m at 60 deg
-// incidence, below the object's; both stand on the ground, so no second gap at their feet), one
-// move where the rows are 2 deg apart (0.91 m there: the sampling cannot tell those tops apart).
+// A fence 2.0 m tall gone and a wall 2.5 m tall come, 11-13 m from the keyframe: no move where the
+// sensor's rows are 1.5 deg apart (the lower view's top may lie one row, 0.33 m there, below the
+// object's; both stand on the ground, so no second gap at their feet; two rows, 0.66 m, would
+// pair them), one move where the rows are 3 deg apart (0.66 m: the sampling cannot tell those tops
+// apart).
 TEST(MapObjects, ViewsWhoseTopsDifferByMoreThanOneRowAreNoMove) {
   KeyframeDelta d;
   d.nd_strong = Car(8, 8, 0.5f, 6.f, 2.f);
   d.pd_weak = Car(-12, -4, 0.5f, 6.f, 2.5f);
-  ExpectOneMoveOnlyAtTheCoarseStep(d, &MapConfig::object_sensor_step_deg, 0.625, 2.0);
+  ExpectOneMoveOnlyAtTheCoarseStep(d, &MapConfig::object_sensor_step_deg, 1.5, 3.0);
 }
 
 // A car gone from a row of parked cars and a car of its size come 20 m away: among like cars the

@@ -332,11 +332,13 @@ Eigen::Vector2d ViewShortfall(const MapObject& o, const MapConfig& cfg) {
 
 
 
-// How far below an object's top a view's highest sample may lie: one gap of the sensor's rows at
-// the view's range (SensorGapsAt), at least the map's sample spacing: the row above it passed over
-// the object.
+// How far below an object's top a view's highest sample may lie: one row of the sensor at the
+// view's range (RowSpacing: the row above it passed over the object), plus the map's sample spacing
+// (SampleSpacing: the voxel that kept the highest sample). Not SensorGapsAt's row gap: that is two
+// rows, for a surface seen at up to 60 deg from below or above, while a view's top is the edge of an
+// upright face whose rows land on it one RowSpacing apart.
 double TopShortfall(const MapObject& o, const MapConfig& cfg) {
-  return std::max(double(SensorGapsAt(o.range_m, cfg).y()), SampleSpacing(cfg));
+  return RowSpacing(o.range_m, cfg) + SampleSpacing(cfg);
 }
 
 // A view's top above its foot: the floor under it (Clearance's ground_z), or its lowest point where
