@@ -1636,6 +1636,28 @@ TEST(MapObjects, UnseenPartsThatMeetMakeNoOneObject) {
   }
 }
 
+// A fence 14 m long and a tree 4 m across 0.6 m beside it, both gone and two clusters, 100 m out
+// where the sensor's columns (0.16 deg) join samples 1.1 m apart after one missed line (seed 53's
+// fence 9 and tree 7 on the HDL-32E): the fence runs on 5 m past the tree on both sides, so two
+// objects. The fence 6 m long (1 m past the tree on either side) may be the tree's piece: one.
+TEST(MapObjects, AThingBesideALongFaceIsNoPieceOfIt) {
+  for (const double past : {5.0, 1.0}) {
+    MapConfig cfg;
+    cfg.object_sensor_azimuth_step_deg = 0.16;
+    cfg.object_sensor_step_deg = 1.33;
+    MapObject fence = Blocks({{5.0 - past, 9.0 + past, 0.0, 0.0}}, "disappeared", 2.0);
+    MapObject tree = Blocks({{5.0, 9.0, 0.6, 4.6}}, "disappeared", 5.0);
+    fence.range_m = tree.range_m = 100.0;
+    std::deque<MapObject> objects{tree, fence};
+    std::vector<MapObject> rejected;
+    detail::MergeParts(objects, rejected, cfg);
+    ASSERT_EQ(objects.size(), past > 2.0 ? 2u : 1u) << "past " << past;
+    if (past > 2.0) {
+      for (const auto& o : objects) EXPECT_EQ(o.points, (o.size.y() < 0.5 ? fence : tree).points);
+    }
+  }
+}
+
 // A fence 14 m long running at 45 deg to the map's axes and a car parked 1.6 m beside it, inside
 // the fence's axis-aligned box but not its oriented one: two objects, not a car merged into the
 // fence.

@@ -19,7 +19,8 @@
 //     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
 //     object's box, one missed line of the sensor's samples from it, or its box's far side
-//     (MergeParts; an appeared part rejected for coverage too), and two pieces of one face
+//     (MergeParts; an appeared part rejected for coverage too; never a thing beside a thin face
+//     that runs on past it on both sides, FaceRunsPast), and two pieces of one face
 //     (their facing ends, one a thin face pointing at the other) across a gap the keyframes
 //     looking that way did not sample (JoinHiddenGaps). A cluster
 //     also stands on change points of its group under it (StandOnChangesBelow), and on its lower
