@@ -1658,6 +1658,26 @@ TEST(MapObjects, AThingBesideALongFaceIsNoPieceOfIt) {
   }
 }
 
+// A tree's crown (2.2-7 m up, its trunk unseen) over a fence 2 m tall it stood 0.6 m beside, both
+// gone: the fence runs on 5 m past the crown on both sides, so it does not hold the crown up (the
+// crown floats, the fence is an object of its own). A fence 1 m past the crown on either side may
+// be what holds it up.
+TEST(MapObjects, ALongFaceHoldsUpNoThingBesideIt) {
+  for (const double past : {5.0, 1.0}) {
+    MapConfig cfg;
+    MapObject fence = Blocks({{5.0 - past, 9.0 + past, 0.0, 0.0}}, "disappeared", 2.0);
+    MapObject crown = Blocks({{5.0, 9.0, 0.6, 4.6}}, "disappeared", 4.8);
+    for (auto& p : crown.cloud.points) p.z += 2.2f;
+    detail::Describe(crown);
+    detail::OrientedBox(crown);
+    crown.clearance_m = 2.2;
+    std::vector<MapObject> group{crown, fence};
+    const std::vector<int> holder = detail::HoldUp(group, cfg);
+    EXPECT_EQ(holder[0], past > 2.0 ? -1 : 1) << "past " << past;
+    EXPECT_EQ(holder[1], -1);
+  }
+}
+
 // A fence 14 m long running at 45 deg to the map's axes and a car parked 1.6 m beside it, inside
 // the fence's axis-aligned box but not its oriented one: two objects, not a car merged into the
 // fence.

@@ -209,8 +209,10 @@ std::size_t UnobservedBeside(const PointCloud& cluster, const UnobservedSurface&
 // MaxClearance below its bottom (the rows between them not scanned) and the tolerance above it,
 // and itself standing on the ground. A cut tree's canopy and its trunk are two clusters where
 // the trunk's top was not scanned; the canopy then takes the trunk's clearance (one level: a
-// cluster held up by a floating one still floats). Returns per cluster the index of the one that
-// holds it up (the lowest), or -1: the two are parts of one object (JoinHeldParts).
+// cluster held up by a floating one still floats). Not by a thin face that runs on past it on
+// both sides (FaceRunsPast): a tree's crown over the fence it stood beside, its trunk unseen, is
+// no part of the fence. Returns per cluster the index of the one that holds it up (the lowest), or
+// -1: the two are parts of one object (JoinHeldParts).
 std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
   const double tol = cfg.object_tolerance_m;
   std::vector<int> holder(group.size(), -1);
@@ -224,7 +226,8 @@ std::vector<int> HoldUp(std::vector<MapObject>& group, const MapConfig& cfg) {
       const bool under = (b.lo.head<2>().array() <= o.hi.head<2>().array() + 2.0 * tol).all() &&
                          (b.hi.head<2>().array() >= o.lo.head<2>().array() - 2.0 * tol).all();
       const bool just_below = b.hi.z() <= o.lo.z() + tol && b.hi.z() >= o.lo.z() - MaxClearance(o, cfg);
-      if (j != i && under && just_below && !Floats(b, cfg) && !CutApart(o, b) && b.clearance_m < held[i]) {
+      if (j != i && under && just_below && !Floats(b, cfg) && !CutApart(o, b) && !FaceRunsPast(b, o, cfg) &&
+          b.clearance_m < held[i]) {
         held[i] = b.clearance_m;
         holder[i] = int(j);
       }

@@ -16,7 +16,8 @@
 //     removed (that object moved there; anything else revealed behind it is coverage).
 //  4. Geometry (Reject()): ghosts of misalignment, height above ground, width across the sensor's sampling at the
 //     cluster's range, flat horizontal patches, optional maximum extent.
-//     A cluster that floats but stands on another of the same change (HoldUp) is a part of it:
+//     A cluster that floats but stands on another of the same change (HoldUp; not on a thin face
+//     that runs on past it on both sides) is a part of it:
 //     when both pass the rules they are joined (JoinHeldParts), as are parts inside a larger
 //     object's box, one missed line of the sensor's samples from it, or its box's far side
 //     (MergeParts; an appeared part rejected for coverage too; never a thing beside a thin face
