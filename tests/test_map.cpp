@@ -1653,7 +1653,7 @@ TEST(MapObjects, AThingBesideALongFaceIsNoPieceOfIt) {
     detail::MergeParts(objects, rejected, cfg);
     ASSERT_EQ(objects.size(), past > 2.0 ? 2u : 1u) << "past " << past;
     if (past > 2.0) {
-      for (const auto& o : objects) EXPECT_EQ(o.points, (o.size.y() < 0.5 ? fence : tree).points);
+      for (const auto& o : objects) EXPECT_EQ(o.points, (detail::ThinFace(o, cfg) ? fence : tree).points);
     }
   }
 }

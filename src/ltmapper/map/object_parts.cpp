@@ -164,7 +164,7 @@ bool FaceRunsPast(const MapObject& face, const MapObject& other, const MapConfig
     lo = std::min(lo, along), hi = std::max(hi, along);
   }
   const double half = 0.5 * face.size.x();
-  return lo + half >= cfg.object_min_length_m && half - hi >= cfg.object_min_length_m;
+  return RunsOnPastBothEnds(-half, half, lo, hi, cfg);
 }
 
 // Is `part` a piece of `whole`: the same change, not a thing beside a long face (FaceRunsPast,

@@ -121,6 +121,13 @@ inline bool InGrownBox(const MapObject& o, const Eigen::Vector3f& q, double r) {
 // A thin face (a fence, a hoarding, a wall): its oriented box no wider than the cluster tolerance.
 inline bool ThinFace(const MapObject& o, const MapConfig& cfg) { return o.size.y() <= cfg.object_tolerance_m; }
 
+// Whether a face spanning [face_lo, face_hi] along its line runs on past a thing spanning [lo, hi]
+// along it by object_min_length_m or more at both ends: a thing standing beside a long face, two
+// things (SplitFaces for one cluster of them, FaceRunsPast for two).
+inline bool RunsOnPastBothEnds(double face_lo, double face_hi, double lo, double hi, const MapConfig& cfg) {
+  return lo - face_lo >= cfg.object_min_length_m && face_hi - hi >= cfg.object_min_length_m;
+}
+
 // The step's surfaces its reference never observed near a group's change points, with their tree
 // (built once per group: UnobservedBeside walks it for every cluster).
 struct UnobservedSurface {

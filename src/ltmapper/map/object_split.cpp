@@ -87,9 +87,7 @@ Split FaceAndRest(const PointCloud& changes, const std::vector<std::uint32_t>& s
     const int side = across[k] <= tol ? 0 : 1;
     lo[side] = std::min(lo[side], along[k]), hi[side] = std::max(hi[side], along[k]);
   }
-  const bool rest_on_both_sides = lo[1] <= hi[1] && std::max(0.0, lo[1] - lo[0]) >= cfg.object_min_length_m &&
-                                  std::max(0.0, hi[0] - hi[1]) >= cfg.object_min_length_m;
-  if (!rest_on_both_sides) return {};
+  if (lo[1] > hi[1] || !RunsOnPastBothEnds(lo[0], hi[0], lo[1], hi[1], cfg)) return {};  // no rest, or not past it
   double top = -std::numeric_limits<double>::infinity();  // the slab's height beyond the rest
   for (std::size_t k = 0; k < sel.size(); ++k)
     if (across[k] <= tol && (along[k] < lo[1] - tol || along[k] > hi[1] + tol))
