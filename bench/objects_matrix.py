@@ -14,11 +14,13 @@ usage: bench/objects_matrix.py [--ltmapper BIN] [--out DIR] [--map-config F] [--
   e.g. bench/objects_matrix.py --out /tmp/objects /tmp/matrix/* out/demo
   --baseline DIR: the --out of an earlier run over the same rows (e.g. main's binary); then each
   row also says what changed: SAME (every cluster and every truth object's IoU, and objects.csv
-  byte for byte), or the truth objects whose IoU moved, and the clusters only one run holds.
+  byte for byte), or the truth objects whose IoU moved, and the clusters only one run holds; a
+  column only this run's objects.csv holds is named, and the rest compared without it.
   The sensor of each row is read from its last session's scans (object_sensor_step_deg: 0).
   Exit status 0 even when a row misses a target: this prints figures, the tests judge.
 """
 import argparse
+import csv
 import filecmp
 import glob
 import json
@@ -80,8 +82,27 @@ def changes(out, base):
     lines += ["cluster only in the baseline: %s" % (c,) for c in b if c not in a]
     csvs = [os.path.join(d, "objects", "objects.csv") for d in (out, base)]
     if not lines and not filecmp.cmp(*csvs, shallow=False):
-        lines.append("objects.csv differs (same clusters and IoUs)")
+        mine_csv, theirs_csv = [read_csv(f) for f in csvs]
+        added = [c for c in mine_csv[0] if c not in theirs_csv[0]]
+        common = [c for c in mine_csv[0] if c in theirs_csv[0]]
+        if added:
+            lines.append("objects.csv columns only here: %s" % ", ".join(added))
+        if columns(mine_csv, common) != columns(theirs_csv, common):
+            lines.append("objects.csv differs (same clusters and IoUs)")
     return lines
+
+
+def read_csv(path):
+    """A CSV file as its header (a list) and its rows (lists)."""
+    with open(path, newline="") as f:
+        table = list(csv.reader(f))
+    return table[0], table[1:]
+
+
+def columns(table, names):
+    """The rows of a read_csv table, each cut to the named columns in that order."""
+    at = [table[0].index(n) for n in names]
+    return [[row[k] for k in at] for row in table[1]]
 
 
 def load_objects(row_out):

@@ -48,7 +48,7 @@ py::dict ObjectToDict(const map::MapObject& o) {
   d["lo"] = Vec3(o.lo);
   d["hi"] = Vec3(o.hi);
   PutFields(d, o, LTM_KV(o, change), LTM_KV(o, partner), LTM_KV(o, move_candidates), LTM_KV(o, alike_beside),
-            LTM_KV(o, exists_in), LTM_KV(o, confidence));
+            LTM_KV(o, hidden_length_m), LTM_KV(o, exists_in), LTM_KV(o, confidence));
   PutFields(d, o, LTM_KV(o, track), LTM_KV(o, track_sessions));
   d["box_center"] = Vec3(o.box_center);
   d["size"] = Vec3(o.size);

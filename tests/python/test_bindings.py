@@ -230,6 +230,7 @@ def test_stages_store_eval():
     assert all(o["track"] <= o["id"] and o["exists_in"] in o["track_sessions"] for o in st.objects())
     assert all(o["partner"] < 0 or o["partner"] in o["move_candidates"] for o in st.objects())
     assert all(o["partner"] < 0 or o["alike_beside"] == 0 for o in st.objects())  # no move's end among its like
+    assert all(o["hidden_length_m"] >= 0.0 for o in st.objects())  # how much longer than its box, unseen
     ch = st.step_changes(1, voxel=0.0)
     assert set(np.unique(ch["cls"])) <= {3, 4, 5, 6} and (ch["session"] == 1).all()
     kf = st.keyframes()[0]

@@ -3,7 +3,7 @@
 //   exists_in; u8 class; string change, rejected (u32 length + bytes); u64 points; f64 confidence,
 //   centroid, lo, hi, box_center, size (3 each), yaw, ground_z, height_above_ground, clearance,
 //   range, observed, twin, attached, box seen (version 2; version 1 has none: 0) fractions; u32
-//   alike beside (version 3; before: 0); u32 cloud points, then the arrays f32 x, y, z, intensity,
+//   alike beside (version 3; before: 0); f64 hidden length (version 4; before: 0); u32 cloud points, then the arrays f32 x, y, z, intensity,
 //   u8 class, u16 session, each as byte planes (all lowest bytes first). Ids and partners are not
 //   stored: Store::Objects assigns them over all steps. The reader checks every length against the
 //   bytes left.
@@ -14,10 +14,11 @@
 namespace ltm::map::detail {
 namespace {
 
-constexpr std::uint32_t kObjectsVersion = 3;
+constexpr std::uint32_t kObjectsVersion = 4;
 constexpr std::uint32_t kOldestObjectsVersion = 1;  // without box_seen_fraction
 constexpr std::uint32_t kBoxSeenSince = 2;          // the first version holding box_seen_fraction
 constexpr std::uint32_t kAlikeSince = 3;            // the first version holding alike_beside
+constexpr std::uint32_t kHiddenSince = 4;           // the first version holding hidden_length_m
 
 class Writer {
  public:
@@ -119,6 +120,7 @@ void PutObject(Writer& w, const MapObject& o) {
                    o.twin_fraction, o.attached_fraction, o.box_seen_fraction})
     w.Put(d);
   w.Put(std::uint32_t(o.alike_beside));
+  w.Put(o.hidden_length_m);
   const PointCloud& c = o.cloud;
   w.Put(std::uint32_t(c.size()));
   for (const auto field : {&PointXYZI::x, &PointXYZI::y, &PointXYZI::z, &PointXYZI::intensity})
@@ -140,6 +142,7 @@ MapObject GetObject(Reader& r, std::uint32_t version) {
     *d = r.Get<double>();
   if (version >= kBoxSeenSince) o.box_seen_fraction = r.Get<double>();
   if (version >= kAlikeSince) o.alike_beside = r.Get<std::uint32_t>();
+  if (version >= kHiddenSince) o.hidden_length_m = r.Get<double>();
   const std::size_t n = r.GetCount(kPointBytes);
   PointCloud& c = o.cloud;
   c.points.resize(n), c.cls.resize(n), c.session.resize(n);

@@ -625,6 +625,19 @@ PointCloud BlockersOver(const NearCells& cells, const Eigen::Vector3d& lo, const
   return out;
 }
 
+// The map's surfaces above the ground (BlockersOver, at `session`) that could block an in-view line
+// of sight from `views` to a point of `gaps` (GapSampled's blockers), in a tree; null: none.
+std::unique_ptr<geometry::KdTree> BlockersOfLines(const std::vector<std::vector<Eigen::Vector3d>>& gaps,
+                                                  const std::vector<Pose>& views, const Store& store, int session,
+                                                  const Floor& floor, const MapConfig& cfg) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& gap : gaps)
+    for (const auto& g : gap) lo = lo.cwiseMin(g), hi = hi.cwiseMax(g);
+  for (const Pose& T : views) lo = lo.cwiseMin(T.translation()), hi = hi.cwiseMax(T.translation());
+  const PointCloud blockers = BlockersOver(CellsOnLines(gaps, views, cfg), lo, hi, store, session, floor, cfg);
+  return blockers.empty() ? nullptr : std::make_unique<geometry::KdTree>(blockers);
+}
+
 struct GapPair {
   std::size_t whole, part;
   Gap gap;
@@ -672,15 +685,9 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, cons
     const std::vector<Pose> views = pairs.empty() ? std::vector<Pose>() : ViewsOf(store, step, appeared);
     if (views.empty()) continue;
     std::vector<std::vector<Eigen::Vector3d>> gaps;
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-    for (const auto& p : pairs) {
-      gaps.push_back(p.gap.points);
-      for (const auto& g : p.gap.points) lo = lo.cwiseMin(g), hi = hi.cwiseMax(g);
-    }
-    for (const Pose& T : views) lo = lo.cwiseMin(T.translation()), hi = hi.cwiseMax(T.translation());
-    const PointCloud blockers = BlockersOver(CellsOnLines(gaps, views, cfg), lo, hi, store,
-                                             appeared ? step.order : step.reference, floor, cfg);
-    const std::unique_ptr<geometry::KdTree> tree = blockers.empty() ? nullptr : std::make_unique<geometry::KdTree>(blockers);
+    for (const auto& p : pairs) gaps.push_back(p.gap.points);
+    const std::unique_ptr<geometry::KdTree> tree =
+        BlockersOfLines(gaps, views, store, appeared ? step.order : step.reference, floor, cfg);
     std::vector<bool> joined(kept.size(), false);
     for (const auto& p : pairs) {
       if (joined[p.whole] || joined[p.part] || (!p.gap.points.empty() && GapSampled(p.gap, views, tree.get(), cfg)))
@@ -692,6 +699,133 @@ void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, cons
     for (std::size_t k = 0; k < kept.size(); ++k)
       if (!joined[k]) out.push_back(std::move(kept[k]));
     kept.swap(out);
+  }
+}
+
+namespace {
+// Where o's end `end` (+1 or -1 along its oriented box's length axis) is: across the axis, the
+// offsets from the box's centre line of its points within a cluster tolerance of that end, a
+// tolerance apart (the face it ends with, or the one face of an L that reaches it).
+std::vector<double> EndAcross(const MapObject& o, int end, const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m;
+  const Eigen::Vector2d axis(std::cos(o.yaw_rad), std::sin(o.yaw_rad)), across(-axis.y(), axis.x());
+  std::vector<long> slots;
+  for (const auto& p : o.cloud.points) {
+    const Eigen::Vector2d d = Eigen::Vector2d(p.x, p.y) - o.box_center.head<2>();
+    if (double(end) * d.dot(axis) >= 0.5 * o.size.x() - tol) slots.push_back(std::lround(d.dot(across) / tol));
+  }
+  std::sort(slots.begin(), slots.end());
+  slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
+  std::vector<double> out;
+  for (const long k : slots) out.push_back(double(k) * tol);
+  return out;
+}
+
+// The column `past` [m] beyond o's end `end`, a cluster tolerance wide along its length: a point at
+// each offset `across` (EndAcross), at the middle of o's height band.
+Gap ColumnPastEnd(const MapObject& o, int end, double past, const std::vector<double>& offsets, const MapConfig& cfg) {
+  const Eigen::Vector2d axis(std::cos(o.yaw_rad), std::sin(o.yaw_rad)), across(-axis.y(), axis.x());
+  const Eigen::Vector2d at = o.box_center.head<2>() + axis * (double(end) * (0.5 * o.size.x() + past));
+  Gap column;
+  column.height = o.hi.z() - o.lo.z();
+  column.bottom = o.lo.z();
+  column.line = axis;
+  column.step = cfg.object_tolerance_m;
+  for (const double w : offsets) {
+    const Eigen::Vector2d xy = at + across * w;
+    column.points.emplace_back(xy.x(), xy.y(), column.bottom + 0.5 * column.height);
+  }
+  return column;
+}
+
+// One end of an object, and its columns outwards (ColumnPastEnd), a tolerance apart.
+struct EndColumns {
+  std::size_t object;
+  int end;
+  std::vector<Gap> columns;
+};
+
+// The step's changes of one side (PD or strong ND) at any height: a far fragment whose cell holds
+// no ground sample is its own floor (GroupPoints leaves it out), and EndFilled takes the object's
+// own ground instead.
+SideChanges AllOfSide(const PointCloud& changes, bool appeared) {
+  std::vector<std::uint32_t> idx;
+  for (std::size_t i = 0; i < changes.size(); ++i)
+    if (Grouped(changes.cls[i]) && IsPd(changes.cls[i]) == appeared) idx.push_back(std::uint32_t(i));
+  return SideChanges(changes.select(idx));
+}
+
+// Whether a change of o's side lies within the cluster tolerance (xy) of a point of `column` past
+// o's end `end` (outside its box: not o's own), above the ground band over o's ground and at most a
+// tolerance over its top: a fragment of it.
+bool EndFilled(const Gap& column, const MapObject& o, int end, const SideChanges& side, const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m, lo = o.ground_z + cfg.object_ground_height_m, hi = o.hi.z() + tol;
+  const Eigen::Vector2d axis(std::cos(o.yaw_rad), std::sin(o.yaw_rad));
+  const auto past_end = [&](const PointXYZI& p) {
+    return double(end) * (Eigen::Vector2d(p.x, p.y) - o.box_center.head<2>()).dot(axis) > 0.5 * o.size.x();
+  };
+  if (!side.tree) return false;
+  for (const auto& g : column.points)
+    for (const auto& [j, sq] : side.tree->RadiusUnsorted(Eigen::Vector3f(float(g.x()), float(g.y()), 0.f), float(tol))) {
+      const PointXYZI& p = side.at.points[j];
+      if (p.z > lo && p.z <= hi && past_end(p)) return true;
+    }
+  return false;
+}
+}  // namespace
+
+void MeasureHiddenEnds(std::deque<MapObject>& objects, const std::vector<double>& upto, const PointCloud& changes,
+                       const Store& store, const SessionRecord& step, const Floor& floor, const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m;
+  for (const bool appeared : {false, true}) {
+    std::vector<EndColumns> ends;
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+      if ((objects[k].change == "appeared") != appeared || !(upto[k] > 0.0)) continue;
+      for (const int end : {-1, 1}) {
+        ends.push_back({k, end, {}});
+        const std::vector<double> offsets = EndAcross(objects[k], end, cfg);
+        for (double past = tol; past < upto[k] + tol && !offsets.empty(); past += tol)
+          ends.back().columns.push_back(ColumnPastEnd(objects[k], end, past, offsets, cfg));
+      }
+    }
+    if (ends.empty()) continue;
+    const std::vector<Pose> views = ViewsOf(store, step, appeared);  // none: every column counts as sampled
+    const SideChanges side = AllOfSide(changes, appeared);
+    std::vector<std::vector<bool>> filled;  // per end, per column: EndFilled
+    for (const auto& e : ends) {
+      filled.emplace_back();
+      for (const Gap& column : e.columns) filled.back().push_back(EndFilled(column, objects[e.object], e.end, side, cfg));
+    }
+    // Two rounds, each with the map's blockers of its lines of sight only: most ends stop at their
+    // first column the changes do not fill, so the first round judges those alone, the second the
+    // rest of the ends that went on past them.
+    std::vector<std::size_t> hidden(ends.size(), 0);  // per end: columns hidden so far
+    std::vector<bool> open(ends.size(), true);        // per end: not yet stopped at a sampled column
+    for (const bool first : {true, false}) {
+      std::vector<std::vector<Eigen::Vector3d>> lines;
+      for (std::size_t n = 0; n < ends.size(); ++n) {
+        while (open[n] && hidden[n] < ends[n].columns.size() && filled[n][hidden[n]]) ++hidden[n];
+        open[n] = open[n] && hidden[n] < ends[n].columns.size();
+        for (std::size_t c = hidden[n]; open[n] && c < ends[n].columns.size() && (!first || c == hidden[n]); ++c)
+          if (!filled[n][c]) lines.push_back(ends[n].columns[c].points);
+      }
+      if (lines.empty()) break;
+      const std::unique_ptr<geometry::KdTree> tree =
+          views.empty() ? nullptr : BlockersOfLines(lines, views, store, appeared ? step.order : step.reference, floor, cfg);
+      const auto hidden_column = [&](std::size_t n, std::size_t c) {
+        return filled[n][c] || (!views.empty() && !GapSampled(ends[n].columns[c], views, tree.get(), cfg));
+      };
+      for (std::size_t n = 0; n < ends.size(); ++n) {
+        if (!open[n]) continue;
+        if (!first)
+          while (hidden[n] < ends[n].columns.size() && hidden_column(n, hidden[n])) ++hidden[n];
+        else if (hidden_column(n, hidden[n]))  // the first column the changes do not fill
+          ++hidden[n];
+        else
+          open[n] = false;
+      }
+    }
+    for (std::size_t n = 0; n < ends.size(); ++n) objects[ends[n].object].hidden_length_m += double(hidden[n]) * tol;
   }
 }
 }  // namespace ltm::map::detail

@@ -214,6 +214,13 @@ void LeaveOutChanged(Gap& gap, const SideChanges& side, const MapConfig& cfg);
 // and changed too.
 void JoinHiddenGaps(std::deque<MapObject>& kept, const PointCloud& changes, const Store& store, const SessionRecord& step,
                     const Floor& floor, const MapConfig& cfg);
+// Sets each object's hidden_length_m, measured up to upto[k] [m] (an object whose upto is 0 is not
+// measured): past each end of its box's length, the columns a cluster tolerance apart (across its
+// width, at its middle height) that the sessions that scanned it did not sample (GapSampled, over
+// the map's surfaces there), or that changes of its side fill (a fragment of it too small to be a
+// cluster), up to the first one they sampled and found free, summed over both ends.
+void MeasureHiddenEnds(std::deque<MapObject>& objects, const std::vector<double>& upto, const PointCloud& changes,
+                       const Store& store, const SessionRecord& step, const Floor& floor, const MapConfig& cfg);
 // Each object takes its foot: the change points of its side in the ground band under it.
 void KeepFeet(std::deque<MapObject>& kept, const PointCloud& changes, const Floor& floor, const MapConfig& cfg);
 

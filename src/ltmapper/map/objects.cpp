@@ -37,8 +37,10 @@
 //     confirms that object and is no second one (Confirms, SetAsideConfirmations).
 //  6. Moved: a disappeared and an appeared object of one step whose box lengths and tops above the
 //     ground agree within what the sensor's sampling lets each view fall short (SizesAgree,
-//     CouldHaveMoved), neither standing among unchanged objects of its shape (AlikeIn, counted per
-//     step); of such pairings, the one that moves the objects least in all (LinkMoved).
+//     CouldHaveMoved), a view's length also by how far past its ends its side's changes run on or
+//     its sessions never sampled (MeasureHiddenEnds, per step, object_parts.cpp), neither standing
+//     among unchanged objects of its shape (AlikeIn, counted per step); of such pairings, the one
+//     that moves the objects least in all (LinkMoved).
 //  7. Tracks: rows of different steps that are one object, and a move's two ends (AssignTracks,
 //     InheritMoves).
 #include "ltmapper/geometry/geometry.hpp"
@@ -347,8 +349,19 @@ double TopShortfall(const MapObject& o, const MapConfig& cfg) {
 // that lies lower (a far object's cell may hold no ground sample, its floor then one of its own).
 double TopAboveFoot(const MapObject& o) { return o.hi.z() - std::min(o.lo.z(), o.ground_z); }
 
+// How far short of an object's length a view's box may fall: its sampling at both ends
+// (ViewShortfall), and what the sessions never sampled past its ends (MapObject::hidden_length_m).
+double LengthShortfall(const MapObject& o, const MapConfig& cfg) { return ViewShortfall(o, cfg).x() + o.hidden_length_m; }
+
+// Whether neither view's top above its foot exceeds the other's by more than the other's top may lie
+// below the object's (TopShortfall).
+bool TopsAgree(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
+  const double top = TopAboveFoot(a) - TopAboveFoot(b);
+  return top <= TopShortfall(b, cfg) && -top <= TopShortfall(a, cfg);
+}
+
 // Whether views a and b can be of one object: neither box's length exceeds the other's by more than
-// the other may have fallen short (ViewShortfall), nor its top above its foot the other's by more
+// the other may have fallen short (LengthShortfall), nor its top above its foot the other's by more
 // than the other's top may lie below the object's (TopShortfall: one row, not a row at either end,
 // as both stand on the ground: a fence 2.1 m tall is no wall of 3.3 m, a structure 3 m tall no
 // tree of 7 m); a far view may be much smaller than a near one, not larger. Their widths say
@@ -356,9 +369,8 @@ double TopAboveFoot(const MapObject& o) { return o.hi.z() - std::min(o.lo.z(), o
 // seen across the street is 0.2 m wide, at an angle 1.3 m of its 2.4 m), so both are lower bounds
 // of the same width.
 bool SizesAgree(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
-  const double length = a.size.x() - b.size.x(), top = TopAboveFoot(a) - TopAboveFoot(b);
-  return length <= ViewShortfall(b, cfg).x() && -length <= ViewShortfall(a, cfg).x() && top <= TopShortfall(b, cfg) &&
-         -top <= TopShortfall(a, cfg);
+  const double length = a.size.x() - b.size.x();
+  return length <= LengthShortfall(b, cfg) && -length <= LengthShortfall(a, cfg) && TopsAgree(a, b, cfg);
 }
 
 // Whether view o shows the shape of object d: it may fall short (ViewShortfall) by less than d's
@@ -721,6 +733,24 @@ std::vector<std::size_t> MoveEnds(const std::deque<MapObject>& objects, const Ma
   return ends;
 }
 
+// Measures how far past its ends each of the step's objects may run unseen (MeasureHiddenEnds), up
+// to what a move's other end would need: the longest object of the other side of the change, far
+// enough away and of a top that agrees (TopsAgree), less its own length and sampling shortfall.
+void MeasureHiddenEndsForMoves(std::deque<MapObject>& objects, const PointCloud& changes, const Store& store,
+                               const SessionRecord& step, const Floor& floor, const MapConfig& cfg) {
+  std::vector<double> upto(objects.size(), 0.0);
+  for (std::size_t d = 0; d < objects.size(); ++d)
+    for (std::size_t a = 0; a < objects.size(); ++a) {
+      const MapObject &gone = objects[d], &came = objects[a];
+      if (gone.change != "disappeared" || came.change != "appeared" || !TopsAgree(gone, came, cfg) ||
+          (gone.centroid - came.centroid).norm() < cfg.object_moved_min_dist_m)
+        continue;
+      upto[a] = std::max(upto[a], gone.size.x() - came.size.x() - ViewShortfall(came, cfg).x());
+      upto[d] = std::max(upto[d], came.size.x() - gone.size.x() - ViewShortfall(gone, cfg).x());
+    }
+  detail::MeasureHiddenEnds(objects, upto, changes, store, step, floor, cfg);
+}
+
 // Sets alike_beside (AlikeIn) of each of the step's objects that could be a move's end (MoveEnds),
 // reading the step's map once (the bounding box of their reaches) when there is one.
 void CountAlikeBeside(std::deque<MapObject>& objects, const Store& store, const SessionRecord& step, const Floor& floor,
@@ -821,6 +851,7 @@ void StepObjects(const Store& store, const SessionRecord& step, StepContext ctx,
   MergeParts(step_kept, step_rejected, cfg);
   JoinHiddenGaps(step_kept, changes, store, step, floor, cfg);
   KeepFeet(step_kept, changes, floor, cfg);
+  MeasureHiddenEndsForMoves(step_kept, changes, store, step, floor, cfg);
   CountAlikeBeside(step_kept, store, step, floor, ctx, cfg);
   for (auto& o : step_kept) {
     Rate(o, cfg);

@@ -219,7 +219,7 @@ constexpr double kRadToDeg = 180.0 / M_PI;
 const char* const kObjectColumns =
     "id,session,reference,class,change,partner,move_candidates,alike_beside,exists_in,track,track_sessions,points,"
     "confidence,cx,cy,cz,min_x,min_y,min_z,max_x,max_y,max_z,box_cx,box_cy,box_cz,yaw_deg,length,width,height,ground_z,"
-    "height_above_ground,clearance,range_m,observed_fraction,twin_fraction,attached_fraction,box_seen_fraction";
+    "height_above_ground,clearance,range_m,observed_fraction,twin_fraction,attached_fraction,box_seen_fraction,hidden_length";
 
 std::string Joined(const std::vector<int>& v, const char* sep) {
   std::string out;
@@ -235,7 +235,8 @@ void WriteObjectRow(std::ostream& os, const MapObject& o) {
      << o.hi.x() << ',' << o.hi.y() << ',' << o.hi.z() << ',' << o.box_center.x() << ',' << o.box_center.y() << ','
      << o.box_center.z() << ',' << o.yaw_rad * kRadToDeg << ',' << o.size.x() << ',' << o.size.y() << ','
      << o.size.z() << ',' << o.ground_z << ',' << o.height_above_ground << ',' << o.clearance_m << ',' << o.range_m << ','
-     << o.observed_fraction << ',' << o.twin_fraction << ',' << o.attached_fraction << ',' << o.box_seen_fraction;
+     << o.observed_fraction << ',' << o.twin_fraction << ',' << o.attached_fraction << ',' << o.box_seen_fraction << ','
+     << o.hidden_length_m;
 }
 
 // Object `id`'s cloud, relative to the objects folder (objects.json's "cloud").
@@ -262,7 +263,7 @@ void WriteObjectJson(io::json::Writer& w, const MapObject& o) {
   w.BeginObject().Int("id", o.id).Int("session", o.session).Int("reference", o.reference);
   w.String("class", ToString(o.cls)).String("change", o.change).Int("partner", o.partner);
   Ints(w, "move_candidates", o.move_candidates);
-  w.Int("alike_beside", o.alike_beside);
+  w.Int("alike_beside", o.alike_beside).Number("hidden_length_m", Mm(o.hidden_length_m));
   Ints(w, "exists_in", {o.exists_in});
   w.Int("track", o.track);
   Ints(w, "track_sessions", o.track_sessions);

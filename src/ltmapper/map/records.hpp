@@ -125,6 +125,12 @@ struct MapObject {
   // of parked cars: objects.cpp AlikeIn). An end with one is never paired as moved (LinkMoved):
   // among like objects, one that left and one that came are as likely two as one that moved.
   std::size_t alike_beside = 0;
+  // How much longer than its box it may be unseen [m]: past each end of its length, how far the
+  // sessions that scanned it never sampled (objects.cpp MeasureHiddenEnds: their lines of sight
+  // blocked, or too sparse there), summed over both ends; measured only as far as a move's other
+  // end could need (0: not measured). A container seen 89 m out at its corner as an L of 3.0 m of
+  // its 6.1 m is a view of the container, not a thing 3 m long.
+  double hidden_length_m = 0.0;
   int exists_in = 0;   // session whose scans hold the object (session for PD, reference for ND)
   // Identity across steps (Store::Objects, not stored per step): the rows that are one object, the
   // same thing at one place seen by several steps or a move's two ends, form one track; its id is
