@@ -156,8 +156,8 @@ TEST(Objects, PrecisionRecallF1PerPairChangeAndClass) {
 
 // Moves: container 10 left one place, 11 is the same container at another (partners); two cars
 // came and went. A move is found when both its ends are found by clusters reported as moved,
-// linked when those clusters name each other; a cluster reported as moved is true when it finds
-// a move's end.
+// linked when those clusters name each other (or a row of each other's track); a cluster reported as
+// moved is true when it finds a move's end.
 TEST(Objects, MovedFoundLinkedAndPrecision) {
   const auto cfg = Cfg();
   std::vector<ObjectTruth> truth(4);
@@ -192,6 +192,17 @@ TEST(Objects, MovedFoundLinkedAndPrecision) {
   // Every reported object with its verdict: the container's end true, the car "moved" too.
   EXPECT_NE(md.find("| 00_01 | 0 | moved | 1 | - | 100 | 10 (container) | 1.000 | yes |"), std::string::npos) << md;
   EXPECT_NE(md.find("| 00_01 | 2 | moved | 3 | - | 100 | 7 (car) | 1.000 | yes |"), std::string::npos) << md;
+  // A later step's view of the container's new place (cluster 1, track 4) inherited the partner of
+  // step 1's view (cluster 4, the same track): linked through the track; through another track, not.
+  clusters.push_back({"00_01", 4, Grid(10, 10, 20.f, 0.f), "appeared", true, 0, 4});
+  clusters[1].track = 4, clusters[0].partner = 4;
+  r = EvaluateObjects(truth, clusters, cfg, 2);
+  EXPECT_EQ(r.moved[0].linked, 1u);
+  clusters[4].track = 5;
+  r = EvaluateObjects(truth, clusters, cfg, 2);
+  EXPECT_EQ(r.moved[0].linked, 0u);
+  clusters.pop_back();
+  clusters[1].track = -1, clusters[0].partner = 1;
   // Both ends reported as moved, each linked to a car: found, not linked.
   clusters[0].partner = 3, clusters[3].partner = 0, clusters[1].partner = 2, clusters[2].partner = 1;
   r = EvaluateObjects(truth, clusters, cfg, 2);

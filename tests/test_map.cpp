@@ -1997,6 +1997,35 @@ TEST(MapObjects, AMovedThingSeenAgainByALaterStepIsTheMovesEnd) {
   EXPECT_TRUE(car->move_candidates.empty());
 }
 
+// Step 1 moved container A to B; step 2, against the same reference, sees B again and container C
+// gone and come to D. C lies nearer B (14 m) than D (34 m), but B's row at step 2 is the end of
+// step 1's move seen again, no candidate for C: C moved to D (the stress row drift3x_4s, whose
+// step 3 paired the container that left with the one step 2 had seen come).
+TEST(MapObjects, AnEarlierMovesEndSeenAgainIsNoCandidateOfALaterMove) {
+  const PointCloud a = Car(8, 8, 2.4f, 6.0f, 2.5f), c = Car(-14, 10, 2.4f, 6.0f, 2.5f);
+  test::TempDir tmp;
+  KeyframeDelta d1, d2;
+  d1.nd_strong = a;
+  d1.pd_weak = Car(-12, -4, 2.4f, 6.0f, 2.5f);                                                 // at B
+  d2.nd_strong = c;
+  d2.pd_weak = Cat(Car(-11.7f, -4, 2.4f, 6.0f, 2.5f), Car(10, -16, 2.4f, 6.0f, 2.5f));  // B again, D
+  const auto objs = TwoStepObjects(tmp, Cat(a, c), d1, d2);
+  ASSERT_EQ(objs.size(), 5u);
+  const MapObject *gone_a = nullptr, *came_b = nullptr, *again = nullptr, *gone_c = nullptr, *came_d = nullptr;
+  for (const auto& o : objs) {
+    const bool gone = o.cls == PointClass::kNDStrong;
+    if (o.session == 1) (gone ? gone_a : came_b) = &o;
+    else if (gone) gone_c = &o;
+    else (o.centroid.x() < 0 ? again : came_d) = &o;
+  }
+  ASSERT_TRUE(gone_a && came_b && again && gone_c && came_d);
+  EXPECT_EQ(gone_a->partner, came_b->id);
+  EXPECT_EQ(again->partner, gone_a->id);  // step 1's move, inherited
+  EXPECT_EQ(gone_c->partner, came_d->id);
+  EXPECT_EQ(came_d->partner, gone_c->id);
+  EXPECT_EQ(gone_c->move_candidates, std::vector<int>({came_d->id}));
+}
+
 // Identity across steps: car A, new in session 1, is found again by step 2, which sampled it 0.3 m
 // off (new points the map state did not hold yet): both rows are one track, existing in sessions 1
 // and 2; car B, new in session 2, and the container gone in session 1 are tracks of their own. A

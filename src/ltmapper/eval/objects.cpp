@@ -184,6 +184,14 @@ ObjectsPrf Slice(const std::string& name, const ObjectsResult& r, const std::vec
   return s;
 }
 
+// Whether a cluster's partner `partner` names cluster `c`: it is c, or a row of c's track (a later
+// step's view of a move's end is that end: the partner a row inherited is the first view's id).
+bool Names(const std::map<int, const ClusterScore*>& cluster, int partner, int c) {
+  if (partner == c) return true;
+  const auto p = cluster.find(partner), q = cluster.find(c);
+  return p != cluster.end() && q != cluster.end() && p->second->track >= 0 && p->second->track == q->second->track;
+}
+
 // The moves of the truth objects and clusters of pair `pair` ("" = every pair), MovedPrf's rules.
 MovedPrf Moves(const std::string& pair, const ObjectsResult& r, const std::vector<ObjectTruth>& truth) {
   MovedPrf m;
@@ -209,7 +217,8 @@ MovedPrf Moves(const std::string& pair, const ObjectsResult& r, const std::vecto
     const ObjectScore &a = r.objects[i], &b = r.objects[j->second];
     if (!moved(a) || !moved(b)) continue;
     ++m.found;
-    if (cluster.at(a.best_cluster)->partner == b.best_cluster && cluster.at(b.best_cluster)->partner == a.best_cluster)
+    if (Names(cluster, cluster.at(a.best_cluster)->partner, b.best_cluster) &&
+        Names(cluster, cluster.at(b.best_cluster)->partner, a.best_cluster))
       ++m.linked;
   }
   for (const auto& c : r.cluster_scores) {

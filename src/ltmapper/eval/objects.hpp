@@ -63,8 +63,9 @@ struct ClusterScore {
 };
 // Moves (ObjectTruth::partner) of one slice: the "moved objects reported as moved". A
 // truth move (both ends scored) is found when both its ends are found (ObjectScore::found) by
-// clusters reported as moved, and linked when those two clusters name each other as partners (two
-// identical containers that both moved may be paired the other way round). A cluster reported as
+// clusters reported as moved, and linked when those two clusters name each other as partners, or a
+// row of each other's track (a later step's view of a move's end inherits the first view's partner;
+// two identical containers that both moved may be paired the other way round). A cluster reported as
 // moved is true when it is a true object whose best truth object is an end of a move. Precision =
 // true reported / reported, recall = found / truth moves; NaN without any.
 struct MovedPrf {

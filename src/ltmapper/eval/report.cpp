@@ -514,7 +514,7 @@ void MdObjects(std::ostringstream& md, const ObjectsResult& r) {
                std::to_string(p.true_clusters), Fmt(p.precision, 3), Fmt(p.recall, 3), Fmt(p.f1, 3)});
   md << "\nMoved objects (truth/objects.csv's partner: the same object gone from one place and new at another "
         "in the pair): a move is found when clusters reported as moved find both its ends, linked when those two "
-        "name each other as partners; a cluster reported as moved is true when it finds an end of a move.\n\n"
+        "name each other (or a row of each other's track) as partners; a cluster reported as moved is true when it finds an end of a move.\n\n"
      << Header({"slice", "truth moves", "found as moved", "linked", "clusters moved", "true", "precision", "recall"});
   for (const auto& m : r.moved)
     md << Row({m.name, std::to_string(m.truth_moves), std::to_string(m.found), std::to_string(m.linked),

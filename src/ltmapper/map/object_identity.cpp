@@ -69,6 +69,18 @@ void AssignIds(std::vector<MapObject>& objects) {
   }
 }
 
+// Rows a and b are one object at one place: found by different steps on the same side of the
+// change (PD: appeared, strong ND: disappeared; a move's end by its class), with a majority of the
+// smaller one's points within object_tolerance_m of the other's.
+bool SameObject(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
+  if (a.session == b.session || IsPd(a.cls) != IsPd(b.cls) || a.cloud.empty() || b.cloud.empty()) return false;
+  const double tol = cfg.object_tolerance_m;
+  if ((a.lo.array() > b.hi.array() + tol).any() || (b.lo.array() > a.hi.array() + tol).any()) return false;
+  const MapObject &small = a.points <= b.points ? a : b, &large = a.points <= b.points ? b : a;
+  const std::vector<bool> near = geometry::WithinRadius(small.cloud, large.cloud, tol);
+  return 2 * std::size_t(std::count(near.begin(), near.end(), true)) > near.size();
+}
+
 // Moved: a disappeared and an appeared object of the same step that could be one (CouldHaveMoved),
 // each object in at most one pair. Objects alike in shape (two containers, or cars) are told apart
 // by nothing their boxes hold: the size differences of one object's two views and of two such
@@ -76,7 +88,10 @@ void AssignIds(std::vector<MapObject>& objects) {
 // all (LeastCostPairs over the centroids' displacement): the likeliest, as moves are more often
 // short than long. An end that stands among unchanged objects of its shape (alike_beside: a row of
 // parked cars) is paired with none: there, one that left and one that came are as likely two
-// things as one that moved. Each still lists the other in move_candidates.
+// things as one that moved. Each still lists the other in move_candidates. A row that is an end
+// of a move an earlier step linked against the same reference, seen again (SameObject, the same
+// side of the change), is that end (InheritMoves), no end of a move of its own step: the container
+// that came at step 2 is no candidate for the one that left at step 3.
 void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
   std::map<int, std::pair<std::vector<std::size_t>, std::vector<std::size_t>>> ends;  // step -> gone, came
   for (std::size_t i = 0; i < objects.size(); ++i) {
@@ -84,9 +99,16 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
     if (objects[i].change == "disappeared") gone.push_back(i);
     if (objects[i].change == "appeared") came.push_back(i);
   }
+  std::vector<std::size_t> linked;  // the ends of the moves of the steps done
+  const auto seen_again = [&](std::size_t i) {
+    return std::any_of(linked.begin(), linked.end(), [&](std::size_t j) {
+      return objects[j].reference == objects[i].reference && SameObject(objects[j], objects[i], cfg);
+    });
+  };
   const double forbidden = std::numeric_limits<double>::infinity();
-  for (const auto& [step, e] : ends) {
-    const auto& [gone, came] = e;
+  for (auto& [step, e] : ends) {
+    auto& [gone, came] = e;
+    for (auto* side : {&gone, &came}) side->erase(std::remove_if(side->begin(), side->end(), seen_again), side->end());
     std::vector<std::vector<double>> cost(gone.size(), std::vector<double>(came.size(), forbidden));
     for (std::size_t r = 0; r < gone.size(); ++r)
       for (std::size_t c = 0; c < came.size(); ++c) {
@@ -99,22 +121,11 @@ void LinkMoved(std::vector<MapObject>& objects, const MapConfig& cfg) {
     for (const auto& [r, c] : detail::LeastCostPairs(cost)) {
       objects[gone[r]].partner = objects[came[c]].id;
       objects[came[c]].partner = objects[gone[r]].id;
+      linked.push_back(gone[r]), linked.push_back(came[c]);
     }
   }
   for (auto& o : objects)
     if (o.partner >= 0) o.change = "moved";
-}
-
-// Rows a and b are one object at one place: found by different steps on the same side of the
-// change (PD: appeared, strong ND: disappeared; a move's end by its class), with a majority of the
-// smaller one's points within object_tolerance_m of the other's.
-bool SameObject(const MapObject& a, const MapObject& b, const MapConfig& cfg) {
-  if (a.session == b.session || IsPd(a.cls) != IsPd(b.cls) || a.cloud.empty() || b.cloud.empty()) return false;
-  const double tol = cfg.object_tolerance_m;
-  if ((a.lo.array() > b.hi.array() + tol).any() || (b.lo.array() > a.hi.array() + tol).any()) return false;
-  const MapObject &small = a.points <= b.points ? a : b, &large = a.points <= b.points ? b : a;
-  const std::vector<bool> near = geometry::WithinRadius(small.cloud, large.cloud, tol);
-  return 2 * std::size_t(std::count(near.begin(), near.end(), true)) > near.size();
 }
 
 // Identity across steps (MapObject::track): rows that are one object (SameObject) and a move's two

@@ -39,8 +39,9 @@
 //     ground agree within what the sensor's sampling lets each view fall short (SizesAgree,
 //     CouldHaveMoved), a view's length also by how far past its ends its side's changes run on or
 //     its sessions never sampled (MeasureHiddenEnds, per step, object_parts.cpp), neither standing
-//     among unchanged objects of its shape (AlikeIn, counted per step); of such pairings, the one
-//     that moves the objects least in all (LinkMoved).
+//     among unchanged objects of its shape (AlikeIn, counted per step), nor being an earlier step's
+//     move's end seen again; of such pairings, the one that moves the objects least in all
+//     (LinkMoved).
 //  7. Tracks: rows of different steps that are one object, and a move's two ends (AssignTracks,
 //     InheritMoves).
 #include "ltmapper/geometry/geometry.hpp"
