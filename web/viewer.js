@@ -468,11 +468,14 @@ function selectObject(k) {
   // Could have moved, but stands among unchanged objects of its shape (objects.json's alike_beside).
   const among = o.partner >= 0 || !alike.length || !o.alike_beside ? '' :
       `\nno move: #${alike.join(', #')} could be it, but ${o.alike_beside} unchanged object(s) of its shape stand beside it`;
+  // How much longer than its box it may be, unseen (objects.json's hidden_length_m).
+  const longer = !(o.hidden_length_m > 0) ? '' :
+      `\nmay be up to ${o.hidden_length_m.toFixed(1)} m longer: past its ends its face goes on in fragments or was never sampled`;
   $('object-detail').textContent =
       `#${o.id} ${o.change} (${o.class}) in ${name(o.session)} vs ${name(o.reference)}\n` +
       `${o.points} points, confidence ${o.confidence}\n` +
       `box ${o.box.size.map((v) => v.toFixed(1)).join(' x ')} m at ${o.box.center.map((v) => v.toFixed(1)).join(', ')}` +
-      partner + among;
+      partner + among + longer;
   showBox(o);
   flyTo(new THREE.Vector3(...o.box.center), new THREE.Vector3(...o.box.size).length());
   showStep(o.session);

@@ -235,6 +235,9 @@ async function clickObject(page, objects) {
   // One that could have moved but stands among unchanged objects of its shape says why it is no move.
   if (o.partner < 0 && candidates.length && o.alike_beside) assert.match(detail, new RegExp(`no move: #${candidates.join(', #')} could be it`));
   if (o.partner < 0) assert.doesNotMatch(detail, /the other end/);
+  // A view whose face goes on past its ends, unseen, says how much longer the object may be.
+  if (o.hidden_length_m > 0) assert.match(detail, new RegExp(`may be up to ${o.hidden_length_m.toFixed(1)} m longer`));
+  else assert.doesNotMatch(detail, /may be up to/);
   assert.match(await page.textContent('#session-label'), new RegExp(`Session ${o.session}: `));
   await page.waitForTimeout(1000);  // the camera's flight (0.8 s)
   console.log(`object #${o.id}: ${detail.split('\n')[0]}`);

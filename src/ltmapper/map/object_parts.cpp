@@ -708,11 +708,11 @@ namespace {
 // tolerance apart (the face it ends with, or the one face of an L that reaches it).
 std::vector<double> EndAcross(const MapObject& o, int end, const MapConfig& cfg) {
   const double tol = cfg.object_tolerance_m;
-  const Eigen::Vector2d axis(std::cos(o.yaw_rad), std::sin(o.yaw_rad)), across(-axis.y(), axis.x());
+  const BoxFrame frame(o);
   std::vector<long> slots;
   for (const auto& p : o.cloud.points) {
-    const Eigen::Vector2d d = Eigen::Vector2d(p.x, p.y) - o.box_center.head<2>();
-    if (double(end) * d.dot(axis) >= 0.5 * o.size.x() - tol) slots.push_back(std::lround(d.dot(across) / tol));
+    const Eigen::Vector2d d = frame.Local(p.xyz().cast<double>());
+    if (double(end) * d.x() >= 0.5 * o.size.x() - tol) slots.push_back(std::lround(d.y() / tol));
   }
   std::sort(slots.begin(), slots.end());
   slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
@@ -724,26 +724,41 @@ std::vector<double> EndAcross(const MapObject& o, int end, const MapConfig& cfg)
 // The column `past` [m] beyond o's end `end`, a cluster tolerance wide along its length: a point at
 // each offset `across` (EndAcross), at the middle of o's height band.
 Gap ColumnPastEnd(const MapObject& o, int end, double past, const std::vector<double>& offsets, const MapConfig& cfg) {
-  const Eigen::Vector2d axis(std::cos(o.yaw_rad), std::sin(o.yaw_rad)), across(-axis.y(), axis.x());
-  const Eigen::Vector2d at = o.box_center.head<2>() + axis * (double(end) * (0.5 * o.size.x() + past));
+  const BoxFrame frame(o);
   Gap column;
   column.height = o.hi.z() - o.lo.z();
   column.bottom = o.lo.z();
-  column.line = axis;
+  column.line = Eigen::Vector2d(std::cos(o.yaw_rad), std::sin(o.yaw_rad));
   column.step = cfg.object_tolerance_m;
   for (const double w : offsets) {
-    const Eigen::Vector2d xy = at + across * w;
+    const Eigen::Vector2d xy = frame.World(double(end) * (0.5 * o.size.x() + past), w);
     column.points.emplace_back(xy.x(), xy.y(), column.bottom + 0.5 * column.height);
   }
   return column;
 }
 
-// One end of an object, and its columns outwards (ColumnPastEnd), a tolerance apart.
+// One end of an object, and its columns outwards (ColumnPastEnd), a tolerance apart, as far as
+// upto (MeasureHiddenEnds) reaches.
 struct EndColumns {
   std::size_t object;
   int end;
   std::vector<Gap> columns;
 };
+std::vector<EndColumns> EndsToMeasure(const std::deque<MapObject>& objects, const std::vector<double>& upto,
+                                      bool appeared, const MapConfig& cfg) {
+  const double tol = cfg.object_tolerance_m;
+  std::vector<EndColumns> ends;
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    if ((objects[k].change == "appeared") != appeared || !(upto[k] > 0.0)) continue;
+    for (const int end : {-1, 1}) {
+      ends.push_back({k, end, {}});
+      const std::vector<double> offsets = EndAcross(objects[k], end, cfg);
+      for (double past = tol; past < upto[k] + tol && !offsets.empty(); past += tol)
+        ends.back().columns.push_back(ColumnPastEnd(objects[k], end, past, offsets, cfg));
+    }
+  }
+  return ends;
+}
 
 // The step's changes of one side (PD or strong ND) at any height: a far fragment whose cell holds
 // no ground sample is its own floor (GroupPoints leaves it out), and EndFilled takes the object's
@@ -760,9 +775,9 @@ SideChanges AllOfSide(const PointCloud& changes, bool appeared) {
 // tolerance over its top: a fragment of it.
 bool EndFilled(const Gap& column, const MapObject& o, int end, const SideChanges& side, const MapConfig& cfg) {
   const double tol = cfg.object_tolerance_m, lo = o.ground_z + cfg.object_ground_height_m, hi = o.hi.z() + tol;
-  const Eigen::Vector2d axis(std::cos(o.yaw_rad), std::sin(o.yaw_rad));
+  const BoxFrame frame(o);
   const auto past_end = [&](const PointXYZI& p) {
-    return double(end) * (Eigen::Vector2d(p.x, p.y) - o.box_center.head<2>()).dot(axis) > 0.5 * o.size.x();
+    return double(end) * frame.Local(p.xyz().cast<double>()).x() > 0.5 * o.size.x();
   };
   if (!side.tree) return false;
   for (const auto& g : column.points)
@@ -772,60 +787,60 @@ bool EndFilled(const Gap& column, const MapObject& o, int end, const SideChanges
     }
   return false;
 }
+
+// Per end, how many of its columns in a row from its end are hidden: filled (EndFilled), or not
+// sampled by `views` (GapSampled over the map's blockers at `session`; no views: every column not
+// filled counts as sampled). Two rounds, each with the map's blockers of its own lines of sight
+// only: most ends stop at their first column the changes do not fill, so the first round judges
+// those alone, the second the rest of the ends that went on past them.
+std::vector<std::size_t> HiddenColumns(const std::vector<EndColumns>& ends, const std::vector<std::vector<bool>>& filled,
+                                       const std::vector<Pose>& views, const Store& store, int session,
+                                       const Floor& floor, const MapConfig& cfg) {
+  std::vector<std::size_t> hidden(ends.size(), 0);  // per end: columns hidden so far
+  std::vector<bool> open(ends.size(), true);        // per end: not yet stopped at a sampled column
+  for (const bool first : {true, false}) {
+    std::vector<std::vector<Eigen::Vector3d>> lines;
+    for (std::size_t n = 0; n < ends.size(); ++n) {
+      while (open[n] && hidden[n] < ends[n].columns.size() && filled[n][hidden[n]]) ++hidden[n];
+      open[n] = open[n] && hidden[n] < ends[n].columns.size();
+      for (std::size_t c = hidden[n]; open[n] && c < ends[n].columns.size() && (!first || c == hidden[n]); ++c)
+        if (!filled[n][c]) lines.push_back(ends[n].columns[c].points);
+    }
+    if (lines.empty()) break;
+    const std::unique_ptr<geometry::KdTree> tree =
+        views.empty() ? nullptr : BlockersOfLines(lines, views, store, session, floor, cfg);
+    const auto hidden_column = [&](std::size_t n, std::size_t c) {
+      return filled[n][c] || (!views.empty() && !GapSampled(ends[n].columns[c], views, tree.get(), cfg));
+    };
+    for (std::size_t n = 0; n < ends.size(); ++n) {
+      if (!open[n]) continue;
+      if (!first)
+        while (hidden[n] < ends[n].columns.size() && hidden_column(n, hidden[n])) ++hidden[n];
+      else if (hidden_column(n, hidden[n]))  // the first column the changes do not fill
+        ++hidden[n];
+      else
+        open[n] = false;
+    }
+  }
+  return hidden;
+}
 }  // namespace
 
 void MeasureHiddenEnds(std::deque<MapObject>& objects, const std::vector<double>& upto, const PointCloud& changes,
                        const Store& store, const SessionRecord& step, const Floor& floor, const MapConfig& cfg) {
-  const double tol = cfg.object_tolerance_m;
   for (const bool appeared : {false, true}) {
-    std::vector<EndColumns> ends;
-    for (std::size_t k = 0; k < objects.size(); ++k) {
-      if ((objects[k].change == "appeared") != appeared || !(upto[k] > 0.0)) continue;
-      for (const int end : {-1, 1}) {
-        ends.push_back({k, end, {}});
-        const std::vector<double> offsets = EndAcross(objects[k], end, cfg);
-        for (double past = tol; past < upto[k] + tol && !offsets.empty(); past += tol)
-          ends.back().columns.push_back(ColumnPastEnd(objects[k], end, past, offsets, cfg));
-      }
-    }
+    const std::vector<EndColumns> ends = EndsToMeasure(objects, upto, appeared, cfg);
     if (ends.empty()) continue;
-    const std::vector<Pose> views = ViewsOf(store, step, appeared);  // none: every column counts as sampled
     const SideChanges side = AllOfSide(changes, appeared);
     std::vector<std::vector<bool>> filled;  // per end, per column: EndFilled
     for (const auto& e : ends) {
       filled.emplace_back();
       for (const Gap& column : e.columns) filled.back().push_back(EndFilled(column, objects[e.object], e.end, side, cfg));
     }
-    // Two rounds, each with the map's blockers of its lines of sight only: most ends stop at their
-    // first column the changes do not fill, so the first round judges those alone, the second the
-    // rest of the ends that went on past them.
-    std::vector<std::size_t> hidden(ends.size(), 0);  // per end: columns hidden so far
-    std::vector<bool> open(ends.size(), true);        // per end: not yet stopped at a sampled column
-    for (const bool first : {true, false}) {
-      std::vector<std::vector<Eigen::Vector3d>> lines;
-      for (std::size_t n = 0; n < ends.size(); ++n) {
-        while (open[n] && hidden[n] < ends[n].columns.size() && filled[n][hidden[n]]) ++hidden[n];
-        open[n] = open[n] && hidden[n] < ends[n].columns.size();
-        for (std::size_t c = hidden[n]; open[n] && c < ends[n].columns.size() && (!first || c == hidden[n]); ++c)
-          if (!filled[n][c]) lines.push_back(ends[n].columns[c].points);
-      }
-      if (lines.empty()) break;
-      const std::unique_ptr<geometry::KdTree> tree =
-          views.empty() ? nullptr : BlockersOfLines(lines, views, store, appeared ? step.order : step.reference, floor, cfg);
-      const auto hidden_column = [&](std::size_t n, std::size_t c) {
-        return filled[n][c] || (!views.empty() && !GapSampled(ends[n].columns[c], views, tree.get(), cfg));
-      };
-      for (std::size_t n = 0; n < ends.size(); ++n) {
-        if (!open[n]) continue;
-        if (!first)
-          while (hidden[n] < ends[n].columns.size() && hidden_column(n, hidden[n])) ++hidden[n];
-        else if (hidden_column(n, hidden[n]))  // the first column the changes do not fill
-          ++hidden[n];
-        else
-          open[n] = false;
-      }
-    }
-    for (std::size_t n = 0; n < ends.size(); ++n) objects[ends[n].object].hidden_length_m += double(hidden[n]) * tol;
+    const std::vector<std::size_t> hidden = HiddenColumns(ends, filled, ViewsOf(store, step, appeared), store,
+                                                          appeared ? step.order : step.reference, floor, cfg);
+    for (std::size_t n = 0; n < ends.size(); ++n)
+      objects[ends[n].object].hidden_length_m += double(hidden[n]) * cfg.object_tolerance_m;
   }
 }
 }  // namespace ltm::map::detail
