@@ -474,6 +474,35 @@ def test_store_threads_order_and_pipeline():
     raises(ltmapper.Error, ltmapper.run_pipeline, ltmapper.RunConfig(), [session_dir(0), session_dir(1)], given,
            poses=[truth_poses(0)], match="2 sessions but 1 pose files")
 
+
+def test_trace_object():
+    """bench/trace_object.py on the true-poses run of test_store_threads_order_and_pipeline: each
+    truth object's change points, in the run's frame (the truth's, as the poses are true), with an
+    LD class each, and a clear error for an object that is no change."""
+    sys.path.insert(0, os.path.join(SOURCE_DIR, "bench"))
+    import trace_object
+    w = work()
+    given = os.path.join(w, "run_given")
+    truth = ltmapper.read_ply(os.path.join(sim_dir(), "truth", "pair_00_01", "objects_changes.ply"))
+    ids = sorted(set(int(o) for o in truth["object"]))
+    assert ids, "the tiny scenario's pair changes no object"
+    for obj in ids:
+        t = trace_object.trace(sim_dir(), given, obj, eval_json=None)
+        mine = truth["points"][truth["object"] == obj, :3]
+        assert t["pair"] == "00_01" and t["change_points"] == len(mine)
+        np.testing.assert_allclose(t["box_world"]["min"], mine.min(0), atol=2e-3)
+        np.testing.assert_allclose(t["box_world"]["max"], mine.max(0), atol=2e-3)
+        cells = [(tc, lc, n) for tc, row in t["ld"]["truth_x_ld"].items() for lc, n in row.items()]
+        assert sum(n for _, _, n in cells) == len(mine)
+        assert all(tc in trace_object.TRUTH_CLASSES.values() for tc, _, _ in cells)
+        assert all(lc in trace_object.LD_CLOUDS + ("none",) for _, lc, _ in cells)
+        assert [s["session"] for s in t["sessions"]] == ["00", "01"] and all(s["aligned"] for s in t["sessions"])
+        assert all(o["reason"] for o in t["objects"])
+    raises(trace_object.TraceError, trace_object.trace, sim_dir(), given, max(ids) + 1000,
+           match=os.path.join(sim_dir(), "truth"))
+    raises(trace_object.TraceError, trace_object.trace, sim_dir(), os.path.join(w, "no_run"), ids[0],
+           match="no_run")
+
 if __name__ == "__main__":
     t0 = time.time()
     tests = [(n, f) for n, f in sorted(globals().items(), key=lambda kv: kv[0]) if n.startswith("test_")]

@@ -1,0 +1,216 @@
+#!/usr/bin/env python3
+"""Where one truth object's change went: for a kept matrix row (ROW/sim, ROW/run, as
+bench/scenario_matrix.py --keep leaves it) or a `make demo` output (out/demo), and one changed
+truth object of a pair, print
+
+  the truth object (class, the session it exists in, its change points: truth PD / ND, strong /
+  weak) and `eval objects`' verdict on it (ROW/eval/objects.json, when there);
+  where each session of the pair was: its nearest keyframe (the run's poses) and range;
+  LD against the truth, point by point: each truth change point of the object, in the run's world
+  frame, with the LD class of the run's nearest change point within the match distance (none:
+  no change point there: LD called it the same surface, or it is not in the map);
+  the object stage: every object (objects.csv) and rejected cluster (rejected.csv, with its reason)
+  whose box overlaps the object's.
+
+It answers the first question about a missed object (LD's classes, a residue, or a cluster the
+rules rejected, and why) without a debugger. Needs the Python bindings (`import ltmapper`: build/
+python, or PYTHONPATH) and numpy.
+
+usage: bench/trace_object.py [--sim DIR] [--run DIR] [--eval FILE] [--pair CC_QQ] [--json] ROW OBJECT
+  e.g. bench/trace_object.py /tmp/matrix/os1-64 0
+  --sim / --run / --eval: other places than ROW/sim, ROW/run, ROW/eval/objects.json.
+  --pair: the pair whose truth holds the object (default: the first pair the truth has that holds it).
+  --json: the same as one JSON object.
+Exit status 2 with a message naming the file when an input is missing or the object is not a
+changed object of the pair.
+"""
+import argparse
+import csv
+import glob
+import json
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "build", "python"))
+import ltmapper  # noqa: E402
+
+# The LD clouds of a pair folder (docs/FORMATS.md), named as LT-removert writes them.
+LD_CLOUDS = ("pd_strong", "pd_weak", "pd_unobserved", "pd_residue", "nd_strong", "nd_weak", "nd_residue")
+# core::PointClass of the truth's labelled change clouds.
+TRUTH_CLASSES = {3: "pd_strong", 4: "pd_weak", 5: "nd_strong", 6: "nd_weak"}
+MATCH_DIST_M = 0.2  # eval's match distance (EvalConfig::match_dist_m)
+NEAR_BOX_M = 1.0    # LD points read around the object's box [m]
+
+
+class TraceError(Exception):
+    pass
+
+
+def need(path):
+    if not os.path.exists(path):
+        raise TraceError("%s: not found" % path)
+    return path
+
+
+def truth_pairs(sim):
+    return sorted(os.path.basename(p)[len("pair_"):] for p in glob.glob(os.path.join(sim, "truth", "pair_*")))
+
+
+def truth_points(sim, pair, obj):
+    """The object's labelled change points in the truth frame: (points (N,3), class names), or None."""
+    ply = need(os.path.join(ltmapper.find_pair_dir(os.path.join(sim, "truth"), pair), "objects_changes.ply"))
+    t = ltmapper.read_ply(ply)
+    m = t["object"] == obj
+    if not m.any():
+        return None
+    return t["points"][m, :3].astype(float), [TRUTH_CLASSES.get(int(c), "class %d" % c) for c in t["cls"][m]]
+
+
+def to_frame(T, p):
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def nearest_ld(pair_dir, pts):
+    """Per point, the LD class of the nearest change point within MATCH_DIST_M (or "none") and the
+    LD points per class inside the points' box grown by NEAR_BOX_M."""
+    lo, hi = pts.min(0) - NEAR_BOX_M, pts.max(0) + NEAR_BOX_M
+    best = np.full(len(pts), np.inf)
+    cls = np.array(["none"] * len(pts), dtype=object)
+    around = {}
+    for name in LD_CLOUDS:
+        c = ltmapper.read_cloud(need(os.path.join(pair_dir, name + ".pcd")))[:, :3].astype(float)
+        c = c[np.all((c >= lo) & (c <= hi), axis=1)]
+        around[name] = int(len(c))
+        for first in range(0, len(c), 2048):
+            d = np.sqrt(((pts[:, None, :] - c[None, first:first + 2048, :]) ** 2).sum(-1)).min(1)
+            better = (d <= MATCH_DIST_M) & (d < best)
+            best[better], cls[better] = d[better], name
+    return list(cls), around
+
+
+def sessions_near(run, pair, centroid):
+    """Per session of the pair: its keyframe nearest the object (the run's world poses) and range."""
+    out = []
+    for k in pair.split("_"):
+        poses = os.path.join(run, "aligned", "session_%s" % k, "poses_world.txt")
+        if not os.path.exists(poses):
+            out.append({"session": k, "aligned": False})
+            continue
+        xyz = ltmapper.read_poses(poses)[:, :3, 3]
+        d = np.linalg.norm(xyz - centroid, axis=1)
+        out.append({"session": k, "aligned": True, "nearest_keyframe": int(d.argmin()), "range_m": float(d.min())})
+    return out
+
+
+def overlapping(path, lo, hi, reason):
+    """Rows of objects.csv / rejected.csv whose axis-aligned box overlaps [lo, hi]."""
+    rows = []
+    with open(need(path)) as f:
+        for r in csv.DictReader(f):
+            blo = np.array([float(r[k]) for k in ("min_x", "min_y", "min_z")])
+            bhi = np.array([float(r[k]) for k in ("max_x", "max_y", "max_z")])
+            if np.all(blo <= hi) and np.all(bhi >= lo):
+                keep = ("id", "session", "class", "change", "partner", "points", "length", "width", "height",
+                        "height_above_ground", "clearance", "range_m", "observed_fraction", "twin_fraction",
+                        "attached_fraction", "box_seen_fraction")
+                row = {k: r[k] for k in keep if k in r}
+                row["reason"] = r.get("reason", "") if reason else "accepted"
+                rows.append(row)
+    return rows
+
+
+def eval_verdict(eval_json, pair, obj):
+    if not eval_json or not os.path.exists(eval_json):
+        return None
+    with open(eval_json) as f:
+        objects = json.load(f)["objects"]["objects"]
+    for o in objects:
+        if o["pair"] == pair and o["id"] == obj:
+            return {k: o[k] for k in ("found", "scored", "best_cluster", "best_iou", "observed_share") if k in o}
+    return None
+
+
+def trace(sim, run, obj, pair=None, eval_json=None):
+    """The trace of truth object `obj` as a dict (see the module's docstring)."""
+    pairs = [pair] if pair else truth_pairs(need(sim))
+    found = None
+    for p in pairs:
+        found = truth_points(sim, p, obj)
+        if found is not None:
+            pair = p
+            break
+    if found is None:
+        raise TraceError("%s: object %d is no changed object of pair %s" % (
+            os.path.join(sim, "truth"), obj, ", ".join(pairs) or "(none)"))
+    pts_truth, truth_cls = found
+    aligned = need(os.path.join(run, "aligned"))
+    pts = to_frame(ltmapper.truth_to_estimate_frame(sim, aligned), pts_truth)
+    ld_cls, around = nearest_ld(need(ltmapper.find_pair_dir(os.path.join(run, "changes"), pair)), pts)
+    confusion, heights = {}, {}
+    for t, l, z in zip(truth_cls, ld_cls, pts[:, 2] - pts[:, 2].min()):
+        confusion.setdefault(t, {}).setdefault(l, 0)
+        confusion[t][l] += 1
+        heights.setdefault("%s %s" % (t, l), []).append(float(z))
+    lo, hi = pts.min(0), pts.max(0)
+    objects_dir = os.path.join(run, "objects")
+    return {
+        "object": obj, "pair": pair, "change_points": len(pts),
+        "box_world": {"min": lo.round(3).tolist(), "max": hi.round(3).tolist()},
+        "eval": eval_verdict(eval_json, pair, obj),
+        "sessions": sessions_near(run, pair, pts.mean(0)),
+        "ld": {"truth_x_ld": confusion, "ld_points_around": around,
+               "heights_m": {k: [round(min(v), 2), round(max(v), 2)] for k, v in heights.items()}},
+        "objects": overlapping(os.path.join(objects_dir, "objects.csv"), lo, hi, False) +
+                   overlapping(os.path.join(objects_dir, "rejected.csv"), lo, hi, True),
+    }
+
+
+def print_trace(t):
+    print("truth object %d, pair %s: %d change points, world box %s .. %s" % (
+        t["object"], t["pair"], t["change_points"], t["box_world"]["min"], t["box_world"]["max"]))
+    print("eval objects: %s" % (t["eval"] if t["eval"] is not None else "(no eval/objects.json)"))
+    for s in t["sessions"]:
+        print("session %s: %s" % (s["session"], "not aligned" if not s["aligned"] else
+                                  "nearest keyframe %d at %.1f m" % (s["nearest_keyframe"], s["range_m"])))
+    print("LD, truth class x LD class of the nearest change point within %.2f m (heights above the object's"
+          " lowest change point, m):" % MATCH_DIST_M)
+    h = t["ld"]["heights_m"]
+    for tc, row in sorted(t["ld"]["truth_x_ld"].items()):
+        print("  %-10s %s" % (tc, "  ".join("%s %d [%.2f-%.2f]" % ((lc, n) + tuple(h["%s %s" % (tc, lc)]))
+                                            for lc, n in sorted(row.items(), key=lambda kv: -kv[1]))))
+    print("LD points within %.1f m of its box: %s" % (NEAR_BOX_M, "  ".join(
+        "%s %d" % kv for kv in t["ld"]["ld_points_around"].items() if kv[1])))
+    print("clusters whose box overlaps it:" if t["objects"] else "no cluster's box overlaps it")
+    for o in t["objects"]:
+        print("  " + ", ".join("%s %s" % kv for kv in o.items()))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("row")
+    ap.add_argument("object", type=int)
+    ap.add_argument("--sim")
+    ap.add_argument("--run")
+    ap.add_argument("--eval", dest="eval_json")
+    ap.add_argument("--pair")
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args()
+    sim = a.sim or os.path.join(a.row, "sim")
+    run = a.run or os.path.join(a.row, "run")
+    try:
+        t = trace(sim, run, a.object, a.pair, a.eval_json or os.path.join(a.row, "eval", "objects.json"))
+    except (TraceError, ltmapper.Error) as e:
+        print("trace_object: %s" % e, file=sys.stderr)
+        return 2
+    if a.json:
+        print(json.dumps(t, indent=1))
+    else:
+        print_trace(t)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
