@@ -459,6 +459,36 @@ TEST(RemovertLd, TheBeamThatPassedAnAppearedCarMakesItWeakPd) {
   EXPECT_GE(double(hid_s), 0.9 * double(hid_w + hid_s));
 }
 
+// A board put up 0.45 m in front of a wall 70 m from both drives: the central's map holds the wall
+// alone. With a rotation uncertainty of 0.06 deg LD's kd radius there is 0.3 m + tan(0.18 deg) x
+// 69.5 m = 0.52 m, so the board's points have the wall's within it, and only beyond ld.radius_m:
+// the beam test decides (the central's beams went through the board's place on to the wall), and
+// the board is PD (strong: at 70 m the pixels' tolerance holds the wall 0.45 m behind it). With 0.1
+// deg the radius grows by 0.36 m, more than ld.beam_tol_m, so a copy of the wall that error moved
+// could not be told from the board by the beams: the radius decides and the board is no change.
+// The wall is neither PD nor strong ND either way (behind the board the query did not see it: weak ND).
+TEST(RemovertLd, AThingBeyondTheBaseRadiusOfTheOtherMapIsJudgedByTheBeams) {
+  const test::Box wall = test::MakeBox(-30, -70.3, 0, 30, -70, 6, 1), board = test::MakeBox(-2, -69.65, 0.4, 2, -69.55, 2.4, 30);
+  const auto c = Drive({wall}, 0.0, nullptr), q = Drive({wall, board}, 0.0, nullptr);
+  auto pd_on = [&](double sigma_deg, std::size_t* on_wall) {
+    RemovertConfig cfg = test::ConfigFor();
+    cfg.ld_rotation_sigma_deg = sigma_deg;
+    const auto ld = removert::DetectLd(removert::BuildSessionMap(c, cfg, 2), removert::BuildSessionMap(q, cfg, 2), c, q,
+                                       cfg, 2);
+    *on_wall = CountIn(ld.pd_weak, wall) + CountIn(ld.pd_strong, wall) + CountIn(ld.nd_strong, wall);
+    return std::make_pair(CountIn(ld.pd_weak, board), CountIn(ld.pd_strong, board));
+  };
+  std::size_t wall_a = 0, wall_b = 0;
+  const auto [weak, strong] = pd_on(0.06, &wall_a);
+  const auto [weak_b, strong_b] = pd_on(0.1, &wall_b);
+  std::printf("board: PD weak %zu strong %zu (0.06 deg), %zu / %zu (0.1 deg); wall changes %zu / %zu\n", weak, strong,
+              weak_b, strong_b, wall_a, wall_b);
+  EXPECT_GT(weak + strong, 60u);
+  EXPECT_LE(weak_b + strong_b, (weak + strong) / 10);
+  EXPECT_EQ(wall_a, 0u);
+  EXPECT_EQ(wall_b, 0u);
+}
+
 // Multi-session cleanup (paper Fig. 3(f)): a pedestrian-sized thing that only one session has, in
 // space the other saw through, is a residue of a mover (HD of its session), not a change; a car
 // stays a change, and so do a small piece beside it (part of the same object, seen apart) and a

@@ -78,8 +78,13 @@ bool OnTheirGround(const geometry::LowestGrid& lowest, const Eigen::Vector3f& p,
 // of either session): a surface seen from afar carries the sessions' rotation error times that
 // distance; or when it lies past the rim of the other's coverage (PastTheirRim, with ld.rim_frac);
 // kRawAboveTheirGround when its neighbours there are the other session's ground under it
-// (AboveTheirGround, OnTheirGround); else kRawNone. Either raw change goes on to the beam test,
-// which decides.
+// (AboveTheirGround, OnTheirGround); kRawMissing too when its neighbours lie only beyond
+// ld_radius_m and what the rotation error adds to it (r_i - ld_radius_m) is within ld.beam_tol_m:
+// there the beam test tells a copy of their surface the error moved (their beams ended on its plane
+// within the tolerance) from a thing their beams went past; past that, the radius decides (a far
+// surface sampled 0.3-0.5 m from the other map's samples of its neighbour was no change: seed 53's
+// tilted VLP-16 lost PD recall 40-60 m out). Else kRawNone. Either raw change goes on to the beam
+// test, which decides.
 std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
                                   const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
@@ -92,7 +97,7 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
   }
   const std::size_t k = std::size_t(cfg.ld_min_neighbors);
   const float r0 = float(cfg.ld_radius_m), rr = float(cfg.LdRadiusRel());
-  const float r_max = float(cfg.ld_radius_max_m), voxel = float(cfg.map_voxel_m);
+  const float r_max = float(cfg.ld_radius_max_m), voxel = float(cfg.map_voxel_m), tol = float(cfg.ld_beam.tol_m);
   const bool rim = cfg.ld_rim_frac > 0.0;
   geometry::LowestGrid lowest(cfg.ld_radius_max_m);
   lowest.Add(other);
@@ -112,15 +117,17 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
       }
       m[i] = tree.CountWithin(p, r, k) < k ? kRawMissing : kRawNone;
       if (m[i]) continue;
-      // Neighbours only beyond r0, or none within a map voxel: one fit of them for both rules.
-      const bool beyond_r0 = rim && r > r0 && tree.CountWithin(p, r0, 1) == 0;
+      // Neighbours only beyond r0, or none within a map voxel: one fit of them for the rules.
+      const bool beyond_r0 = r > r0 && tree.CountWithin(p, r0, 1) == 0;
       const bool beyond_voxel = tree.CountWithin(p, voxel, 1) == 0;
       if (!beyond_r0 && !beyond_voxel) continue;
       const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
-      if (beyond_r0 && PastTheirRim(nb, r, cfg))
+      if (beyond_r0 && rim && PastTheirRim(nb, r, cfg))
         m[i] = kRawMissing;
       else if (beyond_voxel && AboveTheirGround(nb, r, r - r0, cfg) && OnTheirGround(lowest, p, r, voxel))
         m[i] = kRawAboveTheirGround;
+      else if (beyond_r0 && r - r0 <= tol)
+        m[i] = kRawMissing;
     }
   });
   return m;
