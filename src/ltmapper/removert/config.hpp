@@ -139,8 +139,8 @@ struct RemovertConfig {
                                   // it (centroid of the nearest 16 off it by more than this times r, along
                                   // their surface) is past the rim of the other session's coverage: a raw
                                   // change for the beam test (0 = off); where the kd radius grew by at most
-                                  // ld.beam_tol_m every point with neighbours only beyond ld.radius_m is
-                                  // one (Missing, ld_detection.cpp)
+                                  // ld.beam_tol_m every query point (PD) with neighbours only beyond
+                                  // ld.radius_m is one (Missing, ld_detection.cpp)
   std::vector<double> ld_resolutions_deg = {0.6, 1.0};  // [deg/pixel] visibility for weak/strong
   int ld_min_votes = 1;           // [keyframes] see-through votes for strong ND / weak PD (for ND also
                                   // keyframes a beam of which went through the point's surface, or passed

@@ -78,15 +78,18 @@ bool OnTheirGround(const geometry::LowestGrid& lowest, const Eigen::Vector3f& p,
 // of either session): a surface seen from afar carries the sessions' rotation error times that
 // distance; or when it lies past the rim of the other's coverage (PastTheirRim, with ld.rim_frac);
 // kRawAboveTheirGround when its neighbours there are the other session's ground under it
-// (AboveTheirGround, OnTheirGround); kRawMissing too when its neighbours lie only beyond
-// ld_radius_m and what the rotation error adds to it (r_i - ld_radius_m) is within ld.beam_tol_m:
-// there the beam test tells a copy of their surface the error moved (their beams ended on its plane
-// within the tolerance) from a thing their beams went past; past that, the radius decides (a far
-// surface sampled 0.3-0.5 m from the other map's samples of its neighbour was no change: seed 53's
-// tilted VLP-16 lost PD recall 40-60 m out). Else kRawNone. Either raw change goes on to the beam
-// test, which decides.
+// (AboveTheirGround, OnTheirGround); with `beams_beyond_r0` (PD: points of the query), kRawMissing
+// too when its neighbours lie only beyond ld_radius_m and what the rotation error adds to it
+// (r_i - ld_radius_m) is within ld.beam_tol_m: there the beam test tells a copy of their surface the
+// error moved (their beams ended on its plane within the tolerance) from a thing their beams went
+// past; past that, the radius decides (a thing 0.3-0.5 m in front of a far surface the central
+// sampled was no change: seed 53's tilted VLP-16 lost PD recall 40-60 m out). Not for ND: there it
+// cost seed 31's tilted VLP-16 ND precision 0.925 -> 0.903, a crown the query saw only from 63-75 m
+// with a rotation error LT-SLAM could not measure (docs/RESULTS.md). Else kRawNone. Either raw
+// change goes on to the beam test, which decides.
 std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& other, const PointCloud& own_kf,
-                                  const PointCloud& other_kf, const RemovertConfig& cfg, int threads) {
+                                  const PointCloud& other_kf, bool beams_beyond_r0, const RemovertConfig& cfg,
+                                  int threads) {
   if (other.empty() || points.empty()) return std::vector<std::uint8_t>(points.size(), kRawMissing);
   const geometry::KdTree tree(other, threads);
   const bool rel = cfg.LdRadiusRel() > 0.0 && !own_kf.empty() && !other_kf.empty();
@@ -118,7 +121,7 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
       m[i] = tree.CountWithin(p, r, k) < k ? kRawMissing : kRawNone;
       if (m[i]) continue;
       // Neighbours only beyond r0, or none within a map voxel: one fit of them for the rules.
-      const bool beyond_r0 = r > r0 && tree.CountWithin(p, r0, 1) == 0;
+      const bool beyond_r0 = (rim || beams_beyond_r0) && r > r0 && tree.CountWithin(p, r0, 1) == 0;
       const bool beyond_voxel = tree.CountWithin(p, voxel, 1) == 0;
       if (!beyond_r0 && !beyond_voxel) continue;
       const detail::Neighbourhood nb = detail::FitNeighbourhood(tree, other, p, r);
@@ -126,7 +129,7 @@ std::vector<std::uint8_t> Missing(const PointCloud& points, const PointCloud& ot
         m[i] = kRawMissing;
       else if (beyond_voxel && AboveTheirGround(nb, r, r - r0, cfg) && OnTheirGround(lowest, p, r, voxel))
         m[i] = kRawAboveTheirGround;
-      else if (beyond_r0 && r - r0 <= tol)
+      else if (beams_beyond_r0 && beyond_r0 && r - r0 <= tol)
         m[i] = kRawMissing;
     }
   });
@@ -683,8 +686,8 @@ LdLabels LabelLd(const PointCloud& central_map, const PointCloud& query_map, con
                  const std::vector<WorldKeyframe>& query_voters, const RemovertConfig& cfg, int threads) {
   LdLabels out{std::vector<std::uint8_t>(central_map.size(), kLdUnchanged),
                std::vector<std::uint8_t>(query_map.size(), kLdUnchanged)};
-  const std::vector<std::uint8_t> nd = Missing(central_map, query_map, central_positions, query_positions, cfg, threads);
-  const std::vector<std::uint8_t> pd = Missing(query_map, central_map, query_positions, central_positions, cfg, threads);
+  const std::vector<std::uint8_t> nd = Missing(central_map, query_map, central_positions, query_positions, false, cfg, threads);
+  const std::vector<std::uint8_t> pd = Missing(query_map, central_map, query_positions, central_positions, true, cfg, threads);
   // Weak ND preservation: ND the query never saw through stays in the map.
   LabelChanges(central_map, nd, query_map, central_voters, query_voters, true, cfg, threads, &out.central);
   // PD in space the central session observed as free is weak; behind / beyond it, strong.
