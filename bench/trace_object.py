@@ -39,10 +39,14 @@ import ltmapper  # noqa: E402
 
 # The LD clouds of a pair folder (docs/FORMATS.md), named as LT-removert writes them.
 LD_CLOUDS = ("pd_strong", "pd_weak", "pd_unobserved", "pd_residue", "nd_strong", "nd_weak", "nd_residue")
-# core::PointClass of the truth's labelled change clouds.
-TRUTH_CLASSES = {3: "pd_strong", 4: "pd_weak", 5: "nd_strong", 6: "nd_weak"}
-MATCH_DIST_M = 0.2  # eval's match distance (EvalConfig::match_dist_m)
-NEAR_BOX_M = 1.0    # LD points read around the object's box [m]
+# The change classes of the truth's labelled clouds (core::PointClass, named by the bindings).
+CHANGE_CLASSES = tuple(n for n in ltmapper.CLASS_NAMES if n.startswith(("pd_", "nd_")))
+MATCH_DIST_M = ltmapper.EvalConfig().get("ld.match_dist_m")  # eval ld's match distance [m]
+NEAR_BOX_M = 1.0  # LD points read around the object's box [m]
+# The objects.csv / rejected.csv columns a trace prints (docs/FORMATS.md).
+CLUSTER_COLUMNS = ("id", "session", "class", "change", "partner", "points", "length", "width", "height",
+                   "height_above_ground", "clearance", "range_m", "observed_fraction", "twin_fraction",
+                   "attached_fraction", "box_seen_fraction")
 
 
 class TraceError(Exception):
@@ -66,7 +70,7 @@ def truth_points(sim, pair, obj):
     m = t["object"] == obj
     if not m.any():
         return None
-    return t["points"][m, :3].astype(float), [TRUTH_CLASSES.get(int(c), "class %d" % c) for c in t["cls"][m]]
+    return t["points"][m, :3].astype(float), [ltmapper.CLASS_NAMES[int(c)] for c in t["cls"][m]]
 
 
 def to_frame(T, p):
@@ -91,16 +95,18 @@ def nearest_ld(pair_dir, pts):
     return list(cls), around
 
 
-def sessions_near(run, pair, centroid):
-    """Per session of the pair: its keyframe nearest the object (the run's world poses) and range."""
+def sessions_near(sim, aligned, pair, centroid):
+    """Per session of the pair (its position among the sim's sessions): its keyframe nearest the
+    object (the run's world poses, as `eval traj` reads them) and range."""
+    names = ltmapper.sim_session_names(sim)
+    est = {s["name"]: s["est"] for s in ltmapper.load_sim_trajectories(sim, aligned)["sessions"]}
     out = []
     for k in pair.split("_"):
-        poses = os.path.join(run, "aligned", "session_%s" % k, "poses_world.txt")
-        if not os.path.exists(poses):
+        poses = est.get(names[int(k)])
+        if poses is None:
             out.append({"session": k, "aligned": False})
             continue
-        xyz = ltmapper.read_poses(poses)[:, :3, 3]
-        d = np.linalg.norm(xyz - centroid, axis=1)
+        d = np.linalg.norm(poses[:, :3, 3] - centroid, axis=1)
         out.append({"session": k, "aligned": True, "nearest_keyframe": int(d.argmin()), "range_m": float(d.min())})
     return out
 
@@ -113,10 +119,7 @@ def overlapping(path, lo, hi, reason):
             blo = np.array([float(r[k]) for k in ("min_x", "min_y", "min_z")])
             bhi = np.array([float(r[k]) for k in ("max_x", "max_y", "max_z")])
             if np.all(blo <= hi) and np.all(bhi >= lo):
-                keep = ("id", "session", "class", "change", "partner", "points", "length", "width", "height",
-                        "height_above_ground", "clearance", "range_m", "observed_fraction", "twin_fraction",
-                        "attached_fraction", "box_seen_fraction")
-                row = {k: r[k] for k in keep if k in r}
+                row = {k: r[k] for k in CLUSTER_COLUMNS if k in r}
                 row["reason"] = r.get("reason", "") if reason else "accepted"
                 rows.append(row)
     return rows
@@ -160,7 +163,7 @@ def trace(sim, run, obj, pair=None, eval_json=None):
         "object": obj, "pair": pair, "change_points": len(pts),
         "box_world": {"min": lo.round(3).tolist(), "max": hi.round(3).tolist()},
         "eval": eval_verdict(eval_json, pair, obj),
-        "sessions": sessions_near(run, pair, pts.mean(0)),
+        "sessions": sessions_near(sim, aligned, pair, pts.mean(0)),
         "ld": {"truth_x_ld": confusion, "ld_points_around": around,
                "heights_m": {k: [round(min(v), 2), round(max(v), 2)] for k, v in heights.items()}},
         "objects": overlapping(os.path.join(objects_dir, "objects.csv"), lo, hi, False) +

@@ -494,7 +494,7 @@ def test_trace_object():
         np.testing.assert_allclose(t["box_world"]["max"], mine.max(0), atol=2e-3)
         cells = [(tc, lc, n) for tc, row in t["ld"]["truth_x_ld"].items() for lc, n in row.items()]
         assert sum(n for _, _, n in cells) == len(mine)
-        assert all(tc in trace_object.TRUTH_CLASSES.values() for tc, _, _ in cells)
+        assert all(tc in trace_object.CHANGE_CLASSES for tc, _, _ in cells)
         assert all(lc in trace_object.LD_CLOUDS + ("none",) for _, lc, _ in cells)
         assert [s["session"] for s in t["sessions"]] == ["00", "01"] and all(s["aligned"] for s in t["sessions"])
         assert all(o["reason"] for o in t["objects"])
