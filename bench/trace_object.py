@@ -10,16 +10,23 @@ truth object of a pair, print
   frame, with the LD class of the run's nearest change point within the match distance (none:
   no change point there: LD called it the same surface, or it is not in the map);
   the object stage: every object (objects.csv) and rejected cluster (rejected.csv, with its reason)
-  whose box overlaps the object's.
+  whose box overlaps the object's;
+  with --beams, where the beams of the session that judges each change point went (the query's
+  for ND, the central's for PD: its scans, the run's poses, the beam table estimated from its
+  scans): per truth class x LD class, how many points a beam passed within ld.beam_tol_m of and
+  then met nothing (sky) or returned beyond the point (beyond), else ended on it (hit), else only
+  ended in front of it (blocked), or none passed (none). The beam truth calls sky and beyond seen
+  through; this tells an LD class that missed them from a point no beam reached.
 
 It answers the first question about a missed object (LD's classes, a residue, or a cluster the
 rules rejected, and why) without a debugger. Needs the Python bindings (`import ltmapper`: build/
 python, or PYTHONPATH) and numpy.
 
-usage: bench/trace_object.py [--sim DIR] [--run DIR] [--eval FILE] [--pair CC_QQ] [--json] ROW OBJECT
+usage: bench/trace_object.py [--sim DIR] [--run DIR] [--eval FILE] [--pair CC_QQ] [--beams] [--json] ROW OBJECT
   e.g. bench/trace_object.py /tmp/matrix/os1-64 0
   --sim / --run / --eval: other places than ROW/sim, ROW/run, ROW/eval/objects.json.
   --pair: the pair whose truth holds the object (default: the first pair the truth has that holds it).
+  --beams: also the beams' verdicts (slower: reads every scan of the judging sessions).
   --json: the same as one JSON object.
 Exit status 2 with a message naming the file when an input is missing or the object is not a
 changed object of the pair.
@@ -43,6 +50,9 @@ LD_CLOUDS = ("pd_strong", "pd_weak", "pd_unobserved", "pd_residue", "nd_strong",
 CHANGE_CLASSES = tuple(n for n in ltmapper.CLASS_NAMES if n.startswith(("pd_", "nd_")))
 MATCH_DIST_M = ltmapper.EvalConfig().get("ld.match_dist_m")  # eval ld's match distance [m]
 NEAR_BOX_M = 1.0  # LD points read around the object's box [m]
+BEAM_TOL_M = ltmapper.RemovertConfig().get("ld.beam_tol_m")  # a beam this close to a point passed it [m]
+# A beam's verdict on a point, strongest evidence first (beams()).
+BEAM_VERDICTS = ("sky", "beyond", "hit", "blocked", "none")
 # The objects.csv / rejected.csv columns a trace prints (docs/FORMATS.md).
 CLUSTER_COLUMNS = ("id", "session", "class", "change", "partner", "points", "length", "width", "height",
                    "height_above_ground", "clearance", "range_m", "observed_fraction", "twin_fraction",
@@ -136,7 +146,61 @@ def eval_verdict(eval_json, pair, obj):
     return None
 
 
-def trace(sim, run, obj, pair=None, eval_json=None):
+def beam_views(scan, T, pts, elevations, az_half):
+    """The verdict of one keyframe's beams (scan in its sensor frame, world pose T) on each point:
+    index into BEAM_VERDICTS (4: no beam of the table passed within BEAM_TOL_M)."""
+    r = np.linalg.norm(scan, axis=1)
+    az = np.arctan2(scan[:, 1], scan[:, 0])
+    el = np.arcsin(np.clip(scan[:, 2] / np.maximum(r, 1e-9), -1, 1))
+    order = np.argsort(az)
+    az, el, r = az[order], el[order], r[order]
+    ps = (pts - T[:3, 3]) @ T[:3, :3]
+    rp = np.linalg.norm(ps, axis=1)
+    ep = np.arcsin(np.clip(ps[:, 2] / np.maximum(rp, 1e-9), -1, 1))
+    ap = np.arctan2(ps[:, 1], ps[:, 0])
+    out = np.full(len(pts), 4)
+    beam = elevations[np.abs(elevations[None, :] - ep[:, None]).argmin(1)]
+    half_el = 0.5 * np.min(np.diff(elevations)) if len(elevations) > 1 else np.radians(1.0)
+    for i in np.where((rp * np.abs(np.sin(beam - ep)) <= BEAM_TOL_M) & (rp <= r.max(initial=0.0)))[0]:
+        lo, hi = np.searchsorted(az, [ap[i] - az_half, ap[i] + az_half])
+        w = slice(lo, hi)
+        m = np.abs(el[w] - beam[i]) <= half_el
+        if not m.any():
+            out[i] = 0
+            continue
+        near = r[w][m].min()
+        far = r[w][m].max()
+        out[i] = 1 if far > rp[i] + BEAM_TOL_M and near > rp[i] - BEAM_TOL_M else (
+            2 if abs(near - rp[i]) <= BEAM_TOL_M else (3 if near < rp[i] else 1))
+    return out
+
+
+def beams(sim, aligned, pair, pts, truth_cls):
+    """Per point, the strongest verdict (BEAM_VERDICTS) over the keyframes of the session that
+    judges it: the pair's query for ND points, its central for PD points."""
+    names = ltmapper.sim_session_names(sim)
+    est = {s["name"]: s["est"] for s in ltmapper.load_sim_trajectories(sim, aligned)["sessions"]}
+    central, query = (names[int(k)] for k in pair.split("_"))
+    best = np.full(len(pts), len(BEAM_VERDICTS) - 1)
+    for judge, mine in ((query, np.array([c.startswith("nd_") for c in truth_cls])),
+                        (central, np.array([c.startswith("pd_") for c in truth_cls]))):
+        if not mine.any() or est.get(judge) is None:
+            continue
+        scans = [ltmapper.read_cloud(f)[:, :3].astype(float)
+                 for f in sorted(glob.glob(os.path.join(need(os.path.join(sim, "sessions", judge, "Scans")), "*")))]
+        model = ltmapper.estimate_sensor(scans)
+        if not model.ring_based:
+            raise TraceError("%s: --beams needs a sensor with rings (%s)" % (os.path.join(sim, "sessions", judge),
+                                                                          model.describe()))
+        elevations = np.radians(np.sort(np.asarray(model.elevations_deg, dtype=float)))
+        az_half = np.radians(max(model.azimuth_step_deg, 0.1))
+        for scan, T in zip(scans, est[judge]):
+            v = beam_views(scan, T, pts[mine], elevations, az_half)
+            best[mine] = np.minimum(best[mine], v)
+    return [BEAM_VERDICTS[b] for b in best]
+
+
+def trace(sim, run, obj, pair=None, eval_json=None, with_beams=False):
     """The trace of truth object `obj` as a dict (see the module's docstring)."""
     pairs = [pair] if pair else truth_pairs(need(sim))
     found = None
@@ -159,6 +223,12 @@ def trace(sim, run, obj, pair=None, eval_json=None):
         heights.setdefault("%s %s" % (t, l), []).append(float(z))
     lo, hi = pts.min(0), pts.max(0)
     objects_dir = os.path.join(run, "objects")
+    beam_table = None
+    if with_beams:
+        beam_table = {}
+        for t, l, b in zip(truth_cls, ld_cls, beams(sim, aligned, pair, pts, truth_cls)):
+            row = beam_table.setdefault("%s %s" % (t, l), {})
+            row[b] = row.get(b, 0) + 1
     return {
         "object": obj, "pair": pair, "change_points": len(pts),
         "box_world": {"min": lo.round(3).tolist(), "max": hi.round(3).tolist()},
@@ -168,6 +238,7 @@ def trace(sim, run, obj, pair=None, eval_json=None):
                "heights_m": {k: [round(min(v), 2), round(max(v), 2)] for k, v in heights.items()}},
         "objects": overlapping(os.path.join(objects_dir, "objects.csv"), lo, hi, False) +
                    overlapping(os.path.join(objects_dir, "rejected.csv"), lo, hi, True),
+        "beams": beam_table,
     }
 
 
@@ -186,6 +257,11 @@ def print_trace(t):
                                             for lc, n in sorted(row.items(), key=lambda kv: -kv[1]))))
     print("LD points within %.1f m of its box: %s" % (NEAR_BOX_M, "  ".join(
         "%s %d" % kv for kv in t["ld"]["ld_points_around"].items() if kv[1])))
+    if t["beams"] is not None:
+        print("beams of the judging session within %.2f m of each point, truth class x LD class: %s" % (
+            BEAM_TOL_M, " / ".join(BEAM_VERDICTS)))
+        for k, row in sorted(t["beams"].items()):
+            print("  %-20s %s" % (k, " / ".join(str(row.get(v, 0)) for v in BEAM_VERDICTS)))
     print("clusters whose box overlaps it:" if t["objects"] else "no cluster's box overlaps it")
     for o in t["objects"]:
         print("  " + ", ".join("%s %s" % kv for kv in o.items()))
@@ -199,12 +275,13 @@ def main():
     ap.add_argument("--run")
     ap.add_argument("--eval", dest="eval_json")
     ap.add_argument("--pair")
+    ap.add_argument("--beams", action="store_true")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
     sim = a.sim or os.path.join(a.row, "sim")
     run = a.run or os.path.join(a.row, "run")
     try:
-        t = trace(sim, run, a.object, a.pair, a.eval_json or os.path.join(a.row, "eval", "objects.json"))
+        t = trace(sim, run, a.object, a.pair, a.eval_json or os.path.join(a.row, "eval", "objects.json"), a.beams)
     except (TraceError, ltmapper.Error) as e:
         print("trace_object: %s" % e, file=sys.stderr)
         return 2

@@ -498,6 +498,24 @@ def test_trace_object():
         assert all(lc in trace_object.LD_CLOUDS + ("none",) for _, lc, _ in cells)
         assert [s["session"] for s in t["sessions"]] == ["00", "01"] and all(s["aligned"] for s in t["sessions"])
         assert all(o["reason"] for o in t["objects"])
+        assert t["beams"] is None
+    # --beams: the judging session's scans agree with the beam truth. The truth calls a point strong
+    # ND where a query ray passed within the tolerance and met nothing or ended beyond it, weak where
+    # none did; the verdicts read back from the scans (a sky or beyond verdict) must say the same
+    # for nearly every point.
+    agree = total = 0
+    for obj in ids:
+        t = trace_object.trace(sim_dir(), given, obj, eval_json=None, with_beams=True)
+        counts = [(k.split()[0], v, n) for k, row in t["beams"].items() for v, n in row.items()]
+        assert sum(n for _, _, n in counts) == t["change_points"]
+        assert all(v in trace_object.BEAM_VERDICTS for _, v, _ in counts)
+        for tc, v, n in counts:
+            if tc in ("nd_strong", "nd_weak"):
+                passed = v in ("sky", "beyond")
+                agree += n if passed == (tc == "nd_strong") else 0
+                total += n
+    print("trace_object --beams: %d of %d ND points agree with the beam truth" % (agree, total))
+    assert total > 0 and agree >= 0.9 * total, (agree, total)
     raises(trace_object.TraceError, trace_object.trace, sim_dir(), given, max(ids) + 1000,
            match=os.path.join(sim_dir(), "truth"))
     raises(trace_object.TraceError, trace_object.trace, sim_dir(), os.path.join(w, "no_run"), ids[0],
