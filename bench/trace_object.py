@@ -159,19 +159,23 @@ def beam_views(scan, T, pts, elevations, az_half):
     ep = np.arcsin(np.clip(ps[:, 2] / np.maximum(rp, 1e-9), -1, 1))
     ap = np.arctan2(ps[:, 1], ps[:, 0])
     out = np.full(len(pts), 4)
-    beam = elevations[np.abs(elevations[None, :] - ep[:, None]).argmin(1)]
-    half_el = 0.5 * np.min(np.diff(elevations)) if len(elevations) > 1 else np.radians(1.0)
+    nearest = np.abs(elevations[None, :] - ep[:, None]).argmin(1)
+    beam = elevations[nearest]
+    # Each beam's returns: within half the gap to its nearer neighbour in the table.
+    gaps = np.diff(elevations)
+    half_gap = 0.5 * np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf]) if len(gaps) else np.full(1, np.radians(1.0))
     for i in np.where((rp * np.abs(np.sin(beam - ep)) <= BEAM_TOL_M) & (rp <= r.max(initial=0.0)))[0]:
-        lo, hi = np.searchsorted(az, [ap[i] - az_half, ap[i] + az_half])
-        w = slice(lo, hi)
-        m = np.abs(el[w] - beam[i]) <= half_el
-        if not m.any():
-            out[i] = 0
-            continue
-        near = r[w][m].min()
-        far = r[w][m].max()
-        out[i] = 1 if far > rp[i] + BEAM_TOL_M and near > rp[i] - BEAM_TOL_M else (
-            2 if abs(near - rp[i]) <= BEAM_TOL_M else (3 if near < rp[i] else 1))
+        w = np.concatenate([np.arange(*np.searchsorted(az, [a - az_half, a + az_half]))
+                            for a in (ap[i] - 2 * np.pi, ap[i], ap[i] + 2 * np.pi)])  # azimuth wraps at +-pi
+        near = r[w][np.abs(el[w] - beam[i]) <= half_gap[nearest[i]]]
+        if len(near) == 0:
+            out[i] = 0  # sky
+        elif near.min() < rp[i] - BEAM_TOL_M:
+            out[i] = 3  # blocked
+        elif near.min() <= rp[i] + BEAM_TOL_M:
+            out[i] = 2  # hit
+        else:
+            out[i] = 1  # beyond
     return out
 
 
