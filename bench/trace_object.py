@@ -190,12 +190,11 @@ def beams(sim, aligned, pair, pts, truth_cls):
                         (central, np.array([c.startswith("pd_") for c in truth_cls]))):
         if not mine.any() or est.get(judge) is None:
             continue
-        scans = [ltmapper.read_cloud(f)[:, :3].astype(float)
-                 for f in sorted(glob.glob(os.path.join(need(os.path.join(sim, "sessions", judge, "Scans")), "*")))]
+        session_dir = need(os.path.join(sim, "sessions", judge))
+        scans = [np.asarray(c)[:, :3].astype(float) for c in ltmapper.load_session(session_dir).scans()]
         model = ltmapper.estimate_sensor(scans)
         if not model.ring_based:
-            raise TraceError("%s: --beams needs a sensor with rings (%s)" % (os.path.join(sim, "sessions", judge),
-                                                                          model.describe()))
+            raise TraceError("%s: --beams needs a sensor with rings (%s)" % (session_dir, model.describe()))
         elevations = np.radians(np.sort(np.asarray(model.elevations_deg, dtype=float)))
         az_half = np.radians(max(model.azimuth_step_deg, 0.1))
         for scan, T in zip(scans, est[judge]):
