@@ -51,8 +51,10 @@ CHANGE_CLASSES = tuple(n for n in ltmapper.CLASS_NAMES if n.startswith(("pd_", "
 MATCH_DIST_M = ltmapper.EvalConfig().get("ld.match_dist_m")  # eval ld's match distance [m]
 NEAR_BOX_M = 1.0  # LD points read around the object's box [m]
 BEAM_TOL_M = ltmapper.RemovertConfig().get("ld.beam_tol_m")  # a beam this close to a point passed it [m]
-# A beam's verdict on a point, strongest evidence first (beams()).
+# A beam's verdict on a point, strongest evidence first (beams()); the first two are the beam
+# truth's "seen through".
 BEAM_VERDICTS = ("sky", "beyond", "hit", "blocked", "none")
+SEEN_THROUGH = BEAM_VERDICTS[:2]
 # The objects.csv / rejected.csv columns a trace prints (docs/FORMATS.md).
 CLUSTER_COLUMNS = ("id", "session", "class", "change", "partner", "points", "length", "width", "height",
                    "height_above_ground", "clearance", "range_m", "observed_fraction", "twin_fraction",
@@ -105,14 +107,18 @@ def nearest_ld(pair_dir, pts):
     return list(cls), around
 
 
-def sessions_near(sim, aligned, pair, centroid):
-    """Per session of the pair (its position among the sim's sessions): its keyframe nearest the
-    object (the run's world poses, as `eval traj` reads them) and range."""
+def pair_sessions(sim, aligned, pair):
+    """The pair's central and query: (session name, the run's world poses as `eval traj` reads them,
+    or None where the run did not align it), by their positions among the sim's sessions."""
     names = ltmapper.sim_session_names(sim)
     est = {s["name"]: s["est"] for s in ltmapper.load_sim_trajectories(sim, aligned)["sessions"]}
+    return [(names[int(k)], est.get(names[int(k)])) for k in pair.split("_")]
+
+
+def sessions_near(pair, sessions, centroid):
+    """Per session of the pair (pair_sessions): its keyframe nearest the object and range."""
     out = []
-    for k in pair.split("_"):
-        poses = est.get(names[int(k)])
+    for k, (_, poses) in zip(pair.split("_"), sessions):
         if poses is None:
             out.append({"session": k, "aligned": False})
             continue
@@ -163,7 +169,9 @@ def beam_views(scan, T, pts, elevations, az_half):
     beam = elevations[nearest]
     # Each beam's returns: within half the gap to its nearer neighbour in the table.
     gaps = np.diff(elevations)
-    half_gap = 0.5 * np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf]) if len(gaps) else np.full(1, np.radians(1.0))
+    half_gap = 0.5 * np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf])
+    # Only points within the farthest return of this scan: beyond it, no return is no sign of free
+    # space (the sensor's range is not in the scans).
     for i in np.where((rp * np.abs(np.sin(beam - ep)) <= BEAM_TOL_M) & (rp <= r.max(initial=0.0)))[0]:
         w = np.concatenate([np.arange(*np.searchsorted(az, [a - az_half, a + az_half]))
                             for a in (ap[i] - 2 * np.pi, ap[i], ap[i] + 2 * np.pi)])  # azimuth wraps at +-pi
@@ -179,25 +187,24 @@ def beam_views(scan, T, pts, elevations, az_half):
     return out
 
 
-def beams(sim, aligned, pair, pts, truth_cls):
+def beams(sim, sessions, pts, truth_cls):
     """Per point, the strongest verdict (BEAM_VERDICTS) over the keyframes of the session that
-    judges it: the pair's query for ND points, its central for PD points."""
-    names = ltmapper.sim_session_names(sim)
-    est = {s["name"]: s["est"] for s in ltmapper.load_sim_trajectories(sim, aligned)["sessions"]}
-    central, query = (names[int(k)] for k in pair.split("_"))
+    judges it (pair_sessions): the pair's query for ND points, its central for PD points."""
+    (central, central_poses), (query, query_poses) = sessions
     best = np.full(len(pts), len(BEAM_VERDICTS) - 1)
-    for judge, mine in ((query, np.array([c.startswith("nd_") for c in truth_cls])),
-                        (central, np.array([c.startswith("pd_") for c in truth_cls]))):
-        if not mine.any() or est.get(judge) is None:
+    for judge, poses, mine in ((query, query_poses, np.array([c.startswith("nd_") for c in truth_cls])),
+                               (central, central_poses, np.array([c.startswith("pd_") for c in truth_cls]))):
+        if not mine.any() or poses is None:
             continue
         session_dir = need(os.path.join(sim, "sessions", judge))
         scans = [np.asarray(c)[:, :3].astype(float) for c in ltmapper.load_session(session_dir).scans()]
         model = ltmapper.estimate_sensor(scans)
-        if not model.ring_based:
-            raise TraceError("%s: --beams needs a sensor with rings (%s)" % (session_dir, model.describe()))
+        if not model.ring_based or model.beams < 2 or model.azimuth_step_deg <= 0.0:
+            raise TraceError("%s: --beams needs a sensor with rings and a known azimuth step (%s)" % (
+                session_dir, model.describe()))
         elevations = np.radians(np.sort(np.asarray(model.elevations_deg, dtype=float)))
-        az_half = np.radians(max(model.azimuth_step_deg, 0.1))
-        for scan, T in zip(scans, est[judge]):
+        az_half = np.radians(model.azimuth_step_deg)
+        for scan, T in zip(scans, poses):
             v = beam_views(scan, T, pts[mine], elevations, az_half)
             best[mine] = np.minimum(best[mine], v)
     return [BEAM_VERDICTS[b] for b in best]
@@ -217,6 +224,7 @@ def trace(sim, run, obj, pair=None, eval_json=None, with_beams=False):
             os.path.join(sim, "truth"), obj, ", ".join(pairs) or "(none)"))
     pts_truth, truth_cls = found
     aligned = need(os.path.join(run, "aligned"))
+    sessions = pair_sessions(sim, aligned, pair)
     pts = to_frame(ltmapper.truth_to_estimate_frame(sim, aligned), pts_truth)
     ld_cls, around = nearest_ld(need(ltmapper.find_pair_dir(os.path.join(run, "changes"), pair)), pts)
     confusion, heights = {}, {}
@@ -229,14 +237,14 @@ def trace(sim, run, obj, pair=None, eval_json=None, with_beams=False):
     beam_table = None
     if with_beams:
         beam_table = {}
-        for t, l, b in zip(truth_cls, ld_cls, beams(sim, aligned, pair, pts, truth_cls)):
+        for t, l, b in zip(truth_cls, ld_cls, beams(sim, sessions, pts, truth_cls)):
             row = beam_table.setdefault("%s %s" % (t, l), {})
             row[b] = row.get(b, 0) + 1
     return {
         "object": obj, "pair": pair, "change_points": len(pts),
         "box_world": {"min": lo.round(3).tolist(), "max": hi.round(3).tolist()},
         "eval": eval_verdict(eval_json, pair, obj),
-        "sessions": sessions_near(sim, aligned, pair, pts.mean(0)),
+        "sessions": sessions_near(pair, sessions, pts.mean(0)),
         "ld": {"truth_x_ld": confusion, "ld_points_around": around,
                "heights_m": {k: [round(min(v), 2), round(max(v), 2)] for k, v in heights.items()}},
         "objects": overlapping(os.path.join(objects_dir, "objects.csv"), lo, hi, False) +
