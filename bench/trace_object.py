@@ -54,6 +54,7 @@ BEAM_TOL_M = ltmapper.RemovertConfig().get("ld.beam_tol_m")  # a beam this close
 # A beam's verdict on a point, strongest evidence first (beams()); the first two are the beam
 # truth's "seen through".
 BEAM_VERDICTS = ("sky", "beyond", "hit", "blocked", "none")
+SKY, BEYOND, HIT, BLOCKED, NONE = range(len(BEAM_VERDICTS))
 SEEN_THROUGH = BEAM_VERDICTS[:2]
 # The objects.csv / rejected.csv columns a trace prints (docs/FORMATS.md).
 CLUSTER_COLUMNS = ("id", "session", "class", "change", "partner", "points", "length", "width", "height",
@@ -154,7 +155,7 @@ def eval_verdict(eval_json, pair, obj):
 
 def beam_views(scan, T, pts, elevations, az_half):
     """The verdict of one keyframe's beams (scan in its sensor frame, world pose T) on each point:
-    index into BEAM_VERDICTS (4: no beam of the table passed within BEAM_TOL_M)."""
+    index into BEAM_VERDICTS (NONE: no beam of the table passed within BEAM_TOL_M)."""
     r = np.linalg.norm(scan, axis=1)
     az = np.arctan2(scan[:, 1], scan[:, 0])
     el = np.arcsin(np.clip(scan[:, 2] / np.maximum(r, 1e-9), -1, 1))
@@ -164,7 +165,7 @@ def beam_views(scan, T, pts, elevations, az_half):
     rp = np.linalg.norm(ps, axis=1)
     ep = np.arcsin(np.clip(ps[:, 2] / np.maximum(rp, 1e-9), -1, 1))
     ap = np.arctan2(ps[:, 1], ps[:, 0])
-    out = np.full(len(pts), 4)
+    out = np.full(len(pts), NONE)
     nearest = np.abs(elevations[None, :] - ep[:, None]).argmin(1)
     beam = elevations[nearest]
     # Each beam's returns: within half the gap to its nearer neighbour in the table.
@@ -177,13 +178,13 @@ def beam_views(scan, T, pts, elevations, az_half):
                             for a in (ap[i] - 2 * np.pi, ap[i], ap[i] + 2 * np.pi)])  # azimuth wraps at +-pi
         near = r[w][np.abs(el[w] - beam[i]) <= half_gap[nearest[i]]]
         if len(near) == 0:
-            out[i] = 0  # sky
+            out[i] = SKY
         elif near.min() < rp[i] - BEAM_TOL_M:
-            out[i] = 3  # blocked
+            out[i] = BLOCKED
         elif near.min() <= rp[i] + BEAM_TOL_M:
-            out[i] = 2  # hit
+            out[i] = HIT
         else:
-            out[i] = 1  # beyond
+            out[i] = BEYOND
     return out
 
 
@@ -191,7 +192,7 @@ def beams(sim, sessions, pts, truth_cls):
     """Per point, the strongest verdict (BEAM_VERDICTS) over the keyframes of the session that
     judges it (pair_sessions): the pair's query for ND points, its central for PD points."""
     (central, central_poses), (query, query_poses) = sessions
-    best = np.full(len(pts), len(BEAM_VERDICTS) - 1)
+    best = np.full(len(pts), NONE)
     for judge, poses, mine in ((query, query_poses, np.array([c.startswith("nd_") for c in truth_cls])),
                                (central, central_poses, np.array([c.startswith("pd_") for c in truth_cls]))):
         if not mine.any() or poses is None:

@@ -604,18 +604,19 @@ std::vector<WorldKeyframe> BehindATruck(const test::Box& parked) {
 }
 
 // LD of `central` against the query's drive 0.7 m beside it through the common scene alone (what
-// the central saw that is not in it, the query saw through): the central's map and the changes.
+// the central saw that is not in it, the query saw through): the query, both maps and the changes.
 struct AgainstTheCommonScene {
-  PointCloud cmap;
+  RemovertConfig cfg = test::ConfigFor();
+  std::vector<WorldKeyframe> query = Drive(Common(), 0.7, nullptr);
+  PointCloud cmap, qmap;
   removert::LdResult ld;
 };
 AgainstTheCommonScene AgainstTheCommonSceneOf(const std::vector<WorldKeyframe>& central) {
-  const auto query = Drive(Common(), 0.7, nullptr);
-  RemovertConfig cfg = test::ConfigFor();
-  AgainstTheCommonScene out;
-  out.cmap = removert::BuildSessionMap(central, cfg, 2);
-  out.ld = removert::DetectLd(out.cmap, removert::BuildSessionMap(query, cfg, 2), central, query, cfg, 2);
-  return out;
+  AgainstTheCommonScene s;
+  s.cmap = removert::BuildSessionMap(central, s.cfg, 2);
+  s.qmap = removert::BuildSessionMap(s.query, s.cfg, 2);
+  s.ld = removert::DetectLd(s.cmap, s.qmap, central, s.query, s.cfg, 2);
+  return s;
 }
 
 // A truck driving 12 m ahead of the central's sensor in the next lane (2.5 m wide, 8 m long: no
@@ -627,10 +628,7 @@ AgainstTheCommonScene AgainstTheCommonSceneOf(const std::vector<WorldKeyframe>& 
 TEST(RemovertLd, WhatOneKeyframeSawAtItsPlaceIsAResidueOfAMover) {
   const test::Box parked = test::MakeBox(3, -6, 0.3, 7, -4, 1.8, kCarCentral);
   const std::vector<WorldKeyframe> central = BehindATruck(parked);
-  const auto query = Drive(Common(), 0.7, nullptr);
-  RemovertConfig cfg = test::ConfigFor();
-  const PointCloud cmap = removert::BuildSessionMap(central, cfg, 2), qmap = removert::BuildSessionMap(query, cfg, 2);
-  const auto ld = removert::DetectLd(cmap, qmap, central, query, cfg, 2);
+  const auto [cfg, query, cmap, qmap, ld] = AgainstTheCommonSceneOf(central);
   const test::Box lane = test::MakeBox(-8, 1.95, 0.4, 40.05, 4.55, 2.55, 30);  // every place of the truck
   const std::size_t lead = CountIn(cmap, lane);
   ASSERT_GT(lead, 500u);
@@ -665,7 +663,7 @@ TEST(RemovertLd, WhatTwoKeyframesSawAtItsPlaceAsACarCamePastIsAResidueOfAMover) 
     const double x = 30.0 - 2.0 * k;
     return test::MakeBox(x, 2.0, 0.3, x + 4.0, 4.0, 1.6, 30);
   });
-  const auto [cmap, ld] = AgainstTheCommonSceneOf(central);
+  const auto [cfg, query, cmap, qmap, ld] = AgainstTheCommonSceneOf(central);
   const test::Box lane = test::MakeBox(-10.05, 1.95, 0.4, 34.05, 4.05, 1.65, 30);  // every place of the car
   const std::size_t passed = CountIn(cmap, lane);
   ASSERT_GT(passed, 300u);

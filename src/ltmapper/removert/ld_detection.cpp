@@ -314,28 +314,21 @@ SeenParts SeenPartsOf(const std::vector<std::vector<std::uint32_t>>& whole, std:
   return out;
 }
 
-// The most keyframes of a session that may meet a mover at one place: two. Consecutive keyframes
-// are close in time (0.125 s in the simulator: a car at 9 m/s has moved 1.1 m, less than its
-// length), so two hits at one place can be one pass of a car; a thing that stood was hit by more.
-// Measured on 14 kept rows (seeds 3, 23, 31, 61 and the default seed; docs/RESULTS.md): the 154 true
-// objects' points were hit by 4-59 keyframes at the median, seed 61's residues of cars that HD
-// removal missed by 1-4.
-constexpr int kMoverMaxHits = 2;
-
-// Whether most points of `m` at most kMoverMaxHits voters hit while at least two, and more than
-// hit them, had them in view (`views`): a keyframe that had a point in view and did not meet it
-// there is what tells a mover from a thing every view met (a far car that a session of two
-// keyframes saw twice stays a change).
-bool MostlyHitBriefly(const std::vector<std::uint32_t>& m, const std::vector<int>& hits, const std::vector<int>& views) {
+// Whether most points of `m` at most `max_hits` voters hit (ld.residue_max_hits: one pass of a
+// mover) while at least two, and more than hit them, had them in view (`views`): a keyframe that
+// had a point in view and did not meet it there is what tells a mover from a thing every view met
+// (a far car that a session of two keyframes saw twice stays a change).
+bool MostlyHitBriefly(const std::vector<std::uint32_t>& m, const std::vector<int>& hits, const std::vector<int>& views,
+                      int max_hits) {
   const auto n = std::count_if(m.begin(), m.end(), [&](std::uint32_t i) {
-    return hits[i] <= kMoverMaxHits && views[i] >= 2 && hits[i] < views[i];
+    return hits[i] <= max_hits && views[i] >= 2 && hits[i] < views[i];
   });
   return 2 * std::size_t(n) > m.size();
 }
 
 // A thing one pass of a mover could have left: standing still is more keyframes of its own session
 // that met it at the same place (a hit: the pixel's return at the point's range) than a mover gives
-// (kMoverMaxHits). A cluster of `seen` most of whose points no more than that many of `own_voters`
+// (ld.residue_max_hits). A cluster of `seen` most of whose points no more than that many of `own_voters`
 // hit, while at least two and more than hit them had them in view (hit, seen through or met
 // something nearer), is a residue of a mover whatever its size: a car driving ahead of the sensor
 // when the session ended, or waiting beside it when the session began, is seen at its last (first)
@@ -372,7 +365,7 @@ void MarkSeenBriefly(const PointCloud& seen, const PointCloud& both, const std::
   }
   std::vector<std::size_t> candidates;
   for (std::size_t t = 0; t < things.parts.size(); ++t)
-    if (MostlyHitBriefly(things.parts[t], hits, views)) candidates.push_back(t);
+    if (MostlyHitBriefly(things.parts[t], hits, views, cfg.ld_residue_max_hits)) candidates.push_back(t);
   if (candidates.empty()) return;
   std::vector<std::uint32_t> asked, of_things;
   for (std::size_t t : candidates) {
@@ -384,7 +377,7 @@ void MarkSeenBriefly(const PointCloud& seen, const PointCloud& both, const std::
   for (std::size_t j = 0; j < asked.size(); ++j)
     views[asked[j]] = views_of(asked[j], [&](int l) { return int(blocked[std::size_t(l) * asked.size() + j]); });
   for (std::size_t t : candidates)
-    if (MostlyHitBriefly(things.parts[t], hits, views))
+    if (MostlyHitBriefly(things.parts[t], hits, views, cfg.ld_residue_max_hits))
       for (auto i : things.parts[t]) (*residue)[i] = true;
 }
 
