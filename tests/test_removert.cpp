@@ -685,7 +685,8 @@ std::vector<test::Box> CrossingMovers(int k) {
 }
 
 Street MakeStreet(double pose_noise = 0.0, bool non_repetitive = false,
-                  const std::function<std::vector<test::Box>(int)>& movers = CrossingMovers) {
+                  const std::function<std::vector<test::Box>(int)>& movers = CrossingMovers,
+                  const test::Lidar& lidar = {}) {
   std::mt19937 rng(42);
   std::normal_distribution<double> g(0.0, 1.0);
   std::vector<test::Box> fixed = {
@@ -706,7 +707,7 @@ Street MakeStreet(double pose_noise = 0.0, bool non_repetitive = false,
     kf.T_world_sensor = test::At(-20.0 + 2.0 * k, 0.0, 1.8, 0.02 * k);
     auto scan = std::make_shared<PointCloud>(
         non_repetitive ? test::CastDirections(kf.T_world_sensor, boxes, NonRepetitiveDirections(rng), test::Lidar{}.max_range)
-                       : test::CastScan(kf.T_world_sensor, boxes, test::Lidar{}));
+                       : test::CastScan(kf.T_world_sensor, boxes, lidar));
     s.truth.append(test::ToWorld(*scan, kf.T_world_sensor));
     kf.cloud = scan;
     if (pose_noise > 0.0) {  // the method gets slightly wrong poses, like any SLAM output
@@ -894,6 +895,61 @@ TEST(RemovertHd, AWalkersTrailAlongTheLineOfSightIsNoSurface) {
   EXPECT_GE(sc.sa, 0.99);
   EXPECT_LE(20 * res.stats.reverted, res.stats.candidates);  // every candidate here is the walker's
   EXPECT_GE(sc.da, 0.85);  // the rest: places no later ray passed (the body hid them)
+}
+
+// A car crossing beyond the street's far end, 25-65 m out, seen by an OS1-64 (0.71 deg between beams):
+// far away, removal decides a mover in pieces (its lowest row, a few decimetres above the ground,
+// is never seen through: the window's beam below it returns from the ground in front of it). Say
+// the votes took the car's upper part: in each scan that met it, the rest of that cluster is the
+// car's too and goes (CompleteBodies). The parked car beside the street, the walls and the ground
+// stay whole; a scan of which the votes took less than hd.remove_min_ratio of the car keeps the rest.
+TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
+  const auto far_car = [](int k) {
+    const double cy = -12.0 + 1.5 * k;
+    return std::vector<test::Box>{test::MakeBox(44.1, cy - 2.25, 0.3, 45.9, cy + 2.25, 1.5, 100)};
+  };
+  test::Lidar lidar;
+  lidar.fov_up_deg = 22.5;
+  lidar.fov_down_deg = -22.5;
+  lidar.cols = 1024;
+  const Street s = MakeStreet(0.0, false, far_car, lidar);
+  const RemovertConfig cfg = test::ConfigFor(lidar);
+  const PointCloud map = removert::BuildSessionMap(s.kfs, cfg, 2);
+  const geometry::KdTree truth(s.truth);
+  std::vector<int> label(map.size());
+  for (std::size_t i = 0; i < map.size(); ++i) {
+    std::uint32_t j = 0;
+    float d2 = 0.f;
+    truth.Nearest(map.points[i].xyz(), &j, &d2);
+    label[i] = s.truth.object[j];
+  }
+  // The votes took the car's points above `cut` [m]; after CompleteBodies: how many of its other
+  // points are left, and how many points of anything else went.
+  struct Left {
+    std::size_t taken = 0, car_left = 0, static_lost = 0;
+  };
+  const auto complete = [&](double cut) {
+    Left out;
+    std::vector<std::uint8_t> state(map.size(), removert::detail::HdDecision::kStatic);
+    for (std::size_t i = 0; i < map.size(); ++i)
+      if (label[i] == 100 && map.points[i].z > cut) state[i] = removert::detail::HdDecision::kRemoved, ++out.taken;
+    removert::detail::CompleteBodies(map, s.kfs, cfg, 2, &state);
+    for (std::size_t i = 0; i < map.size(); ++i) {
+      const bool gone = state[i] != removert::detail::HdDecision::kStatic;
+      out.car_left += label[i] == 100 && !gone;
+      out.static_lost += label[i] != 100 && gone;
+    }
+    return out;
+  };
+  const std::size_t car = std::size_t(std::count(label.begin(), label.end(), 100));
+  const Left half = complete(0.9), roof = complete(1.35);
+  std::printf("far car: %zu map points; the votes took %zu, bodies left %zu, took %zu static; the votes took the "
+              "roof, %zu: left %zu, took %zu static\n",
+              car, half.taken, half.car_left, half.static_lost, roof.taken, roof.car_left, roof.static_lost);
+  EXPECT_LE(10 * half.car_left, car - half.taken);  // nine tenths of what the votes left of the car go
+  EXPECT_EQ(half.static_lost, 0u);
+  EXPECT_GT(roof.car_left, half.car_left);  // scans where the roof was under remove_min_ratio of the car
+  EXPECT_EQ(roof.static_lost, 0u);
 }
 
 TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {

@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 
@@ -97,19 +98,25 @@ TEST(RemovertTiles, TiledEqualsWholeSessionBitForBit) {
 // of removed bodies, the groundward cells; the plan rounds it up to whole voxels plus one.
 TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
   RemovertConfig cfg;
-  EXPECT_DOUBLE_EQ(removert::TileMarginM(cfg), 0.15 + 0.5 + 1.0);  // dilate 1.5 voxels + body + normals
+  // CompleteBodies: (1 + sqrt 2) body lengths and three dilate_body_m on top of the dilation's margin.
+  const double bodies = (1.0 + std::sqrt(2.0)) * 5.0 + 3.0 * 0.5;
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(cfg), 0.15 + 0.5 + 1.0 + bodies);  // dilate 1.5 voxels + body + normals
+  cfg.hd_body_max_m = 0.0;
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(cfg), 0.15 + 0.5 + 1.0);
   RemovertConfig no_revert = cfg;
   no_revert.revert = false;
   EXPECT_DOUBLE_EQ(removert::TileMarginM(no_revert), 0.15 + 0.5);
   RemovertConfig no_dilation = cfg;
   no_dilation.dilate_voxels = 0.0;
   EXPECT_DOUBLE_EQ(removert::TileMarginM(no_dilation), 1.0);
+  no_dilation.hd_body_max_m = 5.0;  // the bodies need no dilation
+  EXPECT_DOUBLE_EQ(removert::TileMarginM(no_dilation), 1.0 + bodies);
   RemovertConfig wide = cfg;
   wide.dilate_voxels = 10.0;  // 1 m: the ground cells (3 x 1 m) reach farthest
   wide.ld_normal_radius_m = 0.3;
   EXPECT_DOUBLE_EQ(removert::TileMarginM(wide), 3.0);
-  const removert::TilePlan plan = removert::PlanTiles({}, cfg);
-  EXPECT_EQ(plan.margin_voxels, 18);  // ceil(1.65 / 0.1) + 1
+  const removert::TilePlan plan = removert::PlanTiles({}, RemovertConfig{});
+  EXPECT_EQ(plan.margin_voxels, 154);  // ceil(15.22 / 0.1) + 1
   EXPECT_EQ(plan.edge_voxels, 2000);  // 2 x max(100, 60) m
   EXPECT_TRUE(plan.tiles.empty());
 }
@@ -120,7 +127,9 @@ TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
 // maps are still the whole session's bytes.
 TEST(RemovertTiles, MapPointsBoundShrinksTheEdgeKeepingTheBytes) {
   const auto kfs = LongStreet();
-  RemovertConfig cfg = removert::WithSensor(ShortRange(), kfs);
+  RemovertConfig short_margin = ShortRange();  // the dilation's margin alone: the street is 11 of its tiles long
+  short_margin.hd_body_max_m = 0.0;
+  RemovertConfig cfg = removert::WithSensor(short_margin, kfs);
   const removert::HdResult whole = removert::RemoveHd(kfs, cfg, 2);
   cfg.tiles_max_map_points = 0;
   const removert::TilePlan unbounded = removert::PlanTiles(kfs, cfg, 2);
@@ -145,16 +154,22 @@ TEST(RemovertTiles, MapPointsBoundShrinksTheEdgeKeepingTheBytes) {
   EXPECT_TRUE(SameBytes(merged.static_map, whole.static_map));
   EXPECT_TRUE(SameBytes(merged.hd_map, whole.hd_map));
   // The edges a plan may take: the configured one, then whole multiples of 5 margins below it.
-  const std::vector<std::int64_t> edges = removert::TileEdgeChoices(RemovertConfig{});
+  RemovertConfig defaults;
+  const std::vector<std::int64_t> edges = removert::TileEdgeChoices(defaults);
   EXPECT_EQ(edges.front(), 2000);
-  EXPECT_EQ(edges[1], 22 * 90);
-  EXPECT_EQ(edges.back(), 90);
+  EXPECT_EQ(edges[1], 2 * 770);  // margins of 154 voxels
+  EXPECT_EQ(edges.back(), 770);
+  defaults.hd_body_max_m = 0.0;
+  const std::vector<std::int64_t> fine = removert::TileEdgeChoices(defaults);
+  EXPECT_EQ(fine[1], 22 * 90);  // margins of 18 voxels
+  EXPECT_EQ(fine.back(), 90);
   EXPECT_TRUE(std::is_sorted(edges.rbegin(), edges.rend()));
 }
 
 TEST(RemovertTiles, EachTileReadsOnlyTheKeyframesThatReachIt) {
   const auto kfs = LongStreet();
   RemovertConfig cfg = ShortRange();
+  cfg.hd_body_max_m = 0.0;  // the dilation's margin alone (1.65 m)
   cfg.tiles_edge_m = 12.0;
   const removert::TilePlan plan = removert::PlanTiles(kfs, cfg);
   ASSERT_FALSE(plan.tiles.empty());

@@ -21,12 +21,18 @@ double TileReachM(const RemovertConfig& cfg) { return std::max(cfg.max_range_m, 
 double TileMarginM(const RemovertConfig& cfg) {
   const bool surface = cfg.revert && cfg.revert_surface_max_m > 0.0;
   const double normals = surface ? cfg.ld_normal_radius_m : 0.0;
-  if (cfg.dilate_voxels <= 0.0) return normals;
-  const double near = std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m + normals;
-  if (cfg.dilate_voxels <= 1.0) return near;
-  const double body = cfg.DilateM() + cfg.dilate_body_m + normals;
-  const double ground = 3.0 * cfg.DilateM();
-  return std::max({near, body, ground});
+  double dilation = normals;
+  if (cfg.dilate_voxels > 0.0) dilation = std::min(1.0, cfg.dilate_voxels) * cfg.map_voxel_m + normals;
+  if (cfg.dilate_voxels > 1.0) {
+    const double body = cfg.DilateM() + cfg.dilate_body_m + normals;
+    const double ground = 3.0 * cfg.DilateM();
+    dilation = std::max({dilation, body, ground});
+  }
+  if (cfg.hd_body_max_m <= 0.0) return dilation;
+  // CompleteBodies: a point's cluster reaches sqrt(2) body lengths (its xy box) and one gap
+  // (dilate_body_m) beyond, the returns it is chosen from one body length more, the ground of each
+  // the lowest map point two cells of dilate_body_m away.
+  return dilation + (1.0 + std::sqrt(2.0)) * cfg.hd_body_max_m + 3.0 * cfg.dilate_body_m;
 }
 
 namespace {

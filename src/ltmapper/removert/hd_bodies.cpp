@@ -1,0 +1,151 @@
+// HD removal, last step: a removed body's other returns (CompleteBodies).
+//
+// A mover is one rigid body. In the scan of a keyframe that met it, its returns above the ground
+// are one cluster, and where the other keyframes saw through a part of it at that place, the body
+// was not there at their time: the whole of it was a mover's. Removal decides map point by map
+// point, and far away it decides a mover in pieces. A car 40-50 m out is sampled by two or three
+// rows: the lowest, a few decimetres above the ground, is never seen through (the window's beam
+// below it returns from the ground in front of it, within the range tolerance), and where only the
+// last keyframes of a drive met a car, few see through its trail while the coarse windows credit
+// it with hits from the ground at its range. What stayed is the residue LD later takes for a
+// change. So, per keyframe: its returns above the ground, clustered with the gaps that join one
+// surface's samples at their range; a cluster no longer than hd.body_max_m of which at least
+// hd.remove_min_ratio of the returns lie in removed map voxels is a body the keyframe met. A map
+// point goes when every keyframe that returned in its voxel above the ground met it in such a body
+// (a standing thing a mover brushed is returned by the keyframes before and after it, alone).
+#include "ltmapper/removert/detail.hpp"
+
+#include <mutex>
+
+namespace ltm::removert::detail {
+
+namespace {
+
+struct VoxelKey {
+  std::int64_t x, y, z;
+  bool operator==(const VoxelKey& o) const { return x == o.x && y == o.y && z == o.z; }
+};
+struct VoxelKeyHash {
+  std::size_t operator()(const VoxelKey& k) const {
+    return std::size_t(k.x * 73856093LL ^ k.y * 19349663LL ^ k.z * 83492791LL);
+  }
+};
+using VoxelTable = std::unordered_map<VoxelKey, std::uint32_t, VoxelKeyHash>;
+
+VoxelKey KeyOf(const PointXYZI& p, double voxel_m) {
+  return {VoxelIndex(p.x, voxel_m), VoxelIndex(p.y, voxel_m), VoxelIndex(p.z, voxel_m)};
+}
+
+// The keyframe's returns above the ground within submap_radius_m of it (xy; the map points it
+// tests), each with its map point (the voxel's; a return whose voxel the map does not hold, outside
+// a tile's map, is left out).
+struct Returns {
+  PointCloud points;
+  std::vector<std::uint32_t> map_index;
+};
+Returns ReturnsAboveGround(const WorldKeyframe& kf, const VoxelTable& table, const geometry::LowestGrid& low,
+                          const RemovertConfig& cfg) {
+  const PointCloud scan = ScanForMap(kf, cfg, nullptr);
+  const Eigen::Vector3d at = kf.T_world_sensor.translation();
+  const double reach2 = cfg.submap_radius_m * cfg.submap_radius_m;
+  Returns out;
+  for (const PointXYZI& p : scan.points) {
+    const double dx = p.x - at.x(), dy = p.y - at.y();
+    if (dx * dx + dy * dy > reach2) continue;
+    const auto it = table.find(KeyOf(p, cfg.map_voxel_m));
+    if (it == table.end()) continue;
+    const Eigen::Vector3f q(p.x, p.y, p.z);
+    if (p.z <= std::min(p.z, low.Under(q, q, 1)) + float(cfg.map_voxel_m)) continue;  // the ground layer
+    out.points.points.push_back(p);
+    out.map_index.push_back(it->second);
+  }
+  return out;
+}
+
+// The returns within reach_m (xy) of a removed one: every body no longer than reach_m that the
+// keyframe met lies among them, whole.
+std::vector<std::uint32_t> NearRemoved(const Returns& r, const std::vector<std::uint8_t>& removed, double reach_m) {
+  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells;  // removed returns by xy cell of reach_m
+  auto cell = [&](float v) { return std::int64_t(std::floor(double(v) / reach_m)); };
+  const auto& pts = r.points.points;
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    if (removed[r.map_index[i]]) cells[PackXY(cell(pts[i].x), cell(pts[i].y))].push_back(std::uint32_t(i));
+  std::vector<std::uint32_t> near;
+  if (cells.empty()) return near;
+  const float reach2 = float(reach_m * reach_m);
+  auto within = [&](std::size_t i) {
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy) {
+        const auto it = cells.find(PackXY(cell(pts[i].x) + dx, cell(pts[i].y) + dy));
+        if (it == cells.end()) continue;
+        for (std::uint32_t j : it->second) {
+          const float ex = pts[j].x - pts[i].x, ey = pts[j].y - pts[i].y;
+          if (ex * ex + ey * ey <= reach2) return true;
+        }
+      }
+    return false;
+  };
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    if (within(i)) near.push_back(std::uint32_t(i));
+  return near;
+}
+
+// The map points of the bodies this keyframe met (the rule above), not removed themselves: the
+// clusters of its returns near removed ones: dilate_body_m apart in xy, and in z as far as one
+// surface's rows lie apart at their range (at least dilate_body_m).
+std::vector<std::uint32_t> BodiesMet(const Returns& r, const Eigen::Vector3f& sensor, const std::vector<std::uint8_t>& removed,
+                                     const RemovertConfig& cfg) {
+  const std::vector<std::uint32_t> near = NearRemoved(r, removed, cfg.hd_body_max_m);
+  std::vector<std::uint32_t> grown;
+  if (near.empty()) return grown;
+  const PointCloud pts = r.points.select(near);
+  const geometry::SensorModel& m = cfg.sensor_model;
+  std::vector<Eigen::Vector2f> gaps(pts.size());
+  for (std::size_t j = 0; j < pts.size(); ++j) {  // along the rows dilate_body_m; across them one surface's rows
+    const double range = (pts.points[j].xyz() - sensor).norm();
+    const float rows = geometry::SampleJoinGaps(m.azimuth_step_deg, m.CoarserStepDeg(), range).y();
+    gaps[j] = Eigen::Vector2f(float(cfg.dilate_body_m), std::max(float(cfg.dilate_body_m), rows));
+  }
+  for (const auto& members : geometry::EuclideanClusterMembers(pts, gaps, 1)) {
+    std::size_t in_removed = 0;
+    for (std::uint32_t j : members) in_removed += removed[r.map_index[near[j]]];
+    if (in_removed == 0 || double(in_removed) < cfg.remove_min_ratio * double(members.size())) continue;
+    if (geometry::LongestHorizontalEdge(pts, members) > cfg.hd_body_max_m) continue;
+    for (std::uint32_t j : members)
+      if (!removed[r.map_index[near[j]]]) grown.push_back(r.map_index[near[j]]);
+  }
+  return grown;
+}
+
+}  // namespace
+
+void CompleteBodies(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
+                    int threads, std::vector<std::uint8_t>* state) {
+  if (cfg.hd_body_max_m <= 0.0 || !cfg.SensorResolved()) return;
+  std::vector<std::uint8_t> removed(map.size(), 0);
+  bool any = false;
+  for (std::size_t i = 0; i < map.size(); ++i) {
+    removed[i] = (*state)[i] == HdDecision::kRemoved || (*state)[i] == HdDecision::kDilated;
+    any = any || removed[i];
+  }
+  if (!any) return;
+  VoxelTable table;
+  table.reserve(map.size());
+  for (std::size_t i = 0; i < map.size(); ++i) table.emplace(KeyOf(map.points[i], cfg.map_voxel_m), std::uint32_t(i));
+  geometry::LowestGrid low(cfg.dilate_body_m);
+  low.Add(map);
+  std::vector<std::uint16_t> returned(map.size(), 0), met(map.size(), 0);
+  std::mutex merge;
+  ParallelFor(keyframes.size(), threads, [&](std::size_t k) {
+    const Returns r = ReturnsAboveGround(keyframes[k], table, low, cfg);
+    const Eigen::Vector3f sensor = keyframes[k].T_world_sensor.translation().cast<float>();
+    const std::vector<std::uint32_t> grown = BodiesMet(r, sensor, removed, cfg);
+    const std::lock_guard<std::mutex> lock(merge);
+    for (std::uint32_t i : r.map_index) returned[i] = std::uint16_t(std::min(0xffff, returned[i] + 1));
+    for (std::uint32_t i : grown) met[i] = std::uint16_t(std::min(0xffff, met[i] + 1));
+  });
+  for (std::size_t i = 0; i < map.size(); ++i)
+    if (met[i] > 0 && met[i] == returned[i]) (*state)[i] = HdDecision::kDilated;
+}
+
+}  // namespace ltm::removert::detail
