@@ -902,7 +902,8 @@ TEST(RemovertHd, AWalkersTrailAlongTheLineOfSightIsNoSurface) {
 // is never seen through: the window's beam below it returns from the ground in front of it). Say
 // the votes took the car's upper part: in each scan that met it, the rest of that cluster is the
 // car's too and goes (CompleteBodies). The parked car beside the street, the walls and the ground
-// stay whole; a scan of which the votes took less than hd.remove_min_ratio of the car keeps the rest.
+// stay whole; a scan of which the votes took less than hd.remove_min_ratio of the car keeps the rest,
+// and so does a standing car whose removal went wrong in part: its votes, pooled, say it stood.
 TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
   const auto far_car = [](int k) {
     const double cy = -12.0 + 1.5 * k;
@@ -923,33 +924,40 @@ TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
     truth.Nearest(map.points[i].xyz(), &j, &d2);
     label[i] = s.truth.object[j];
   }
-  // The votes took the car's points above `cut` [m]; after CompleteBodies: how many of its other
+  const removert::VisibilityVotes votes = removert::CountVisibility(map, s.kfs, cfg.remove_resolutions_deg, cfg, 2);
+  // Say removal took the points of `id` above `cut` [m]; after CompleteBodies: how many of its other
   // points are left, and how many points of anything else went.
   struct Left {
-    std::size_t taken = 0, car_left = 0, static_lost = 0;
+    std::size_t taken = 0, left = 0, others_lost = 0;
   };
-  const auto complete = [&](double cut) {
+  const auto complete = [&](int id, double cut) {
     Left out;
     std::vector<std::uint8_t> state(map.size(), removert::detail::HdDecision::kStatic);
     for (std::size_t i = 0; i < map.size(); ++i)
-      if (label[i] == 100 && map.points[i].z > cut) state[i] = removert::detail::HdDecision::kRemoved, ++out.taken;
-    removert::detail::CompleteBodies(map, s.kfs, cfg, 2, &state);
+      if (label[i] == id && map.points[i].z > cut) state[i] = removert::detail::HdDecision::kRemoved, ++out.taken;
+    removert::detail::CompleteBodies(map, s.kfs, cfg, votes, 2, &state);
     for (std::size_t i = 0; i < map.size(); ++i) {
       const bool gone = state[i] != removert::detail::HdDecision::kStatic;
-      out.car_left += label[i] == 100 && !gone;
-      out.static_lost += label[i] != 100 && gone;
+      out.left += label[i] == id && !gone;
+      out.others_lost += label[i] != id && gone;
     }
     return out;
   };
   const std::size_t car = std::size_t(std::count(label.begin(), label.end(), 100));
-  const Left half = complete(0.9), roof = complete(1.35);
-  std::printf("far car: %zu map points; the votes took %zu, bodies left %zu, took %zu static; the votes took the "
-              "roof, %zu: left %zu, took %zu static\n",
-              car, half.taken, half.car_left, half.static_lost, roof.taken, roof.car_left, roof.static_lost);
-  EXPECT_LE(10 * half.car_left, car - half.taken);  // nine tenths of what the votes left of the car go
-  EXPECT_EQ(half.static_lost, 0u);
-  EXPECT_GT(roof.car_left, half.car_left);  // scans where the roof was under remove_min_ratio of the car
-  EXPECT_EQ(roof.static_lost, 0u);
+  const std::size_t parked = std::size_t(std::count(label.begin(), label.end(), 7));
+  const Left half = complete(100, 0.9), roof = complete(100, 1.35), wrong = complete(7, 1.0);
+  std::printf("far car: %zu map points; removal took %zu, bodies left %zu, took %zu others; removal took the roof, "
+              "%zu: left %zu, took %zu others; parked car (%zu points) above 1 m, %zu: left %zu, took %zu others\n",
+              car, half.taken, half.left, half.others_lost, roof.taken, roof.left, roof.others_lost, parked, wrong.taken,
+              wrong.left, wrong.others_lost);
+  EXPECT_LE(10 * half.left, car - half.taken);  // nine tenths of what the votes left of the car go
+  EXPECT_EQ(half.others_lost, 0u);
+  EXPECT_GT(roof.left, half.left);  // scans where the roof was under remove_min_ratio of the car
+  EXPECT_EQ(roof.others_lost, 0u);
+  // A standing car half of which removal took by mistake: its votes, pooled, say it stood.
+  EXPECT_GT(2 * wrong.taken, parked);
+  EXPECT_EQ(wrong.left, parked - wrong.taken);
+  EXPECT_EQ(wrong.others_lost, 0u);
 }
 
 TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {

@@ -94,8 +94,9 @@ struct RemovertConfig {
                                   // distance and at least half of it above or below them (a car's flank, a
                                   // pedestrian's legs), not removed patches of flat ground
   double hd_body_max_m = 5.0;     // [m] a keyframe's cluster of returns above the ground no longer than this, at least
-                                  // remove_min_ratio of it removed, is a mover's body: the map points that every
-                                  // keyframe returning on them met in such a body go too; 0 = off
+                                  // remove_min_ratio of it removed and its votes pooled passing removal's test, is a
+                                  // mover's body: the map points that every keyframe returning on them met in such a
+                                  // body go too; 0 = off
   // --- LD detection
   double ld_radius_m = 0.3;       // [m] neighbour radius in the other session's map
   // ... plus LdRadiusRel() times the larger of the point's distances to either session's nearest keyframe

@@ -173,10 +173,11 @@ HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& key
                     int threads);
 // A removed body's other returns (hd_bodies.cpp): per keyframe, the clusters of its returns above
 // the ground no longer than hd.body_max_m, at least hd.remove_min_ratio of them in removed map voxels
-// (state kRemoved / kDilated); a map point every keyframe returning in its voxel met in such a
-// cluster becomes kDilated. Needs cfg's sensor resolved (else, or with hd.body_max_m 0, nothing).
+// (state kRemoved / kDilated) and their map points' `votes` (the removal resolutions') pooled passing
+// removal's test; a map point every keyframe returning in its voxel met in such a cluster becomes
+// kDilated. Needs cfg's sensor resolved (else, or with hd.body_max_m 0, nothing).
 void CompleteBodies(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
-                    int threads, std::vector<std::uint8_t>* state);
+                    const VisibilityVotes& votes, int threads, std::vector<std::uint8_t>* state);
 // The static and HD maps of the points with (*include)[i] (null: all) and their stats.
 HdResult SplitHd(const PointCloud& map, const HdDecision& decision, const std::vector<bool>* include);
 

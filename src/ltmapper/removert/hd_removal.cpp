@@ -370,7 +370,7 @@ HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& key
   }
   if (cfg.dilate_voxels > 0.0 && std::find(dynamic.begin(), dynamic.end(), true) != dynamic.end())
     Dilate(map, cfg, threads, dynamic, &d.state);
-  CompleteBodies(map, keyframes, cfg, threads, &d.state);
+  CompleteBodies(map, keyframes, cfg, votes, threads, &d.state);
   return d;
 }
 
