@@ -91,7 +91,7 @@ std::vector<std::uint32_t> NearRemoved(const Returns& r, const std::vector<std::
   return near;
 }
 
-// Removal's vote pooled over a cluster's map points (cluster[j] = near[members[j]] of r): at some
+// Removal's vote pooled over a cluster's map points (members index `near`, whose entries index r): at some
 // removal resolution, its see-through votes are at least remove_min_votes and remove_min_ratio of
 // its see-through + hit votes. A mover's body passes it as a whole (0.27-1.0 on seed 61's far cars,
 // whose lowest rows alone have none); a standing car whose votes went wrong in part does not
