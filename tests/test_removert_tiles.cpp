@@ -101,7 +101,7 @@ TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
   // CompleteBodies: (1 + sqrt 2) body lengths and three dilate_body_m on top of the dilation's margin.
   const double bodies = (1.0 + std::sqrt(2.0)) * 5.0 + 3.0 * 0.5;
   EXPECT_DOUBLE_EQ(removert::TileMarginM(cfg), 0.15 + 0.5 + 1.0 + bodies);  // dilate 1.5 voxels + body + normals
-  cfg.hd_body_max_m = 0.0;
+  cfg.body_max_m = 0.0;
   EXPECT_DOUBLE_EQ(removert::TileMarginM(cfg), 0.15 + 0.5 + 1.0);
   RemovertConfig no_revert = cfg;
   no_revert.revert = false;
@@ -109,7 +109,7 @@ TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
   RemovertConfig no_dilation = cfg;
   no_dilation.dilate_voxels = 0.0;
   EXPECT_DOUBLE_EQ(removert::TileMarginM(no_dilation), 1.0);
-  no_dilation.hd_body_max_m = 5.0;  // the bodies need no dilation
+  no_dilation.body_max_m = 5.0;  // the bodies need no dilation
   EXPECT_DOUBLE_EQ(removert::TileMarginM(no_dilation), 1.0 + bodies);
   RemovertConfig wide = cfg;
   wide.dilate_voxels = 10.0;  // 1 m: the ground cells (3 x 1 m) reach farthest
@@ -128,7 +128,7 @@ TEST(RemovertTiles, MarginIsDerivedFromTheDecisionsKeys) {
 TEST(RemovertTiles, MapPointsBoundShrinksTheEdgeKeepingTheBytes) {
   const auto kfs = LongStreet();
   RemovertConfig short_margin = ShortRange();  // the dilation's margin alone: the street is 11 of its tiles long
-  short_margin.hd_body_max_m = 0.0;
+  short_margin.body_max_m = 0.0;
   RemovertConfig cfg = removert::WithSensor(short_margin, kfs);
   const removert::HdResult whole = removert::RemoveHd(kfs, cfg, 2);
   cfg.tiles_max_map_points = 0;
@@ -159,7 +159,7 @@ TEST(RemovertTiles, MapPointsBoundShrinksTheEdgeKeepingTheBytes) {
   EXPECT_EQ(edges.front(), 2000);
   EXPECT_EQ(edges[1], 2 * 770);  // margins of 154 voxels
   EXPECT_EQ(edges.back(), 770);
-  defaults.hd_body_max_m = 0.0;
+  defaults.body_max_m = 0.0;
   const std::vector<std::int64_t> fine = removert::TileEdgeChoices(defaults);
   EXPECT_EQ(fine[1], 22 * 90);  // margins of 18 voxels
   EXPECT_EQ(fine.back(), 90);
@@ -169,7 +169,7 @@ TEST(RemovertTiles, MapPointsBoundShrinksTheEdgeKeepingTheBytes) {
 TEST(RemovertTiles, EachTileReadsOnlyTheKeyframesThatReachIt) {
   const auto kfs = LongStreet();
   RemovertConfig cfg = ShortRange();
-  cfg.hd_body_max_m = 0.0;  // the dilation's margin alone (1.65 m)
+  cfg.body_max_m = 0.0;  // the dilation's margin alone (1.65 m)
   cfg.tiles_edge_m = 12.0;
   const removert::TilePlan plan = removert::PlanTiles(kfs, cfg);
   ASSERT_FALSE(plan.tiles.empty());

@@ -93,7 +93,7 @@ struct RemovertConfig {
   double dilate_body_m = 0.5;     // [m] a removed body's points: removed points with removed points within this
                                   // distance and at least half of it above or below them (a car's flank, a
                                   // pedestrian's legs), not removed patches of flat ground
-  double hd_body_max_m = 5.0;     // [m] a keyframe's cluster of returns above the ground no longer than this, at least
+  double body_max_m = 5.0;        // [m] a keyframe's cluster of returns above the ground no longer than this, at least
                                   // remove_min_ratio of it removed and its votes pooled passing removal's test, is a
                                   // mover's body: the map points that every keyframe returning on them met in such a
                                   // body go too; 0 = off
@@ -227,7 +227,7 @@ struct RemovertConfig {
     v("hd.revert_surface_max_m", revert_surface_max_m, "m", 0.0, 100.0);
     v("hd.dilate_voxels", dilate_voxels, "map voxels", 0.0, 10.0);
     v("hd.dilate_body_m", dilate_body_m, "m", 0.01, 10.0);
-    v("hd.body_max_m", hd_body_max_m, "m", 0.0, 100.0);
+    v("hd.body_max_m", body_max_m, "m", 0.0, 100.0);
     v("ld.radius_m", ld_radius_m, "m", 0.01, 10.0);
     v("ld.rotation_sigma_deg", ld_rotation_sigma_deg, "deg", 0.0, 10.0);
     v("ld.radius_max_m", ld_radius_max_m, "m", 0.01, 10.0);

@@ -171,6 +171,11 @@ struct HdDecision {
 };
 HdDecision DecideHd(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                     int threads);
+// The local ground under p: the lowest z of `low` in p's cell and the 8 around it, at most p.z.
+inline float GroundNear(const geometry::LowestGrid& low, const PointXYZI& p) {
+  const Eigen::Vector3f q(p.x, p.y, p.z);
+  return std::min(p.z, low.Under(q, q, 1));
+}
 // A removed body's other returns (hd_bodies.cpp): per keyframe, the clusters of its returns above
 // the ground no longer than hd.body_max_m, at least hd.remove_min_ratio of them in removed map voxels
 // (state kRemoved / kDilated) and their map points' `votes` (the removal resolutions') pooled passing

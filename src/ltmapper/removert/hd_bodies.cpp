@@ -99,8 +99,7 @@ Returns ReturnsAboveGround(const WorldKeyframe& kf, const VoxelTable& table, con
     if (dx * dx + dy * dy > reach2) continue;
     std::uint32_t index = 0;
     if (!table.Find(p, &index)) continue;
-    const Eigen::Vector3f q(p.x, p.y, p.z);
-    if (p.z <= std::min(p.z, low.Under(q, q, 1)) + float(cfg.map_voxel_m)) continue;  // the ground layer
+    if (p.z <= GroundNear(low, p) + float(cfg.map_voxel_m)) continue;  // the ground layer (as GroundwardMask)
     out.points.points.push_back(p);
     out.map_index.push_back(index);
   }
@@ -159,7 +158,7 @@ bool SeenThroughAsOne(const std::vector<std::uint32_t>& members, const std::vect
 // surface's rows lie apart at their range (at least dilate_body_m).
 std::vector<std::uint32_t> BodiesMet(const Returns& r, const Eigen::Vector3f& sensor, const std::vector<std::uint8_t>& removed,
                                      const RemovertConfig& cfg, const VisibilityVotes& votes) {
-  const std::vector<std::uint32_t> near = NearRemoved(r, removed, cfg.hd_body_max_m);
+  const std::vector<std::uint32_t> near = NearRemoved(r, removed, cfg.body_max_m);
   std::vector<std::uint32_t> grown;
   if (near.empty()) return grown;
   const PointCloud pts = r.points.select(near);
@@ -175,7 +174,7 @@ std::vector<std::uint32_t> BodiesMet(const Returns& r, const Eigen::Vector3f& se
     for (std::uint32_t j : members) in_removed += removed[r.map_index[near[j]]];
     if (in_removed == 0 || double(in_removed) < cfg.remove_min_ratio * double(members.size())) continue;
     if (!SeenThroughAsOne(members, near, r, votes, cfg)) continue;
-    if (geometry::LongestHorizontalEdge(pts, members) > cfg.hd_body_max_m) continue;
+    if (geometry::LongestHorizontalEdge(pts, members) > cfg.body_max_m) continue;
     for (std::uint32_t j : members)
       if (!removed[r.map_index[near[j]]]) grown.push_back(r.map_index[near[j]]);
   }
@@ -186,7 +185,7 @@ std::vector<std::uint32_t> BodiesMet(const Returns& r, const Eigen::Vector3f& se
 
 void CompleteBodies(const PointCloud& map, const std::vector<WorldKeyframe>& keyframes, const RemovertConfig& cfg,
                     const VisibilityVotes& votes, int threads, std::vector<std::uint8_t>* state) {
-  if (cfg.hd_body_max_m <= 0.0 || !cfg.SensorResolved()) return;
+  if (cfg.body_max_m <= 0.0 || !cfg.SensorResolved()) return;
   std::vector<std::uint8_t> removed(map.size(), 0);
   bool any = false;
   for (std::size_t i = 0; i < map.size(); ++i) {

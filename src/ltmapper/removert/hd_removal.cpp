@@ -216,10 +216,7 @@ std::vector<std::uint8_t> GroundwardMask(const PointCloud& map, const std::vecto
   if (bodies.empty() || radius_m <= 0.0) return grow;
   geometry::LowestGrid low(radius_m);
   low.Add(map);
-  auto ground_near = [&](const PointXYZI& p) {  // the lowest map point of p's cell and the 8 around it
-    const Eigen::Vector3f q(p.x, p.y, p.z);
-    return std::min(p.z, low.Under(q, q, 1));
-  };
+  auto ground_near = [&](const PointXYZI& p) { return detail::GroundNear(low, p); };
   std::unordered_map<std::int64_t, std::vector<std::uint32_t>> body_cells;  // the bodies' feet
   for (std::size_t j = 0; j < bodies.size(); ++j) {
     const PointXYZI& b = bodies.points[j];

@@ -28,11 +28,11 @@ double TileMarginM(const RemovertConfig& cfg) {
     const double ground = 3.0 * cfg.DilateM();
     dilation = std::max({dilation, body, ground});
   }
-  if (cfg.hd_body_max_m <= 0.0) return dilation;
+  if (cfg.body_max_m <= 0.0) return dilation;
   // CompleteBodies: a point's cluster reaches sqrt(2) body lengths (its xy box) and one gap
   // (dilate_body_m) beyond, the returns it is chosen from one body length more, the ground of each
   // the lowest map point two cells of dilate_body_m away.
-  return dilation + (1.0 + std::sqrt(2.0)) * cfg.hd_body_max_m + 3.0 * cfg.dilate_body_m;
+  return dilation + (1.0 + std::sqrt(2.0)) * cfg.body_max_m + 3.0 * cfg.dilate_body_m;
 }
 
 namespace {
