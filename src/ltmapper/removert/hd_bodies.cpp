@@ -25,6 +25,9 @@ namespace {
 // The map point of each voxel. A session map is in voxel order (x, then y, then z index:
 // VoxelDownsample's), and is searched as it is; any other map through a sorted copy of its voxels,
 // 16 bytes a point (a hash map of the 7.5 M voxels of a 1000-keyframe session took 0.37 GB more).
+// A keyframe's scan for the map is in that order too, so its returns are looked up one after
+// another from where the last one was found (Cursor): a gallop over the few voxels between them,
+// not a search of the whole map each time.
 struct VoxelEntry {
   std::int32_t x, y, z;
   std::uint32_t index;
@@ -32,6 +35,11 @@ struct VoxelEntry {
 };
 class VoxelTable {
  public:
+  // Where the last lookup of a run of ascending voxels ended.
+  struct Cursor {
+    std::size_t at = 0;
+  };
+
   VoxelTable(const PointCloud& map, double voxel_m) : map_(map), voxel_m_(voxel_m) {
     bool sorted = true;
     VoxelEntry last{}, e{};
@@ -43,31 +51,42 @@ class VoxelTable {
     for (std::size_t i = 0; i < map.size(); ++i)
       if (Of(map.points[i], &e)) entries_.push_back({e.x, e.y, e.z, std::uint32_t(i)});
     std::sort(entries_.begin(), entries_.end());
+    sorted_copy_ = true;
   }
-  // The map point of p's voxel; false where the map holds none.
-  bool Find(const PointXYZI& p, std::uint32_t* index) const {
+  // The map point of p's voxel; false where the map holds none. Fastest when p's voxel follows the
+  // cursor's last one.
+  bool Find(const PointXYZI& p, Cursor* cursor, std::uint32_t* index) const {
     VoxelEntry e{};
     if (!Of(p, &e)) return false;
-    if (entries_.empty()) {  // the map itself, in voxel order
-      std::size_t lo = 0, hi = map_.size();
-      VoxelEntry m{};
-      while (lo < hi) {
-        const std::size_t mid = lo + (hi - lo) / 2;
-        Of(map_.points[mid], &m);
-        if (m < e) lo = mid + 1;
-        else hi = mid;
+    const std::size_t n = size();
+    std::size_t lo = cursor->at, hi = n;
+    if (lo > 0 && !(At(lo - 1) < e)) lo = 0;  // not past the cursor's last voxel: search from the start
+    for (std::size_t step = 1; lo + step <= n; step *= 2) {  // gallop: the first entry not below e lies in (lo, lo + step]
+      if (!(At(lo + step - 1) < e)) {
+        hi = lo + step - 1;
+        break;
       }
-      if (lo == map_.size() || !Of(map_.points[lo], &m) || e < m) return false;
-      *index = std::uint32_t(lo);
-      return true;
+      lo += step;
     }
-    const auto it = std::lower_bound(entries_.begin(), entries_.end(), e);
-    if (it == entries_.end() || e < *it) return false;
-    *index = it->index;
+    while (lo < hi) {
+      const std::size_t mid = lo + (hi - lo) / 2;
+      if (At(mid) < e) lo = mid + 1;
+      else hi = mid;
+    }
+    cursor->at = lo;
+    if (lo == n || e < At(lo)) return false;
+    *index = sorted_copy_ ? entries_[lo].index : std::uint32_t(lo);
     return true;
   }
 
  private:
+  std::size_t size() const { return sorted_copy_ ? entries_.size() : map_.size(); }
+  VoxelEntry At(std::size_t i) const {  // the i-th voxel in order
+    if (sorted_copy_) return entries_[i];
+    VoxelEntry e{};
+    Of(map_.points[i], &e);
+    return e;
+  }
   bool Of(const PointXYZI& p, VoxelEntry* e) const {  // false beyond 2^31 voxels from the origin
     constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
     const std::int64_t v[3] = {VoxelIndex(p.x, voxel_m_), VoxelIndex(p.y, voxel_m_), VoxelIndex(p.z, voxel_m_)};
@@ -78,7 +97,8 @@ class VoxelTable {
   }
   const PointCloud& map_;
   double voxel_m_;
-  std::vector<VoxelEntry> entries_;  // empty: the map is in voxel order
+  bool sorted_copy_ = false;         // false: the map is in voxel order, searched as it is
+  std::vector<VoxelEntry> entries_;  // the sorted copy
 };
 
 // The keyframe's returns above the ground within submap_radius_m of it (xy; the map points it
@@ -94,12 +114,13 @@ Returns ReturnsAboveGround(const WorldKeyframe& kf, const VoxelTable& table, con
   const Eigen::Vector3d at = kf.T_world_sensor.translation();
   const double reach2 = cfg.submap_radius_m * cfg.submap_radius_m;
   Returns out;
+  VoxelTable::Cursor cursor;  // the scan is in voxel order (VoxelDownsample's)
   for (const PointXYZI& p : scan.points) {
     const double dx = p.x - at.x(), dy = p.y - at.y();
     if (dx * dx + dy * dy > reach2) continue;
-    std::uint32_t index = 0;
-    if (!table.Find(p, &index)) continue;
     if (p.z <= GroundNear(low, p) + float(cfg.map_voxel_m)) continue;  // the ground layer (as GroundwardMask)
+    std::uint32_t index = 0;
+    if (!table.Find(p, &cursor, &index)) continue;
     out.points.points.push_back(p);
     out.map_index.push_back(index);
   }
