@@ -903,7 +903,8 @@ TEST(RemovertHd, AWalkersTrailAlongTheLineOfSightIsNoSurface) {
 // the votes took the car's upper part: in each scan that met it, the rest of that cluster is the
 // car's too and goes (CompleteBodies). The parked car beside the street, the walls and the ground
 // stay whole; a scan of which the votes took less than hd.remove_min_ratio of the car keeps the rest,
-// and so does a standing car whose removal went wrong in part: its votes, pooled, say it stood.
+// and so does a standing car whose removal went wrong in part: its votes, pooled, say it stood. A
+// scanner without rings judges no body.
 TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
   const auto far_car = [](int k) {
     const double cy = -12.0 + 1.5 * k;
@@ -930,12 +931,12 @@ TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
   struct Left {
     std::size_t taken = 0, left = 0, others_lost = 0;
   };
-  const auto complete = [&](int id, double cut) {
+  const auto complete = [&](int id, double cut, const RemovertConfig& with) {
     Left out;
     std::vector<std::uint8_t> state(map.size(), removert::detail::HdDecision::kStatic);
     for (std::size_t i = 0; i < map.size(); ++i)
       if (label[i] == id && map.points[i].z > cut) state[i] = removert::detail::HdDecision::kRemoved, ++out.taken;
-    removert::detail::CompleteBodies(map, s.kfs, cfg, votes, 2, &state);
+    removert::detail::CompleteBodies(map, s.kfs, with, votes, 2, &state);
     for (std::size_t i = 0; i < map.size(); ++i) {
       const bool gone = state[i] != removert::detail::HdDecision::kStatic;
       out.left += label[i] == id && !gone;
@@ -945,7 +946,7 @@ TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
   };
   const std::size_t car = std::size_t(std::count(label.begin(), label.end(), 100));
   const std::size_t parked = std::size_t(std::count(label.begin(), label.end(), 7));
-  const Left half = complete(100, 0.9), roof = complete(100, 1.35), wrong = complete(7, 1.0);
+  const Left half = complete(100, 0.9, cfg), roof = complete(100, 1.35, cfg), wrong = complete(7, 1.0, cfg);
   std::printf("far car: %zu map points; removal took %zu, bodies left %zu, took %zu others; removal took the roof, "
               "%zu: left %zu, took %zu others; parked car (%zu points) above 1 m, %zu: left %zu, took %zu others\n",
               car, half.taken, half.left, half.others_lost, roof.taken, roof.left, roof.others_lost, parked, wrong.taken,
@@ -958,6 +959,11 @@ TEST(RemovertHd, WhatTheVotesLeftOfAFarCarsBodyGoesWithTheRest) {
   EXPECT_GT(2 * wrong.taken, parked);
   EXPECT_EQ(wrong.left, parked - wrong.taken);
   EXPECT_EQ(wrong.others_lost, 0u);
+  // A scanner without rings samples a place in a pattern of its own in each scan: no body is judged.
+  RemovertConfig rosette = cfg;
+  rosette.sensor_model.ring_based = false;
+  const Left unringed = complete(100, 0.9, rosette);
+  EXPECT_EQ(unringed.left, car - unringed.taken);
 }
 
 TEST(RemovertHd, RevertKeepsMoreStaticThanSingleResolution) {
