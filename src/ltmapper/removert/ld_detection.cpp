@@ -431,37 +431,28 @@ double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& h
 // (DroveWithTheSensor): two instants, as a trail needs.
 constexpr int kDroveKeyframesBefore = kTrailMinKeyframes;
 
-// The evidence one earlier keyframe gives of where a thing was (DroveWithTheSensor), counted two
-// ways: the thing's points that a return lies near, and the returns that lie near a point of it,
-// each at its place relative to the sensor (with_sensor) and in the world (in_world).
-struct PlaceCounts {
-  std::size_t with_sensor = 0, in_world = 0;
-  PlaceCounts& operator+=(const PlaceCounts& o) {
-    with_sensor += o.with_sensor, in_world += o.in_world;
+// What one scan returned on a thing at one place (DroveWithTheSensor), counted two ways: the
+// thing's points that a return lies within `reach` of, and the returns within reach of one of its
+// points, each return once.
+struct ReturnedOn {
+  std::size_t points = 0, returns = 0;
+  ReturnedOn& operator+=(const ReturnedOn& o) {
+    points += o.points, returns += o.returns;
     return *this;
   }
 };
-struct PlaceEvidence {
-  PlaceCounts points, returns;
-};
 
-// How many of `pts` a scan (world frame, its tree) returned on: a return within `reach` of the point.
-std::size_t PointsReturnedOn(const std::vector<Eigen::Vector3f>& pts, const geometry::KdTree& scan, float reach) {
-  std::size_t n = 0;
-  for (const auto& p : pts) n += scan.CountWithin(p, reach, 1) > 0 ? 1 : 0;
-  return n;
-}
-
-// How many returns of a scan (world frame, its tree's cloud) lie within `reach` of a thing (its
-// points' tree, their box grown by reach: lo, hi) once moved by `move`, each counted once.
-std::size_t ReturnsOn(const geometry::KdTree& thing, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi,
-                      const geometry::KdTree& scan, const Eigen::Affine3f& move, float reach) {
-  std::size_t n = 0;
-  for (const auto& q : scan.cloud().points) {
-    const Eigen::Vector3f x = move * q.xyz();
-    if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) continue;
-    n += thing.CountWithin(x, reach, 1) > 0 ? 1 : 0;
+// What a scan (world frame, its tree) returned on the points `pts` (world frame).
+ReturnedOn ReturnsOn(const std::vector<Eigen::Vector3f>& pts, const geometry::KdTree& scan, float reach) {
+  ReturnedOn n;
+  std::vector<std::uint32_t> returns;
+  for (const auto& p : pts) {
+    const auto near = scan.RadiusUnsorted(p, reach);
+    n.points += near.empty() ? 0 : 1;
+    for (const auto& [i, sq] : near) returns.push_back(i);
   }
+  std::sort(returns.begin(), returns.end());
+  n.returns = std::size_t(std::unique(returns.begin(), returns.end()) - returns.begin());
   return n;
 }
 
@@ -699,30 +690,20 @@ bool DroveWithTheSensor(const PointCloud& c, const std::vector<std::uint32_t>& m
                         const RemovertConfig& cfg) {
   if (before.size() < std::size_t(kDroveKeyframesBefore)) return false;
   const float reach = HitReach(cfg);
-  const geometry::KdTree thing(c.select(m));
-  Eigen::Vector3f lo, hi;
-  std::tie(lo, hi) = BoxOf(c, m);
-  lo.array() -= reach, hi.array() += reach;
   std::vector<Eigen::Vector3f> world;
   for (auto i : m) world.push_back(c.points[i].xyz());
-  PlaceEvidence sum;
+  ReturnedOn with_sensor, in_world;  // summed over `before`
   for (std::size_t j = 0; j < before.size(); ++j) {
-    // The thing's place relative to the sensor at `before`: T_before T_last^-1 p; a return there,
-    // moved back by the inverse, lies on the thing.
     const Eigen::Affine3f to = (before[j]->T_world_sensor * last.T_world_sensor.inverse()).cast<float>();
     std::vector<Eigen::Vector3f> relative;
     for (const auto& p : world) relative.push_back(to * p);
-    PlaceEvidence e;
-    e.points = {PointsReturnedOn(relative, *scans[j], reach), PointsReturnedOn(world, *scans[j], reach)};
-    e.returns = {ReturnsOn(thing, lo, hi, *scans[j], to.inverse(), reach),
-                 ReturnsOn(thing, lo, hi, *scans[j], Eigen::Affine3f::Identity(), reach)};
-    for (const PlaceCounts* n : {&e.points, &e.returns})
-      if (n->with_sensor <= n->in_world) return false;
-    sum.points += e.points;
-    sum.returns += e.returns;
+    const ReturnedOn s = ReturnsOn(relative, *scans[j], reach), w = ReturnsOn(world, *scans[j], reach);
+    if (s.points <= w.points || s.returns <= w.returns) return false;
+    with_sensor += s;
+    in_world += w;
   }
-  return SignificantlyMore(sum.points.with_sensor, sum.points.in_world) &&
-         SignificantlyMore(sum.returns.with_sensor, sum.returns.in_world);
+  return SignificantlyMore(with_sensor.points, in_world.points) &&
+         SignificantlyMore(with_sensor.returns, in_world.returns);
 }
 
 Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m) {
