@@ -305,6 +305,14 @@ std::vector<std::string> LdPairCloudFiles();
 // cluster reaches in xy (LdTileMarginM).
 Eigen::Vector2f ResidueGapsAt(const RemovertConfig& cfg, double range_m);
 
+// Marks in *residue (per point of `c`) the clusters `members` of `c` that are a mover's trail: at
+// least two of `own_voters` returned on them, each in pieces shorter than a mover, not counting the
+// cluster's bottom that the ground's returns touch (ld_detection.cpp); and those that drove with the
+// sensor.
+void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
+                const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
+                std::vector<bool>* residue);
+
 // Whether the points `m` of `c`, last returned on by keyframe `last`, drove with the sensor: each of
 // the keyframes `before` it (their scans' trees in world coordinates, `scans`) returned on more of
 // them at their place relative to the sensor than at their place in the world, and all of them by

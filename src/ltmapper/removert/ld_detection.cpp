@@ -427,6 +427,25 @@ double LongestPieceSeen(const PointCloud& c, const std::vector<std::uint32_t>& h
   return longest;
 }
 
+// Per point of `c` among `asked`: whether it is the bottom of its thing, within HitReach above the
+// lowest of `asked` around it (cells of ResidueGround's size, kGroundGrowCells on each side). The
+// returns from the ground a thing stands on lie that near its lowest points in every keyframe that
+// sees the ground there, so they say nothing of where the thing was (LongestPieceSeen leaves them
+// out): a walker's trail along a sidewalk was touched along its whole length by a few sidewalk
+// returns of each keyframe (seed 83's Pandar64: 1-6 returns 0.17-0.21 m above the street level,
+// against 63-215 on the walker, which each keyframe met within 0.08-0.64 m).
+std::vector<bool> BottomOf(const PointCloud& c, const std::vector<std::uint32_t>& asked, const RemovertConfig& cfg) {
+  geometry::LowestGrid lowest = ResidueGround(cfg);
+  lowest.Add(c.select(asked));
+  std::vector<bool> bottom(c.size(), false);
+  const float reach = HitReach(cfg);
+  for (auto i : asked) {
+    const Eigen::Vector3f p = c.points[i].xyz();
+    bottom[i] = p.z() - lowest.Under(p, p, kGroundGrowCells) <= reach;
+  }
+  return bottom;
+}
+
 // How many keyframes before its last view a thing that drove with the sensor is tested over
 // (DroveWithTheSensor): two instants, as a trail needs.
 constexpr int kDroveKeyframesBefore = kTrailMinKeyframes;
@@ -507,7 +526,9 @@ void MarkDroveWithTheSensor(const PointCloud& c, const std::vector<const std::ve
 // `c`). The whole cluster decides, so a tile must hold it: clusters up to LdWholeClusterM long are
 // judged (about 6 m with the defaults). The same clusters, with the keyframes' hits, are judged for
 // having driven with the sensor (MarkDroveWithTheSensor).
-void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
+}  // namespace
+
+void detail::MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
                 const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
                 std::vector<bool>* residue) {
   const double longest = LdWholeClusterM(cfg);
@@ -527,13 +548,17 @@ void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t
   std::vector<int> seen_by(judged.size(), 0), last(judged.size(), -1);  // last: the latest voter that hit it
   std::vector<bool> whole(judged.size(), false);
   const auto hits = HitsPerKeyframe(c, asked, own_voters, cfg, threads);
+  const std::vector<bool> bottom = BottomOf(c, asked, cfg);
   for (std::size_t v = 0; v < hits.size(); ++v) {
-    std::vector<std::vector<std::uint32_t>> piece(judged.size());  // this keyframe's hits per cluster
-    for (auto i : hits[v]) piece[cluster_of[i]].push_back(i);
+    std::vector<std::vector<std::uint32_t>> piece(judged.size()), above(judged.size());  // this keyframe's hits per cluster
+    for (auto i : hits[v]) {
+      piece[cluster_of[i]].push_back(i);
+      if (!bottom[i]) above[cluster_of[i]].push_back(i);
+    }
     for (std::size_t t = 0; t < judged.size(); ++t) {
       if (piece[t].empty()) continue;
       ++seen_by[t];
-      whole[t] = whole[t] || LongestPieceSeen(c, piece[t], cfg) >= cfg.ld_residue_length_m;
+      whole[t] = whole[t] || LongestPieceSeen(c, above[t], cfg) >= cfg.ld_residue_length_m;
       if (last[t] < 0 || own_voters[v].index > own_voters[std::size_t(last[t])].index) last[t] = int(v);
     }
   }
@@ -542,6 +567,8 @@ void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t
       for (auto i : *judged[t]) (*residue)[i] = true;
   MarkDroveWithTheSensor(c, judged, last, own_voters, residue, cfg);
 }
+
+namespace {
 
 // The points of `c` higher than ld_radius_m above the ground of `own` under them (ResidueGround,
 // as FitAMover measures a thing's top). A thing stands on the ground but is not joined to others
@@ -606,7 +633,7 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
   const auto whole = geometry::EuclideanClusterMembers(both, ResidueGaps(both, own_voters, cfg), threads);
   std::vector<bool> fit = FitAMover(both, whole, own, cfg);
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
-  MarkTrails(both, whole, own_voters, cfg, threads, &fit);
+  detail::MarkTrails(both, whole, own_voters, cfg, threads, &fit);
   std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
   MarkSeenBriefly(seen, both, whole, own, own_voters, cfg, threads, &residue);
   return residue;
