@@ -552,17 +552,20 @@ void detail::MarkTrails(const PointCloud& c, const std::vector<std::vector<std::
   std::vector<int> seen_by(judged.size(), 0), last(judged.size(), -1);  // last: the latest voter that hit it
   std::vector<bool> whole(judged.size(), false);
   const auto hits = HitsPerKeyframe(c, asked, own_voters, cfg, threads);
-  // A cluster with parts above its bottom is judged by the hits on those parts (a keyframe that only
-  // touched its bottom met nothing of it); one that is all bottom (one scan line of a far fence) by
-  // all its hits.
+  // A cluster most of whose points lie above its bottom is judged by the hits on those (a keyframe
+  // that only touched its bottom met nothing of it); one that is mostly bottom, a low strip or one
+  // scan line of a far fence (seed 23's VLP-16: 46 of 48 points, the line running up and down
+  // across cells), by all its hits.
   const std::vector<bool> bottom = BottomOf(c, asked, cfg);
-  std::vector<bool> has_above(judged.size(), false);
-  for (auto i : asked) has_above[cluster_of[i]] = has_above[cluster_of[i]] || !bottom[i];
+  std::vector<std::size_t> n_above(judged.size(), 0);
+  for (auto i : asked) n_above[cluster_of[i]] += bottom[i] ? 0 : 1;
+  std::vector<bool> mostly_above(judged.size(), false);
+  for (std::size_t t = 0; t < judged.size(); ++t) mostly_above[t] = 2 * n_above[t] > judged[t]->size();
   for (std::size_t v = 0; v < hits.size(); ++v) {
     std::vector<std::vector<std::uint32_t>> piece(judged.size()), met(judged.size());  // this keyframe's hits per cluster
     for (auto i : hits[v]) {
       piece[cluster_of[i]].push_back(i);
-      if (!has_above[cluster_of[i]] || !bottom[i]) met[cluster_of[i]].push_back(i);
+      if (!mostly_above[cluster_of[i]] || !bottom[i]) met[cluster_of[i]].push_back(i);
     }
     for (std::size_t t = 0; t < judged.size(); ++t) {
       if (piece[t].empty()) continue;
