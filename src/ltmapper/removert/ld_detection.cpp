@@ -519,6 +519,8 @@ void MarkDroveWithTheSensor(const PointCloud& c, const std::vector<const std::ve
   }
 }
 
+}  // namespace
+
 // A mover walking along its own session's line of sight leaves a trail in that session's map that
 // its HD removal cannot take (the keyframes that met it later met it nearer, in front of its earlier
 // places, so none saw through them) and that is longer than a mover (FitAMover does not take it).
@@ -527,14 +529,13 @@ void MarkDroveWithTheSensor(const PointCloud& c, const std::vector<const std::ve
 // is seen along its visible length by the keyframes that see it whole. So a cluster of `c` (not yet
 // marked) longer than a mover that at least kTrailMinKeyframes of `own_voters` hit, each in pieces
 // shorter than a mover (LongestPieceSeen), is a mover's trail (marked in *residue, per point of
-// `c`). The whole cluster decides, so a tile must hold it: clusters up to LdWholeClusterM long are
+// `c`). A keyframe's returns from the ground a cluster stands on are no piece of it (BottomOf).
+// The whole cluster decides, so a tile must hold it: clusters up to LdWholeClusterM long are
 // judged (about 6 m with the defaults). The same clusters, with the keyframes' hits, are judged for
 // having driven with the sensor (MarkDroveWithTheSensor).
-}  // namespace
-
 void detail::MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
-                const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
-                std::vector<bool>* residue) {
+                        const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
+                        std::vector<bool>* residue) {
   const double longest = LdWholeClusterM(cfg);
   std::vector<const std::vector<std::uint32_t>*> judged;
   std::vector<std::uint32_t> asked;
