@@ -779,31 +779,29 @@ TEST(RemovertLd, TheSidewalksReturnsUnderAWalkersTrailDoNotMakeItWhole) {
     fence_scans.push_back(geometry::Transform(fence, kf.T_world_sensor.inverse()));
     kfs.push_back(kf);
   }
-  const auto judged = [&](const std::vector<PointCloud>& scans, const RemovertConfig& with) {
+  // How many points of `thing` (one cluster) MarkTrails marks, the keyframes' scans being `scans`.
+  const auto judged = [&](const PointCloud& thing, const std::vector<PointCloud>& scans, const RemovertConfig& with) {
     for (std::size_t k = 0; k < kfs.size(); ++k) kfs[k].cloud = std::make_shared<PointCloud>(scans[k]);
-    std::vector<std::uint32_t> all(trail.size());
-    for (std::size_t i = 0; i < trail.size(); ++i) all[i] = std::uint32_t(i);
-    std::vector<bool> residue(trail.size(), false);
-    removert::detail::MarkTrails(trail, {all}, kfs, with, 1, &residue);
+    std::vector<std::uint32_t> all(thing.size());
+    for (std::size_t i = 0; i < thing.size(); ++i) all[i] = std::uint32_t(i);
+    std::vector<bool> residue(thing.size(), false);
+    removert::detail::MarkTrails(thing, {all}, kfs, with, 1, &residue);
     return std::count(residue.begin(), residue.end(), true);
   };
   ASSERT_TRUE(cfg.sensor_model.ring_based);
-  EXPECT_EQ(judged(walker_scans, cfg), std::ptrdiff_t(trail.size())) << "the walker's trail";
-  EXPECT_EQ(judged(fence_scans, cfg), 0) << "a fence every keyframe met along its length";
+  EXPECT_EQ(judged(trail, walker_scans, cfg), std::ptrdiff_t(trail.size())) << "the walker's trail";
+  EXPECT_EQ(judged(trail, fence_scans, cfg), 0) << "a fence every keyframe met along its length";
   RemovertConfig no_rings = cfg;  // a rosette: the bottom counts, as before (BottomOf)
   no_rings.sensor_model.ring_based = false;
-  EXPECT_EQ(judged(walker_scans, no_rings), 0);
+  EXPECT_EQ(judged(trail, walker_scans, no_rings), 0);
   // One scan line of a far fence, 3 m long, rising 0.1 m per metre, that every keyframe met whole:
   // most of it is its bottom, so all its hits judge it (by the few points above the bottom alone,
   // it was a trail: seed 23's VLP-16 lost 48 points of fence 9).
   PointCloud line;
   for (double x = 0.0; x <= 3.0 + 1e-9; x += 0.1) line.push_back(float(x), 5.0f, float(1.3 + 0.1 * x), 0.5f);
-  for (std::size_t k = 0; k < kfs.size(); ++k) kfs[k].cloud = std::make_shared<PointCloud>(geometry::Transform(line, kfs[k].T_world_sensor.inverse()));
-  std::vector<std::uint32_t> all(line.size());
-  for (std::size_t i = 0; i < line.size(); ++i) all[i] = std::uint32_t(i);
-  std::vector<bool> residue(line.size(), false);
-  removert::detail::MarkTrails(line, {all}, kfs, cfg, 1, &residue);
-  EXPECT_EQ(std::count(residue.begin(), residue.end(), true), 0) << "one scan line met whole";
+  std::vector<PointCloud> line_scans;
+  for (const auto& kf : kfs) line_scans.push_back(geometry::Transform(line, kf.T_world_sensor.inverse()));
+  EXPECT_EQ(judged(line, line_scans, cfg), 0) << "one scan line met whole";
 }
 
 // Vertical patch of points 0.1 m apart: x fixed, y in [y0, y1], z in [0, h].

@@ -558,18 +558,20 @@ void detail::MarkTrails(const PointCloud& c, const std::vector<std::vector<std::
   // scan line of a far fence (seed 23's VLP-16: 46 of 48 points, the line running up and down
   // across cells), by all its hits.
   const std::vector<bool> bottom = BottomOf(c, asked, cfg);
-  std::vector<std::size_t> n_above(judged.size(), 0);
-  for (auto i : asked) n_above[cluster_of[i]] += bottom[i] ? 0 : 1;
   std::vector<bool> mostly_above(judged.size(), false);
-  for (std::size_t t = 0; t < judged.size(); ++t) mostly_above[t] = 2 * n_above[t] > judged[t]->size();
+  for (std::size_t t = 0; t < judged.size(); ++t) {
+    const auto above = std::count_if(judged[t]->begin(), judged[t]->end(), [&](std::uint32_t i) { return !bottom[i]; });
+    mostly_above[t] = 2 * std::size_t(above) > judged[t]->size();
+  }
   for (std::size_t v = 0; v < hits.size(); ++v) {
-    std::vector<std::vector<std::uint32_t>> piece(judged.size()), met(judged.size());  // this keyframe's hits per cluster
+    std::vector<bool> hit(judged.size(), false);
+    std::vector<std::vector<std::uint32_t>> met(judged.size());  // this keyframe's hits per cluster, as judged
     for (auto i : hits[v]) {
-      piece[cluster_of[i]].push_back(i);
+      hit[cluster_of[i]] = true;
       if (!mostly_above[cluster_of[i]] || !bottom[i]) met[cluster_of[i]].push_back(i);
     }
     for (std::size_t t = 0; t < judged.size(); ++t) {
-      if (piece[t].empty()) continue;
+      if (!hit[t]) continue;
       if (last[t] < 0 || own_voters[v].index > own_voters[std::size_t(last[t])].index) last[t] = int(v);
       if (met[t].empty()) continue;
       ++seen_by[t];
