@@ -823,67 +823,6 @@ std::vector<WorldKeyframe> KeyframesAlongX(int n) {
   return kf;
 }
 
-// A car's side 4.5 m long (x from k to k + 4.5, y 10 m, z 0.3-1.5 m) that drove 1 m per keyframe
-// past four keyframes: HD removal took the places some keyframe saw free and left the 1.5 m every
-// keyframe met it at (x 3-4.5), in the map with the ground. Each keyframe's returns on that rest go
-// on, within the joining gap, onto the places removal took: a mover's (seed 61: cars 35-50 m out that
-// the drives' first or last keyframes met through gaps, false objects on three sensors). A parked
-// car's side every keyframe met whole is returned on with the map beside it, and so is one that a
-// walker passed within 0.3 m of in one keyframe (its returns beside the car off the map, fewer than
-// removal's errors on the car's returns would be by chance), and one whose lower half removal took
-// in error (off the map, but within the outline of what stayed): none is a mover's.
-TEST(RemovertLd, WhatAMoversBodyLeftBesideWhatRemovalTookIsAMovers) {
-  const RemovertConfig cfg = test::ConfigFor();
-  const auto side = [](double x0, double x1) {
-    PointCloud c;
-    for (double x = x0; x <= x1 + 1e-9; x += 0.1)
-      for (double z = 0.3; z <= 1.5 + 1e-9; z += 0.1) c.push_back(float(x), 10.0f, float(z), 0.5f);
-    return c;
-  };
-  PointCloud ground;
-  for (double x = -6.0; x <= 12.0 + 1e-9; x += 0.1)
-    for (double y = 6.0; y <= 14.0 + 1e-9; y += 0.1) ground.push_back(float(x), float(y), 0.0f, 0.5f);
-  std::vector<WorldKeyframe> kfs = KeyframesAlongX(4);
-  for (auto& kf : kfs) kf.T_world_sensor.translation().z() = 1.8;
-  // How many points of `thing` MarkCutBodies marks, its map `thing` + ground, keyframe k's returns
-  // `seen(k)` (world frame) + the ground.
-  const auto judged = [&](const PointCloud& thing, const std::function<PointCloud(int)>& seen) {
-    for (std::size_t k = 0; k < kfs.size(); ++k) {
-      PointCloud scan = seen(int(k));
-      scan.append(ground);
-      kfs[k].cloud = std::make_shared<PointCloud>(geometry::Transform(scan, kfs[k].T_world_sensor.inverse()));
-    }
-    PointCloud own = thing;
-    own.append(ground);
-    std::vector<std::uint32_t> all(thing.size());
-    for (std::size_t i = 0; i < thing.size(); ++i) all[i] = std::uint32_t(i);
-    std::vector<bool> residue(thing.size(), false);
-    removert::detail::MarkCutBodies(thing, {all}, own, kfs, cfg, 1, &residue);
-    return std::count(residue.begin(), residue.end(), true);
-  };
-  const PointCloud rest = side(3.0, 4.5);
-  EXPECT_EQ(judged(rest, [&](int k) { return side(k, k + 4.5); }), std::ptrdiff_t(rest.size())) << "a mover's rest";
-  EXPECT_EQ(judged(rest, [&](int) { return rest; }), 0) << "a parked car's side";
-  const PointCloud parked = side(0.0, 4.5);
-  const auto walker_once = [&](int k) {
-    PointCloud scan = parked;
-    if (k == 2)
-      for (double x = 4.7; x <= 4.8 + 1e-9; x += 0.1)
-        for (double z = 0.3; z <= 1.5 + 1e-9; z += 0.1) scan.push_back(float(x), 10.0f, float(z), 0.5f);
-    return scan;
-  };
-  EXPECT_EQ(judged(parked, walker_once), 0) << "a parked car a walker passed";
-  // A parked car's side of which removal took the lower half (z 0.3-0.8 m) in error: its keyframes'
-  // returns there are off the map, but within its outline, under what stayed.
-  const PointCloud upper = [&] {
-    PointCloud c;
-    for (const auto& p : parked.points)
-      if (p.z > 0.85f) c.points.push_back(p);
-    return c;
-  }();
-  EXPECT_EQ(judged(upper, [&](int) { return parked; }), 0) << "a parked car removal took in part";
-}
-
 // Three keyframes 1 m apart along x. A car's rear 20 m ahead of each, at the same place relative
 // to the sensor (it drove ahead at the sensor's speed), drove with the sensor: the keyframes before
 // the last returned on its last place's points where they lie relative to the sensor, not where

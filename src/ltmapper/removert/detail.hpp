@@ -313,15 +313,6 @@ void MarkTrails(const PointCloud& c, const std::vector<std::vector<std::uint32_t
                 const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
                 std::vector<bool>* residue);
 
-// Marks in *residue (per point of `c`) the clusters `members` of `c` (not yet marked, shorter than
-// LdWholeClusterM) that are what a mover's body left: the keyframes of `own_voters` that returned on
-// them returned beside them, within the sensor's joining gaps, on places the session's HD removal
-// took (off its map `own`, above the ground), more often than removal errs on standing surfaces
-// (ld_detection.cpp).
-void MarkCutBodies(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members, const PointCloud& own,
-                   const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads,
-                   std::vector<bool>* residue);
-
 // Whether the points `m` of `c`, last returned on by keyframe `last`, drove with the sensor: each of
 // the keyframes `before` it (their scans' trees in world coordinates, `scans`) returned on more of
 // them at their place relative to the sensor than at their place in the world, and all of them by

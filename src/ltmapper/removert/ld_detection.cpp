@@ -14,7 +14,6 @@
 #include <cmath>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <thread>
 #include <tuple>
 #include <utility>
@@ -587,155 +586,6 @@ void detail::MarkTrails(const PointCloud& c, const std::vector<std::vector<std::
 
 namespace {
 
-// The share of a standing thing's surroundings that HD removal keeps: issue 17's acceptance asks
-// that removal keep at least this share of the static map (SA), so at most 1 - this of the returns
-// beside a standing thing fall where removal took the map (MarkCutBodies).
-constexpr double kStaticKeptShare = 0.99;
-
-// The points of `c` on the plane z = 0 (what lies near them in xy lies near there).
-PointCloud Flat(const PointCloud& c) {
-  PointCloud flat = c;
-  for (auto& p : flat.points) p.z = 0.f;
-  return flat;
-}
-
-// What the keyframes of a session returned on a cluster and beside it (MarkCutBodies), summed over
-// them: returns on its points, and returns beside those on places the session's map does not hold.
-struct OnAndBeside {
-  std::size_t on = 0, removed = 0;
-};
-
-// The map `own` near the clusters judged (`near`: per point of own): its points there (for the
-// test "on the map") and its lowest points per cell (ResidueGround: the ground a return stands above).
-struct MapAround {
-  std::unique_ptr<geometry::KdTree> points;
-  geometry::LowestGrid ground;
-  MapAround(const PointCloud& own, const std::vector<bool>& near, const RemovertConfig& cfg) : ground(ResidueGround(cfg)) {
-    const PointCloud there = own.select(near);
-    ground.Add(there);
-    points = std::make_unique<geometry::KdTree>(there);
-  }
-  // A return off the map (no map point within `reach`) and more than `reach` above its ground.
-  bool RemovedAbove(const Eigen::Vector3f& x, float reach) const {
-    return points->CountWithin(x, reach, 1) == 0 && x.z() - ground.Under(x, x, kGroundGrowCells) > reach;
-  }
-};
-
-// One keyframe's returns (world frame `scan`, sensor at `at`) on the clusters of the points `tree`
-// holds (`cluster_of` per tree point; `flat_tree`: the same points at z = 0) and beside them: a
-// return within HitReach of a point is on its cluster; one off the map and above the ground
-// (MapAround), outside every cluster's outline (no point within HitReach in xy), that the sensor's
-// joining gaps at its range (ResidueGapsAt: horizontal, vertical; as the residues' clusters join)
-// join to a return on a cluster is beside it, counted once, for the cluster of the nearest such
-// return. Within its outline a standing thing's own face lies, which removal may have taken in
-// part in error (seed 23's tilted VLP-16: 7 returns on a parked car's lower face 33 m out, under
-// the cluster's upper points); a mover's body went on beyond it.
-void CountOnAndBeside(const PointCloud& scan, const Eigen::Vector3f& at, const geometry::KdTree& tree,
-                      const geometry::KdTree& flat_tree, const std::vector<std::uint32_t>& cluster_of,
-                      const MapAround& map, const RemovertConfig& cfg, std::vector<OnAndBeside>* counts) {
-  const float reach = HitReach(cfg);
-  PointCloud on;
-  std::vector<std::uint32_t> on_cluster;
-  std::vector<Eigen::Vector3f> removed;
-  for (const auto& q : scan.points) {
-    const Eigen::Vector3f x = q.xyz();
-    std::uint32_t j = 0;
-    float sq = 0.f;
-    if (tree.Nearest(x, &j, &sq) && sq <= reach * reach) {
-      on.points.push_back(q);
-      on_cluster.push_back(cluster_of[j]);
-      ++(*counts)[cluster_of[j]].on;
-    } else if (map.RemovedAbove(x, reach) && flat_tree.CountWithin(Eigen::Vector3f(x.x(), x.y(), 0.f), reach, 1) == 0) {
-      removed.push_back(x);
-    }
-  }
-  if (on.empty() || removed.empty()) return;
-  const geometry::KdTree near_on(on);
-  for (const Eigen::Vector3f& x : removed) {
-    const Eigen::Vector2f gap = detail::ResidueGapsAt(cfg, double((x - at).norm()));
-    float best = 1.f;  // the nearest return on a cluster, in gaps ((dxy / gap.x)^2 + (dz / gap.y)^2 < 1)
-    std::uint32_t of = 0;
-    for (const auto& [j, sq] : near_on.RadiusUnsorted(x, gap.maxCoeff())) {
-      const Eigen::Vector3f d = on.points[j].xyz() - x;
-      const float g = d.head<2>().squaredNorm() / (gap.x() * gap.x()) + d.z() * d.z() / (gap.y() * gap.y());
-      if (g < best) best = g, of = j;
-    }
-    if (best < 1.f) ++(*counts)[on_cluster[of]].removed;
-  }
-}
-
-// Whether `removed` of `n` returns beside a thing is more than removal's errors on standing surfaces
-// (1 - kStaticKeptShare of them) by more than chance: kCountSigmas standard deviations of that
-// many errors (a binomial count).
-bool MoreRemovedThanErrors(std::size_t removed, std::size_t n) {
-  const double errors = (1.0 - kStaticKeptShare) * double(n);
-  return double(removed) - errors > kCountSigmas * std::sqrt(errors);
-}
-
-}  // namespace
-
-// A mover that HD removal took in part leaves the rest of its body in its session's map: the places
-// where every keyframe that met it met it there (a car 35-50 m out that a drive's first or last
-// keyframes met through gaps, a car following another at the drive's end), which no keyframe saw
-// through. In each keyframe that met that rest, the body went on beyond it, and removal took those
-// places: the keyframe's returns beside the rest, beyond its outline, fall off the map. A standing
-// thing's keyframes return beside it on what the map kept, except where removal erred (at most
-// 1 - kStaticKeptShare of the static map) or a mover passed by. So a cluster of `c` (not yet marked) beside which the
-// keyframes of `own_voters` that returned on it returned on removed places (CountOnAndBeside) more
-// often than removal errs, by more than chance (MoreRemovedThanErrors, over the returns on it and
-// beside it), is a mover's (marked in *residue). The whole cluster decides, so a tile must hold it
-// and what lies beside it: clusters up to LdWholeClusterM long less that are judged (5.4 m with the
-// Pandar64's gaps; the false objects it was made for were 2.2-3.2 m long).
-void detail::MarkCutBodies(const PointCloud& c, const std::vector<std::vector<std::uint32_t>>& members,
-                           const PointCloud& own, const std::vector<WorldKeyframe>& own_voters,
-                           const RemovertConfig& cfg, int threads, std::vector<bool>* residue) {
-  const float reach = HitReach(cfg), range = float(cfg.max_range_m);
-  // In xy, a return beside a cluster lies within a joining gap at the sensor's range (and a hit's
-  // reach) of it, and the map that tells it removed within a hit's reach and two ground cells of
-  // that (MapAround): a tile's window holds that around the clusters up to `longest` whole.
-  const double beside = double(detail::ResidueGapsAt(cfg, cfg.max_range_m).x() + reach);
-  const double around = beside + 2.0 * ResidueGround(cfg).cell_m();
-  const double longest = LdWholeClusterM(cfg) - around / std::sqrt(2.0);
-  std::vector<const std::vector<std::uint32_t>*> judged;
-  std::vector<std::uint32_t> asked, cluster_of;
-  for (const auto& m : members) {
-    if ((*residue)[m.front()] || geometry::LongestHorizontalEdge(c, m) >= longest) continue;
-    for (auto i : m) asked.push_back(i), cluster_of.push_back(std::uint32_t(judged.size()));
-    judged.push_back(&m);
-  }
-  if (judged.empty()) return;
-  const PointCloud pts = c.select(asked);
-  const PointCloud flat_pts = Flat(pts);
-  std::vector<Eigen::Vector3d> set;
-  for (const auto& p : flat_pts.points) set.push_back(p.xyz().cast<double>());
-  const geometry::RadiusIndex near(set, beside, std::size_t(1) << 20);
-  const MapAround map(own, geometry::WithinRadius(Flat(own), flat_pts, around, threads), cfg);
-  Eigen::Vector3f lo, hi;
-  std::tie(lo, hi) = BoxOf(c, asked);
-  const geometry::KdTree tree(pts), flat_tree(flat_pts);
-  std::vector<OnAndBeside> total(judged.size());
-  std::mutex merge;
-  detail::ParallelFor(own_voters.size(), threads, [&](std::size_t k) {
-    const Eigen::Vector3f at = own_voters[k].T_world_sensor.translation().cast<float>();
-    if (DistanceToBox(at, lo, hi) > range) return;
-    const PointCloud scan = geometry::Transform(*detail::LoadScan(own_voters[k]), own_voters[k].T_world_sensor);
-    std::vector<bool> inside(scan.size());
-    for (std::size_t i = 0; i < scan.size(); ++i) {
-      const Eigen::Vector3f x = scan.points[i].xyz();
-      inside[i] = near.Near(Eigen::Vector3d(x.x(), x.y(), 0.0));
-    }
-    std::vector<OnAndBeside> counts(judged.size());
-    CountOnAndBeside(scan.select(inside), at, tree, flat_tree, cluster_of, map, cfg, &counts);
-    const std::lock_guard<std::mutex> lock(merge);
-    for (std::size_t t = 0; t < judged.size(); ++t) total[t].on += counts[t].on, total[t].removed += counts[t].removed;
-  });
-  for (std::size_t t = 0; t < judged.size(); ++t)
-    if (MoreRemovedThanErrors(total[t].removed, total[t].on + total[t].removed))
-      for (auto i : *judged[t]) (*residue)[i] = true;
-}
-
-namespace {
-
 // The points of `c` higher than ld_radius_m above the ground of `own` under them (ResidueGround,
 // as FitAMover measures a thing's top). A thing stands on the ground but is not joined to others
 // through it: a strip of new road surface the other session did not see, between a parked car and
@@ -788,10 +638,9 @@ std::vector<Eigen::Vector2f> ResidueGaps(const PointCloud& c, const std::vector<
 // is ground the other session did not cover (on real scans, around the other vehicle's place).
 // So is a cluster longer than a mover that each keyframe of its own session saw only a mover-sized
 // piece of (MarkTrails: a walker's trail), one of those lengths that drove with the sensor
-// (MarkDroveWithTheSensor: a car ahead of it to the session's end), one beside which its session's
-// keyframes returned on what its HD removal took (MarkCutBodies: the rest of a mover removal took in
-// part), and a thing its own session saw at its place from no more keyframes than a mover
-// (MarkSeenBriefly, over the seen-through part of each cluster).
+// (MarkDroveWithTheSensor: a car ahead of it to the session's end), and a thing its own session saw
+// at its place from no more keyframes than a mover (MarkSeenBriefly, over the seen-through part of
+// each cluster).
 std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, const PointCloud& own,
                            const std::vector<WorldKeyframe>& own_voters, const RemovertConfig& cfg, int threads) {
   if (cfg.ld_residue_length_m <= 0.0 || seen.empty()) return std::vector<bool>(seen.size(), false);
@@ -801,7 +650,6 @@ std::vector<bool> Residues(const PointCloud& seen, const PointCloud& unseen, con
   std::vector<bool> fit = FitAMover(both, whole, own, cfg);
   UnmarkPiecesOfLargerOnes(both, whole, cfg.ld_residue_length_m, &fit);
   detail::MarkTrails(both, whole, own_voters, cfg, threads, &fit);
-  detail::MarkCutBodies(both, whole, own, own_voters, cfg, threads, &fit);
   std::vector<bool> residue(fit.begin(), fit.begin() + std::ptrdiff_t(seen.size()));
   MarkSeenBriefly(seen, both, whole, own, own_voters, cfg, threads, &residue);
   return residue;
